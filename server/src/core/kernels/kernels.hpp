@@ -1,0 +1,92 @@
+// Hot loops of the explicit step, lane-blocked so that the compiler
+// vectorises them across elements, built once per x86-64 ISA level and
+// picked at run time (dispatch.cpp).
+//
+// Elements are stored in blocks of W lanes (W = 64 bytes / sizeof(Real): one
+// AVX-512 register, two AVX2 ones). Node arrays are interleaved xyz, (n x 3).
+#pragma once
+
+#include <cstdint>
+#include <string_view>
+
+#include "core/material.hpp"
+
+namespace tactile {
+
+template <class Real>
+inline constexpr int kLanes = 64 / static_cast<int>(sizeof(Real));
+
+template <class Real>
+struct alignas(64) ElementBlock {
+  static constexpr int W = kLanes<Real>;
+  int32_t node[4][W];  // corner node ids; padding lanes point at node 0 (n_blocks x 4 x W)
+  Real Dinv[9][W];     // inverse rest edge matrix Dm^-1, row-major, Dm = [X1-X0 X2-X0 X3-X0]
+  Real lambdaV[W];     // lambda * rest volume [N m]; 0 in padding lanes
+  Real muV[W];         // mu * rest volume [N m]; 0 in padding lanes
+};
+
+// Elastic forces of blocks [begin, end): f -= dU/dx, accumulated into f (n x 3).
+// The elastic energy comes almost free with the stress, so the energy guard
+// can check every step.
+struct ElasticSums {
+  double energy = 0;     // sum V psi(F) [J]
+  int32_t inverted = 0;  // lanes with det F <= 0, counted only for models that cannot invert
+};
+template <class Real>
+using ForcesFn = ElasticSums (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Real* u,
+                                 Real* f);
+
+// Elastic energy V psi(F) per lane of blocks [begin, end), written to
+// energy[(b - begin) * W + lane]; and det F per lane to J (may be null).
+template <class Real>
+using EnergyFn = void (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Real* u, double* energy,
+                          Real* J);
+
+// Newmark predictor, eq. (7), over nodes [begin, end):
+//   u += dt v + dt^2/2 a;  v <- v + dt/2 a (the half-step velocity eq. (9) completes).
+template <class Real>
+using PredictFn = void (*)(int32_t begin, int32_t end, Real dt, Real* u, Real* v, const Real* a);
+
+// Corrector, eqs. (8)-(10) with D = alpha M, over nodes [begin, end):
+//   a = (f / m + g - alpha v_half) / (1 + alpha dt / 2);  v = v_half + dt/2 a.
+// f is the sum of n_parts force arrays, stride 3n apart.
+template <class Real>
+struct CorrectArgs {
+  int32_t begin, end;
+  Real dt;
+  const Real* f;
+  int32_t n_parts;
+  int64_t part_stride;
+  const Real* inv_m;  // 1/m per node [1/kg] (n)
+  const Real* m;      // m per node [kg] (n)
+  Real g[3];          // [m/s^2]
+  Real alpha;         // [1/s]
+  const Real* u;      // for the gravity potential
+  Real* v;
+  Real* a;
+};
+struct CorrectSums {
+  double abs_a = 0;   // sum |a|: non-finite when any value is
+  double mv2 = 0;     // sum m |v|^2 = 2 x kinetic energy [J]
+  double mgu = 0;     // sum m g.u [J], with gravity only
+  double ma2 = 0;     // sum m |a|^2, for the central-difference energy
+};
+template <class Real>
+using CorrectFn = CorrectSums (*)(const CorrectArgs<Real>& args);
+
+template <class Real>
+struct KernelTable {
+  ForcesFn<Real> forces[kMaterialModelCount];
+  EnergyFn<Real> energy[kMaterialModelCount];
+  PredictFn<Real> predict;
+  CorrectFn<Real> correct[2][2];  // [gravity][damping]: a scene pays only for what it has
+};
+
+// The table for the best ISA this CPU runs, or the one forced by select_isa.
+template <class Real>
+const KernelTable<Real>& kernels();
+std::string_view kernel_isa();
+// Forces an ISA level ("baseline", "v3", "v4"); false if unknown or unsupported.
+bool select_isa(std::string_view name);
+
+}  // namespace tactile

@@ -1,0 +1,85 @@
+#include "core/mesh.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+
+#include <glm/geometric.hpp>
+
+namespace tactile {
+
+double compute_tet_volume(const Vec3& x0, const Vec3& x1, const Vec3& x2, const Vec3& x3) {
+  return glm::dot(x1 - x0, glm::cross(x2 - x0, x3 - x0)) / 6.0;
+}
+
+std::vector<Tri> compute_boundary_faces(const TetMesh& mesh) {
+  // Faces of a positively oriented tet (0,1,2,3) with outward normals.
+  static constexpr int kFace[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  struct Seen {
+    Tri oriented;
+    int count;
+  };
+  std::map<std::array<int32_t, 3>, Seen> faces;
+  for (const Tet& t : mesh.tets) {
+    for (const auto& f : kFace) {
+      Tri tri{t[static_cast<size_t>(f[0])], t[static_cast<size_t>(f[1])], t[static_cast<size_t>(f[2])]};
+      std::array<int32_t, 3> key = tri;
+      std::sort(key.begin(), key.end());
+      auto [it, inserted] = faces.try_emplace(key, Seen{tri, 0});
+      ++it->second.count;
+    }
+  }
+  std::vector<Tri> out;
+  for (const auto& [key, seen] : faces) {
+    if (seen.count == 1) out.push_back(seen.oriented);
+  }
+  return out;
+}
+
+std::vector<int32_t> compute_boundary_nodes(const std::vector<Tri>& faces) {
+  std::vector<int32_t> nodes;
+  nodes.reserve(faces.size() * 3);
+  for (const Tri& f : faces) nodes.insert(nodes.end(), f.begin(), f.end());
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  return nodes;
+}
+
+Aabb compute_aabb(const std::vector<Vec3>& x) {
+  Aabb box;
+  if (x.empty()) return box;
+  box.lo = box.hi = x[0];
+  for (const Vec3& p : x) {
+    box.lo = glm::min(box.lo, p);
+    box.hi = glm::max(box.hi, p);
+  }
+  return box;
+}
+
+std::string check_mesh_structure(const TetMesh& mesh) {
+  if (mesh.X.size() < 4) return "mesh has " + std::to_string(mesh.X.size()) + " nodes; a tet mesh needs at least 4";
+  if (mesh.tets.empty()) return "mesh has no tetrahedra";
+  if (!mesh.region.empty() && mesh.region.size() != mesh.tets.size())
+    return "mesh has " + std::to_string(mesh.region.size()) + " region ids for " + std::to_string(mesh.tets.size()) +
+           " tets";
+  for (size_t i = 0; i < mesh.X.size(); ++i) {
+    const Vec3& p = mesh.X[i];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+      return "node " + std::to_string(i) + " has a non-finite coordinate";
+  }
+  const auto n = static_cast<int32_t>(mesh.X.size());
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    const Tet& t = mesh.tets[e];
+    for (int32_t id : t) {
+      if (id < 0 || id >= n)
+        return "tet " + std::to_string(e) + " refers to node " + std::to_string(id) + ", outside 0.." +
+               std::to_string(n - 1);
+    }
+    if (t[0] == t[1] || t[0] == t[2] || t[0] == t[3] || t[1] == t[2] || t[1] == t[3] || t[2] == t[3])
+      return "tet " + std::to_string(e) + " repeats a node";
+  }
+  return "";
+}
+
+}  // namespace tactile

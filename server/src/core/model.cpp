@@ -1,0 +1,314 @@
+#include "core/model.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <sstream>
+
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
+
+namespace tactile {
+
+namespace {
+
+std::string list_ids(const std::vector<int32_t>& ids, size_t max = 10) {
+  std::ostringstream out;
+  for (size_t i = 0; i < ids.size() && i < max; ++i) out << (i ? ", " : "") << ids[i];
+  if (ids.size() > max) out << ", ... (" << ids.size() << " in all)";
+  return out.str();
+}
+
+// Smallest altitude of a tet [m]: 3 V / (largest face area).
+double compute_min_altitude(const Vec3& x0, const Vec3& x1, const Vec3& x2, const Vec3& x3) {
+  const double V = std::fabs(compute_tet_volume(x0, x1, x2, x3));
+  const double a0 = glm::length(glm::cross(x2 - x1, x3 - x1));
+  const double a1 = glm::length(glm::cross(x2 - x0, x3 - x0));
+  const double a2 = glm::length(glm::cross(x1 - x0, x3 - x0));
+  const double a3 = glm::length(glm::cross(x1 - x0, x2 - x0));
+  const double amax = std::max({a0, a1, a2, a3}) * 0.5;
+  return amax > 0 ? 3.0 * V / amax : 0.0;
+}
+
+// Largest eigenvalue of a symmetric n x n matrix by cyclic Jacobi (small n).
+double max_eigenvalue_symmetric(double* A, int n) {
+  for (int sweep = 0; sweep < 30; ++sweep) {
+    double off = 0, diag = 0;
+    for (int p = 0; p < n; ++p) {
+      diag += A[p * n + p] * A[p * n + p];
+      for (int q = p + 1; q < n; ++q) off += A[p * n + q] * A[p * n + q];
+    }
+    if (off <= 1e-30 * diag) break;
+    for (int p = 0; p < n; ++p) {
+      for (int q = p + 1; q < n; ++q) {
+        const double apq = A[p * n + q];
+        if (std::fabs(apq) < 1e-300) continue;
+        const double theta = (A[q * n + q] - A[p * n + p]) / (2.0 * apq);
+        const double t = std::copysign(1.0, theta) / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
+        const double c = 1.0 / std::sqrt(t * t + 1.0), s = t * c;
+        for (int k = 0; k < n; ++k) {
+          const double akp = A[k * n + p], akq = A[k * n + q];
+          A[k * n + p] = c * akp - s * akq;
+          A[k * n + q] = s * akp + c * akq;
+        }
+        for (int k = 0; k < n; ++k) {
+          const double apk = A[p * n + k], aqk = A[q * n + k];
+          A[p * n + k] = c * apk - s * aqk;
+          A[q * n + k] = s * apk + c * aqk;
+        }
+      }
+    }
+  }
+  double best = A[0];
+  for (int p = 1; p < n; ++p) best = std::max(best, A[p * n + p]);
+  return best;
+}
+
+// Morton code of a point in [0,1]^3, 10 bits per axis: elements sorted by it
+// touch nearby nodes, which keeps the gathers and scatters in cache.
+uint32_t morton(const Vec3& p) {
+  auto spread = [](uint32_t v) {
+    v = (v | (v << 16)) & 0x030000FF;
+    v = (v | (v << 8)) & 0x0300F00F;
+    v = (v | (v << 4)) & 0x030C30C3;
+    v = (v | (v << 2)) & 0x09249249;
+    return v;
+  };
+  auto q = [](double x) { return static_cast<uint32_t>(std::clamp(x, 0.0, 1.0) * 1023.0); };
+  return spread(q(p.x)) | (spread(q(p.y)) << 1) | (spread(q(p.z)) << 2);
+}
+
+}  // namespace
+
+double compute_element_critical_dt(const Vec3& X0, const Vec3& X1, const Vec3& X2, const Vec3& X3, double lambda,
+                                   double mu, double rho) {
+  // K_e = V B^T C B (12 x 12). Its nonzero eigenvalues are those of the 6 x 6
+  // matrix V L^T (B B^T) L, with C = L L^T, which Jacobi solves exactly.
+  const glm::dmat3 Dm(X1 - X0, X2 - X0, X3 - X0);  // columns
+  const double V = std::fabs(glm::determinant(Dm)) / 6.0;
+  const glm::dmat3 Dinv = glm::inverse(Dm);
+  // Shape function gradients: grad N_a = row (a-1) of Dm^-1 for a = 1..3.
+  Vec3 g[4];
+  for (int a = 0; a < 3; ++a) g[a + 1] = Vec3(Dinv[0][a], Dinv[1][a], Dinv[2][a]);
+  g[0] = -(g[1] + g[2] + g[3]);
+  // Voigt strain rows (xx, yy, zz, xy, yz, zx; engineering shear) of B for node a.
+  double G[36] = {};
+  for (int a = 0; a < 4; ++a) {
+    const double Ba[6][3] = {{g[a].x, 0, 0},      {0, g[a].y, 0},      {0, 0, g[a].z},
+                             {g[a].y, g[a].x, 0}, {0, g[a].z, g[a].y}, {g[a].z, 0, g[a].x}};
+    for (int r = 0; r < 6; ++r)
+      for (int s = 0; s < 6; ++s) G[6 * r + s] += Ba[r][0] * Ba[s][0] + Ba[r][1] * Ba[s][1] + Ba[r][2] * Ba[s][2];
+  }
+  double C[36] = {};
+  for (int r = 0; r < 3; ++r)
+    for (int s = 0; s < 3; ++s) C[6 * r + s] = lambda + (r == s ? 2 * mu : 0);
+  for (int r = 3; r < 6; ++r) C[6 * r + r] = mu;
+  double L[36] = {};  // Cholesky C = L L^T
+  for (int i = 0; i < 6; ++i) {
+    for (int j = 0; j <= i; ++j) {
+      double sum = C[6 * i + j];
+      for (int k = 0; k < j; ++k) sum -= L[6 * i + k] * L[6 * j + k];
+      L[6 * i + j] = i == j ? std::sqrt(std::max(sum, 0.0)) : (L[6 * j + j] > 0 ? sum / L[6 * j + j] : 0.0);
+    }
+  }
+  double S[36];  // L^T G L
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) {
+      double sum = 0;
+      for (int k = 0; k < 6; ++k)
+        for (int l = 0; l < 6; ++l) sum += L[6 * k + i] * G[6 * k + l] * L[6 * l + j];
+      S[6 * i + j] = sum;
+    }
+  const double k_max = V * max_eigenvalue_symmetric(S, 6);
+  const double m_node = rho * V / 4.0;
+  if (!(k_max > 0) || !(m_node > 0)) return 0.0;
+  return 2.0 / std::sqrt(k_max / m_node);
+}
+
+template <class Real>
+Model<Real> build_model(const ModelSpec& spec) {
+  constexpr int W = kLanes<Real>;
+  const TetMesh& mesh = spec.mesh;
+  if (std::string err = check_mesh_structure(mesh); !err.empty()) throw ModelError("mesh: " + err);
+
+  Model<Real> model;
+  model.mesh = mesh;
+  model.n_nodes = mesh.n_nodes();
+  model.n_tets = mesh.n_tets();
+  const auto nn = static_cast<size_t>(model.n_nodes);
+  const auto nt = static_cast<size_t>(model.n_tets);
+
+  // Materials per region.
+  for (size_t r = 0; r < spec.materials.size(); ++r) {
+    const MaterialSpec& mat = spec.materials[r];
+    const std::string where = "materials[" + std::to_string(r) + "]";
+    if (!(mat.E > 0) || !std::isfinite(mat.E)) throw ModelError(where + ".E must be > 0 Pa, got " + std::to_string(mat.E));
+    if (!(mat.nu > -1.0 && mat.nu < 0.5))
+      throw ModelError(where + ".nu must lie in (-1, 0.5), got " + std::to_string(mat.nu));
+    if (!(mat.rho > 0) || !std::isfinite(mat.rho))
+      throw ModelError(where + ".rho must be > 0 kg/m^3, got " + std::to_string(mat.rho));
+  }
+
+  // Rest volumes, orientation and per-element constants.
+  model.tet_model.resize(nt);
+  model.tet_volume.resize(nt);
+  model.tet_lambda.resize(nt);
+  model.tet_mu.resize(nt);
+  model.tet_altitude.resize(nt);
+  model.tet_dt.resize(nt);
+  std::vector<int32_t> inverted, flat;
+  for (size_t e = 0; e < nt; ++e) {
+    const Tet& t = mesh.tets[e];
+    const Vec3 &x0 = mesh.X[size_t(t[0])], &x1 = mesh.X[size_t(t[1])], &x2 = mesh.X[size_t(t[2])],
+               &x3 = mesh.X[size_t(t[3])];
+    const double V = compute_tet_volume(x0, x1, x2, x3);
+    const double L = std::max({glm::length(x1 - x0), glm::length(x2 - x0), glm::length(x3 - x0),
+                               glm::length(x2 - x1), glm::length(x3 - x1), glm::length(x3 - x2)});
+    if (V < 0) inverted.push_back(int32_t(e));
+    else if (V <= 1e-9 * L * L * L) flat.push_back(int32_t(e));
+    model.tet_volume[e] = V;
+  }
+  if (!inverted.empty() || !flat.empty()) {
+    std::string msg = "mesh refused:";
+    if (!inverted.empty())
+      msg += " " + std::to_string(inverted.size()) + " inverted tet(s) (ids " + list_ids(inverted) + ")";
+    if (!flat.empty())
+      msg += std::string(inverted.empty() ? "" : ";") + " " + std::to_string(flat.size()) +
+             " degenerate tet(s) (ids " + list_ids(flat) + ")";
+    throw ModelError(msg);
+  }
+
+  model.m.assign(nn, Real(0));
+  std::vector<double> mass(nn, 0.0);
+  for (size_t e = 0; e < nt; ++e) {
+    const int32_t r = mesh.region_of(int32_t(e));
+    if (r < 0 || size_t(r) >= spec.materials.size())
+      throw ModelError("tet " + std::to_string(e) + " is in region " + std::to_string(r) + " but materials has " +
+                       std::to_string(spec.materials.size()) + " entries");
+    const MaterialSpec& mat = spec.materials[size_t(r)];
+    const Lame lame = compute_lame(mat.E, mat.nu);
+    model.tet_model[e] = mat.model;
+    model.tet_lambda[e] = lame.lambda;
+    model.tet_mu[e] = lame.mu;
+    if (!can_invert(mat.model)) model.any_non_invertible = true;
+    const Tet& t = mesh.tets[e];
+    const Vec3 &x0 = mesh.X[size_t(t[0])], &x1 = mesh.X[size_t(t[1])], &x2 = mesh.X[size_t(t[2])],
+               &x3 = mesh.X[size_t(t[3])];
+    model.tet_altitude[e] = compute_min_altitude(x0, x1, x2, x3);
+    model.tet_dt[e] = compute_element_critical_dt(x0, x1, x2, x3, lame.lambda, lame.mu, mat.rho);
+    const double m4 = mat.rho * model.tet_volume[e] / 4.0;  // section 4.1: lump by rows
+    for (int32_t id : t) mass[size_t(id)] += m4;
+  }
+  model.dt_rest = *std::min_element(model.tet_dt.begin(), model.tet_dt.end());
+
+  std::vector<int32_t> unreferenced;
+  model.inv_m.assign(nn, Real(0));
+  for (size_t i = 0; i < nn; ++i) {
+    model.m[i] = Real(mass[i]);
+    model.total_mass += mass[i];
+    if (mass[i] > 0) model.inv_m[i] = Real(1.0 / mass[i]);
+    else unreferenced.push_back(int32_t(i));
+  }
+  if (!unreferenced.empty())
+    throw ModelError("mesh has " + std::to_string(unreferenced.size()) + " node(s) in no tet (ids " +
+                     list_ids(unreferenced) + "); compact the mesh first");
+
+  // Elements grouped by material model, each group in Morton order of centroids.
+  const Aabb box = compute_aabb(mesh.X);
+  const Vec3 extent = glm::max(box.size(), Vec3(1e-30));
+  std::vector<uint32_t> key(nt);
+  for (size_t e = 0; e < nt; ++e) {
+    const Tet& t = mesh.tets[e];
+    const Vec3 c = (mesh.X[size_t(t[0])] + mesh.X[size_t(t[1])] + mesh.X[size_t(t[2])] + mesh.X[size_t(t[3])]) * 0.25;
+    key[e] = morton((c - box.lo) / extent);
+  }
+  std::vector<int32_t> order(nt);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
+    if (model.tet_model[size_t(a)] != model.tet_model[size_t(b)])
+      return model.tet_model[size_t(a)] < model.tet_model[size_t(b)];
+    return key[size_t(a)] < key[size_t(b)];
+  });
+
+  for (size_t i = 0; i < nt;) {
+    const MaterialModel mm = model.tet_model[size_t(order[i])];
+    size_t j = i;
+    while (j < nt && model.tet_model[size_t(order[j])] == mm) ++j;
+    ElementGroup group{mm, int32_t(model.blocks.size()), 0};
+    for (size_t k = i; k < j; k += W) {
+      ElementBlock<Real> B{};
+      for (int l = 0; l < W; ++l) {
+        const size_t slot = k + size_t(l);
+        if (slot >= j) {  // padding lane: zero stiffness, identity shape
+          for (int c = 0; c < 4; ++c) B.node[c][l] = 0;
+          for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
+          B.lambdaV[l] = B.muV[l] = Real(0);
+          model.lane_tet.push_back(-1);
+          continue;
+        }
+        const auto e = size_t(order[slot]);
+        const Tet& t = mesh.tets[e];
+        for (int c = 0; c < 4; ++c) B.node[c][l] = t[size_t(c)];
+        const Vec3& X0 = mesh.X[size_t(t[0])];
+        const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
+        const glm::dmat3 Dinv = glm::inverse(Dm);  // glm is column-major: Dinv[col][row]
+        for (int r = 0; r < 3; ++r)
+          for (int c = 0; c < 3; ++c) B.Dinv[3 * r + c][l] = Real(Dinv[c][r]);
+        B.lambdaV[l] = Real(model.tet_lambda[e] * model.tet_volume[e]);
+        B.muV[l] = Real(model.tet_mu[e] * model.tet_volume[e]);
+        model.lane_tet.push_back(int32_t(e));
+      }
+      model.blocks.push_back(B);
+    }
+    group.end = int32_t(model.blocks.size());
+    model.groups.push_back(group);
+    i = j;
+  }
+
+  // Boundary conditions and loads.
+  for (size_t k = 0; k < spec.essential.size(); ++k) {
+    const EssentialBc& bc = spec.essential[k];
+    EssentialSet set{bc, select_nodes(mesh, bc.where), bc.angle.has_value() || bc.shift.has_value()};
+    if (set.nodes.empty())
+      throw ModelError("boundary condition " + std::to_string(k) + (bc.name.empty() ? "" : " ('" + bc.name + "')") +
+                       " selects no node");
+    if (bc.angle && !(glm::length(bc.axis) > 0))
+      throw ModelError("boundary condition " + std::to_string(k) + " rotates about a zero axis");
+    model.constrained.insert(model.constrained.end(), set.nodes.begin(), set.nodes.end());
+    model.essential.push_back(std::move(set));
+  }
+  std::sort(model.constrained.begin(), model.constrained.end());
+  const size_t before = model.constrained.size();
+  model.constrained.erase(std::unique(model.constrained.begin(), model.constrained.end()), model.constrained.end());
+  if (model.constrained.size() != before)
+    throw ModelError("boundary conditions overlap: a node is held by two of them");
+
+  for (size_t k = 0; k < spec.loads.size(); ++k) {
+    const NaturalLoad& load = spec.loads[k];
+    LoadSet set{load, select_nodes(mesh, load.where), {}};
+    if (set.nodes.empty())
+      throw ModelError("load " + std::to_string(k) + (load.name.empty() ? "" : " ('" + load.name + "')") +
+                       " selects no node");
+    double sum = 0;
+    for (int32_t i : set.nodes) sum += mass[size_t(i)];
+    for (int32_t i : set.nodes) set.weight.push_back(mass[size_t(i)] / sum);
+    model.loads.push_back(std::move(set));
+  }
+
+  model.effects = spec.effects;
+  if (model.effects.damping && !(model.effects.alpha >= 0))
+    throw ModelError("damping alpha must be >= 0 1/s, got " + std::to_string(model.effects.alpha));
+  model.integrator = spec.integrator;
+  if (!(model.integrator.safety > 0 && model.integrator.safety <= 1))
+    throw ModelError("integrator.safety must lie in (0, 1], got " + std::to_string(model.integrator.safety));
+  if (model.integrator.dt < 0) throw ModelError("integrator.dt must be >= 0 s");
+  if (model.integrator.threads < 1) throw ModelError("integrator.threads must be >= 1");
+  model.surface = compute_boundary_faces(mesh);
+  return model;
+}
+
+template Model<float> build_model<float>(const ModelSpec&);
+template Model<double> build_model<double>(const ModelSpec&);
+
+}  // namespace tactile

@@ -1,0 +1,85 @@
+// The FEM model: everything about the body that does not change while it
+// moves. Built once from a ModelSpec, immutable after; a State is plain data
+// (core/state.hpp) and the Stepper (core/stepper.hpp) reads the model and
+// writes the state.
+#pragma once
+
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/kernels/kernels.hpp"
+#include "core/spec.hpp"
+
+namespace tactile {
+
+// A spec the core cannot build (bad material, degenerate element, empty
+// selection...). The message names the field or element at fault.
+struct ModelError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Lane blocks [begin, end) whose elements share one material model, so the
+// kernel for that model runs over them with no per-element branch.
+struct ElementGroup {
+  MaterialModel model;
+  int32_t begin, end;
+};
+
+// Nodes held by one essential boundary condition.
+struct EssentialSet {
+  EssentialBc spec;
+  std::vector<int32_t> nodes;  // node ids (n_set)
+  bool moving;                 // false: fixed in place
+};
+
+// Nodes loaded by one natural boundary condition, with their share of it.
+struct LoadSet {
+  NaturalLoad spec;
+  std::vector<int32_t> nodes;   // node ids (n_set)
+  std::vector<double> weight;   // share of the total force, sums to 1 (n_set)
+};
+
+template <class Real>
+struct Model {
+  static constexpr int W = kLanes<Real>;
+
+  TetMesh mesh;                    // rest mesh as given (double)
+  std::vector<Tri> surface;        // boundary triangles, outward (n_faces x 3)
+  int32_t n_nodes = 0;
+  int32_t n_tets = 0;
+
+  std::vector<Real> m;             // lumped mass [kg] (n_nodes), section 4.1
+  std::vector<Real> inv_m;         // 1 / m [1/kg] (n_nodes)
+  double total_mass = 0;           // [kg]
+
+  std::vector<ElementBlock<Real>> blocks;  // lane-blocked elements (n_blocks)
+  std::vector<ElementGroup> groups;        // one range of blocks per material model present
+  std::vector<int32_t> lane_tet;           // tet id of block lane b*W+l, -1 for padding (n_blocks x W)
+
+  std::vector<MaterialModel> tet_model;    // material model per tet (n_tets)
+  std::vector<double> tet_volume;          // rest volume [m^3] (n_tets)
+  std::vector<double> tet_lambda, tet_mu;  // Lame parameters [Pa] (n_tets)
+  std::vector<double> tet_altitude;        // smallest rest altitude [m] (n_tets)
+  std::vector<double> tet_dt;              // critical step at rest, exact per element [s] (n_tets)
+  double dt_rest = 0;                      // min of tet_dt [s]
+  bool any_non_invertible = false;         // some element uses a model that cannot invert
+
+  std::vector<EssentialSet> essential;
+  std::vector<int32_t> constrained;        // all nodes under an essential BC, sorted unique
+  std::vector<LoadSet> loads;
+  Effects effects;
+  IntegratorSpec integrator;
+};
+
+template <class Real>
+Model<Real> build_model(const ModelSpec& spec);
+
+// Critical time step of one element at rest [s]: 2 / omega_max of its
+// stiffness against its lumped mass. By Irons' element eigenvalue theorem the
+// assembled system's critical step is at least the smallest of these.
+double compute_element_critical_dt(const Vec3& X0, const Vec3& X1, const Vec3& X2, const Vec3& X3, double lambda,
+                                   double mu, double rho);
+
+}  // namespace tactile

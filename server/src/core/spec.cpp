@@ -1,0 +1,52 @@
+#include "core/spec.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <glm/geometric.hpp>
+
+namespace tactile {
+
+ProfileValue compute_profile(const MotionProfile& p, double t) {
+  const double tau = t - p.start;
+  if (tau <= 0.0) return {0.0, 0.0, 0.0};
+  if (p.kind == MotionProfile::Kind::ConstantRate) return {p.rate * tau, p.rate, 0.0};
+  if (p.duration <= 0.0 || tau >= p.duration) return {p.target, 0.0, 0.0};
+  // s = target (1 - cos(pi tau / T)) / 2: zero velocity at both ends.
+  const double w = std::numbers::pi / p.duration;
+  return {0.5 * p.target * (1.0 - std::cos(w * tau)), 0.5 * p.target * w * std::sin(w * tau),
+          0.5 * p.target * w * w * std::cos(w * tau)};
+}
+
+std::vector<int32_t> select_nodes(const TetMesh& mesh, const NodeSelector& s) {
+  std::vector<int32_t> out;
+  switch (s.kind) {
+    case NodeSelector::Kind::Box:
+      for (int32_t i = 0; i < mesh.n_nodes(); ++i) {
+        const Vec3& p = mesh.X[static_cast<size_t>(i)];
+        if (p.x >= s.lo.x - s.tolerance && p.x <= s.hi.x + s.tolerance && p.y >= s.lo.y - s.tolerance &&
+            p.y <= s.hi.y + s.tolerance && p.z >= s.lo.z - s.tolerance && p.z <= s.hi.z + s.tolerance)
+          out.push_back(i);
+      }
+      break;
+    case NodeSelector::Kind::Plane: {
+      const double len = glm::length(s.normal);
+      if (!(len > 0.0)) break;
+      const Vec3 n = s.normal / len;
+      for (int32_t i = 0; i < mesh.n_nodes(); ++i) {
+        if (std::fabs(glm::dot(mesh.X[static_cast<size_t>(i)] - s.point, n)) <= s.tolerance) out.push_back(i);
+      }
+      break;
+    }
+    case NodeSelector::Kind::Nodes:
+      for (int32_t i : s.nodes)
+        if (i >= 0 && i < mesh.n_nodes()) out.push_back(i);
+      std::sort(out.begin(), out.end());
+      out.erase(std::unique(out.begin(), out.end()), out.end());
+      break;
+  }
+  return out;
+}
+
+}  // namespace tactile

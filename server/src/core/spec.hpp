@@ -1,0 +1,104 @@
+// What a scene asks of the core, in core terms: mesh, materials, boundary
+// conditions, loads, effects and integrator settings. Plain data, in double,
+// SI units. The scene loader (src/scene/) fills it from JSON; tests fill it
+// directly. A Model is built from it once (core/model.hpp).
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/material.hpp"
+#include "core/mesh.hpp"
+
+namespace tactile {
+
+struct MaterialSpec {
+  MaterialModel model = MaterialModel::StVK;
+  double E = 1e5;      // Young's modulus [Pa]
+  double nu = 0.3;     // Poisson's ratio [-]
+  double rho = 1000;   // density [kg/m^3]
+};
+
+// Which nodes a boundary condition or load applies to (rest positions).
+struct NodeSelector {
+  enum class Kind : uint8_t { Box, Plane, Nodes };
+  Kind kind = Kind::Box;
+  Vec3 lo{0.0}, hi{0.0};      // Box: inclusive corners [m]
+  Vec3 point{0.0};            // Plane: a point on it [m]
+  Vec3 normal{0.0, 1.0, 0.0}; // Plane: its normal (any length)
+  double tolerance = 1e-9;    // Plane: max distance [m]; Box: slack [m]
+  std::vector<int32_t> nodes; // Nodes: explicit ids
+};
+
+// A scalar s(t) with its first two derivatives, used as an angle [rad] or a
+// displacement [m] along a direction. Ramp eases in and out (half cosine)
+// from 0 to `target` over [start, start + duration], then holds.
+struct MotionProfile {
+  enum class Kind : uint8_t { Ramp, ConstantRate };
+  Kind kind = Kind::Ramp;
+  double start = 0.0;     // [s]
+  double duration = 0.0;  // Ramp [s]
+  double target = 0.0;    // Ramp: final value
+  double rate = 0.0;      // ConstantRate: value per second
+};
+struct ProfileValue {
+  double s, ds, dds;
+};
+ProfileValue compute_profile(const MotionProfile& p, double t);
+
+// Essential boundary condition: the selected nodes follow a rigid motion
+// x(t) = c + Rot(axis, angle(t)) (X - c) + direction * shift(t).
+// With neither rotation nor shift, the nodes are fixed.
+struct EssentialBc {
+  std::string name;
+  NodeSelector where;
+  Vec3 centre{0.0};
+  Vec3 axis{0.0, 1.0, 0.0};
+  std::optional<MotionProfile> angle;  // rotation about axis through centre [rad]
+  Vec3 direction{0.0};
+  std::optional<MotionProfile> shift;  // translation along direction [m]
+};
+
+// Natural boundary condition: a total force spread over the selected nodes in
+// proportion to their lumped mass, scaled by an optional profile (0..1).
+struct NaturalLoad {
+  std::string name;
+  NodeSelector where;
+  Vec3 force{0.0};  // total [N]
+  std::optional<MotionProfile> scale;
+};
+
+struct Effects {
+  bool gravity = false;
+  Vec3 g{0.0, -9.81, 0.0};  // [m/s^2]
+  bool damping = false;
+  double alpha = 0.0;       // Rayleigh mass damping D = alpha M [1/s], eq. (10)
+};
+
+enum class Precision : uint8_t { Float, Double };
+enum class UnstablePolicy : uint8_t { Subdivide, Refuse };
+
+struct IntegratorSpec {
+  Precision precision = Precision::Double;
+  double dt = 0.0;                 // fixed step [s]; 0 = chosen from the critical step
+  double safety = 0.9;             // auto step = safety * critical step
+  UnstablePolicy unstable = UnstablePolicy::Subdivide;  // fixed dt above the critical step
+  int32_t threads = 1;             // element and node passes split this many ways
+  double energy_tolerance = 0.05;  // energy growth allowed beyond the work done, relative
+};
+
+struct ModelSpec {
+  TetMesh mesh;
+  std::vector<MaterialSpec> materials;  // indexed by mesh region id
+  std::vector<EssentialBc> essential;
+  std::vector<NaturalLoad> loads;
+  Effects effects;
+  IntegratorSpec integrator;
+};
+
+// Ids of the nodes a selector picks, sorted. Pure.
+std::vector<int32_t> select_nodes(const TetMesh& mesh, const NodeSelector& s);
+
+}  // namespace tactile

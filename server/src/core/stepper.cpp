@@ -1,0 +1,535 @@
+#include "core/stepper.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <sstream>
+
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
+
+namespace tactile {
+
+const char* to_string(Fault::Kind k) {
+  switch (k) {
+    case Fault::Kind::None: return "none";
+    case Fault::Kind::NonFinite: return "non-finite";
+    case Fault::Kind::Inverted: return "inverted";
+    case Fault::Kind::EnergyGrowth: return "energy-growth";
+    case Fault::Kind::StepTooLarge: return "step-too-large";
+  }
+  return "?";
+}
+
+const char* to_string(Pass p) {
+  switch (p) {
+    case Pass::Predict: return "predict";
+    case Pass::Essential: return "essential";
+    case Pass::Elastic: return "elastic";
+    case Pass::Loads: return "loads";
+    case Pass::Correct: return "correct";
+    case Pass::Guard: return "guard";
+  }
+  return "?";
+}
+
+namespace {
+
+// Rigid motion of an essential BC at time t: position, velocity, acceleration.
+struct Kinematics {
+  Vec3 x, v, a;
+};
+Kinematics compute_bc_kinematics(const EssentialBc& bc, const Vec3& X, double t) {
+  Vec3 r = X - bc.centre;
+  Vec3 v{0.0}, a{0.0};
+  if (bc.angle) {
+    const ProfileValue th = compute_profile(*bc.angle, t);
+    const Vec3 k = glm::normalize(bc.axis);
+    const double c = std::cos(th.s), s = std::sin(th.s);
+    r = r * c + glm::cross(k, r) * s + k * glm::dot(k, r) * (1.0 - c);  // Rodrigues
+    const Vec3 kr = glm::cross(k, r);
+    v = th.ds * kr;
+    a = th.dds * kr + th.ds * th.ds * glm::cross(k, kr);
+  }
+  Vec3 x = bc.centre + r;
+  if (bc.shift) {
+    const ProfileValue d = compute_profile(*bc.shift, t);
+    x += bc.direction * d.s;
+    v += bc.direction * d.ds;
+    a += bc.direction * d.dds;
+  }
+  return {x, v, a};
+}
+
+std::string list_ids(const std::vector<int32_t>& ids) {
+  std::ostringstream out;
+  for (size_t i = 0; i < ids.size() && i < 10; ++i) out << (i ? ", " : "") << ids[i];
+  if (ids.size() > 10) out << ", ... (" << ids.size() << " in all)";
+  return out.str();
+}
+
+}  // namespace
+
+template <class Real>
+Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
+    : model_(model), parallel_(parallel), kernels_(kernels<Real>()) {
+  correct_ = kernels_.correct[model_.effects.gravity ? 1 : 0][model_.effects.damping ? 1 : 0];
+  n_parts_ = std::max(1, model_.integrator.threads);
+  if (!parallel_ || parallel_->workers() < 2) n_parts_ = 1;
+  n_parts_ = std::min<int32_t>(n_parts_, std::max<int32_t>(1, static_cast<int32_t>(model_.blocks.size())));
+  // Even split of blocks; nodes split in multiples of 16 so parts do not share cache lines.
+  const auto nb = static_cast<int32_t>(model_.blocks.size());
+  for (int32_t p = 0; p < n_parts_; ++p) {
+    Part part;
+    part.block_begin = static_cast<int32_t>(int64_t(nb) * p / n_parts_);
+    part.block_end = static_cast<int32_t>(int64_t(nb) * (p + 1) / n_parts_);
+    auto node_cut = [&](int32_t q) {
+      if (q == n_parts_) return model_.n_nodes;
+      return std::min(model_.n_nodes, static_cast<int32_t>((int64_t(model_.n_nodes) * q / n_parts_) / 16 * 16));
+    };
+    part.node_begin = node_cut(p);
+    part.node_end = node_cut(p + 1);
+    part_.push_back(part);
+  }
+  f_.assign(size_t(n_parts_) * 3 * size_t(model_.n_nodes), Real(0));
+  elastic_.assign(size_t(n_parts_), ElasticSums{});
+  correct_sums_.assign(size_t(n_parts_), CorrectSums{});
+  for (const LoadSet& load : model_.loads) loaded_.insert(loaded_.end(), load.nodes.begin(), load.nodes.end());
+  u_before_.assign(model_.constrained.size() + loaded_.size(), Vec3(0.0));
+  load_force_.assign(loaded_.size(), Vec3(0.0));
+  a_prescribed_.assign(3 * model_.constrained.size(), Real(0));
+  v_prescribed_.assign(3 * model_.constrained.size(), Real(0));
+}
+
+template <class Real>
+void Stepper<Real>::run_parts(void (*fn)(void*, int32_t), void* ctx) {
+  if (n_parts_ == 1) fn(ctx, 0);
+  else parallel_->run(n_parts_, fn, ctx);
+}
+
+template <class Real>
+void Stepper<Real>::predict_part(void* ctx, int32_t p) {
+  auto* self = static_cast<Stepper*>(ctx);
+  const Part& part = self->part_[size_t(p)];
+  State<Real>& s = *self->cur_;
+  self->kernels_.predict(part.node_begin, part.node_end, self->cur_dt_, s.u.data(), s.v.data(), s.a.data());
+}
+
+template <class Real>
+void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
+  auto* self = static_cast<Stepper*>(ctx);
+  const Part& part = self->part_[size_t(p)];
+  const Model<Real>& m = self->model_;
+  Real* f = self->f_.data() + size_t(p) * 3 * size_t(m.n_nodes);
+  std::fill(f, f + 3 * size_t(m.n_nodes), Real(0));
+  ElasticSums sums;
+  for (const ElementGroup& g : m.groups) {
+    const int32_t b0 = std::max(g.begin, part.block_begin), b1 = std::min(g.end, part.block_end);
+    if (b0 >= b1) continue;
+    const ElasticSums s = self->kernels_.forces[int(g.model)](m.blocks.data(), b0, b1, self->cur_->u.data(), f);
+    sums.energy += s.energy;
+    sums.inverted += s.inverted;
+  }
+  self->elastic_[size_t(p)] = sums;
+}
+
+template <class Real>
+void Stepper<Real>::correct_part(void* ctx, int32_t p) {
+  auto* self = static_cast<Stepper*>(ctx);
+  const Part& part = self->part_[size_t(p)];
+  const Model<Real>& m = self->model_;
+  State<Real>& s = *self->cur_;
+  CorrectArgs<Real> args{};
+  args.begin = part.node_begin;
+  args.end = part.node_end;
+  args.dt = self->cur_dt_;
+  args.f = self->f_.data();
+  args.n_parts = self->n_parts_;
+  args.part_stride = 3 * int64_t(m.n_nodes);
+  args.inv_m = m.inv_m.data();
+  args.m = m.m.data();
+  for (int k = 0; k < 3; ++k) args.g[k] = Real(m.effects.g[k]);
+  args.alpha = Real(m.effects.alpha);
+  args.u = s.u.data();
+  args.v = s.v.data();
+  args.a = s.a.data();
+  self->correct_sums_[size_t(p)] = self->correct_(args);
+}
+
+template <class Real>
+void Stepper<Real>::apply_essential_positions(State<Real>& s, double t) {
+  // Essential BCs set displacement and velocity directly, section 4.1.
+  size_t c = 0;
+  for (const EssentialSet& set : model_.essential) {
+    for (int32_t i : set.nodes) {
+      const Vec3& X = model_.mesh.X[size_t(i)];
+      const Kinematics k = set.moving ? compute_bc_kinematics(set.spec, X, t) : Kinematics{X, Vec3(0.0), Vec3(0.0)};
+      const Vec3 u = k.x - X;
+      for (int d = 0; d < 3; ++d) {
+        s.u[3 * size_t(i) + size_t(d)] = Real(u[d]);
+        v_prescribed_[3 * c + size_t(d)] = Real(k.v[d]);
+        a_prescribed_[3 * c + size_t(d)] = Real(k.a[d]);
+      }
+      ++c;
+    }
+  }
+}
+
+template <class Real>
+void Stepper<Real>::apply_essential_rates(State<Real>& s, double t, double dt) {
+  (void)t;
+  // The corrector computed a from the forces alone; the constraint supplies
+  // the difference: r = m (a_prescribed - a) (1 + alpha dt / 2), eq. (10).
+  const double q = model_.effects.damping ? 1.0 + 0.5 * model_.effects.alpha * dt : 1.0;
+  double work = 0, mv2_delta = 0, ma2_delta = 0;
+  size_t c = 0;
+  for (const EssentialSet& set : model_.essential) {
+    for (int32_t i : set.nodes) {
+      const size_t j = 3 * size_t(i);
+      const double m = double(model_.m[size_t(i)]);
+      const Vec3& u0 = u_before_[c];
+      for (int d = 0; d < 3; ++d) {
+        const double v_free = double(s.v[j + size_t(d)]), v_held = double(v_prescribed_[3 * c + size_t(d)]);
+        mv2_delta += m * (v_held * v_held - v_free * v_free);
+        const double a_free = double(s.a[j + size_t(d)]), a_held = double(a_prescribed_[3 * c + size_t(d)]);
+        ma2_delta += m * (a_held * a_held - a_free * a_free);
+        const double r_new = m * (double(a_prescribed_[3 * c + size_t(d)]) - double(s.a[j + size_t(d)])) * q;
+        const double r_old = double(s.reaction[3 * c + size_t(d)]);
+        work += 0.5 * (r_old + r_new) * (double(s.u[j + size_t(d)]) - u0[d]);  // trapezoid
+        s.reaction[3 * c + size_t(d)] = Real(r_new);
+        s.v[j + size_t(d)] = v_prescribed_[3 * c + size_t(d)];
+        s.a[j + size_t(d)] = a_prescribed_[3 * c + size_t(d)];
+      }
+      ++c;
+    }
+  }
+  s.work_essential += work;
+  essential_mv2_delta_ = mv2_delta;
+  essential_ma2_delta_ = ma2_delta;
+}
+
+template <class Real>
+void Stepper<Real>::apply_loads(const State<Real>& s, double t) {
+  Real* f = f_.data();  // part 0's buffer; the corrector sums all parts
+  double work = 0;
+  size_t c = 0;
+  for (const LoadSet& load : model_.loads) {
+    const double scale = load.spec.scale ? compute_profile(*load.spec.scale, t).s : 1.0;
+    for (size_t k = 0; k < load.nodes.size(); ++k, ++c) {
+      const size_t j = 3 * size_t(load.nodes[k]);
+      const Vec3 force = load.spec.force * (scale * load.weight[k]);
+      const Vec3& u0 = u_before_[model_.constrained.size() + c];
+      for (int d = 0; d < 3; ++d) {
+        f[j + size_t(d)] += Real(force[d]);
+        work += 0.5 * (load_force_[c][d] + force[d]) * (double(s.u[j + size_t(d)]) - u0[d]);
+      }
+      load_force_[c] = force;
+    }
+  }
+  cur_->work_loads += work;
+}
+
+template <class Real>
+Fault Stepper<Real>::step(State<Real>& s, double dt) {
+  if (fault_) return fault_;
+  if (!(dt > 0) || !std::isfinite(dt))
+    return make_fault(Fault::Kind::StepTooLarge, s, "time step must be finite and > 0, got " + std::to_string(dt), {});
+  cur_ = &s;
+  cur_dt_ = Real(dt);
+  const double t1 = s.t + dt;
+  const size_t nc = model_.constrained.size();
+
+  if (!energy_started_) {  // loads at t_n for the work trapezoid, and the reference energy
+    size_t c = 0;
+    for (const LoadSet& load : model_.loads) {
+      const double scale = load.spec.scale ? compute_profile(*load.spec.scale, s.t).s : 1.0;
+      for (size_t k = 0; k < load.nodes.size(); ++k, ++c) load_force_[c] = load.spec.force * (scale * load.weight[k]);
+    }
+    const Energy e0 = compute_energy(s);
+    energy_reference_ = e0.balance();
+    energy_scale_ = std::fabs(e0.kinetic) + std::fabs(e0.elastic) + std::fabs(e0.gravity);
+    energy_started_ = true;
+  }
+  // Positions at t_n of the nodes whose work is accounted.
+  for (size_t c = 0; c < nc; ++c) {
+    const size_t j = 3 * size_t(model_.constrained[c]);
+    u_before_[c] = Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
+  }
+  for (size_t c = 0; c < loaded_.size(); ++c) {
+    const size_t j = 3 * size_t(loaded_[c]);
+    u_before_[nc + c] = Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
+  }
+
+  enter(Pass::Predict);
+  run_parts(&Stepper::predict_part, this);  // eq. (7)
+  leave(Pass::Predict);
+
+  if (!model_.essential.empty()) {
+    enter(Pass::Essential);
+    apply_essential_positions(s, t1);
+    leave(Pass::Essential);
+  }
+
+  enter(Pass::Elastic);
+  run_parts(&Stepper::elastic_part, this);  // R(u_{n+1})
+  leave(Pass::Elastic);
+
+  if (!model_.loads.empty()) {
+    enter(Pass::Loads);
+    apply_loads(s, t1);  // F_{n+1}
+    leave(Pass::Loads);
+  }
+
+  enter(Pass::Correct);
+  run_parts(&Stepper::correct_part, this);  // eqs. (8)-(10), then (9)
+  leave(Pass::Correct);
+
+  essential_mv2_delta_ = essential_ma2_delta_ = 0;
+  if (!model_.essential.empty()) {
+    enter(Pass::Essential);
+    apply_essential_rates(s, t1, dt);
+    leave(Pass::Essential);
+  }
+
+  enter(Pass::Guard);
+  ElasticSums el;
+  CorrectSums co;
+  for (int32_t p = 0; p < n_parts_; ++p) {
+    el.energy += elastic_[size_t(p)].energy;
+    el.inverted += elastic_[size_t(p)].inverted;
+    co.abs_a += correct_sums_[size_t(p)].abs_a;
+    co.mv2 += correct_sums_[size_t(p)].mv2;
+    co.mgu += correct_sums_[size_t(p)].mgu;
+    co.ma2 += correct_sums_[size_t(p)].ma2;
+  }
+  s.t = t1;
+  ++s.step;
+  // The corrector's sum saw the constrained nodes before their velocities
+  // were prescribed; apply_essential_rates swapped their terms.
+  const double mv2 = std::max(0.0, co.mv2 + essential_mv2_delta_);
+  const double ma2 = std::max(0.0, co.ma2 + essential_ma2_delta_);
+  if (model_.effects.damping) s.dissipated += model_.effects.alpha * mv2 * dt;
+  energy_.kinetic = 0.5 * mv2;
+  energy_.discrete = -0.125 * dt * dt * ma2;
+  energy_.elastic = el.energy;
+  energy_.gravity = -co.mgu;
+  energy_.work_loads = s.work_loads;
+  energy_.work_essential = s.work_essential;
+  energy_.dissipated = s.dissipated;
+
+  Fault fault;
+  if (!std::isfinite(co.abs_a) || !std::isfinite(el.energy)) {
+    fault = make_fault(Fault::Kind::NonFinite, s, "non-finite acceleration or energy", find_nonfinite_elements(s));
+  } else if (el.inverted > 0) {
+    std::vector<int32_t> ids = find_inverted_elements(s);
+    fault = make_fault(Fault::Kind::Inverted, s,
+                       std::to_string(el.inverted) + " element(s) inverted (det F <= 0), which their material (stvk) "
+                       "cannot recover from: ids " + list_ids(ids),
+                       std::move(ids));
+  } else {
+    const double magnitude = std::fabs(energy_.kinetic) + std::fabs(energy_.elastic) + std::fabs(energy_.gravity) +
+                             std::fabs(s.work_loads) + std::fabs(s.work_essential) + s.dissipated;
+    energy_scale_ = std::max(energy_scale_, magnitude);
+    const double growth = energy_.balance() - energy_reference_;
+    const double allowed = model_.integrator.energy_tolerance * energy_scale_ + 1e-12;
+    if (growth > allowed) {
+      std::vector<int32_t> ids = find_top_energy_elements(s, 10);
+      std::ostringstream msg;
+      msg << "energy grew by " << growth << " J beyond the work done (allowed " << allowed
+          << " J); highest strain energy in elements " << list_ids(ids);
+      fault = make_fault(Fault::Kind::EnergyGrowth, s, msg.str(), std::move(ids));
+    }
+  }
+  leave(Pass::Guard);
+  return fault;
+}
+
+template <class Real>
+Fault Stepper<Real>::make_fault(Fault::Kind kind, const State<Real>& s, std::string message,
+                                std::vector<int32_t> elements) {
+  fault_.kind = kind;
+  fault_.step = s.step;
+  fault_.t = s.t;
+  fault_.message = std::move(message);
+  fault_.elements = std::move(elements);
+  return fault_;
+}
+
+template <class Real>
+void Stepper<Real>::clear_fault() {
+  fault_ = Fault{};
+  energy_started_ = false;
+  dt_refreshed_at_ = -1;
+}
+
+template <class Real>
+AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
+  AdvanceReport report;
+  if (fault_) {
+    report.fault = fault_;
+    return report;
+  }
+  if (!(frame_dt > 0) || !std::isfinite(frame_dt)) {
+    report.fault = make_fault(Fault::Kind::StepTooLarge, s, "frame interval must be finite and > 0", {});
+    return report;
+  }
+  // Refresh the estimate as the body deforms; it changes slowly, so every 16 steps.
+  if (dt_refreshed_at_ < 0 || s.step - dt_refreshed_at_ >= 16) {
+    dt_critical_ = compute_critical_dt(s);
+    dt_refreshed_at_ = s.step;
+  }
+  report.dt_critical = dt_critical_;
+  const double fixed = model_.integrator.dt;
+  int64_t n = 1;
+  if (fixed > 0) {
+    n = std::max<int64_t>(1, std::llround(frame_dt / fixed));
+    if (frame_dt / double(n) > dt_critical_) {
+      if (model_.integrator.unstable == UnstablePolicy::Refuse) {
+        std::ostringstream msg;
+        msg << "integrator.dt = " << fixed << " s exceeds the critical step " << dt_critical_
+            << " s of the current configuration; refused (set integrator.unstable to \"subdivide\" to split it)";
+        report.fault = make_fault(Fault::Kind::StepTooLarge, s, msg.str(), {});
+        return report;
+      }
+      n = static_cast<int64_t>(std::ceil(frame_dt / (model_.integrator.safety * dt_critical_)));
+      report.subdivided = true;
+    }
+  } else {
+    n = static_cast<int64_t>(std::ceil(frame_dt / (model_.integrator.safety * dt_critical_)));
+  }
+  const double dt = frame_dt / double(n);
+  report.dt = dt;
+  for (int64_t k = 0; k < n; ++k) {
+    if (Fault f = step(s, dt)) {
+      report.fault = std::move(f);
+      break;
+    }
+    ++report.substeps;
+  }
+  return report;
+}
+
+template <class Real>
+double Stepper<Real>::compute_critical_dt(const State<Real>& s) const {
+  double dt = model_.dt_rest;
+  const TetMesh& mesh = model_.mesh;
+  for (size_t e = 0; e < size_t(model_.n_tets); ++e) {
+    const Tet& t = mesh.tets[e];
+    Vec3 x[4];
+    for (int c = 0; c < 4; ++c) {
+      const size_t i = size_t(t[size_t(c)]);
+      x[c] = mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
+    }
+    // Current altitude over rest altitude: a squashed element has a shorter crossing time.
+    const double V = std::fabs(compute_tet_volume(x[0], x[1], x[2], x[3]));
+    double amax = 0;
+    amax = std::max(amax, glm::length(glm::cross(x[2] - x[1], x[3] - x[1])));
+    amax = std::max(amax, glm::length(glm::cross(x[2] - x[0], x[3] - x[0])));
+    amax = std::max(amax, glm::length(glm::cross(x[1] - x[0], x[3] - x[0])));
+    amax = std::max(amax, glm::length(glm::cross(x[1] - x[0], x[2] - x[0])));
+    const double h = amax > 0 ? 6.0 * V / amax : 0.0;
+    const double ratio = std::min(1.0, h / model_.tet_altitude[e]);
+    const glm::dmat3 Ds(x[1] - x[0], x[2] - x[0], x[3] - x[0]);
+    const Vec3& X0 = mesh.X[size_t(t[0])];
+    const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
+    const glm::dmat3 Fg = Ds * glm::inverse(Dm);
+    double F[9];
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) F[3 * r + c] = Fg[c][r];
+    const double k = material::stiffening(model_.tet_model[e], F);
+    // An element squashed flat has h = 0; it is the guards' job, not a zero step's.
+    const double dte = model_.tet_dt[e] * std::max(ratio, 0.05) / std::sqrt(k);
+    dt = std::min(dt, dte);
+  }
+  return dt;
+}
+
+template <class Real>
+std::vector<double> Stepper<Real>::compute_element_energy(const State<Real>& s) const {
+  std::vector<double> out(size_t(model_.n_tets), 0.0);
+  std::vector<double> lane(size_t(kLanes<Real>));
+  for (const ElementGroup& g : model_.groups) {
+    for (int32_t b = g.begin; b < g.end; ++b) {
+      kernels_.energy[int(g.model)](model_.blocks.data(), b, b + 1, s.u.data(), lane.data(), nullptr);
+      for (int l = 0; l < kLanes<Real>; ++l) {
+        const int32_t e = model_.lane_tet[size_t(b) * kLanes<Real> + size_t(l)];
+        if (e >= 0) out[size_t(e)] = lane[size_t(l)];
+      }
+    }
+  }
+  return out;
+}
+
+template <class Real>
+Energy Stepper<Real>::compute_energy(const State<Real>& s) const {
+  Energy e;
+  for (double x : compute_element_energy(s)) e.elastic += x;
+  for (size_t i = 0; i < size_t(model_.n_nodes); ++i) {
+    double v2 = 0, gu = 0;
+    for (size_t d = 0; d < 3; ++d) {
+      v2 += double(s.v[3 * i + d]) * double(s.v[3 * i + d]);
+      gu += model_.effects.g[int(d)] * double(s.u[3 * i + d]);
+    }
+    e.kinetic += 0.5 * double(model_.m[i]) * v2;
+    if (model_.effects.gravity) e.gravity -= double(model_.m[i]) * gu;
+  }
+  e.work_loads = s.work_loads;
+  e.work_essential = s.work_essential;
+  e.dissipated = s.dissipated;
+  return e;
+}
+
+template <class Real>
+std::vector<int32_t> Stepper<Real>::find_nonfinite_elements(const State<Real>& s) const {
+  std::vector<int32_t> out;
+  for (size_t e = 0; e < size_t(model_.n_tets) && out.size() < 50; ++e) {
+    for (int32_t i : model_.mesh.tets[e]) {
+      bool bad = false;
+      for (size_t d = 0; d < 3; ++d) {
+        const size_t j = 3 * size_t(i) + d;
+        bad |= !std::isfinite(double(s.u[j])) || !std::isfinite(double(s.v[j])) || !std::isfinite(double(s.a[j]));
+      }
+      if (bad) {
+        out.push_back(int32_t(e));
+        break;
+      }
+    }
+  }
+  return out;
+}
+
+template <class Real>
+std::vector<int32_t> Stepper<Real>::find_inverted_elements(const State<Real>& s) const {
+  std::vector<int32_t> out;
+  const TetMesh& mesh = model_.mesh;
+  for (size_t e = 0; e < size_t(model_.n_tets) && out.size() < 50; ++e) {
+    if (can_invert(model_.tet_model[e])) continue;
+    const Tet& t = mesh.tets[e];
+    Vec3 x[4];
+    for (int c = 0; c < 4; ++c) {
+      const size_t i = size_t(t[size_t(c)]);
+      x[c] = mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
+    }
+    if (compute_tet_volume(x[0], x[1], x[2], x[3]) <= 0) out.push_back(int32_t(e));
+  }
+  return out;
+}
+
+template <class Real>
+std::vector<int32_t> Stepper<Real>::find_top_energy_elements(const State<Real>& s, size_t count) const {
+  const std::vector<double> energy = compute_element_energy(s);
+  std::vector<int32_t> ids(energy.size());
+  std::iota(ids.begin(), ids.end(), 0);
+  count = std::min(count, ids.size());
+  std::partial_sort(ids.begin(), ids.begin() + long(count), ids.end(), [&](int32_t a, int32_t b) {
+    return energy[size_t(a)] / model_.tet_volume[size_t(a)] > energy[size_t(b)] / model_.tet_volume[size_t(b)];
+  });
+  ids.resize(count);
+  return ids;
+}
+
+template class Stepper<float>;
+template class Stepper<double>;
+
+}  // namespace tactile

@@ -1,0 +1,149 @@
+// Explicit Newmark time stepping, eqs. (7)-(10), assembled from only the
+// effects a model has.
+//
+// One step: predict u and the half-step velocity (eq. 7), impose essential
+// BCs, elastic forces R(u) (lane-blocked kernels), natural loads, then the
+// diagonal solve of eq. (10) with gravity and damping only if present, and
+// the essential BCs' velocities and accelerations. Each step also checks for
+// non-finite values, inverted elements (for models that cannot take them)
+// and energy growth beyond the work done, and reports a Fault instead of
+// going on.
+//
+// The stepper owns a preallocated workspace: a step allocates nothing. It
+// starts no threads: a ParallelFor from the application layer splits the
+// element and node passes.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/model.hpp"
+#include "core/state.hpp"
+
+namespace tactile {
+
+// Runs fn(ctx, i) for i in [0, n) and returns when all calls are done.
+// Implemented by the application layer (a thread pool); the core stays pure.
+class ParallelFor {
+ public:
+  virtual ~ParallelFor() = default;
+  virtual int32_t workers() const = 0;
+  virtual void run(int32_t n, void (*fn)(void* ctx, int32_t i), void* ctx) = 0;
+};
+
+// The passes of a step, for cost accounting by a StepProbe.
+enum class Pass : uint8_t { Predict, Essential, Elastic, Loads, Correct, Guard };
+inline constexpr int kPassCount = 6;
+const char* to_string(Pass p);
+
+// Told when each pass of a step starts and ends; the application layer times
+// them (the core reads no clock).
+class StepProbe {
+ public:
+  virtual ~StepProbe() = default;
+  virtual void enter(Pass p) = 0;
+  virtual void leave(Pass p) = 0;
+};
+
+struct AdvanceReport {
+  int32_t substeps = 0;
+  double dt = 0;           // sub-step used [s]
+  double dt_critical = 0;  // estimate for the current configuration [s]
+  bool subdivided = false; // a fixed dt above the estimate was split
+  Fault fault;
+};
+
+template <class Real>
+class Stepper {
+ public:
+  explicit Stepper(const Model<Real>& model, ParallelFor* parallel = nullptr);
+
+  const Model<Real>& model() const { return model_; }
+  State<Real> make_state() const { return make_rest_state<Real>(model_.n_nodes, n_constrained()); }
+
+  // One step of dt [s]. After a fault, returns it again until clear_fault().
+  Fault step(State<Real>& s, double dt);
+
+  // Covers frame_dt [s] with as many equal sub-steps as stability needs
+  // (auto step), or with the scene's fixed step, subdivided or refused when
+  // it exceeds the critical step of the current configuration.
+  AdvanceReport advance(State<Real>& s, double frame_dt);
+
+  // Critical step of the current configuration [s]: each element's exact rest
+  // value scaled by how much it has been squashed and stiffened.
+  double compute_critical_dt(const State<Real>& s) const;
+
+  // All energies from a full pass (not the hot path).
+  Energy compute_energy(const State<Real>& s) const;
+  // Elastic energy density V psi per tet [J] (n_tets).
+  std::vector<double> compute_element_energy(const State<Real>& s) const;
+
+  // Energies as of the latest step, from sums the step computes anyway.
+  const Energy& energy() const { return energy_; }
+
+  void clear_fault();
+  const Fault& fault() const { return fault_; }
+  void set_probe(StepProbe* probe) { probe_ = probe; }
+  int32_t parts() const { return n_parts_; }
+
+ private:
+  struct Part {
+    int32_t block_begin, block_end;  // lane blocks
+    int32_t node_begin, node_end;    // nodes
+  };
+
+  int32_t n_constrained() const { return static_cast<int32_t>(model_.constrained.size()); }
+  void apply_essential_positions(State<Real>& s, double t);
+  void apply_essential_rates(State<Real>& s, double t, double dt);
+  void apply_loads(const State<Real>& s, double t);
+  Fault make_fault(Fault::Kind kind, const State<Real>& s, std::string message, std::vector<int32_t> elements);
+  std::vector<int32_t> find_nonfinite_elements(const State<Real>& s) const;
+  std::vector<int32_t> find_inverted_elements(const State<Real>& s) const;
+  std::vector<int32_t> find_top_energy_elements(const State<Real>& s, size_t count) const;
+  void run_parts(void (*fn)(void*, int32_t), void* ctx);
+  void enter(Pass p) {
+    if (probe_) probe_->enter(p);
+  }
+  void leave(Pass p) {
+    if (probe_) probe_->leave(p);
+  }
+
+  static void predict_part(void* ctx, int32_t p);
+  static void elastic_part(void* ctx, int32_t p);
+  static void correct_part(void* ctx, int32_t p);
+
+  const Model<Real>& model_;
+  ParallelFor* parallel_;
+  StepProbe* probe_ = nullptr;
+  const KernelTable<Real>& kernels_;
+  CorrectFn<Real> correct_;
+  int32_t n_parts_ = 1;
+  std::vector<Part> part_;
+
+  // Workspace, sized once.
+  std::vector<Real> f_;                  // force per part [N] (n_parts x n_nodes x 3)
+  std::vector<ElasticSums> elastic_;     // per part
+  std::vector<CorrectSums> correct_sums_;  // per part
+  std::vector<Vec3> u_before_;           // constrained and loaded nodes' u at t_n [m]
+  std::vector<Vec3> load_force_;         // load force at t_n per loaded node [N]
+  std::vector<Real> a_prescribed_;       // prescribed accelerations (n_constrained x 3)
+  std::vector<Real> v_prescribed_;       // prescribed velocities (n_constrained x 3)
+  std::vector<int32_t> loaded_;          // loaded node ids, flattened over loads
+
+  // Per-step context for the part functions.
+  State<Real>* cur_ = nullptr;
+  Real cur_dt_ = 0;
+
+  double essential_mv2_delta_ = 0;  // constrained nodes' change of m |v|^2 in this step
+  double essential_ma2_delta_ = 0;  // and of m |a|^2
+  Energy energy_;
+  double energy_reference_ = 0;  // balance at the first step
+  double energy_scale_ = 0;      // running max of the energy magnitudes [J]
+  bool energy_started_ = false;
+  Fault fault_;
+  double dt_critical_ = 0;
+  int64_t dt_refreshed_at_ = -1;
+};
+
+}  // namespace tactile
