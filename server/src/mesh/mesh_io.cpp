@@ -1,0 +1,396 @@
+#include "mesh/mesh_io.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <string_view>
+
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include "mesh/mesh_error.hpp"
+
+namespace tactile {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return s;
+}
+
+std::string format_vec(const Vec3& p) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "(%.9g, %.9g, %.9g)", p.x, p.y, p.z);
+  return buf;
+}
+
+bool is_finite(const Vec3& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
+
+void require_file(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw MeshError(path + ": file not found");
+  if (!fs::is_regular_file(path, ec)) throw MeshError(path + ": not a regular file");
+}
+
+std::string read_text(const std::string& path) {
+  require_file(path);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw MeshError(path + ": cannot open for reading");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// --- text files: content lines, '#' comments, whitespace-separated tokens ---
+
+struct Line {
+  int number;                           // 1-based line number in the file
+  std::vector<std::string_view> words;  // non-empty
+};
+
+// The non-blank lines of `text`, comments removed. Views point into `text`.
+std::vector<Line> split_lines(const std::string& text) {
+  std::vector<Line> lines;
+  int number = 0;
+  size_t begin = 0;
+  while (begin < text.size()) {
+    size_t end = text.find('\n', begin);
+    if (end == std::string::npos) end = text.size();
+    ++number;
+    std::string_view line(text.data() + begin, end - begin);
+    if (const size_t hash = line.find('#'); hash != std::string_view::npos) line = line.substr(0, hash);
+    Line out{number, {}};
+    size_t i = 0;
+    while (i < line.size()) {
+      while (i < line.size() && std::isspace(static_cast<unsigned char>(line[i]))) ++i;
+      size_t j = i;
+      while (j < line.size() && !std::isspace(static_cast<unsigned char>(line[j]))) ++j;
+      if (j > i) out.words.push_back(line.substr(i, j - i));
+      i = j;
+    }
+    if (!out.words.empty()) lines.push_back(std::move(out));
+    begin = end + 1;
+  }
+  return lines;
+}
+
+// Parses whole words of a text file, naming file and line on error.
+struct WordParser {
+  const std::string& path;
+
+  [[noreturn]] void fail(const Line& line, const std::string& what) const {
+    throw MeshError(path + ":" + std::to_string(line.number) + ": " + what);
+  }
+  int64_t integer(const Line& line, size_t w, const char* what) const {
+    if (w >= line.words.size()) fail(line, std::string("missing ") + what);
+    const std::string_view s = line.words[w];
+    int64_t v = 0;
+    auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (ec != std::errc() || end != s.data() + s.size())
+      fail(line, std::string(what) + " '" + std::string(s) + "' is not an integer");
+    return v;
+  }
+  double real(const Line& line, size_t w, const char* what) const {
+    if (w >= line.words.size()) fail(line, std::string("missing ") + what);
+    const std::string_view s = line.words[w];
+    double v = 0;
+    auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (ec != std::errc() || end != s.data() + s.size())
+      fail(line, std::string(what) + " '" + std::string(s) + "' is not a number");
+    return v;
+  }
+};
+
+// --- OFF (our own reader) ---
+
+SurfaceMesh read_off(const std::string& path) {
+  const std::string text = read_text(path);
+  const std::vector<Line> lines = split_lines(text);
+  const WordParser p{path};
+  if (lines.empty()) throw MeshError(path + ": empty file");
+  // Header keyword [ST][C][N][4][n]OFF; only 3-D ASCII is read here.
+  const Line& head = lines[0];
+  const std::string_view key = head.words[0];
+  if (key.size() < 3 || key.substr(key.size() - 3) != "OFF") p.fail(head, "not an OFF file (no OFF header)");
+  if (key.find('4') != std::string_view::npos || key.find('n') != std::string_view::npos)
+    p.fail(head, "only 3-D OFF is supported, not " + std::string(key));
+  size_t next = 1;
+  Line counts = head;
+  counts.words.erase(counts.words.begin());
+  if (!counts.words.empty() && lower(std::string(counts.words[0])) == "binary")
+    p.fail(head, "binary OFF is not supported");
+  if (counts.words.empty()) {
+    if (lines.size() < 2) throw MeshError(path + ": missing the vertex and face counts");
+    counts = lines[next++];
+  }
+  const int64_t nv = p.integer(counts, 0, "vertex count");
+  const int64_t nf = p.integer(counts, 1, "face count");
+  if (nv < 0 || nf < 0 || nv > std::numeric_limits<int32_t>::max()) p.fail(counts, "invalid vertex or face count");
+  if (lines.size() < next + size_t(nv) + size_t(nf))
+    throw MeshError(path + ": ends early; line " + std::to_string(counts.number) + " declares " + std::to_string(nv) +
+                    " vertices and " + std::to_string(nf) + " faces");
+
+  SurfaceMesh s;
+  s.vertices.reserve(size_t(nv));
+  for (int64_t i = 0; i < nv; ++i) {
+    const Line& line = lines[next++];
+    const Vec3 x(p.real(line, 0, "x"), p.real(line, 1, "y"), p.real(line, 2, "z"));
+    if (!is_finite(x)) p.fail(line, "vertex " + std::to_string(i) + " has a non-finite coordinate");
+    s.vertices.push_back(x);
+  }
+  for (int64_t f = 0; f < nf; ++f) {
+    const Line& line = lines[next++];
+    const int64_t n = p.integer(line, 0, "face size");
+    if (n < 3) p.fail(line, "face " + std::to_string(f) + " has " + std::to_string(n) + " vertices; need >= 3");
+    std::vector<int32_t> ids;
+    for (int64_t k = 0; k < n; ++k) {
+      const int64_t id = p.integer(line, size_t(1 + k), "vertex id");
+      if (id < 0 || id >= nv)
+        p.fail(line, "face " + std::to_string(f) + " refers to vertex " + std::to_string(id) + ", outside 0.." +
+                         std::to_string(nv - 1));
+      ids.push_back(int32_t(id));
+    }
+    for (size_t k = 1; k + 1 < ids.size(); ++k) s.triangles.push_back({ids[0], ids[k], ids[k + 1]});
+  }
+  // Further lines (edges, per-face data) are ignored, as OFF allows.
+  return s;
+}
+
+// --- OBJ, STL, PLY through Assimp ---
+
+SurfaceMesh read_with_assimp(const std::string& path, const std::string& format) {
+  require_file(path);
+  Assimp::Importer importer;
+  // Drop everything but positions, so JoinIdenticalVertices welds by position
+  // alone (STL gives every corner its face's normal).
+  importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS,
+                              aiComponent_NORMALS | aiComponent_TANGENTS_AND_BITANGENTS | aiComponent_COLORS |
+                                  aiComponent_TEXCOORDS | aiComponent_BONEWEIGHTS | aiComponent_ANIMATIONS |
+                                  aiComponent_TEXTURES | aiComponent_LIGHTS | aiComponent_CAMERAS |
+                                  aiComponent_MATERIALS);
+  const unsigned flags = aiProcess_RemoveComponent | aiProcess_JoinIdenticalVertices | aiProcess_Triangulate |
+                         aiProcess_PreTransformVertices | aiProcess_ValidateDataStructure;
+  const aiScene* scene = importer.ReadFile(path, flags);
+  if (scene == nullptr) throw MeshError(path + ": cannot read " + format + ": " + importer.GetErrorString());
+
+  // Merge the file's meshes, welding equal positions across them.
+  SurfaceMesh s;
+  std::map<std::array<double, 3>, int32_t> id_at;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh* mesh = scene->mMeshes[m];
+    std::vector<int32_t> id(mesh->mNumVertices);
+    for (unsigned v = 0; v < mesh->mNumVertices; ++v) {
+      const aiVector3D& a = mesh->mVertices[v];
+      const Vec3 x(a.x, a.y, a.z);
+      if (!is_finite(x)) throw MeshError(path + ": a vertex has a non-finite coordinate " + format_vec(x));
+      auto [it, inserted] = id_at.try_emplace({x.x, x.y, x.z}, int32_t(s.vertices.size()));
+      if (inserted) s.vertices.push_back(x);
+      id[v] = it->second;
+    }
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
+      const aiFace& face = mesh->mFaces[f];
+      if (face.mNumIndices != 3) continue;  // points and lines
+      Tri t{};
+      for (unsigned k = 0; k < 3; ++k) {
+        if (face.mIndices[k] >= mesh->mNumVertices)
+          throw MeshError(path + ": a face refers to vertex " + std::to_string(face.mIndices[k]) + ", outside 0.." +
+                          std::to_string(mesh->mNumVertices) + " (index out of range)");
+        t[k] = id[face.mIndices[k]];
+      }
+      s.triangles.push_back(t);
+    }
+  }
+  return s;
+}
+
+// --- TetGen .node / .ele ---
+
+struct NodeFile {
+  std::vector<Vec3> X;
+  int64_t first = 0;  // number of the first node: 0 or 1
+};
+
+NodeFile read_node_file(const std::string& path) {
+  const std::string text = read_text(path);
+  const std::vector<Line> lines = split_lines(text);
+  const WordParser p{path};
+  if (lines.empty()) throw MeshError(path + ": empty file");
+  const Line& head = lines[0];
+  const int64_t n = p.integer(head, 0, "node count");
+  const int64_t dim = head.words.size() > 1 ? p.integer(head, 1, "dimension") : 3;
+  const int64_t n_attr = head.words.size() > 2 ? p.integer(head, 2, "attribute count") : 0;
+  const int64_t n_marker = head.words.size() > 3 ? p.integer(head, 3, "boundary marker count") : 0;
+  if (n < 4 || n > std::numeric_limits<int32_t>::max())
+    p.fail(head, "node count " + std::to_string(n) + " is not >= 4");
+  if (dim != 3) p.fail(head, "dimension is " + std::to_string(dim) + "; only 3 is supported");
+  if (n_attr < 0 || n_marker < 0 || n_marker > 1) p.fail(head, "invalid attribute or boundary marker count");
+  if (lines.size() < size_t(n) + 1)
+    throw MeshError(path + ": ends after " + std::to_string(lines.size() - 1) + " of the " + std::to_string(n) +
+                    " nodes declared on line " + std::to_string(head.number));
+  if (lines.size() > size_t(n) + 1)
+    p.fail(lines[size_t(n) + 1], "more lines than the " + std::to_string(n) + " nodes declared");
+
+  NodeFile out;
+  out.X.reserve(size_t(n));
+  for (int64_t i = 0; i < n; ++i) {
+    const Line& line = lines[size_t(i) + 1];
+    const int64_t id = p.integer(line, 0, "node id");
+    if (i == 0) {
+      if (id != 0 && id != 1)
+        p.fail(line, "first node id is " + std::to_string(id) + "; numbering must start at 0 or 1");
+      out.first = id;
+    } else if (id != out.first + i) {
+      p.fail(line,
+             "node id " + std::to_string(id) + " out of sequence (expected " + std::to_string(out.first + i) + ")");
+    }
+    if (line.words.size() != size_t(4 + n_attr + n_marker))
+      p.fail(line, "expected " + std::to_string(4 + n_attr + n_marker) + " fields (id, x, y, z, " +
+                       std::to_string(n_attr) + " attributes, " + std::to_string(n_marker) + " markers), found " +
+                       std::to_string(line.words.size()));
+    const Vec3 x(p.real(line, 1, "x"), p.real(line, 2, "y"), p.real(line, 3, "z"));
+    if (!is_finite(x)) p.fail(line, "node " + std::to_string(id) + " has a non-finite coordinate");
+    out.X.push_back(x);
+  }
+  return out;
+}
+
+void read_ele_file(const std::string& path, const NodeFile& nodes, const std::string& node_path, TetMesh& mesh) {
+  const std::string text = read_text(path);
+  const std::vector<Line> lines = split_lines(text);
+  const WordParser p{path};
+  if (lines.empty()) throw MeshError(path + ": empty file");
+  const Line& head = lines[0];
+  const int64_t n = p.integer(head, 0, "tet count");
+  const int64_t corners = head.words.size() > 1 ? p.integer(head, 1, "nodes per tet") : 4;
+  const int64_t n_attr = head.words.size() > 2 ? p.integer(head, 2, "attribute count") : 0;
+  if (n < 1 || n > std::numeric_limits<int32_t>::max()) p.fail(head, "tet count " + std::to_string(n) + " is not >= 1");
+  if (corners == 10) p.fail(head, "second-order (10-node) tets are not supported; mesh without TetGen -o2");
+  if (corners != 4) p.fail(head, "nodes per tet is " + std::to_string(corners) + "; must be 4");
+  if (n_attr < 0) p.fail(head, "invalid attribute count");
+  if (lines.size() < size_t(n) + 1)
+    throw MeshError(path + ": ends after " + std::to_string(lines.size() - 1) + " of the " + std::to_string(n) +
+                    " tets declared on line " + std::to_string(head.number));
+  if (lines.size() > size_t(n) + 1)
+    p.fail(lines[size_t(n) + 1], "more lines than the " + std::to_string(n) + " tets declared");
+
+  const auto nn = int64_t(nodes.X.size());
+  mesh.tets.reserve(size_t(n));
+  if (n_attr > 0) mesh.region.reserve(size_t(n));
+  for (int64_t e = 0; e < n; ++e) {
+    const Line& line = lines[size_t(e) + 1];
+    const int64_t id = p.integer(line, 0, "tet id");
+    if (line.words.size() != size_t(5 + n_attr))
+      p.fail(line, "expected " + std::to_string(5 + n_attr) + " fields (id, 4 nodes, " + std::to_string(n_attr) +
+                       " attributes), found " + std::to_string(line.words.size()));
+    Tet t{};
+    for (size_t k = 0; k < 4; ++k) {
+      const int64_t node = p.integer(line, 1 + k, "node id");
+      if (node < nodes.first || node >= nodes.first + nn)
+        p.fail(line, "tet " + std::to_string(id) + " refers to node " + std::to_string(node) + ", but " + node_path +
+                         " has nodes " + std::to_string(nodes.first) + ".." + std::to_string(nodes.first + nn - 1));
+      t[k] = int32_t(node - nodes.first);
+    }
+    if (compute_tet_volume(nodes.X[size_t(t[0])], nodes.X[size_t(t[1])], nodes.X[size_t(t[2])],
+                           nodes.X[size_t(t[3])]) < 0.0)
+      std::swap(t[1], t[2]);
+    mesh.tets.push_back(t);
+    if (n_attr > 0) {
+      const double r = p.real(line, 5, "region attribute");
+      if (!(r == std::floor(r) && std::abs(r) <= double(std::numeric_limits<int32_t>::max())))
+        p.fail(line, "region attribute " + std::string(line.words[5]) + " of tet " + std::to_string(id) +
+                         " is not an integer");
+      mesh.region.push_back(int32_t(r));
+    }
+  }
+}
+
+std::ofstream open_for_writing(const std::string& path) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) throw MeshError(path + ": cannot open for writing");
+  return out;
+}
+
+void finish_writing(std::ofstream& out, const std::string& path) {
+  out.close();
+  if (!out) throw MeshError(path + ": write failed");
+}
+
+std::string g17(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+}  // namespace
+
+SurfaceMesh read_surface(const std::string& path) {
+  const std::string ext = lower(fs::path(path).extension().string());
+  SurfaceMesh s;
+  if (ext == ".off") {
+    s = read_off(path);
+  } else if (ext == ".obj" || ext == ".stl" || ext == ".ply") {
+    s = read_with_assimp(path, ext == ".obj" ? "OBJ" : ext == ".stl" ? "STL" : "PLY");
+  } else {
+    throw MeshError(path + ": unknown surface mesh extension '" + fs::path(path).extension().string() +
+                    "' (expected .obj, .stl, .off or .ply)");
+  }
+  if (s.triangles.empty()) throw MeshError(path + ": no triangles in file");
+  return s;
+}
+
+TetMesh read_tetgen(const std::string& path) {
+  std::string base = path;
+  const std::string ext = lower(fs::path(path).extension().string());
+  if (ext == ".node" || ext == ".ele") base = path.substr(0, path.size() - ext.size());
+  const std::string node_path = base + ".node", ele_path = base + ".ele";
+  const NodeFile nodes = read_node_file(node_path);
+  TetMesh mesh;
+  read_ele_file(ele_path, nodes, node_path, mesh);
+  mesh.X = nodes.X;
+  return mesh;
+}
+
+void write_tetgen(const TetMesh& mesh, const std::string& base) {
+  const std::string node_path = base + ".node", ele_path = base + ".ele";
+  {
+    std::ofstream out = open_for_writing(node_path);
+    out << "# tactile TetMesh: <node count> <dimension> <attributes> <boundary markers>\n";
+    out << mesh.n_nodes() << " 3 0 0\n";
+    for (int32_t i = 0; i < mesh.n_nodes(); ++i) {
+      const Vec3& x = mesh.X[size_t(i)];
+      out << i << ' ' << g17(x.x) << ' ' << g17(x.y) << ' ' << g17(x.z) << '\n';
+    }
+    finish_writing(out, node_path);
+  }
+  {
+    const bool regions = !mesh.region.empty();
+    std::ofstream out = open_for_writing(ele_path);
+    out << "# tactile TetMesh: <tet count> <nodes per tet> <attributes (region id)>\n";
+    out << mesh.n_tets() << " 4 " << (regions ? 1 : 0) << '\n';
+    for (int32_t e = 0; e < mesh.n_tets(); ++e) {
+      const Tet& t = mesh.tets[size_t(e)];
+      out << e << ' ' << t[0] << ' ' << t[1] << ' ' << t[2] << ' ' << t[3];
+      if (regions) out << ' ' << mesh.region_of(e);
+      out << '\n';
+    }
+    finish_writing(out, ele_path);
+  }
+}
+
+void write_surface_obj(const SurfaceMesh& surface, const std::string& path) {
+  std::ofstream out = open_for_writing(path);
+  for (const Vec3& x : surface.vertices) out << "v " << g17(x.x) << ' ' << g17(x.y) << ' ' << g17(x.z) << '\n';
+  for (const Tri& t : surface.triangles) out << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
+  finish_writing(out, path);
+}
+
+}  // namespace tactile
