@@ -1,0 +1,12 @@
+#!/usr/bin/env bash
+# Sets everything up, then runs all the tests: the C++ suites (ctest) and the
+# cross-piece tests in tests/ (pytest).
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+scripts/setup.sh
+build="${TACTILE_BUILD:-build/release}"
+echo "test: C++ (ctest)"
+ctest --test-dir "$build" --output-on-failure -j"$(nproc)"
+echo "test: cross-piece (pytest)"
+TACTILE_BUILD="$build" .venv/bin/python -m pytest -q tests
