@@ -264,7 +264,9 @@ template <class T>
 TACTILE_INLINE T stress_neohookean(const T* F, T lambda, T mu, T* P) {
   const T mu_s = T(4.0 / 3.0) * mu;
   const T lambda_s = lambda + T(5.0 / 6.0) * mu;
-  const T alpha = T(1) + T(0.75) * mu_s / lambda_s;
+  // The kernels' padding lanes pass lambda = mu = 0: 0/0 there would put a
+  // NaN into the block's energy sum and into node 0's force.
+  const T alpha = lambda_s != T(0) ? T(1) + T(0.75) * mu_s / lambda_s : T(1);
   T Ic = 0;
   #pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) Ic += F[k] * F[k];

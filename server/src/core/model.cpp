@@ -236,10 +236,15 @@ Model<Real> build_model(const ModelSpec& spec) {
     size_t j = i;
     while (j < nt && model.tet_model[size_t(order[j])] == mm) ++j;
     ElementGroup group{mm, int32_t(model.blocks.size()), 0};
-    for (size_t k = i; k < j; k += W) {
+    const size_t chunk_blocks = getenv("TACTILE_STRIP") ? size_t(atoi(getenv("TACTILE_STRIP"))) : 1;
+    for (size_t k = i; k < j; k += W * chunk_blocks) {
+      const size_t rem = std::min(j - k, W * chunk_blocks);
+      const size_t cb = (rem + W - 1) / W;
+      for (size_t bb = 0; bb < cb; ++bb) {
       ElementBlock<Real> B{};
       for (int l = 0; l < W; ++l) {
-        const size_t slot = k + size_t(l);
+        const size_t rel = size_t(l) * cb + bb;
+        const size_t slot = rel < rem ? k + rel : j;
         if (slot >= j) {  // padding lane: zero stiffness, identity shape
           for (int c = 0; c < 4; ++c) B.node[c][l] = 0;
           for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
@@ -260,6 +265,7 @@ Model<Real> build_model(const ModelSpec& spec) {
         model.lane_tet.push_back(int32_t(e));
       }
       model.blocks.push_back(B);
+      }
     }
     group.end = int32_t(model.blocks.size());
     model.groups.push_back(group);

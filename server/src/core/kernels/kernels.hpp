@@ -25,7 +25,9 @@ struct alignas(64) ElementBlock {
   Real muV[W];         // mu * rest volume [N m]; 0 in padding lanes
 };
 
-// Elastic forces of blocks [begin, end): f -= dU/dx, accumulated into f (n x 3).
+// Elastic forces of blocks [begin, end): f -= dU/dx, accumulated into f
+// (n_nodes x 4: x, y, z and an unused entry, so that a lane adds a corner's
+// force as one vector).
 // The elastic energy comes almost free with the stress, so the energy guard
 // can check every step.
 struct ElasticSums {
@@ -34,7 +36,7 @@ struct ElasticSums {
 };
 template <class Real>
 using ForcesFn = ElasticSums (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Real* u,
-                                 Real* f);
+                                 Real (*f)[4]);
 
 // Elastic energy V psi(F) per lane of blocks [begin, end), written to
 // energy[(b - begin) * W + lane]; and det F per lane to J (may be null).

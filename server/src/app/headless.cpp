@@ -1,0 +1,372 @@
+#include "app/headless.hpp"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <ostream>
+#include <stdexcept>
+
+#include <glm/geometric.hpp>
+#include <nlohmann/json.hpp>
+
+#include "app/progress.hpp"
+#include "app/section.hpp"
+#include "app/simulation.hpp"
+#include "app/vtu.hpp"
+#include "core/kernels/kernels.hpp"
+
+namespace tactile {
+
+namespace {
+
+namespace fs = std::filesystem;
+using Json = nlohmann::ordered_json;
+using Clock = std::chrono::steady_clock;
+
+// Time spent in each pass of the step; the core reads no clock, so the app does.
+class PassTimer final : public StepProbe {
+ public:
+  void enter(Pass p) override { start_[size_t(p)] = Clock::now(); }
+  void leave(Pass p) override {
+    total_[size_t(p)] += std::chrono::duration<double>(Clock::now() - start_[size_t(p)]).count();
+  }
+  double total(Pass p) const { return total_[size_t(p)]; }
+
+ private:
+  std::array<Clock::time_point, kPassCount> start_{};
+  std::array<double, kPassCount> total_{};
+};
+
+// Running min, max and mean of a per-frame figure.
+struct Range {
+  double lo = std::numeric_limits<double>::infinity(), hi = -std::numeric_limits<double>::infinity(), sum = 0;
+  int64_t n = 0;
+  void add(double x) {
+    lo = std::min(lo, x);
+    hi = std::max(hi, x);
+    sum += x;
+    ++n;
+  }
+  Json to_json() const {
+    if (n == 0) return Json(nullptr);
+    return Json{{"min", lo}, {"max", hi}, {"mean", sum / double(n)}};
+  }
+};
+
+Json vec(const Vec3& v) { return Json::array({v.x, v.y, v.z}); }
+
+const char* precision_name(Precision p) { return p == Precision::Float ? "float" : "double"; }
+
+std::string frame_name(int32_t frame) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "frame_%06d.vtu", frame);
+  return buf;
+}
+
+Json energy_json(const Energy& e) {
+  return Json{{"kinetic_J", e.kinetic},
+              {"elastic_J", e.elastic},
+              {"gravity_J", e.gravity},
+              {"work_loads_J", e.work_loads},
+              {"work_essential_J", e.work_essential},
+              {"dissipated_J", e.dissipated},
+              {"discrete_J", e.discrete},
+              {"balance_drift_J", e.balance()}};
+}
+
+Json fault_json(const Fault& f) {
+  if (!f) return Json(nullptr);
+  return Json{{"kind", to_string(f.kind)}, {"message", f.message}, {"step", f.step}, {"t_s", f.t},
+              {"elements", f.elements}};
+}
+
+void write_text(const fs::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) throw std::runtime_error(path.string() + ": cannot open for writing");
+  out << text;
+  out.close();
+  if (!out) throw std::runtime_error(path.string() + ": write failed");
+}
+
+// Appends ",x" with 9 significant digits (appends rather than operator+, which trips GCC 12's -Wrestrict).
+void append_number(std::string& csv, double x) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, ",%.9g", x);
+  csv += buf;
+}
+
+// Removes the frames and collection an earlier run left in `dir`, so the folder holds one run.
+void clear_old_output(const fs::path& dir) {
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if ((name.starts_with("frame_") && name.ends_with(".vtu")) || name == "series.pvd") fs::remove(entry.path(), ec);
+  }
+}
+
+}  // namespace
+
+HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) {
+  const Clock::time_point started = Clock::now();
+  HeadlessResult result;
+  result.scene = scene.name;
+  result.variant = scene.variant;
+  const fs::path dir = fs::path(options.out_dir) / scene.name / (scene.variant.empty() ? "run" : scene.variant);
+  result.dir = dir.string();
+  fs::create_directories(dir);
+  clear_old_output(dir);
+
+  Simulation sim(scene.spec);
+  PassTimer timer;
+  sim.set_probe(&timer);
+  const TetMesh& mesh = sim.mesh();
+  const RunSettings& run = scene.run;
+  const int32_t n_frames = int32_t(std::max<int64_t>(1, std::llround(run.duration * run.frame_rate)));
+  const double frame_dt = run.duration / double(n_frames);
+
+  std::vector<SectionCut> cuts;
+  for (const SectionPlane& p : run.sections) cuts.push_back(make_section_cut(mesh, p));
+  std::vector<double> rest_area;
+  for (const SectionCut& c : cuts) rest_area.push_back(compute_section_area(c, mesh, {}));
+
+  // frames.csv: one row per frame, frame 0 at rest.
+  std::string csv = "frame,t_s,substeps,dt_s";
+  for (const TrackedPoint& p : scene.track) csv += "," + p.name + "_ux_m," + p.name + "_uy_m," + p.name + "_uz_m";
+  for (const SectionPlane& p : run.sections) csv += "," + p.name + "_area_m2";
+  csv += ",kinetic_J,elastic_J,gravity_J,work_loads_J,work_essential_J,dissipated_J,balance_drift_J\n";
+
+  std::vector<double> u, v, density;
+  std::vector<PvdEntry> pvd;
+  Range substeps, dt_used, dt_critical, frame_wall, max_u, section_ratio;
+  int64_t subdivided_frames = 0;
+  char buf[64];
+
+  auto record = [&](int32_t frame, const AdvanceReport* report, bool vtu) {
+    sim.copy_displacement(u);
+    const Energy& e = sim.energy();
+    csv += std::to_string(frame);
+    append_number(csv, sim.time());
+    append_number(csv, report ? report->substeps : 0);
+    append_number(csv, report ? report->dt : 0.0);
+    for (const TrackedPoint& p : scene.track) {
+      const size_t j = 3 * size_t(p.node);
+      for (size_t d = 0; d < 3; ++d) append_number(csv, u[j + d]);
+    }
+    for (size_t k = 0; k < cuts.size(); ++k) {
+      const double a = compute_section_area(cuts[k], mesh, u);
+      append_number(csv, a);
+      if (frame > 0) section_ratio.add(a / rest_area[k]);
+    }
+    for (double x : {e.kinetic, e.elastic, e.gravity, e.work_loads, e.work_essential, e.dissipated, e.balance()})
+      append_number(csv, x);
+    csv += '\n';
+    double umax = 0;
+    for (size_t i = 0; i < u.size(); i += 3) umax = std::max(umax, std::sqrt(u[i] * u[i] + u[i + 1] * u[i + 1] + u[i + 2] * u[i + 2]));
+    if (frame > 0) max_u.add(umax);
+    if (!vtu) return;
+    sim.copy_velocity(v);
+    density = sim.compute_element_energy();
+    for (size_t t = 0; t < density.size(); ++t) density[t] /= sim.tet_volume()[t];
+    const std::string name = frame_name(frame);
+    write_vtu((dir / name).string(), VtuFrame{&mesh, &u, &v, &density});
+    pvd.push_back({sim.time(), name});
+  };
+
+  if (options.log)
+    *options.log << "running " << scene.name << (scene.variant.empty() ? "" : " [" + scene.variant + "]") << ": "
+                 << mesh.n_tets() << " tets, " << mesh.n_nodes() << " nodes, " << precision_name(sim.precision())
+                 << ", " << n_frames << " frames of " << frame_dt << " s, critical step at rest " << sim.dt_rest()
+                 << " s, " << sim.parts() << " thread(s)\n";
+
+  record(0, nullptr, options.write_vtu);
+  ProgressBar bar(stderr, options.progress,
+                  scene.name + (scene.variant.empty() ? "" : "/" + scene.variant));
+  double wall = 0;
+  for (int32_t frame = 1; frame <= n_frames; ++frame) {
+    const Clock::time_point t0 = Clock::now();
+    const AdvanceReport report = sim.advance(frame_dt);
+    const double dt_wall = std::chrono::duration<double>(Clock::now() - t0).count();
+    wall += dt_wall;
+    frame_wall.add(dt_wall);
+    substeps.add(report.substeps);
+    if (report.dt > 0) dt_used.add(report.dt);
+    dt_critical.add(report.dt_critical);
+    subdivided_frames += report.subdivided ? 1 : 0;
+    const bool last = frame == n_frames || bool(report.fault);
+    if (!report.fault) result.frames = frame;
+    record(frame, &report, options.write_vtu && (frame % run.vtu_every == 0 || last));
+    std::snprintf(buf, sizeof buf, "t = %.3g / %.3g s", sim.time(), run.duration);
+    bar.update(double(frame) / double(n_frames), buf);
+    if (report.fault) {
+      result.fault = report.fault;
+      break;
+    }
+  }
+  bar.finish();
+
+  result.steps = sim.steps();
+  result.t = sim.time();
+  result.wall_s = wall;
+  result.energy = sim.energy();
+  for (const TrackedPoint& p : scene.track) result.tracked.push_back({p.name, p.node, p.X, sim.displacement(p.node)});
+  sim.copy_displacement(u);
+  for (size_t k = 0; k < cuts.size(); ++k)
+    result.sections.push_back({run.sections[k].name, rest_area[k], compute_section_area(cuts[k], mesh, u)});
+
+  if (options.write_vtu) write_pvd((dir / "series.pvd").string(), pvd);
+  write_text(dir / "frames.csv", csv);
+
+  // summary.json
+  Json s;
+  s["scene"] = scene.name;
+  s["variant"] = scene.variant.empty() ? Json(nullptr) : Json(scene.variant);
+  s["description"] = scene.description;
+  s["scene_file"] = scene.path;
+  s["status"] = result.fault ? "fault" : "ok";
+  s["mesh"] = Json{{"nodes", mesh.n_nodes()},
+                   {"tets", mesh.n_tets()},
+                   {"total_mass_kg", sim.total_mass()},
+                   {"min_dihedral_deg", scene.quality.min_dihedral_deg},
+                   {"max_dihedral_deg", scene.quality.max_dihedral_deg},
+                   {"max_aspect_ratio", scene.quality.max_aspect_ratio},
+                   {"poor_tets", scene.quality.poor.size()}};
+  Json materials = Json::array();
+  for (const MaterialSpec& m : scene.spec.materials)
+    materials.push_back(Json{{"model", std::string(to_string(m.model))}, {"E_Pa", m.E}, {"nu", m.nu}, {"rho_kg_m3", m.rho}});
+  s["materials"] = materials;
+  const Effects& fx = scene.spec.effects;
+  s["effects"] = Json{{"gravity", fx.gravity ? vec(fx.g) : Json(false)},
+                      {"damping_alpha_per_s", fx.damping ? Json(fx.alpha) : Json(false)}};
+  const IntegratorSpec& in = scene.spec.integrator;
+  s["integrator"] = Json{{"precision", precision_name(in.precision)},
+                         {"dt", in.dt > 0 ? Json(in.dt) : Json("auto")},
+                         {"safety", in.safety},
+                         {"unstable", in.unstable == UnstablePolicy::Refuse ? "refuse" : "subdivide"},
+                         {"threads", in.threads},
+                         {"threads_used", sim.parts()},
+                         {"kernel_isa", std::string(kernel_isa())},
+                         {"dt_critical_rest_s", sim.dt_rest()},
+                         {"dt_s", dt_used.to_json()},
+                         {"dt_critical_s", dt_critical.to_json()},
+                         {"substeps_per_frame", substeps.to_json()},
+                         {"frames_subdivided", subdivided_frames}};
+  s["run"] = Json{{"duration_s", run.duration},
+                  {"frame_rate_hz", run.frame_rate},
+                  {"frame_dt_s", frame_dt},
+                  {"frames_planned", n_frames},
+                  {"frames_done", result.frames},
+                  {"steps", result.steps},
+                  {"t_end_s", result.t},
+                  {"vtu", options.write_vtu},
+                  {"vtu_files", pvd.size()}};
+  s["frames"] = Json{{"wall_s", frame_wall.to_json()}, {"max_displacement_m", max_u.to_json()},
+                     {"section_area_ratio", section_ratio.to_json()}};
+  Json tracked = Json::array();
+  for (const TrackedResult& t : result.tracked)
+    tracked.push_back(Json{{"name", t.name}, {"node", t.node}, {"rest_m", vec(t.X)}, {"position_m", vec(t.X + t.u)},
+                           {"displacement_m", vec(t.u)}, {"distance_m", std::sqrt(glm::dot(t.u, t.u))}});
+  s["tracked"] = tracked;
+  Json sections = Json::array();
+  for (const SectionResult& r : result.sections)
+    sections.push_back(Json{{"name", r.name}, {"rest_area_m2", r.rest_area}, {"area_m2", r.area},
+                            {"ratio", r.area / r.rest_area}});
+  s["sections"] = sections;
+  s["energy"] = energy_json(result.energy);
+  const double scale = std::max({std::fabs(result.energy.kinetic) + std::fabs(result.energy.elastic) +
+                                     std::fabs(result.energy.gravity) + std::fabs(result.energy.work_loads) +
+                                     std::fabs(result.energy.work_essential) + result.energy.dissipated,
+                                 1e-300});
+  s["energy"]["balance_drift_relative"] = result.energy.balance() / scale;
+  const double step_time = std::max(wall, 1e-12);
+  Json cost;
+  for (int p = 0; p < kPassCount; ++p) {
+    const Pass pass = Pass(p);
+    cost[to_string(pass)] = Json{{"total_s", timer.total(pass)},
+                                 {"per_step_us", result.steps ? 1e6 * timer.total(pass) / double(result.steps) : 0.0},
+                                 {"share", timer.total(pass) / step_time}};
+  }
+  s["performance"] = Json{{"wall_s", wall},
+                          {"wall_with_output_s", std::chrono::duration<double>(Clock::now() - started).count()},
+                          {"steps_per_s", double(result.steps) / step_time},
+                          {"tet_steps_per_s", double(result.steps) * double(mesh.n_tets()) / step_time},
+                          {"real_time_factor", result.t / step_time},
+                          {"cost_per_pass", cost}};
+  s["fault"] = fault_json(result.fault);
+  write_text(dir / "summary.json", s.dump(2) + "\n");
+
+  if (options.log) {
+    *options.log << "  " << (result.fault ? "FAULT" : "done") << ": t = " << result.t << " s, " << result.steps
+                 << " steps in " << wall << " s (" << double(result.steps) * double(mesh.n_tets()) / step_time / 1e6
+                 << " M tet-steps/s)\n";
+    for (const TrackedResult& t : result.tracked)
+      *options.log << "  " << t.name << ": displacement [" << t.u.x << ", " << t.u.y << ", " << t.u.z << "] m\n";
+    for (const SectionResult& r : result.sections)
+      *options.log << "  section " << r.name << ": area " << r.area << " m^2 (" << 100.0 * r.area / r.rest_area
+                   << " % of rest)\n";
+    if (result.fault)
+      *options.log << "  fault (" << to_string(result.fault.kind) << ") at t = " << result.fault.t
+                   << " s: " << result.fault.message << "\n";
+    *options.log << "  wrote " << dir.string() << "/ (summary.json, frames.csv"
+                 << (options.write_vtu ? ", series.pvd and " + std::to_string(pvd.size()) + " VTU files" : "")
+                 << ")\n";
+  }
+  return result;
+}
+
+void write_comparison(const std::string& dir, const std::vector<HeadlessResult>& results) {
+  fs::create_directories(dir);
+  std::string csv = "variant,status,t_s";
+  if (!results.empty()) {
+    for (const TrackedResult& t : results.front().tracked)
+      csv += "," + t.name + "_ux_m," + t.name + "_uy_m," + t.name + "_uz_m," + t.name + "_distance_m";
+    for (const SectionResult& r : results.front().sections)
+      csv += "," + r.name + "_rest_area_m2," + r.name + "_area_m2," + r.name + "_ratio";
+  }
+  csv += '\n';
+  Json variants = Json::array();
+  for (const HeadlessResult& r : results) {
+    csv += r.variant.empty() ? "run" : r.variant;
+    csv += r.fault ? ",fault" : ",ok";
+    append_number(csv, r.t);
+    Json tracked = Json::array(), sections = Json::array();
+    for (const TrackedResult& t : r.tracked) {
+      const double d = std::sqrt(glm::dot(t.u, t.u));
+      for (double x : {t.u.x, t.u.y, t.u.z, d}) append_number(csv, x);
+      tracked.push_back(Json{{"name", t.name}, {"rest_m", vec(t.X)}, {"displacement_m", vec(t.u)}, {"distance_m", d}});
+    }
+    for (const SectionResult& s : r.sections) {
+      for (double x : {s.rest_area, s.area, s.area / s.rest_area}) append_number(csv, x);
+      sections.push_back(Json{{"name", s.name}, {"rest_area_m2", s.rest_area}, {"area_m2", s.area},
+                              {"ratio", s.area / s.rest_area}});
+    }
+    csv += "\n";
+    variants.push_back(Json{{"variant", r.variant},
+                            {"status", r.fault ? "fault" : "ok"},
+                            {"t_s", r.t},
+                            {"fault", fault_json(r.fault)},
+                            {"tracked", tracked},
+                            {"sections", sections}});
+  }
+  write_text(fs::path(dir) / "comparison.csv", csv);
+  Json j{{"scene", results.empty() ? "" : results.front().scene}, {"variants", variants}};
+  write_text(fs::path(dir) / "comparison.json", j.dump(2) + "\n");
+}
+
+std::vector<HeadlessResult> run_headless_all(const std::vector<Scene>& scenes, const HeadlessOptions& options) {
+  std::vector<HeadlessResult> results;
+  for (const Scene& s : scenes) results.push_back(run_headless(s, options));
+  const bool variants = std::any_of(scenes.begin(), scenes.end(), [](const Scene& s) { return !s.variant.empty(); });
+  if (variants && !results.empty()) {
+    const fs::path dir = fs::path(options.out_dir) / results.front().scene;
+    write_comparison(dir.string(), results);
+    if (options.log) *options.log << "wrote " << (dir / "comparison.csv").string() << " and comparison.json\n";
+  }
+  return results;
+}
+
+}  // namespace tactile

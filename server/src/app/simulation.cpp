@@ -1,0 +1,122 @@
+#include "app/simulation.hpp"
+
+#include <utility>
+
+#include "core/model.hpp"
+
+// The thread pool is another part of the application layer; until it is in
+// the tree, integrator.threads > 1 runs on one thread.
+#if __has_include("app/thread_pool.hpp")
+#include "app/thread_pool.hpp"
+#define TACTILE_HAS_THREAD_POOL 1
+#endif
+
+namespace tactile {
+
+struct Simulation::Engine {
+  virtual ~Engine() = default;
+  virtual const TetMesh& mesh() const = 0;
+  virtual int32_t n_nodes() const = 0;
+  virtual int32_t n_tets() const = 0;
+  virtual double total_mass() const = 0;
+  virtual const std::vector<double>& tet_volume() const = 0;
+  virtual double dt_rest() const = 0;
+  virtual int32_t parts() const = 0;
+  virtual double time() const = 0;
+  virtual int64_t steps() const = 0;
+  virtual AdvanceReport advance(double frame_dt) = 0;
+  virtual double compute_critical_dt() const = 0;
+  virtual const Energy& energy() const = 0;
+  virtual Energy compute_energy() const = 0;
+  virtual std::vector<double> compute_element_energy() const = 0;
+  virtual void copy_displacement(std::vector<double>& u) const = 0;
+  virtual void copy_velocity(std::vector<double>& v) const = 0;
+  virtual Vec3 displacement(int32_t node) const = 0;
+  virtual const Fault& fault() const = 0;
+  virtual void set_probe(StepProbe* probe) = 0;
+};
+
+namespace {
+
+template <class Real>
+class EngineOf final : public Simulation::Engine {
+ public:
+  EngineOf(const ModelSpec& spec, ParallelFor* pool)
+      : model_(std::make_unique<Model<Real>>(build_model<Real>(spec))),
+        stepper_(*model_, pool),
+        state_(stepper_.make_state()) {}
+
+  const TetMesh& mesh() const override { return model_->mesh; }
+  int32_t n_nodes() const override { return model_->n_nodes; }
+  int32_t n_tets() const override { return model_->n_tets; }
+  double total_mass() const override { return model_->total_mass; }
+  const std::vector<double>& tet_volume() const override { return model_->tet_volume; }
+  double dt_rest() const override { return model_->dt_rest; }
+  int32_t parts() const override { return stepper_.parts(); }
+  double time() const override { return state_.t; }
+  int64_t steps() const override { return state_.step; }
+  AdvanceReport advance(double frame_dt) override { return stepper_.advance(state_, frame_dt); }
+  double compute_critical_dt() const override { return stepper_.compute_critical_dt(state_); }
+  const Energy& energy() const override { return stepper_.energy(); }
+  Energy compute_energy() const override { return stepper_.compute_energy(state_); }
+  std::vector<double> compute_element_energy() const override { return stepper_.compute_element_energy(state_); }
+  void copy_displacement(std::vector<double>& u) const override { u.assign(state_.u.begin(), state_.u.end()); }
+  void copy_velocity(std::vector<double>& v) const override { v.assign(state_.v.begin(), state_.v.end()); }
+  Vec3 displacement(int32_t node) const override {
+    const size_t j = 3 * size_t(node);
+    return {double(state_.u[j]), double(state_.u[j + 1]), double(state_.u[j + 2])};
+  }
+  const Fault& fault() const override { return stepper_.fault(); }
+  void set_probe(StepProbe* probe) override { stepper_.set_probe(probe); }
+
+ private:
+  std::unique_ptr<Model<Real>> model_;  // the stepper keeps a reference: the model must not move
+  Stepper<Real> stepper_;
+  State<Real> state_;
+};
+
+}  // namespace
+
+Simulation::Simulation(const ModelSpec& spec) {
+#ifdef TACTILE_HAS_THREAD_POOL
+  if (spec.integrator.threads > 1) pool_ = std::make_unique<ThreadPool>(spec.integrator.threads);
+#endif
+  if (spec.integrator.precision == Precision::Float)
+    engine_ = std::make_unique<EngineOf<float>>(spec, pool_.get());
+  else
+    engine_ = std::make_unique<EngineOf<double>>(spec, pool_.get());
+  precision_ = spec.integrator.precision;
+}
+
+Simulation::~Simulation() = default;
+Simulation::Simulation(Simulation&&) noexcept = default;
+Simulation& Simulation::operator=(Simulation&&) noexcept = default;
+
+Precision Simulation::precision() const { return precision_; }
+const TetMesh& Simulation::mesh() const { return engine_->mesh(); }
+int32_t Simulation::n_nodes() const { return engine_->n_nodes(); }
+int32_t Simulation::n_tets() const { return engine_->n_tets(); }
+double Simulation::total_mass() const { return engine_->total_mass(); }
+const std::vector<double>& Simulation::tet_volume() const { return engine_->tet_volume(); }
+double Simulation::dt_rest() const { return engine_->dt_rest(); }
+int32_t Simulation::parts() const { return engine_->parts(); }
+double Simulation::time() const { return engine_->time(); }
+int64_t Simulation::steps() const { return engine_->steps(); }
+AdvanceReport Simulation::advance(double frame_dt) { return engine_->advance(frame_dt); }
+double Simulation::compute_critical_dt() const { return engine_->compute_critical_dt(); }
+const Energy& Simulation::energy() const { return engine_->energy(); }
+Energy Simulation::compute_energy() const { return engine_->compute_energy(); }
+std::vector<double> Simulation::compute_element_energy() const { return engine_->compute_element_energy(); }
+void Simulation::copy_positions(std::vector<double>& x) const {
+  engine_->copy_displacement(x);
+  const TetMesh& m = mesh();
+  for (size_t i = 0; i < m.X.size(); ++i)
+    for (size_t d = 0; d < 3; ++d) x[3 * i + d] += m.X[i][int(d)];
+}
+void Simulation::copy_displacement(std::vector<double>& u) const { engine_->copy_displacement(u); }
+void Simulation::copy_velocity(std::vector<double>& v) const { engine_->copy_velocity(v); }
+Vec3 Simulation::displacement(int32_t node) const { return engine_->displacement(node); }
+const Fault& Simulation::fault() const { return engine_->fault(); }
+void Simulation::set_probe(StepProbe* probe) { engine_->set_probe(probe); }
+
+}  // namespace tactile

@@ -1,0 +1,64 @@
+// One body in motion, whatever its precision: owns the Model, the Stepper and
+// the State of a ModelSpec, in float or double as the spec's integrator asks,
+// and hands out positions and energies in double.
+//
+// The core is templated on the scalar; the application layer picks it once,
+// here, from the scene, so nothing above this file is a template.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "core/spec.hpp"
+#include "core/state.hpp"
+#include "core/stepper.hpp"
+
+namespace tactile {
+
+class Simulation {
+ public:
+  // Builds the model (throws ModelError for a spec the core refuses) and its
+  // rest state; a thread pool when spec.integrator.threads > 1.
+  explicit Simulation(const ModelSpec& spec);
+  ~Simulation();
+  Simulation(Simulation&&) noexcept;
+  Simulation& operator=(Simulation&&) noexcept;
+
+  Precision precision() const;
+  const TetMesh& mesh() const;
+  int32_t n_nodes() const;
+  int32_t n_tets() const;
+  double total_mass() const;                    // [kg]
+  const std::vector<double>& tet_volume() const;  // rest volumes [m^3] (n_tets)
+  double dt_rest() const;                       // critical step at rest [s]
+  int32_t parts() const;                        // ways each pass is split (threads in use)
+
+  double time() const;     // simulated [s]
+  int64_t steps() const;
+
+  // Covers frame_dt [s] with as many sub-steps as stability needs (Stepper::advance).
+  AdvanceReport advance(double frame_dt);
+  double compute_critical_dt() const;  // of the current configuration [s]
+
+  const Energy& energy() const;               // as of the latest step
+  Energy compute_energy() const;              // full pass
+  std::vector<double> compute_element_energy() const;  // V psi per tet [J] (n_tets)
+
+  void copy_positions(std::vector<double>& x) const;     // X + u [m] (n_nodes x 3)
+  void copy_displacement(std::vector<double>& u) const;  // [m] (n_nodes x 3)
+  void copy_velocity(std::vector<double>& v) const;      // [m/s] (n_nodes x 3)
+  Vec3 displacement(int32_t node) const;                 // [m]
+
+  const Fault& fault() const;
+  void set_probe(StepProbe* probe);
+
+  struct Engine;  // the precision-specific part, simulation.cpp
+
+ private:
+  std::unique_ptr<ParallelFor> pool_;  // declared first: outlives the stepper that uses it
+  std::unique_ptr<Engine> engine_;
+  Precision precision_ = Precision::Double;
+};
+
+}  // namespace tactile

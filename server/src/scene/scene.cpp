@@ -1,0 +1,468 @@
+#include "scene/scene.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <numbers>
+#include <sstream>
+
+#include <glm/geometric.hpp>
+#include <nlohmann/json.hpp>
+
+#include "scene/json_fields.hpp"
+#include "scene/scene_mesh.hpp"
+
+namespace tactile {
+
+using scene_json::Fields;
+using scene_json::join;
+using scene_json::Json;
+using scene_json::Origin;
+
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr double kDegree = std::numbers::pi / 180.0;
+
+std::string format_vec(const Vec3& v) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "[%g, %g, %g]", v.x, v.y, v.z);
+  return buf;
+}
+
+// Everything parse_one needs besides the JSON: where it came from and the meshes built so far.
+struct Context {
+  Origin origin;
+  std::string scene_dir;
+  std::map<std::string, SceneMesh>* mesh_cache;  // by the mesh object's JSON text: variants share meshes
+};
+
+MaterialSpec read_material(const Json& j, const std::string& path, const Origin& o) {
+  const Fields f(j, path, o, {"model", "E", "nu", "rho"});
+  MaterialSpec m;
+  const std::string model =
+      scene_json::read_choice(f.at("model"), f.path("model"), o, {"linear", "stvk", "corotational", "neohookean"});
+  parse_material_model(model, &m.model);
+  m.E = f.positive("E");
+  m.nu = f.number("nu");
+  if (!(m.nu > -1.0 && m.nu < 0.5))
+    o.fail(f.path("nu"), "must lie in (-1, 0.5), got " + scene_json::describe(f.at("nu")) +
+                             " (0.5 is incompressible: lambda is infinite and no explicit step is stable)");
+  m.rho = f.positive("rho");
+  return m;
+}
+
+std::vector<MaterialSpec> read_materials(const Fields& root, const Origin& o) {
+  const Json* one = root.find("material");
+  const Json* many = root.find("materials");
+  if (one && many) o.fail("materials", "give \"material\" or \"materials\", not both");
+  if (!one && !many) o.fail("material", "required field missing (give \"material\" or \"materials\")");
+  if (one) return {read_material(*one, "material", o)};
+  const Json& arr = scene_json::read_array(*many, "materials", o, 1);
+  std::vector<MaterialSpec> out;
+  for (size_t i = 0; i < arr.size(); ++i) out.push_back(read_material(arr[i], join("materials", i), o));
+  return out;
+}
+
+// A box of JSON fields {lo, hi[, tolerance]}, hi >= lo.
+void read_box(const Json& j, const std::string& path, const Origin& o, bool with_tolerance, NodeSelector& s) {
+  const Fields f = with_tolerance ? Fields(j, path, o, {"lo", "hi", "tolerance"}) : Fields(j, path, o, {"lo", "hi"});
+  s.lo = f.vec3("lo");
+  s.hi = f.vec3("hi");
+  for (int d = 0; d < 3; ++d)
+    if (!(s.hi[d] >= s.lo[d])) o.fail(f.path("hi"), "must be >= lo in every axis");
+  if (with_tolerance) s.tolerance = f.non_negative_or("tolerance", s.tolerance);
+}
+
+// Reads a selector and checks that it picks at least one node.
+NodeSelector read_selector(const Json& j, const std::string& path, const Origin& o, const TetMesh& mesh) {
+  const Fields f(j, path, o, {"box", "plane", "nodes"});
+  const int kinds = int(f.has("box")) + int(f.has("plane")) + int(f.has("nodes"));
+  if (kinds != 1) o.fail(path, "needs exactly one of \"box\", \"plane\", \"nodes\"");
+  const Aabb aabb = compute_aabb(mesh.X);
+  NodeSelector s;
+  // Default slack: a millionth of the body's size, for coordinates that went through float (OBJ, STL) or scaling.
+  s.tolerance = 1e-6 * glm::length(aabb.size());
+  std::string what;
+  if (f.has("box")) {
+    s.kind = NodeSelector::Kind::Box;
+    read_box(f.at("box"), f.path("box"), o, true, s);
+    what = "box " + format_vec(s.lo) + " to " + format_vec(s.hi);
+  } else if (f.has("plane")) {
+    s.kind = NodeSelector::Kind::Plane;
+    const Fields p(f.at("plane"), f.path("plane"), o, {"point", "normal", "tolerance"});
+    s.point = p.vec3("point");
+    s.normal = scene_json::read_direction(p.at("normal"), p.path("normal"), o);
+    s.tolerance = p.non_negative_or("tolerance", s.tolerance);
+    what = "plane through " + format_vec(s.point) + " normal " + format_vec(s.normal);
+  } else {
+    s.kind = NodeSelector::Kind::Nodes;
+    const Json& ids = scene_json::read_array(f.at("nodes"), f.path("nodes"), o, 1);
+    for (size_t i = 0; i < ids.size(); ++i)
+      s.nodes.push_back(int32_t(scene_json::read_integer(ids[i], join(f.path("nodes"), i), o, 0, mesh.n_nodes() - 1)));
+    what = "node list";
+  }
+  if (select_nodes(mesh, s).empty()) {
+    char tol[32];
+    std::snprintf(tol, sizeof tol, "%g", s.tolerance);
+    o.fail(path, "selects no node (" + what + ", tolerance " + tol + " m; the mesh spans " + format_vec(aabb.lo) +
+                     " to " + format_vec(aabb.hi) + ")");
+  }
+  return s;
+}
+
+MotionProfile read_ramp(const Fields& f, const std::string& amount_key, double unit) {
+  MotionProfile p;
+  p.kind = MotionProfile::Kind::Ramp;
+  p.target = f.number(amount_key) * unit;
+  p.duration = f.non_negative("duration");
+  p.start = f.non_negative_or("start", 0.0);
+  return p;
+}
+
+EssentialBc read_boundary(const Json& j, const std::string& path, const Origin& o, const TetMesh& mesh) {
+  const Fields f(j, path, o, {"name", "select", "fixed", "rotate", "spin", "translate"});
+  EssentialBc bc;
+  bc.name = f.string_or("name", "");
+  bc.where = read_selector(f.at("select"), f.path("select"), o, mesh);
+  const bool moving = f.has("rotate") || f.has("spin") || f.has("translate");
+  if (const Json* fixed = f.find("fixed")) {
+    if (!fixed->is_boolean() || !fixed->get<bool>())
+      o.fail(f.path("fixed"), "must be true (leave it out for a moving condition), got " + scene_json::describe(*fixed));
+    if (moving) o.fail(f.path("fixed"), "cannot be combined with rotate, spin or translate");
+    return bc;
+  }
+  if (!moving) o.fail(path, "needs \"fixed\": true, or \"rotate\" or \"spin\" and/or \"translate\"");
+  if (f.has("rotate") && f.has("spin")) o.fail(f.path("spin"), "give \"rotate\" or \"spin\", not both");
+  if (const Json* r = f.find("rotate")) {
+    const Fields g(*r, f.path("rotate"), o, {"centre", "axis", "angle_deg", "duration", "start"});
+    bc.centre = g.vec3("centre");
+    bc.axis = scene_json::read_direction(g.at("axis"), g.path("axis"), o);
+    bc.angle = read_ramp(g, "angle_deg", kDegree);
+  }
+  if (const Json* r = f.find("spin")) {
+    const Fields g(*r, f.path("spin"), o, {"centre", "axis", "rate_deg_s", "start"});
+    bc.centre = g.vec3("centre");
+    bc.axis = scene_json::read_direction(g.at("axis"), g.path("axis"), o);
+    MotionProfile p;
+    p.kind = MotionProfile::Kind::ConstantRate;
+    p.rate = g.number("rate_deg_s") * kDegree;
+    p.start = g.non_negative_or("start", 0.0);
+    bc.angle = p;
+  }
+  if (const Json* t = f.find("translate")) {
+    const Fields g(*t, f.path("translate"), o, {"direction", "distance", "duration", "start"});
+    bc.direction = scene_json::read_direction(g.at("direction"), g.path("direction"), o);
+    bc.shift = read_ramp(g, "distance", 1.0);
+  }
+  return bc;
+}
+
+NaturalLoad read_load(const Json& j, const std::string& path, const Origin& o, const TetMesh& mesh) {
+  const Fields f(j, path, o, {"name", "select", "force", "ramp"});
+  NaturalLoad load;
+  load.name = f.string_or("name", "");
+  load.where = read_selector(f.at("select"), f.path("select"), o, mesh);
+  load.force = f.vec3("force");
+  if (const Json* r = f.find("ramp")) {
+    const Fields g(*r, f.path("ramp"), o, {"duration", "start"});
+    MotionProfile p;
+    p.kind = MotionProfile::Kind::Ramp;
+    p.target = 1.0;
+    p.duration = g.non_negative("duration");
+    p.start = g.non_negative_or("start", 0.0);
+    load.scale = p;
+  }
+  return load;
+}
+
+Effects read_effects(const Json& j, const Origin& o) {
+  const Fields f(j, "effects", o, {"gravity", "damping"});
+  Effects e;
+  if (const Json* g = f.find("gravity")) {
+    if (g->is_boolean() && !g->get<bool>()) {
+      e.gravity = false;
+    } else if (g->is_array()) {
+      e.gravity = true;
+      e.g = scene_json::read_vec3(*g, f.path("gravity"), o);
+    } else {
+      o.fail(f.path("gravity"), "must be [gx, gy, gz] in m/s^2 or false, got " + scene_json::describe(*g));
+    }
+  }
+  if (const Json* d = f.find("damping")) {
+    if (d->is_boolean() && !d->get<bool>()) {
+      e.damping = false;
+    } else if (d->is_object()) {
+      const Fields g(*d, f.path("damping"), o, {"alpha"});
+      e.damping = true;
+      e.alpha = g.non_negative("alpha");
+    } else {
+      o.fail(f.path("damping"), "must be {\"alpha\": 1/s} or false, got " + scene_json::describe(*d));
+    }
+  }
+  return e;
+}
+
+IntegratorSpec read_integrator(const Json& j, const Origin& o) {
+  const Fields f(j, "integrator", o, {"precision", "dt", "safety", "unstable", "threads", "energy_tolerance"});
+  IntegratorSpec s;
+  if (const Json* p = f.find("precision"))
+    s.precision = scene_json::read_choice(*p, f.path("precision"), o, {"float", "double"}) == "float"
+                      ? Precision::Float
+                      : Precision::Double;
+  if (const Json* dt = f.find("dt")) {
+    const bool is_auto = dt->is_string() && dt->get<std::string>() == "auto";
+    if (!is_auto) {
+      if (!dt->is_number() || !(dt->get<double>() > 0) || !std::isfinite(dt->get<double>()))
+        o.fail(f.path("dt"), "must be \"auto\" or a number > 0, got " + scene_json::describe(*dt));
+      s.dt = dt->get<double>();
+    }
+  }
+  if (f.has("safety")) {
+    s.safety = f.positive("safety");
+    if (s.safety > 1) o.fail(f.path("safety"), "must lie in (0, 1], got " + scene_json::describe(f.at("safety")));
+  }
+  if (const Json* u = f.find("unstable"))
+    s.unstable = scene_json::read_choice(*u, f.path("unstable"), o, {"subdivide", "refuse"}) == "refuse"
+                     ? UnstablePolicy::Refuse
+                     : UnstablePolicy::Subdivide;
+  s.threads = int32_t(f.integer_or("threads", 1, 256, 1));
+  s.energy_tolerance = f.positive_or("energy_tolerance", s.energy_tolerance);
+  return s;
+}
+
+// Whether some tet has nodes on both sides of the plane (d >= 0 and d < 0).
+bool plane_cuts_mesh(const TetMesh& mesh, const Vec3& point, const Vec3& normal) {
+  for (const Tet& t : mesh.tets) {
+    int above = 0;
+    for (int32_t i : t) above += glm::dot(mesh.X[size_t(i)] - point, normal) >= 0 ? 1 : 0;
+    if (above > 0 && above < 4) return true;
+  }
+  return false;
+}
+
+void read_run(const Json& j, const Origin& o, const TetMesh& mesh, Scene& scene) {
+  const Fields f(j, "run", o, {"duration", "frame_rate", "vtu_every", "track", "sections"});
+  RunSettings& r = scene.run;
+  r.duration = f.positive("duration");
+  r.frame_rate = f.positive_or("frame_rate", r.frame_rate);
+  if (r.duration * r.frame_rate > 1e6)
+    o.fail(f.path("frame_rate"), "asks for " + std::to_string(std::llround(r.duration * r.frame_rate)) +
+                                     " frames; the limit is 1000000");
+  r.vtu_every = int32_t(f.integer_or("vtu_every", 1, std::numeric_limits<int32_t>::max(), 1));
+  if (const Json* t = f.find("track")) {
+    const Json& arr = scene_json::read_array(*t, f.path("track"), o, 0);
+    for (size_t i = 0; i < arr.size(); ++i) {
+      const std::string path = join(f.path("track"), i);
+      const Fields g(arr[i], path, o, {"name", "point"});
+      TrackedPoint p;
+      p.name = scene_json::read_name(g.at("name"), g.path("name"), o);
+      for (const TrackedPoint& q : scene.track)
+        if (q.name == p.name) o.fail(g.path("name"), "'" + p.name + "' is tracked twice");
+      p.point = g.vec3("point");
+      double best = std::numeric_limits<double>::infinity();
+      for (int32_t k = 0; k < mesh.n_nodes(); ++k) {
+        const double d = glm::length(mesh.X[size_t(k)] - p.point);
+        if (d < best) best = d, p.node = k;
+      }
+      p.X = mesh.X[size_t(p.node)];
+      scene.track.push_back(p);
+    }
+  }
+  if (const Json* s = f.find("sections")) {
+    const Json& arr = scene_json::read_array(*s, f.path("sections"), o, 0);
+    for (size_t i = 0; i < arr.size(); ++i) {
+      const std::string path = join(f.path("sections"), i);
+      const Fields g(arr[i], path, o, {"name", "point", "normal"});
+      SectionPlane p;
+      p.name = scene_json::read_name(g.at("name"), g.path("name"), o);
+      for (const SectionPlane& q : r.sections)
+        if (q.name == p.name) o.fail(g.path("name"), "'" + p.name + "' is named twice");
+      p.point = g.vec3("point");
+      p.normal = scene_json::read_direction(g.at("normal"), g.path("normal"), o);
+      if (!plane_cuts_mesh(mesh, p.point, p.normal)) o.fail(path, "the plane cuts no tet of the mesh");
+      r.sections.push_back(p);
+    }
+  }
+}
+
+// Region ids by tet centroid: later entries win over earlier ones and over the mesh's own ids.
+void apply_regions(const Json& j, const Origin& o, size_t n_materials, TetMesh& mesh) {
+  const Json& arr = scene_json::read_array(j, "regions", o, 1);
+  if (mesh.region.empty()) mesh.region.assign(mesh.tets.size(), 0);
+  for (size_t i = 0; i < arr.size(); ++i) {
+    const std::string path = join("regions", i);
+    const Fields f(arr[i], path, o, {"box", "material"});
+    NodeSelector box;
+    read_box(f.at("box"), f.path("box"), o, false, box);
+    const auto material = int32_t(f.integer("material", 0, int64_t(n_materials) - 1));
+    size_t hits = 0;
+    for (size_t e = 0; e < mesh.tets.size(); ++e) {
+      const Tet& t = mesh.tets[e];
+      const Vec3 c = 0.25 * (mesh.X[size_t(t[0])] + mesh.X[size_t(t[1])] + mesh.X[size_t(t[2])] + mesh.X[size_t(t[3])]);
+      if (glm::all(glm::greaterThanEqual(c, box.lo)) && glm::all(glm::lessThanEqual(c, box.hi))) {
+        mesh.region[e] = material;
+        ++hits;
+      }
+    }
+    if (hits == 0) o.fail(f.path("box"), "contains no tet centroid");
+  }
+}
+
+Json merge(Json base, const Json& patch) {
+  if (!base.is_object() || !patch.is_object()) return patch;
+  for (const auto& item : patch.items()) base[item.key()] = merge(base.contains(item.key()) ? base[item.key()] : Json(), item.value());
+  return base;
+}
+
+// A variant's mesh of another kind (a file for a primitive, another primitive) replaces the scene's;
+// one that names no kind, or the same, amends it.
+bool same_mesh_kind(const Json& base, const Json& patch) {
+  if (!base.is_object() || !patch.is_object()) return false;
+  if (patch.contains("file")) return base.contains("file");
+  if (patch.contains("primitive")) return base.contains("primitive") && base["primitive"] == patch["primitive"];
+  return true;
+}
+
+Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
+  const Origin& o = ctx.origin;
+  const Fields root(j, "", o,
+                    {"$schema", "name", "description", "mesh", "material", "materials", "regions", "boundary", "loads",
+                     "effects", "integrator", "run", "variants"});
+  Scene scene;
+  scene.path = path;
+  if (const Json* s = root.find("$schema")) scene_json::read_string(*s, "$schema", o);
+  if (root.has("name")) {
+    scene.name = scene_json::read_name(root.at("name"), "name", o);
+  } else {  // the file's stem, made folder-safe
+    scene.name = fs::path(path).stem().string();
+    for (char& c : scene.name)
+      if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_' && c != '.') c = '_';
+    if (scene.name.empty()) scene.name = "scene";
+  }
+  scene.description = root.string_or("description", "");
+
+  // Mesh first: selectors and tracked points are checked against it.
+  const std::string mesh_key = root.at("mesh").dump();
+  auto cached = ctx.mesh_cache->find(mesh_key);
+  if (cached == ctx.mesh_cache->end())
+    cached = ctx.mesh_cache->emplace(mesh_key, build_scene_mesh(root.at("mesh"), "mesh", o, ctx.scene_dir)).first;
+  scene.spec.mesh = cached->second.mesh;
+  scene.quality = cached->second.quality;
+  TetMesh& mesh = scene.spec.mesh;
+
+  scene.spec.materials = read_materials(root, o);
+  if (const Json* r = root.find("regions")) apply_regions(*r, o, scene.spec.materials.size(), mesh);
+  for (int32_t e = 0; e < mesh.n_tets(); ++e) {
+    const int32_t r = mesh.region_of(e);
+    if (r < 0 || size_t(r) >= scene.spec.materials.size())
+      o.fail(root.has("regions") ? "regions" : "mesh",
+             "tet " + std::to_string(e) + " is in region " + std::to_string(r) + " but there " +
+                 (scene.spec.materials.size() == 1 ? "is 1 material" : "are " + std::to_string(scene.spec.materials.size()) + " materials") +
+                 " (indices from 0); give more \"materials\" or assign \"regions\"");
+  }
+
+  std::vector<int32_t> held_by(size_t(mesh.n_nodes()), -1);
+  if (const Json* b = root.find("boundary")) {
+    const Json& arr = scene_json::read_array(*b, "boundary", o, 0);
+    for (size_t i = 0; i < arr.size(); ++i) {
+      EssentialBc bc = read_boundary(arr[i], join("boundary", i), o, mesh);
+      for (int32_t n : select_nodes(mesh, bc.where)) {
+        if (held_by[size_t(n)] >= 0)
+          o.fail(join(join("boundary", i), "select"),
+                 "node " + std::to_string(n) + " is also held by boundary[" + std::to_string(held_by[size_t(n)]) +
+                     "]; a node may follow one essential condition only");
+        held_by[size_t(n)] = int32_t(i);
+      }
+      scene.spec.essential.push_back(std::move(bc));
+    }
+  }
+  if (const Json* l = root.find("loads")) {
+    const Json& arr = scene_json::read_array(*l, "loads", o, 0);
+    for (size_t i = 0; i < arr.size(); ++i) scene.spec.loads.push_back(read_load(arr[i], join("loads", i), o, mesh));
+  }
+  if (const Json* e = root.find("effects")) scene.spec.effects = read_effects(*e, o);
+  if (const Json* g = root.find("integrator")) scene.spec.integrator = read_integrator(*g, o);
+  read_run(root.at("run"), o, mesh, scene);
+  return scene;
+}
+
+}  // namespace
+
+std::vector<Scene> parse_scene(const Json& j, const std::string& path) {
+  std::map<std::string, SceneMesh> meshes;
+  Context ctx{Origin{path, ""}, fs::path(path).parent_path().string(), &meshes};
+  if (ctx.scene_dir.empty()) ctx.scene_dir = ".";
+  if (!j.is_object()) ctx.origin.fail("", "a scene must be a JSON object, got " + scene_json::describe(j));
+  const auto variants = j.find("variants");
+  if (variants == j.end()) return {parse_one(j, path, ctx)};
+  // The scene itself names its material, so that variants amend rather than supply it (as the schema says).
+  if (!j.contains("material") && !j.contains("materials"))
+    ctx.origin.fail("material", "required field missing (give \"material\" or \"materials\")");
+
+  const Json& arr = scene_json::read_array(*variants, "variants", ctx.origin, 1);
+  // Check every variant's own fields before merging, so errors name where they are.
+  std::vector<std::string> names;
+  for (size_t i = 0; i < arr.size(); ++i) {
+    const std::string vpath = join("variants", i);
+    const Fields f(arr[i], vpath, ctx.origin, {"name", "description", "material", "materials", "effects", "integrator", "mesh"});
+    const std::string name = scene_json::read_name(f.at("name"), f.path("name"), ctx.origin);
+    if (std::find(names.begin(), names.end(), name) != names.end())
+      ctx.origin.fail(f.path("name"), "'" + name + "' names two variants");
+    if (f.has("material") && f.has("materials"))
+      ctx.origin.fail(f.path("materials"), "give \"material\" or \"materials\", not both");
+    if (f.has("description")) scene_json::read_string(f.at("description"), f.path("description"), ctx.origin);
+    names.push_back(name);
+  }
+  std::vector<Scene> out;
+  for (size_t i = 0; i < arr.size(); ++i) {
+    const Json& v = arr[i];
+    Json merged = j;
+    merged.erase("variants");
+    if (v.contains("material")) {
+      merged.erase("materials");
+      merged["material"] = merge(merged.contains("material") ? merged["material"] : Json(), v["material"]);
+    }
+    if (v.contains("materials")) {
+      merged.erase("material");
+      merged["materials"] = v["materials"];
+    }
+    for (const char* key : {"effects", "integrator"})
+      if (v.contains(key)) merged[key] = merge(merged.contains(key) ? merged[key] : Json(), v[key]);
+    if (v.contains("mesh"))
+      merged["mesh"] = same_mesh_kind(merged["mesh"], v["mesh"]) ? merge(merged["mesh"], v["mesh"]) : v["mesh"];
+    Context vctx = ctx;
+    vctx.origin.variant = names[i];
+    Scene s = parse_one(merged, path, vctx);
+    s.variant = names[i];
+    if (v.contains("description")) s.description = v["description"].get<std::string>();
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
+std::vector<Scene> load_scene(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw SceneError(path + ": cannot open scene file");
+  std::ostringstream text;
+  text << in.rdbuf();
+  Json j;
+  try {
+    j = Json::parse(text.str());
+  } catch (const Json::parse_error& e) {
+    std::string what = e.what();
+    // "[json.exception.parse_error.101] parse error at line 3, column 5: ..." -> from "parse error".
+    const size_t at = what.find("] ");
+    if (at != std::string::npos) what = what.substr(at + 2);
+    throw SceneError(path + ": not valid JSON: " + what);
+  }
+  return parse_scene(j, path);
+}
+
+}  // namespace tactile

@@ -1,0 +1,69 @@
+// Scene files: JSON (schema: server/scenes/scene.schema.json), SI units, y up.
+//
+// A scene names a mesh, materials, boundary conditions, loads, the effects it
+// wants, integrator settings and what a headless run records. Loading is
+// strict: an unknown field, a wrong type or an out-of-range value throws
+// SceneError naming the file and the JSON path of the field at fault, e.g.
+//   cantilever.json: integrator.dt: must be "auto" or a number > 0, got -1
+// and a mesh with inverted or degenerate tets is refused naming the tets.
+// Keep this loader and the schema in agreement (tests/test_scenes_schema.py).
+#pragma once
+
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "core/spec.hpp"
+#include "mesh/quality.hpp"
+
+namespace tactile {
+
+struct SceneError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// A point whose motion a run reports: the mesh node nearest to `point`.
+struct TrackedPoint {
+  std::string name;
+  Vec3 point{0.0};   // as asked [m]
+  int32_t node = -1; // nearest node id
+  Vec3 X{0.0};       // rest position of that node [m]
+};
+
+// A plane through the body at rest; a run reports the area of the deformed
+// material section it cuts (the paper's Fig. 2 is about this area).
+struct SectionPlane {
+  std::string name;
+  Vec3 point{0.0};             // a point of the plane at rest [m]
+  Vec3 normal{0.0, 1.0, 0.0};  // unit normal
+};
+
+struct RunSettings {
+  double duration = 1.0;     // simulated time [s]
+  double frame_rate = 30.0;  // output frames per simulated second [Hz]
+  int32_t vtu_every = 1;     // a VTU file every this many frames
+  std::vector<SectionPlane> sections;
+};
+
+struct Scene {
+  std::string name, description;
+  std::string path;       // the scene file, as given
+  ModelSpec spec;         // what the core builds
+  RunSettings run;
+  std::vector<TrackedPoint> track;
+  std::string variant;    // "" when the scene has no variants
+  MeshQuality quality;    // of spec.mesh; poor tets are allowed and listed here
+};
+
+// Reads and checks a scene file; one entry per variant (one when it has none).
+// Throws SceneError.
+std::vector<Scene> load_scene(const std::string& path);
+
+// The same from parsed JSON; `path` names the file in messages and anchors
+// relative mesh paths.
+std::vector<Scene> parse_scene(const nlohmann::json& j, const std::string& path);
+
+}  // namespace tactile

@@ -1,0 +1,210 @@
+"""The published scene schema (server/scenes/scene.schema.json) against the shipped
+scenes, against scenes it must refuse, and, when a built tactile-sim is at hand,
+against the C++ loader: both must accept and refuse the same scenes."""
+
+from __future__ import annotations
+
+import copy
+import glob
+import json
+import os
+import pathlib
+import subprocess
+from typing import Any, Callable
+
+import jsonschema
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+SCENES = ROOT / "server" / "scenes"
+SCHEMA_PATH = SCENES / "scene.schema.json"
+
+
+def load_schema() -> dict[str, Any]:
+    with open(SCHEMA_PATH, encoding="utf-8") as f:
+        schema: dict[str, Any] = json.load(f)
+    return schema
+
+
+def validator() -> jsonschema.Draft202012Validator:
+    return jsonschema.Draft202012Validator(load_schema())
+
+
+def shipped_scenes() -> list[pathlib.Path]:
+    return sorted(p for p in SCENES.glob("*.json") if p.name != SCHEMA_PATH.name)
+
+
+def tactile_sim() -> str | None:
+    """A built tactile-sim: $TACTILE_SIM, else in $TACTILE_BUILD, else the newest under build/."""
+    exe = os.environ.get("TACTILE_SIM")
+    if exe:
+        return exe
+    build = os.environ.get("TACTILE_BUILD")
+    if build:
+        candidate = pathlib.Path(build) if pathlib.Path(build).is_absolute() else ROOT / build
+        if os.access(candidate / "tactile-sim", os.X_OK):
+            return str(candidate / "tactile-sim")
+    found = [p for p in glob.glob(str(ROOT / "build" / "*" / "tactile-sim")) if os.access(p, os.X_OK)]
+    return max(found, key=os.path.getmtime) if found else None
+
+
+BEAM: dict[str, Any] = {
+    "name": "beam",
+    "mesh": {"primitive": "box", "lo": [0, 0, 0], "hi": [0.4, 0.1, 0.1], "cells": [8, 2, 2]},
+    "material": {"model": "stvk", "E": 1e5, "nu": 0.3, "rho": 1000},
+    "boundary": [{"name": "clamp", "select": {"box": {"lo": [0, 0, 0], "hi": [0, 0.1, 0.1]}}, "fixed": True}],
+    "effects": {"gravity": [0, -9.81, 0], "damping": {"alpha": 1.0}},
+    "integrator": {"precision": "double", "dt": "auto", "safety": 0.9, "unstable": "subdivide", "threads": 1},
+    "run": {"duration": 0.1, "frame_rate": 30, "vtu_every": 2, "track": [{"name": "tip", "point": [0.4, 0.05, 0.05]}]},
+}
+
+
+def amended(change: Callable[[dict[str, Any]], None]) -> dict[str, Any]:
+    scene = copy.deepcopy(BEAM)
+    change(scene)
+    return scene
+
+
+def set_path(path: list[str | int], value: Any) -> Callable[[dict[str, Any]], None]:
+    def change(scene: dict[str, Any]) -> None:
+        node: Any = scene
+        for key in path[:-1]:
+            node = node[key]
+        node[path[-1]] = value
+
+    return change
+
+
+def delete(key: str) -> Callable[[dict[str, Any]], None]:
+    return lambda scene: scene.pop(key)
+
+
+GOOD: dict[str, dict[str, Any]] = {
+    "beam": BEAM,
+    "cylinder": amended(
+        set_path(["mesh"], {"primitive": "cylinder", "radius": 0.05, "height": 0.4, "around": 12, "layers": 8, "rings": 2})
+    ),
+    "variants": amended(
+        set_path(["variants"], [{"name": "lin", "material": {"model": "linear"}}, {"name": "f32", "integrator": {"precision": "float"}}])
+    ),
+    "rotate_and_translate": amended(
+        set_path(
+            ["boundary", 0],
+            {
+                "select": {"plane": {"point": [0, 0, 0], "normal": [1, 0, 0]}},
+                "rotate": {"centre": [0, 0.05, 0.05], "axis": [1, 0, 0], "angle_deg": 45, "duration": 0.5},
+                "translate": {"direction": [0, 1, 0], "distance": 0.01, "duration": 0.5, "start": 0.1},
+            },
+        )
+    ),
+    "dt_number": amended(set_path(["integrator", "dt"], 1e-4)),
+    "no_effects": amended(delete("effects")),
+    "gravity_false": amended(set_path(["effects"], {"gravity": False, "damping": False})),
+}
+
+BAD: dict[str, dict[str, Any]] = {
+    "unknown_field": amended(set_path(["materal"], {})),
+    "unknown_nested_field": amended(set_path(["material", "young"], 1)),
+    "wrong_type": amended(set_path(["material", "E"], "soft")),
+    "negative_E": amended(set_path(["material", "E"], -5)),
+    "nu_half": amended(set_path(["material", "nu"], 0.5)),
+    "missing_mesh": amended(delete("mesh")),
+    "missing_run": amended(delete("run")),
+    "unknown_model": amended(set_path(["material", "model"], "rubber")),
+    "dt_fast": amended(set_path(["integrator", "dt"], "fast")),
+    "dt_negative": amended(set_path(["integrator", "dt"], -1)),
+    "material_and_materials": amended(set_path(["materials"], [BEAM["material"]])),
+    "no_material": amended(delete("material")),
+    "fixed_false": amended(set_path(["boundary", 0, "fixed"], False)),
+    "fixed_and_rotate": amended(
+        set_path(["boundary", 0, "rotate"], {"centre": [0, 0, 0], "axis": [1, 0, 0], "angle_deg": 5, "duration": 1})
+    ),
+    "zero_axis": amended(
+        set_path(
+            ["boundary", 0],
+            {
+                "select": {"box": {"lo": [0, 0, 0], "hi": [0, 0.1, 0.1]}},
+                "rotate": {"centre": [0, 0, 0], "axis": [0, 0, 0], "angle_deg": 5, "duration": 1},
+            },
+        )
+    ),
+    "two_selectors": amended(set_path(["boundary", 0, "select", "nodes"], [0])),
+    "gravity_true": amended(set_path(["effects", "gravity"], True)),
+    "vec2": amended(set_path(["mesh", "lo"], [0, 0])),
+    "cells_zero": amended(set_path(["mesh", "cells"], [8, 0, 2])),
+    "bad_split": amended(set_path(["mesh", "split"], "kuhn5")),
+    "mesh_primitive_and_file": amended(set_path(["mesh", "file"], "x.obj")),
+    "safety_above_one": amended(set_path(["integrator", "safety"], 1.5)),
+    "threads_zero": amended(set_path(["integrator", "threads"], 0)),
+    "bad_name": amended(set_path(["name"], "a/b")),
+    "variant_unknown_field": amended(set_path(["variants"], [{"name": "v", "run": {"duration": 1}}])),
+    "variant_without_name": amended(set_path(["variants"], [{"material": {"model": "linear"}}])),
+    "duration_zero": amended(set_path(["run", "duration"], 0)),
+    "track_without_point": amended(set_path(["run", "track"], [{"name": "tip"}])),
+}
+
+
+@pytest.mark.parametrize("path", shipped_scenes(), ids=lambda p: p.name)
+def test_shipped_scene_is_valid(path: pathlib.Path) -> None:
+    with open(path, encoding="utf-8") as f:
+        scene = json.load(f)
+    errors = [e.message for e in validator().iter_errors(scene)]
+    assert errors == [], f"{path.name}: {errors}"
+
+
+def test_the_schema_is_a_valid_draft_2020_12_schema() -> None:
+    schema = load_schema()
+    assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
+    jsonschema.Draft202012Validator.check_schema(schema)
+
+
+def test_every_object_in_the_schema_forbids_unknown_fields() -> None:
+    def walk(node: Any, where: str) -> None:
+        if isinstance(node, dict):
+            if node.get("type") == "object":
+                assert node.get("additionalProperties") is False, where
+            for key, value in node.items():
+                walk(value, f"{where}/{key}")
+        elif isinstance(node, list):
+            for i, value in enumerate(node):
+                walk(value, f"{where}/{i}")
+
+    walk(load_schema(), "#")
+
+
+def test_there_are_shipped_scenes_of_each_kind() -> None:
+    names = {p.stem for p in shipped_scenes()}
+    assert {"default", "fig2_twist", "fig3_cantilever"} <= names
+    files = [json.load(open(p, encoding="utf-8")) for p in shipped_scenes()]
+    assert any("file" in s["mesh"] and s["mesh"]["file"].endswith(".obj") for s in files)
+
+
+@pytest.mark.parametrize("name", sorted(GOOD))
+def test_schema_accepts(name: str) -> None:
+    errors = [e.message for e in validator().iter_errors(GOOD[name])]
+    assert errors == []
+
+
+@pytest.mark.parametrize("name", sorted(BAD))
+def test_schema_refuses(name: str) -> None:
+    assert not validator().is_valid(BAD[name])
+
+
+def run_check(exe: str, scene: dict[str, Any], tmp_path: pathlib.Path) -> subprocess.CompletedProcess[str]:
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(scene), encoding="utf-8")
+    return subprocess.run([exe, "check", str(path)], capture_output=True, text=True, timeout=120, check=False)
+
+
+@pytest.mark.parametrize("name", sorted(GOOD) + sorted(BAD))
+def test_loader_agrees_with_the_schema(name: str, tmp_path: pathlib.Path) -> None:
+    exe = tactile_sim()
+    if exe is None:
+        pytest.skip("no built tactile-sim (set TACTILE_SIM or build into build/<dir>/)")
+    scene = GOOD.get(name) or BAD[name]
+    result = run_check(exe, scene, tmp_path)
+    if name in GOOD:
+        assert result.returncode == 0, result.stderr
+    else:
+        assert result.returncode == 2, result.stdout + result.stderr
+        assert str(tmp_path / "scene.json") in result.stderr
