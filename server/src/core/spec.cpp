@@ -13,10 +13,14 @@ ProfileValue compute_profile(const MotionProfile& p, double t) {
   if (tau <= 0.0) return {0.0, 0.0, 0.0};
   if (p.kind == MotionProfile::Kind::ConstantRate) return {p.rate * tau, p.rate, 0.0};
   if (p.duration <= 0.0 || tau >= p.duration) return {p.target, 0.0, 0.0};
-  // s = target (1 - cos(pi tau / T)) / 2: zero velocity at both ends.
-  const double w = std::numbers::pi / p.duration;
-  return {0.5 * p.target * (1.0 - std::cos(w * tau)), 0.5 * p.target * w * std::sin(w * tau),
-          0.5 * p.target * w * w * std::cos(w * tau)};
+  // Cycloidal ramp s = target (tau/T - sin(w tau)/(2 pi)), w = 2 pi / T: zero
+  // velocity and acceleration at both ends, so a prescribed motion starts and
+  // stops without a jump in acceleration (which would inject energy that the
+  // explicit step cannot account for).
+  const double T = p.duration;
+  const double w = 2.0 * std::numbers::pi / T;
+  return {p.target * (tau / T - std::sin(w * tau) / (2.0 * std::numbers::pi)), p.target / T * (1.0 - std::cos(w * tau)),
+          p.target / T * w * std::sin(w * tau)};
 }
 
 std::vector<int32_t> select_nodes(const TetMesh& mesh, const NodeSelector& s) {

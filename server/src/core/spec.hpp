@@ -33,8 +33,9 @@ struct NodeSelector {
 };
 
 // A scalar s(t) with its first two derivatives, used as an angle [rad] or a
-// displacement [m] along a direction. Ramp eases in and out (half cosine)
-// from 0 to `target` over [start, start + duration], then holds.
+// displacement [m] along a direction. Ramp eases in and out (cycloidal: zero
+// velocity and acceleration at both ends) from 0 to `target` over
+// [start, start + duration], then holds.
 struct MotionProfile {
   enum class Kind : uint8_t { Ramp, ConstantRate };
   Kind kind = Kind::Ramp;

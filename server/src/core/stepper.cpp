@@ -196,9 +196,7 @@ void Stepper<Real>::apply_essential_rates(State<Real>& s, double t, double dt) {
         const double a_free = double(s.a[j + size_t(d)]), a_held = double(a_prescribed_[3 * c + size_t(d)]);
         ma2_delta += m * (a_held * a_held - a_free * a_free);
         const double r_new = m * (double(a_prescribed_[3 * c + size_t(d)]) - double(s.a[j + size_t(d)])) * q;
-        // A fresh state stores no reaction, though a prescribed motion may start
-        // with an acceleration: its first step takes the new reaction throughout.
-        const double r_old = s.step == 0 ? r_new : double(s.reaction[3 * c + size_t(d)]);
+        const double r_old = double(s.reaction[3 * c + size_t(d)]);  // set at t_0 by apply_initial_acceleration
         work += 0.5 * (r_old + r_new) * (double(s.u[j + size_t(d)]) - u0[d]);  // trapezoid
         s.reaction[3 * c + size_t(d)] = Real(r_new);
         s.v[j + size_t(d)] = v_prescribed_[3 * c + size_t(d)];
@@ -213,8 +211,13 @@ void Stepper<Real>::apply_essential_rates(State<Real>& s, double t, double dt) {
 }
 
 template <class Real>
+void Stepper<Real>::add_load_force(int32_t node, const Vec3& force) {
+  Real* f = f_.data() + 4 * size_t(node);  // part 0's buffer, (n_nodes x 4); the corrector sums all parts
+  for (int d = 0; d < 3; ++d) f[d] += Real(force[d]);
+}
+
+template <class Real>
 void Stepper<Real>::apply_loads(const State<Real>& s, double t) {
-  Real* f = f_.data();  // part 0's buffer; the corrector sums all parts
   double work = 0;
   size_t c = 0;
   for (const LoadSet& load : model_.loads) {
@@ -223,14 +226,50 @@ void Stepper<Real>::apply_loads(const State<Real>& s, double t) {
       const size_t j = 3 * size_t(load.nodes[k]);
       const Vec3 force = load.spec.force * (scale * load.weight[k]);
       const Vec3& u0 = u_before_[model_.constrained.size() + c];
-      for (int d = 0; d < 3; ++d) {
-        f[4 * size_t(load.nodes[k]) + size_t(d)] += Real(force[d]);
+      add_load_force(load.nodes[k], force);
+      for (int d = 0; d < 3; ++d)  // trapezoid over the step
         work += 0.5 * (load_force_[c][d] + force[d]) * (double(s.u[j + size_t(d)]) - u0[d]);
-      }
       load_force_[c] = force;
     }
   }
   cur_->work_loads += work;
+}
+
+template <class Real>
+void Stepper<Real>::apply_initial_acceleration(State<Real>& s) {
+  // Newmark starts from an acceleration consistent with the forces, eq. (1):
+  // M a_0 = F_0 - R(u_0) - D v_0. The corrector with dt = 0 computes exactly
+  // that and leaves v alone.
+  cur_ = &s;
+  cur_dt_ = Real(0);
+  if (!model_.essential.empty()) apply_essential_positions(s, s.t);
+  run_parts(&Stepper::elastic_part, this);
+  if (!model_.loads.empty()) {
+    size_t c = 0;
+    for (const LoadSet& load : model_.loads) {
+      for (size_t k = 0; k < load.nodes.size(); ++k, ++c) add_load_force(load.nodes[k], load_force_[c]);
+    }
+  }
+  run_parts(&Stepper::correct_part, this);
+  double ma2 = 0;
+  for (int32_t p = 0; p < n_parts_; ++p) ma2 += correct_sums_[size_t(p)].ma2;
+  // Constrained nodes follow their motion; the constraint supplies the rest.
+  size_t c = 0;
+  for (const EssentialSet& set : model_.essential) {
+    for (int32_t i : set.nodes) {
+      const size_t j = 3 * size_t(i);
+      const double m = double(model_.m[size_t(i)]);
+      for (size_t d = 0; d < 3; ++d) {
+        const double a_held = double(a_prescribed_[3 * c + d]), a_free = double(s.a[j + d]);
+        ma2 += m * (a_held * a_held - a_free * a_free);
+        s.reaction[3 * c + d] = Real(m * (a_held - a_free));
+        s.v[j + d] = v_prescribed_[3 * c + d];
+        s.a[j + d] = a_prescribed_[3 * c + d];
+      }
+      ++c;
+    }
+  }
+  initial_ma2_ = ma2;
 }
 
 template <class Real>
@@ -250,7 +289,10 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
       const double scale = load.spec.scale ? compute_profile(*load.spec.scale, s.t).s : 1.0;
       for (size_t k = 0; k < load.nodes.size(); ++k, ++c) load_force_[c] = load.spec.force * (scale * load.weight[k]);
     }
-    const Energy e0 = compute_energy(s);
+    apply_initial_acceleration(s);
+    cur_dt_ = Real(dt);
+    Energy e0 = compute_energy(s);
+    e0.discrete = -0.125 * dt * dt * initial_ma2_;
     energy_reference_ = e0.balance();
     energy_ = e0;  // the kinetic energy at t_n for the dissipation trapezoid below
     energy_scale_ = std::fabs(e0.kinetic) + std::fabs(e0.elastic) + std::fabs(e0.gravity);

@@ -70,6 +70,11 @@ class Stepper {
   // it exceeds the critical step of the current configuration.
   AdvanceReport advance(State<Real>& s, double frame_dt);
 
+  // Sets a consistent with the forces at s.t, eq. (1): M a = F - R(u) - D v,
+  // and the constrained nodes' v, a and reaction. step() does this itself when
+  // it starts from a state (first step, or after clear_fault()).
+  void apply_initial_acceleration(State<Real>& s);
+
   // Critical step of the current configuration [s]: each element's exact rest
   // value scaled by how much it has been squashed and stiffened.
   double compute_critical_dt(const State<Real>& s) const;
@@ -97,6 +102,8 @@ class Stepper {
   void apply_essential_positions(State<Real>& s, double t);
   void apply_essential_rates(State<Real>& s, double t, double dt);
   void apply_loads(const State<Real>& s, double t);
+  void add_load_force(int32_t node, const Vec3& force);
+
   Fault make_fault(Fault::Kind kind, const State<Real>& s, std::string message, std::vector<int32_t> elements);
   std::vector<int32_t> find_nonfinite_elements(const State<Real>& s) const;
   std::vector<int32_t> find_inverted_elements(const State<Real>& s) const;
@@ -137,6 +144,7 @@ class Stepper {
 
   double essential_mv2_delta_ = 0;  // constrained nodes' change of m |v|^2 in this step
   double essential_ma2_delta_ = 0;  // and of m |a|^2
+  double initial_ma2_ = 0;          // sum m |a_0|^2 of the starting state
   Energy energy_;
   double energy_reference_ = 0;  // balance at the first step
   double energy_scale_ = 0;      // running max of the energy magnitudes [J]

@@ -98,9 +98,9 @@ std::vector<Real> make_affine_displacement(const TetMesh& mesh, const glm::dmat3
 }
 
 // Elastic nodal forces -dU/du of the whole model at displacement u [N]
-// (n_nodes x 3); `energy` receives U [J]. Computed by the stepper itself: one
-// step from zero velocity and acceleration leaves u in place (eq. 7) and
-// leaves a = f / m (eq. 10). The model must have no BC, load, gravity or damping.
+// (n_nodes x 3); `energy` receives U [J]. Computed by the stepper itself: the
+// initial acceleration at rest velocity is a = f / m (eq. 1 with lumped M).
+// The model must have no BC, load, gravity or damping.
 template <class Real>
 std::vector<Real> compute_elastic_forces(const Model<Real>& model, const std::vector<Real>& u,
                                          double* energy = nullptr) {
@@ -108,10 +108,10 @@ std::vector<Real> compute_elastic_forces(const Model<Real>& model, const std::ve
   Stepper<Real> stepper(model);
   State<Real> s = stepper.make_state();
   s.u = u;
-  stepper.step(s, model.dt_rest);
+  stepper.apply_initial_acceleration(s);
   std::vector<Real> f(s.a.size());
   for (size_t k = 0; k < f.size(); ++k) f[k] = s.a[k] * model.m[k / 3];
-  if (energy) *energy = stepper.energy().elastic;
+  if (energy) *energy = stepper.compute_energy(s).elastic;
   return f;
 }
 
