@@ -15,38 +15,13 @@
 
 #include "scene/scene.hpp"
 
+#include "temp_dir.hpp"
+
 namespace tactile::test {
 
-// A fresh folder for one test, removed afterwards.
-class SceneDir {
- public:
-  SceneDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    std::string name = std::string(info->test_suite_name()) + "_" + info->name();
-    for (char& c : name)
-      if (c == '/') c = '_';
-    path_ = std::filesystem::temp_directory_path() / ("tactile_scene_" + name + "_" + std::to_string(::getpid()));
-    std::filesystem::remove_all(path_);
-    std::filesystem::create_directories(path_);
-  }
-  ~SceneDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  SceneDir(const SceneDir&) = delete;
-  SceneDir& operator=(const SceneDir&) = delete;
-
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-  std::string write(const std::string& name, const std::string& text) const {
-    const std::string p = file(name);
-    std::ofstream out(p, std::ios::binary | std::ios::trunc);
-    out << text;
-    return p;
-  }
+// The test's folder, with scenes written as JSON.
+struct SceneDir : TempDir {
   std::string write_json(const std::string& name, const nlohmann::json& j) const { return write(name, j.dump(2)); }
-
- private:
-  std::filesystem::path path_;
 };
 
 // A small valid scene: a 0.4 x 0.1 x 0.1 m StVK beam clamped at x = 0.
