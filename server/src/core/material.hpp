@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <string_view>
 
 // Force-inlined: the kernels are compiled once per ISA, and an out-of-line
@@ -136,104 +137,165 @@ TACTILE_INLINE T stress_stvk(const T* F, T lambda, T mu, T* P) {
 }
 
 // ---- rotation of the polar decomposition, inversion-aware --------------------
-// R = U V^T from the SVD of F, with the sign of the smallest singular value
-// flipped when det F < 0 (Irving, Teran and Fedkiw 2004), so R is always a
-// proper rotation. The eigenvectors of F^T F come from cyclic Jacobi sweeps.
+// R = U V^T from the SVD F = U Sigma V^T, with the sign of the smallest
+// singular value flipped when det F < 0 (Irving, Teran and Fedkiw 2004), so R
+// is always a proper rotation and an inverted element is pushed back.
+//
+// Method: McAdams, Selle, Tamstorf, Teran and Sifakis 2011, "Computing the
+// SVD of 3x3 matrices with minimal branching and elementary floating point
+// operations": Jacobi sweeps on F^T F with approximate Givens angles, sorting
+// of the singular vectors by conditional swaps, and a Givens QR of F V. Every
+// step is a fixed sequence of arithmetic and value selects, with compile-time
+// indices, so the kernels' lane loop vectorises through it (the former
+// exact-Jacobi version picked the smallest eigenvalue by index and branched
+// on norms, and ran scalar). It was chosen over a polar Newton iteration
+// because that needs F^-1 (singular for a flat element) and finds only the
+// det F < 0 polar factor, not which axis to flip; here the QR puts the sign
+// of det F on the last, smallest, singular value by construction, and every
+// rotation it applies is guarded so that R stays a rotation for any F.
+
+// Below this a squared length counts as zero: far enough above the smallest
+// normal number that its square root and reciprocal keep full precision.
+template <class T>
+inline constexpr T kRotationTiny = std::numeric_limits<T>::min() / std::numeric_limits<T>::epsilon();
+// Off-diagonal entries of F^T F below this times the diagonal pair are taken
+// as zero: far below what changes R, and it stops the cubic convergence from
+// driving them into the subnormal range, where each operation costs a
+// microcode assist (it made the kernel several times slower).
+template <class T>
+inline constexpr T kJacobiFloor = std::numeric_limits<T>::epsilon() * std::numeric_limits<T>::epsilon();
+
+// Jacobi sweeps: the approximate angles converge slowly while F^T F is far
+// from diagonal and cubically once near; over random F the worst off-diagonal
+// left is ~1e-6 after 5 sweeps and ~1e-15 after 6 (relative to |F|^2), and
+// ~1e-31 after 7.
+template <class T>
+inline constexpr int kJacobiSweeps = sizeof(T) == 4 ? 6 : 7;
+
+// One Jacobi rotation of the symmetric S in the (p, q) plane, (p, q, k) cyclic:
+// S <- J^T S J, V <- V J, with J's angle theta approximating the one that
+// zeroes S_pq (tan 2 theta = 2 S_pq / (S_pp - S_qq)). The half-angle pair
+// (ch, sh) = (2 (S_pp - S_qq), S_pq) is exact to first order; where it would
+// exceed pi/8 (that is, S_pq is large against the gap, gamma sh^2 >= ch^2
+// with gamma = (1 + sqrt 2)^2) the rotation is pi/4 instead (McAdams et al.
+// 2011, sec. 2.2). cos and sin of theta follow from the half angle with one
+// division and no square root.
+template <int p, int q, int k, class T>
+TACTILE_INLINE void apply_jacobi_rotation(T (&S)[3][3], T (&V)[3][3]) {
+  constexpr T kGamma = T(5.828427124746190097603377448419396157);
+  constexpr T kSqrtHalf = T(0.7071067811865475244008443621048490393);
+  const T spp = S[p][p], sqq = S[q][q], skk = S[k][k];
+  const T spq = std::fabs(S[p][q]) > kJacobiFloor<T> * (spp + sqq) ? S[p][q] : T(0);
+  const T spk = std::fabs(S[p][k]) > kJacobiFloor<T> * (spp + skk) ? S[p][k] : T(0);
+  const T sqk = std::fabs(S[q][k]) > kJacobiFloor<T> * (sqq + skk) ? S[q][k] : T(0);
+  const T ch = T(2) * (spp - sqq);
+  const T sh = spq;
+  const T ch2 = ch * ch, sh2 = sh * sh;
+  const bool approximate = kGamma * sh2 < ch2 && ch2 > kRotationTiny<T>;
+  const T inv = T(1) / (approximate ? ch2 + sh2 : T(1));
+  const T c = approximate ? (ch2 - sh2) * inv : kSqrtHalf;
+  const T s = approximate ? T(2) * ch * sh * inv : kSqrtHalf;
+  const T cc = c * c, ss = s * s, cs = c * s;
+  S[p][p] = cc * spp + T(2) * cs * spq + ss * sqq;
+  S[q][q] = ss * spp - T(2) * cs * spq + cc * sqq;
+  S[p][q] = S[q][p] = (cc - ss) * spq + cs * (sqq - spp);
+  S[p][k] = S[k][p] = c * spk + s * sqk;
+  S[q][k] = S[k][q] = c * sqk - s * spk;
+  #pragma GCC unroll 3
+  for (int i = 0; i < 3; ++i) {
+    const T vp = V[i][p], vq = V[i][q];
+    V[i][p] = c * vp + s * vq;
+    V[i][q] = c * vq - s * vp;
+  }
+}
+
+// Swaps columns i and j of B and V when |b_i|^2 = rho_i < rho_j, negating the
+// new column j so that det V stays +1.
+template <int i, int j, class T>
+TACTILE_INLINE void sort_singular_pair(T (&B)[3][3], T (&V)[3][3], T (&rho)[3]) {
+  const bool swap = rho[i] < rho[j];
+  const T ri = rho[i], rj = rho[j];
+  rho[i] = swap ? rj : ri;
+  rho[j] = swap ? ri : rj;
+  #pragma GCC unroll 3
+  for (int r = 0; r < 3; ++r) {
+    const T bi = B[r][i], bj = B[r][j], vi = V[r][i], vj = V[r][j];
+    B[r][i] = swap ? bj : bi;
+    B[r][j] = swap ? -bi : bj;
+    V[r][i] = swap ? vj : vi;
+    V[r][j] = swap ? -vi : vj;
+  }
+}
+
+// Givens rotation G of rows i and j of B that zeroes B_j,col and leaves
+// B_i,col = |(B_i,col, B_j,col)| >= 0; U <- U G^T keeps B_before = U B.
+// Where both entries vanish G is the identity.
+template <int i, int j, int col, class T>
+TACTILE_INLINE void apply_givens_qr(T (&B)[3][3], T (&U)[3][3]) {
+  const T a1 = B[i][col], a2 = B[j][col];
+  const T rho2 = a1 * a1 + a2 * a2;
+  const bool nonzero = rho2 > kRotationTiny<T>;
+  const T r = T(1) / std::sqrt(nonzero ? rho2 : T(1));
+  const T c = nonzero ? a1 * r : T(1);
+  const T s = nonzero ? a2 * r : T(0);
+  #pragma GCC unroll 3
+  for (int m = 0; m < 3; ++m) {
+    const T bi = B[i][m], bj = B[j][m];
+    B[i][m] = c * bi + s * bj;
+    B[j][m] = c * bj - s * bi;
+    const T ui = U[m][i], uj = U[m][j];
+    U[m][i] = c * ui + s * uj;
+    U[m][j] = c * uj - s * ui;
+  }
+}
+
 template <class T>
 TACTILE_INLINE void rotation_of(const T* F, T* R) {
-  T A[9];
-  mul_tn(F, F, A);  // A = F^T F, symmetric
-  T V[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-  constexpr int kSweeps = sizeof(T) == 4 ? 4 : 6;
+  // A = F / |F|: R does not change, and every threshold below is relative.
+  T f2 = 0;
   #pragma GCC unroll 16
-  for (int sweep = 0; sweep < kSweeps; ++sweep) {
-    #pragma GCC unroll 16
-    for (int pair = 0; pair < 3; ++pair) {
-      const int p = pair == 2 ? 1 : 0;
-      const int q = pair == 0 ? 1 : 2;
-      const T apq = A[3 * p + q];
-      const T app = A[3 * p + p];
-      const T aqq = A[3 * q + q];
-      // Rutishauser's rotation: t = sign(theta) / (|theta| + sqrt(theta^2 + 1)).
-      const T scale = std::fabs(app) + std::fabs(aqq) + T(1e-30);
-      const bool active = std::fabs(apq) > scale * T(sizeof(T) == 4 ? 1e-9 : 1e-18);
-      const T theta = active ? (aqq - app) / (T(2) * apq) : T(0);
-      const T t = active ? std::copysign(T(1), theta) / (std::fabs(theta) + std::sqrt(theta * theta + T(1))) : T(0);
-      const T c = T(1) / std::sqrt(t * t + T(1));
-      const T s = t * c;
-      // A <- J^T A J, V <- V J with J the (p,q) rotation.
-      #pragma GCC unroll 16
-      for (int k = 0; k < 3; ++k) {
-        const T akp = A[3 * k + p];
-        const T akq = A[3 * k + q];
-        A[3 * k + p] = c * akp - s * akq;
-        A[3 * k + q] = s * akp + c * akq;
-      }
-      #pragma GCC unroll 16
-      for (int k = 0; k < 3; ++k) {
-        const T apk = A[3 * p + k];
-        const T aqk = A[3 * q + k];
-        A[3 * p + k] = c * apk - s * aqk;
-        A[3 * q + k] = s * apk + c * aqk;
-      }
-      #pragma GCC unroll 16
-      for (int k = 0; k < 3; ++k) {
-        const T vkp = V[3 * k + p];
-        const T vkq = V[3 * k + q];
-        V[3 * k + p] = c * vkp - s * vkq;
-        V[3 * k + q] = s * vkp + c * vkq;
-      }
-    }
-  }
-  // Order the eigenpairs so column 2 has the smallest eigenvalue.
-  int lo = 0;
-  if (A[4] < A[3 * lo + lo]) lo = 1;
-  if (A[8] < A[3 * lo + lo]) lo = 2;
-  const int a = lo == 0 ? 1 : 0;
-  const int b = lo == 2 ? 1 : 2;
-  T v0[3] = {V[a], V[3 + a], V[6 + a]};
-  T v1[3] = {V[b], V[3 + b], V[6 + b]};
-  // v2 = v0 x v1 makes V a proper rotation.
-  T v2[3] = {v0[1] * v1[2] - v0[2] * v1[1], v0[2] * v1[0] - v0[0] * v1[2], v0[0] * v1[1] - v0[1] * v1[0]};
-  // u0 = F v0 / |F v0|; u1 = F v1 orthogonalised against u0; u2 = u0 x u1.
-  T u0[3], u1[3];
-  #pragma GCC unroll 16
-  for (int i = 0; i < 3; ++i) {
-    u0[i] = F[3 * i] * v0[0] + F[3 * i + 1] * v0[1] + F[3 * i + 2] * v0[2];
-    u1[i] = F[3 * i] * v1[0] + F[3 * i + 1] * v1[1] + F[3 * i + 2] * v1[2];
-  }
-  const T n0 = std::sqrt(u0[0] * u0[0] + u0[1] * u0[1] + u0[2] * u0[2]);
-  if (n0 > T(1e-30)) {
-    #pragma GCC unroll 3
-    for (T& x : u0) x /= n0;
-  } else {  // F annihilates everything: any rotation will do
-    u0[0] = v0[0];
-    u0[1] = v0[1];
-    u0[2] = v0[2];
-  }
-  const T d01 = u0[0] * u1[0] + u0[1] * u1[1] + u0[2] * u1[2];
-  #pragma GCC unroll 16
-  for (int i = 0; i < 3; ++i) u1[i] -= d01 * u0[i];
-  const T n1 = std::sqrt(u1[0] * u1[0] + u1[1] * u1[1] + u1[2] * u1[2]);
-  if (n1 > T(1e-30)) {
-    #pragma GCC unroll 3
-    for (T& x : u1) x /= n1;
-  } else {  // F has rank one: complete with any unit vector orthogonal to u0
-    const int k = std::fabs(u0[0]) < T(0.6) ? 0 : 1;
-    T e[3] = {0, 0, 0};
-    e[k] = 1;
-    const T d = u0[k];
-    #pragma GCC unroll 16
-    for (int i = 0; i < 3; ++i) u1[i] = e[i] - d * u0[i];
-    const T n = std::sqrt(u1[0] * u1[0] + u1[1] * u1[1] + u1[2] * u1[2]);
-    #pragma GCC unroll 3
-    for (T& x : u1) x /= n;
-  }
-  T u2[3] = {u0[1] * u1[2] - u0[2] * u1[1], u0[2] * u1[0] - u0[0] * u1[2], u0[0] * u1[1] - u0[1] * u1[0]};
+  for (int k = 0; k < 9; ++k) f2 += F[k] * F[k];
+  const T scale = T(1) / std::sqrt(f2 > kRotationTiny<T> ? f2 : kRotationTiny<T>);
+  T A[3][3];
   #pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
     #pragma GCC unroll 16
-    for (int j = 0; j < 3; ++j) R[3 * i + j] = u0[i] * v0[j] + u1[i] * v1[j] + u2[i] * v2[j];
+    for (int j = 0; j < 3; ++j) A[i][j] = scale * F[3 * i + j];
+  // V: eigenvectors of S = A^T A, a proper rotation from the start.
+  T S[3][3];
+  #pragma GCC unroll 16
+  for (int i = 0; i < 3; ++i)
+    #pragma GCC unroll 16
+    for (int j = 0; j < 3; ++j) S[i][j] = A[0][i] * A[0][j] + A[1][i] * A[1][j] + A[2][i] * A[2][j];
+  T V[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  #pragma GCC unroll 16
+  for (int sweep = 0; sweep < kJacobiSweeps<T>; ++sweep) {
+    apply_jacobi_rotation<0, 1, 2>(S, V);
+    apply_jacobi_rotation<1, 2, 0>(S, V);
+    apply_jacobi_rotation<2, 0, 1>(S, V);
+  }
+  // B = A V = U Sigma: columns in decreasing length, so the last is the smallest.
+  T B[3][3];
+  #pragma GCC unroll 16
+  for (int i = 0; i < 3; ++i)
+    #pragma GCC unroll 16
+    for (int j = 0; j < 3; ++j) B[i][j] = A[i][0] * V[0][j] + A[i][1] * V[1][j] + A[i][2] * V[2][j];
+  T rho[3];
+  #pragma GCC unroll 16
+  for (int j = 0; j < 3; ++j) rho[j] = B[0][j] * B[0][j] + B[1][j] * B[1][j] + B[2][j] * B[2][j];
+  sort_singular_pair<0, 1>(B, V, rho);
+  sort_singular_pair<0, 2>(B, V, rho);
+  sort_singular_pair<1, 2>(B, V, rho);
+  // B = U Sigma' by Givens QR: Sigma'_00, Sigma'_11 >= 0 and Sigma'_22 has the
+  // sign of det F, which is the Irving et al. flip.
+  T U[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  apply_givens_qr<0, 1, 0>(B, U);
+  apply_givens_qr<0, 2, 0>(B, U);
+  apply_givens_qr<1, 2, 1>(B, U);
+  #pragma GCC unroll 16
+  for (int i = 0; i < 3; ++i)
+    #pragma GCC unroll 16
+    for (int j = 0; j < 3; ++j) R[3 * i + j] = U[i][0] * V[j][0] + U[i][1] * V[j][1] + U[i][2] * V[j][2];
 }
 
 // ---- corotational linear -----------------------------------------------------

@@ -231,40 +231,45 @@ Model<Real> build_model(const ModelSpec& spec) {
     return key[size_t(a)] < key[size_t(b)];
   });
 
+  // Lane blocks, one run per material model. Within a chunk of kStripBlocks
+  // blocks, lane l takes the l-th run of the chunk's Morton-ordered elements:
+  // elements that share nodes sit in one lane of consecutive blocks rather
+  // than side by side in one block, so a block's corner-force adds seldom hit
+  // the same node back to back (a store-to-load forwarding chain), while each
+  // chunk stays compact in space. Measured: 6-14 % on the element pass.
+  constexpr size_t kStripBlocks = 64;
   for (size_t i = 0; i < nt;) {
     const MaterialModel mm = model.tet_model[size_t(order[i])];
     size_t j = i;
     while (j < nt && model.tet_model[size_t(order[j])] == mm) ++j;
     ElementGroup group{mm, int32_t(model.blocks.size()), 0};
-    const size_t chunk_blocks = getenv("TACTILE_STRIP") ? size_t(atoi(getenv("TACTILE_STRIP"))) : 1;
-    for (size_t k = i; k < j; k += W * chunk_blocks) {
-      const size_t rem = std::min(j - k, W * chunk_blocks);
-      const size_t cb = (rem + W - 1) / W;
-      for (size_t bb = 0; bb < cb; ++bb) {
-      ElementBlock<Real> B{};
-      for (int l = 0; l < W; ++l) {
-        const size_t rel = size_t(l) * cb + bb;
-        const size_t slot = rel < rem ? k + rel : j;
-        if (slot >= j) {  // padding lane: zero stiffness, identity shape
-          for (int c = 0; c < 4; ++c) B.node[c][l] = 0;
-          for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
-          B.lambdaV[l] = B.muV[l] = Real(0);
-          model.lane_tet.push_back(-1);
-          continue;
+    for (size_t k = i; k < j; k += W * kStripBlocks) {
+      const size_t count = std::min(j - k, W * kStripBlocks);  // elements in this chunk
+      const size_t n_blocks = (count + W - 1) / W;
+      for (size_t b = 0; b < n_blocks; ++b) {
+        ElementBlock<Real> B{};
+        for (int l = 0; l < W; ++l) {
+          const size_t slot = size_t(l) * n_blocks + b;  // position in the chunk
+          if (slot >= count) {  // padding lane: zero stiffness, identity shape
+            for (int c = 0; c < 4; ++c) B.node[c][l] = 0;
+            for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
+            B.lambdaV[l] = B.muV[l] = Real(0);
+            model.lane_tet.push_back(-1);
+            continue;
+          }
+          const auto e = size_t(order[k + slot]);
+          const Tet& t = mesh.tets[e];
+          for (int c = 0; c < 4; ++c) B.node[c][l] = t[size_t(c)];
+          const Vec3& X0 = mesh.X[size_t(t[0])];
+          const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
+          const glm::dmat3 Dinv = glm::inverse(Dm);  // glm is column-major: Dinv[col][row]
+          for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 3; ++c) B.Dinv[3 * r + c][l] = Real(Dinv[c][r]);
+          B.lambdaV[l] = Real(model.tet_lambda[e] * model.tet_volume[e]);
+          B.muV[l] = Real(model.tet_mu[e] * model.tet_volume[e]);
+          model.lane_tet.push_back(int32_t(e));
         }
-        const auto e = size_t(order[slot]);
-        const Tet& t = mesh.tets[e];
-        for (int c = 0; c < 4; ++c) B.node[c][l] = t[size_t(c)];
-        const Vec3& X0 = mesh.X[size_t(t[0])];
-        const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
-        const glm::dmat3 Dinv = glm::inverse(Dm);  // glm is column-major: Dinv[col][row]
-        for (int r = 0; r < 3; ++r)
-          for (int c = 0; c < 3; ++c) B.Dinv[3 * r + c][l] = Real(Dinv[c][r]);
-        B.lambdaV[l] = Real(model.tet_lambda[e] * model.tet_volume[e]);
-        B.muV[l] = Real(model.tet_mu[e] * model.tet_volume[e]);
-        model.lane_tet.push_back(int32_t(e));
-      }
-      model.blocks.push_back(B);
+        model.blocks.push_back(B);
       }
     }
     group.end = int32_t(model.blocks.size());

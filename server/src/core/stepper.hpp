@@ -117,6 +117,7 @@ class Stepper {
   }
 
   static void predict_part(void* ctx, int32_t p);
+  static void pad_part(void* ctx, int32_t p);
   static void elastic_part(void* ctx, int32_t p);
   static void correct_part(void* ctx, int32_t p);
 
@@ -129,7 +130,9 @@ class Stepper {
   std::vector<Part> part_;
 
   // Workspace, sized once.
-  std::vector<Real> f_;                  // force per part [N] (n_parts x n_nodes x 3)
+  std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> u4_;  // u for the element pass [m] (n_nodes)
+  std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> f_;   // force per part [N] (n_parts x part_stride_)
+  int64_t part_stride_ = 0;              // nodes from one part's forces to the next's
   std::vector<ElasticSums> elastic_;     // per part
   std::vector<CorrectSums> correct_sums_;  // per part
   std::vector<Vec3> u_before_;           // constrained and loaded nodes' u at t_n [m]

@@ -57,6 +57,22 @@ const KernelTable<double>& kernels<double>() {
   }
 }
 
+template <>
+const KernelTable<float>* kernels_for<float>(std::string_view isa) {
+  if ((isa == "baseline" || isa == "v2") && cpu_has(kBaseline)) return &kKernelsFloat_baseline;
+  if (isa == "v3" && cpu_has(kV3)) return &kKernelsFloat_v3;
+  if (isa == "v4" && cpu_has(kV4)) return &kKernelsFloat_v4;
+  return nullptr;
+}
+
+template <>
+const KernelTable<double>* kernels_for<double>(std::string_view isa) {
+  if ((isa == "baseline" || isa == "v2") && cpu_has(kBaseline)) return &kKernelsDouble_baseline;
+  if (isa == "v3" && cpu_has(kV3)) return &kKernelsDouble_v3;
+  if (isa == "v4" && cpu_has(kV4)) return &kKernelsDouble_v4;
+  return nullptr;
+}
+
 std::string_view kernel_isa() {
   switch (current().load(std::memory_order_relaxed)) {
     case kV4: return "x86-64-v4 (AVX-512)";

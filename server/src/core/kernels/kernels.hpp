@@ -1,12 +1,17 @@
 // Hot loops of the explicit step, lane-blocked so that the compiler
-// vectorises them across elements, built once per x86-64 ISA level and
-// picked at run time (dispatch.cpp).
+// vectorises the material math across elements, built once per x86-64 ISA
+// level and picked at run time (dispatch.cpp).
 //
 // Elements are stored in blocks of W lanes (W = 64 bytes / sizeof(Real): one
-// AVX-512 register, two AVX2 ones). Node arrays are interleaved xyz, (n x 3).
+// AVX-512 register, two AVX2 ones). The state's node arrays are interleaved
+// xyz, (n x 3); the element pass reads and writes node arrays padded to four
+// entries per node (Node4), so that a lane loads or adds a whole corner as
+// one vector.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
+#include <new>
 #include <string_view>
 
 #include "core/material.hpp"
@@ -25,38 +30,65 @@ struct alignas(64) ElementBlock {
   Real muV[W];         // mu * rest volume [N m]; 0 in padding lanes
 };
 
-// Elastic forces of blocks [begin, end): f -= dU/dx, accumulated into f
-// (n_nodes x 4: x, y, z and an unused entry, so that a lane adds a corner's
-// force as one vector).
-// The elastic energy comes almost free with the stress, so the energy guard
-// can check every step.
+// One node's vector padded to four entries (x, y, z, 0), aligned to its size
+// so that it never straddles a cache line.
+template <class Real>
+struct alignas(4 * sizeof(Real)) Node4 {
+  Real v[4];
+};
+
+// Allocator for the node arrays the kernels stream through in whole vectors:
+// cache-line aligned, so that a W-node group never straddles an extra line.
+template <class T>
+struct CacheAlignedAllocator {
+  using value_type = T;
+  CacheAlignedAllocator() = default;
+  template <class U>
+  CacheAlignedAllocator(const CacheAlignedAllocator<U>&) {}
+  T* allocate(size_t n) { return static_cast<T*>(::operator new(n * sizeof(T), std::align_val_t(64))); }
+  void deallocate(T* p, size_t) { ::operator delete(p, std::align_val_t(64)); }
+  friend bool operator==(const CacheAlignedAllocator&, const CacheAlignedAllocator&) { return true; }
+};
+
+// Elastic forces of blocks [begin, end) at displacements u (n_nodes): f -= dU/du,
+// accumulated into f (n_nodes; the 4th entries stay 0). The elastic energy
+// comes almost free with the stress, so the energy guard can check every step.
 struct ElasticSums {
   double energy = 0;     // sum V psi(F) [J]
   int32_t inverted = 0;  // lanes with det F <= 0, counted only for models that cannot invert
 };
 template <class Real>
-using ForcesFn = ElasticSums (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Real* u,
-                                 Real (*f)[4]);
+using ForcesFn = ElasticSums (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Node4<Real>* u,
+                                 Node4<Real>* f);
 
-// Elastic energy V psi(F) per lane of blocks [begin, end), written to
-// energy[(b - begin) * W + lane]; and det F per lane to J (may be null).
+// Elastic energy V psi(F) per lane of blocks [begin, end) at displacements u
+// (n_nodes x 3), written to energy[(b - begin) * W + lane]; and det F per lane
+// to J (may be null). Not a hot loop: energy reports and fault diagnosis.
 template <class Real>
 using EnergyFn = void (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Real* u, double* energy,
                           Real* J);
 
 // Newmark predictor, eq. (7), over nodes [begin, end):
-//   u += dt v + dt^2/2 a;  v <- v + dt/2 a (the half-step velocity eq. (9) completes).
+//   u += dt v + dt^2/2 a;  v <- v + dt/2 a (the half-step velocity eq. (9) completes);
+// and the new u padded into u4 for the element pass.
 template <class Real>
-using PredictFn = void (*)(int32_t begin, int32_t end, Real dt, Real* u, Real* v, const Real* a);
+using PredictFn = void (*)(int32_t begin, int32_t end, Real dt, Real* u, Real* v, const Real* a, Node4<Real>* u4);
+
+// u4[i] = (u_i, 0) over nodes [begin, end), u (n x 3): the element pass's copy
+// of u when no predictor wrote it.
+template <class Real>
+using PadFn = void (*)(int32_t begin, int32_t end, const Real* u, Node4<Real>* u4);
 
 // Corrector, eqs. (8)-(10) with D = alpha M, over nodes [begin, end):
 //   a = (f / m + g - alpha v_half) / (1 + alpha dt / 2);  v = v_half + dt/2 a.
-// f is the sum of n_parts force arrays, stride 3n apart.
+// f is the sum of n_parts force arrays, part_stride nodes apart; the corrector
+// sets the entries it has read back to 0, so the next element pass adds into
+// zeros without a clearing pass of its own.
 template <class Real>
 struct CorrectArgs {
   int32_t begin, end;
   Real dt;
-  const Real* f;
+  Node4<Real>* f;
   int32_t n_parts;
   int64_t part_stride;
   const Real* inv_m;  // 1/m per node [1/kg] (n)
@@ -81,12 +113,17 @@ struct KernelTable {
   ForcesFn<Real> forces[kMaterialModelCount];
   EnergyFn<Real> energy[kMaterialModelCount];
   PredictFn<Real> predict;
+  PadFn<Real> pad;
   CorrectFn<Real> correct[2][2];  // [gravity][damping]: a scene pays only for what it has
 };
 
 // The table for the best ISA this CPU runs, or the one forced by select_isa.
 template <class Real>
 const KernelTable<Real>& kernels();
+// The table of one ISA level ("baseline", "v3", "v4"), or null if unknown or
+// not supported by this CPU: for tests that compare the levels.
+template <class Real>
+const KernelTable<Real>* kernels_for(std::string_view isa);
 std::string_view kernel_isa();
 // Forces an ISA level ("baseline", "v3", "v4"); false if unknown or unsupported.
 bool select_isa(std::string_view name);

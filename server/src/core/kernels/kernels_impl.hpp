@@ -4,6 +4,15 @@
 // own instantiations, or the linker would fold them into one (ODR) and every
 // ISA would run whichever copy it kept. The material math is force-inlined
 // for the same reason (TACTILE_INLINE).
+//
+// The element pass per block of W elements: load the corners' displacements
+// (one vector per lane and corner, transposed into lanes), run the material
+// math across lanes (GCC vectorises it from the scalar code in
+// core/material.hpp), and add the corner forces back (one vector per lane and
+// corner). The loads and adds are written per ISA with intrinsics: GCC's
+// generic tuning emulates gathers with scalar extracts, and no compiler
+// vectorises a scatter whose lanes may share a node. Lanes that share a node
+// simply add in turn.
 #pragma once
 
 // GCC 12's intrinsics headers trip -Wmaybe-uninitialized in their own
@@ -15,83 +24,120 @@
 #pragma GCC diagnostic pop
 
 #include <cmath>
+#include <utility>
+
+// log has SIMD versions in glibc's libmvec (linked with libm); declared here
+// as such, so that the stable Neo-Hookean's energy (the only log in the
+// materials) vectorises with the rest of the lane loop instead of forcing it
+// to scalar code. glibc's own headers declare them only under -ffast-math.
+// The vector versions are accurate to a few ulp; they touch only psi.
+extern "C" {
+__attribute__((__simd__("notinbranch"))) float logf(float) noexcept;
+__attribute__((__simd__("notinbranch"))) double log(double) noexcept;
+}
 
 #include "core/kernels/kernels.hpp"
+
+// Everything below is internal and inlined: the ABI of 64-byte vector
+// arguments (which -Wpsabi warns about below AVX-512) never applies.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
 
 namespace tactile::kernel_impl {
 namespace {
 
-// ---- corner gather and force scatter ----------------------------------------
-// The material math vectorises across lanes by itself; the memory traffic
-// around it does not (GCC's generic tuning emulates gathers with scalar
-// extracts, and no compiler vectorises a scatter whose lanes may share a
-// node). These do it explicitly per ISA, with a scalar version for the rest.
+// ---- corner loads and force adds ---------------------------------------------
 
-// x[3c + i][l] = u[3 node[c][l] + i]: corner displacements of every lane.
+// x[3c + i][l] = u[node[c][l]].v[i]: the corner displacements of every lane.
 template <class Real>
-TACTILE_INLINE void gather_corners(const ElementBlock<Real>& B, const Real* u, Real (*x)[kLanes<Real>]) {
+TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>* u, Real (*x)[kLanes<Real>]) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
+  #pragma GCC unroll 4
+  for (int c = 0; c < 4; ++c) {
+    const int32_t* id = B.node[c];
 #if defined(__AVX512F__)
-  #pragma GCC unroll 4
-  for (int c = 0; c < 4; ++c) {
     if constexpr (sizeof(Real) == 4) {
-      const __m512i id = _mm512_load_si512(B.node[c]);
-      const __m512i i3 = _mm512_add_epi32(_mm512_add_epi32(id, id), id);
-      _mm512_store_ps(x[3 * c], _mm512_i32gather_ps(i3, u, 4));
-      _mm512_store_ps(x[3 * c + 1], _mm512_i32gather_ps(i3, u + 1, 4));
-      _mm512_store_ps(x[3 * c + 2], _mm512_i32gather_ps(i3, u + 2, 4));
+      // Chunk k of r[j] is lane 4k + j; a 4x4 transpose per chunk gives x, y, z in lane order.
+      __m512 r[4];
+      #pragma GCC unroll 4
+      for (int j = 0; j < 4; ++j) {
+        const __m512 v = _mm512_castps128_ps512(_mm_load_ps(u[id[j]].v));
+        const __m512 v1 = _mm512_insertf32x4(v, _mm_load_ps(u[id[4 + j]].v), 1);
+        const __m512 v2 = _mm512_insertf32x4(v1, _mm_load_ps(u[id[8 + j]].v), 2);
+        r[j] = _mm512_insertf32x4(v2, _mm_load_ps(u[id[12 + j]].v), 3);
+      }
+      const __m512d t0 = _mm512_castps_pd(_mm512_unpacklo_ps(r[0], r[1]));  // x0 x1 y0 y1 per chunk
+      const __m512d t1 = _mm512_castps_pd(_mm512_unpackhi_ps(r[0], r[1]));  // z0 z1 0 0
+      const __m512d t2 = _mm512_castps_pd(_mm512_unpacklo_ps(r[2], r[3]));  // x2 x3 y2 y3
+      const __m512d t3 = _mm512_castps_pd(_mm512_unpackhi_ps(r[2], r[3]));  // z2 z3 0 0
+      _mm512_store_ps(x[3 * c], _mm512_castpd_ps(_mm512_unpacklo_pd(t0, t2)));
+      _mm512_store_ps(x[3 * c + 1], _mm512_castpd_ps(_mm512_unpackhi_pd(t0, t2)));
+      _mm512_store_ps(x[3 * c + 2], _mm512_castpd_ps(_mm512_unpacklo_pd(t1, t3)));
     } else {
-      const __m256i id = _mm256_load_si256(reinterpret_cast<const __m256i*>(B.node[c]));
-      const __m256i i3 = _mm256_add_epi32(_mm256_add_epi32(id, id), id);
-      _mm512_store_pd(x[3 * c], _mm512_i32gather_pd(i3, u, 8));
-      _mm512_store_pd(x[3 * c + 1], _mm512_i32gather_pd(i3, u + 1, 8));
-      _mm512_store_pd(x[3 * c + 2], _mm512_i32gather_pd(i3, u + 2, 8));
+      // r[j] holds lane j in its low half and lane j + 4 in its high half.
+      __m512d r[4];
+      #pragma GCC unroll 4
+      for (int j = 0; j < 4; ++j)
+        r[j] = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_load_pd(u[id[j]].v)), _mm256_load_pd(u[id[4 + j]].v),
+                                  1);
+      const __m512d t0 = _mm512_unpacklo_pd(r[0], r[1]);  // pairs: x0 x1 | z0 z1 | x4 x5 | z4 z5
+      const __m512d t1 = _mm512_unpackhi_pd(r[0], r[1]);  // y0 y1 | 0 0 | y4 y5 | 0 0
+      const __m512d t2 = _mm512_unpacklo_pd(r[2], r[3]);  // x2 x3 | z2 z3 | x6 x7 | z6 z7
+      const __m512d t3 = _mm512_unpackhi_pd(r[2], r[3]);
+      const __m512i even = _mm512_setr_epi64(0, 1, 8, 9, 4, 5, 12, 13);
+      const __m512i odd = _mm512_setr_epi64(2, 3, 10, 11, 6, 7, 14, 15);
+      _mm512_store_pd(x[3 * c], _mm512_permutex2var_pd(t0, even, t2));
+      _mm512_store_pd(x[3 * c + 1], _mm512_permutex2var_pd(t1, even, t3));
+      _mm512_store_pd(x[3 * c + 2], _mm512_permutex2var_pd(t0, odd, t2));
     }
-  }
 #elif defined(__AVX2__)
-  #pragma GCC unroll 4
-  for (int c = 0; c < 4; ++c) {
     if constexpr (sizeof(Real) == 4) {
       #pragma GCC unroll 2
       for (int h = 0; h < W; h += 8) {
-        const __m256i id = _mm256_load_si256(reinterpret_cast<const __m256i*>(B.node[c] + h));
-        const __m256i i3 = _mm256_add_epi32(_mm256_add_epi32(id, id), id);
-        _mm256_store_ps(x[3 * c] + h, _mm256_i32gather_ps(u, i3, 4));
-        _mm256_store_ps(x[3 * c + 1] + h, _mm256_i32gather_ps(u + 1, i3, 4));
-        _mm256_store_ps(x[3 * c + 2] + h, _mm256_i32gather_ps(u + 2, i3, 4));
+        __m256 r[4];  // lane h + j in the low chunk, h + 4 + j in the high one
+        #pragma GCC unroll 4
+        for (int j = 0; j < 4; ++j)
+          r[j] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u[id[h + j]].v)), _mm_load_ps(u[id[h + 4 + j]].v),
+                                      1);
+        const __m256d t0 = _mm256_castps_pd(_mm256_unpacklo_ps(r[0], r[1]));
+        const __m256d t1 = _mm256_castps_pd(_mm256_unpackhi_ps(r[0], r[1]));
+        const __m256d t2 = _mm256_castps_pd(_mm256_unpacklo_ps(r[2], r[3]));
+        const __m256d t3 = _mm256_castps_pd(_mm256_unpackhi_ps(r[2], r[3]));
+        _mm256_store_ps(x[3 * c] + h, _mm256_castpd_ps(_mm256_unpacklo_pd(t0, t2)));
+        _mm256_store_ps(x[3 * c + 1] + h, _mm256_castpd_ps(_mm256_unpackhi_pd(t0, t2)));
+        _mm256_store_ps(x[3 * c + 2] + h, _mm256_castpd_ps(_mm256_unpacklo_pd(t1, t3)));
       }
     } else {
       #pragma GCC unroll 2
       for (int h = 0; h < W; h += 4) {
-        const __m128i id = _mm_load_si128(reinterpret_cast<const __m128i*>(B.node[c] + h));
-        const __m128i i3 = _mm_add_epi32(_mm_add_epi32(id, id), id);
-        _mm256_store_pd(x[3 * c] + h, _mm256_i32gather_pd(u, i3, 8));
-        _mm256_store_pd(x[3 * c + 1] + h, _mm256_i32gather_pd(u + 1, i3, 8));
-        _mm256_store_pd(x[3 * c + 2] + h, _mm256_i32gather_pd(u + 2, i3, 8));
+        const __m256d r0 = _mm256_load_pd(u[id[h]].v), r1 = _mm256_load_pd(u[id[h + 1]].v);
+        const __m256d r2 = _mm256_load_pd(u[id[h + 2]].v), r3 = _mm256_load_pd(u[id[h + 3]].v);
+        const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);  // x0 x1 | z0 z1; y0 y1 | 0 0
+        const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
+        _mm256_store_pd(x[3 * c] + h, _mm256_permute2f128_pd(t0, t2, 0x20));
+        _mm256_store_pd(x[3 * c + 1] + h, _mm256_permute2f128_pd(t1, t3, 0x20));
+        _mm256_store_pd(x[3 * c + 2] + h, _mm256_permute2f128_pd(t0, t2, 0x31));
       }
     }
-  }
 #else
-  for (int c = 0; c < 4; ++c)
     for (int l = 0; l < W; ++l) {
-      const Real* p = u + 3 * B.node[c][l];
+      const Real* p = u[id[l]].v;
       x[3 * c][l] = p[0];
       x[3 * c + 1][l] = p[1];
       x[3 * c + 2][l] = p[2];
     }
 #endif
+  }
 }
 
-// f[node[c][l]][i] += fc[3c + i][l], f padded to 4 per node: each lane adds
-// one 4-wide vector per corner, and lanes that share a node simply add in
-// turn (no conflict detection needed).
+// f[node[c][l]].v[i] += fc[3c + i][l]: one 4-wide add per lane and corner.
 template <class Real>
-TACTILE_INLINE void scatter_corners(const ElementBlock<Real>& B, const Real (*fc)[kLanes<Real>], Real (*f)[4]) {
+TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*fc)[kLanes<Real>], Node4<Real>* f) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
-#if defined(__AVX512F__)
   #pragma GCC unroll 4
   for (int c = 0; c < 4; ++c) {
     const int32_t* id = B.node[c];
+#if defined(__AVX512F__)
     if constexpr (sizeof(Real) == 4) {
       // 4x4 transposes within each 128-bit chunk: chunk k of q[j] is lane 4k + j as (x, y, z, 0).
       const __m512 fx = _mm512_load_ps(fc[3 * c]), fy = _mm512_load_ps(fc[3 * c + 1]);
@@ -103,8 +149,8 @@ TACTILE_INLINE void scatter_corners(const ElementBlock<Real>& B, const Real (*fc
       const __m512 q[4] = {_mm512_castpd_ps(_mm512_unpacklo_pd(t0, t2)), _mm512_castpd_ps(_mm512_unpackhi_pd(t0, t2)),
                            _mm512_castpd_ps(_mm512_unpacklo_pd(t1, t3)), _mm512_castpd_ps(_mm512_unpackhi_pd(t1, t3))};
       auto add = [&](int l, __m128 v) {
-        float* p = f[id[l]];
-        _mm_storeu_ps(p, _mm_add_ps(_mm_loadu_ps(p), v));
+        float* p = f[id[l]].v;
+        _mm_store_ps(p, _mm_add_ps(_mm_load_ps(p), v));
       };
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
@@ -121,13 +167,13 @@ TACTILE_INLINE void scatter_corners(const ElementBlock<Real>& B, const Real (*fc
       const __m512d t2 = _mm512_unpacklo_pd(fz, zero), t3 = _mm512_unpackhi_pd(fz, zero);
       const __m512i lo = _mm512_setr_epi64(0, 1, 8, 9, 2, 3, 10, 11);
       const __m512i hi = _mm512_setr_epi64(4, 5, 12, 13, 6, 7, 14, 15);
+      // q[0]: lanes 0, 2; q[1]: 1, 3; q[2]: 4, 6; q[3]: 5, 7.
       const __m512d q[4] = {_mm512_permutex2var_pd(t0, lo, t2), _mm512_permutex2var_pd(t1, lo, t3),
                             _mm512_permutex2var_pd(t0, hi, t2), _mm512_permutex2var_pd(t1, hi, t3)};
       auto add = [&](int l, __m256d v) {
-        double* p = f[id[l]];
-        _mm256_storeu_pd(p, _mm256_add_pd(_mm256_loadu_pd(p), v));
+        double* p = f[id[l]].v;
+        _mm256_store_pd(p, _mm256_add_pd(_mm256_load_pd(p), v));
       };
-      // q[0]: lanes 0, 2; q[1]: 1, 3; q[2]: 4, 6; q[3]: 5, 7.
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
         const int l = (j & 1) + 4 * (j >> 1);
@@ -135,14 +181,10 @@ TACTILE_INLINE void scatter_corners(const ElementBlock<Real>& B, const Real (*fc
         add(l + 2, _mm512_extractf64x4_pd(q[j], 1));
       }
     }
-  }
 #elif defined(__AVX2__)
-  #pragma GCC unroll 4
-  for (int c = 0; c < 4; ++c) {
     if constexpr (sizeof(Real) == 4) {
       #pragma GCC unroll 2
       for (int h = 0; h < W; h += 8) {
-        const int32_t* id = B.node[c] + h;
         const __m256 fx = _mm256_load_ps(fc[3 * c] + h), fy = _mm256_load_ps(fc[3 * c + 1] + h);
         const __m256 fz = _mm256_load_ps(fc[3 * c + 2] + h), zero = _mm256_setzero_ps();
         const __m256d t0 = _mm256_castps_pd(_mm256_unpacklo_ps(fx, fy));
@@ -152,8 +194,8 @@ TACTILE_INLINE void scatter_corners(const ElementBlock<Real>& B, const Real (*fc
         const __m256 q[4] = {_mm256_castpd_ps(_mm256_unpacklo_pd(t0, t2)), _mm256_castpd_ps(_mm256_unpackhi_pd(t0, t2)),
                              _mm256_castpd_ps(_mm256_unpacklo_pd(t1, t3)), _mm256_castpd_ps(_mm256_unpackhi_pd(t1, t3))};
         auto add = [&](int l, __m128 v) {
-          float* p = f[id[l]];
-          _mm_storeu_ps(p, _mm_add_ps(_mm_loadu_ps(p), v));
+          float* p = f[id[h + l]].v;
+          _mm_store_ps(p, _mm_add_ps(_mm_load_ps(p), v));
         };
         #pragma GCC unroll 4
         for (int j = 0; j < 4; ++j) {
@@ -164,14 +206,13 @@ TACTILE_INLINE void scatter_corners(const ElementBlock<Real>& B, const Real (*fc
     } else {
       #pragma GCC unroll 2
       for (int h = 0; h < W; h += 4) {
-        const int32_t* id = B.node[c] + h;
         const __m256d fx = _mm256_load_pd(fc[3 * c] + h), fy = _mm256_load_pd(fc[3 * c + 1] + h);
         const __m256d fz = _mm256_load_pd(fc[3 * c + 2] + h), zero = _mm256_setzero_pd();
         const __m256d t0 = _mm256_unpacklo_pd(fx, fy), t1 = _mm256_unpackhi_pd(fx, fy);
         const __m256d t2 = _mm256_unpacklo_pd(fz, zero), t3 = _mm256_unpackhi_pd(fz, zero);
         auto add = [&](int l, __m256d v) {
-          double* p = f[id[l]];
-          _mm256_storeu_pd(p, _mm256_add_pd(_mm256_loadu_pd(p), v));
+          double* p = f[id[h + l]].v;
+          _mm256_store_pd(p, _mm256_add_pd(_mm256_load_pd(p), v));
         };
         add(0, _mm256_permute2f128_pd(t0, t2, 0x20));
         add(1, _mm256_permute2f128_pd(t1, t3, 0x20));
@@ -179,16 +220,15 @@ TACTILE_INLINE void scatter_corners(const ElementBlock<Real>& B, const Real (*fc
         add(3, _mm256_permute2f128_pd(t1, t3, 0x31));
       }
     }
-  }
 #else
-  for (int l = 0; l < W; ++l)
-    for (int c = 0; c < 4; ++c) {
-      Real* p = f[B.node[c][l]];
+    for (int l = 0; l < W; ++l) {
+      Real* p = f[id[l]].v;
       p[0] += fc[3 * c][l];
       p[1] += fc[3 * c + 1][l];
       p[2] += fc[3 * c + 2][l];
     }
 #endif
+  }
 }
 
 // ---- element math ------------------------------------------------------------
@@ -200,12 +240,14 @@ struct LaneVectors;
 template <>
 struct LaneVectors<float> {
   typedef float RealW __attribute__((vector_size(64)));
+  typedef float RealWU __attribute__((vector_size(64), aligned(4)));  // for unaligned loads and stores
   typedef double DoubleW __attribute__((vector_size(128)));
   typedef int32_t MaskW __attribute__((vector_size(64)));  // what RealW <= RealW gives
 };
 template <>
 struct LaneVectors<double> {
   typedef double RealW __attribute__((vector_size(64)));
+  typedef double RealWU __attribute__((vector_size(64), aligned(8)));
   typedef double DoubleW __attribute__((vector_size(64)));
   typedef int64_t MaskW __attribute__((vector_size(64)));
 };
@@ -229,7 +271,8 @@ TACTILE_INLINE void deformation_gradient(const ElementBlock<Real>& B, int l, con
 }
 
 template <class Real, MaterialModel M>
-ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Real* u, Real (*f)[4]) {
+ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Node4<Real>* u,
+                   Node4<Real>* f) {
   constexpr int W = kLanes<Real>;
   using RealW = typename LaneVectors<Real>::RealW;
   using DoubleW = typename LaneVectors<Real>::DoubleW;
@@ -244,7 +287,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
     alignas(64) Real fc[12][W];  // corner forces [N]: fc[3c + i][lane]
     alignas(64) Real psiV[W];    // V psi per lane [J]
     alignas(64) Real J[W];       // det F per lane
-    gather_corners(B, u, x);
+    load_corners(B, u, x);
     // Per-lane outputs and no OpenMP pragma: GCC's `omp simd` would keep F and
     // P in memory as per-lane arrays; its plain vectoriser does far better.
 #pragma GCC ivdep
@@ -271,12 +314,12 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
     }
     energy += __builtin_convertvector(*reinterpret_cast<const RealW*>(psiV), DoubleW);
     if constexpr (!can_invert(M)) inverted -= *reinterpret_cast<const RealW*>(J) <= Real(0);  // true is -1
-    scatter_corners(B, fc, f);
+    add_corner_forces(B, fc, f);
   }
   ElasticSums sums;
   for (int l = 0; l < W; ++l) {
     sums.energy += energy[l];
-    sums.inverted += inverted[l];
+    sums.inverted += int32_t(inverted[l]);
   }
   return sums;
 }
@@ -287,7 +330,9 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const 
   for (int32_t b = begin; b < end; ++b) {
     const ElementBlock<Real>& B = blocks[b];
     alignas(64) Real x[12][W];
-    gather_corners(B, u, x);
+    for (int c = 0; c < 4; ++c)
+      for (int l = 0; l < W; ++l)
+        for (int i = 0; i < 3; ++i) x[3 * c + i][l] = u[3 * int64_t(B.node[c][l]) + i];
     for (int l = 0; l < W; ++l) {
       Real F[9], P[9];
       deformation_gradient(B, l, x, F);
@@ -297,61 +342,207 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const 
   }
 }
 
+// ---- node passes -------------------------------------------------------------
+//
+// Node arrays come in two layouts: the state's (n x 3) and the element pass's
+// Node4 (n x 4). The node passes run W nodes at a time as 3 vectors of
+// components (flat, so every entry is one lane) and convert to and from the
+// 4 vectors of Node4 with constant shuffles of whole vectors.
+
 template <class Real>
-void predict(int32_t begin, int32_t end, Real dt, Real* u, Real* v, const Real* a) {
+struct NodeVectors {
+  static constexpr int W = kLanes<Real>;
+  using V = typename LaneVectors<Real>::RealW;
+  using VU = typename LaneVectors<Real>::RealWU;
+  using M = typename LaneVectors<Real>::MaskW;
+
+  // A constant mask vector, lane e = f(e).
+  template <class F>
+  static TACTILE_INLINE M mask(F f) {
+    return [&]<size_t... E>(std::index_sequence<E...>) { return M{f(int(E))...}; }(std::make_index_sequence<W>{});
+  }
+  // Component vector r, lane e: entry (r W + e) % 3 of node (r W + e) / 3.
+  // Its Node4 lanes lie in Node4 vectors first4(r) and first4(r) + 1.
+  static constexpr int first4(int r) { return 4 * ((r * W) / 3) / W; }
+  // Node4 vector k, lane e: entry e % 4 of node k W / 4 + e / 4. Its
+  // component lanes lie in component vectors first3(k) and first3(k) + 1.
+  static constexpr int first3(int k) { return 3 * (k * W / 4) / W; }
+
+  // Component vector r from the Node4 vectors q[0..3].
+  template <int R>
+  static TACTILE_INLINE V unpack(const V* q) {
+    const M m = mask([](int e) {
+      const int p = R * W + e;
+      return 4 * (p / 3) + p % 3 - first4(R) * W;
+    });
+    return __builtin_shuffle(q[first4(R)], q[first4(R) + 1], m);
+  }
+  // Component vector r of a per-node scalar s (W nodes): s of each lane's node.
+  template <int R>
+  static TACTILE_INLINE V spread(V s) {
+    return __builtin_shuffle(s, mask([](int e) { return (R * W + e) / 3; }));
+  }
+  // Node4 vector k from the component vectors c[0..2], 4th entries 0.
+  template <int K>
+  static TACTILE_INLINE V pack(const V* c) {
+    constexpr int a = first3(K), b = a + 1 < 3 ? a + 1 : 2;
+    const M m = mask([](int e) { return e % 4 == 3 ? 0 : 3 * (K * W / 4 + e / 4) + e % 4 - first3(K) * W; });
+    const V q = __builtin_shuffle(c[a], c[b], m);
+    return mask([](int e) { return e % 4 == 3 ? 0 : -1; }) ? q : V{};
+  }
+};
+
+template <class Real>
+void pad(int32_t begin, int32_t end, const Real* u, Node4<Real>* u4) {
+  using N = NodeVectors<Real>;
+  using V = typename N::V;
+  using VU = typename N::VU;
+  constexpr int W = N::W;
+  int64_t i = begin;
+  for (; i + W <= end; i += W) {
+    const VU* in = reinterpret_cast<const VU*>(u + 3 * i);
+    const V c[3] = {in[0], in[1], in[2]};
+    VU* out = reinterpret_cast<VU*>(u4[i].v);
+    out[0] = N::template pack<0>(c);
+    out[1] = N::template pack<1>(c);
+    out[2] = N::template pack<2>(c);
+    out[3] = N::template pack<3>(c);
+  }
+  for (; i < end; ++i) u4[i] = Node4<Real>{{u[3 * i], u[3 * i + 1], u[3 * i + 2], Real(0)}};
+}
+
+template <class Real>
+void predict(int32_t begin, int32_t end, Real dt, Real* u, Real* v, const Real* a, Node4<Real>* u4) {
+  using N = NodeVectors<Real>;
+  using V = typename N::V;
+  using VU = typename N::VU;
+  constexpr int W = N::W;
   const Real half_dt2 = Real(0.5) * dt * dt;
   const Real half_dt = Real(0.5) * dt;
-#pragma GCC ivdep
-  for (int64_t k = 3 * int64_t(begin); k < 3 * int64_t(end); ++k) {
-    u[k] += dt * v[k] + half_dt2 * a[k];  // eq. (7)
-    v[k] += half_dt * a[k];               // first half of eq. (9)
+  int64_t i = begin;
+  // A node group's three component vectors stay in registers for the pad.
+  for (; i + W <= end; i += W) {
+    VU* ui = reinterpret_cast<VU*>(u + 3 * i);
+    VU* vi = reinterpret_cast<VU*>(v + 3 * i);
+    const VU* ai = reinterpret_cast<const VU*>(a + 3 * i);
+    V c[3];
+    #pragma GCC unroll 3
+    for (int r = 0; r < 3; ++r) {
+      c[r] = ui[r] + dt * vi[r] + half_dt2 * ai[r];  // eq. (7)
+      ui[r] = c[r];
+      vi[r] = vi[r] + half_dt * ai[r];  // first half of eq. (9)
+    }
+    VU* out = reinterpret_cast<VU*>(u4[i].v);
+    out[0] = N::template pack<0>(c);
+    out[1] = N::template pack<1>(c);
+    out[2] = N::template pack<2>(c);
+    out[3] = N::template pack<3>(c);
   }
+  for (int64_t k = 3 * i; k < 3 * int64_t(end); ++k) {
+    u[k] += dt * v[k] + half_dt2 * a[k];
+    v[k] += half_dt * a[k];
+  }
+  pad(int32_t(i), end, u, u4);
 }
 
 template <class Real, bool kGravity, bool kDamping>
 CorrectSums correct(const CorrectArgs<Real>& A) {
-  constexpr int W = kLanes<Real>;
+  using N = NodeVectors<Real>;
+  using V = typename N::V;
+  using VU = typename N::VU;
+  constexpr int W = N::W;
   const Real half_dt = Real(0.5) * A.dt;
   // eq. (10): q = m (1 + alpha dt / 2) is diagonal, so a is a division per node.
   const Real q_inv = kDamping ? Real(1) / (Real(1) + A.alpha * half_dt) : Real(1);
+  // g along the components of a node group.
+  V gc[3];
+  for (int r = 0; r < 3; ++r)
+    for (int e = 0; e < W; ++e) gc[r][e] = A.g[(r * W + e) % 3];
   // Sums kept per lane (no reassociation needed to vectorise), folded at the end.
-  alignas(64) Real abs_a[W] = {}, mv2[W] = {}, mgu[W] = {}, ma2[W] = {};
-  auto node = [&](int32_t i, int l) {
-    Real node_v2 = 0, node_gu = 0, node_a2 = 0;
-    for (int k = 0; k < 3; ++k) {
-      const int64_t j = 3 * int64_t(i) + k;
-      Real fj = A.f[4 * int64_t(i) + k];
-      for (int32_t p = 1; p < A.n_parts; ++p) fj += A.f[4 * int64_t(i) + k + p * A.part_stride];
-      Real acc = fj * A.inv_m[i];
-      if constexpr (kGravity) {
-        acc += A.g[k];
-        node_gu += A.g[k] * A.u[j];
-      }
-      if constexpr (kDamping) acc -= A.alpha * A.v[j];  // d = alpha m (v + a dt/2), eq. (8)
-      acc *= q_inv;
-      const Real v_new = A.v[j] + half_dt * acc;  // second half of eq. (9)
-      A.v[j] = v_new;
-      A.a[j] = acc;
-      abs_a[l] += std::fabs(acc);
-      node_v2 += v_new * v_new;
-      node_a2 += acc * acc;
+  V abs_a{}, mv2{}, mgu{}, ma2{};
+  // One component vector r of the update: f, 1/m and m per lane in; v, a out.
+  auto update = [&](V f, V inv_m, V m, V gr, V u, V& v, V& a) {
+    V acc = f * inv_m;
+    if constexpr (kGravity) {
+      acc += gr;
+      mgu += m * gr * u;
     }
-    mv2[l] += A.m[i] * node_v2;
-    ma2[l] += A.m[i] * node_a2;
-    if constexpr (kGravity) mgu[l] += A.m[i] * node_gu;
+    if constexpr (kDamping) acc -= A.alpha * v;  // d = alpha m (v + a dt/2), eq. (8)
+    acc *= q_inv;
+    v = v + half_dt * acc;  // second half of eq. (9)
+    a = acc;
+    abs_a += acc < V{} ? -acc : acc;
+    mv2 += m * v * v;
+    ma2 += m * acc * acc;
   };
-  int32_t i = A.begin;
+  int64_t i = A.begin;
   for (; i + W <= A.end; i += W) {
-#pragma GCC ivdep
-    for (int l = 0; l < W; ++l) node(i + l, l);
+    V q[4];
+    VU* f0 = reinterpret_cast<VU*>(A.f[i].v);
+    #pragma GCC unroll 4
+    for (int k = 0; k < 4; ++k) {
+      q[k] = f0[k];
+      f0[k] = V{};  // cleared for the next element pass
+    }
+    for (int32_t p = 1; p < A.n_parts; ++p) {
+      VU* fp = reinterpret_cast<VU*>(A.f[i + p * A.part_stride].v);
+      #pragma GCC unroll 4
+      for (int k = 0; k < 4; ++k) {
+        q[k] += fp[k];
+        fp[k] = V{};
+      }
+    }
+    const V inv_m = *reinterpret_cast<const VU*>(A.inv_m + i), m = *reinterpret_cast<const VU*>(A.m + i);
+    VU* vi = reinterpret_cast<VU*>(A.v + 3 * i);
+    VU* ai = reinterpret_cast<VU*>(A.a + 3 * i);
+    const VU* ui = reinterpret_cast<const VU*>(A.u + 3 * i);
+    V vr, ar;
+    vr = vi[0];
+    update(N::template unpack<0>(q), N::template spread<0>(inv_m), N::template spread<0>(m), gc[0],
+           kGravity ? V(ui[0]) : V{}, vr, ar);
+    vi[0] = vr;
+    ai[0] = ar;
+    vr = vi[1];
+    update(N::template unpack<1>(q), N::template spread<1>(inv_m), N::template spread<1>(m), gc[1],
+           kGravity ? V(ui[1]) : V{}, vr, ar);
+    vi[1] = vr;
+    ai[1] = ar;
+    vr = vi[2];
+    update(N::template unpack<2>(q), N::template spread<2>(inv_m), N::template spread<2>(m), gc[2],
+           kGravity ? V(ui[2]) : V{}, vr, ar);
+    vi[2] = vr;
+    ai[2] = ar;
   }
-  for (int l = 0; i < A.end; ++i, ++l) node(i, l);
   CorrectSums out;
   for (int l = 0; l < W; ++l) {
     out.abs_a += double(abs_a[l]);
     out.mv2 += double(mv2[l]);
     out.mgu += double(mgu[l]);
     out.ma2 += double(ma2[l]);
+  }
+  // The last nodes (fewer than W) one by one.
+  for (; i < A.end; ++i) {
+    Real fi[3] = {0, 0, 0};
+    for (int32_t p = 0; p < A.n_parts; ++p) {
+      Node4<Real>& fp = A.f[i + p * A.part_stride];
+      for (int k = 0; k < 3; ++k) fi[k] += fp.v[k];
+      fp = Node4<Real>{};
+    }
+    for (int k = 0; k < 3; ++k) {
+      const int64_t j = 3 * i + k;
+      Real acc = fi[k] * A.inv_m[i];
+      if constexpr (kGravity) {
+        acc += A.g[k];
+        out.mgu += double(A.m[i] * A.g[k] * A.u[j]);
+      }
+      if constexpr (kDamping) acc -= A.alpha * A.v[j];
+      acc *= q_inv;
+      A.v[j] = A.v[j] + half_dt * acc;
+      A.a[j] = acc;
+      out.abs_a += double(std::fabs(acc));
+      out.mv2 += double(A.m[i] * A.v[j] * A.v[j]);
+      out.ma2 += double(A.m[i] * acc * acc);
+    }
   }
   return out;
 }
@@ -368,6 +559,7 @@ constexpr KernelTable<Real> make_table() {
   t.energy[int(MaterialModel::Corotational)] = &energy<Real, MaterialModel::Corotational>;
   t.energy[int(MaterialModel::NeoHookean)] = &energy<Real, MaterialModel::NeoHookean>;
   t.predict = &predict<Real>;
+  t.pad = &pad<Real>;
   t.correct[0][0] = &correct<Real, false, false>;
   t.correct[0][1] = &correct<Real, false, true>;
   t.correct[1][0] = &correct<Real, true, false>;
@@ -377,3 +569,5 @@ constexpr KernelTable<Real> make_table() {
 
 }  // namespace
 }  // namespace tactile::kernel_impl
+
+#pragma GCC diagnostic pop

@@ -1,0 +1,512 @@
+// FEM step benchmark: rate of the explicit step per material, precision and
+// mesh size; one thread against two; the cost of each effect a scene may ask
+// for; the ISA levels; the float-vs-double difference of a loaded beam; and
+// the allocations inside steps. Prints figures, passes and fails nothing.
+//
+//   fem_bench            all tables, meshes up to 100 k tets (a minute or two)
+//   fem_bench --large    also 1 M and 2 M tets
+//   fem_bench --quick    small meshes and few repeats, for CI (seconds)
+//
+// Times are wall-clock medians of repeated runs of many steps, so that other
+// processes on the machine shift them less than a mean would; rates are
+// element updates per second (tets x steps / s).
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <malloc.h>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "app/thread_pool.hpp"
+#include "core/model.hpp"
+#include "core/stepper.hpp"
+#include "mesh/primitives.hpp"
+
+// ---- allocation counting -----------------------------------------------------
+// Every heap allocation of the process goes through these (operator new calls
+// malloc); counted only while a timed loop of steps runs.
+namespace {
+std::atomic<bool> g_counting{false};
+std::atomic<int64_t> g_allocations{0};
+inline void note_allocation() {
+  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
+}
+}  // namespace
+
+extern "C" {
+void* __libc_malloc(size_t);
+void* __libc_calloc(size_t, size_t);
+void* __libc_realloc(void*, size_t);
+void* __libc_memalign(size_t, size_t);
+void* malloc(size_t n) {
+  note_allocation();
+  return __libc_malloc(n);
+}
+void* calloc(size_t n, size_t size) {
+  note_allocation();
+  return __libc_calloc(n, size);
+}
+void* realloc(void* p, size_t n) {
+  note_allocation();
+  return __libc_realloc(p, n);
+}
+void* memalign(size_t alignment, size_t n) {
+  note_allocation();
+  return __libc_memalign(alignment, n);
+}
+void* aligned_alloc(size_t alignment, size_t n) {
+  note_allocation();
+  return __libc_memalign(alignment, n);
+}
+int posix_memalign(void** p, size_t alignment, size_t n) {
+  note_allocation();
+  *p = __libc_memalign(alignment, n);
+  return *p ? 0 : 12;  // ENOMEM
+}
+}
+
+namespace tactile {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Options {
+  bool quick = false;
+  bool large = false;
+};
+
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+const char* name_of(Precision p) { return p == Precision::Float ? "float" : "double"; }
+
+// A box of about `tets` tets, 6 per cell (Kuhn split), `aspect` cells along x per cell along y and z.
+TetMesh make_bench_box(double tets, int aspect, double size_y) {
+  const int n = std::max(1, int(std::lround(std::cbrt(tets / (6.0 * aspect)))));
+  return make_box(Vec3(0.0), Vec3(aspect * size_y, size_y, size_y), {aspect * n, n, n});
+}
+
+ModelSpec make_spec(TetMesh mesh, MaterialModel model, Precision precision) {
+  ModelSpec spec;
+  spec.mesh = std::move(mesh);
+  spec.materials = {MaterialSpec{model, 1e5, 0.3, 1000}};
+  spec.integrator.precision = precision;
+  return spec;
+}
+
+// Selects the nodes on the face x = x0 of a box.
+NodeSelector face_x(const TetMesh& mesh, double x0) {
+  const Aabb box = compute_aabb(mesh.X);
+  NodeSelector s;
+  s.kind = NodeSelector::Kind::Box;
+  s.lo = Vec3(x0, box.lo.y, box.lo.z);
+  s.hi = Vec3(x0, box.hi.y, box.hi.z);
+  s.tolerance = 1e-9;
+  return s;
+}
+
+// A swinging, twisting velocity field, so that every element deforms and the
+// step does its real work (a body at rest would multiply zeros).
+template <class Real>
+void set_swing(const Model<Real>& model, State<Real>& s) {
+  const Aabb box = compute_aabb(model.mesh.X);
+  const Vec3 c = 0.5 * (box.lo + box.hi);
+  const double L = std::max(box.size().x, 1e-9);
+  for (int32_t i = 0; i < model.n_nodes; ++i) {
+    const Vec3 r = model.mesh.X[size_t(i)] - c;
+    const double x = (model.mesh.X[size_t(i)].x - box.lo.x) / L;
+    s.v[3 * size_t(i) + 0] = Real(0.0);
+    s.v[3 * size_t(i) + 1] = Real(0.5 * x * x - 2.0 * r.z * x);
+    s.v[3 * size_t(i) + 2] = Real(2.0 * r.y * x);
+  }
+}
+
+// One model with its stepper and state, stepped in timed runs.
+template <class Real>
+struct Run {
+  Model<Real> model;
+  Stepper<Real> stepper;
+  State<Real> state;
+  State<Real> start;
+  double dt;
+  int64_t faults = 0;
+
+  Run(const ModelSpec& spec, ParallelFor* pool)
+      : model(build_model<Real>(spec)), stepper(model, pool), state(stepper.make_state()) {
+    set_swing(model, state);
+    start = state;
+    dt = 0.5 * model.dt_rest;
+  }
+  // Seconds per step over `steps` steps; a fault restarts from the start state.
+  // Allocations are counted unless `warm_up` (the first step from a state
+  // sets up its energy accounting, with a full energy pass).
+  double time_steps(int64_t steps, bool warm_up = false) {
+    g_counting = !warm_up;
+    const Clock::time_point t0 = Clock::now();
+    for (int64_t k = 0; k < steps; ++k) {
+      if (stepper.step(state, dt)) {
+        g_counting = false;
+        ++faults;
+        std::fprintf(stderr, "fault (restarting): %s\n", stepper.fault().message.c_str());
+        stepper.clear_fault();
+        state = start;
+        g_counting = !warm_up;
+      }
+    }
+    const double s = seconds_since(t0) / double(steps);
+    g_counting = false;
+    return s;
+  }
+};
+
+// How many steps make one timed run of about `target` seconds.
+template <class Real>
+int64_t calibrate(Run<Real>& run, double target) {
+  run.time_steps(3, true);  // warm up: first step, caches, pool threads
+  int64_t steps = 4;
+  for (;;) {
+    const Clock::time_point t0 = Clock::now();
+    run.time_steps(steps);
+    const double s = seconds_since(t0);
+    if (s > 0.25 * target || steps > (int64_t(1) << 24)) return std::max<int64_t>(1, int64_t(double(steps) * target / s));
+    steps *= 4;
+  }
+}
+
+// Median seconds per step of several runs, alternating between the cases so
+// that a burst of load elsewhere on the machine hits all of them alike.
+template <class Real>
+std::vector<double> time_alternating(std::vector<Run<Real>*> runs, const Options& opt) {
+  const double target = opt.quick ? 0.004 : 0.03;
+  const int repeats = opt.quick ? 5 : 11;
+  std::vector<int64_t> steps;
+  for (Run<Real>* r : runs) steps.push_back(calibrate(*r, target));
+  std::vector<std::vector<double>> t(runs.size());
+  for (int k = 0; k < repeats; ++k)
+    for (size_t i = 0; i < runs.size(); ++i) t[i].push_back(runs[i]->time_steps(steps[i]));
+  std::vector<double> out;
+  for (auto& v : t) out.push_back(median(v));
+  return out;
+}
+
+std::vector<double> bench_sizes(const Options& opt) {
+  if (opt.quick) return {1e3, 2e4};
+  std::vector<double> s = {1e3, 5e3, 2e4, 1e5};
+  if (opt.large) {
+    s.push_back(1e6);
+    s.push_back(2e6);
+  }
+  return s;
+}
+
+// ---- tables --------------------------------------------------------------------
+
+template <class Real>
+void rate_rows(const Options& opt, MaterialModel model) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  for (double size : bench_sizes(opt)) {
+    if (model != MaterialModel::StVK && size > 2.5e5) continue;  // the large meshes for the paper's model only
+    Run<Real> run(make_spec(make_bench_box(size, 1, 0.1), model, precision), nullptr);
+    const double s = time_alternating<Real>({&run}, opt)[0];
+    std::printf("| %-12s | %-6s | %9d | %12.0f | %10.1f |\n", std::string(to_string(model)).c_str(),
+                name_of(precision), run.model.n_tets, s * 1e9, run.model.n_tets / s * 1e-6);
+  }
+}
+
+void table_rates(const Options& opt) {
+  std::printf("\n## Explicit step, one thread (forces, predictor, corrector, guards)\n\n");
+  std::printf("| material     | real   |      tets |  ns per step | M tets/s   |\n");
+  std::printf("|--------------|--------|-----------|--------------|------------|\n");
+  for (int m = 0; m < kMaterialModelCount; ++m) {
+    rate_rows<float>(opt, MaterialModel(m));
+    rate_rows<double>(opt, MaterialModel(m));
+  }
+}
+
+template <class Real>
+void thread_rows(const Options& opt, ThreadPool& pool) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  for (double size : bench_sizes(opt)) {
+    ModelSpec spec = make_spec(make_bench_box(size, 1, 0.1), MaterialModel::StVK, precision);
+    Run<Real> one(spec, nullptr);
+    spec.integrator.threads = 2;
+    Run<Real> two(spec, &pool);
+    const std::vector<double> t = time_alternating<Real>({&one, &two}, opt);
+    std::printf("| %-6s | %9d | %10.1f | %10.1f | %7.2fx |\n", name_of(precision), one.model.n_tets,
+                one.model.n_tets / t[0] * 1e-6, two.model.n_tets / t[1] * 1e-6, t[0] / t[1]);
+  }
+}
+
+void table_threads(const Options& opt) {
+  ThreadPool pool(2);
+  std::printf("\n## StVK, one thread against two (M tets/s)\n\n");
+  std::printf("| real   |      tets |  1 thread  | 2 threads  | speedup  |\n");
+  std::printf("|--------|-----------|------------|------------|----------|\n");
+  thread_rows<float>(opt, pool);
+  thread_rows<double>(opt, pool);
+  if (std::thread::hardware_concurrency() < 2) std::printf("\n(this machine has one core: two threads share it)\n");
+}
+
+// Scenes on a 4:1:1 beam that each add one effect to the bare step.
+struct Scene {
+  const char* name;
+  std::function<void(ModelSpec&)> add;
+};
+
+std::vector<Scene> effect_scenes() {
+  auto clamp = [](ModelSpec& s) {
+    EssentialBc bc;
+    bc.name = "clamp";
+    bc.where = face_x(s.mesh, 0.0);
+    s.essential.push_back(bc);
+  };
+  return {
+      {"bare step", [](ModelSpec&) {}},
+      {"gravity", [](ModelSpec& s) { s.effects.gravity = true; }},
+      {"damping (alpha M)",
+       [](ModelSpec& s) {
+         s.effects.damping = true;
+         s.effects.alpha = 2.0;
+       }},
+      {"load (tip face)",
+       [](ModelSpec& s) {
+         NaturalLoad load;
+         load.name = "tip";
+         load.where = face_x(s.mesh, compute_aabb(s.mesh.X).hi.x);
+         load.force = Vec3(0.0, -0.5, 0.0);
+         s.loads.push_back(load);
+       }},
+      {"fixed BC (clamped face)", clamp},
+      {"rotating BC (twisted face)",
+       [](ModelSpec& s) {
+         EssentialBc bc;
+         bc.name = "twist";
+         const Aabb box = compute_aabb(s.mesh.X);
+         bc.where = face_x(s.mesh, box.hi.x);
+         bc.centre = 0.5 * (box.lo + box.hi);
+         bc.axis = Vec3(1.0, 0.0, 0.0);
+         MotionProfile rate;
+         rate.kind = MotionProfile::Kind::ConstantRate;
+         rate.rate = 0.2;  // [rad/s]
+         bc.angle = rate;
+         s.essential.push_back(bc);
+       }},
+      {"all of the above",
+       [clamp](ModelSpec& s) {
+         s.effects.gravity = true;
+         s.effects.damping = true;
+         s.effects.alpha = 2.0;
+         clamp(s);
+         NaturalLoad load;
+         load.where = face_x(s.mesh, compute_aabb(s.mesh.X).hi.x);
+         load.force = Vec3(0.0, -0.5, 0.0);
+         s.loads.push_back(load);
+       }},
+  };
+}
+
+template <class Real>
+void effect_rows(const Options& opt, double size) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  const std::vector<Scene> scenes = effect_scenes();
+  std::vector<std::unique_ptr<Run<Real>>> runs;
+  for (const Scene& scene : scenes) {
+    ModelSpec spec = make_spec(make_bench_box(size, 4, 0.1), MaterialModel::StVK, precision);
+    scene.add(spec);
+    runs.push_back(std::make_unique<Run<Real>>(spec, nullptr));
+  }
+  std::vector<Run<Real>*> ptrs;
+  for (auto& r : runs) ptrs.push_back(r.get());
+  // The bare step twice, first and last: how far two identical cases differ here.
+  ptrs.push_back(runs[0].get());
+  const std::vector<double> t = time_alternating<Real>(ptrs, opt);
+  const double bare = t[0];
+  for (size_t i = 0; i < scenes.size(); ++i) {
+    const double d = t[i] - bare;
+    std::printf("| %-6s | %-27s | %11.0f | %+9.0f | %+7.1f %% |\n", name_of(precision), scenes[i].name, t[i] * 1e9,
+                d * 1e9, 100.0 * d / bare);
+  }
+  std::printf("| %-6s | %-27s | %11.0f | %+9.0f | %+7.1f %% |\n", name_of(precision), "bare step, timed again",
+              t.back() * 1e9, (t.back() - bare) * 1e9, 100.0 * (t.back() - bare) / bare);
+  int64_t faults = 0;
+  for (auto& r : runs) faults += r->faults;
+  if (faults) std::printf("(%lld fault(s) during these runs, see stderr)\n", static_cast<long long>(faults));
+}
+
+void table_effects(const Options& opt) {
+  const double size = opt.quick ? 5e3 : 2.4e4;
+  std::printf("\n## Cost of each effect: StVK beam (4:1:1, ~%.0f k tets), one thread\n\n", size * 1e-3);
+  std::printf("A scene pays only for the effects it asks for: each row adds one to the bare step.\n\n");
+  std::printf("| real   | scene                       | ns per step | vs bare   | vs bare   |\n");
+  std::printf("|--------|-----------------------------|-------------|-----------|-----------|\n");
+  effect_rows<float>(opt, size);
+  effect_rows<double>(opt, size);
+}
+
+// Time spent per pass of the bare StVK step, from the stepper's probe.
+class PassClock final : public StepProbe {
+ public:
+  void enter(Pass) override { t0_ = Clock::now(); }
+  void leave(Pass p) override {
+    total_[int(p)] += std::chrono::duration<double>(Clock::now() - t0_).count();
+  }
+  double total(Pass p) const { return total_[int(p)]; }
+
+ private:
+  Clock::time_point t0_;
+  double total_[kPassCount] = {};
+};
+
+template <class Real>
+void pass_rows(const Options& opt) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  ModelSpec spec = make_spec(make_bench_box(opt.quick ? 5e3 : 2e4, 1, 0.1), MaterialModel::StVK, precision);
+  Run<Real> run(spec, nullptr);
+  const int64_t steps = calibrate(run, opt.quick ? 0.02 : 0.2);
+  PassClock clock;
+  run.stepper.set_probe(&clock);
+  run.time_steps(steps, true);  // (clock reads are not the step's)
+  run.stepper.set_probe(nullptr);
+  double all = 0;
+  for (int p = 0; p < kPassCount; ++p) all += clock.total(Pass(p));
+  std::printf("| %-6s | %9d |", name_of(precision), run.model.n_tets);
+  for (Pass p : {Pass::Predict, Pass::Elastic, Pass::Correct, Pass::Guard})
+    std::printf(" %6.1f %% |", 100.0 * clock.total(p) / all);
+  std::printf("\n");
+}
+
+void table_passes(const Options& opt) {
+  std::printf("\n## Where the bare StVK step goes (share of its time)\n\n");
+  std::printf("| real   |      tets | predict  | elastic  | correct  | guard    |\n");
+  std::printf("|--------|-----------|----------|----------|----------|----------|\n");
+  pass_rows<float>(opt);
+  pass_rows<double>(opt);
+}
+
+template <class Real>
+void isa_rows(const Options& opt) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  Run<Real> run(make_spec(make_bench_box(opt.quick ? 5e3 : 2e4, 1, 0.1), MaterialModel::StVK, precision), nullptr);
+  const double s = time_alternating<Real>({&run}, opt)[0];
+  std::printf("| %-24s | %-6s | %9d | %10.1f |\n", std::string(kernel_isa()).c_str(), name_of(precision),
+              run.model.n_tets, run.model.n_tets / s * 1e-6);
+}
+
+void table_isas(const Options& opt) {
+  const std::string best(kernel_isa());
+  std::printf("\n## StVK per ISA level (kernels chosen at run time; this CPU's best: %s)\n\n", best.c_str());
+  std::printf("| ISA                      | real   |      tets | M tets/s   |\n");
+  std::printf("|--------------------------|--------|-----------|------------|\n");
+  for (const char* isa : {"baseline", "v3", "v4"}) {
+    if (!select_isa(isa)) {
+      std::printf("| %-24s | (not supported by this CPU)         |\n", isa);
+      continue;
+    }
+    isa_rows<float>(opt);
+    isa_rows<double>(opt);
+  }
+  select_isa(best.find("v4") != std::string::npos ? "v4" : best.find("v3") != std::string::npos ? "v3" : "baseline");
+}
+
+// A cantilever (clamped at x = 0, tip load down) stepped in float and in
+// double from the same start: the max displacement difference over the max
+// displacement.
+template <class Real>
+std::vector<double> beam_displacement(MaterialModel model, int steps, double dt) {
+  ModelSpec spec = make_spec(make_box(Vec3(0.0), Vec3(0.4, 0.1, 0.1), {16, 4, 4}), model,
+                             sizeof(Real) == 4 ? Precision::Float : Precision::Double);
+  EssentialBc clamp;
+  clamp.where = face_x(spec.mesh, 0.0);
+  spec.essential.push_back(clamp);
+  NaturalLoad load;
+  load.where = face_x(spec.mesh, 0.4);
+  load.force = Vec3(0.0, -2.0, 0.0);  // [N]
+  spec.loads.push_back(load);
+  const Model<Real> m = build_model<Real>(spec);
+  Stepper<Real> stepper(m);
+  State<Real> s = stepper.make_state();
+  for (int k = 0; k < steps; ++k)
+    if (Fault f = stepper.step(s, dt)) {
+      std::fprintf(stderr, "beam fault: %s\n", f.message.c_str());
+      break;
+    }
+  return std::vector<double>(s.u.begin(), s.u.end());
+}
+
+void table_precision(const Options& opt) {
+  const int steps = opt.quick ? 400 : 4000;
+  std::printf("\n## Float against double: loaded cantilever (0.4 m, 384 tets), %d steps\n\n", steps);
+  std::printf("| material     | max |u| [m]  | max |u_float - u_double| / max |u| |\n");
+  std::printf("|--------------|--------------|-------------------------------------|\n");
+  ModelSpec probe = make_spec(make_box(Vec3(0.0), Vec3(0.4, 0.1, 0.1), {16, 4, 4}), MaterialModel::StVK,
+                              Precision::Double);
+  const double dt = 0.5 * build_model<double>(probe).dt_rest;
+  for (int m = 0; m < kMaterialModelCount; ++m) {
+    const std::vector<double> uf = beam_displacement<float>(MaterialModel(m), steps, dt);
+    const std::vector<double> ud = beam_displacement<double>(MaterialModel(m), steps, dt);
+    double scale = 0, diff = 0;
+    for (size_t k = 0; k < ud.size(); ++k) {
+      scale = std::max(scale, std::fabs(ud[k]));
+      diff = std::max(diff, std::fabs(uf[k] - ud[k]));
+    }
+    std::printf("| %-12s | %12.4e | %35.2e |\n", std::string(to_string(MaterialModel(m))).c_str(), scale,
+                scale > 0 ? diff / scale : 0.0);
+  }
+}
+
+std::string cpu_name() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
+  return "unknown CPU";
+}
+
+}  // namespace
+}  // namespace tactile
+
+int main(int argc, char** argv) {
+  using namespace tactile;
+  Options opt;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--quick")) opt.quick = true;
+    else if (!std::strcmp(argv[i], "--large")) opt.large = true;
+    else {
+      std::fprintf(stderr, "usage: %s [--quick] [--large]\n", argv[0]);
+      return 2;
+    }
+  }
+  std::printf("# tactile FEM step benchmark%s\n\n", opt.quick ? " (--quick)" : "");
+  std::printf("CPU: %s, %u hardware threads; kernels: %s\n", cpu_name().c_str(), std::thread::hardware_concurrency(),
+              std::string(kernel_isa()).c_str());
+  std::printf("Box meshes (make_box, 6 tets per cell), E = 100 kPa, nu = 0.3, rho = 1000 kg/m^3, dt = dt_rest / 2,\n");
+  std::printf("free bodies swinging and twisting unless a scene says otherwise. Medians of alternated runs.\n");
+  std::fflush(stdout);
+
+  table_rates(opt);
+  std::fflush(stdout);
+  table_threads(opt);
+  std::fflush(stdout);
+  table_passes(opt);
+  table_effects(opt);
+  std::fflush(stdout);
+  table_isas(opt);
+  table_precision(opt);
+
+  std::printf("\n## Allocations inside steps (all timed loops above): %lld\n",
+              static_cast<long long>(g_allocations.load()));
+  return 0;
+}
