@@ -131,8 +131,8 @@ class Stepper {
 
   // Workspace, sized once.
   std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> u4_;  // u for the element pass [m] (n_nodes)
-  std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> f_;   // force per part [N] (n_parts x part_stride_)
-  int64_t part_stride_ = 0;              // nodes from one part's forces to the next's
+  std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> f_;   // force per part [N] (n_parts x n_nodes, padded)
+  std::vector<ForcePart> force_parts_;    // each part's array in f_ and the nodes it touches
   std::vector<ElasticSums> elastic_;     // per part
   std::vector<CorrectSums> correct_sums_;  // per part
   std::vector<Vec3> u_before_;           // constrained and loaded nodes' u at t_n [m]

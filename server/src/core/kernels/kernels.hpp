@@ -79,18 +79,26 @@ using PredictFn = void (*)(int32_t begin, int32_t end, Real dt, Real* u, Real* v
 template <class Real>
 using PadFn = void (*)(int32_t begin, int32_t end, const Real* u, Node4<Real>* u4);
 
+// One part's force array (n_nodes, from `offset` nodes into the parts'
+// common array) and the nodes its elements touch, [begin, end) rounded out to
+// multiples of 16; the rest of it stays 0.
+struct ForcePart {
+  int64_t offset;
+  int32_t begin, end;
+};
+
 // Corrector, eqs. (8)-(10) with D = alpha M, over nodes [begin, end):
 //   a = (f / m + g - alpha v_half) / (1 + alpha dt / 2);  v = v_half + dt/2 a.
-// f is the sum of n_parts force arrays, part_stride nodes apart; the corrector
-// sets the entries it has read back to 0, so the next element pass adds into
-// zeros without a clearing pass of its own.
+// f is the sum of the parts' force arrays over the nodes each touches; the
+// corrector sets the entries it has read back to 0, so the next element
+// pass adds into zeros without a clearing pass of its own.
 template <class Real>
 struct CorrectArgs {
   int32_t begin, end;
   Real dt;
-  Node4<Real>* f;
+  Node4<Real>* f;               // the parts' force arrays [N]
+  const ForcePart* parts;
   int32_t n_parts;
-  int64_t part_stride;
   const Real* inv_m;  // 1/m per node [1/kg] (n)
   const Real* m;      // m per node [kg] (n)
   Real g[3];          // [m/s^2]

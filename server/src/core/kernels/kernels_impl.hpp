@@ -130,7 +130,8 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
   }
 }
 
-// f[node[c][l]].v[i] += fc[3c + i][l]: one 4-wide add per lane and corner.
+// f[node[c][l]].v[i] += fc[3c + i][l] for corner 0, -= for corners 1-3 (the
+// element pass stores those negated): one 4-wide add per lane and corner.
 template <class Real>
 TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*fc)[kLanes<Real>], Node4<Real>* f) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
@@ -150,7 +151,7 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
                            _mm512_castpd_ps(_mm512_unpacklo_pd(t1, t3)), _mm512_castpd_ps(_mm512_unpackhi_pd(t1, t3))};
       auto add = [&](int l, __m128 v) {
         float* p = f[id[l]].v;
-        _mm_store_ps(p, _mm_add_ps(_mm_load_ps(p), v));
+        _mm_store_ps(p, c == 0 ? _mm_add_ps(_mm_load_ps(p), v) : _mm_sub_ps(_mm_load_ps(p), v));
       };
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
@@ -172,7 +173,7 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
                             _mm512_permutex2var_pd(t0, hi, t2), _mm512_permutex2var_pd(t1, hi, t3)};
       auto add = [&](int l, __m256d v) {
         double* p = f[id[l]].v;
-        _mm256_store_pd(p, _mm256_add_pd(_mm256_load_pd(p), v));
+        _mm256_store_pd(p, c == 0 ? _mm256_add_pd(_mm256_load_pd(p), v) : _mm256_sub_pd(_mm256_load_pd(p), v));
       };
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
@@ -195,7 +196,7 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
                              _mm256_castpd_ps(_mm256_unpacklo_pd(t1, t3)), _mm256_castpd_ps(_mm256_unpackhi_pd(t1, t3))};
         auto add = [&](int l, __m128 v) {
           float* p = f[id[h + l]].v;
-          _mm_store_ps(p, _mm_add_ps(_mm_load_ps(p), v));
+          _mm_store_ps(p, c == 0 ? _mm_add_ps(_mm_load_ps(p), v) : _mm_sub_ps(_mm_load_ps(p), v));
         };
         #pragma GCC unroll 4
         for (int j = 0; j < 4; ++j) {
@@ -212,7 +213,7 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
         const __m256d t2 = _mm256_unpacklo_pd(fz, zero), t3 = _mm256_unpackhi_pd(fz, zero);
         auto add = [&](int l, __m256d v) {
           double* p = f[id[h + l]].v;
-          _mm256_store_pd(p, _mm256_add_pd(_mm256_load_pd(p), v));
+          _mm256_store_pd(p, c == 0 ? _mm256_add_pd(_mm256_load_pd(p), v) : _mm256_sub_pd(_mm256_load_pd(p), v));
         };
         add(0, _mm256_permute2f128_pd(t0, t2, 0x20));
         add(1, _mm256_permute2f128_pd(t1, t3, 0x20));
@@ -223,9 +224,10 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
 #else
     for (int l = 0; l < W; ++l) {
       Real* p = f[id[l]].v;
-      p[0] += fc[3 * c][l];
-      p[1] += fc[3 * c + 1][l];
-      p[2] += fc[3 * c + 2][l];
+      const Real sign = c == 0 ? Real(1) : Real(-1);  // exact
+      p[0] += sign * fc[3 * c][l];
+      p[1] += sign * fc[3 * c + 1][l];
+      p[2] += sign * fc[3 * c + 2][l];
     }
 #endif
   }
@@ -284,7 +286,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
   for (int32_t b = begin; b < end; ++b) {
     const ElementBlock<Real>& B = blocks[b];
     alignas(64) Real x[12][W];   // corner displacements [m]: x[3c + i][lane]
-    alignas(64) Real fc[12][W];  // corner forces [N]: fc[3c + i][lane]
+    alignas(64) Real fc[12][W];  // corner forces [N], corners 1-3 negated: fc[3c + i][lane]
     alignas(64) Real psiV[W];    // V psi per lane [J]
     alignas(64) Real J[W];       // det F per lane
     load_corners(B, u, x);
@@ -298,18 +300,20 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       // P and psi are linear in (lambda, mu) at a fixed ratio, so passing
       // (lambda V, mu V) gives V P and V psi.
       psiV[l] = material::stress<M>(F, B.lambdaV[l], B.muV[l], P);
-      // [f1 f2 f3] = -V P Dm^-T, f0 = -(f1 + f2 + f3).
+      // [f1 f2 f3] = -V P Dm^-T, f0 = -(f1 + f2 + f3). Stored with the
+      // opposite sign (g), which add_corner_forces subtracts: the same
+      // numbers, without a negation per entry.
       #pragma GCC unroll 16
       for (int i = 0; i < 3; ++i) {
         Real sum = 0;
         #pragma GCC unroll 16
         for (int c = 0; c < 3; ++c) {
-          const Real h = -(P[3 * i] * B.Dinv[3 * c][l] + P[3 * i + 1] * B.Dinv[3 * c + 1][l] +
-                           P[3 * i + 2] * B.Dinv[3 * c + 2][l]);
-          fc[3 * (c + 1) + i][l] = h;
-          sum += h;
+          const Real g = P[3 * i] * B.Dinv[3 * c][l] + P[3 * i + 1] * B.Dinv[3 * c + 1][l] +
+                         P[3 * i + 2] * B.Dinv[3 * c + 2][l];
+          fc[3 * (c + 1) + i][l] = g;
+          sum = c == 0 ? g : sum + g;
         }
-        fc[i][l] = -sum;
+        fc[i][l] = sum;
       }
     }
     energy += __builtin_convertvector(*reinterpret_cast<const RealW*>(psiV), DoubleW);
@@ -458,8 +462,11 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
   V gc[3];
   for (int r = 0; r < 3; ++r)
     for (int e = 0; e < W; ++e) gc[r][e] = A.g[(r * W + e) % 3];
-  // Sums kept per lane (no reassociation needed to vectorise), folded at the end.
-  V abs_a{}, mv2{}, mgu{}, ma2{};
+  // Sums per lane of a node group, added to per-lane sums in double (so that
+  // a million nodes sum as accurately as a hundred), folded at the end.
+  using D = typename LaneVectors<Real>::DoubleW;
+  V abs_a, mv2, mgu, ma2;
+  D abs_a_d{}, mv2_d{}, mgu_d{}, ma2_d{};
   // One component vector r of the update: f, 1/m and m per lane in; v, a out.
   auto update = [&](V f, V inv_m, V m, V gr, V u, V& v, V& a) {
     V acc = f * inv_m;
@@ -477,19 +484,16 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
   };
   int64_t i = A.begin;
   for (; i + W <= A.end; i += W) {
-    V q[4];
-    VU* f0 = reinterpret_cast<VU*>(A.f[i].v);
-    #pragma GCC unroll 4
-    for (int k = 0; k < 4; ++k) {
-      q[k] = f0[k];
-      f0[k] = V{};  // cleared for the next element pass
-    }
-    for (int32_t p = 1; p < A.n_parts; ++p) {
-      VU* fp = reinterpret_cast<VU*>(A.f[i + p * A.part_stride].v);
+    abs_a = mv2 = mgu = ma2 = V{};
+    V q[4] = {};
+    for (int32_t p = 0; p < A.n_parts; ++p) {
+      const ForcePart& part = A.parts[p];
+      if (i >= part.end || i + W <= part.begin) continue;  // whole groups: the bounds are multiples of 16
+      VU* fp = reinterpret_cast<VU*>(A.f[part.offset + i].v);
       #pragma GCC unroll 4
       for (int k = 0; k < 4; ++k) {
         q[k] += fp[k];
-        fp[k] = V{};
+        fp[k] = V{};  // cleared for the next element pass
       }
     }
     const V inv_m = *reinterpret_cast<const VU*>(A.inv_m + i), m = *reinterpret_cast<const VU*>(A.m + i);
@@ -512,19 +516,25 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
            kGravity ? V(ui[2]) : V{}, vr, ar);
     vi[2] = vr;
     ai[2] = ar;
+    abs_a_d += __builtin_convertvector(abs_a, D);
+    mv2_d += __builtin_convertvector(mv2, D);
+    ma2_d += __builtin_convertvector(ma2, D);
+    if constexpr (kGravity) mgu_d += __builtin_convertvector(mgu, D);
   }
   CorrectSums out;
   for (int l = 0; l < W; ++l) {
-    out.abs_a += double(abs_a[l]);
-    out.mv2 += double(mv2[l]);
-    out.mgu += double(mgu[l]);
-    out.ma2 += double(ma2[l]);
+    out.abs_a += abs_a_d[l];
+    out.mv2 += mv2_d[l];
+    out.mgu += mgu_d[l];
+    out.ma2 += ma2_d[l];
   }
   // The last nodes (fewer than W) one by one.
   for (; i < A.end; ++i) {
     Real fi[3] = {0, 0, 0};
     for (int32_t p = 0; p < A.n_parts; ++p) {
-      Node4<Real>& fp = A.f[i + p * A.part_stride];
+      const ForcePart& part = A.parts[p];
+      if (i >= part.end || i < part.begin) continue;
+      Node4<Real>& fp = A.f[part.offset + i];
       for (int k = 0; k < 3; ++k) fi[k] += fp.v[k];
       fp = Node4<Real>{};
     }
