@@ -26,16 +26,6 @@
 #include <cmath>
 #include <utility>
 
-// log has SIMD versions in glibc's libmvec (linked with libm); declared here
-// as such, so that the stable Neo-Hookean's energy (the only log in the
-// materials) vectorises with the rest of the lane loop instead of forcing it
-// to scalar code. glibc's own headers declare them only under -ffast-math.
-// The vector versions are accurate to a few ulp; they touch only psi.
-extern "C" {
-__attribute__((__simd__("notinbranch"))) float logf(float) noexcept;
-__attribute__((__simd__("notinbranch"))) double log(double) noexcept;
-}
-
 #include "core/kernels/kernels.hpp"
 
 // Everything below is internal and inlined: the ABI of 64-byte vector
@@ -383,7 +373,7 @@ struct NodeVectors {
   }
   // Component vector r of a per-node scalar s (W nodes): s of each lane's node.
   template <int R>
-  static TACTILE_INLINE V spread(V s) {
+  static TACTILE_INLINE V spread(const V& s) {
     return __builtin_shuffle(s, mask([](int e) { return (R * W + e) / 3; }));
   }
   // Node4 vector k from the component vectors c[0..2], 4th entries 0.
@@ -468,7 +458,7 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
   V abs_a, mv2, mgu, ma2;
   D abs_a_d{}, mv2_d{}, mgu_d{}, ma2_d{};
   // One component vector r of the update: f, 1/m and m per lane in; v, a out.
-  auto update = [&](V f, V inv_m, V m, V gr, V u, V& v, V& a) {
+  auto update = [&](const V& f, const V& inv_m, const V& m, const V& gr, const V& u, V& v, V& a) {
     V acc = f * inv_m;
     if constexpr (kGravity) {
       acc += gr;
