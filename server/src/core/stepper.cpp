@@ -320,7 +320,6 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   const double t1 = s.t + dt;
   const size_t nc = model_.constrained.size();
 
-  const bool first_step = !energy_started_;
   if (!energy_started_) {  // loads at t_n for the work trapezoid, and the reference energy
     size_t c = 0;
     for (const LoadSet& load : model_.loads) {
@@ -431,14 +430,11 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     // elastic rises), so the physical energy is checked too, against all the
     // energy the body was given. Below the critical step it exceeds that by
     // at most -discrete <= U (w dt)^2/4 / (1 - (w dt)^2/4), 4.3x at 0.9 of it.
-    // Not in the first step from a given state: it starts from that state's
-    // a, which need not match the forces (a rest state has a = 0), and the
-    // energy it seems to gain there is that mismatch, not a runaway.
     constexpr double kRunaway = 10;
     const double given = std::fabs(energy_reference_) + std::fabs(energy_.gravity) + std::fabs(s.work_loads) +
                          std::fabs(s.work_essential) + s.dissipated;
     const double runaway = growth - energy_.discrete - kRunaway * given;
-    if (!first_step && runaway > allowed) {
+    if (runaway > allowed) {
       std::vector<int32_t> ids = find_top_energy_elements(s, 10);
       std::ostringstream msg;
       msg << "kinetic + elastic energy grew by " << growth - energy_.discrete << " J, over " << kRunaway
