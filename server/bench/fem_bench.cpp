@@ -6,6 +6,7 @@
 //   fem_bench            all tables, meshes up to 100 k tets (a minute or two)
 //   fem_bench --large    also 1 M and 2 M tets
 //   fem_bench --quick    small meshes and few repeats, for CI (seconds)
+//   fem_bench --only=T   one table: rates, threads, passes, effects, isas, precision
 //
 // Times are wall-clock medians of repeated runs of many steps, so that other
 // processes on the machine shift them less than a mean would; rates are
@@ -81,6 +82,8 @@ using Clock = std::chrono::steady_clock;
 struct Options {
   bool quick = false;
   bool large = false;
+  std::string only;  // one table's name, or empty for all
+  bool wants(const char* table) const { return only.empty() || only == table; }
 };
 
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
@@ -375,29 +378,34 @@ class PassClock final : public StepProbe {
 };
 
 template <class Real>
-void pass_rows(const Options& opt) {
+void pass_rows(const Options& opt, ThreadPool& pool) {
   const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
-  ModelSpec spec = make_spec(make_bench_box(opt.quick ? 5e3 : 2e4, 1, 0.1), MaterialModel::StVK, precision);
-  Run<Real> run(spec, nullptr);
-  const int64_t steps = calibrate(run, opt.quick ? 0.02 : 0.2);
-  PassClock clock;
-  run.stepper.set_probe(&clock);
-  run.time_steps(steps, true);  // (clock reads are not the step's)
-  run.stepper.set_probe(nullptr);
-  double all = 0;
-  for (int p = 0; p < kPassCount; ++p) all += clock.total(Pass(p));
-  std::printf("| %-6s | %9d |", name_of(precision), run.model.n_tets);
-  for (Pass p : {Pass::Predict, Pass::Elastic, Pass::Correct, Pass::Guard})
-    std::printf(" %6.1f %% |", 100.0 * clock.total(p) / all);
-  std::printf("\n");
+  for (int threads : {1, 2}) {
+    ModelSpec spec = make_spec(make_bench_box(opt.quick ? 5e3 : 2e4, 1, 0.1), MaterialModel::StVK, precision);
+    spec.integrator.threads = threads;
+    Run<Real> run(spec, threads > 1 ? &pool : nullptr);
+    const int64_t steps = calibrate(run, opt.quick ? 0.02 : 0.2);
+    PassClock clock;
+    run.stepper.set_probe(&clock);
+    run.time_steps(steps, true);  // (clock reads are not the step's)
+    run.stepper.set_probe(nullptr);
+    double all = 0;
+    for (int p = 0; p < kPassCount; ++p) all += clock.total(Pass(p));
+    std::printf("| %-6s | %9d | %7d | %9.1f |", name_of(precision), run.model.n_tets, run.stepper.parts(),
+                all / double(steps) * 1e6);
+    for (Pass p : {Pass::Predict, Pass::Elastic, Pass::Correct, Pass::Guard})
+      std::printf(" %6.1f |", clock.total(p) / double(steps) * 1e6);
+    std::printf("\n");
+  }
 }
 
 void table_passes(const Options& opt) {
-  std::printf("\n## Where the bare StVK step goes (share of its time)\n\n");
-  std::printf("| real   |      tets | predict  | elastic  | correct  | guard    |\n");
-  std::printf("|--------|-----------|----------|----------|----------|----------|\n");
-  pass_rows<float>(opt);
-  pass_rows<double>(opt);
+  ThreadPool pool(2);
+  std::printf("\n## Where the bare StVK step goes (us per step; threads: parts the passes were split in)\n\n");
+  std::printf("| real   |      tets | threads | all       | predict | elastic | correct | guard  |\n");
+  std::printf("|--------|-----------|---------|-----------|---------|---------|---------|--------|\n");
+  pass_rows<float>(opt, pool);
+  pass_rows<double>(opt, pool);
 }
 
 template <class Real>
@@ -488,8 +496,10 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) opt.quick = true;
     else if (!std::strcmp(argv[i], "--large")) opt.large = true;
+    else if (!std::strncmp(argv[i], "--only=", 7)) opt.only = argv[i] + 7;
     else {
-      std::fprintf(stderr, "usage: %s [--quick] [--large]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--quick] [--large] [--only=rates|threads|passes|effects|isas|precision]\n",
+                   argv[0]);
       return 2;
     }
   }
@@ -500,15 +510,20 @@ int main(int argc, char** argv) {
   std::printf("free bodies swinging and twisting unless a scene says otherwise. Medians of alternated runs.\n");
   std::fflush(stdout);
 
-  table_rates(opt);
-  std::fflush(stdout);
-  table_threads(opt);
-  std::fflush(stdout);
-  table_passes(opt);
-  table_effects(opt);
-  std::fflush(stdout);
-  table_isas(opt);
-  table_precision(opt);
+  const std::pair<const char*, void (*)(const Options&)> tables[] = {
+      {"rates", table_rates},     {"threads", table_threads}, {"passes", table_passes},
+      {"effects", table_effects}, {"isas", table_isas},       {"precision", table_precision}};
+  bool any = false;
+  for (const auto& [name, table] : tables) {
+    if (!opt.wants(name)) continue;
+    table(opt);
+    std::fflush(stdout);
+    any = true;
+  }
+  if (!any) {
+    std::fprintf(stderr, "unknown table '%s'\n", opt.only.c_str());
+    return 2;
+  }
 
   std::printf("\n## Allocations inside steps (all timed loops above): %lld\n",
               static_cast<long long>(g_allocations.load()));
