@@ -27,6 +27,15 @@ struct ElementGroup {
   int32_t begin, end;
 };
 
+// A share of the step's work for one thread: the nodes [node_begin,
+// node_end) for the node passes, and the lane blocks [block_begin,
+// block_end) of the elements whose lowest node lies among them. The parts
+// tile both ranges in order.
+struct ModelPart {
+  int32_t block_begin, block_end;
+  int32_t node_begin, node_end;
+};
+
 // Nodes held by one essential boundary condition.
 struct EssentialSet {
   EssentialBc spec;
@@ -55,7 +64,8 @@ struct Model {
   double total_mass = 0;           // [kg]
 
   std::vector<ElementBlock<Real>> blocks;  // lane-blocked elements (n_blocks)
-  std::vector<ElementGroup> groups;        // one range of blocks per material model present
+  std::vector<ElementGroup> groups;        // ranges of blocks of one material model, per part
+  std::vector<ModelPart> parts;            // how the step splits over threads (integrator.threads at most)
   std::vector<int32_t> lane_tet;           // tet id of block lane b*W+l, -1 for padding (n_blocks x W)
 
   std::vector<MaterialModel> tet_model;    // material model per tet (n_tets)

@@ -75,32 +75,18 @@ template <class Real>
 Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
     : model_(model), parallel_(parallel), kernels_(kernels<Real>()) {
   correct_ = kernels_.correct[model_.effects.gravity ? 1 : 0][model_.effects.damping ? 1 : 0];
-  n_parts_ = std::max(1, model_.integrator.threads);
-  if (!parallel_ || parallel_->workers() < 2) n_parts_ = 1;
-  // At least kMinPartLanes element lanes per part: below that the hand-offs
-  // between threads cost more than the split saves (fem_bench, two threads
-  // against one: 0.7x at 1.3 k tets, 1.1x at 4.4 k, 1.5x at 20 k, 2.0x at 100 k).
-  constexpr int64_t kMinPartLanes = 4096;
-  const int64_t lanes = int64_t(model_.blocks.size()) * kLanes<Real>;
-  n_parts_ = static_cast<int32_t>(std::min<int64_t>(n_parts_, std::max<int64_t>(1, lanes / kMinPartLanes)));
-  // Even split of blocks; nodes split in multiples of 16 so parts do not share cache lines.
-  const auto nb = static_cast<int32_t>(model_.blocks.size());
-  for (int32_t p = 0; p < n_parts_; ++p) {
-    Part part;
-    part.block_begin = static_cast<int32_t>(int64_t(nb) * p / n_parts_);
-    part.block_end = static_cast<int32_t>(int64_t(nb) * (p + 1) / n_parts_);
-    auto node_cut = [&](int32_t q) {
-      if (q == n_parts_) return model_.n_nodes;
-      return std::min(model_.n_nodes, static_cast<int32_t>((int64_t(model_.n_nodes) * q / n_parts_) / 16 * 16));
-    };
-    part.node_begin = node_cut(p);
-    part.node_end = node_cut(p + 1);
-    part_.push_back(part);
+  // The model's parts (integrator.threads of them, fewer on small meshes);
+  // one covering everything without a pool to run them on.
+  if (parallel_ && parallel_->workers() >= 2) {
+    for (const ModelPart& mp : model_.parts) part_.push_back({mp.block_begin, mp.block_end, mp.node_begin, mp.node_end});
+  } else {
+    part_.push_back({0, static_cast<int32_t>(model_.blocks.size()), 0, model_.n_nodes});
   }
+  n_parts_ = static_cast<int32_t>(part_.size());
   // A force array per part, each starting on a cache line (16 nodes: 4 lines
   // of float, 8 of double). The corrector reads a part's array only over the
   // nodes its elements touch: parts of a Morton-ordered mesh touch nearly
-  // disjoint node ranges, so two parts cost little more traffic than one.
+  // disjoint node ranges (see build_model), so two parts cost little more traffic than one.
   const int64_t stride = (int64_t(model_.n_nodes) + 15) / 16 * 16;
   f_.assign(size_t(n_parts_) * size_t(stride), Node4<Real>{});
   for (int32_t p = 0; p < n_parts_; ++p) {

@@ -193,7 +193,7 @@ TEST(Kernels, IsaCopiesAgreeFloat) { check_isas_agree<float>(); }
 TEST(Kernels, IsaCopiesAgreeDouble) { check_isas_agree<double>(); }
 
 // Padding lanes: no energy, det F = 1, and nothing added to the node they
-// point at (node 0), whatever the displacements.
+// point at (one node for all four corners), whatever the displacements.
 template <class Real>
 void check_padding() {
   for (MaterialModel model : kModels) {

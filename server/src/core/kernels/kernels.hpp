@@ -24,7 +24,7 @@ inline constexpr int kLanes = 64 / static_cast<int>(sizeof(Real));
 template <class Real>
 struct alignas(64) ElementBlock {
   static constexpr int W = kLanes<Real>;
-  int32_t node[4][W];  // corner node ids; padding lanes point at node 0 (n_blocks x 4 x W)
+  int32_t node[4][W];  // corner node ids; padding lanes: lane 0's corner 0, all four (n_blocks x 4 x W)
   Real Dinv[9][W];     // inverse rest edge matrix Dm^-1, row-major, Dm = [X1-X0 X2-X0 X3-X0]
   Real lambdaV[W];     // lambda * rest volume [N m]; 0 in padding lanes
   Real muV[W];         // mu * rest volume [N m]; 0 in padding lanes
