@@ -8,6 +8,7 @@
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
+#include <glm/vec4.hpp>
 
 namespace tactile {
 
@@ -351,6 +352,35 @@ Model<Real> build_model(const ModelSpec& spec) {
     for (int32_t i : set.nodes) sum += mass[size_t(i)];
     for (int32_t i : set.nodes) set.weight.push_back(mass[size_t(i)] / sum);
     model.loads.push_back(std::move(set));
+  }
+
+  for (size_t j = 0; j < spec.proxies.size(); ++j) {
+    const ProxySpec& proxy = spec.proxies[j];
+    const std::string where = "proxy " + std::to_string(j) + (proxy.name.empty() ? "" : " ('" + proxy.name + "')");
+    const ProxyGeometry& g = proxy.geometry;
+    auto positive = [&](double value, const char* field) {
+      if (!(value > 0) || !std::isfinite(value))
+        throw ModelError(where + ": " + field + " must be finite and > 0 m, got " + std::to_string(value));
+    };
+    if (g.shape == ProxyShape::Sphere || g.shape == ProxyShape::Capsule) positive(g.radius, "radius");
+    if (g.shape == ProxyShape::Capsule) positive(g.half_length, "half_length");
+    if (g.shape == ProxyShape::Box) {
+      positive(g.half_extents.x, "half_extents.x");
+      positive(g.half_extents.y, "half_extents.y");
+      positive(g.half_extents.z, "half_extents.z");
+      if (!(g.radius >= 0)) throw ModelError(where + ": radius must be >= 0 m");
+    }
+    if (!(proxy.friction >= 0) || !std::isfinite(proxy.friction))
+      throw ModelError(where + ": friction must be finite and >= 0, got " + std::to_string(proxy.friction));
+    const double qn = glm::length(glm::dvec4(proxy.pose.orientation.x, proxy.pose.orientation.y,
+                                             proxy.pose.orientation.z, proxy.pose.orientation.w));
+    if (!(std::fabs(qn - 1.0) < 1e-6))
+      throw ModelError(where + ": orientation must be a unit quaternion, |q| = " + std::to_string(qn));
+    if (!std::isfinite(glm::length(proxy.pose.position))) throw ModelError(where + ": position must be finite");
+    for (size_t k = 0; k < j; ++k)
+      if (!proxy.name.empty() && spec.proxies[k].name == proxy.name)
+        throw ModelError(where + ": name used twice (also proxy " + std::to_string(k) + ")");
+    model.proxies.push_back(proxy);
   }
 
   model.effects = spec.effects;

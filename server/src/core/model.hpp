@@ -79,6 +79,7 @@ struct Model {
   std::vector<EssentialSet> essential;
   std::vector<int32_t> constrained;        // all nodes under an essential BC, sorted unique
   std::vector<LoadSet> loads;
+  std::vector<ProxySpec> proxies;
   Effects effects;
   IntegratorSpec integrator;
 };

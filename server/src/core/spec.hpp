@@ -11,6 +11,7 @@
 
 #include "core/material.hpp"
 #include "core/mesh.hpp"
+#include "core/proxy.hpp"
 
 namespace tactile {
 
@@ -71,7 +72,20 @@ struct NaturalLoad {
   std::optional<MotionProfile> scale;
 };
 
+// A rigid proxy (paper section 5.1) bound to one device channel: the forces
+// it feels go to that channel only. Proxies sharing a `hand` move together
+// when their device drives the hand.
+struct ProxySpec {
+  std::string name;
+  std::string device;   // device channel that drives it and receives its force
+  std::string hand;     // group it belongs to ("" = none)
+  ProxyGeometry geometry;
+  Pose pose;            // at t = 0
+  double friction = 0;  // Coulomb coefficient mu (used when effects.friction)
+};
+
 struct Effects {
+  bool friction = false;    // Coulomb friction at proxy contacts (contact itself: any proxy)
   bool gravity = false;
   Vec3 g{0.0, -9.81, 0.0};  // [m/s^2]
   bool damping = false;
@@ -95,6 +109,7 @@ struct ModelSpec {
   std::vector<MaterialSpec> materials;  // indexed by mesh region id
   std::vector<EssentialBc> essential;
   std::vector<NaturalLoad> loads;
+  std::vector<ProxySpec> proxies;
   Effects effects;
   IntegratorSpec integrator;
 };

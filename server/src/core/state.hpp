@@ -18,6 +18,7 @@ struct State {
   // Energy accounting, accumulated by the stepper [J].
   double work_loads = 0;      // work of natural loads (gravity is a potential, not here)
   double work_essential = 0;  // work of essential BCs (prescribed motions) on the body
+  double work_contact = 0;    // work of proxy contacts on the body
   double dissipated = 0;      // energy removed by Rayleigh damping
   std::vector<Real> reaction; // force the essential BCs exert on each constrained node [N] (n_constrained x 3)
 };
@@ -51,13 +52,14 @@ struct Energy {
   double gravity = 0;      // -sum m g.u [J]
   double work_loads = 0;   // [J]
   double work_essential = 0;  // [J]
+  double work_contact = 0;    // [J]
   double dissipated = 0;   // [J]
   // Central differences conserve 1/2 m v_{n-1/2}.v_{n+1/2} rather than
   // 1/2 m |v_n|^2; the difference is -dt^2/8 sum m |a|^2 [J].
   double discrete = 0;
-  // Conserved: kinetic + elastic + gravity - work_loads - work_essential + dissipated.
+  // Conserved: kinetic + elastic + gravity - work_loads - work_essential - work_contact + dissipated.
   double balance() const {
-    return kinetic + discrete + elastic + gravity - work_loads - work_essential + dissipated;
+    return kinetic + discrete + elastic + gravity - work_loads - work_essential - work_contact + dissipated;
   }
 };
 

@@ -29,6 +29,7 @@ const char* to_string(Pass p) {
     case Pass::Elastic: return "elastic";
     case Pass::Loads: return "loads";
     case Pass::Correct: return "correct";
+    case Pass::Contact: return "contact";
     case Pass::Guard: return "guard";
   }
   return "?";
@@ -73,7 +74,7 @@ std::string list_ids(const std::vector<int32_t>& ids) {
 
 template <class Real>
 Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
-    : model_(model), parallel_(parallel), kernels_(kernels<Real>()) {
+    : model_(model), parallel_(parallel), kernels_(kernels<Real>()), contact_(model) {
   correct_ = kernels_.correct[model_.effects.gravity ? 1 : 0][model_.effects.damping ? 1 : 0];
   // The model's parts (integrator.threads of them, fewer on small meshes);
   // one covering everything without a pool to run them on.
@@ -313,6 +314,8 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
       for (size_t k = 0; k < load.nodes.size(); ++k, ++c) load_force_[c] = load.spec.force * (scale * load.weight[k]);
     }
     apply_initial_acceleration(s);
+    contact_.start(s);
+    contact_given_ = 0;
     cur_dt_ = Real(dt);
     Energy e0 = compute_energy(s);
     e0.discrete = -0.125 * dt * dt * initial_ma2_;
@@ -359,6 +362,17 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   run_parts(&Stepper::correct_part, this);  // eqs. (8)-(10), then (9)
   leave(Pass::Correct);
 
+  double contact_mv2_delta = 0, contact_ma2_delta = 0;
+  if (!model_.proxies.empty()) {
+    enter(Pass::Contact);
+    const ContactSums sums = contact_.apply(s, s.t, t1, dt);
+    s.work_contact += sums.work;
+    contact_mv2_delta = sums.mv2_delta;
+    contact_ma2_delta = sums.ma2_delta;
+    contact_given_ += sums.proxy_work;
+    leave(Pass::Contact);
+  }
+
   essential_mv2_delta_ = essential_ma2_delta_ = 0;
   if (!model_.essential.empty()) {
     enter(Pass::Essential);
@@ -381,8 +395,8 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   ++s.step;
   // The corrector's sum saw the constrained nodes before their velocities
   // were prescribed; apply_essential_rates swapped their terms.
-  const double mv2 = std::max(0.0, co.mv2 + essential_mv2_delta_);
-  const double ma2 = std::max(0.0, co.ma2 + essential_ma2_delta_);
+  const double mv2 = std::max(0.0, co.mv2 + essential_mv2_delta_ + contact_mv2_delta);
+  const double ma2 = std::max(0.0, co.ma2 + essential_ma2_delta_ + contact_ma2_delta);
   // Power alpha m |v|^2 integrated by the trapezoid over the step: its error
   // telescopes (O(dt^2) in all), where the rectangle alpha m |v_{n+1}|^2 dt
   // drifted by alpha dt times the change of kinetic energy.
@@ -393,6 +407,7 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   energy_.gravity = -co.mgu;
   energy_.work_loads = s.work_loads;
   energy_.work_essential = s.work_essential;
+  energy_.work_contact = s.work_contact;
   energy_.dissipated = s.dissipated;
 
   Fault fault;
@@ -407,7 +422,7 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     fault = make_fault(Fault::Kind::Inverted, s, std::move(msg), std::move(ids));
   } else {
     const double magnitude = std::fabs(energy_.kinetic) + std::fabs(energy_.elastic) + std::fabs(energy_.gravity) +
-                             std::fabs(s.work_loads) + std::fabs(s.work_essential) + s.dissipated;
+                             std::fabs(s.work_loads) + std::fabs(s.work_essential) + std::fabs(s.work_contact) + s.dissipated;
     energy_scale_ = std::max(energy_scale_, magnitude);
     const double growth = energy_.balance() - energy_reference_;
     const double allowed = model_.integrator.energy_tolerance * energy_scale_ + 1e-12;
@@ -418,7 +433,7 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     // at most -discrete <= U (w dt)^2/4 / (1 - (w dt)^2/4), 4.3x at 0.9 of it.
     constexpr double kRunaway = 10;
     const double given = std::fabs(energy_reference_) + std::fabs(energy_.gravity) + std::fabs(s.work_loads) +
-                         std::fabs(s.work_essential) + s.dissipated;
+                         std::fabs(s.work_essential) + std::fabs(s.work_contact) + contact_given_ + s.dissipated;
     const double runaway = growth - energy_.discrete - kRunaway * given;
     if (runaway > allowed) {
       std::vector<int32_t> ids = find_top_energy_elements(s, 10);
@@ -572,6 +587,7 @@ Energy Stepper<Real>::compute_energy(const State<Real>& s) const {
   }
   e.work_loads = s.work_loads;
   e.work_essential = s.work_essential;
+  e.work_contact = s.work_contact;
   e.dissipated = s.dissipated;
   return e;
 }

@@ -3,8 +3,9 @@
 //
 // One step: predict u and the half-step velocity (eq. 7), impose essential
 // BCs, elastic forces R(u) (lane-blocked kernels), natural loads, then the
-// diagonal solve of eq. (10) with gravity and damping only if present, and
-// the essential BCs' velocities and accelerations. Each step also checks for
+// diagonal solve of eq. (10) with gravity and damping only if present, proxy
+// contact only if there are proxies (core/contact.hpp), and the essential
+// BCs' velocities and accelerations. Each step also checks for
 // non-finite values, inverted elements (for models that cannot take them)
 // and energy growth beyond the work done, and reports a Fault instead of
 // going on.
@@ -18,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "core/contact.hpp"
 #include "core/model.hpp"
 #include "core/state.hpp"
 
@@ -33,8 +35,8 @@ class ParallelFor {
 };
 
 // The passes of a step, for cost accounting by a StepProbe.
-enum class Pass : uint8_t { Predict, Essential, Elastic, Loads, Correct, Guard };
-inline constexpr int kPassCount = 6;
+enum class Pass : uint8_t { Predict, Essential, Elastic, Loads, Correct, Contact, Guard };
+inline constexpr int kPassCount = 7;
 const char* to_string(Pass p);
 
 // Told when each pass of a step starts and ends; the application layer times
@@ -92,6 +94,11 @@ class Stepper {
   void set_probe(StepProbe* probe) { probe_ = probe; }
   int32_t parts() const { return n_parts_; }
 
+  // The proxies: their motion over the coming steps (set by the application
+  // from device inputs or scripts) and what each felt in the latest step.
+  Contact<Real>& contact() { return contact_; }
+  const Contact<Real>& contact() const { return contact_; }
+
  private:
   struct Part {
     int32_t block_begin, block_end;  // lane blocks
@@ -126,6 +133,7 @@ class Stepper {
   StepProbe* probe_ = nullptr;
   const KernelTable<Real>& kernels_;
   CorrectFn<Real> correct_;
+  Contact<Real> contact_;
   int32_t n_parts_ = 1;
   std::vector<Part> part_;
 
@@ -148,6 +156,10 @@ class Stepper {
   double essential_mv2_delta_ = 0;  // constrained nodes' change of m |v|^2 in this step
   double essential_ma2_delta_ = 0;  // and of m |a|^2
   double initial_ma2_ = 0;          // sum m |a_0|^2 of the starting state
+  // Energy the moving proxies gave since the start (sum of |F.v_proxy| dt): a
+  // contact kick raises the kinetic energy at once, while its work on the
+  // body (trapezoid) shows in the balance a step later.
+  double contact_given_ = 0;
   Energy energy_;
   double energy_reference_ = 0;  // balance at the first step
   double energy_scale_ = 0;      // running max of the energy magnitudes [J]

@@ -1,0 +1,115 @@
+// Proxy contact, the paper's way (section 5.1): no penalty springs. A
+// surface node inside a proxy whose velocity relative to the proxy points
+// into it has that normal relative velocity set to zero,
+//   v^_{n+1} = v^ - (v^ . n) n
+// (eq. (11) is printed with a `+`; its text and eq. (13) need this sign),
+// and its acceleration follows from eq. (9), a_{n+1} = 2 (v_{n+1} - v_half) / dt,
+// so that the node's normal offset two steps on equals the one before
+// contact (eq. 13): penetration stops growing within two steps. The change of
+// acceleration times q = m (1 + alpha dt / 2), eq. (10), is the equivalent
+// force on the node; its opposite, summed per proxy, is the force and the
+// torque the proxy (and the hand holding it) feels. Bouncing, sticking and
+// sliding contacts all take this one path. Coulomb friction, when the scene
+// asks for it, uses the same impulse: the tangential relative velocity is
+// removed if that takes at most mu times the normal impulse (stick), and
+// reduced by mu times it otherwise (slide).
+//
+// Fast motion: each node is tested along its path relative to the proxy
+// over the step (its proxy-frame positions at t_n and t_{n+1}), and a node
+// that crossed the surface takes the normal where it crossed. A node deep
+// inside keeps the normal it entered with, so a fast proxy never pushes a
+// node out through its far side. This costs the same at any speed, where
+// sub-stepping would multiply the FEM steps by the speed.
+//
+// Broad phase: surface nodes in clusters of 32 (Morton order of rest
+// positions), each with a box around its nodes' motion over the step; only
+// clusters whose box meets a proxy's swept bounding box are examined node by
+// node. A proxy far from the body costs one box test per cluster.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/mat3x3.hpp>
+
+#include "core/model.hpp"
+#include "core/proxy.hpp"
+#include "core/state.hpp"
+
+namespace tactile {
+
+// What one proxy felt over the latest step.
+struct ProxyReport {
+  Vec3 force{0.0};    // on the proxy [N] (the reaction of the contact impulses)
+  Vec3 torque{0.0};   // on the proxy, about its position [N m]
+  int32_t contacts = 0;  // surface nodes inside it
+  // Local contact stiffness dF/dx of the force with the proxy's position
+  // [N/m], a secant estimate fitted to the latest steps' changes (zero out of
+  // contact, and in directions the proxy has not moved along).
+  glm::dmat3 stiffness{0.0};
+  double work = 0;    // work the proxy has done on the body since the start [J]
+};
+
+// What the contact pass changed, for the stepper's energy accounting.
+struct ContactSums {
+  double work = 0;       // work of the contact forces on the body over the step [J]
+  double mv2_delta = 0;  // change of sum m |v|^2 over the nodes it touched
+  double ma2_delta = 0;  // and of sum m |a|^2
+  double proxy_work = 0; // sum over proxies of |work they did| in the step [J]
+};
+
+template <class Real>
+class Contact {
+ public:
+  explicit Contact(const Model<Real>& model);
+
+  int32_t proxies() const { return static_cast<int32_t>(motion_.size()); }
+  void set_motion(int32_t proxy, const ProxyMotion& m) { motion_[size_t(proxy)] = m; }
+  const ProxyMotion& motion(int32_t proxy) const { return motion_[size_t(proxy)]; }
+  const std::vector<ProxyReport>& reports() const { return reports_; }
+
+  // Forgets the previous positions and contacts (a new or reset state).
+  void start(const State<Real>& s);
+  // The contact pass of the step [t0, t1]: after the corrector has written
+  // v_{n+1} and a_{n+1}, before the essential BCs overwrite theirs. Returns
+  // the work the contact forces did on the body over the step (trapezoid on
+  // the nodes' displacements, like the natural loads').
+  ContactSums apply(State<Real>& s, double t0, double t1, double dt);
+
+ private:
+  struct Memory {
+    int32_t proxy = -1;  // proxy it is inside, or -1
+    Vec3 normal{0.0};    // outward normal it is pushed along (proxy frame)
+  };
+  struct Cluster {
+    int32_t begin, end;  // range in surface_
+    Vec3 lo, hi;         // box around its nodes' motion over the step
+  };
+  void contact_node(State<Real>& s, int32_t k, int32_t proxy, const Pose& p0, const Pose& p1, double dt,
+                    ContactSums& sums);
+  void update_stiffness(int32_t proxy, const Vec3& position, const Vec3& force);
+
+  const Model<Real>& model_;
+  std::vector<ProxyMotion> motion_;
+  std::vector<ProxyReport> reports_;
+  std::vector<int32_t> surface_;  // surface nodes not under an essential BC, in Morton order
+  std::vector<Cluster> clusters_;
+  std::vector<Vec3> x_prev_;      // world position at t_n per surface node [m]
+  std::vector<Vec3> f_prev_;      // contact force on the node over the previous step [N]
+  std::vector<Vec3> f_now_;       // and over this one
+  std::vector<Memory> memory_;
+  std::vector<Pose> pose0_, pose1_;  // per proxy at t_n and t_{n+1}
+  std::vector<Vec3> lo_, hi_;        // per proxy: box its bounding sphere sweeps over the step
+  // Secant fit of the stiffness per proxy: exponentially weighted sums of
+  // dF dx^T and dx dx^T over the steps the proxy moved in contact.
+  struct Fit {
+    glm::dmat3 fx{0.0}, xx{0.0};
+    Vec3 last_position{0.0}, last_force{0.0};
+    bool has_last = false;
+  };
+  std::vector<Fit> fit_;
+  double alpha_ = 0;  // Rayleigh mass damping [1/s], for q = m (1 + alpha dt / 2)
+  bool friction_ = false;
+};
+
+}  // namespace tactile

@@ -1,0 +1,413 @@
+// Proxy contact (paper section 5.1): shapes, motion, and the laws the
+// contact pass must keep: eq. (13), momentum, Coulomb friction, no energy
+// from nothing, no tunnelling, and forces routed per proxy.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include <glm/geometric.hpp>
+
+#include "core/contact.hpp"
+#include "core/model.hpp"
+#include "core/stepper.hpp"
+#include "mesh/primitives.hpp"
+
+namespace tactile {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// ---- shapes and motion ---------------------------------------------------------
+
+TEST(ProxyShape, SignedDistanceAndNormalOfEachShape) {
+  ProxyGeometry sphere{ProxyShape::Sphere, 0.02, 0, Vec3(0.0)};
+  SurfacePoint p = locate(sphere, Vec3(0.0, 0.05, 0.0));
+  EXPECT_NEAR(p.phi, 0.03, 1e-15);
+  EXPECT_NEAR(p.n.y, 1.0, 1e-15);
+  EXPECT_NEAR(locate(sphere, Vec3(0.01, 0.0, 0.0)).phi, -0.01, 1e-15);
+
+  ProxyGeometry capsule{ProxyShape::Capsule, 0.01, 0.05, Vec3(0.0)};
+  p = locate(capsule, Vec3(0.03, 0.0, -0.02));  // beside the segment
+  EXPECT_NEAR(p.phi, 0.01, 1e-15);
+  EXPECT_NEAR(p.n.z, -1.0, 1e-15);
+  p = locate(capsule, Vec3(0.08, 0.0, 0.0));  // past its round end
+  EXPECT_NEAR(p.phi, 0.02, 1e-15);
+  EXPECT_NEAR(p.n.x, 1.0, 1e-15);
+
+  ProxyGeometry box{ProxyShape::Box, 0.0, 0, Vec3(0.02, 0.01, 0.03)};
+  p = locate(box, Vec3(0.0, 0.008, 0.0));  // inside, nearest the top face
+  EXPECT_NEAR(p.phi, -0.002, 1e-15);
+  EXPECT_NEAR(p.n.y, 1.0, 1e-15);
+  p = locate(box, Vec3(0.05, 0.05, 0.0));  // outside, off an edge
+  EXPECT_NEAR(p.phi, std::sqrt(0.03 * 0.03 + 0.04 * 0.04), 1e-15);
+  EXPECT_NEAR(glm::length(p.n), 1.0, 1e-15);
+
+  ProxyGeometry plane{ProxyShape::Plane, 0, 0, Vec3(0.0)};
+  EXPECT_NEAR(locate(plane, Vec3(3.0, -0.25, 7.0)).phi, -0.25, 1e-15);
+}
+
+TEST(ProxyMotion, InterpolatesPoseAndGivesRigidVelocities) {
+  ProxyMotion m;
+  m.t0 = 1.0;
+  m.t1 = 1.5;
+  m.from.position = Vec3(0.0);
+  m.to.position = Vec3(0.1, 0.0, 0.0);
+  m.to.orientation = glm::angleAxis(kPi / 2, Vec3(0.0, 0.0, 1.0));  // a quarter turn about z in 0.5 s
+  const Pose mid = m.at(1.25);
+  EXPECT_NEAR(mid.position.x, 0.05, 1e-15);
+  EXPECT_NEAR(glm::angle(mid.orientation), kPi / 4, 1e-12);
+  EXPECT_NEAR(m.velocity().x, 0.2, 1e-12);
+  EXPECT_NEAR(m.angular_velocity().z, kPi, 1e-12);
+  // A point 1 m out along x from the proxy (at t = 1.25) moves with v + w x r.
+  const Vec3 v = m.velocity_at(mid.position + Vec3(1.0, 0.0, 0.0), 1.25);
+  EXPECT_NEAR(v.x, 0.2, 1e-12);
+  EXPECT_NEAR(v.y, kPi, 1e-12);
+  // Held at the ends outside the interval.
+  EXPECT_EQ(m.at(0.0).position, m.from.position);
+  EXPECT_EQ(m.at(9.0).position, m.to.position);
+}
+
+// ---- fixtures --------------------------------------------------------------------
+
+// A soft block [0, 0.04] x [0, 0.02] x [0, 0.04] m.
+ModelSpec block_spec(std::array<int, 3> cells = {8, 4, 8}, double E = 2e4) {
+  ModelSpec spec;
+  spec.mesh = make_box(Vec3(0.0), Vec3(0.04, 0.02, 0.04), cells);
+  spec.materials = {MaterialSpec{MaterialModel::StVK, E, 0.3, 1000}};
+  return spec;
+}
+
+ProxySpec sphere_proxy(const std::string& name, const std::string& device, const Vec3& at, double radius) {
+  ProxySpec p;
+  p.name = name;
+  p.device = device;
+  p.geometry = ProxyGeometry{ProxyShape::Sphere, radius, 0, Vec3(0.0)};
+  p.pose.position = at;
+  return p;
+}
+
+// A floor: the half-space y <= `height`.
+ProxySpec floor_proxy(double height, double friction = 0) {
+  ProxySpec p;
+  p.name = "floor";
+  p.device = "scene";
+  p.geometry.shape = ProxyShape::Plane;
+  p.pose.position = Vec3(0.0, height, 0.0);
+  p.friction = friction;
+  return p;
+}
+
+template <class Real>
+Vec3 node_position(const Model<Real>& model, const State<Real>& s, int32_t i) {
+  const size_t j = 3 * size_t(i);
+  return model.mesh.X[size_t(i)] + Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
+}
+
+template <class Real>
+Vec3 momentum(const Model<Real>& model, const State<Real>& s) {
+  Vec3 p(0.0);
+  for (int32_t i = 0; i < model.n_nodes; ++i) {
+    const size_t j = 3 * size_t(i);
+    p += double(model.m[size_t(i)]) * Vec3(double(s.v[j]), double(s.v[j + 1]), double(s.v[j + 2]));
+  }
+  return p;
+}
+
+// Moves a proxy at constant velocity over the coming step.
+template <class Real>
+void move_proxy(Stepper<Real>& stepper, int32_t proxy, const Pose& from, const Vec3& velocity, double t, double dt) {
+  ProxyMotion m;
+  m.t0 = t;
+  m.t1 = t + dt;
+  m.from = from;
+  m.to = from;
+  m.to.position += velocity * dt;
+  stepper.contact().set_motion(proxy, m);
+}
+
+// ---- the laws --------------------------------------------------------------------
+
+// A block thrown down onto a floor. Eq. (13): a node that enters the floor
+// in step n+1 is, at step n+2, exactly as far from it as at step n; and no
+// node ever sinks deeper than one step of its approach.
+TEST(Contact, PenetrationStopsGrowingWithinTwoSteps) {
+  ModelSpec spec = block_spec();
+  spec.proxies = {floor_proxy(0.0)};
+  for (Vec3& X : spec.mesh.X) X.y += 0.001;  // 1 mm above the floor
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  const double speed = 0.5;  // [m/s] downward
+  for (int32_t i = 0; i < model.n_nodes; ++i) s.v[3 * size_t(i) + 1] = -speed;
+  const double dt = 0.5 * model.dt_rest;
+
+  std::vector<std::vector<double>> height, vy;  // per step, per node: y above the floor, y velocity
+  auto record = [&] {
+    std::vector<double> h(size_t(model.n_nodes)), v(size_t(model.n_nodes));
+    for (int32_t i = 0; i < model.n_nodes; ++i) {
+      h[size_t(i)] = node_position(model, s, i).y;
+      v[size_t(i)] = s.v[3 * size_t(i) + 1];
+    }
+    height.push_back(std::move(h));
+    vy.push_back(std::move(v));
+  };
+  record();
+  double deepest = 0;
+  int entries = 0;
+  for (int k = 0; k < 400; ++k) {
+    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    record();
+    for (double h : height.back()) deepest = std::min(deepest, h);
+  }
+  for (size_t n = 0; n + 2 < height.size(); ++n)
+    for (size_t i = 0; i < height[n].size(); ++i) {
+      // Entered in step n+1 and stopped there (v_y set to 0 exactly); a node
+      // the elastic forces already turned back gets no impulse, and no eq. (13).
+      if (!(height[n][i] > 0 && height[n + 1][i] <= 0 && vy[n + 1][i] == 0.0)) continue;
+      ++entries;
+      EXPECT_NEAR(height[n + 2][i], height[n][i], 1e-12) << "node " << i << " entering at step " << n + 1;
+    }
+  EXPECT_GT(entries, 20);  // most of the bottom face landed so
+  // Bounded by a step or two of approach at the speeds the landing reaches, never growing with time.
+  EXPECT_GT(deepest, -3.0 * speed * dt) << "a node sank deeper than a few steps of approach";
+  EXPECT_LT(deepest, 0.0);
+}
+
+// Without gravity or damping, the body's momentum changes only by the contact
+// impulses: P_{n+1} - P_n = -dt/2 (F_n + F_{n+1}) with F the force on the
+// proxies, every step (eq. 9 applied to all nodes and summed).
+TEST(Contact, ReactionEqualsTheMomentumTheContactsGave) {
+  ModelSpec spec = block_spec();
+  spec.proxies = {sphere_proxy("tip", "left", Vec3(0.02, 0.03, 0.02), 0.01)};
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  const double dt = 0.5 * model.dt_rest;
+  Pose pose = model.proxies[0].pose;
+  const Vec3 velocity(0.0, -0.2, 0.05);  // down into the top face, and sideways
+  Vec3 F_prev(0.0);
+  int in_contact = 0;
+  double push = 0;
+  for (int k = 0; k < 600; ++k) {
+    move_proxy(stepper, 0, pose, velocity, s.t, dt);
+    const Vec3 P0 = momentum(model, s);
+    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    const Vec3 F = stepper.contact().reports()[0].force;
+    const Vec3 dP = momentum(model, s) - P0;
+    const Vec3 expected = -0.5 * dt * (F_prev + F);
+    const double scale = 1e-9 * glm::length(expected) + 1e-15;  // elastic forces cancel to round-off
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(dP[c], expected[c], scale) << "step " << k << " component " << c;
+    if (stepper.contact().reports()[0].contacts > 0) ++in_contact;
+    push = std::max(push, F.y);
+    F_prev = F;
+    pose.position += velocity * dt;
+  }
+  EXPECT_GT(in_contact, 100);  // (the free block is knocked away in the end)
+  EXPECT_GT(push, 0.0);        // the body pushed the proxy back up
+}
+
+// A block on a floor with friction, pulled sideways by a load: below mu m g it
+// sticks, above it slides with acceleration (F - mu m g) / m.
+double slide_acceleration(double pull_over_mu_mg, double* creep) {
+  const double mu = 0.4;
+  ModelSpec spec = block_spec({4, 2, 4}, 2e5);
+  spec.proxies = {floor_proxy(0.0, mu)};
+  spec.effects.friction = true;
+  spec.effects.gravity = true;  // no damping: alpha M would drag the sliding block like air
+  const double mass = 1000 * 0.04 * 0.02 * 0.04;
+  NaturalLoad pull;
+  pull.name = "pull";
+  pull.where.kind = NodeSelector::Kind::Box;
+  pull.where.lo = Vec3(0.0);
+  pull.where.hi = Vec3(0.04, 0.02, 0.04);  // the whole block, in proportion to mass
+  pull.force = Vec3(pull_over_mu_mg * mu * mass * 9.81, 0.0, 0.0);
+  MotionProfile on;  // after the block has settled on the floor
+  on.kind = MotionProfile::Kind::Ramp;
+  on.start = 0.05;
+  on.duration = 0.01;
+  on.target = 1.0;
+  pull.scale = on;
+  spec.loads = {pull};
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  const double dt = 0.5 * model.dt_rest;
+  auto mean_x = [&] {
+    double x = 0;
+    for (int32_t i = 0; i < model.n_nodes; ++i) x += double(model.m[size_t(i)]) * s.u[3 * size_t(i)];
+    return x / mass;
+  };
+  auto run_until = [&](double t) {
+    while (s.t < t) EXPECT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+  };
+  run_until(0.08);
+  const double x0 = mean_x(), t0 = s.t;
+  run_until(0.13);
+  const double x1 = mean_x(), t1 = s.t;
+  run_until(0.18);
+  const double x2 = mean_x(), t2 = s.t;
+  *creep = std::fabs(x2 - x0);
+  // x(t) = x0 + v0 t + a t^2 / 2 through the three samples.
+  const double h1 = t1 - t0, h2 = t2 - t0;
+  return 2.0 * ((x2 - x0) / h2 - (x1 - x0) / h1) / (h2 - h1);
+}
+
+TEST(Contact, FrictionSticksBelowMuTimesTheNormalLoadAndSlidesAbove) {
+  double creep = 0;
+  const double a_stick = slide_acceleration(0.5, &creep);
+  EXPECT_LT(creep, 2e-4) << "held at half the friction limit, it crept " << creep << " m in 0.1 s";
+  EXPECT_LT(std::fabs(a_stick), 0.05);
+  const double a_slide = slide_acceleration(2.0, &creep);  // pulled at twice the limit
+  const double expected = (2.0 - 1.0) * 0.4 * 9.81;       // (F - mu m g) / m
+  EXPECT_NEAR(a_slide, expected, 0.1 * expected);
+}
+
+// Two proxies bound to two devices: each report holds only its own proxy's
+// contacts. One presses the top face, the other hovers clear of the body.
+// The block is held by its x = 0 face.
+TEST(Contact, ForcesAreRoutedPerProxy) {
+  ModelSpec spec = block_spec();
+  EssentialBc wall;
+  wall.name = "wall";
+  wall.where.kind = NodeSelector::Kind::Box;
+  wall.where.lo = Vec3(0.0, 0.0, 0.0);
+  wall.where.hi = Vec3(0.0, 0.02, 0.04);
+  spec.essential = {wall};
+  spec.proxies = {sphere_proxy("a", "left", Vec3(0.02, 0.028, 0.02), 0.01),
+                  sphere_proxy("b", "right", Vec3(0.02, -0.015, 0.02), 0.01)};  // 5 mm below
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  const double dt = 0.5 * model.dt_rest;
+  Pose a = model.proxies[0].pose, b = model.proxies[1].pose;
+  for (int k = 0; k < 100; ++k) {
+    move_proxy(stepper, 0, a, Vec3(0.0, -0.1, 0.0), s.t, dt);
+    move_proxy(stepper, 1, b, Vec3(0.0), s.t, dt);
+    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    a.position.y -= 0.1 * dt;
+    const ProxyReport& rb = stepper.contact().reports()[1];
+    EXPECT_EQ(rb.contacts, 0);
+    EXPECT_EQ(rb.force, Vec3(0.0));
+  }
+  EXPECT_GT(stepper.contact().reports()[0].contacts, 0);
+  EXPECT_GT(stepper.contact().reports()[0].force.y, 0.0);
+  // Now b presses the bottom face from below as well: each feels its own side.
+  for (int pressed = 0, k = 0; pressed < 100 && k < 5000; ++k) {  // until b has pressed for 100 steps
+    move_proxy(stepper, 0, a, Vec3(0.0), s.t, dt);
+    move_proxy(stepper, 1, b, Vec3(0.0, 0.1, 0.0), s.t, dt);
+    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    b.position.y += 0.1 * dt;
+    if (stepper.contact().reports()[1].contacts > 0) ++pressed;
+  }
+  EXPECT_GT(stepper.contact().reports()[0].force.y, 0.0);
+  EXPECT_LT(stepper.contact().reports()[1].force.y, 0.0);
+}
+
+// Over a press and a release, the body gains at most the work the proxy did:
+// the contact takes energy out (inelastic normal impulses), never puts it in;
+// and the stepper's energy balance, which counts the contact work, holds.
+TEST(Contact, NeverAddsEnergy) {
+  ModelSpec spec = block_spec();
+  spec.proxies = {sphere_proxy("tip", "left", Vec3(0.02, 0.031, 0.02), 0.01)};
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  const double dt = 0.5 * model.dt_rest;
+  Pose pose = model.proxies[0].pose;
+  const int steps = 1600;
+  for (int k = 0; k < steps; ++k) {
+    const Vec3 velocity(0.0, k < steps / 2 ? -0.3 : 0.3, 0.0);
+    move_proxy(stepper, 0, pose, velocity, s.t, dt);
+    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    pose.position += velocity * dt;
+  }
+  const Energy e = stepper.compute_energy(s);
+  const double body = e.kinetic + e.elastic;  // it started at rest, unstrained
+  const double by_proxy = stepper.contact().reports()[0].work;
+  EXPECT_GT(by_proxy, 0.0);
+  EXPECT_GT(body, 0.0);  // still ringing
+  EXPECT_LE(body, by_proxy * (1 + 1e-3));
+  // The balance counts the contact work: kinetic + elastic = work_contact, to the integrator's error.
+  EXPECT_NEAR(body, s.work_contact, 0.02 * s.work_contact);
+  EXPECT_LE(s.work_contact, by_proxy * (1 + 1e-3));
+}
+
+// A 10 m/s impact on a 2 mm plate clamped at its rim: no node passes through
+// the sphere (each stays within one step of travel of its surface), and the
+// run stays finite or ends in a reported fault.
+TEST(Contact, FastImpactDoesNotTunnelThroughAThinPlate) {
+  for (MaterialModel mm : {MaterialModel::StVK, MaterialModel::NeoHookean, MaterialModel::Corotational}) {
+    ModelSpec spec;
+    spec.mesh = make_box(Vec3(-0.02, 0.0, -0.02), Vec3(0.02, 0.002, 0.02), {10, 1, 10});
+    spec.materials = {MaterialSpec{mm, 1e5, 0.3, 1000}};
+    EssentialBc rim;
+    rim.name = "rim";
+    rim.where.kind = NodeSelector::Kind::Box;  // everything, minus the inside below
+    for (int side = 0; side < 4; ++side) {
+      EssentialBc edge = rim;
+      const double lo = -0.02, hi = 0.02;
+      edge.where.lo = Vec3(side == 1 ? hi : lo, 0.0, side == 3 ? hi : lo);
+      edge.where.hi = Vec3(side == 0 ? lo : hi, 0.002, side == 2 ? lo : hi);
+      edge.name = "edge" + std::to_string(side);
+      spec.essential.push_back(edge);
+    }
+    spec.proxies = {sphere_proxy("bullet", "left", Vec3(0.0, 0.008, 0.0), 0.005)};
+    Model<double> model = [&] {
+      try {
+        return build_model<double>(spec);
+      } catch (const ModelError&) {  // edges overlap at the corners: drop them from two sides
+        spec.essential[2].where.lo.x += 1e-6;
+        spec.essential[2].where.hi.x -= 1e-6;
+        spec.essential[3].where.lo.x += 1e-6;
+        spec.essential[3].where.hi.x -= 1e-6;
+        return build_model<double>(spec);
+      }
+    }();
+    Stepper<double> stepper(model);
+    State<double> s = stepper.make_state();
+    const double dt = 0.5 * model.dt_rest;
+    const Vec3 velocity(0.0, -10.0, 0.0);
+    Pose pose = model.proxies[0].pose;
+    double deepest = 0;
+    bool faulted = false;
+    for (int k = 0; pose.position.y > -0.01 && k < 20000; ++k) {
+      move_proxy(stepper, 0, pose, velocity, s.t, dt);
+      if (stepper.step(s, dt)) {
+        faulted = true;  // a reported fault is an allowed end (elements crushed flat)
+        break;
+      }
+      pose.position += velocity * dt;
+      for (int32_t i = 0; i < model.n_nodes; ++i) {
+        const Vec3 x = node_position(model, s, i);
+        ASSERT_TRUE(std::isfinite(x.x) && std::isfinite(x.y) && std::isfinite(x.z));
+        deepest = std::min(deepest, glm::length(x - pose.position) - 0.005);
+      }
+    }
+    EXPECT_GT(deepest, -10.0 * dt * 1.5 - 1e-9) << to_string(mm) << ": a node went deep inside the sphere";
+    if (!faulted) {
+      EXPECT_LT(pose.position.y, -0.009) << to_string(mm);
+    }
+  }
+}
+
+TEST(Contact, BadProxiesAreRefusedByName) {
+  ModelSpec spec = block_spec({2, 2, 2});
+  spec.proxies = {sphere_proxy("tip", "left", Vec3(0.0, 0.1, 0.0), -0.01)};
+  try {
+    build_model<double>(spec);
+    FAIL() << "a negative radius was accepted";
+  } catch (const ModelError& e) {
+    EXPECT_NE(std::string(e.what()).find("proxy 0 ('tip'): radius"), std::string::npos) << e.what();
+  }
+  spec.proxies = {sphere_proxy("tip", "left", Vec3(0.0, 0.1, 0.0), 0.01),
+                  sphere_proxy("tip", "right", Vec3(0.0, 0.2, 0.0), 0.01)};
+  EXPECT_THROW(build_model<double>(spec), ModelError);
+  spec.proxies = {sphere_proxy("tip", "left", Vec3(0.0, 0.1, 0.0), 0.01)};
+  spec.proxies[0].pose.orientation = Quat(2.0, 0.0, 0.0, 0.0);
+  EXPECT_THROW(build_model<double>(spec), ModelError);
+}
+
+}  // namespace
+}  // namespace tactile
