@@ -37,6 +37,9 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   motion_.resize(n_proxies);
   for (size_t j = 0; j < n_proxies; ++j) motion_[j] = hold(model.proxies[j].pose);
   reports_.resize(n_proxies);
+  device_reports_.resize(model.devices.size());
+  hand_motion_.resize(model.hands.size());
+  for (size_t h = 0; h < model.hands.size(); ++h) hand_motion_[h] = hold(model.hands[h].pose);
   fit_.resize(n_proxies);
   pose0_.resize(n_proxies);
   pose1_.resize(n_proxies);
@@ -72,6 +75,32 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
 }
 
 template <class Real>
+void Contact<Real>::set_hand_motion(int32_t hand, const ProxyMotion& m) {
+  hand_motion_[size_t(hand)] = m;
+  for (size_t j = 0; j < motion_.size(); ++j) {
+    if (model_.proxy_hand[j] != hand) continue;
+    const Pose& offset = model_.proxy_offset[j];
+    ProxyMotion& pm = motion_[j];
+    pm.t0 = m.t0;
+    pm.t1 = m.t1;
+    pm.from = {m.from.to_world(offset.position), m.from.orientation * offset.orientation};
+    pm.to = {m.to.to_world(offset.position), m.to.orientation * offset.orientation};
+  }
+}
+
+template <class Real>
+void Contact<Real>::clear_impulses() {
+  for (ProxyReport& r : reports_) {
+    r.impulse = r.angular_impulse = Vec3(0.0);
+    r.elapsed = 0;
+  }
+  for (DeviceReport& d : device_reports_) {
+    d.impulse = d.angular_impulse = Vec3(0.0);
+    d.elapsed = 0;
+  }
+}
+
+template <class Real>
 void Contact<Real>::start(const State<Real>& s) {
   for (size_t k = 0; k < surface_.size(); ++k) {
     const size_t i = size_t(surface_[k]);
@@ -81,6 +110,7 @@ void Contact<Real>::start(const State<Real>& s) {
   std::fill(memory_.begin(), memory_.end(), Memory{});
   for (Fit& f : fit_) f = Fit{};
   for (ProxyReport& r : reports_) r = ProxyReport{};
+  for (DeviceReport& d : device_reports_) d = DeviceReport{};
 }
 
 template <class Real>
@@ -91,6 +121,11 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   for (ProxyReport& r : reports_) {
     r.force = r.torque = Vec3(0.0);
     r.contacts = 0;
+  }
+  for (DeviceReport& d : device_reports_) {
+    d.force = d.torque = Vec3(0.0);
+    d.contacts = 0;
+    d.stiffness = glm::dmat3(0.0);
   }
   std::fill(f_now_.begin(), f_now_.end(), Vec3(0.0));
 
@@ -136,6 +171,25 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
       fit_[j] = Fit{};
       reports_[j].stiffness = glm::dmat3(0.0);
     }
+  }
+  // Per device: its proxies' sums, torques moved to the device's reference point.
+  for (size_t j = 0; j < n_proxies; ++j) {
+    ProxyReport& r = reports_[j];
+    r.impulse += r.force * dt;
+    r.angular_impulse += r.torque * dt;
+    r.elapsed += dt;
+    DeviceReport& d = device_reports_[size_t(model_.proxy_device[j])];
+    const int32_t hand = model_.proxy_hand[j];
+    const Vec3 reference = hand >= 0 ? hand_motion_[size_t(hand)].at(t1).position : pose1_[j].position;
+    d.force += r.force;
+    d.torque += r.torque + glm::cross(pose1_[j].position - reference, r.force);
+    d.contacts += r.contacts;
+    d.stiffness += r.stiffness;
+  }
+  for (DeviceReport& d : device_reports_) {
+    d.impulse += d.force * dt;
+    d.angular_impulse += d.torque * dt;
+    d.elapsed += dt;
   }
   return sums;
 }

@@ -48,6 +48,24 @@ struct ProxyReport {
   // contact, and in directions the proxy has not moved along).
   glm::dmat3 stiffness{0.0};
   double work = 0;    // work the proxy has done on the body since the start [J]
+  // Sums over the steps since the last clear_impulses(): the mean force over
+  // an interval longer than a step (a device tick, an output frame) is
+  // impulse / elapsed.
+  Vec3 impulse{0.0};          // [N s]
+  Vec3 angular_impulse{0.0};  // [N m s]
+  double elapsed = 0;         // [s]
+};
+
+// What one device channel felt over the latest step: the sum over the
+// proxies it drives (one proxy, or a hand's), never another device's.
+struct DeviceReport {
+  Vec3 force{0.0};    // [N]
+  Vec3 torque{0.0};   // about the device's reference point (its hand's or proxy's position) [N m]
+  int32_t contacts = 0;
+  glm::dmat3 stiffness{0.0};  // sum of its proxies' dF/dx [N/m]: the hand translated as one
+  Vec3 impulse{0.0};          // since clear_impulses() [N s]
+  Vec3 angular_impulse{0.0};  // [N m s]
+  double elapsed = 0;         // [s]
 };
 
 // What the contact pass changed, for the stepper's energy accounting.
@@ -64,7 +82,14 @@ class Contact {
   explicit Contact(const Model<Real>& model);
 
   int32_t proxies() const { return static_cast<int32_t>(motion_.size()); }
+  // A proxy's motion over the coming steps. For a proxy in a hand, prefer
+  // set_hand_motion: this moves it alone.
   void set_motion(int32_t proxy, const ProxyMotion& m) { motion_[size_t(proxy)] = m; }
+  // Moves a hand's proxies rigidly with it: each keeps its offset from the hand.
+  void set_hand_motion(int32_t hand, const ProxyMotion& m);
+  const std::vector<DeviceReport>& device_reports() const { return device_reports_; }
+  // Starts the impulse sums of every proxy and device report again.
+  void clear_impulses();
   const ProxyMotion& motion(int32_t proxy) const { return motion_[size_t(proxy)]; }
   const std::vector<ProxyReport>& reports() const { return reports_; }
 
@@ -92,6 +117,8 @@ class Contact {
   const Model<Real>& model_;
   std::vector<ProxyMotion> motion_;
   std::vector<ProxyReport> reports_;
+  std::vector<DeviceReport> device_reports_;
+  std::vector<ProxyMotion> hand_motion_;  // per hand (its position is the torque reference)
   std::vector<int32_t> surface_;  // surface nodes not under an essential BC, in Morton order
   std::vector<Cluster> clusters_;
   std::vector<Vec3> x_prev_;      // world position at t_n per surface node [m]

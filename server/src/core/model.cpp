@@ -380,7 +380,47 @@ Model<Real> build_model(const ModelSpec& spec) {
     for (size_t k = 0; k < j; ++k)
       if (!proxy.name.empty() && spec.proxies[k].name == proxy.name)
         throw ModelError(where + ": name used twice (also proxy " + std::to_string(k) + ")");
-    model.proxies.push_back(proxy);
+    ProxySpec kept = proxy;
+    int32_t hand = -1;
+    Pose offset;
+    if (!proxy.hand.empty()) {
+      for (size_t h = 0; h < spec.hands.size(); ++h)
+        if (spec.hands[h].name == proxy.hand) hand = int32_t(h);
+      if (hand < 0) throw ModelError(where + ": hand '" + proxy.hand + "' is not among the hands");
+      const HandSpec& hs = spec.hands[size_t(hand)];
+      if (!proxy.device.empty() && proxy.device != hs.device)
+        throw ModelError(where + ": device '" + proxy.device + "' differs from its hand's ('" + hs.device +
+                         "'); a hand's proxies go to the hand's device");
+      kept.device = hs.device;
+      offset.orientation = glm::conjugate(hs.pose.orientation) * proxy.pose.orientation;
+      offset.position = hs.pose.to_local(proxy.pose.position);
+    }
+    if (kept.device.empty()) throw ModelError(where + ": device must name the channel that drives it");
+    int32_t device = -1;
+    for (size_t d = 0; d < model.devices.size(); ++d)
+      if (model.devices[d] == kept.device) device = int32_t(d);
+    if (device < 0) {
+      device = int32_t(model.devices.size());
+      model.devices.push_back(kept.device);
+    }
+    model.proxies.push_back(kept);
+    model.proxy_hand.push_back(hand);
+    model.proxy_offset.push_back(offset);
+    model.proxy_device.push_back(device);
+  }
+  for (size_t h = 0; h < spec.hands.size(); ++h) {
+    const HandSpec& hs = spec.hands[h];
+    const std::string where = "hand " + std::to_string(h) + (hs.name.empty() ? "" : " ('" + hs.name + "')");
+    if (hs.name.empty()) throw ModelError(where + ": name must not be empty");
+    if (hs.device.empty()) throw ModelError(where + ": device must name the channel that drives it");
+    const glm::dquat& q = hs.pose.orientation;
+    if (!(std::fabs(std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z) - 1.0) < 1e-6))
+      throw ModelError(where + ": orientation must be a unit quaternion");
+    for (size_t k = 0; k < h; ++k)
+      if (spec.hands[k].name == hs.name) throw ModelError(where + ": name used twice (also hand " + std::to_string(k) + ")");
+    if (std::find(model.proxy_hand.begin(), model.proxy_hand.end(), int32_t(h)) == model.proxy_hand.end())
+      throw ModelError(where + ": no proxy belongs to it");
+    model.hands.push_back(hs);
   }
 
   model.effects = spec.effects;

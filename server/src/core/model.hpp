@@ -79,7 +79,12 @@ struct Model {
   std::vector<EssentialSet> essential;
   std::vector<int32_t> constrained;        // all nodes under an essential BC, sorted unique
   std::vector<LoadSet> loads;
-  std::vector<ProxySpec> proxies;
+  std::vector<ProxySpec> proxies;          // device filled in from the hand for hand proxies
+  std::vector<HandSpec> hands;
+  std::vector<int32_t> proxy_hand;         // hand index per proxy, -1 if none (n_proxies)
+  std::vector<Pose> proxy_offset;          // pose in its hand's frame (n_proxies; identity if no hand)
+  std::vector<std::string> devices;        // distinct device channels, in order of first use
+  std::vector<int32_t> proxy_device;       // device index per proxy (n_proxies)
   Effects effects;
   IntegratorSpec integrator;
 };

@@ -73,15 +73,22 @@ struct NaturalLoad {
 };
 
 // A rigid proxy (paper section 5.1) bound to one device channel: the forces
-// it feels go to that channel only. Proxies sharing a `hand` move together
-// when their device drives the hand.
+// it feels go to that channel only. A proxy in a hand moves rigidly with the
+// hand, which one device drives: finger tips and segments pressed and
+// turned together, their forces summed for that device.
 struct ProxySpec {
   std::string name;
-  std::string device;   // device channel that drives it and receives its force
-  std::string hand;     // group it belongs to ("" = none)
+  std::string device;   // device channel that drives it and receives its force ("" in a hand: the hand's)
+  std::string hand;     // hand it belongs to ("" = none)
   ProxyGeometry geometry;
-  Pose pose;            // at t = 0
+  Pose pose;            // at t = 0 (world)
   double friction = 0;  // Coulomb coefficient mu (used when effects.friction)
+};
+
+struct HandSpec {
+  std::string name;
+  std::string device;  // device channel that drives the hand
+  Pose pose;           // at t = 0 (world): its proxies keep their offsets from it
 };
 
 struct Effects {
@@ -110,6 +117,7 @@ struct ModelSpec {
   std::vector<EssentialBc> essential;
   std::vector<NaturalLoad> loads;
   std::vector<ProxySpec> proxies;
+  std::vector<HandSpec> hands;
   Effects effects;
   IntegratorSpec integrator;
 };
