@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <vector>
 
@@ -407,6 +408,208 @@ TEST(Contact, BadProxiesAreRefusedByName) {
   spec.proxies = {sphere_proxy("tip", "left", Vec3(0.0, 0.1, 0.0), 0.01)};
   spec.proxies[0].pose.orientation = Quat(2.0, 0.0, 0.0, 0.0);
   EXPECT_THROW(build_model<double>(spec), ModelError);
+}
+
+}  // namespace
+}  // namespace tactile
+
+namespace tactile {
+namespace {
+
+// ---- Hertz -------------------------------------------------------------------
+
+// A block [-30, 30] x [-30, 0] x [-30, 30] mm, cells graded towards the top
+// centre (each axis mapped by sinh, so the cells stay boxes and the tets keep
+// their orientation), bottom fixed; a rigid sphere of radius R pressed slowly
+// to depth delta at the centre of the top face and held. Returns the settled
+// force on the sphere [N] and, through `stiffness`, the fitted dF/dy.
+double settled_sphere_force(int cells, double R, double delta, double* stiffness) {
+  const double W = 0.03, beta = 3.5;
+  ModelSpec spec;
+  spec.mesh = make_box(Vec3(-1.0, -1.0, -1.0), Vec3(1.0, 0.0, 1.0), {cells, cells / 2, cells});
+  for (Vec3& X : spec.mesh.X) {
+    X.x = W * std::sinh(beta * X.x) / std::sinh(beta);
+    X.z = W * std::sinh(beta * X.z) / std::sinh(beta);
+    X.y = W * std::sinh(beta * X.y) / std::sinh(beta);  // y in [-1, 0]: fine at the top
+  }
+  const double E = 1e5, nu = 0.3;
+  spec.materials = {MaterialSpec{MaterialModel::StVK, E, nu, 1000}};
+  EssentialBc base;
+  base.name = "base";
+  base.where.kind = NodeSelector::Kind::Box;
+  base.where.lo = Vec3(-W, -W, -W);
+  base.where.hi = Vec3(W, -W, W);
+  spec.essential = {base};
+  spec.effects.damping = true;
+  spec.effects.alpha = 600.0;  // about half the critical damping of the block's lowest modes [1/s]
+  spec.proxies = {sphere_proxy("ball", "arm", Vec3(0.0, R, 0.0), R)};
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  const double dt = 0.9 * model.dt_rest;
+  const double ramp = 0.01, hold = 0.02;  // [s]
+  Pose pose = model.proxies[0].pose;
+  Vec3 mean(0.0);
+  int samples = 0, k_samples = 0;
+  double k_sum = 0;
+  while (s.t < ramp + hold) {
+    // Cycloidal press: zero speed at both ends.
+    const double t0 = s.t, t1 = s.t + dt;
+    auto depth = [&](double t) {
+      const double x = std::min(t / ramp, 1.0);
+      return delta * (x - std::sin(2 * kPi * x) / (2 * kPi));
+    };
+    ProxyMotion m;
+    m.t0 = t0;
+    m.t1 = t1;
+    m.from = m.to = pose;
+    m.from.position.y = R - depth(t0);
+    m.to.position.y = R - depth(t1);
+    stepper.contact().set_motion(0, m);
+    const Fault f = stepper.step(s, dt);
+    EXPECT_FALSE(f) << f.message;
+    if (f) return 0.0;
+    if (s.t > ramp + 0.75 * hold) {
+      mean += stepper.contact().reports()[0].force;
+      ++samples;
+    }
+    if (s.t > 0.45 * ramp && s.t < 0.55 * ramp) {  // around mid-ramp, depth delta / 2
+      k_sum += stepper.contact().reports()[0].stiffness[1][1];
+      ++k_samples;
+    }
+  }
+  *stiffness = k_sum / k_samples;
+  mean /= double(samples);
+  EXPECT_LT(std::fabs(mean.x) + std::fabs(mean.z), 0.02 * mean.y);  // symmetric: straight up
+  return mean.y;
+}
+
+// Hertz: F = 4/3 E* sqrt(R) delta^(3/2), E* = E / (1 - nu^2), for a small
+// depth. The settled force converges as the mesh refines and lands within
+// 20 % of Hertz on the finest mesh; the stiffness fitted while pressing is
+// the slope dF/d(delta) = 3/2 F / delta, with the sign of a restoring force.
+TEST(Contact, SpherePressedIntoABlockAgreesWithHertz) {
+  const double R = 0.02, delta = 0.001, E = 1e5, nu = 0.3;
+  const double hertz = 4.0 / 3.0 * E / (1 - nu * nu) * std::sqrt(R) * std::pow(delta, 1.5);
+  std::vector<double> F;
+  double k = 0;
+  for (int cells : {12, 16, 24}) {
+    F.push_back(settled_sphere_force(cells, R, delta, &k));
+    std::printf("  cells %2d: F = %.4f N (Hertz %.4f N, %+.1f %%), dFy/dy at mid-ramp %.1f N/m\n", cells,
+                F.back(), hertz, 100 * (F.back() / hertz - 1), k);
+  }
+  EXPECT_LT(std::fabs(F[2] - F[1]), std::fabs(F[1] - F[0]));  // converging
+  EXPECT_NEAR(F[2], hertz, 0.2 * hertz);
+  // Pressing down (position -y) raises the upward force: dFy/dy < 0. Mid-ramp
+  // depth is delta / 2, where Hertz's slope is 3/2 F(delta/2) / (delta/2).
+  const double slope = 1.5 * hertz * std::pow(0.5, 1.5) / (0.5 * delta);
+  EXPECT_LT(k, 0.0);
+  EXPECT_NEAR(-k, slope, 0.3 * slope);
+}
+
+}  // namespace
+}  // namespace tactile
+
+namespace tactile {
+namespace {
+
+// ---- hard cases ----------------------------------------------------------------
+
+// Runs a scene in frames of half the rest critical step (Stepper::advance:
+// sub-steps as the deformed configuration needs), its proxies moving at
+// constant velocities for `move_frames` frames and then holding, until
+// `frames` or a fault. Every state before the fault must be finite and
+// bounded (no node further than `bound` from the body's mean displacement).
+Fault run_hard_case(ModelSpec spec, const std::vector<Vec3>& velocity, int move_frames, int frames, double bound) {
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  const double frame = 0.5 * model.dt_rest;
+  std::vector<Pose> pose;
+  for (const ProxySpec& p : model.proxies) pose.push_back(p.pose);
+  for (int k = 0; k < frames; ++k) {
+    for (size_t j = 0; j < pose.size(); ++j) {
+      const Vec3 v = k < move_frames ? velocity[j] : Vec3(0.0);
+      move_proxy(stepper, int32_t(j), pose[j], v, s.t, frame);
+      pose[j].position += v * frame;
+    }
+    if (Fault f = stepper.advance(s, frame).fault) return f;
+    // Bounded deformation: no node far from where the body as a whole went
+    // (a free body may be pushed away whole).
+    Vec3 mean(0.0);
+    for (int32_t i = 0; i < model.n_nodes; ++i) mean += Vec3(s.u[3 * size_t(i)], s.u[3 * size_t(i) + 1], s.u[3 * size_t(i) + 2]);
+    mean /= double(model.n_nodes);
+    for (int32_t i = 0; i < model.n_nodes; ++i) {
+      const Vec3 u(s.u[3 * size_t(i)], s.u[3 * size_t(i) + 1], s.u[3 * size_t(i) + 2]);
+      const double d = glm::length(u - mean);
+      EXPECT_TRUE(std::isfinite(d)) << "node " << i << " step " << k;
+      EXPECT_LT(d, bound) << "node " << i << " step " << k;
+      if (!(d < bound)) return Fault{};
+    }
+  }
+  return Fault{};
+}
+
+constexpr MaterialModel kContactModels[] = {MaterialModel::Linear, MaterialModel::StVK, MaterialModel::Corotational,
+                                            MaterialModel::NeoHookean};
+
+// A sphere crushing a 2 mm plate that lies on a floor, down past the plate's
+// thickness: the elements flatten and invert. StVK must end in a reported
+// fault or stay finite; the invertible models stay finite and bounded.
+TEST(ContactHardCases, ProxyCrushesAThinPlateOnAFloor) {
+  for (MaterialModel mm : kContactModels) {
+    ModelSpec spec;
+    spec.mesh = make_box(Vec3(-0.01, 0.0, -0.01), Vec3(0.01, 0.002, 0.01), {10, 2, 10});
+    spec.materials = {MaterialSpec{mm, 5e4, 0.3, 1000}};
+    spec.proxies = {sphere_proxy("press", "arm", Vec3(0.0, 0.0071, 0.0), 0.005), floor_proxy(0.0)};
+    // Down 2.6 mm at 0.5 m/s: through the whole plate and 0.5 mm into the floor, then held.
+    const double frame = 0.5 * build_model<double>(spec).dt_rest;
+    const int move = int(std::ceil(0.0026 / 0.5 / frame));
+    const Fault f = run_hard_case(spec, {Vec3(0.0, -0.5, 0.0), Vec3(0.0)}, move, move + 2000, 0.05);
+    if (f) {
+      EXPECT_FALSE(f.message.empty());
+      EXPECT_FALSE(f.kind == Fault::Kind::NonFinite) << to_string(mm) << ": " << f.message;  // caught before NaN
+      std::printf("  %-12s crushed: fault after step %lld: %s\n", std::string(to_string(mm)).c_str(),
+                  static_cast<long long>(f.step),
+                  f.message.substr(0, 90).c_str());
+    } else {
+      EXPECT_NE(mm, MaterialModel::StVK) << "StVK crushed flat without a fault";
+      std::printf("  %-12s crushed: finite and bounded throughout\n", std::string(to_string(mm)).c_str());
+    }
+  }
+}
+
+// Two small spheres closing on one corner node of a block (its base held)
+// from opposite sides, past each other: the node is squeezed between them.
+TEST(ContactHardCases, TwoProxiesPinchOneNode) {
+  for (MaterialModel mm : kContactModels) {
+    ModelSpec spec = block_spec({4, 2, 4}, 5e4);
+    spec.materials[0].model = mm;
+    EssentialBc base;
+    base.name = "base";
+    base.where.kind = NodeSelector::Kind::Box;
+    base.where.hi = Vec3(0.04, 0.0, 0.04);
+    spec.essential = {base};
+    const Vec3 corner(0.04, 0.02, 0.04);
+    spec.proxies = {sphere_proxy("a", "left", corner + Vec3(-0.0031, 0.0, 0.0) + Vec3(0.0, 0.003, 0.0), 0.003),
+                    sphere_proxy("b", "right", corner + Vec3(0.0031, 0.0, 0.0), 0.003)};
+    const Fault f = run_hard_case(spec, {Vec3(0.1, -0.1, 0.0), Vec3(-0.1, 0.0, 0.0)}, 300, 1500, 0.05);
+    if (f) {
+      EXPECT_NE(f.kind, Fault::Kind::NonFinite) << to_string(mm) << ": " << f.message;
+    }
+  }
+}
+
+// A proxy that starts inside the body, then leaves it: no explosion, and
+// once it is out the block is free of it.
+TEST(ContactHardCases, ProxyStartingInsideTheBody) {
+  for (MaterialModel mm : kContactModels) {
+    ModelSpec spec = block_spec({8, 4, 8}, 5e4);
+    spec.materials[0].model = mm;
+    spec.proxies = {sphere_proxy("inside", "arm", Vec3(0.02, 0.015, 0.02), 0.006)};  // pokes out of the top
+    const Fault f = run_hard_case(spec, {Vec3(0.0, 0.5, 0.0)}, 600, 600, 0.05);
+    EXPECT_FALSE(f) << to_string(mm) << ": " << f.message;
+  }
 }
 
 }  // namespace
