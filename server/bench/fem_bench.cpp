@@ -6,7 +6,7 @@
 //   fem_bench            all tables, meshes up to 100 k tets (a minute or two)
 //   fem_bench --large    also 1 M and 2 M tets
 //   fem_bench --quick    small meshes and few repeats, for CI (seconds)
-//   fem_bench --only=T   one table: rates, threads, passes, effects, isas, precision
+//   fem_bench --only=T   one table: rates, threads, passes, effects, hand, isas, precision
 //
 // Times are wall-clock medians of repeated runs of many steps, so that other
 // processes on the machine shift them less than a mean would; rates are
@@ -265,6 +265,19 @@ void table_threads(const Options& opt) {
   if (std::thread::hardware_concurrency() < 2) std::printf("\n(this machine has one core: two threads share it)\n");
 }
 
+// A sphere of a fifth of the body's height sunk 1 mm into the middle of its top face.
+ProxySpec top_sphere(const TetMesh& mesh, double friction) {
+  const Aabb box = compute_aabb(mesh.X);
+  const double r = 0.2 * box.size().y;
+  ProxySpec p;
+  p.name = "sphere";
+  p.device = "arm";
+  p.geometry = ProxyGeometry{ProxyShape::Sphere, r, 0.0, Vec3(0.0)};
+  p.pose.position = Vec3(0.5 * (box.lo.x + box.hi.x), box.hi.y + r - 0.001, 0.5 * (box.lo.z + box.hi.z));
+  p.friction = friction;
+  return p;
+}
+
 // Scenes on a 4:1:1 beam that each add one effect to the bare step.
 struct Scene {
   const char* name;
@@ -308,6 +321,13 @@ std::vector<Scene> effect_scenes() {
          rate.rate = 0.2;  // [rad/s]
          bc.angle = rate;
          s.essential.push_back(bc);
+       }},
+      {"contact (sphere on the top)",
+       [](ModelSpec& s) { s.proxies = {top_sphere(s.mesh, 0.0)}; }},
+      {"contact + friction (mu 0.5)",
+       [](ModelSpec& s) {
+         s.proxies = {top_sphere(s.mesh, 0.5)};
+         s.effects.friction = true;
        }},
       {"all of the above",
        [clamp](ModelSpec& s) {
@@ -376,6 +396,71 @@ class PassClock final : public StepProbe {
   Clock::time_point t0_;
   double total_[kPassCount] = {};
 };
+
+// A hand of five proxies on the top face of a body: a palm (rounded box)
+// and four capsule fingers, each sunk 1 mm into it, on one device.
+void add_hand(ModelSpec& spec, double friction) {
+  const Aabb box = compute_aabb(spec.mesh.X);
+  const Vec3 c = 0.5 * (box.lo + box.hi);
+  const double w = box.size().x, top = box.hi.y;
+  HandSpec hand;
+  hand.name = "hand";
+  hand.device = "glove";
+  hand.pose.position = Vec3(c.x, top, c.z);
+  spec.hands = {hand};
+  ProxySpec palm;
+  palm.name = "palm";
+  palm.hand = "hand";
+  palm.geometry = ProxyGeometry{ProxyShape::Box, 0.01 * w, 0.0, Vec3(0.15 * w, 0.05 * w, 0.15 * w)};
+  palm.pose.position = Vec3(c.x - 0.15 * w, top + 0.06 * w - 0.001, c.z);
+  palm.friction = friction;
+  spec.proxies = {palm};
+  for (int k = 0; k < 4; ++k) {
+    ProxySpec finger;
+    finger.name = "finger" + std::to_string(k);
+    finger.hand = "hand";
+    finger.geometry = ProxyGeometry{ProxyShape::Capsule, 0.03 * w, 0.08 * w, Vec3(0.0)};
+    finger.pose.position = Vec3(c.x + 0.15 * w, top + 0.03 * w - 0.001, c.z + (k - 1.5) * 0.08 * w);
+    finger.friction = friction;
+    spec.proxies.push_back(finger);
+  }
+}
+
+template <class Real>
+void hand_rows(const Options& opt) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  const double size = opt.quick ? 5e3 : 1e4;
+  std::vector<std::unique_ptr<Run<Real>>> runs;
+  for (int variant = 0; variant < 3; ++variant) {
+    ModelSpec spec = make_spec(make_bench_box(size, 1, 0.1), MaterialModel::StVK, precision);
+    EssentialBc base;  // held, so that the hand does not push it away
+    base.name = "base";
+    base.where.kind = NodeSelector::Kind::Box;
+    base.where.hi = Vec3(0.1, 0.0, 0.1);
+    spec.essential = {base};
+    if (variant > 0) add_hand(spec, 0.5);
+    spec.effects.friction = variant == 2;
+    runs.push_back(std::make_unique<Run<Real>>(spec, nullptr, 0.1));
+  }
+  const std::vector<double> t = time_alternating<Real>({runs[0].get(), runs[1].get(), runs[2].get()}, opt);
+  const char* names[] = {"no proxies", "hand: contact", "hand: contact + friction"};
+  for (int v = 0; v < 3; ++v) {
+    int32_t contacts = 0;
+    for (const ProxyReport& r : runs[size_t(v)]->stepper.contact().reports()) contacts += r.contacts;
+    std::printf("| %-6s | %9d | %-24s | %11.0f | %+7.1f %% | %8d |\n", name_of(precision), runs[0]->model.n_tets,
+                names[v], t[size_t(v)] * 1e9, 100.0 * (t[size_t(v)] / t[0] - 1), contacts);
+  }
+}
+
+void table_hand(const Options& opt) {
+  std::printf("\n## Contact cost: a hand of five proxies (palm and four fingers) pressed into a swinging StVK body\n");
+  std::printf("(0.1 m cube, base held), one thread\n\n");
+  std::printf("(contacts: surface nodes inside the proxies at the end of the timed steps)\n\n");
+  std::printf("| real   |      tets | scene                    | ns per step | vs bare   | contacts |\n");
+  std::printf("|--------|-----------|--------------------------|-------------|-----------|----------|\n");
+  hand_rows<float>(opt);
+  hand_rows<double>(opt);
+}
 
 template <class Real>
 void pass_rows(const Options& opt, ThreadPool& pool) {
@@ -498,7 +583,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--large")) opt.large = true;
     else if (!std::strncmp(argv[i], "--only=", 7)) opt.only = argv[i] + 7;
     else {
-      std::fprintf(stderr, "usage: %s [--quick] [--large] [--only=rates|threads|passes|effects|isas|precision]\n",
+      std::fprintf(stderr, "usage: %s [--quick] [--large] [--only=rates|threads|passes|effects|hand|isas|precision]\n",
                    argv[0]);
       return 2;
     }
@@ -511,8 +596,8 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
 
   const std::pair<const char*, void (*)(const Options&)> tables[] = {
-      {"rates", table_rates},     {"threads", table_threads}, {"passes", table_passes},
-      {"effects", table_effects}, {"isas", table_isas},       {"precision", table_precision}};
+      {"rates", table_rates}, {"threads", table_threads}, {"passes", table_passes}, {"effects", table_effects},
+      {"hand", table_hand},   {"isas", table_isas},       {"precision", table_precision}};
   bool any = false;
   for (const auto& [name, table] : tables) {
     if (!opt.wants(name)) continue;

@@ -69,8 +69,11 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   const auto n = static_cast<int32_t>(surface_.size());
   for (int32_t b = 0; b < n; b += kClusterNodes) clusters_.push_back({b, std::min(n, b + kClusterNodes), {}, {}});
   x_prev_.assign(surface_.size(), Vec3(0.0));
+  x_now_.assign(surface_.size(), Vec3(0.0));
   f_prev_.assign(surface_.size(), Vec3(0.0));
   f_now_.assign(surface_.size(), Vec3(0.0));
+  touched_prev_.reserve(surface_.size());
+  touched_now_.reserve(surface_.size());
   memory_.assign(surface_.size(), Memory{});
 }
 
@@ -107,6 +110,9 @@ void Contact<Real>::start(const State<Real>& s) {
     x_prev_[k] = model_.mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
   }
   std::fill(f_prev_.begin(), f_prev_.end(), Vec3(0.0));
+  std::fill(f_now_.begin(), f_now_.end(), Vec3(0.0));
+  touched_prev_.clear();
+  touched_now_.clear();
   std::fill(memory_.begin(), memory_.end(), Memory{});
   for (Fit& f : fit_) f = Fit{};
   for (ProxyReport& r : reports_) r = ProxyReport{};
@@ -127,14 +133,14 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     d.contacts = 0;
     d.stiffness = glm::dmat3(0.0);
   }
-  std::fill(f_now_.begin(), f_now_.end(), Vec3(0.0));
 
-  // Boxes around each cluster's motion over the step: x_prev to x_{n+1}.
+  // Positions at t_{n+1}, and boxes around each cluster's motion over the step.
   for (Cluster& c : clusters_) {
     Vec3 clo(std::numeric_limits<double>::infinity()), chi(-std::numeric_limits<double>::infinity());
     for (int32_t k = c.begin; k < c.end; ++k) {
       const size_t i = size_t(surface_[size_t(k)]);
       const Vec3 x = model_.mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
+      x_now_[size_t(k)] = x;
       clo = glm::min(clo, glm::min(x, x_prev_[size_t(k)]));
       chi = glm::max(chi, glm::max(x, x_prev_[size_t(k)]));
     }
@@ -146,25 +152,44 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   for (size_t j = 0; j < n_proxies; ++j) {
     pose0_[j] = motion_[j].at(t0);
     pose1_[j] = motion_[j].at(t1);
-    const double r = bounding_radius(model_.proxies[j].geometry);
-    lo_[j] = glm::min(pose0_[j].position, pose1_[j].position) - Vec3(r);
-    hi_[j] = glm::max(pose0_[j].position, pose1_[j].position) + Vec3(r);
+    const Aabb b0 = world_bounds(model_.proxies[j].geometry, pose0_[j]);
+    const Aabb b1 = world_bounds(model_.proxies[j].geometry, pose1_[j]);
+    lo_[j] = glm::min(b0.lo, b1.lo);
+    hi_[j] = glm::max(b0.hi, b1.hi);
   }
   for (const Cluster& c : clusters_)
     for (size_t j = 0; j < n_proxies; ++j) {
       if (!boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
-      for (int32_t k = c.begin; k < c.end; ++k) contact_node(s, k, int32_t(j), pose0_[j], pose1_[j], dt, sums);
+      for (int32_t k = c.begin; k < c.end; ++k) {
+        // The node's own path over the step against the proxy's swept box.
+        const Vec3& x = x_now_[size_t(k)];
+        const Vec3& xp = x_prev_[size_t(k)];
+        if (!boxes_meet(glm::min(x, xp), glm::max(x, xp), lo_[j], hi_[j])) {
+          Memory& mem = memory_[size_t(k)];
+          if (mem.proxy == int32_t(j)) mem.proxy = -1;
+          continue;
+        }
+        contact_node(s, k, int32_t(j), pose0_[j], pose1_[j], dt, sums);
+      }
     }
 
   // Work of the contact forces on the body (trapezoid, as for the loads) and
   // by each proxy; then this step's positions and forces become the previous.
-  for (size_t k = 0; k < surface_.size(); ++k) {
-    const size_t i = size_t(surface_[k]);
-    const Vec3 x = model_.mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
-    if (f_prev_[k] != Vec3(0.0) || f_now_[k] != Vec3(0.0)) sums.work += 0.5 * glm::dot(f_prev_[k] + f_now_[k], x - x_prev_[k]);
-    x_prev_[k] = x;
-    f_prev_[k] = f_now_[k];
+  // Only the nodes pushed in this step or the one before carry a force.
+  for (int32_t k : touched_now_)
+    sums.work += 0.5 * glm::dot(f_prev_[size_t(k)] + f_now_[size_t(k)], x_now_[size_t(k)] - x_prev_[size_t(k)]);
+  for (int32_t k : touched_prev_) {
+    if (f_now_[size_t(k)] != Vec3(0.0)) continue;  // counted above
+    sums.work += 0.5 * glm::dot(f_prev_[size_t(k)], x_now_[size_t(k)] - x_prev_[size_t(k)]);
   }
+  for (int32_t k : touched_prev_) f_prev_[size_t(k)] = Vec3(0.0);
+  for (int32_t k : touched_now_) {
+    f_prev_[size_t(k)] = f_now_[size_t(k)];
+    f_now_[size_t(k)] = Vec3(0.0);
+  }
+  touched_prev_.swap(touched_now_);
+  touched_now_.clear();
+  x_prev_.swap(x_now_);
   for (size_t j = 0; j < n_proxies; ++j) {
     if (reports_[j].contacts > 0) update_stiffness(int32_t(j), motion_[j].at(t1).position, reports_[j].force);
     else {
@@ -201,7 +226,7 @@ void Contact<Real>::contact_node(State<Real>& s, int32_t k, int32_t proxy, const
   const ProxyGeometry& g = spec.geometry;
   const size_t i = size_t(surface_[size_t(k)]);
   Memory& mem = memory_[size_t(k)];
-  const Vec3 x1 = model_.mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
+  const Vec3 x1 = x_now_[size_t(k)];
   const Vec3 q1 = p1.to_local(x1);
   const SurfacePoint at1 = locate(g, q1);
   if (at1.phi > 0) {
@@ -256,6 +281,7 @@ void Contact<Real>::contact_node(State<Real>& s, int32_t k, int32_t proxy, const
   }
   sums.mv2_delta += m * (glm::dot(v_new, v_new) - glm::dot(v, v));
   sums.ma2_delta += m * (glm::dot(a_new, a_new) - glm::dot(a, a));
+  if (f_now_[size_t(k)] == Vec3(0.0)) touched_now_.push_back(k);  // (reserved: never allocates)
   f_now_[size_t(k)] += fc;
   ProxyReport& r = reports_[size_t(proxy)];
   r.force -= fc;

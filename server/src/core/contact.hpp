@@ -122,8 +122,10 @@ class Contact {
   std::vector<int32_t> surface_;  // surface nodes not under an essential BC, in Morton order
   std::vector<Cluster> clusters_;
   std::vector<Vec3> x_prev_;      // world position at t_n per surface node [m]
+  std::vector<Vec3> x_now_;       // and at t_{n+1}
   std::vector<Vec3> f_prev_;      // contact force on the node over the previous step [N]
   std::vector<Vec3> f_now_;       // and over this one
+  std::vector<int32_t> touched_prev_, touched_now_;  // surface indices with a force in those steps
   std::vector<Memory> memory_;
   std::vector<Pose> pose0_, pose1_;  // per proxy at t_n and t_{n+1}
   std::vector<Vec3> lo_, hi_;        // per proxy: box its bounding sphere sweeps over the step

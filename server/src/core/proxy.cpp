@@ -5,6 +5,8 @@
 #include <limits>
 
 #include <glm/geometric.hpp>
+#include <glm/gtc/quaternion.hpp>
+#include <glm/mat3x3.hpp>
 
 namespace tactile {
 
@@ -77,6 +79,23 @@ double bounding_radius(const ProxyGeometry& g) {
     case ProxyShape::Plane: return std::numeric_limits<double>::infinity();
   }
   return 0.0;
+}
+
+Aabb world_bounds(const ProxyGeometry& g, const Pose& pose) {
+  const double inf = std::numeric_limits<double>::infinity();
+  Vec3 half(0.0);  // half-size of the box around the core shape, before adding the radius
+  switch (g.shape) {
+    case ProxyShape::Sphere: break;
+    case ProxyShape::Capsule: half = glm::abs(pose.orientation * Vec3(g.half_length, 0.0, 0.0)); break;
+    case ProxyShape::Box: {
+      const glm::dmat3 R = glm::mat3_cast(pose.orientation);
+      for (int c = 0; c < 3; ++c) half += glm::abs(R[c]) * g.half_extents[c];  // R[c]: column c, local axis c
+      break;
+    }
+    case ProxyShape::Plane: return {Vec3(-inf), Vec3(inf)};
+  }
+  const Vec3 r = half + Vec3(g.radius);
+  return {pose.position - r, pose.position + r};
 }
 
 Pose ProxyMotion::at(double t) const {

@@ -48,6 +48,10 @@ double trust_depth(const ProxyGeometry& g);
 // Bounding radius about the proxy origin [m]; infinite for a plane.
 double bounding_radius(const ProxyGeometry& g);
 
+struct Pose;
+// World-space box around the shape at a pose; infinite for a plane.
+Aabb world_bounds(const ProxyGeometry& g, const Pose& pose);
+
 struct Pose {
   Vec3 position{0.0};
   Quat orientation{1.0, 0.0, 0.0, 0.0};  // (w, x, y, z)
