@@ -431,7 +431,7 @@ void hand_rows(const Options& opt) {
   const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
   const double size = opt.quick ? 5e3 : 1e4;
   std::vector<std::unique_ptr<Run<Real>>> runs;
-  for (int variant = 0; variant < 3; ++variant) {
+  for (int variant = 0; variant < 4; ++variant) {
     ModelSpec spec = make_spec(make_bench_box(size, 1, 0.1), MaterialModel::StVK, precision);
     EssentialBc base;  // held, so that the hand does not push it away
     base.name = "base";
@@ -439,12 +439,17 @@ void hand_rows(const Options& opt) {
     base.where.hi = Vec3(0.1, 0.0, 0.1);
     spec.essential = {base};
     if (variant > 0) add_hand(spec, 0.5);
-    spec.effects.friction = variant == 2;
+    if (variant == 3)  // lifted 1 m clear of the body: the broad phase alone
+      for (HandSpec& h : spec.hands) h.pose.position.y += 1.0;
+    if (variant == 3)
+      for (ProxySpec& p : spec.proxies) p.pose.position.y += 1.0;
+    spec.effects.friction = variant >= 2;
     runs.push_back(std::make_unique<Run<Real>>(spec, nullptr, 0.1));
   }
-  const std::vector<double> t = time_alternating<Real>({runs[0].get(), runs[1].get(), runs[2].get()}, opt);
-  const char* names[] = {"no proxies", "hand: contact", "hand: contact + friction"};
-  for (int v = 0; v < 3; ++v) {
+  const std::vector<double> t =
+      time_alternating<Real>({runs[0].get(), runs[1].get(), runs[2].get(), runs[3].get()}, opt);
+  const char* names[] = {"no proxies", "hand: contact", "hand: contact + friction", "hand 1 m away"};
+  for (int v = 0; v < 4; ++v) {
     int32_t contacts = 0;
     for (const ProxyReport& r : runs[size_t(v)]->stepper.contact().reports()) contacts += r.contacts;
     std::printf("| %-6s | %9d | %-24s | %11.0f | %+7.1f %% | %8d |\n", name_of(precision), runs[0]->model.n_tets,

@@ -100,12 +100,14 @@ void append_number(std::string& csv, double x) {
   csv += buf;
 }
 
-// Removes the frames and collection an earlier run left in `dir`, so the folder holds one run.
+// Removes the frames, collection and force traces an earlier run left in `dir`, so the folder holds one run.
 void clear_old_output(const fs::path& dir) {
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
     const std::string name = entry.path().filename().string();
-    if ((name.starts_with("frame_") && name.ends_with(".vtu")) || name == "series.pvd") fs::remove(entry.path(), ec);
+    if ((name.starts_with("frame_") && name.ends_with(".vtu")) || name == "series.pvd" || name == "forces.csv" ||
+        name == "devices.csv")
+      fs::remove(entry.path(), ec);
   }
 }
 
@@ -128,6 +130,12 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   const RunSettings& run = scene.run;
   const int32_t n_frames = int32_t(std::max<int64_t>(1, std::llround(run.duration * run.frame_rate)));
   const double frame_dt = run.duration / double(n_frames);
+
+  // Control intervals: a whole number per frame, none longer than options.control_interval.
+  const bool has_proxies = !sim.proxies().empty();
+  const int32_t per_frame =
+      has_proxies ? int32_t(std::max(1.0, std::ceil(frame_dt / options.control_interval * (1.0 - 1e-12)))) : 1;
+  const double interval = frame_dt / double(per_frame);
 
   std::vector<SectionCut> cuts;
   for (const SectionPlane& p : run.sections) cuts.push_back(make_section_cut(mesh, p));
@@ -183,13 +191,80 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
                  << ", " << n_frames << " frames of " << frame_dt << " s, critical step at rest " << sim.dt_rest()
                  << " s, " << sim.parts() << " thread(s)\n";
 
+  // forces.csv and devices.csv: one row per proxy (device) per control interval.
+  std::string forces = "t_s,proxy,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts,px_m,py_m,pz_m\n";
+  std::string devices = "t_s,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts\n";
+  const std::vector<ProxySpec>& proxies = sim.proxies();
+  for (size_t j = 0; j < proxies.size(); ++j)
+    result.proxies.push_back({proxies[j].name, proxies[j].device, {}, {}, 0, sim.proxy_pose(int32_t(j)).position, 0});
+  for (const std::string& d : sim.devices()) result.devices.push_back({d, d, {}, {}, 0, {}, 0});
+  auto mean = [](const Vec3& impulse, double elapsed) { return elapsed > 0 ? impulse / elapsed : Vec3(0.0); };
+
+  // Before an interval: scripted proxies and hands move over it; the others hold.
+  auto drive = [&](double t0, double t1) {
+    for (size_t j = 0; j < scene.proxy_script.size(); ++j)
+      if (scene.proxy_script[j]) sim.set_proxy_motion(int32_t(j), scene.proxy_script[j]->motion(t0, t1));
+    for (size_t h = 0; h < scene.hand_script.size(); ++h)
+      if (scene.hand_script[h]) sim.set_hand_motion(int32_t(h), scene.hand_script[h]->motion(t0, t1));
+    sim.clear_impulses();
+  };
+  // After it: the mean force and torque over it, the contacts and positions at its end.
+  auto record_contacts = [&]() {
+    const double t = sim.time();
+    const std::vector<ProxyReport>& pr = sim.proxy_reports();
+    for (size_t j = 0; j < pr.size(); ++j) {
+      ContactResult& c = result.proxies[j];
+      c.force = mean(pr[j].impulse, pr[j].elapsed);
+      c.torque = mean(pr[j].angular_impulse, pr[j].elapsed);
+      c.contacts = pr[j].contacts;
+      c.position = sim.proxy_pose(int32_t(j)).position;
+      c.peak_force = std::max(c.peak_force, glm::length(c.force));
+      std::snprintf(buf, sizeof buf, "%.9g", t);
+      forces += buf;
+      forces.append(",").append(c.name).append(",").append(c.device);
+      for (double x : {c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z}) append_number(forces, x);
+      forces.append(",").append(std::to_string(c.contacts));
+      for (double x : {c.position.x, c.position.y, c.position.z}) append_number(forces, x);
+      forces += '\n';
+    }
+    const std::vector<DeviceReport>& dr = sim.device_reports();
+    for (size_t d = 0; d < dr.size(); ++d) {
+      ContactResult& c = result.devices[d];
+      c.force = mean(dr[d].impulse, dr[d].elapsed);
+      c.torque = mean(dr[d].angular_impulse, dr[d].elapsed);
+      c.contacts = dr[d].contacts;
+      c.peak_force = std::max(c.peak_force, glm::length(c.force));
+      std::snprintf(buf, sizeof buf, "%.9g", t);
+      devices += buf;
+      devices.append(",").append(c.name);
+      for (double x : {c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z}) append_number(devices, x);
+      devices.append(",").append(std::to_string(c.contacts)).append("\n");
+    }
+  };
+
   record(0, nullptr, options.write_vtu);
   ProgressBar bar(stderr, options.progress,
                   scene.name + (scene.variant.empty() ? "" : "/" + scene.variant));
   double wall = 0;
   for (int32_t frame = 1; frame <= n_frames; ++frame) {
     const Clock::time_point t0 = Clock::now();
-    const AdvanceReport report = sim.advance(frame_dt);
+    AdvanceReport report;
+    if (!has_proxies) {
+      report = sim.advance(frame_dt);
+    } else {
+      // The frame's control intervals, summed into one report.
+      for (int32_t k = 0; k < per_frame && !report.fault; ++k) {
+        const double t_start = sim.time();
+        drive(t_start, t_start + interval);
+        const AdvanceReport r = sim.advance(interval);
+        record_contacts();
+        report.substeps += r.substeps;
+        report.dt = r.dt > 0 ? r.dt : report.dt;
+        report.dt_critical = r.dt_critical;
+        report.subdivided = report.subdivided || r.subdivided;
+        report.fault = r.fault;
+      }
+    }
     const double dt_wall = std::chrono::duration<double>(Clock::now() - t0).count();
     wall += dt_wall;
     frame_wall.add(dt_wall);
@@ -220,6 +295,10 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
 
   if (options.write_vtu) write_pvd((dir / "series.pvd").string(), pvd);
   write_text(dir / "frames.csv", csv);
+  if (has_proxies) {
+    write_text(dir / "forces.csv", forces);
+    write_text(dir / "devices.csv", devices);
+  }
 
   // summary.json
   Json s;
@@ -241,7 +320,8 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   s["materials"] = materials;
   const Effects& fx = scene.spec.effects;
   s["effects"] = Json{{"gravity", fx.gravity ? vec(fx.g) : Json(false)},
-                      {"damping_alpha_per_s", fx.damping ? Json(fx.alpha) : Json(false)}};
+                      {"damping_alpha_per_s", fx.damping ? Json(fx.alpha) : Json(false)},
+                      {"friction", fx.friction}};
   const IntegratorSpec& in = scene.spec.integrator;
   s["integrator"] = Json{{"precision", precision_name(in.precision)},
                          {"dt", in.dt > 0 ? Json(in.dt) : Json("auto")},
@@ -262,6 +342,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
                   {"frames_done", result.frames},
                   {"steps", result.steps},
                   {"t_end_s", result.t},
+                  {"control_interval_s", has_proxies ? Json(interval) : Json(nullptr)},
                   {"vtu", options.write_vtu},
                   {"vtu_files", pvd.size()}};
   s["frames"] = Json{{"wall_s", frame_wall.to_json()}, {"max_displacement_m", max_u.to_json()},
@@ -276,6 +357,30 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
     sections.push_back(Json{{"name", r.name}, {"rest_area_m2", r.rest_area}, {"area_m2", r.area},
                             {"ratio", r.area / r.rest_area}});
   s["sections"] = sections;
+  // Proxies and devices: means over the last control interval.
+  Json proxies_json = Json::array();
+  for (size_t j = 0; j < result.proxies.size(); ++j) {
+    const ContactResult& c = result.proxies[j];
+    const Pose pose = sim.proxy_pose(int32_t(j));
+    proxies_json.push_back(Json{{"name", c.name},
+                                {"device", c.device},
+                                {"hand", proxies[j].hand.empty() ? Json(nullptr) : Json(proxies[j].hand)},
+                                {"shape", to_string(proxies[j].geometry.shape)},
+                                {"scripted", j < scene.proxy_script.size() && scene.proxy_script[j].has_value()},
+                                {"force_N", vec(c.force)},
+                                {"torque_Nm", vec(c.torque)},
+                                {"contacts", c.contacts},
+                                {"peak_force_N", c.peak_force},
+                                {"position_m", vec(c.position)},
+                                {"orientation_wxyz", Json::array({pose.orientation.w, pose.orientation.x,
+                                                                  pose.orientation.y, pose.orientation.z})}});
+  }
+  s["proxies"] = proxies_json;
+  Json devices_json = Json::array();
+  for (const ContactResult& c : result.devices)
+    devices_json.push_back(Json{{"name", c.name}, {"force_N", vec(c.force)}, {"torque_Nm", vec(c.torque)},
+                                {"contacts", c.contacts}, {"peak_force_N", c.peak_force}});
+  s["devices"] = devices_json;
   s["energy"] = energy_json(result.energy);
   const double scale = std::max({std::fabs(result.energy.kinetic) + std::fabs(result.energy.elastic) +
                                      std::fabs(result.energy.gravity) + std::fabs(result.energy.work_loads) +
@@ -305,13 +410,16 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
                  << " M tet-steps/s)\n";
     for (const TrackedResult& t : result.tracked)
       *options.log << "  " << t.name << ": displacement [" << t.u.x << ", " << t.u.y << ", " << t.u.z << "] m\n";
+    for (const ContactResult& c : result.proxies)
+      *options.log << "  proxy " << c.name << " (" << c.device << "): force [" << c.force.x << ", " << c.force.y << ", "
+                   << c.force.z << "] N, " << c.contacts << " contacts, peak " << c.peak_force << " N\n";
     for (const SectionResult& r : result.sections)
       *options.log << "  section " << r.name << ": area " << r.area << " m^2 (" << 100.0 * r.area / r.rest_area
                    << " % of rest)\n";
     if (result.fault)
       *options.log << "  fault (" << to_string(result.fault.kind) << ") at t = " << result.fault.t
                    << " s: " << result.fault.message << "\n";
-    *options.log << "  wrote " << dir.string() << "/ (summary.json, frames.csv"
+    *options.log << "  wrote " << dir.string() << "/ (summary.json, frames.csv" << (has_proxies ? ", forces.csv, devices.csv" : "")
                  << (options.write_vtu ? ", series.pvd and " + std::to_string(pvd.size()) + " VTU files" : "")
                  << ")\n";
   }

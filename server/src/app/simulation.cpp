@@ -32,6 +32,16 @@ struct Simulation::Engine {
   virtual void copy_displacement(std::vector<double>& u) const = 0;
   virtual void copy_velocity(std::vector<double>& v) const = 0;
   virtual Vec3 displacement(int32_t node) const = 0;
+  virtual const std::vector<ProxySpec>& proxies() const = 0;
+  virtual const std::vector<HandSpec>& hands() const = 0;
+  virtual const std::vector<std::string>& devices() const = 0;
+  virtual const std::vector<int32_t>& proxy_device() const = 0;
+  virtual void set_proxy_motion(int32_t proxy, const ProxyMotion& m) = 0;
+  virtual void set_hand_motion(int32_t hand, const ProxyMotion& m) = 0;
+  virtual Pose proxy_pose(int32_t proxy) const = 0;
+  virtual const std::vector<ProxyReport>& proxy_reports() const = 0;
+  virtual const std::vector<DeviceReport>& device_reports() const = 0;
+  virtual void clear_impulses() = 0;
   virtual const Fault& fault() const = 0;
   virtual void set_probe(StepProbe* probe) = 0;
 };
@@ -66,6 +76,16 @@ class EngineOf final : public Simulation::Engine {
     const size_t j = 3 * size_t(node);
     return {double(state_.u[j]), double(state_.u[j + 1]), double(state_.u[j + 2])};
   }
+  const std::vector<ProxySpec>& proxies() const override { return model_->proxies; }
+  const std::vector<HandSpec>& hands() const override { return model_->hands; }
+  const std::vector<std::string>& devices() const override { return model_->devices; }
+  const std::vector<int32_t>& proxy_device() const override { return model_->proxy_device; }
+  void set_proxy_motion(int32_t proxy, const ProxyMotion& m) override { stepper_.contact().set_motion(proxy, m); }
+  void set_hand_motion(int32_t hand, const ProxyMotion& m) override { stepper_.contact().set_hand_motion(hand, m); }
+  Pose proxy_pose(int32_t proxy) const override { return stepper_.contact().motion(proxy).at(state_.t); }
+  const std::vector<ProxyReport>& proxy_reports() const override { return stepper_.contact().reports(); }
+  const std::vector<DeviceReport>& device_reports() const override { return stepper_.contact().device_reports(); }
+  void clear_impulses() override { stepper_.contact().clear_impulses(); }
   const Fault& fault() const override { return stepper_.fault(); }
   void set_probe(StepProbe* probe) override { stepper_.set_probe(probe); }
 
@@ -116,6 +136,16 @@ void Simulation::copy_positions(std::vector<double>& x) const {
 void Simulation::copy_displacement(std::vector<double>& u) const { engine_->copy_displacement(u); }
 void Simulation::copy_velocity(std::vector<double>& v) const { engine_->copy_velocity(v); }
 Vec3 Simulation::displacement(int32_t node) const { return engine_->displacement(node); }
+const std::vector<ProxySpec>& Simulation::proxies() const { return engine_->proxies(); }
+const std::vector<HandSpec>& Simulation::hands() const { return engine_->hands(); }
+const std::vector<std::string>& Simulation::devices() const { return engine_->devices(); }
+const std::vector<int32_t>& Simulation::proxy_device() const { return engine_->proxy_device(); }
+void Simulation::set_proxy_motion(int32_t proxy, const ProxyMotion& m) { engine_->set_proxy_motion(proxy, m); }
+void Simulation::set_hand_motion(int32_t hand, const ProxyMotion& m) { engine_->set_hand_motion(hand, m); }
+Pose Simulation::proxy_pose(int32_t proxy) const { return engine_->proxy_pose(proxy); }
+const std::vector<ProxyReport>& Simulation::proxy_reports() const { return engine_->proxy_reports(); }
+const std::vector<DeviceReport>& Simulation::device_reports() const { return engine_->device_reports(); }
+void Simulation::clear_impulses() { engine_->clear_impulses(); }
 const Fault& Simulation::fault() const { return engine_->fault(); }
 void Simulation::set_probe(StepProbe* probe) { engine_->set_probe(probe); }
 

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "core/spec.hpp"
@@ -49,6 +50,22 @@ class Simulation {
   void copy_displacement(std::vector<double>& u) const;  // [m] (n_nodes x 3)
   void copy_velocity(std::vector<double>& v) const;      // [m/s] (n_nodes x 3)
   Vec3 displacement(int32_t node) const;                 // [m]
+
+  // Rigid proxies (core/contact.hpp) as the model holds them: a hand's
+  // proxies carry the hand's device.
+  const std::vector<ProxySpec>& proxies() const;     // (n_proxies)
+  const std::vector<HandSpec>& hands() const;        // (n_hands)
+  const std::vector<std::string>& devices() const;   // device channels, in order of first use (n_devices)
+  const std::vector<int32_t>& proxy_device() const;  // index into devices() per proxy (n_proxies)
+  // Motion over the coming steps of one proxy (alone) or of a hand (with its proxies).
+  void set_proxy_motion(int32_t proxy, const ProxyMotion& m);
+  void set_hand_motion(int32_t hand, const ProxyMotion& m);
+  Pose proxy_pose(int32_t proxy) const;  // at time(), world
+  // What each proxy and each device channel felt in the latest step, with
+  // impulse sums since clear_impulses() (mean force = impulse / elapsed).
+  const std::vector<ProxyReport>& proxy_reports() const;    // (n_proxies)
+  const std::vector<DeviceReport>& device_reports() const;  // (n_devices)
+  void clear_impulses();
 
   const Fault& fault() const;
   void set_probe(StepProbe* probe);

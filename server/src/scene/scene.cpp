@@ -182,9 +182,186 @@ NaturalLoad read_load(const Json& j, const std::string& path, const Origin& o, c
   return load;
 }
 
+// An identifier that goes into CSV files and summaries as it is: a proxy,
+// hand or device channel name.
+std::string read_label(const Json& v, const std::string& path, const Origin& o) {
+  const std::string s = scene_json::read_string(v, path, o);
+  bool ok = !s.empty() && s.size() <= 64 && s[0] != '.' && s[0] != '-';
+  for (char c : s) ok = ok && (std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.');
+  if (!ok)
+    o.fail(path, "must be 1 to 64 letters, digits, '_', '-' or '.', not starting with '.' or '-', got " +
+                     scene_json::describe(v));
+  return s;
+}
+
+// [w, x, y, z], nonzero; normalised.
+Quat read_quaternion(const Json& v, const std::string& path, const Origin& o) {
+  if (!v.is_array() || v.size() != 4)
+    o.fail(path, "must be a quaternion [w, x, y, z] (4 numbers), got " + scene_json::describe(v));
+  double q[4];
+  for (size_t i = 0; i < 4; ++i) q[i] = scene_json::read_number(v[i], join(path, i), o);
+  const double len = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  if (!(len > 0)) o.fail(path, "must be a nonzero quaternion [w, x, y, z], got [0, 0, 0, 0]");
+  return Quat(q[0] / len, q[1] / len, q[2] / len, q[3] / len);
+}
+
+// Whether two unit quaternions are one rotation (q and -q are).
+bool same_rotation(const Quat& a, const Quat& b) { return std::fabs(glm::dot(a, b)) > 1.0 - 1e-12; }
+
+// {"easing", "keyframes": [{"t", "position", "orientation"}]}. A keyframe
+// without an orientation keeps the one before it (the first: `orientation`).
+PoseScript read_script(const Json& j, const std::string& path, const Origin& o, const Quat& orientation) {
+  const Fields f(j, path, o, {"easing", "keyframes"});
+  PoseScript script;
+  if (const Json* e = f.find("easing"))
+    script.easing = scene_json::read_choice(*e, f.path("easing"), o, {"smooth", "linear"}) == "linear"
+                        ? PoseScript::Easing::Linear
+                        : PoseScript::Easing::Smooth;
+  const Json& keys = scene_json::read_array(f.at("keyframes"), f.path("keyframes"), o, 1);
+  Quat previous = orientation;
+  for (size_t i = 0; i < keys.size(); ++i) {
+    const std::string kpath = join(f.path("keyframes"), i);
+    const Fields k(keys[i], kpath, o, {"t", "position", "orientation"});
+    PoseScript::Keyframe key;
+    key.t = k.non_negative("t");
+    if (i > 0 && !(key.t > script.keys.back().t)) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "must be greater than the previous keyframe's (%g s), got %g", script.keys.back().t,
+                    key.t);
+      o.fail(k.path("t"), buf);
+    }
+    key.pose.position = k.vec3("position");
+    key.pose.orientation = k.has("orientation") ? read_quaternion(k.at("orientation"), k.path("orientation"), o) : previous;
+    previous = key.pose.orientation;
+    script.keys.push_back(key);
+  }
+  return script;
+}
+
+// The pose at t = 0 of a proxy or hand: "position" and "orientation", or,
+// with a "script", the script's (which they may repeat but not contradict).
+Pose read_start_pose(const Fields& f, const Origin& o, std::optional<PoseScript>& script) {
+  Pose pose;
+  if (f.has("orientation")) pose.orientation = read_quaternion(f.at("orientation"), f.path("orientation"), o);
+  if (!f.has("script")) {
+    pose.position = f.vec3("position");
+    return pose;
+  }
+  script = read_script(f.at("script"), f.path("script"), o, pose.orientation);
+  const Pose start = script->at(0.0);
+  if (f.has("position") && glm::length(f.vec3("position") - start.position) > 1e-9)
+    o.fail(f.path("position"), "differs from where the script starts, " + format_vec(start.position) +
+                                   "; leave it out or make them agree");
+  if (f.has("orientation") && !same_rotation(pose.orientation, start.orientation))
+    o.fail(f.path("orientation"), "differs from the script's orientation at t = 0; leave it out or make them agree");
+  return start;
+}
+
+void read_hands(const Json& j, const Origin& o, Scene& scene) {
+  const Json& arr = scene_json::read_array(j, "hands", o, 0);
+  for (size_t i = 0; i < arr.size(); ++i) {
+    const std::string path = join("hands", i);
+    const Fields f(arr[i], path, o, {"name", "device", "position", "orientation", "script"});
+    HandSpec hand;
+    hand.name = read_label(f.at("name"), f.path("name"), o);
+    for (const HandSpec& h : scene.spec.hands)
+      if (h.name == hand.name) o.fail(f.path("name"), "'" + hand.name + "' names two hands");
+    hand.device = read_label(f.at("device"), f.path("device"), o);
+    std::optional<PoseScript> script;
+    hand.pose = read_start_pose(f, o, script);
+    scene.spec.hands.push_back(hand);
+    scene.hand_script.push_back(std::move(script));
+  }
+}
+
+// Shape fields: what each shape needs, and nothing it does not use.
+void read_geometry(const Fields& f, const Origin& o, ProxyGeometry& g) {
+  const std::string shape = scene_json::read_choice(f.at("shape"), f.path("shape"), o, {"sphere", "capsule", "box", "plane"});
+  auto refuse = [&](const char* key, const char* used_by) {
+    if (f.has(key)) o.fail(f.path(key), std::string("is for ") + used_by + " only (shape is \"" + shape + "\")");
+  };
+  if (shape == "sphere") {
+    g.shape = ProxyShape::Sphere;
+    g.radius = f.positive("radius");
+    refuse("half_length", "a capsule");
+    refuse("half_extents", "a box");
+  } else if (shape == "capsule") {
+    g.shape = ProxyShape::Capsule;
+    g.radius = f.positive("radius");
+    g.half_length = f.positive("half_length");
+    refuse("half_extents", "a box");
+  } else if (shape == "box") {
+    g.shape = ProxyShape::Box;
+    g.half_extents = f.vec3("half_extents");
+    for (int d = 0; d < 3; ++d)
+      if (!(g.half_extents[d] > 0))
+        o.fail(join(f.path("half_extents"), size_t(d)), "must be a number > 0, got " + scene_json::describe(f.at("half_extents")[size_t(d)]));
+    g.radius = f.non_negative_or("radius", 0.0);
+    refuse("half_length", "a capsule");
+  } else {
+    g.shape = ProxyShape::Plane;
+    refuse("radius", "a sphere, capsule or box");
+    refuse("half_length", "a capsule");
+    refuse("half_extents", "a box");
+  }
+}
+
+void read_proxies(const Json& j, const Origin& o, Scene& scene) {
+  const Json& arr = scene_json::read_array(j, "proxies", o, 0);
+  for (size_t i = 0; i < arr.size(); ++i) {
+    const std::string path = join("proxies", i);
+    const Fields f(arr[i], path, o,
+                   {"name", "device", "hand", "shape", "radius", "half_length", "half_extents", "position",
+                    "orientation", "friction", "script"});
+    ProxySpec proxy;
+    proxy.name = read_label(f.at("name"), f.path("name"), o);
+    for (const ProxySpec& p : scene.spec.proxies)
+      if (p.name == proxy.name) o.fail(f.path("name"), "'" + proxy.name + "' names two proxies");
+    read_geometry(f, o, proxy.geometry);
+    proxy.friction = f.non_negative_or("friction", 0.0);
+    if (f.has("hand")) {
+      proxy.hand = read_label(f.at("hand"), f.path("hand"), o);
+      const auto hand = std::find_if(scene.spec.hands.begin(), scene.spec.hands.end(),
+                                     [&](const HandSpec& h) { return h.name == proxy.hand; });
+      if (hand == scene.spec.hands.end()) {
+        std::string names;
+        for (const HandSpec& h : scene.spec.hands) names += (names.empty() ? "'" : ", '") + h.name + "'";
+        o.fail(f.path("hand"), "'" + proxy.hand + "' is not among the hands (" +
+                                   (names.empty() ? std::string("the scene has none") : "they are " + names) + ")");
+      }
+      if (f.has("device")) {
+        const std::string device = read_label(f.at("device"), f.path("device"), o);
+        if (device != hand->device)
+          o.fail(f.path("device"), "'" + device + "' differs from the device of hand '" + hand->name + "' ('" +
+                                       hand->device + "'); a hand's proxies go to its device (leave this out)");
+      }
+      if (f.has("script"))
+        o.fail(f.path("script"), "a proxy in a hand moves with it; give the script to hand '" + hand->name + "'");
+      // The core fills the device in from the hand; the spec keeps it empty.
+    } else {
+      if (!f.has("device"))
+        o.fail(f.path("device"), "required field missing (the device channel that drives the proxy; or give a \"hand\")");
+      proxy.device = read_label(f.at("device"), f.path("device"), o);
+    }
+    std::optional<PoseScript> script;
+    proxy.pose = read_start_pose(f, o, script);
+    scene.spec.proxies.push_back(proxy);
+    scene.proxy_script.push_back(std::move(script));
+  }
+  for (size_t h = 0; h < scene.spec.hands.size(); ++h) {
+    const std::string& name = scene.spec.hands[h].name;
+    if (std::none_of(scene.spec.proxies.begin(), scene.spec.proxies.end(), [&](const ProxySpec& p) { return p.hand == name; }))
+      o.fail(join("hands", h), "no proxy belongs to hand '" + name + "' (give proxies \"hand\": \"" + name + "\")");
+  }
+}
+
 Effects read_effects(const Json& j, const Origin& o) {
-  const Fields f(j, "effects", o, {"gravity", "damping"});
+  const Fields f(j, "effects", o, {"gravity", "damping", "friction"});
   Effects e;
+  if (const Json* fr = f.find("friction")) {
+    if (!fr->is_boolean()) o.fail(f.path("friction"), "must be true or false, got " + scene_json::describe(*fr));
+    e.friction = fr->get<bool>();
+  }
   if (const Json* g = f.find("gravity")) {
     if (g->is_boolean() && !g->get<bool>()) {
       e.gravity = false;
@@ -334,7 +511,7 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   const Origin& o = ctx.origin;
   const Fields root(j, "", o,
                     {"$schema", "name", "description", "mesh", "material", "materials", "regions", "boundary", "loads",
-                     "effects", "integrator", "run", "variants"});
+                     "proxies", "hands", "effects", "integrator", "run", "variants"});
   Scene scene;
   scene.path = path;
   if (const Json* s = root.find("$schema")) scene_json::read_string(*s, "$schema", o);
@@ -387,6 +564,8 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
     const Json& arr = scene_json::read_array(*l, "loads", o, 0);
     for (size_t i = 0; i < arr.size(); ++i) scene.spec.loads.push_back(read_load(arr[i], join("loads", i), o, mesh));
   }
+  if (const Json* h = root.find("hands")) read_hands(*h, o, scene);
+  read_proxies(root.has("proxies") ? root.at("proxies") : Json::array(), o, scene);  // checks that each hand has one
   if (const Json* e = root.find("effects")) scene.spec.effects = read_effects(*e, o);
   if (const Json* g = root.find("integrator")) scene.spec.integrator = read_integrator(*g, o);
   read_run(root.at("run"), o, mesh, scene);
@@ -394,6 +573,34 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
 }
 
 }  // namespace
+
+Pose PoseScript::at(double t) const {
+  if (keys.empty()) return Pose{};
+  if (t <= keys.front().t) return keys.front().pose;
+  if (t >= keys.back().t) return keys.back().pose;
+  // The segment [keys[k - 1].t, keys[k].t) holding t.
+  const auto next = std::upper_bound(keys.begin(), keys.end(), t, [](double x, const Keyframe& k) { return x < k.t; });
+  const Keyframe& a = *(next - 1);
+  const Keyframe& b = *next;
+  const double tau = (t - a.t) / (b.t - a.t);
+  // Cycloidal: s' = 1 - cos(2 pi tau) vanishes at both ends, as the boundary ramps do (core/spec.hpp).
+  const double s = easing == Easing::Linear ? tau : tau - std::sin(2.0 * std::numbers::pi * tau) / (2.0 * std::numbers::pi);
+  Pose p;
+  p.position = a.pose.position + s * (b.pose.position - a.pose.position);
+  Quat q = b.pose.orientation;
+  if (glm::dot(a.pose.orientation, q) < 0) q = -q;  // the shorter arc
+  p.orientation = glm::normalize(glm::slerp(a.pose.orientation, q, s));
+  return p;
+}
+
+ProxyMotion PoseScript::motion(double t0, double t1) const {
+  ProxyMotion m;
+  m.t0 = t0;
+  m.t1 = t1;
+  m.from = at(t0);
+  m.to = at(t1);
+  return m;
+}
 
 std::vector<Scene> parse_scene(const Json& j, const std::string& path) {
   std::map<std::string, SceneMesh> meshes;

@@ -1,7 +1,8 @@
 // Scene files: JSON (schema: server/scenes/scene.schema.json), SI units, y up.
 //
-// A scene names a mesh, materials, boundary conditions, loads, the effects it
-// wants, integrator settings and what a headless run records. Loading is
+// A scene names a mesh, materials, boundary conditions, loads, rigid proxies
+// and hands (with their scripted motions), the effects it wants, integrator
+// settings and what a headless run records. Loading is
 // strict: an unknown field, a wrong type or an out-of-range value throws
 // SceneError naming the file and the JSON path of the field at fault, e.g.
 //   cantilever.json: integrator.dt: must be "auto" or a number > 0, got -1
@@ -10,6 +11,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -41,6 +43,27 @@ struct SectionPlane {
   Vec3 normal{0.0, 1.0, 0.0};  // unit normal
 };
 
+// A scripted motion of a proxy or a hand: world poses at keyframes, eased
+// between them; before the first keyframe and after the last, the pose
+// holds. Scripts live here, not in the core: the core is told one
+// ProxyMotion per control interval (core/proxy.hpp).
+struct PoseScript {
+  enum class Easing : uint8_t {
+    Smooth,  // cycloidal ease in and out per segment: zero velocity at every keyframe
+    Linear,  // constant velocity per segment
+  };
+  struct Keyframe {
+    double t = 0;  // [s], strictly increasing
+    Pose pose;     // world
+  };
+  Easing easing = Easing::Smooth;
+  std::vector<Keyframe> keys;  // at least one
+
+  Pose at(double t) const;
+  // The core's motion over [t0, t1]: from at(t0) to at(t1), linear in between.
+  ProxyMotion motion(double t0, double t1) const;
+};
+
 struct RunSettings {
   double duration = 1.0;     // simulated time [s]
   double frame_rate = 30.0;  // output frames per simulated second [Hz]
@@ -52,6 +75,11 @@ struct Scene {
   std::string name, description;
   std::string path;       // the scene file, as given
   ModelSpec spec;         // what the core builds
+  // Scripted motions, by index into spec.proxies and spec.hands; a proxy or
+  // hand with none holds its pose. A scripted one's pose at t = 0 in spec is
+  // its script's.
+  std::vector<std::optional<PoseScript>> proxy_script;  // (n_proxies)
+  std::vector<std::optional<PoseScript>> hand_script;   // (n_hands)
   RunSettings run;
   std::vector<TrackedPoint> track;
   std::string variant;    // "" when the scene has no variants

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <numbers>
 
 #include <glm/geometric.hpp>
@@ -184,6 +185,137 @@ TEST(SceneMapping, VariantsAmendTheScene) {
   for (const Scene& s : v) EXPECT_EQ(s.name, "beam");
 }
 
+// The beam with a sphere scripted over it, a box and a plane holding still,
+// and a hand of a capsule and a sphere turned by its script.
+json make_proxy_scene() {
+  json j = make_beam_scene();
+  j["proxies"] = json::parse(R"([
+    { "name": "tip", "device": "stylus", "shape": "sphere", "radius": 0.01, "friction": 0.5,
+      "script": { "easing": "linear", "keyframes": [ { "t": 0.1, "position": [0.3, 0.12, 0.05] },
+                                                     { "t": 0.3, "position": [0.3, 0.1, 0.05], "orientation": [0, 0, 2, 0] } ] } },
+    { "name": "wall", "device": "fixed", "shape": "box", "half_extents": [0.01, 0.02, 0.03], "radius": 0.002,
+      "position": [0.5, 0.05, 0.05], "orientation": [2, 0, 0, 0] },
+    { "name": "floor", "device": "fixed", "shape": "plane", "position": [0, -0.1, 0] },
+    { "name": "finger", "hand": "right", "shape": "capsule", "radius": 0.005, "half_length": 0.02,
+      "position": [0.2, 0.11, 0.05] },
+    { "name": "thumb", "hand": "right", "device": "glove", "shape": "sphere", "radius": 0.006,
+      "position": [0.2, 0.11, 0.0] }
+  ])");
+  j["hands"] = json::parse(R"([
+    { "name": "right", "device": "glove", "position": [0.2, 0.12, 0.05],
+      "script": { "keyframes": [ { "t": 0, "position": [0.2, 0.12, 0.05] },
+                                 { "t": 0.5, "position": [0.2, 0.12, 0.05], "orientation": [0.7071067811865476, 0, 0.7071067811865476, 0] } ] } }
+  ])");
+  j["effects"]["friction"] = true;
+  return j;
+}
+
+TEST(SceneMapping, ProxiesHandsAndScriptsBecomeTheCoreSpec) {
+  SceneDir dir;
+  const Scene s = load_scene(dir.write_json("p.json", make_proxy_scene())).at(0);
+  const std::vector<ProxySpec>& p = s.spec.proxies;
+  ASSERT_EQ(p.size(), 5u);
+  ASSERT_EQ(s.proxy_script.size(), 5u);
+  EXPECT_TRUE(s.spec.effects.friction);
+
+  EXPECT_EQ(p[0].name, "tip");
+  EXPECT_EQ(p[0].device, "stylus");
+  EXPECT_EQ(p[0].hand, "");
+  EXPECT_EQ(p[0].geometry.shape, ProxyShape::Sphere);
+  EXPECT_EQ(p[0].geometry.radius, 0.01);
+  EXPECT_EQ(p[0].friction, 0.5);
+  ASSERT_TRUE(s.proxy_script[0]);
+  const PoseScript& script = *s.proxy_script[0];
+  EXPECT_EQ(script.easing, PoseScript::Easing::Linear);
+  ASSERT_EQ(script.keys.size(), 2u);
+  EXPECT_EQ(script.keys[1].t, 0.3);
+  EXPECT_EQ(script.keys[0].pose.orientation, Quat(1, 0, 0, 0));  // the proxy's, identity when absent
+  EXPECT_EQ(script.keys[1].pose.orientation, Quat(0, 0, 1, 0));  // normalised
+  // A scripted proxy starts where its script does.
+  EXPECT_EQ(p[0].pose.position, Vec3(0.3, 0.12, 0.05));
+
+  EXPECT_EQ(p[1].geometry.shape, ProxyShape::Box);
+  EXPECT_EQ(p[1].geometry.half_extents, Vec3(0.01, 0.02, 0.03));
+  EXPECT_EQ(p[1].geometry.radius, 0.002);
+  EXPECT_EQ(p[1].pose.position, Vec3(0.5, 0.05, 0.05));
+  EXPECT_EQ(p[1].pose.orientation, Quat(1, 0, 0, 0));
+  EXPECT_EQ(p[1].friction, 0.0);
+  EXPECT_FALSE(s.proxy_script[1]);
+  EXPECT_EQ(p[2].geometry.shape, ProxyShape::Plane);
+  EXPECT_EQ(p[2].device, "fixed");
+
+  EXPECT_EQ(p[3].geometry.shape, ProxyShape::Capsule);
+  EXPECT_EQ(p[3].geometry.half_length, 0.02);
+  EXPECT_EQ(p[3].hand, "right");
+  EXPECT_EQ(p[3].device, "");  // the core gives a hand's proxies the hand's device
+  EXPECT_EQ(p[4].hand, "right");
+
+  ASSERT_EQ(s.spec.hands.size(), 1u);
+  ASSERT_EQ(s.hand_script.size(), 1u);
+  EXPECT_EQ(s.spec.hands[0].name, "right");
+  EXPECT_EQ(s.spec.hands[0].device, "glove");
+  EXPECT_EQ(s.spec.hands[0].pose.position, Vec3(0.2, 0.12, 0.05));
+  ASSERT_TRUE(s.hand_script[0]);
+  EXPECT_EQ(s.hand_script[0]->easing, PoseScript::Easing::Smooth);  // the default
+}
+
+TEST(SceneMapping, VariantsCanTurnFrictionOnAndOff) {
+  SceneDir dir;
+  json j = make_proxy_scene();
+  j["variants"] = json::parse(R"([{ "name": "dry" }, { "name": "slippery", "effects": { "friction": false } }])");
+  const std::vector<Scene> v = load_scene(dir.write_json("v.json", j));
+  ASSERT_EQ(v.size(), 2u);
+  EXPECT_TRUE(v[0].spec.effects.friction);
+  EXPECT_FALSE(v[1].spec.effects.friction);
+  EXPECT_TRUE(v[1].spec.effects.gravity);  // the rest of the effects kept
+  EXPECT_EQ(v[1].spec.proxies.size(), 5u);
+}
+
+// ---- scripts ----------------------------------------------------------------
+
+PoseScript two_keys(PoseScript::Easing easing) {
+  PoseScript s;
+  s.easing = easing;
+  s.keys.push_back({1.0, Pose{Vec3(0.0), Quat(1, 0, 0, 0)}});
+  // A quarter turn about y and 2 m along x.
+  s.keys.push_back({3.0, Pose{Vec3(2.0, 0, 0), Quat(std::cos(std::numbers::pi / 4), 0, std::sin(std::numbers::pi / 4), 0)}});
+  return s;
+}
+
+double angle_about_y(const Quat& q) { return 2.0 * std::atan2(q.y, q.w); }
+
+TEST(PoseScript, HoldsBeforeTheFirstKeyframeAndAfterTheLast) {
+  for (auto easing : {PoseScript::Easing::Smooth, PoseScript::Easing::Linear}) {
+    const PoseScript s = two_keys(easing);
+    EXPECT_EQ(s.at(0.0).position, Vec3(0.0));
+    EXPECT_EQ(s.at(1.0).position, Vec3(0.0));
+    EXPECT_EQ(s.at(3.0).position, Vec3(2.0, 0, 0));
+    EXPECT_EQ(s.at(10.0).position, Vec3(2.0, 0, 0));
+    EXPECT_NEAR(angle_about_y(s.at(10.0).orientation), std::numbers::pi / 2, 1e-12);
+    // Half way in time is half way in position and angle, both easings (the cycloid is symmetric).
+    EXPECT_NEAR(s.at(2.0).position.x, 1.0, 1e-12);
+    EXPECT_NEAR(angle_about_y(s.at(2.0).orientation), std::numbers::pi / 4, 1e-12);
+  }
+}
+
+TEST(PoseScript, SmoothStartsAndStopsAtRestLinearKeepsOneSpeed) {
+  const double h = 1e-6;
+  auto speed = [&](const PoseScript& s, double t) { return (s.at(t + h).position.x - s.at(t - h).position.x) / (2 * h); };
+  const PoseScript smooth = two_keys(PoseScript::Easing::Smooth);
+  const PoseScript linear = two_keys(PoseScript::Easing::Linear);
+  EXPECT_NEAR(speed(smooth, 1.0 + 2 * h), 0.0, 1e-4);
+  EXPECT_NEAR(speed(smooth, 3.0 - 2 * h), 0.0, 1e-4);
+  EXPECT_NEAR(speed(smooth, 2.0), 2.0, 1e-6);  // peak: twice the mean speed of 1 m/s
+  for (double t : {1.1, 1.5, 2.0, 2.9}) EXPECT_NEAR(speed(linear, t), 1.0, 1e-6) << t;
+  // The core's motion over an interval runs between the script's poses at its ends.
+  const ProxyMotion m = smooth.motion(1.5, 1.6);
+  EXPECT_EQ(m.t0, 1.5);
+  EXPECT_EQ(m.t1, 1.6);
+  EXPECT_EQ(m.from.position, smooth.at(1.5).position);
+  EXPECT_EQ(m.to.position, smooth.at(1.6).position);
+  EXPECT_NEAR(m.velocity().x, (smooth.at(1.6).position.x - smooth.at(1.5).position.x) / 0.1, 1e-9);
+}
+
 // ---- refusals: each names the file and the JSON path -----------------------
 
 TEST(SceneErrors, UnknownField) {
@@ -333,6 +465,88 @@ TEST(SceneErrors, VariantErrorsNameTheVariant) {
   expect_scene_error(dir, "s.json", j, {"variants[1].name: 'a' names two variants"});
   j["variants"] = json::parse(R"([{ "name": "a/b" }])");
   expect_scene_error(dir, "s.json", j, {"variants[0].name: must be 1 to 64 letters"});
+}
+
+TEST(SceneErrors, ProxyFields) {
+  SceneDir dir;
+  auto refused = [&](const std::function<void(json&)>& change, const std::vector<std::string>& parts) {
+    json j = make_proxy_scene();
+    change(j);
+    expect_scene_error(dir, "s.json", j, parts);
+  };
+  refused([](json& j) { j["proxies"][0]["shape"] = "cone"; },
+          {"proxies[0].shape: must be one of \"sphere\", \"capsule\", \"box\", \"plane\", got \"cone\""});
+  refused([](json& j) { j["proxies"][0]["radius"] = -0.01; }, {"proxies[0].radius: must be a number > 0, got -0.01"});
+  refused([](json& j) { j["proxies"][3]["half_length"] = 0; }, {"proxies[3].half_length: must be a number > 0, got 0"});
+  refused([](json& j) { j["proxies"][1]["half_extents"][2] = -1; }, {"proxies[1].half_extents[2]: must be a number > 0"});
+  refused([](json& j) { j["proxies"][1]["radius"] = -1; }, {"proxies[1].radius: must be a number >= 0, got -1"});
+  refused([](json& j) { j["proxies"][0]["half_length"] = 0.1; }, {"proxies[0].half_length: is for a capsule only (shape is \"sphere\")"});
+  refused([](json& j) { j["proxies"][2]["radius"] = 0.1; }, {"proxies[2].radius: is for a sphere, capsule or box only"});
+  refused([](json& j) { j["proxies"][0]["colour"] = "red"; }, {"proxies[0].colour: unknown field"});
+  refused([](json& j) { j["proxies"][0]["friction"] = -0.1; }, {"proxies[0].friction: must be a number >= 0"});
+  refused([](json& j) { j["proxies"][1]["orientation"] = json::array({0, 0, 0, 0}); },
+          {"proxies[1].orientation: must be a nonzero quaternion"});
+  refused([](json& j) { j["proxies"][1]["orientation"] = json::array({1, 0, 0}); },
+          {"proxies[1].orientation: must be a quaternion [w, x, y, z] (4 numbers)"});
+  refused([](json& j) { j["proxies"][1].erase("position"); }, {"proxies[1].position: required field missing"});
+  refused([](json& j) { j["proxies"][1].erase("device"); }, {"proxies[1].device: required field missing"});
+  refused([](json& j) { j["proxies"][1]["device"] = "a,b"; }, {"proxies[1].device: must be 1 to 64 letters"});
+  refused([](json& j) { j["proxies"][2]["name"] = "tip"; }, {"proxies[2].name: 'tip' names two proxies"});
+  refused([](json& j) { j["proxies"] = json::object(); }, {"proxies: must be an array"});
+  refused([](json& j) { j["effects"]["friction"] = 1; }, {"effects.friction: must be true or false, got 1"});
+}
+
+TEST(SceneErrors, ProxyScripts) {
+  SceneDir dir;
+  auto refused = [&](const std::function<void(json&)>& change, const std::vector<std::string>& parts) {
+    json j = make_proxy_scene();
+    change(j);
+    expect_scene_error(dir, "s.json", j, parts);
+  };
+  refused([](json& j) { j["proxies"][0]["script"]["keyframes"][1]["t"] = 0.1; },
+          {"proxies[0].script.keyframes[1].t: must be greater than the previous keyframe's (0.1 s), got 0.1"});
+  refused([](json& j) { j["proxies"][0]["script"]["keyframes"][1]["t"] = 0.05; },
+          {"proxies[0].script.keyframes[1].t: must be greater than the previous keyframe's"});
+  refused([](json& j) { j["hands"][0]["script"]["keyframes"][0]["t"] = -1; },
+          {"hands[0].script.keyframes[0].t: must be a number >= 0, got -1"});
+  refused([](json& j) { j["proxies"][0]["script"]["keyframes"] = json::array(); },
+          {"proxies[0].script.keyframes: must have at least 1 entry"});
+  refused([](json& j) { j["proxies"][0]["script"]["easing"] = "bouncy"; },
+          {"proxies[0].script.easing: must be one of \"smooth\", \"linear\", got \"bouncy\""});
+  refused([](json& j) { j["proxies"][0]["script"]["keyframes"][0]["velocity"] = json::array({0, 0, 0}); },
+          {"proxies[0].script.keyframes[0].velocity: unknown field"});
+  refused([](json& j) { j["proxies"][0]["script"]["keyframes"][0].erase("position"); },
+          {"proxies[0].script.keyframes[0].position: required field missing"});
+  refused([](json& j) { j["proxies"][0]["position"] = json::array({0, 0, 0}); },
+          {"proxies[0].position: differs from where the script starts, [0.3, 0.12, 0.05]"});
+  refused([](json& j) { j["hands"][0]["orientation"] = json::array({0, 1, 0, 0}); },
+          {"hands[0].orientation: differs from the script's orientation at t = 0"});
+}
+
+TEST(SceneErrors, HandsAndTheirProxies) {
+  SceneDir dir;
+  auto refused = [&](const std::function<void(json&)>& change, const std::vector<std::string>& parts) {
+    json j = make_proxy_scene();
+    change(j);
+    expect_scene_error(dir, "s.json", j, parts);
+  };
+  refused([](json& j) { j["proxies"][3]["hand"] = "left"; },
+          {"proxies[3].hand: 'left' is not among the hands (they are 'right')"});
+  refused([](json& j) { j.erase("hands"); j["proxies"][3]["hand"] = "right"; },
+          {"proxies[3].hand: 'right' is not among the hands (the scene has none)"});
+  refused([](json& j) { j["proxies"][4]["device"] = "stylus"; },
+          {"proxies[4].device: 'stylus' differs from the device of hand 'right' ('glove')"});
+  refused([](json& j) { j["proxies"][3]["script"] = j["proxies"][0]["script"]; },
+          {"proxies[3].script: a proxy in a hand moves with it; give the script to hand 'right'"});
+  refused([](json& j) { j["hands"].push_back(json::parse(R"({ "name": "left", "device": "g2", "position": [0, 0, 0] })")); },
+          {"hands[1]: no proxy belongs to hand 'left'"});
+  refused([](json& j) { j["hands"].push_back(j["hands"][0]); }, {"hands[1].name: 'right' names two hands"});
+  refused([](json& j) { j["hands"][0].erase("device"); }, {"hands[0].device: required field missing"});
+  refused([](json& j) { j["hands"][0]["fingers"] = 5; }, {"hands[0].fingers: unknown field"});
+  refused([](json& j) { j["hands"][0].erase("script"); j["hands"][0].erase("position"); },
+          {"hands[0].position: required field missing"});
+  refused([](json& j) { j["variants"] = json::parse(R"([{ "name": "v", "proxies": [] }])"); },
+          {"variants[0].proxies: unknown field"});
 }
 
 TEST(SceneErrors, NotJson) {
