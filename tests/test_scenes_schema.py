@@ -79,6 +79,38 @@ def delete(key: str) -> Callable[[dict[str, Any]], None]:
     return lambda scene: scene.pop(key)
 
 
+def with_proxies(scene: dict[str, Any]) -> None:
+    """A scripted sphere, a plane that holds, and a hand of a capsule and a box turned by its script."""
+    scene["proxies"] = [
+        {
+            "name": "tip", "device": "stylus", "shape": "sphere", "radius": 0.01, "friction": 0.5,
+            "script": {
+                "easing": "linear",
+                "keyframes": [{"t": 0, "position": [0.3, 0.12, 0.05]}, {"t": 0.05, "position": [0.3, 0.1, 0.05]}],
+            },
+        },
+        {"name": "floor", "device": "fixed", "shape": "plane", "position": [0, -0.1, 0], "orientation": [1, 0, 0, 0]},
+        {"name": "finger", "hand": "right", "shape": "capsule", "radius": 0.005, "half_length": 0.02,
+         "position": [0.2, 0.12, 0.05]},
+        {"name": "palm", "hand": "right", "device": "glove", "shape": "box", "half_extents": [0.02, 0.005, 0.02],
+         "radius": 0.002, "position": [0.2, 0.13, 0.05]},
+    ]
+    scene["hands"] = [
+        {
+            "name": "right", "device": "glove",
+            "script": {"keyframes": [{"t": 0, "position": [0.2, 0.13, 0.05]},
+                                     {"t": 0.1, "position": [0.2, 0.13, 0.05], "orientation": [0.9, 0, 0.1, 0]}]},
+        }
+    ]
+    scene["effects"]["friction"] = True
+
+
+def proxy_change(change: Callable[[dict[str, Any]], None]) -> dict[str, Any]:
+    scene = amended(with_proxies)
+    change(scene)
+    return scene
+
+
 GOOD: dict[str, dict[str, Any]] = {
     "beam": BEAM,
     "cylinder": amended(
@@ -100,6 +132,8 @@ GOOD: dict[str, dict[str, Any]] = {
     "dt_number": amended(set_path(["integrator", "dt"], 1e-4)),
     "no_effects": amended(delete("effects")),
     "gravity_false": amended(set_path(["effects"], {"gravity": False, "damping": False})),
+    "proxies": amended(with_proxies),
+    "friction_variants": proxy_change(set_path(["variants"], [{"name": "dry"}, {"name": "wet", "effects": {"friction": False}}])),
 }
 
 BAD: dict[str, dict[str, Any]] = {
@@ -141,6 +175,40 @@ BAD: dict[str, dict[str, Any]] = {
     "variant_without_name": amended(set_path(["variants"], [{"material": {"model": "linear"}}])),
     "duration_zero": amended(set_path(["run", "duration"], 0)),
     "track_without_point": amended(set_path(["run", "track"], [{"name": "tip"}])),
+    "proxy_unknown_shape": proxy_change(set_path(["proxies", 0, "shape"], "cone")),
+    "proxy_negative_radius": proxy_change(set_path(["proxies", 0, "radius"], -0.01)),
+    "proxy_zero_radius_sphere": proxy_change(set_path(["proxies", 0, "radius"], 0)),
+    "proxy_unknown_field": proxy_change(set_path(["proxies", 0, "colour"], "red")),
+    "proxy_field_of_another_shape": proxy_change(set_path(["proxies", 0, "half_length"], 0.1)),
+    "plane_with_radius": proxy_change(set_path(["proxies", 1, "radius"], 0.1)),
+    "box_without_half_extents": proxy_change(lambda s: s["proxies"][3].pop("half_extents")),
+    "proxy_without_device_or_hand": proxy_change(lambda s: s["proxies"][1].pop("device")),
+    "proxy_without_position_or_script": proxy_change(lambda s: s["proxies"][1].pop("position")),
+    "hand_proxy_with_script": proxy_change(set_path(["proxies", 2, "script"], {"keyframes": [{"t": 0, "position": [0, 0, 0]}]})),
+    "zero_quaternion": proxy_change(set_path(["proxies", 1, "orientation"], [0, 0, 0, 0])),
+    "quaternion_of_three": proxy_change(set_path(["proxies", 1, "orientation"], [1, 0, 0])),
+    "negative_friction": proxy_change(set_path(["proxies", 0, "friction"], -0.5)),
+    "unknown_easing": proxy_change(set_path(["proxies", 0, "script", "easing"], "bouncy")),
+    "keyframe_without_position": proxy_change(lambda s: s["proxies"][0]["script"]["keyframes"][0].pop("position")),
+    "no_keyframes": proxy_change(set_path(["proxies", 0, "script", "keyframes"], [])),
+    "hand_without_device": proxy_change(lambda s: s["hands"][0].pop("device")),
+    "friction_not_a_boolean": proxy_change(set_path(["effects", "friction"], 1)),
+}
+
+# Scenes the schema cannot refuse but the loader does, naming the field.
+LOADER_ONLY: dict[str, tuple[dict[str, Any], str]] = {
+    "script_times_not_increasing": (
+        proxy_change(set_path(["proxies", 0, "script", "keyframes", 1, "t"], 0)),
+        "proxies[0].script.keyframes[1].t",
+    ),
+    "proxy_of_an_unknown_hand": (proxy_change(set_path(["proxies", 2, "hand"], "left")), "proxies[2].hand"),
+    "hand_proxy_on_another_device": (proxy_change(set_path(["proxies", 3, "device"], "stylus")), "proxies[3].device"),
+    "hand_without_proxies": (
+        proxy_change(lambda s: s["hands"].append({"name": "left", "device": "g2", "position": [0, 0, 0]})),
+        "hands[1]",
+    ),
+    "proxy_names_twice": (proxy_change(set_path(["proxies", 1, "name"], "tip")), "proxies[1].name"),
+    "position_off_the_script": (proxy_change(set_path(["proxies", 0, "position"], [0, 0, 0])), "proxies[0].position"),
 }
 
 
@@ -174,9 +242,13 @@ def test_every_object_in_the_schema_forbids_unknown_fields() -> None:
 
 def test_there_are_shipped_scenes_of_each_kind() -> None:
     names = {p.stem for p in shipped_scenes()}
-    assert {"default", "fig2_twist", "fig3_cantilever"} <= names
+    assert {"default", "fig2_twist", "fig3_cantilever", "poke", "stroke", "pinch", "hand_twist"} <= names
     files = [json.load(open(p, encoding="utf-8")) for p in shipped_scenes()]
     assert any("file" in s["mesh"] and s["mesh"]["file"].endswith(".obj") for s in files)
+    # Proxy contact: scripted proxies, two devices at once, a hand, friction.
+    assert any(len({p["device"] for p in s.get("proxies", []) if "device" in p}) >= 2 for s in files)
+    assert any(s.get("hands") and len([p for p in s["proxies"] if "hand" in p]) >= 5 for s in files)
+    assert any(s.get("effects", {}).get("friction") for s in files)
 
 
 @pytest.mark.parametrize("name", sorted(GOOD))
@@ -194,6 +266,18 @@ def run_check(exe: str, scene: dict[str, Any], tmp_path: pathlib.Path) -> subpro
     path = tmp_path / "scene.json"
     path.write_text(json.dumps(scene), encoding="utf-8")
     return subprocess.run([exe, "check", str(path)], capture_output=True, text=True, timeout=120, check=False)
+
+
+@pytest.mark.parametrize("name", sorted(LOADER_ONLY))
+def test_the_loader_refuses_what_the_schema_cannot_see(name: str, tmp_path: pathlib.Path) -> None:
+    scene, path = LOADER_ONLY[name]
+    assert validator().is_valid(scene)
+    exe = tactile_sim()
+    if exe is None:
+        pytest.skip("no built tactile-sim (set TACTILE_SIM or build into build/<dir>/)")
+    result = run_check(exe, scene, tmp_path)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert f"{tmp_path / 'scene.json'}: {path}: " in result.stderr
 
 
 @pytest.mark.parametrize("name", sorted(GOOD) + sorted(BAD))

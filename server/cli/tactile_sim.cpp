@@ -24,6 +24,7 @@ using namespace tactile;
 constexpr const char* kUsage =
     "usage:\n"
     "  tactile-sim run SCENE.json [options]   run a scene headless, write VTU frames, frames.csv, summary.json\n"
+    "                                         (and forces.csv, devices.csv when it has proxies)\n"
     "  tactile-sim check SCENE.json           load and validate; print mesh quality and the critical step\n"
     "  tactile-sim --help\n"
     "\n"

@@ -293,9 +293,10 @@ void read_geometry(const Fields& f, const Origin& o, ProxyGeometry& g) {
   } else if (shape == "box") {
     g.shape = ProxyShape::Box;
     g.half_extents = f.vec3("half_extents");
-    for (int d = 0; d < 3; ++d)
-      if (!(g.half_extents[d] > 0))
-        o.fail(join(f.path("half_extents"), size_t(d)), "must be a number > 0, got " + scene_json::describe(f.at("half_extents")[size_t(d)]));
+    for (size_t d = 0; d < 3; ++d)
+      if (!(g.half_extents[int(d)] > 0))
+        o.fail(join(f.path("half_extents"), d),
+               "must be a number > 0, got " + scene_json::describe(f.at("half_extents")[d]));
     g.radius = f.non_negative_or("radius", 0.0);
     refuse("half_length", "a capsule");
   } else {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <sstream>
 
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
@@ -166,6 +167,9 @@ TEST(Headless, SummaryAndFramesReportTheTrackedDisplacementOfTheState) {
     EXPECT_EQ(r.tracked[0].u[d], u[d]);
   }
   EXPECT_TRUE(s["fault"].is_null());
+  EXPECT_TRUE(s["proxies"].empty());
+  EXPECT_FALSE(fs::exists(r.dir + "/forces.csv"));  // no proxies, no force traces
+  EXPECT_FALSE(fs::exists(r.dir + "/devices.csv"));
   EXPECT_GT(s["performance"]["tet_steps_per_s"].get<double>(), 0);
   EXPECT_TRUE(s["performance"]["cost_per_pass"].contains("elastic"));
   // Energy is conserved up to what damping took and the step's O(dt^2) error, here near the stability limit.
@@ -267,6 +271,192 @@ TEST(Headless, PaperFig2LinearStrainChangesTheTwistedSectionAndStvkKeepsIt) {
   ASSERT_EQ(lines.size(), 3u);
   EXPECT_NE(lines[0].find("mid_area_m2"), std::string::npos);
   EXPECT_EQ(lines[1].rfind("linear,ok,", 0), 0u);
+}
+
+// ---- proxies ----------------------------------------------------------------
+
+// One row of forces.csv or devices.csv: the names, and the numbers in order.
+struct TraceRow {
+  std::string proxy, device;
+  std::vector<double> x;  // t_s, then the columns after the names
+};
+
+std::vector<TraceRow> read_trace(const std::string& path, int names) {
+  const std::vector<std::string> lines = csv_lines(path);
+  std::vector<TraceRow> rows;
+  for (size_t i = 1; i < lines.size(); ++i) {
+    std::istringstream in(lines[i]);
+    std::vector<std::string> cells;
+    for (std::string cell; std::getline(in, cell, ',');) cells.push_back(cell);
+    TraceRow r;
+    r.x.push_back(std::stod(cells.at(0)));
+    if (names == 2) {
+      r.proxy = cells.at(1);
+      r.device = cells.at(2);
+    } else {
+      r.device = cells.at(1);
+    }
+    for (size_t k = 1 + size_t(names); k < cells.size(); ++k) r.x.push_back(std::stod(cells[k]));
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+constexpr const char* kForcesHeader = "t_s,proxy,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts,px_m,py_m,pz_m";
+constexpr const char* kDevicesHeader = "t_s,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts";
+
+TEST(HeadlessProxies, PokeForcePushesTheSphereOutOfTheBlockAndIsZeroBeforeContact) {
+  TempDir dir;
+  Scene scene = load_scene(std::string(TACTILE_SCENE_DIR) + "/poke.json").at(0);
+  scene.run.duration = 0.6;  // the approach and the press, 8 mm deep at the end
+  const HeadlessResult r = run_headless(scene, quiet_options(dir, false));
+  ASSERT_TRUE(r.ok()) << r.fault.message;
+  const ProxySpec& tip = scene.spec.proxies.at(0);
+  const PoseScript& script = scene.proxy_script.at(0).value();
+  const double top = compute_aabb(scene.spec.mesh.X).hi.y;
+  const double R = tip.geometry.radius;
+
+  ASSERT_EQ(csv_lines(r.dir + "/forces.csv").at(0), kForcesHeader);
+  ASSERT_EQ(csv_lines(r.dir + "/devices.csv").at(0), kDevicesHeader);
+  const std::vector<TraceRow> rows = read_trace(r.dir + "/forces.csv", 2);
+  const std::vector<TraceRow> dev = read_trace(r.dir + "/devices.csv", 1);
+  ASSERT_EQ(rows.size(), 600u);  // 1 ms intervals, one proxy
+  ASSERT_EQ(dev.size(), rows.size());
+  int before = 0, pressed = 0;
+  double deepest = 0, force_deepest = 0;
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const TraceRow& row = rows[i];
+    const double t = row.x[0], fx = row.x[1], fy = row.x[2], fz = row.x[3];
+    ASSERT_NEAR(t, 0.001 * double(i + 1), 1e-9);
+    EXPECT_EQ(row.proxy, "tip");
+    EXPECT_EQ(row.device, "stylus");
+    // The proxy is where its script puts it at the interval's end.
+    const Vec3 p(row.x[8], row.x[9], row.x[10]);
+    EXPECT_LT(glm::length(p - script.at(t).position), 1e-9) << t;
+    // Its device feels exactly its force (it is the device's only proxy).
+    for (size_t k = 0; k < 7; ++k) EXPECT_EQ(dev[i].x[k], row.x[k]);
+    const double depth = top - (p.y - R);
+    if (depth < -1e-3) {  // more than a millimetre above the block
+      EXPECT_EQ(fx, 0.0);
+      EXPECT_EQ(fy, 0.0);
+      EXPECT_EQ(fz, 0.0);
+      EXPECT_EQ(row.x[7], 0.0);  // contacts
+      ++before;
+    } else if (depth > 3e-3) {  // pressed in: pushed back up, out of the body
+      EXPECT_GT(fy, 0.0) << t;
+      EXPECT_LT(std::hypot(fx, fz), 0.05 * fy) << t;
+      ++pressed;
+      if (depth > deepest) deepest = depth, force_deepest = fy;
+    }
+  }
+  EXPECT_GT(before, 100);
+  EXPECT_GT(pressed, 100);
+  // Hertz's sphere on a half-space, F = 4/3 E/(1 - nu^2) sqrt(R) d^1.5: the block is
+  // finite and fixed below, so somewhat stiffer, but of that order.
+  const MaterialSpec& m = scene.spec.materials[0];
+  const double hertz = 4.0 / 3.0 * m.E / (1 - m.nu * m.nu) * std::sqrt(R) * std::pow(deepest, 1.5);
+  std::printf("poke: %.2f mm deep, force %.3f N, Hertz %.3f N\n", 1e3 * deepest, force_deepest, hertz);
+  EXPECT_GT(deepest, 7.5e-3);
+  EXPECT_GT(force_deepest, 0.7 * hertz);
+  EXPECT_LT(force_deepest, 2.0 * hertz);
+
+  // The result and summary.json give the last interval's means.
+  ASSERT_EQ(r.proxies.size(), 1u);
+  ASSERT_EQ(r.devices.size(), 1u);
+  EXPECT_NEAR(r.proxies[0].force.y, rows.back().x[2], 1e-8 * rows.back().x[2]);  // the file has 9 digits
+  EXPECT_GE(r.proxies[0].peak_force, r.proxies[0].force.y);
+  const json s = json::parse(test::read_file(r.dir + "/summary.json"));
+  ASSERT_EQ(s["proxies"].size(), 1u);
+  EXPECT_EQ(s["proxies"][0]["name"], "tip");
+  EXPECT_EQ(s["proxies"][0]["device"], "stylus");
+  EXPECT_EQ(s["proxies"][0]["shape"], "sphere");
+  EXPECT_EQ(s["proxies"][0]["scripted"], true);
+  EXPECT_EQ(s["proxies"][0]["force_N"][1].get<double>(), r.proxies[0].force.y);
+  EXPECT_EQ(s["proxies"][0]["position_m"][1].get<double>(), r.proxies[0].position.y);
+  EXPECT_NEAR(r.proxies[0].position.y, script.at(0.6).position.y, 1e-12);
+  EXPECT_EQ(s["devices"][0]["name"], "stylus");
+  EXPECT_EQ(s["devices"][0]["force_N"][1].get<double>(), r.devices[0].force.y);
+  EXPECT_NEAR(s["run"]["control_interval_s"].get<double>(), 1e-3, 1e-15);
+}
+
+// A soft block, a hand of two spheres pressed into it by one device, and a
+// sphere on another device that nothing moves, away from the block.
+Scene make_hand_scene(double frame_rate) {
+  json j = json::parse(R"({
+    "name": "hand",
+    "mesh": { "primitive": "box", "lo": [-0.05, 0, -0.05], "hi": [0.05, 0.04, 0.05], "cells": [10, 4, 10] },
+    "material": { "model": "neohookean", "E": 3e4, "nu": 0.3, "rho": 1000 },
+    "boundary": [ { "select": { "plane": { "point": [0, 0, 0], "normal": [0, 1, 0] } }, "fixed": true } ],
+    "hands": [ { "name": "h", "device": "glove", "position": [0, 0.06, 0],
+                 "script": { "keyframes": [ { "t": 0, "position": [0, 0.06, 0] }, { "t": 0.2, "position": [0, 0.047, 0] } ] } } ],
+    "proxies": [
+      { "name": "a", "hand": "h", "shape": "sphere", "radius": 0.015, "position": [-0.025, 0.057, 0] },
+      { "name": "b", "hand": "h", "shape": "capsule", "radius": 0.012, "half_length": 0.01, "position": [0.025, 0.054, 0] },
+      { "name": "idle", "device": "other", "shape": "sphere", "radius": 0.01, "position": [0, 0.2, 0] }
+    ],
+    "effects": { "damping": { "alpha": 5 } },
+    "run": { "duration": 0.25, "frame_rate": 30 }
+  })");
+  j["run"]["frame_rate"] = frame_rate;
+  return parse_scene(j, "hand.json").at(0);
+}
+
+TEST(HeadlessProxies, AHandsDeviceFeelsTheSumOfItsProxiesAndAnUnscriptedProxyHolds) {
+  TempDir dir;
+  const Scene scene = make_hand_scene(30);
+  const HeadlessResult r = run_headless(scene, quiet_options(dir, false));
+  ASSERT_TRUE(r.ok()) << r.fault.message;
+  const std::vector<TraceRow> rows = read_trace(r.dir + "/forces.csv", 2);
+  const std::vector<TraceRow> dev = read_trace(r.dir + "/devices.csv", 1);
+  ASSERT_EQ(rows.size() % 3, 0u);
+  ASSERT_EQ(dev.size(), 2 * rows.size() / 3);
+  int both_pressing = 0;
+  for (size_t i = 0; i < rows.size() / 3; ++i) {
+    const TraceRow &a = rows[3 * i], &b = rows[3 * i + 1], &idle = rows[3 * i + 2];
+    const TraceRow &glove = dev[2 * i], &other = dev[2 * i + 1];
+    ASSERT_EQ(a.proxy, "a");
+    ASSERT_EQ(b.proxy, "b");
+    ASSERT_EQ(idle.proxy, "idle");
+    EXPECT_EQ(a.device, "glove");  // a hand's proxies go to its device
+    EXPECT_EQ(b.device, "glove");
+    ASSERT_EQ(glove.device, "glove");
+    ASSERT_EQ(other.device, "other");
+    // The hand's device: the sum of its proxies' forces and contacts (up to the files' 9 digits).
+    for (size_t k = 1; k <= 3; ++k)
+      EXPECT_NEAR(glove.x[k], a.x[k] + b.x[k], 1e-8 * (std::fabs(a.x[k]) + std::fabs(b.x[k]) + std::fabs(glove.x[k])) + 1e-15);
+    EXPECT_EQ(glove.x[7], a.x[7] + b.x[7]);
+    // The other device feels nothing, and its proxy stays where it was put.
+    for (size_t k = 1; k <= 7; ++k) EXPECT_EQ(other.x[k], 0.0);
+    EXPECT_EQ(Vec3(idle.x[8], idle.x[9], idle.x[10]), Vec3(0, 0.2, 0));
+    // The hand's proxies keep their offsets from it.
+    EXPECT_NEAR(a.x[8] - b.x[8], -0.05, 1e-12);
+    EXPECT_NEAR(a.x[9] - b.x[9], 0.003, 1e-12);
+    if (a.x[2] > 0 && b.x[2] > 0) ++both_pressing;
+  }
+  EXPECT_GT(both_pressing, 20);
+  EXPECT_GT(r.devices.at(0).force.y, 0.1);  // still pressed at the end
+}
+
+TEST(HeadlessProxies, ControlIntervalsAreAtMostAMillisecondAndFillEachFrame) {
+  struct Case {
+    double frame_rate, duration;
+    int intervals;    // in the run
+    double interval;  // [s]
+  };
+  // 30 Hz: frames of 33.3 ms, 34 intervals each; 4 kHz: the 0.25 ms frame is the interval.
+  for (const Case c : {Case{30, 0.1, 3 * 34, 0.1 / 102}, Case{4000, 0.01, 40, 0.25e-3}}) {
+    SCOPED_TRACE(c.frame_rate);
+    TempDir dir;
+    Scene scene = make_hand_scene(c.frame_rate);
+    scene.run.duration = c.duration;
+    const HeadlessResult r = run_headless(scene, quiet_options(dir, false));
+    ASSERT_TRUE(r.ok()) << r.fault.message;
+    const std::vector<TraceRow> rows = read_trace(r.dir + "/forces.csv", 2);
+    ASSERT_EQ(rows.size(), 3 * size_t(c.intervals));
+    for (size_t i = 0; i < rows.size(); i += 3) EXPECT_NEAR(rows[i].x[0], c.interval * double(i / 3 + 1), 1e-9);
+    const json s = json::parse(test::read_file(r.dir + "/summary.json"));
+    EXPECT_NEAR(s["run"]["control_interval_s"].get<double>(), c.interval, 1e-15);
+  }
 }
 
 }  // namespace

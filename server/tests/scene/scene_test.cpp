@@ -519,7 +519,11 @@ TEST(SceneErrors, ProxyScripts) {
           {"proxies[0].script.keyframes[0].position: required field missing"});
   refused([](json& j) { j["proxies"][0]["position"] = json::array({0, 0, 0}); },
           {"proxies[0].position: differs from where the script starts, [0.3, 0.12, 0.05]"});
-  refused([](json& j) { j["hands"][0]["orientation"] = json::array({0, 1, 0, 0}); },
+  refused(
+      [](json& j) {
+        j["hands"][0]["orientation"] = json::array({0, 1, 0, 0});
+        j["hands"][0]["script"]["keyframes"][0]["orientation"] = json::array({1, 0, 0, 0});
+      },
           {"hands[0].orientation: differs from the script's orientation at t = 0"});
 }
 

@@ -1,0 +1,79 @@
+"""The force trace of a headless poke (server/scenes/poke.json) obeys contact's laws: no force before
+contact, and while the sphere moves in, the force on it grows with depth, as a Hertz contact does."""
+import csv
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from test_scenes_schema import ROOT, tactile_sim
+
+SIM = tactile_sim()
+pytestmark = pytest.mark.skipif(SIM is None, reason="tactile-sim is not built (scripts/setup.sh builds it)")
+
+POKE = ROOT / "server/scenes/poke.json"
+COLUMNS = ["t_s", "proxy", "device", "fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm", "contacts", "px_m", "py_m", "pz_m"]
+
+
+@pytest.fixture(scope="module")
+def poke_trace(tmp_path_factory):
+    """The poke's approach and press (0.6 s: 8 mm deep at the end), as columns of forces.csv."""
+    out = tmp_path_factory.mktemp("out")
+    result = subprocess.run([SIM, "run", str(POKE), "--out", str(out), "--duration", "0.6", "--no-vtu", "--quiet"],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    with open(out / "poke" / "run" / "forces.csv", newline="") as f:
+        reader = csv.DictReader(f)
+        header = reader.fieldnames
+        rows = list(reader)
+    scene = json.loads(POKE.read_text())
+    trace = {k: np.array([float(r[k]) for r in rows]) for k in COLUMNS if k not in ("proxy", "device")}
+    trace["proxy"] = [r["proxy"] for r in rows]
+    return header, trace, scene
+
+
+def depth_of(trace, scene):
+    """How far the sphere's lowest point is below the block's top [m] (negative above it)."""
+    top = scene["mesh"]["hi"][1]
+    radius = scene["proxies"][0]["radius"]
+    return top - (trace["py_m"] - radius)
+
+
+def test_forces_csv_has_the_columns_and_one_row_per_millisecond(poke_trace):
+    header, trace, _ = poke_trace
+    assert header == COLUMNS
+    assert set(trace["proxy"]) == {"tip"}
+    assert len(trace["t_s"]) == 600
+    np.testing.assert_allclose(np.diff(trace["t_s"]), 1e-3, atol=1e-8)
+
+
+def test_no_force_before_contact(poke_trace):
+    _, trace, scene = poke_trace
+    above = depth_of(trace, scene) < -1e-3
+    assert above.sum() > 100
+    for k in ("fx_N", "fy_N", "fz_N", "contacts"):
+        assert (trace[k][above] == 0).all(), k
+
+
+def test_force_grows_with_depth_while_the_sphere_moves_in(poke_trace):
+    _, trace, scene = poke_trace
+    depth = depth_of(trace, scene)
+    force = np.sqrt(trace["fx_N"] ** 2 + trace["fy_N"] ** 2 + trace["fz_N"] ** 2)
+    moving_in = np.concatenate([[False], np.diff(trace["py_m"]) < 0])
+    press = moving_in & (depth > 0.5e-3)
+    assert press.sum() > 100
+    # Mean force per 0.5 mm of depth: each bin's at least the one before, up to the noise of node-by-node contact.
+    edges = np.arange(0.5e-3, depth[press].max(), 0.5e-3)
+    which = np.digitize(depth[press], edges)
+    means = np.array([force[press][which == b].mean() for b in range(1, len(edges)) if (which == b).any()])
+    assert len(means) >= 10
+    noise = 0.02 * means.max()
+    assert (np.diff(means) > -noise).all(), means
+    assert means[-1] > 10 * means[0]
+    # Hertz: F ~ d^1.5 for a sphere on a half-space; the block is finite, so only roughly.
+    deep = press & (depth > 2e-3)
+    slope = np.polyfit(np.log(depth[deep]), np.log(force[deep]), 1)[0]
+    assert 1.2 < slope < 2.0, slope
+    # The force pushes the sphere back out of the block: up.
+    assert (trace["fy_N"][deep] > 0).all()
