@@ -614,3 +614,57 @@ TEST(ContactHardCases, ProxyStartingInsideTheBody) {
 
 }  // namespace
 }  // namespace tactile
+
+namespace tactile {
+namespace {
+
+// A frictionless sphere pushes along its radii: the torque about its centre
+// stays near zero. With friction, stroking sideways, the tangential force
+// acts at the contact, a radius below the centre: the torque about the
+// centre is about R times the friction force, about the axis r x F.
+TEST(Contact, TorqueIsAboutTheProxyCentre) {
+  for (bool friction : {false, true}) {
+    ModelSpec spec = block_spec();
+    EssentialBc base;
+    base.name = "base";
+    base.where.kind = NodeSelector::Kind::Box;
+    base.where.hi = Vec3(0.04, 0.0, 0.04);
+    spec.essential = {base};
+    const double R = 0.01;
+    spec.proxies = {sphere_proxy("tip", "arm", Vec3(0.015, 0.02 + R, 0.02), R)};
+    spec.proxies[0].friction = 0.8;
+    spec.effects.friction = friction;
+    const Model<double> model = build_model<double>(spec);
+    Stepper<double> stepper(model);
+    State<double> s = stepper.make_state();
+    const double dt = 0.5 * model.dt_rest;
+    Pose pose = model.proxies[0].pose;
+    Vec3 F(0.0), T(0.0);
+    int samples = 0;
+    for (int k = 0; k < 2400; ++k) {
+      const Vec3 v = k < 800 ? Vec3(0.0, -0.002 / (800 * dt), 0.0) : Vec3(0.01 / (1600 * dt), 0.0, 0.0);  // 2 mm in, 1 cm along x
+      move_proxy(stepper, 0, pose, v, s.t, dt);
+      ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+      pose.position += v * dt;
+      if (k >= 1200) {
+        F += stepper.contact().reports()[0].force;
+        T += stepper.contact().reports()[0].torque;
+        ++samples;
+      }
+    }
+    F /= double(samples);
+    T /= double(samples);
+    ASSERT_GT(F.y, 0.0);
+    if (!friction) {
+      EXPECT_LT(glm::length(T), 0.05 * glm::length(F) * R) << "torque " << T.x << " " << T.y << " " << T.z;
+      EXPECT_LT(std::fabs(F.x), 0.1 * F.y);  // no drag without friction
+    } else {
+      EXPECT_LT(F.x, -0.1 * F.y);  // held back by the body as it moves along +x
+      // r = (0, -R, 0) to the contact, F = (Fx, Fy, 0): r x F = (0, 0, R Fx).
+      EXPECT_NEAR(T.z, R * F.x, 0.25 * R * std::fabs(F.x));
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tactile
