@@ -140,8 +140,12 @@ void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   auto* self = static_cast<Stepper*>(ctx);
   const Part& part = self->part_[size_t(p)];
   const Model<Real>& m = self->model_;
-  // Zero on entry: the corrector cleared it after reading (see CorrectArgs).
-  Node4<Real>* f = self->f_.data() + self->force_parts_[size_t(p)].offset;
+  // Zero on entry: this part's corrector cleared the entries over its own
+  // nodes after reading them; the few past them, which the next parts'
+  // correctors read, are cleared here (see CorrectArgs).
+  const ForcePart& fp = self->force_parts_[size_t(p)];
+  Node4<Real>* f = self->f_.data() + fp.offset;
+  if (fp.end > part.node_end) std::fill(f + std::max(fp.begin, part.node_end), f + fp.end, Node4<Real>{});
   ElasticSums sums;
   for (const ElementGroup& g : m.groups) {
     const int32_t b0 = std::max(g.begin, part.block_begin), b1 = std::min(g.end, part.block_end);
@@ -166,6 +170,7 @@ void Stepper<Real>::correct_part(void* ctx, int32_t p) {
   args.f = self->f_.data();
   args.parts = self->force_parts_.data();
   args.n_parts = self->n_parts_;
+  args.self = p;
   args.inv_m = m.inv_m.data();
   args.m = m.m.data();
   for (int k = 0; k < 3; ++k) args.g[k] = Real(m.effects.g[k]);

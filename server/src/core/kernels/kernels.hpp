@@ -89,9 +89,12 @@ struct ForcePart {
 
 // Corrector, eqs. (8)-(10) with D = alpha M, over nodes [begin, end):
 //   a = (f / m + g - alpha v_half) / (1 + alpha dt / 2);  v = v_half + dt/2 a.
-// f is the sum of the parts' force arrays over the nodes each touches; the
-// corrector sets the entries it has read back to 0, so the next element
-// pass adds into zeros without a clearing pass of its own.
+// f is the sum of the parts' force arrays over the nodes each touches. The
+// corrector sets the entries of its own part's array (`self`) back to 0 as
+// it reads them, so the next element pass adds into zeros without a
+// clearing pass; another part's entries it only reads, and their owner
+// clears them (the few past its own nodes) before its element pass, so that
+// no thread writes into another's cache lines.
 template <class Real>
 struct CorrectArgs {
   int32_t begin, end;
@@ -99,6 +102,7 @@ struct CorrectArgs {
   Node4<Real>* f;               // the parts' force arrays [N]
   const ForcePart* parts;
   int32_t n_parts;
+  int32_t self;                 // the part whose array this call clears
   const Real* inv_m;  // 1/m per node [1/kg] (n)
   const Real* m;      // m per node [kg] (n)
   Real g[3];          // [m/s^2]
