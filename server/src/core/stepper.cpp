@@ -422,7 +422,9 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     std::vector<int32_t> ids = find_inverted_elements(s);
     // The message first: an argument std::move(ids) may be evaluated before list_ids(ids).
     std::string msg = std::to_string(el.inverted) +
-                      " element(s) inverted (det F <= 0), which their material (stvk) cannot recover from: ids " +
+                      " element(s) inverted (det F <= 0), which their material (" +
+                      std::string(ids.empty() ? "stvk" : to_string(model_.tet_model[size_t(ids.front())])) +
+                      ") cannot recover from: ids " +
                       list_ids(ids);
     fault = make_fault(Fault::Kind::Inverted, s, std::move(msg), std::move(ids));
   } else {
