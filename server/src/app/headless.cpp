@@ -198,7 +198,20 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   for (size_t j = 0; j < proxies.size(); ++j)
     result.proxies.push_back({proxies[j].name, proxies[j].device, {}, {}, 0, sim.proxy_pose(int32_t(j)).position, 0});
   for (const std::string& d : sim.devices()) result.devices.push_back({d, d, {}, {}, 0, {}, 0});
-  auto mean = [](const Vec3& impulse, double elapsed) { return elapsed > 0 ? impulse / elapsed : Vec3(0.0); };
+  // One interval's report into a result and a CSV row: t, names, mean force
+  // and torque over the interval, contacts at its end.
+  auto take = [&](const ContactReport& r, ContactResult& c, double t, std::string& out, bool with_device) {
+    const double span = r.elapsed;
+    c.force = span > 0 ? r.impulse / span : Vec3(0.0);
+    c.torque = span > 0 ? r.angular_impulse / span : Vec3(0.0);
+    c.contacts = r.contacts;
+    c.peak_force = std::max(c.peak_force, glm::length(c.force));
+    std::snprintf(buf, sizeof buf, "%.9g", t);
+    out.append(buf).append(",").append(c.name);
+    if (with_device) out.append(",").append(c.device);
+    for (double x : {c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z}) append_number(out, x);
+    out.append(",").append(std::to_string(c.contacts));
+  };
 
   // Before an interval: scripted proxies and hands move over it; the others hold.
   auto drive = [&](double t0, double t1) {
@@ -214,31 +227,15 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
     const std::vector<ProxyReport>& pr = sim.proxy_reports();
     for (size_t j = 0; j < pr.size(); ++j) {
       ContactResult& c = result.proxies[j];
-      c.force = mean(pr[j].impulse, pr[j].elapsed);
-      c.torque = mean(pr[j].angular_impulse, pr[j].elapsed);
-      c.contacts = pr[j].contacts;
+      take(pr[j], c, t, forces, true);
       c.position = sim.proxy_pose(int32_t(j)).position;
-      c.peak_force = std::max(c.peak_force, glm::length(c.force));
-      std::snprintf(buf, sizeof buf, "%.9g", t);
-      forces += buf;
-      forces.append(",").append(c.name).append(",").append(c.device);
-      for (double x : {c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z}) append_number(forces, x);
-      forces.append(",").append(std::to_string(c.contacts));
       for (double x : {c.position.x, c.position.y, c.position.z}) append_number(forces, x);
       forces += '\n';
     }
     const std::vector<DeviceReport>& dr = sim.device_reports();
     for (size_t d = 0; d < dr.size(); ++d) {
-      ContactResult& c = result.devices[d];
-      c.force = mean(dr[d].impulse, dr[d].elapsed);
-      c.torque = mean(dr[d].angular_impulse, dr[d].elapsed);
-      c.contacts = dr[d].contacts;
-      c.peak_force = std::max(c.peak_force, glm::length(c.force));
-      std::snprintf(buf, sizeof buf, "%.9g", t);
-      devices += buf;
-      devices.append(",").append(c.name);
-      for (double x : {c.force.x, c.force.y, c.force.z, c.torque.x, c.torque.y, c.torque.z}) append_number(devices, x);
-      devices.append(",").append(std::to_string(c.contacts)).append("\n");
+      take(dr[d], result.devices[d], t, devices, false);
+      devices += '\n';
     }
   };
 

@@ -93,14 +93,8 @@ void Contact<Real>::set_hand_motion(int32_t hand, const ProxyMotion& m) {
 
 template <class Real>
 void Contact<Real>::clear_impulses() {
-  for (ProxyReport& r : reports_) {
-    r.impulse = r.angular_impulse = Vec3(0.0);
-    r.elapsed = 0;
-  }
-  for (DeviceReport& d : device_reports_) {
-    d.impulse = d.angular_impulse = Vec3(0.0);
-    d.elapsed = 0;
-  }
+  for (ProxyReport& r : reports_) r.clear_impulses();
+  for (DeviceReport& d : device_reports_) d.clear_impulses();
 }
 
 template <class Real>
@@ -129,9 +123,11 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     r.contacts = 0;
   }
   for (DeviceReport& d : device_reports_) {
-    d.force = d.torque = Vec3(0.0);
-    d.contacts = 0;
-    d.stiffness = glm::dmat3(0.0);
+    const DeviceReport kept = d;
+    d = DeviceReport{};  // summed from its proxies below, but for the impulse sums
+    d.impulse = kept.impulse;
+    d.angular_impulse = kept.angular_impulse;
+    d.elapsed = kept.elapsed;
   }
 
   // Positions at t_{n+1}, and boxes around each cluster's motion over the step.
@@ -200,9 +196,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   // Per device: its proxies' sums, torques moved to the device's reference point.
   for (size_t j = 0; j < n_proxies; ++j) {
     ProxyReport& r = reports_[j];
-    r.impulse += r.force * dt;
-    r.angular_impulse += r.torque * dt;
-    r.elapsed += dt;
+    r.add_step(dt);
     DeviceReport& d = device_reports_[size_t(model_.proxy_device[j])];
     const int32_t hand = model_.proxy_hand[j];
     const Vec3 reference = hand >= 0 ? hand_motion_[size_t(hand)].at(t1).position : pose1_[j].position;
@@ -211,11 +205,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     d.contacts += r.contacts;
     d.stiffness += r.stiffness;
   }
-  for (DeviceReport& d : device_reports_) {
-    d.impulse += d.force * dt;
-    d.angular_impulse += d.torque * dt;
-    d.elapsed += dt;
-  }
+  for (DeviceReport& d : device_reports_) d.add_step(dt);
   return sums;
 }
 

@@ -38,35 +38,41 @@
 
 namespace tactile {
 
-// What one proxy felt over the latest step.
-struct ProxyReport {
-  Vec3 force{0.0};    // on the proxy [N] (the reaction of the contact impulses)
-  Vec3 torque{0.0};   // on the proxy, about its position [N m]
-  int32_t contacts = 0;  // surface nodes inside it
-  // Local contact stiffness dF/dx of the force with the proxy's position
-  // [N/m], a secant estimate fitted to the latest steps' changes (zero out of
-  // contact, and in directions the proxy has not moved along).
+// What a proxy, or a device channel, felt over the latest step. A device's
+// report is the sum over the proxies it drives (one proxy, or a hand's),
+// never another device's; its torque is about its reference point (its
+// hand's or its proxy's position), a proxy's about the proxy's position.
+struct ContactReport {
+  Vec3 force{0.0};    // on the proxy or device [N] (the reaction of the contact impulses)
+  Vec3 torque{0.0};   // [N m]
+  int32_t contacts = 0;  // surface nodes inside its proxies
+  // Local contact stiffness dF/dx of the force with the position [N/m]: per
+  // proxy a secant estimate fitted to the latest steps' changes (zero out of
+  // contact, and in directions the proxy has not moved along); per device
+  // the sum over its proxies (the hand translated as one).
   glm::dmat3 stiffness{0.0};
-  double work = 0;    // work the proxy has done on the body since the start [J]
   // Sums over the steps since the last clear_impulses(): the mean force over
   // an interval longer than a step (a device tick, an output frame) is
   // impulse / elapsed.
   Vec3 impulse{0.0};          // [N s]
   Vec3 angular_impulse{0.0};  // [N m s]
   double elapsed = 0;         // [s]
+
+  void add_step(double dt) {
+    impulse += force * dt;
+    angular_impulse += torque * dt;
+    elapsed += dt;
+  }
+  void clear_impulses() {
+    impulse = angular_impulse = Vec3(0.0);
+    elapsed = 0;
+  }
 };
 
-// What one device channel felt over the latest step: the sum over the
-// proxies it drives (one proxy, or a hand's), never another device's.
-struct DeviceReport {
-  Vec3 force{0.0};    // [N]
-  Vec3 torque{0.0};   // about the device's reference point (its hand's or proxy's position) [N m]
-  int32_t contacts = 0;
-  glm::dmat3 stiffness{0.0};  // sum of its proxies' dF/dx [N/m]: the hand translated as one
-  Vec3 impulse{0.0};          // since clear_impulses() [N s]
-  Vec3 angular_impulse{0.0};  // [N m s]
-  double elapsed = 0;         // [s]
+struct ProxyReport : ContactReport {
+  double work = 0;  // work the proxy has done on the body since the start [J]
 };
+using DeviceReport = ContactReport;
 
 // What the contact pass changed, for the stepper's energy accounting.
 struct ContactSums {
