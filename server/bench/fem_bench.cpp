@@ -254,6 +254,22 @@ void thread_rows(const Options& opt, ThreadPool& pool) {
   }
 }
 
+// Round trip of the pool on an empty job of two indices: the fixed cost of a
+// pass split over two threads.
+double pool_handoff_seconds(ThreadPool& pool) {
+  std::atomic<int> sink{0};
+  auto fn = [](void* ctx, int32_t i) { static_cast<std::atomic<int>*>(ctx)->fetch_add(i, std::memory_order_relaxed); };
+  for (int k = 0; k < 10000; ++k) pool.run(2, fn, &sink);
+  std::vector<double> t;
+  for (int rep = 0; rep < 5; ++rep) {
+    const int runs = 100000;
+    const Clock::time_point t0 = Clock::now();
+    for (int k = 0; k < runs; ++k) pool.run(2, fn, &sink);
+    t.push_back(seconds_since(t0) / runs);
+  }
+  return median(t);
+}
+
 void table_threads(const Options& opt) {
   ThreadPool pool(2);
   std::printf("\n## StVK, one thread against two (M tets/s)\n\n");
@@ -262,6 +278,8 @@ void table_threads(const Options& opt) {
   std::printf("|--------|-----------|------------|------------|-------|----------|\n");
   thread_rows<float>(opt, pool);
   thread_rows<double>(opt, pool);
+  std::printf("\nHand-off: %.2f us per pass split over the two threads (an empty job's round trip)\n",
+              pool_handoff_seconds(pool) * 1e6);
   if (std::thread::hardware_concurrency() < 2) std::printf("\n(this machine has one core: two threads share it)\n");
 }
 

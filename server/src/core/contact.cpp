@@ -17,14 +17,6 @@ constexpr int32_t kClusterNodes = 32;
 // about the last 50 steps count.
 constexpr double kFitMemory = 0.98;
 
-uint32_t spread_bits(uint32_t v) {
-  v = (v | (v << 16)) & 0x030000FF;
-  v = (v | (v << 8)) & 0x0300F00F;
-  v = (v | (v << 4)) & 0x030C30C3;
-  v = (v | (v << 2)) & 0x09249249;
-  return v;
-}
-
 bool boxes_meet(const Vec3& alo, const Vec3& ahi, const Vec3& blo, const Vec3& bhi) {
   return alo.x <= bhi.x && blo.x <= ahi.x && alo.y <= bhi.y && blo.y <= ahi.y && alo.z <= bhi.z && blo.z <= ahi.z;
 }
@@ -57,10 +49,7 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   const Aabb box = compute_aabb(model.mesh.X);
   const Vec3 extent = glm::max(box.size(), Vec3(1e-30));
   std::vector<uint32_t> key(free.size());
-  for (size_t k = 0; k < free.size(); ++k) {
-    const Vec3 p = glm::clamp((model.mesh.X[size_t(free[k])] - box.lo) / extent, Vec3(0.0), Vec3(1.0)) * 1023.0;
-    key[k] = spread_bits(uint32_t(p.x)) | spread_bits(uint32_t(p.y)) << 1 | spread_bits(uint32_t(p.z)) << 2;
-  }
+  for (size_t k = 0; k < free.size(); ++k) key[k] = compute_morton_code((model.mesh.X[size_t(free[k])] - box.lo) / extent);
   std::vector<size_t> order(free.size());
   std::iota(order.begin(), order.end(), size_t(0));
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key[a] < key[b]; });

@@ -82,4 +82,16 @@ std::string check_mesh_structure(const TetMesh& mesh) {
   return "";
 }
 
+uint32_t compute_morton_code(const Vec3& p) {
+  auto spread = [](uint32_t v) {
+    v = (v | (v << 16)) & 0x030000FF;
+    v = (v | (v << 8)) & 0x0300F00F;
+    v = (v | (v << 4)) & 0x030C30C3;
+    v = (v | (v << 2)) & 0x09249249;
+    return v;
+  };
+  auto q = [](double x) { return static_cast<uint32_t>(std::clamp(x, 0.0, 1.0) * 1023.0); };
+  return spread(q(p.x)) | (spread(q(p.y)) << 1) | (spread(q(p.z)) << 2);
+}
+
 }  // namespace tactile

@@ -45,6 +45,10 @@ struct Aabb {
 };
 Aabb compute_aabb(const std::vector<Vec3>& x);
 
+// Morton (Z-order) code of a point in [0, 1]^3 (clamped), 10 bits per axis:
+// sorting by it keeps points that are near in space near in memory.
+uint32_t compute_morton_code(const Vec3& p);
+
 // Checks indices, counts and orientation; returns "" when the mesh is
 // structurally valid, else a message naming the first offending tet or node.
 std::string check_mesh_structure(const TetMesh& mesh);

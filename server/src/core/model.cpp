@@ -66,19 +66,6 @@ double max_eigenvalue_symmetric(double* A, int n) {
   return best;
 }
 
-// Morton code of a point in [0,1]^3, 10 bits per axis: elements sorted by it
-// touch nearby nodes, which keeps the gathers and scatters in cache.
-uint32_t morton(const Vec3& p) {
-  auto spread = [](uint32_t v) {
-    v = (v | (v << 16)) & 0x030000FF;
-    v = (v | (v << 8)) & 0x0300F00F;
-    v = (v | (v << 4)) & 0x030C30C3;
-    v = (v | (v << 2)) & 0x09249249;
-    return v;
-  };
-  auto q = [](double x) { return static_cast<uint32_t>(std::clamp(x, 0.0, 1.0) * 1023.0); };
-  return spread(q(p.x)) | (spread(q(p.y)) << 1) | (spread(q(p.z)) << 2);
-}
 
 }  // namespace
 
@@ -253,7 +240,7 @@ Model<Real> build_model(const ModelSpec& spec) {
   for (size_t e = 0; e < nt; ++e) {
     const Tet& t = mesh.tets[e];
     const Vec3 c = (mesh.X[size_t(t[0])] + mesh.X[size_t(t[1])] + mesh.X[size_t(t[2])] + mesh.X[size_t(t[3])]) * 0.25;
-    key[e] = morton((c - box.lo) / extent);
+    key[e] = compute_morton_code((c - box.lo) / extent);  // nearby elements touch nearby nodes
   }
   std::vector<int32_t> order(nt);
   std::iota(order.begin(), order.end(), 0);
