@@ -35,6 +35,8 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   fit_.resize(n_proxies);
   pose0_.resize(n_proxies);
   pose1_.resize(n_proxies);
+  velocity_.resize(n_proxies);
+  spin_.resize(n_proxies);
   lo_.resize(n_proxies);
   hi_.resize(n_proxies);
   alpha_ = model.effects.damping ? model.effects.alpha : 0.0;
@@ -137,6 +139,8 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   for (size_t j = 0; j < n_proxies; ++j) {
     pose0_[j] = motion_[j].at(t0);
     pose1_[j] = motion_[j].at(t1);
+    velocity_[j] = motion_[j].velocity();
+    spin_[j] = motion_[j].angular_velocity();
     const Aabb b0 = world_bounds(model_.proxies[j].geometry, pose0_[j]);
     const Aabb b1 = world_bounds(model_.proxies[j].geometry, pose1_[j]);
     lo_[j] = glm::min(b0.lo, b1.lo);
@@ -234,8 +238,7 @@ void Contact<Real>::contact_node(State<Real>& s, int32_t k, int32_t proxy, const
   ++reports_[size_t(proxy)].contacts;
 
   const Vec3 n = p1.orientation * n_local;
-  const ProxyMotion& motion = motion_[size_t(proxy)];
-  const Vec3 vp = motion.velocity() + glm::cross(motion.angular_velocity(), x1 - p1.position);
+  const Vec3 vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], x1 - p1.position);
   const Vec3 v(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2]));
   const Vec3 rel = v - vp;
   const double vn = glm::dot(rel, n);

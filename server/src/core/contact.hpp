@@ -134,6 +134,7 @@ class Contact {
   std::vector<int32_t> touched_prev_, touched_now_;  // surface indices with a force in those steps
   std::vector<Memory> memory_;
   std::vector<Pose> pose0_, pose1_;  // per proxy at t_n and t_{n+1}
+  std::vector<Vec3> velocity_, spin_;  // per proxy over the step: velocity [m/s], angular velocity [rad/s]
   std::vector<Vec3> lo_, hi_;        // per proxy: box its bounding sphere sweeps over the step
   // Secant fit of the stiffness per proxy: exponentially weighted sums of
   // dF dx^T and dx dx^T over the steps the proxy moved in contact.
