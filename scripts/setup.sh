@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what the project needs on Debian 12 and builds it. Idempotent:
 # packages already present are not fetched again, and the build is incremental.
-#   scripts/setup.sh            -> packages, Python venv (.venv), C++ build (build/release)
+#   scripts/setup.sh            -> packages, Python venv (.venv), C++ build (build/release),
+#                                  JavaScript codec (proto/js: node_modules, dist)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -15,6 +16,10 @@ missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
+# Node.js and npm by command, not by package: a Node from elsewhere (with its own
+# npm) serves as well, and Debian's npm package would conflict with it.
+command -v node >/dev/null || missing+=(nodejs)
+command -v npm >/dev/null || missing+=(npm)
 if [ ${#missing[@]} -gt 0 ]; then
   echo "setup: installing Debian packages: ${missing[*]}"
   $sudo apt-get update -qq
@@ -31,6 +36,19 @@ if ! cmp -s tests/requirements.txt .venv/.requirements 2>/dev/null; then
   .venv/bin/python -m pip install -q --upgrade pip >/dev/null
   .venv/bin/python -m pip install -q -r tests/requirements.txt
   cp tests/requirements.txt .venv/.requirements
+fi
+
+# --- JavaScript (the protocol codec, proto/js) -------------------------------
+js=proto/js
+if ! cmp -s "$js/package-lock.json" "$js/node_modules/.setup-package-lock.json" 2>/dev/null; then
+  echo "setup: installing JavaScript packages ($js/package-lock.json)"
+  (cd "$js" && npm ci --ignore-scripts --no-audit --no-fund)
+  cp "$js/package-lock.json" "$js/node_modules/.setup-package-lock.json"
+fi
+if [ ! -f "$js/dist/tactile-proto.js" ] ||
+   [ -n "$(find "$js/src" "$js/package.json" "$js/package-lock.json" -newer "$js/dist/tactile-proto.js" -print -quit)" ]; then
+  echo "setup: building the JavaScript codec ($js/dist)"
+  npm --prefix "$js" run -s build
 fi
 
 # --- C++ build -------------------------------------------------------------

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Sets everything up, then runs all the tests: the C++ suites (ctest) and the
-# cross-piece tests in tests/ (pytest).
+# Sets everything up, then runs all the tests: the C++ suites (ctest), the
+# JavaScript codec's (node --test) and the cross-piece tests in tests/ (pytest).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -8,5 +8,7 @@ scripts/setup.sh
 build="${TACTILE_BUILD:-build/release}"
 echo "test: C++ (ctest)"
 ctest --test-dir "$build" --output-on-failure -j"$(nproc)"
+echo "test: JavaScript codec (proto/js, node --test)"
+npm --prefix proto/js test
 echo "test: cross-piece (pytest)"
 TACTILE_BUILD="$build" .venv/bin/python -m pytest -q tests
