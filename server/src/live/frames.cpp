@@ -1,0 +1,150 @@
+#include "live/frames.hpp"
+
+#include <cmath>
+
+#include <glm/geometric.hpp>
+
+#include "tactile_generated.h"
+
+namespace tactile {
+
+namespace fb = flatbuffers;
+namespace wire = proto;
+
+Surface extract_surface(const TetMesh& mesh) {
+  const std::vector<Tri> faces = compute_boundary_faces(mesh);
+  const std::vector<int32_t> nodes = compute_boundary_nodes(faces);
+  Surface s;
+  std::vector<int32_t> vertex_of(size_t(mesh.n_nodes()), -1);
+  for (size_t k = 0; k < nodes.size(); ++k) {
+    vertex_of[size_t(nodes[k])] = int32_t(k);
+    s.nodes.push_back(uint32_t(nodes[k]));
+  }
+  s.triangles.reserve(3 * faces.size());
+  for (const Tri& f : faces)
+    for (int32_t i : f) s.triangles.push_back(uint32_t(vertex_of[size_t(i)]));
+  return s;
+}
+
+namespace {
+
+wire::Vec3f to_wire(const Vec3& v) { return {float(v.x), float(v.y), float(v.z)}; }
+wire::Quatf to_wire(const Quat& q) { return {float(q.w), float(q.x), float(q.y), float(q.z)}; }
+wire::Mat3f to_wire(const glm::dmat3& m) {  // glm is column-major: m[col][row]
+  return {float(m[0][0]), float(m[1][0]), float(m[2][0]), float(m[0][1]), float(m[1][1]),
+          float(m[2][1]), float(m[0][2]), float(m[1][2]), float(m[2][2])};
+}
+
+wire::ProxyShape to_wire(ProxyShape s) {
+  switch (s) {
+    case ProxyShape::Sphere: return wire::ProxyShape::Sphere;
+    case ProxyShape::Capsule: return wire::ProxyShape::Capsule;
+    case ProxyShape::Box: return wire::ProxyShape::Box;
+    case ProxyShape::Plane: return wire::ProxyShape::Plane;
+  }
+  return wire::ProxyShape::Sphere;
+}
+
+template <class T>
+fb::span<const uint8_t> seal(fb::FlatBufferBuilder& b, wire::Message type, fb::Offset<T> body) {
+  b.Finish(wire::CreateEnvelope(b, type, body.Union()), wire::EnvelopeIdentifier());
+  return fb::span<const uint8_t>(b.GetBufferPointer(), b.GetSize());
+}
+
+}  // namespace
+
+FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt)
+    : sim_(sim), scene_name_(std::move(scene_name)), scene_id_(scene_id), dt_(dt), surface_(extract_surface(sim.mesh())) {
+  x_.resize(3 * size_t(sim.n_nodes()));
+  u_.resize(3 * size_t(sim.n_nodes()));
+  positions_.resize(3 * surface_.nodes.size());
+  scalar_.resize(surface_.nodes.size());
+  poses_.resize(sim.proxies().size());
+  forces_.resize(sim.proxies().size());
+  proxy_haptics_.resize(sim.proxies().size());
+  device_haptics_.resize(sim.devices().size());
+}
+
+fb::span<const uint8_t> FrameEncoder::scene_description() {
+  fb::FlatBufferBuilder& b = scene_builder_;
+  b.Clear();
+  const TetMesh& mesh = sim_.mesh();
+  std::vector<float> rest(3 * surface_.nodes.size());
+  for (size_t k = 0; k < surface_.nodes.size(); ++k)
+    for (int c = 0; c < 3; ++c) rest[3 * k + size_t(c)] = float(mesh.X[surface_.nodes[k]][c]);
+  std::vector<fb::Offset<wire::ProxyInfo>> proxies;
+  for (const ProxySpec& p : sim_.proxies()) {
+    const wire::Vec3f half = to_wire(p.geometry.half_extents);
+    proxies.push_back(wire::CreateProxyInfoDirect(b, p.name.c_str(), p.device.c_str(), p.hand.c_str(),
+                                                  to_wire(p.geometry.shape), float(p.geometry.radius),
+                                                  float(p.geometry.half_length), &half, float(p.friction)));
+  }
+  std::vector<fb::Offset<fb::String>> devices;
+  for (const std::string& d : sim_.devices()) devices.push_back(b.CreateString(d));
+  return seal(b, wire::Message::SceneDescription,
+              wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
+                                                 &surface_.nodes, "displacement_m", &proxies, &devices));
+}
+
+fb::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
+  sim_.copy_positions(x_);
+  sim_.copy_displacement(u_);
+  for (size_t k = 0; k < surface_.nodes.size(); ++k) {
+    const size_t i = 3 * size_t(surface_.nodes[k]);
+    for (size_t c = 0; c < 3; ++c) positions_[3 * k + c] = float(x_[i + c]);
+    scalar_[k] = float(std::sqrt(u_[i] * u_[i] + u_[i + 1] * u_[i + 1] + u_[i + 2] * u_[i + 2]));
+  }
+  fb::FlatBufferBuilder& b = state_builder_;
+  b.Clear();
+  const auto positions = b.CreateVector(positions_);
+  const auto scalar = b.CreateVector(scalar_);
+  // (CreateVectorOfStructs, not the uninitialized variant: flatbuffers 2.0.8
+  // aligns that one to the struct's size, which is wrong for these.)
+  const std::vector<ProxyReport>& reports = sim_.proxy_reports();
+  for (size_t j = 0; j < reports.size(); ++j) {
+    const Pose p = sim_.proxy_pose(int32_t(j));
+    poses_[j] = wire::ProxyPose(to_wire(p.position), to_wire(p.orientation));
+    forces_[j] = to_wire(reports[j].force);
+  }
+  const auto pose_vec = b.CreateVectorOfStructs(poses_.data(), reports.size());
+  const auto force_vec = b.CreateVectorOfStructs(forces_.data(), reports.size());
+  wire::StateFrameBuilder f(b);
+  f.add_scene_id(scene_id_);
+  f.add_step(uint64_t(sim_.steps()));
+  f.add_sim_time(sim_.time());
+  f.add_server_time_ns(server_time_ns);
+  f.add_positions(positions);
+  f.add_scalar(scalar);
+  f.add_proxies(pose_vec);
+  f.add_contact_forces(force_vec);
+  return seal(b, wire::Message::StateFrame, f.Finish());
+}
+
+fb::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence) {
+  fb::FlatBufferBuilder& b = haptic_builder_;
+  b.Clear();
+  const std::vector<ProxyReport>& pr = sim_.proxy_reports();
+  const std::vector<DeviceReport>& dr = sim_.device_reports();
+  for (size_t j = 0; j < pr.size(); ++j) {
+    const Pose p = sim_.proxy_pose(int32_t(j));
+    proxy_haptics_[j] = wire::ProxyHaptics(to_wire(pr[j].force), to_wire(pr[j].torque),
+                                           wire::ProxyPose(to_wire(p.position), to_wire(p.orientation)),
+                                           to_wire(pr[j].stiffness), uint32_t(pr[j].contacts));
+  }
+  for (size_t d = 0; d < dr.size(); ++d)
+    device_haptics_[d] = wire::DeviceHaptics(to_wire(dr[d].force), to_wire(dr[d].torque), to_wire(dr[d].stiffness),
+                                             uint32_t(dr[d].contacts));
+  const auto proxies = b.CreateVectorOfStructs(proxy_haptics_.data(), pr.size());
+  const auto devices = b.CreateVectorOfStructs(device_haptics_.data(), dr.size());
+  wire::HapticFrameBuilder f(b);
+  f.add_scene_id(scene_id_);
+  f.add_step(uint64_t(sim_.steps()));
+  f.add_sim_time(sim_.time());
+  f.add_server_time_ns(server_time_ns);
+  f.add_last_input_sequence(last_input_sequence);
+  f.add_proxies(proxies);
+  f.add_devices(devices);
+  return seal(b, wire::Message::HapticFrame, f.Finish());
+}
+
+}  // namespace tactile

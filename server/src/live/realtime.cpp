@@ -1,0 +1,184 @@
+#include "live/realtime.hpp"
+
+#include <algorithm>
+#include <thread>
+
+#include <immintrin.h>
+
+namespace tactile {
+
+namespace {
+
+// A stall longer than this is not caught up on: the loop re-anchors its
+// clock and says so, rather than running a burst of steps faster than real time.
+constexpr double kMaxBacklog = 0.05;  // [s]
+// Sleeping is coarse (the kernel's timer slack); the last stretch before a
+// deadline is spun.
+constexpr double kSpinWindow = 200e-6;  // [s]
+
+double seconds(RealtimeLoop::Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+int64_t nanoseconds(RealtimeLoop::Clock::time_point t) {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count();
+}
+
+}  // namespace
+
+RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const RealtimeOptions& options)
+    : sim_(sim),
+      frames_(frames),
+      dt_(options.dt > 0 ? options.dt : 0.9 * sim.dt_rest()),
+      state_period_(1.0 / std::max(options.state_rate_hz, 1e-3)),
+      inputs_(options.input_capacity) {
+  const std::vector<std::string>& devices = sim.devices();
+  drivers_.resize(devices.size());
+  for (size_t d = 0; d < devices.size(); ++d) {
+    Driver& drv = drivers_[d];
+    drv.interval = options.input_interval;
+    for (size_t h = 0; h < sim.hands().size(); ++h)
+      if (sim.hands()[h].device == devices[d]) drv.hand = int32_t(h);
+    for (size_t j = 0; j < sim.proxies().size(); ++j)
+      if (sim.proxy_device()[j] == int32_t(d) && sim.proxies()[j].hand.empty()) drv.proxies.push_back(int32_t(j));
+    drv.motion = hold(drv.hand >= 0 ? sim.hands()[size_t(drv.hand)].pose
+                                    : (drv.proxies.empty() ? Pose{} : sim.proxy_pose(drv.proxies.front())));
+  }
+}
+
+bool RealtimeLoop::post_input(const DeviceSample& sample) {
+  if (sample.device < 0 || size_t(sample.device) >= drivers_.size() || !inputs_.push(sample)) {
+    dropped_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  return true;
+}
+
+void RealtimeLoop::apply_inputs() {
+  DeviceSample s;
+  int64_t applied = 0;
+  const double t = sim_.time();
+  while (inputs_.pop(s)) {
+    Driver& drv = drivers_[size_t(s.device)];
+    if (drv.has_sample && s.device_time_ns > drv.last_device_ns) {
+      // The device's input interval, smoothed, within sane bounds.
+      const double gap = 1e-9 * double(s.device_time_ns - drv.last_device_ns);
+      drv.interval = std::clamp(0.8 * drv.interval + 0.2 * gap, dt_, 0.02);
+    }
+    drv.has_sample = true;
+    drv.last_device_ns = s.device_time_ns;
+    // From where it is now to the new pose over one input interval.
+    ProxyMotion m;
+    m.t0 = t;
+    m.t1 = t + drv.interval;
+    m.from = drv.motion.at(t);
+    m.to = s.pose;
+    drv.motion = m;
+    if (drv.hand >= 0) sim_.set_hand_motion(drv.hand, m);
+    for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);
+    last_sequence_ = std::max(last_sequence_, s.sequence);
+    ++applied;
+  }
+  if (applied) {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    stats_.inputs_applied += applied;
+  }
+}
+
+void RealtimeLoop::step_once(int64_t now_ns) {
+  apply_inputs();
+  const AdvanceReport report = sim_.advance(dt_);
+  if (report.fault) {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    stats_.fault = report.fault.message;
+    return;
+  }
+  if (haptic_sink_) haptic_sink_(frames_.haptic_frame(now_ns, last_sequence_));
+  bool state = false;
+  if (sim_.time() + 1e-12 >= next_state_) {
+    next_state_ += state_period_;
+    if (state_sink_) state_sink_(frames_.state_frame(now_ns));
+    state = true;
+  }
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  ++stats_.haptic_frames;
+  if (state) ++stats_.state_frames;
+}
+
+void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
+  const double sim_start = sim_.time();
+  Clock::time_point anchor = Clock::now();  // wall time of simulated time `anchor_sim`
+  double anchor_sim = sim_start;
+  next_state_ = sim_start;
+  if (state_sink_) state_sink_(frames_.state_frame(nanoseconds(anchor)));
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++stats_.state_frames;
+  }
+  next_state_ += state_period_;
+
+  const Clock::time_point start = anchor;
+  Clock::time_point window_start = start;
+  double window_sim = sim_start, cost_sum = 0, cost_max = 0;
+  int64_t window_steps = 0, missed = 0, reanchors = 0;
+  while (!stop.load(std::memory_order_relaxed) && sim_.time() - sim_start < duration) {
+    // The step to t + dt may start once the wall clock has reached t + dt.
+    const double target = sim_.time() + dt_ - anchor_sim;
+    const Clock::time_point due = anchor + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(target));
+    Clock::time_point now = Clock::now();
+    if (now < due) {
+      const double wait = seconds(due - now);
+      if (wait > kSpinWindow)
+        std::this_thread::sleep_until(due - std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kSpinWindow)));
+      while ((now = Clock::now()) < due) _mm_pause();
+    } else {
+      const double late = seconds(now - due);
+      if (late > dt_) ++missed;
+      if (late > kMaxBacklog) {  // give up on the backlog: real time from here on
+        anchor = now;
+        anchor_sim = sim_.time() + dt_;
+        ++reanchors;
+      }
+    }
+    const Clock::time_point t0 = Clock::now();
+    step_once(nanoseconds(t0));
+    const Clock::time_point t1 = Clock::now();
+    const double cost = seconds(t1 - t0);
+    cost_sum += cost;
+    cost_max = std::max(cost_max, cost);
+    ++window_steps;
+
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    stats_.steps = sim_.steps();
+    stats_.sim_time = sim_.time() - sim_start;
+    stats_.wall_time = seconds(t1 - start);
+    stats_.missed_deadlines = missed;
+    stats_.reanchors = reanchors;
+    stats_.inputs_dropped = dropped_.load(std::memory_order_relaxed);
+    if (seconds(t1 - window_start) >= 1.0) {
+      stats_.real_time_factor = (sim_.time() - window_sim) / seconds(t1 - window_start);
+      stats_.step_mean_us = 1e6 * cost_sum / double(window_steps);
+      stats_.step_max_us = 1e6 * cost_max;
+      window_start = t1;
+      window_sim = sim_.time();
+      cost_sum = cost_max = 0;
+      window_steps = 0;
+    }
+    if (!stats_.fault.empty()) break;
+  }
+  // A run shorter than the window still reports its figures.
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  if (window_steps > 0 && stats_.real_time_factor == 0) {
+    const double wall = seconds(Clock::now() - window_start);
+    stats_.real_time_factor = wall > 0 ? (sim_.time() - window_sim) / wall : 0;
+    stats_.step_mean_us = 1e6 * cost_sum / double(window_steps);
+    stats_.step_max_us = 1e6 * cost_max;
+  }
+}
+
+RealtimeStats RealtimeLoop::stats() const {
+  std::lock_guard<std::mutex> lock(stats_mutex_);
+  RealtimeStats s = stats_;
+  s.inputs_dropped = dropped_.load(std::memory_order_relaxed);
+  return s;
+}
+
+}  // namespace tactile
