@@ -63,6 +63,8 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   forces_.resize(sim.proxies().size());
   proxy_haptics_.resize(sim.proxies().size());
   device_haptics_.resize(sim.devices().size());
+  last_proxy_.resize(sim.proxies().size());
+  last_device_.resize(sim.devices().size());
 }
 
 fb::span<const uint8_t> FrameEncoder::scene_description() {
@@ -125,15 +127,25 @@ fb::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint6
   b.Clear();
   const std::vector<ProxyReport>& pr = sim_.proxy_reports();
   const std::vector<DeviceReport>& dr = sim_.device_reports();
+  // The force over the step just taken: the mean of the contact forces at
+  // its two ends, which is what changed the body's momentum (eq. 9: the
+  // velocity takes half of each end's acceleration). A resting contact
+  // pushes its nodes back on alternate steps, so the force at one instant
+  // flickers between 0 and twice its mean; this mean does not.
   for (size_t j = 0; j < pr.size(); ++j) {
     const Pose p = sim_.proxy_pose(int32_t(j));
-    proxy_haptics_[j] = wire::ProxyHaptics(to_wire(pr[j].force), to_wire(pr[j].torque),
+    const Vec3 force = 0.5 * (pr[j].force + last_proxy_[j].force), torque = 0.5 * (pr[j].torque + last_proxy_[j].torque);
+    last_proxy_[j] = {pr[j].force, pr[j].torque};
+    proxy_haptics_[j] = wire::ProxyHaptics(to_wire(force), to_wire(torque),
                                            wire::ProxyPose(to_wire(p.position), to_wire(p.orientation)),
                                            to_wire(pr[j].stiffness), uint32_t(pr[j].contacts));
   }
-  for (size_t d = 0; d < dr.size(); ++d)
-    device_haptics_[d] = wire::DeviceHaptics(to_wire(dr[d].force), to_wire(dr[d].torque), to_wire(dr[d].stiffness),
+  for (size_t d = 0; d < dr.size(); ++d) {
+    const Vec3 force = 0.5 * (dr[d].force + last_device_[d].force), torque = 0.5 * (dr[d].torque + last_device_[d].torque);
+    last_device_[d] = {dr[d].force, dr[d].torque};
+    device_haptics_[d] = wire::DeviceHaptics(to_wire(force), to_wire(torque), to_wire(dr[d].stiffness),
                                              uint32_t(dr[d].contacts));
+  }
   const auto proxies = b.CreateVectorOfStructs(proxy_haptics_.data(), pr.size());
   const auto devices = b.CreateVectorOfStructs(device_haptics_.data(), dr.size());
   wire::HapticFrameBuilder f(b);

@@ -29,6 +29,8 @@ class FrameEncoder {
   const Surface& surface() const { return surface_; }
 
   // Each returns the encoded Envelope, valid until the same call is made again.
+  // haptic_frame() is meant for every step: its forces are the means over
+  // the step (see frames.cpp).
   flatbuffers::span<const uint8_t> scene_description();
   flatbuffers::span<const uint8_t> state_frame(int64_t server_time_ns);
   flatbuffers::span<const uint8_t> haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence);
@@ -46,6 +48,10 @@ class FrameEncoder {
   std::vector<proto::Vec3f> forces_;
   std::vector<proto::ProxyHaptics> proxy_haptics_;
   std::vector<proto::DeviceHaptics> device_haptics_;
+  struct Wrench {
+    Vec3 force{0.0}, torque{0.0};
+  };
+  std::vector<Wrench> last_proxy_, last_device_;  // at the previous haptic frame
   flatbuffers::FlatBufferBuilder scene_builder_, state_builder_, haptic_builder_;
 };
 

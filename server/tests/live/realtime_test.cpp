@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cstddef>
 #include <chrono>
 #include <cmath>
 #include <thread>
@@ -13,6 +14,33 @@
 #include "live/realtime.hpp"
 #include "mesh/primitives.hpp"
 #include "tactile_generated.h"
+
+// Heap allocations made on a thread while it has counting switched on: every
+// allocation of the process goes through malloc (operator new calls it).
+namespace {
+thread_local bool t_counting = false;
+std::atomic<int64_t> g_allocations{0};
+inline void note_allocation() {
+  if (t_counting) g_allocations.fetch_add(1, std::memory_order_relaxed);
+}
+}  // namespace
+extern "C" {
+void* __libc_malloc(size_t);
+void* __libc_calloc(size_t, size_t);
+void* __libc_realloc(void*, size_t);
+void* malloc(size_t n) {
+  note_allocation();
+  return __libc_malloc(n);
+}
+void* calloc(size_t n, size_t size) {
+  note_allocation();
+  return __libc_calloc(n, size);
+}
+void* realloc(void* p, size_t n) {
+  note_allocation();
+  return __libc_realloc(p, n);
+}
+}
 
 namespace tactile {
 namespace {
@@ -96,11 +124,15 @@ TEST(RealtimeLoop, DeviceInputsMoveTheProxyAndTheForceComesBack) {
   RealtimeOptions options;
   options.dt = 2e-4;
   RealtimeLoop loop(sim, frames, options);
-  std::atomic<float> force_y{0};
+  std::vector<float> force_y;  // per haptic frame
+  force_y.reserve(4000);
+  float flicker = 0;  // largest change of the force between frames in the hold
   std::atomic<uint64_t> seen_sequence{0};
   loop.on_haptic([&](flatbuffers::span<const uint8_t> m) {
     const proto::HapticFrame* h = proto::GetEnvelope(m.data())->message_as_HapticFrame();
-    force_y = h->proxies()->Get(0)->force().y();
+    force_y.push_back(h->proxies()->Get(0)->force().y());
+    if (h->sim_time() > 0.3 && force_y.size() > 1)
+      flicker = std::max(flicker, std::fabs(force_y.back() - force_y[force_y.size() - 2]));
     seen_sequence = h->last_input_sequence();
   });
   std::atomic<bool> stop{false}, device_done{false};
@@ -125,7 +157,15 @@ TEST(RealtimeLoop, DeviceInputsMoveTheProxyAndTheForceComesBack) {
   EXPECT_EQ(s.inputs_dropped, 0);
   EXPECT_GT(s.inputs_applied, 250);
   EXPECT_EQ(seen_sequence.load(), sent);
-  EXPECT_GT(force_y.load(), 0.0f) << "pressed 3 mm into the block, the sphere should be pushed up";
+  // Held 3 mm deep for the last 0.1 s: pushed up, every frame, steadily.
+  ASSERT_GT(force_y.size(), 100u);
+  float lowest = force_y.back(), mean = 0;
+  for (size_t k = force_y.size() - 100; k < force_y.size(); ++k) {
+    lowest = std::min(lowest, force_y[k]);
+    mean += force_y[k] / 100;
+  }
+  EXPECT_GT(lowest, 0.0f) << "pressed 3 mm into the block, the sphere should be pushed up in every frame";
+  EXPECT_LT(flicker, 0.5f * mean) << "the force flickers from frame to frame";
   // The proxy reached the last input's pose.
   EXPECT_NEAR(sim.proxy_pose(0).position.y, 0.025, 1e-6);
 }
@@ -151,6 +191,43 @@ TEST(RealtimeLoop, OverloadIsReportedAsMissedDeadlines) {
   EXPECT_GT(s.reanchors, 0);
   EXPECT_LT(s.real_time_factor, 0.5);
   EXPECT_GT(s.step_mean_us, 1e6 * options.dt);
+}
+
+// Once the builders have grown, the simulation thread allocates nothing:
+// not for steps, inputs, haptic frames or state frames.
+TEST(RealtimeLoop, SteadyStateAllocatesNothing) {
+  Simulation sim(poke_spec());
+  FrameEncoder frames(sim, "poke", 1, 0.0);
+  RealtimeOptions options;
+  options.dt = 2e-4;
+  RealtimeLoop loop(sim, frames, options);
+  int64_t haptics = 0;
+  size_t bytes = 0;
+  loop.on_haptic([&](flatbuffers::span<const uint8_t> m) {
+    bytes += m.size();
+    if (++haptics == 200) t_counting = true;  // (the sim thread: counting from here on)
+  });
+  loop.on_state([&](flatbuffers::span<const uint8_t> m) { bytes += m.size(); });
+  std::atomic<bool> stop{false};
+  std::thread device([&] {
+    for (int k = 1; k <= 250; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      DeviceSample s;
+      s.device = 0;
+      s.sequence = uint64_t(k);
+      s.device_time_ns = int64_t(k) * 1000000;
+      s.pose.position = Vec3(0.02, 0.029 - 1e-5 * k, 0.02);
+      loop.post_input(s);
+    }
+  });
+  g_allocations = 0;
+  loop.run(stop, 0.3);
+  t_counting = false;
+  device.join();
+  EXPECT_GT(haptics, 1000);
+  EXPECT_GT(bytes, 0u);
+  EXPECT_GT(loop.stats().inputs_applied, 100);
+  EXPECT_EQ(g_allocations.load(), 0) << "allocations on the simulation thread in the steady state";
 }
 
 TEST(RealtimeLoop, AFullQueueOrAnUnknownDeviceDropsAndCounts) {
