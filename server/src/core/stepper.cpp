@@ -490,10 +490,29 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
     report.fault = make_fault(Fault::Kind::StepTooLarge, s, "frame interval must be finite and > 0", {});
     return report;
   }
-  // Refresh the estimate as the body deforms; it changes slowly, so every 16 steps.
-  if (dt_refreshed_at_ < 0 || s.step - dt_refreshed_at_ >= 16) {
-    dt_critical_ = compute_critical_dt(s);
+  // Refresh the estimate as the body deforms. It changes slowly, so each call
+  // re-examines a sixteenth of the elements: every element is seen again
+  // within 16 calls, at an even cost per call (a full pass at once is a
+  // spike a real-time loop would feel as a missed deadline). Until a sweep
+  // completes, the lower of the last sweep's estimate and this one's so far.
+  constexpr int32_t kSweepCalls = 16;
+  if (dt_refreshed_at_ < 0) {
+    dt_critical_ = sweep_last_ = compute_critical_dt(s);
+    sweep_next_ = 0;
+    sweep_min_ = model_.dt_rest;
     dt_refreshed_at_ = s.step;
+  } else {
+    const int32_t chunk = (model_.n_tets + kSweepCalls - 1) / kSweepCalls;
+    const int32_t end = std::min(model_.n_tets, sweep_next_ + chunk);
+    sweep_min_ = std::min(sweep_min_, compute_critical_dt(s, sweep_next_, end));
+    sweep_next_ = end;
+    if (sweep_next_ >= model_.n_tets) {
+      sweep_last_ = sweep_min_;
+      sweep_min_ = model_.dt_rest;
+      sweep_next_ = 0;
+      dt_refreshed_at_ = s.step;
+    }
+    dt_critical_ = std::min(sweep_last_, sweep_min_);
   }
   report.dt_critical = dt_critical_;
   const double fixed = model_.integrator.dt;
@@ -528,9 +547,14 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
 
 template <class Real>
 double Stepper<Real>::compute_critical_dt(const State<Real>& s) const {
+  return compute_critical_dt(s, 0, model_.n_tets);
+}
+
+template <class Real>
+double Stepper<Real>::compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const {
   double dt = model_.dt_rest;
   const TetMesh& mesh = model_.mesh;
-  for (size_t e = 0; e < size_t(model_.n_tets); ++e) {
+  for (size_t e = size_t(begin); e < size_t(end); ++e) {
     // Small strain (eqs. 2-3) has one stiffness K for every configuration: its rest step holds throughout.
     if (model_.tet_model[e] == MaterialModel::Linear) continue;
     const Tet& t = mesh.tets[e];

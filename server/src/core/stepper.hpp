@@ -80,6 +80,8 @@ class Stepper {
   // Critical step of the current configuration [s]: each element's exact rest
   // value scaled by how much it has been squashed and stiffened.
   double compute_critical_dt(const State<Real>& s) const;
+  // The same over the elements [begin, end) only (tet ids).
+  double compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const;
 
   // All energies from a full pass (not the hot path).
   Energy compute_energy(const State<Real>& s) const;
@@ -166,7 +168,10 @@ class Stepper {
   bool energy_started_ = false;
   Fault fault_;
   double dt_critical_ = 0;
-  int64_t dt_refreshed_at_ = -1;
+  int64_t dt_refreshed_at_ = -1;  // step of the last complete sweep, -1 before the first
+  double sweep_last_ = 0;         // estimate of the last complete sweep [s]
+  double sweep_min_ = 0;          // of the sweep under way, so far [s]
+  int32_t sweep_next_ = 0;        // first element the next call examines
 };
 
 }  // namespace tactile

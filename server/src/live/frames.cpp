@@ -46,9 +46,9 @@ wire::ProxyShape to_wire(ProxyShape s) {
 }
 
 template <class T>
-fb::span<const uint8_t> seal(fb::FlatBufferBuilder& b, wire::Message type, fb::Offset<T> body) {
+std::span<const uint8_t> seal(fb::FlatBufferBuilder& b, wire::Message type, fb::Offset<T> body) {
   b.Finish(wire::CreateEnvelope(b, type, body.Union()), wire::EnvelopeIdentifier());
-  return fb::span<const uint8_t>(b.GetBufferPointer(), b.GetSize());
+  return std::span<const uint8_t>(b.GetBufferPointer(), b.GetSize());
 }
 
 }  // namespace
@@ -67,7 +67,7 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   last_device_.resize(sim.devices().size());
 }
 
-fb::span<const uint8_t> FrameEncoder::scene_description() {
+std::span<const uint8_t> FrameEncoder::scene_description() {
   fb::FlatBufferBuilder& b = scene_builder_;
   b.Clear();
   const TetMesh& mesh = sim_.mesh();
@@ -88,7 +88,7 @@ fb::span<const uint8_t> FrameEncoder::scene_description() {
                                                  &surface_.nodes, "displacement_m", &proxies, &devices));
 }
 
-fb::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
+std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
   sim_.copy_positions(x_);
   sim_.copy_displacement(u_);
   for (size_t k = 0; k < surface_.nodes.size(); ++k) {
@@ -122,7 +122,7 @@ fb::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
   return seal(b, wire::Message::StateFrame, f.Finish());
 }
 
-fb::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence) {
+std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence) {
   fb::FlatBufferBuilder& b = haptic_builder_;
   b.Clear();
   const std::vector<ProxyReport>& pr = sim_.proxy_reports();

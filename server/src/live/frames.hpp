@@ -1,9 +1,15 @@
 // The protocol messages the simulation publishes (proto/tactile.fbs), encoded
 // from a Simulation into builders that are reused: after the first frames
 // have grown their buffers, encoding a frame allocates nothing.
+//
+// Encoded messages are handed out as std::span, never flatbuffers::span:
+// flatbuffers 2.0.8 makes that an alias of std::span or a class of its own
+// depending on what a file included before it, so two files could disagree
+// on the type (and on how it is returned).
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -31,9 +37,9 @@ class FrameEncoder {
   // Each returns the encoded Envelope, valid until the same call is made again.
   // haptic_frame() is meant for every step: its forces are the means over
   // the step (see frames.cpp).
-  flatbuffers::span<const uint8_t> scene_description();
-  flatbuffers::span<const uint8_t> state_frame(int64_t server_time_ns);
-  flatbuffers::span<const uint8_t> haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence);
+  std::span<const uint8_t> scene_description();
+  std::span<const uint8_t> state_frame(int64_t server_time_ns);
+  std::span<const uint8_t> haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence);
 
  private:
   const Simulation& sim_;

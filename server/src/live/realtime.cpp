@@ -27,7 +27,7 @@ int64_t nanoseconds(RealtimeLoop::Clock::time_point t) {
 RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const RealtimeOptions& options)
     : sim_(sim),
       frames_(frames),
-      dt_(options.dt > 0 ? options.dt : 0.9 * sim.dt_rest()),
+      dt_(options.dt > 0 ? options.dt : 0.7 * sim.dt_rest()),
       state_period_(1.0 / std::max(options.state_rate_hz, 1e-3)),
       inputs_(options.input_capacity) {
   const std::vector<std::string>& devices = sim.devices();
@@ -120,6 +120,12 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
   double window_sim = sim_start, cost_sum = 0, cost_max = 0;
   int64_t window_steps = 0, missed = 0, reanchors = 0;
   while (!stop.load(std::memory_order_relaxed) && sim_.time() - sim_start < duration) {
+    if (paused_.load(std::memory_order_relaxed)) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      anchor = Clock::now();  // on resume, real time runs on from here
+      anchor_sim = sim_.time();
+      continue;
+    }
     // The step to t + dt may start once the wall clock has reached t + dt.
     const double target = sim_.time() + dt_ - anchor_sim;
     const Clock::time_point due = anchor + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(target));

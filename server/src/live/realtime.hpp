@@ -19,6 +19,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <span>
 #include <functional>
 #include <limits>
 #include <mutex>
@@ -40,7 +41,10 @@ struct DeviceSample {
 };
 
 struct RealtimeOptions {
-  double dt = 0;                 // step [s]; 0: the scene's fixed step, else safety x the critical step at rest
+  // Step [s]; 0 picks 0.7 x the critical step at rest: under the stepper's
+  // own limit (safety 0.9 x the current critical step, which stiffening
+  // lowers) with room to spare, so that a step is one sub-step, not two.
+  double dt = 0;
   double state_rate_hz = 30;     // state frames per simulated second
   double input_interval = 1e-3;  // expected time between a device's inputs until measured [s]
   size_t input_capacity = 4096;  // queued device samples before new ones are dropped
@@ -65,7 +69,7 @@ struct RealtimeStats {
 class RealtimeLoop {
  public:
   using Clock = std::chrono::steady_clock;
-  using Sink = std::function<void(flatbuffers::span<const uint8_t> message)>;
+  using Sink = std::function<void(std::span<const uint8_t> message)>;
 
   RealtimeLoop(Simulation& sim, FrameEncoder& frames, const RealtimeOptions& options);
 
@@ -85,6 +89,11 @@ class RealtimeLoop {
   // A snapshot, from any thread (updated every step; the per-second figures
   // once a second).
   RealtimeStats stats() const;
+
+  // From any thread: holds the simulation (no steps, no frames) until
+  // resumed; simulated time then goes on from where it stopped.
+  void set_paused(bool paused) { paused_.store(paused, std::memory_order_relaxed); }
+  bool paused() const { return paused_.load(std::memory_order_relaxed); }
 
  private:
   struct Driver {             // what one device channel moves
@@ -111,6 +120,7 @@ class RealtimeLoop {
   mutable std::mutex stats_mutex_;
   RealtimeStats stats_;
   std::atomic<int64_t> dropped_{0};
+  std::atomic<bool> paused_{false};
 };
 
 }  // namespace tactile

@@ -69,7 +69,7 @@ ModelSpec poke_spec(std::array<int, 3> cells = {6, 3, 6}) {
   return spec;
 }
 
-const proto::Envelope* envelope(flatbuffers::span<const uint8_t> bytes) {
+const proto::Envelope* envelope(std::span<const uint8_t> bytes) {
   flatbuffers::Verifier v(bytes.data(), bytes.size());
   return proto::VerifyEnvelopeBuffer(v) ? proto::GetEnvelope(bytes.data()) : nullptr;
 }
@@ -83,7 +83,7 @@ TEST(RealtimeLoop, NeverAheadOfTheClockAndPublishesEveryStep) {
   Clock::time_point start;
   double worst_lead = -1, last_sim = 0;
   int64_t haptics = 0, states = 0, bad = 0;
-  loop.on_haptic([&](flatbuffers::span<const uint8_t> m) {
+  loop.on_haptic([&](std::span<const uint8_t> m) {
     const proto::Envelope* e = envelope(m);
     if (!e || !e->message_as_HapticFrame()) {
       ++bad;
@@ -94,7 +94,7 @@ TEST(RealtimeLoop, NeverAheadOfTheClockAndPublishesEveryStep) {
     worst_lead = std::max(worst_lead, last_sim - wall);  // > 0 would be ahead of real time
     ++haptics;
   });
-  loop.on_state([&](flatbuffers::span<const uint8_t> m) {
+  loop.on_state([&](std::span<const uint8_t> m) {
     const proto::Envelope* e = envelope(m);
     if (!e || !e->message_as_StateFrame()) ++bad;
     else if (e->message_as_StateFrame()->positions()->size() != 3 * frames.surface().nodes.size()) ++bad;
@@ -128,7 +128,7 @@ TEST(RealtimeLoop, DeviceInputsMoveTheProxyAndTheForceComesBack) {
   force_y.reserve(8000);
   std::atomic<bool> stop{false}, holding{false};
   std::atomic<uint64_t> seen_sequence{0};
-  loop.on_haptic([&](flatbuffers::span<const uint8_t> m) {
+  loop.on_haptic([&](std::span<const uint8_t> m) {
     const proto::HapticFrame* h = proto::GetEnvelope(m.data())->message_as_HapticFrame();
     if (holding) force_y.push_back(h->proxies()->Get(0)->force().y());
     seen_sequence = h->last_input_sequence();
@@ -206,11 +206,11 @@ TEST(RealtimeLoop, SteadyStateAllocatesNothing) {
   RealtimeLoop loop(sim, frames, options);
   int64_t haptics = 0;
   size_t bytes = 0;
-  loop.on_haptic([&](flatbuffers::span<const uint8_t> m) {
+  loop.on_haptic([&](std::span<const uint8_t> m) {
     bytes += m.size();
     if (++haptics == 200) t_counting = true;  // (the sim thread: counting from here on)
   });
-  loop.on_state([&](flatbuffers::span<const uint8_t> m) { bytes += m.size(); });
+  loop.on_state([&](std::span<const uint8_t> m) { bytes += m.size(); });
   std::atomic<bool> stop{false};
   std::thread device([&] {
     for (int k = 1; k <= 250; ++k) {

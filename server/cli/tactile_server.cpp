@@ -1,0 +1,182 @@
+// tactile-server: runs a scene live, paced to real time, and serves it over
+// WebSocket (the protocol in proto/tactile.fbs) and static files over HTTP on
+// the same port.
+//
+// Exit codes: 0 stopped by a signal, 1 a fault stopped the simulation, 2 bad
+// input (scene, mesh, command line, or an address it may not listen on).
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <thread>
+#include <vector>
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/post.hpp>
+#include <boost/asio/signal_set.hpp>
+
+#include "app/simulation.hpp"
+#include "core/model.hpp"
+#include "live/frames.hpp"
+#include "live/realtime.hpp"
+#include "mesh/mesh_error.hpp"
+#include "net/server.hpp"
+#include "scene/scene.hpp"
+
+namespace {
+
+using namespace tactile;
+
+constexpr const char* kUsage =
+    "usage: tactile-server SCENE.json [options]\n"
+    "\n"
+    "Runs the scene in real time and serves it: WebSocket clients (viewers, devices, a controller)\n"
+    "and static files over HTTP, on one port.\n"
+    "\n"
+    "options:\n"
+    "  --bind ADDR          listen address (default 127.0.0.1; off loopback a token is required)\n"
+    "  --port N             port (default 8765; 0 picks a free one)\n"
+    "  --token T            token devices and controllers must present (default: $TACTILE_TOKEN)\n"
+    "  --allow-origin O     also accept WebSockets from browser Origin O (repeatable)\n"
+    "  --static DIR         serve DIR over HTTP (e.g. client-web)\n"
+    "  --dt S               simulation step (default: the scene's fixed step, else 0.7 x critical at rest)\n"
+    "  --state-rate HZ      state frames per second to viewers (default 30)\n"
+    "  --variant NAME       run this variant of the scene (default: the first)\n"
+    "  --duration S         stop after S simulated seconds (default: run until stopped)\n"
+    "\n"
+    "exit status: 0 stopped, 1 a fault stopped the simulation, 2 bad input\n";
+
+struct BadInput {
+  std::string message;
+};
+
+struct Options {
+  std::string scene;
+  ServerOptions server;
+  std::optional<double> dt, duration;
+  double state_rate = 30;
+  std::optional<std::string> variant;
+};
+
+double number(std::string_view flag, const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (text.empty() || *end != '\0' || !std::isfinite(v)) throw BadInput{std::string(flag) + ": not a number: " + text};
+  return v;
+}
+
+Options parse_args(int argc, char** argv) {
+  Options o;
+  if (const char* t = std::getenv("TACTILE_TOKEN")) o.server.token = t;
+  std::vector<std::string> args(argv + 1, argv + argc);
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    auto value = [&]() -> const std::string& {
+      if (i + 1 >= args.size()) throw BadInput{a + " needs a value"};
+      return args[++i];
+    };
+    if (a == "--help" || a == "-h") {
+      std::cout << kUsage;
+      std::exit(0);
+    } else if (a == "--bind") o.server.bind = value();
+    else if (a == "--port") {
+      const double p = number(a, value());
+      if (p < 0 || p > 65535 || p != std::floor(p)) throw BadInput{"--port: not a port: " + args[i]};
+      o.server.port = uint16_t(p);
+    } else if (a == "--token") o.server.token = value();
+    else if (a == "--allow-origin") o.server.allowed_origins.push_back(value());
+    else if (a == "--static") o.server.static_dir = value();
+    else if (a == "--dt") {
+      o.dt = number(a, value());
+      if (!(*o.dt > 0)) throw BadInput{"--dt must be > 0"};
+    } else if (a == "--state-rate") {
+      o.state_rate = number(a, value());
+      if (!(o.state_rate > 0)) throw BadInput{"--state-rate must be > 0"};
+    } else if (a == "--variant") o.variant = value();
+    else if (a == "--duration") o.duration = number(a, value());
+    else if (!a.empty() && a[0] == '-') throw BadInput{"unknown option " + a};
+    else if (o.scene.empty()) o.scene = a;
+    else throw BadInput{"one scene only (got " + o.scene + " and " + a + ")"};
+  }
+  if (o.scene.empty()) throw BadInput{"no scene given"};
+  o.server.viewer_rate_hz = o.state_rate;
+  return o;
+}
+
+std::atomic<bool> g_stop{false};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    const Options o = parse_args(argc, argv);
+    const std::vector<Scene> scenes = load_scene(o.scene);
+    const Scene* scene = &scenes.front();
+    if (o.variant) {
+      scene = nullptr;
+      for (const Scene& s : scenes)
+        if (s.variant == *o.variant) scene = &s;
+      if (!scene) throw BadInput{"scene has no variant '" + *o.variant + "'"};
+    }
+    Simulation sim(scene->spec);
+    RealtimeOptions ro;
+    ro.dt = o.dt ? *o.dt : scene->spec.integrator.dt;
+    ro.state_rate_hz = o.state_rate;
+    FrameEncoder frames(sim, scene->name, 1, ro.dt > 0 ? ro.dt : 0.7 * sim.dt_rest());  // RealtimeLoop's default
+    RealtimeLoop loop(sim, frames, ro);
+
+    boost::asio::io_context ioc(1);
+    Server server(ioc, loop, frames, sim, o.server);
+    std::printf("tactile-server: scene %s%s, %d tets, %d nodes, step %g s, %zu proxies\n", scene->name.c_str(),
+                scene->variant.empty() ? "" : ("/" + scene->variant).c_str(), sim.n_tets(), sim.n_nodes(), loop.dt(),
+                sim.proxies().size());
+    std::printf("tactile-server: listening on http://%s:%u/ (WebSocket on the same port)\n", o.server.bind.c_str(),
+                unsigned(server.port()));
+    std::fflush(stdout);
+
+    std::thread simulation([&] {
+      loop.run(g_stop, o.duration.value_or(std::numeric_limits<double>::infinity()));
+      boost::asio::post(ioc, [&] {
+        server.stop();
+        ioc.stop();
+      });
+    });
+    boost::asio::signal_set signals(ioc, SIGINT, SIGTERM);
+    signals.async_wait([&](const boost::system::error_code& ec, int) {
+      if (!ec) g_stop = true;
+    });
+    ioc.run();
+    g_stop = true;
+    simulation.join();
+    const RealtimeStats st = loop.stats();
+    std::printf("tactile-server: stopped after %.3f s simulated in %.3f s (real-time factor %.3f, %lld missed deadlines)\n",
+                st.sim_time, st.wall_time, st.wall_time > 0 ? st.sim_time / st.wall_time : 0.0,
+                static_cast<long long>(st.missed_deadlines));
+    if (!st.fault.empty()) {
+      std::fprintf(stderr, "tactile-server: fault: %s\n", st.fault.c_str());
+      return 1;
+    }
+    return 0;
+  } catch (const BadInput& e) {
+    std::fprintf(stderr, "tactile-server: %s\n%s", e.message.c_str(), kUsage);
+    return 2;
+  } catch (const SceneError& e) {
+    std::fprintf(stderr, "tactile-server: %s\n", e.what());
+    return 2;
+  } catch (const ModelError& e) {
+    std::fprintf(stderr, "tactile-server: %s\n", e.what());
+    return 2;
+  } catch (const MeshError& e) {
+    std::fprintf(stderr, "tactile-server: %s\n", e.what());
+    return 2;
+  } catch (const ServerError& e) {
+    std::fprintf(stderr, "tactile-server: %s\n", e.what());
+    return 2;
+  }
+}

@@ -1,0 +1,593 @@
+#include "net/server.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <optional>
+#include <unordered_set>
+
+#include <boost/asio.hpp>
+#include <boost/asio/posix/stream_descriptor.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/websocket.hpp>
+
+#include "net/mailbox.hpp"
+#include "tactile_generated.h"
+
+namespace tactile {
+
+namespace asio = boost::asio;
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace websocket = beast::websocket;
+namespace fb = flatbuffers;
+namespace wire = proto;
+using tcp = asio::ip::tcp;
+using Bytes = std::shared_ptr<const std::vector<uint8_t>>;
+
+namespace {
+
+int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+Bytes copy_bytes(const uint8_t* data, size_t n) { return std::make_shared<const std::vector<uint8_t>>(data, data + n); }
+
+template <class T>
+Bytes seal(fb::FlatBufferBuilder& b, wire::Message type, fb::Offset<T> body) {
+  b.Finish(wire::CreateEnvelope(b, type, body.Union()), wire::EnvelopeIdentifier());
+  return copy_bytes(b.GetBufferPointer(), b.GetSize());
+}
+
+Bytes make_error(wire::ErrorCode code, const std::string& message, uint32_t request_id = 0) {
+  fb::FlatBufferBuilder b;
+  return seal(b, wire::Message::Error, wire::CreateErrorDirect(b, code, message.c_str(), request_id));
+}
+
+const char* content_type(const std::filesystem::path& p) {
+  const std::string ext = p.extension().string();
+  if (ext == ".html") return "text/html; charset=utf-8";
+  if (ext == ".js" || ext == ".mjs") return "text/javascript; charset=utf-8";
+  if (ext == ".css") return "text/css; charset=utf-8";
+  if (ext == ".json") return "application/json";
+  if (ext == ".png") return "image/png";
+  if (ext == ".svg") return "image/svg+xml";
+  if (ext == ".map") return "application/json";
+  return "application/octet-stream";
+}
+
+}  // namespace
+
+class WsSession;
+
+struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
+  asio::io_context& ioc;
+  RealtimeLoop& loop;
+  const Simulation& sim;
+  ServerOptions options;
+  tcp::acceptor acceptor;
+  bool stopped = false;
+
+  // From the simulation thread.
+  FrameRing haptics;
+  LatestBox states;
+  Wakeup wakeup;
+  asio::posix::stream_descriptor wake_fd;
+  uint64_t wake_value = 0;
+
+  Bytes scene;  // the scene description, encoded once
+  std::unordered_set<WsSession*> sessions;
+  WsSession* controller = nullptr;
+  asio::steady_timer telemetry_timer;
+  int64_t haptic_dropped_reported = 0;
+
+  Impl(asio::io_context& io, RealtimeLoop& l, FrameEncoder& frames, const Simulation& s, ServerOptions o)
+      : ioc(io),
+        loop(l),
+        sim(s),
+        options(std::move(o)),
+        acceptor(io),
+        haptics(1024, 512 + 128 * (s.proxies().size() + s.devices().size())),
+        states(64 + 20 * 3 * frames.surface().nodes.size() + 64 * s.proxies().size()),
+        wake_fd(io, ::dup(wakeup.fd())),
+        telemetry_timer(io) {
+    const std::span<const uint8_t> d = frames.scene_description();
+    scene = copy_bytes(d.data(), d.size());
+  }
+
+  void listen();
+  void accept();
+  void wait_wakeup();
+  void deliver();
+  void tick_telemetry();
+  Bytes telemetry_message();
+  bool origin_allowed(const std::string& origin) const;
+  void close_all();
+};
+
+// ---- WebSocket sessions ----------------------------------------------------------------
+
+class WsSession : public std::enable_shared_from_this<WsSession> {
+ public:
+  WsSession(std::shared_ptr<Server::Impl> server, tcp::socket socket, bool loopback)
+      : server_(std::move(server)), ws_(std::move(socket)), hello_timer_(server_->ioc), loopback_(loopback) {}
+
+  ~WsSession() {
+    server_->sessions.erase(this);
+    if (server_->controller == this) server_->controller = nullptr;
+  }
+
+  void start(http::request<http::string_body> req) {
+    server_->sessions.insert(this);
+    beast::get_lowest_layer(ws_).expires_never();
+    websocket::stream_base::timeout t = websocket::stream_base::timeout::suggested(beast::role_type::server);
+    t.idle_timeout = std::chrono::milliseconds(int64_t(server_->options.idle_timeout_s * 1000));
+    t.keep_alive_pings = true;
+    ws_.set_option(t);
+    ws_.read_message_max(server_->options.max_message_bytes);
+    ws_.binary(true);
+    ws_.async_accept(req, [self = shared_from_this()](beast::error_code ec) {
+      if (ec) return;
+      self->arm_hello_timer();
+      self->read();
+    });
+  }
+
+  wire::Role role() const { return role_; }
+  bool greeted() const { return greeted_; }
+  bool drives_devices() const { return greeted_ && role_ == wire::Role::Device; }
+
+  // Queues a message; `kind` decides what a slow reader loses.
+  enum class Kind { Control, State, Haptic };
+  void send(const Bytes& message, Kind kind) {
+    if (closing_) return;
+    if (kind == Kind::State) {
+      // Latest wins, at the viewer's rate.
+      const auto now = std::chrono::steady_clock::now();
+      if (now - last_state_ < std::chrono::duration<double>(1.0 / server_->options.viewer_rate_hz)) return;
+      if (pending_state_) {
+        pending_state_ = message;  // replaces the one not yet sent
+        return;
+      }
+      last_state_ = now;
+      pending_state_ = message;
+      queue_.push_back(nullptr);  // a marker: the pending state goes here
+    } else if (kind == Kind::Haptic) {
+      if (haptics_queued_ >= server_->options.device_queue) {
+        ++haptics_dropped_;
+        return;  // the device reads too slowly: newer frames are dropped until it catches up
+      }
+      ++haptics_queued_;
+      queue_.push_back(message);
+      haptic_flags_.push_back(true);
+      write();
+      return;
+    } else {
+      queue_.push_back(message);
+    }
+    haptic_flags_.push_back(false);
+    write();
+  }
+
+  // Sends an error, then closes.
+  void refuse(wire::ErrorCode code, const std::string& message) {
+    send(make_error(code, message), Kind::Control);
+    close_after_write_ = true;
+    write();
+  }
+
+  void close() {
+    if (closing_) return;
+    closing_ = true;
+    hello_timer_.cancel();
+    ws_.async_close(websocket::close_code::normal, [self = shared_from_this()](beast::error_code) {});
+  }
+
+ private:
+  void arm_hello_timer() {
+    hello_timer_.expires_after(std::chrono::milliseconds(int64_t(server_->options.hello_timeout_s * 1000)));
+    hello_timer_.async_wait([weak = weak_from_this()](beast::error_code ec) {
+      auto self = weak.lock();
+      if (ec || !self || self->greeted_) return;
+      self->refuse(wire::ErrorCode::BadRequest, "no Hello within the hello timeout");
+    });
+  }
+
+  void read() {
+    ws_.async_read(in_, [self = shared_from_this()](beast::error_code ec, size_t) {
+      if (ec) {
+        self->closing_ = true;  // closed, timed out, or too big (Beast sends close code 1009)
+        self->hello_timer_.cancel();
+        return;
+      }
+      self->on_message();
+      if (!self->closing_) self->read();
+    });
+  }
+
+  void on_message() {
+    const auto* data = static_cast<const uint8_t*>(in_.data().data());
+    const size_t size = in_.size();
+    // Rate limit: a token bucket of max_messages_per_s, a second's burst.
+    const auto now = std::chrono::steady_clock::now();
+    const double rate = server_->options.max_messages_per_s;
+    tokens_ = std::min(rate, tokens_ + rate * std::chrono::duration<double>(now - last_message_).count());
+    last_message_ = now;
+    if ((tokens_ -= 1) < 0) {
+      in_.consume(size);
+      return refuse(wire::ErrorCode::RateLimited, "more than " + std::to_string(int64_t(rate)) + " messages per second");
+    }
+    if (!ws_.got_binary()) {
+      in_.consume(size);
+      return send(make_error(wire::ErrorCode::Malformed, "text message: the protocol is binary FlatBuffers"),
+                  Kind::Control);
+    }
+    fb::Verifier v(data, size);
+    if (!wire::VerifyEnvelopeBuffer(v)) {
+      in_.consume(size);
+      return send(make_error(wire::ErrorCode::Malformed,
+                             "not a tactile Envelope (" + std::to_string(size) + " bytes failed verification)"),
+                  Kind::Control);
+    }
+    const wire::Envelope* e = wire::GetEnvelope(data);
+    dispatch(*e);
+    in_.consume(size);
+  }
+
+  void dispatch(const wire::Envelope& e) {
+    if (!greeted_ && e.message_type() != wire::Message::Hello && e.message_type() != wire::Message::Ping)
+      return refuse(wire::ErrorCode::WrongRole, std::string("the first message must be Hello, got ") +
+                                                    wire::EnumNameMessage(e.message_type()));
+    switch (e.message_type()) {
+      case wire::Message::Hello: return on_hello(*e.message_as_Hello());
+      case wire::Message::Ping: return on_ping(*e.message_as_Ping());
+      case wire::Message::DeviceInput: return on_input(*e.message_as_DeviceInput());
+      case wire::Message::Control: return on_control(*e.message_as_Control());
+      default:
+        return send(make_error(wire::ErrorCode::WrongRole, std::string("a client may not send ") +
+                                                               wire::EnumNameMessage(e.message_type())),
+                    Kind::Control);
+    }
+  }
+
+  void on_hello(const wire::Hello& h) {
+    if (greeted_) return send(make_error(wire::ErrorCode::BadRequest, "Hello sent twice"), Kind::Control);
+    const int major = int(wire::ProtocolVersion::Major), minor = int(wire::ProtocolVersion::Minor);
+    if (h.protocol_major() != major)
+      return refuse(wire::ErrorCode::VersionMismatch,
+                    "client speaks protocol " + std::to_string(h.protocol_major()) + "." +
+                        std::to_string(h.protocol_minor()) + ", this server " + std::to_string(major) + "." +
+                        std::to_string(minor));
+    const std::string token = h.token() ? h.token()->str() : "";
+    const bool needs_token = h.role() != wire::Role::Viewer || !loopback_;
+    if (needs_token && (server_->options.token.empty() || token != server_->options.token))
+      return refuse(wire::ErrorCode::Unauthorized,
+                    std::string(server_->options.token.empty() ? "this server has no token set: the "
+                                                               : "a wrong or missing token for the ") +
+                        wire::EnumNameRole(h.role()) + " role" + (loopback_ ? "" : " (off loopback every role needs it)"));
+    if (h.role() == wire::Role::Controller) {
+      if (server_->controller) return refuse(wire::ErrorCode::Busy, "another controller is connected");
+      server_->controller = this;
+    }
+    if (h.role() == wire::Role::Device) {
+      const std::vector<std::string>& names = server_->sim.devices();
+      if (h.devices())
+        for (const fb::String* d : *h.devices()) {
+          const auto it = std::find(names.begin(), names.end(), d->str());
+          if (it == names.end())
+            return refuse(wire::ErrorCode::BadRequest, "no device channel '" + d->str() + "' in this scene");
+          devices_.push_back(int32_t(it - names.begin()));
+        }
+    }
+    greeted_ = true;
+    role_ = h.role();
+    hello_timer_.cancel();
+    fb::FlatBufferBuilder b;
+    send(seal(b, wire::Message::Welcome,
+              wire::CreateWelcomeDirect(b, uint16_t(major), uint16_t(minor), role_,
+                                        server_->options.server_name.c_str(), id_, now_ns())),
+         Kind::Control);
+    send(server_->scene, Kind::Control);
+  }
+
+  void on_ping(const wire::Ping& p) {
+    const int64_t received = now_ns();
+    fb::FlatBufferBuilder b;
+    send(seal(b, wire::Message::Pong, wire::CreatePong(b, p.id(), p.client_time_ns(), received, now_ns())),
+         Kind::Control);
+  }
+
+  void on_input(const wire::DeviceInput& in) {
+    if (role_ != wire::Role::Device)
+      return send(make_error(wire::ErrorCode::WrongRole, "DeviceInput needs the device role"), Kind::Control);
+    const std::vector<std::string>& names = server_->sim.devices();
+    const std::string name = in.device() ? in.device()->str() : "";
+    const auto it = std::find(names.begin(), names.end(), name);
+    const int32_t index = it == names.end() ? -1 : int32_t(it - names.begin());
+    if (index < 0 || std::find(devices_.begin(), devices_.end(), index) == devices_.end())
+      return send(make_error(wire::ErrorCode::BadRequest, "DeviceInput for channel '" + name +
+                                                              "', which this connection did not name in its Hello"),
+                  Kind::Control);
+    if (!in.position() || !in.orientation())
+      return send(make_error(wire::ErrorCode::BadRequest, "DeviceInput without position or orientation"),
+                  Kind::Control);
+    const wire::Vec3d& p = *in.position();
+    const wire::Quatd& q = *in.orientation();
+    DeviceSample s;
+    s.device = index;
+    s.sequence = in.sequence();
+    s.device_time_ns = in.device_time_ns();
+    s.pose.position = Vec3(p.x(), p.y(), p.z());
+    const double qn = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
+    if (!std::isfinite(p.x() + p.y() + p.z()) || !(qn > 0.5 && qn < 2.0))
+      return send(make_error(wire::ErrorCode::BadRequest, "DeviceInput with a non-finite position or a "
+                                                          "non-unit orientation"),
+                  Kind::Control);
+    s.pose.orientation = Quat(q.w() / qn, q.x() / qn, q.y() / qn, q.z() / qn);
+    s.buttons = in.buttons();
+    server_->loop.post_input(s);  // a full queue drops it and counts (telemetry)
+  }
+
+  void on_control(const wire::Control& c) {
+    if (role_ != wire::Role::Controller)
+      return send(make_error(wire::ErrorCode::WrongRole, "Control needs the controller role", c.request_id()),
+                  Kind::Control);
+    switch (c.command_type()) {
+      case wire::ControlCommand::Pause: server_->loop.set_paused(true); break;
+      case wire::ControlCommand::Resume: server_->loop.set_paused(false); break;
+      default:
+        return send(make_error(wire::ErrorCode::BadRequest,
+                               std::string("control command ") + wire::EnumNameControlCommand(c.command_type()) +
+                                   " is not available in this server version (pause and resume are)",
+                               c.request_id()),
+                    Kind::Control);
+    }
+  }
+
+  void write() {
+    if (writing_ || queue_.empty()) {
+      if (!writing_ && queue_.empty() && close_after_write_) close();
+      return;
+    }
+    writing_ = true;
+    Bytes message = queue_.front() ? queue_.front() : pending_state_;
+    if (!queue_.front()) pending_state_.reset();
+    current_ = message;
+    ws_.async_write(asio::buffer(*current_), [self = shared_from_this()](beast::error_code ec, size_t) {
+      self->writing_ = false;
+      if (self->haptic_flags_.front()) --self->haptics_queued_;
+      self->queue_.pop_front();
+      self->haptic_flags_.pop_front();
+      self->current_.reset();
+      if (ec) {
+        self->closing_ = true;
+        return;
+      }
+      self->write();
+    });
+  }
+
+  std::shared_ptr<Server::Impl> server_;
+  websocket::stream<beast::tcp_stream> ws_;
+  beast::flat_buffer in_;
+  asio::steady_timer hello_timer_;
+  bool loopback_;
+  bool greeted_ = false, closing_ = false, writing_ = false, close_after_write_ = false;
+  wire::Role role_ = wire::Role::Viewer;
+  std::vector<int32_t> devices_;
+  std::deque<Bytes> queue_;          // null entries stand for pending_state_
+  std::deque<bool> haptic_flags_;    // per queue entry: a haptic frame
+  Bytes pending_state_, current_;
+  size_t haptics_queued_ = 0;
+  int64_t haptics_dropped_ = 0;
+  std::chrono::steady_clock::time_point last_state_{}, last_message_ = std::chrono::steady_clock::now();
+  double tokens_ = 1e18;  // clamped to the burst at the first message
+  uint64_t id_ = next_id_++;
+  static inline uint64_t next_id_ = 1;
+
+  friend struct Server::Impl;
+};
+
+// ---- HTTP: static files, or the upgrade to a WebSocket -------------------------------------
+
+class HttpSession : public std::enable_shared_from_this<HttpSession> {
+ public:
+  HttpSession(std::shared_ptr<Server::Impl> server, tcp::socket socket)
+      : server_(std::move(server)), stream_(std::move(socket)) {}
+
+  void start() {
+    parser_.emplace();
+    parser_->header_limit(16 * 1024);
+    parser_->body_limit(16 * 1024);
+    stream_.expires_after(std::chrono::seconds(10));
+    http::async_read(stream_, buffer_, *parser_, [self = shared_from_this()](beast::error_code ec, size_t) {
+      if (ec) return;  // closed, timed out or malformed: nothing to answer
+      self->on_request(self->parser_->release());
+    });
+  }
+
+ private:
+  void on_request(http::request<http::string_body> req) {
+    if (websocket::is_upgrade(req)) {
+      const std::string origin(req[http::field::origin]);
+      if (!origin.empty() && !server_->origin_allowed(origin))
+        return respond(req, http::status::forbidden, "Origin '" + origin + "' is not allowed to connect\n");
+      if (server_->sessions.size() >= server_->options.max_connections)
+        return respond(req, http::status::service_unavailable, "too many connections\n");
+      beast::error_code ec;
+      const bool loopback = stream_.socket().remote_endpoint(ec).address().is_loopback();
+      auto session = std::make_shared<WsSession>(server_, stream_.release_socket(), loopback && !ec);
+      session->start(std::move(req));
+      return;
+    }
+    if (req.method() != http::verb::get && req.method() != http::verb::head)
+      return respond(req, http::status::method_not_allowed, "only GET and HEAD\n");
+    if (server_->options.static_dir.empty())
+      return respond(req, http::status::not_found, "this server serves no files (no static folder set)\n");
+    std::string target(req.target().substr(0, req.target().find('?')));
+    if (target.empty() || target[0] != '/' || target.find("..") != std::string::npos)
+      return respond(req, http::status::bad_request, "bad path\n");
+    if (target.back() == '/') target += "index.html";
+    const std::filesystem::path path = std::filesystem::path(server_->options.static_dir) / target.substr(1);
+    std::ifstream in(path, std::ios::binary);
+    if (!in || std::filesystem::is_directory(path)) return respond(req, http::status::not_found, "not found\n");
+    std::string body((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    respond(req, http::status::ok, std::move(body), content_type(path));
+  }
+
+  void respond(const http::request<http::string_body>& req, http::status status, std::string body,
+               const char* type = "text/plain; charset=utf-8") {
+    auto res = std::make_shared<http::response<http::string_body>>(status, req.version());
+    res->set(http::field::server, server_->options.server_name);
+    res->set(http::field::content_type, type);
+    res->set(http::field::cache_control, "no-cache");
+    res->keep_alive(false);
+    if (req.method() != http::verb::head) res->body() = std::move(body);
+    res->prepare_payload();
+    http::async_write(stream_, *res, [self = shared_from_this(), res](beast::error_code, size_t) {
+      beast::error_code ignored;
+      self->stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
+    });
+  }
+
+  std::shared_ptr<Server::Impl> server_;
+  beast::tcp_stream stream_;
+  beast::flat_buffer buffer_;
+  std::optional<http::request_parser<http::string_body>> parser_;
+};
+
+// ---- the server ------------------------------------------------------------------------------
+
+bool Server::Impl::origin_allowed(const std::string& origin) const {
+  const uint16_t port = acceptor.local_endpoint().port();
+  for (const char* host : {"127.0.0.1", "localhost", "[::1]"})
+    if (origin == "http://" + std::string(host) + ":" + std::to_string(port)) return true;
+  return std::find(options.allowed_origins.begin(), options.allowed_origins.end(), origin) !=
+         options.allowed_origins.end();
+}
+
+void Server::Impl::listen() {
+  beast::error_code ec;
+  const asio::ip::address address = asio::ip::make_address(options.bind, ec);
+  if (ec) throw ServerError("bind address '" + options.bind + "' is not an IP address");
+  if (!address.is_loopback() && options.token.empty())
+    throw ServerError("refusing to listen on " + options.bind +
+                      " without a token: off loopback every client must present one (--token)");
+  const tcp::endpoint endpoint(address, options.port);
+  acceptor.open(endpoint.protocol());
+  acceptor.set_option(asio::socket_base::reuse_address(true));
+  acceptor.bind(endpoint, ec);
+  if (ec) throw ServerError("cannot listen on " + options.bind + ":" + std::to_string(options.port) + ": " + ec.message());
+  acceptor.listen(asio::socket_base::max_listen_connections);
+}
+
+void Server::Impl::accept() {
+  acceptor.async_accept([self = shared_from_this()](beast::error_code ec, tcp::socket socket) {
+    if (self->stopped) return;
+    if (!ec) std::make_shared<HttpSession>(self, std::move(socket))->start();
+    self->accept();
+  });
+}
+
+void Server::Impl::wait_wakeup() {
+  wake_fd.async_read_some(asio::buffer(&wake_value, sizeof wake_value),
+                          [self = shared_from_this()](beast::error_code ec, size_t) {
+                            if (ec || self->stopped) return;
+                            self->deliver();
+                            self->wait_wakeup();
+                          });
+}
+
+void Server::Impl::deliver() {
+  std::vector<WsSession*> devices, viewers;
+  for (WsSession* s : sessions) {
+    if (!s->greeted()) continue;
+    (s->role() == wire::Role::Device ? devices : viewers).push_back(s);
+  }
+  haptics.drain([&](const uint8_t* data, size_t n) {
+    if (devices.empty()) return;
+    const Bytes frame = copy_bytes(data, n);
+    for (WsSession* s : devices) s->send(frame, WsSession::Kind::Haptic);
+  });
+  if (const std::vector<uint8_t>* state = states.take()) {
+    const Bytes frame = copy_bytes(state->data(), state->size());
+    for (WsSession* s : sessions)
+      if (s->greeted()) s->send(frame, WsSession::Kind::State);
+  }
+}
+
+Bytes Server::Impl::telemetry_message() {
+  const RealtimeStats st = loop.stats();
+  uint32_t viewers = 0, devices = 0, controllers = 0;
+  for (WsSession* s : sessions) {
+    if (!s->greeted()) continue;
+    if (s->role() == wire::Role::Viewer) ++viewers;
+    else if (s->role() == wire::Role::Device) ++devices;
+    else ++controllers;
+  }
+  fb::FlatBufferBuilder b;
+  std::vector<fb::Offset<fb::String>> faults;
+  if (!st.fault.empty()) faults.push_back(b.CreateString(st.fault));
+  std::vector<fb::Offset<wire::EffectCost>> costs;  // per effect: from the step probe, once wired
+  return seal(b, wire::Message::Telemetry,
+              wire::CreateTelemetryDirect(b, now_ns(), uint64_t(st.steps), st.sim_time, float(st.step_mean_us),
+                                          float(st.step_max_us), float(st.real_time_factor),
+                                          uint64_t(st.missed_deadlines), &costs, viewers, devices, controllers,
+                                          &faults, loop.paused()));
+}
+
+void Server::Impl::tick_telemetry() {
+  telemetry_timer.expires_after(std::chrono::seconds(1));
+  telemetry_timer.async_wait([self = shared_from_this()](beast::error_code ec) {
+    if (ec || self->stopped) return;
+    const Bytes t = self->telemetry_message();
+    for (WsSession* s : self->sessions)
+      if (s->greeted()) s->send(t, WsSession::Kind::Control);
+    self->tick_telemetry();
+  });
+}
+
+void Server::Impl::close_all() {
+  std::vector<WsSession*> all(sessions.begin(), sessions.end());
+  for (WsSession* s : all) s->close();
+}
+
+Server::Server(asio::io_context& ioc, RealtimeLoop& loop, FrameEncoder& frames, const Simulation& sim,
+               ServerOptions options)
+    : impl_(std::make_shared<Impl>(ioc, loop, frames, sim, std::move(options))) {
+  impl_->listen();
+  Impl* impl = impl_.get();
+  // The simulation thread's side: copy into the mailboxes and wake the network thread.
+  loop.on_haptic([impl](std::span<const uint8_t> m) {
+    impl->haptics.push(m.data(), m.size());
+    impl->wakeup.signal();
+  });
+  loop.on_state([impl](std::span<const uint8_t> m) {
+    impl->states.put(m.data(), m.size());
+    impl->wakeup.signal();
+  });
+  impl_->accept();
+  impl_->wait_wakeup();
+  impl_->tick_telemetry();
+}
+
+Server::~Server() { stop(); }
+
+uint16_t Server::port() const { return impl_->acceptor.local_endpoint().port(); }
+
+void Server::stop() {
+  if (impl_->stopped) return;
+  impl_->stopped = true;
+  beast::error_code ec;
+  impl_->acceptor.close(ec);
+  impl_->wake_fd.close(ec);
+  impl_->telemetry_timer.cancel();
+  impl_->close_all();
+}
+
+}  // namespace tactile

@@ -1,0 +1,77 @@
+// The WebSocket endpoint (Boost.Beast) and the static HTTP files on the same
+// port, on its own thread (one io_context), fed by the real-time loop
+// through mailboxes it never waits on (net/mailbox.hpp).
+//
+// Roles (granted at Hello, proto/tactile.fbs):
+//   viewer      the scene description, then state frames at up to the state
+//               rate, latest wins; telemetry once a second.
+//   device      a haptic frame after every step; sends DeviceInput for the
+//               channels it named in Hello. Needs the token.
+//   controller  one at a time: pause, resume. Needs the token.
+// Every client may Ping (answered with Pong at once).
+//
+// Safety of the service: listens on loopback unless told otherwise, and off
+// loopback only with a token, which then every role needs; browser Origins
+// are checked against an allow-list; message size, message rate and the
+// number of connections are bounded; a client that has not said Hello in
+// time, or has gone silent, is closed. Each refusal is an Error naming what
+// is wrong (or an HTTP status with a message). A slow client loses frames
+// (latest wins for states, a bounded queue for haptic frames): it never
+// slows the simulation or another client.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <boost/asio/io_context.hpp>
+
+#include "app/simulation.hpp"
+#include "live/frames.hpp"
+#include "live/realtime.hpp"
+
+namespace tactile {
+
+struct ServerOptions {
+  std::string bind = "127.0.0.1";
+  uint16_t port = 8765;                       // 0: any free port
+  std::string token;                          // needed by devices and controllers (by all roles off loopback)
+  std::vector<std::string> allowed_origins;   // extra browser Origins (its own http://host:port always allowed)
+  std::string static_dir;                     // served over HTTP (client-web); "" for none
+  double viewer_rate_hz = 30;                 // state frames per second per viewer at most
+  size_t max_connections = 256;
+  size_t max_message_bytes = 64 * 1024;       // inbound
+  double max_messages_per_s = 5000;           // inbound per connection (burst: a second's worth)
+  size_t device_queue = 256;                  // haptic frames queued per device before the oldest drop
+  double hello_timeout_s = 5;
+  double idle_timeout_s = 30;
+  std::string server_name = "tactile";
+};
+
+// What the server refuses to start with (a bind off loopback without a
+// token, a port in use...), with a message naming it.
+struct ServerError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+class Server {
+ public:
+  // Installs itself as the loop's sinks. The loop, the encoder and the
+  // simulation must outlive the server; the loop runs on its own thread.
+  Server(boost::asio::io_context& ioc, RealtimeLoop& loop, FrameEncoder& frames, const Simulation& sim,
+         ServerOptions options);
+  ~Server();
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  uint16_t port() const;  // the port bound
+  void stop();            // closes the acceptor and every connection
+
+  struct Impl;
+
+ private:
+  std::shared_ptr<Impl> impl_;
+};
+
+}  // namespace tactile
