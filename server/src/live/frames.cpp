@@ -1,5 +1,6 @@
 #include "live/frames.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include <glm/geometric.hpp>
@@ -53,7 +54,8 @@ std::span<const uint8_t> seal(fb::FlatBufferBuilder& b, wire::Message type, fb::
 
 }  // namespace
 
-FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt)
+FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt,
+                           double force_window)
     : sim_(sim), scene_name_(std::move(scene_name)), scene_id_(scene_id), dt_(dt), surface_(extract_surface(sim.mesh())) {
   x_.resize(3 * size_t(sim.n_nodes()));
   u_.resize(3 * size_t(sim.n_nodes()));
@@ -63,8 +65,11 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   forces_.resize(sim.proxies().size());
   proxy_haptics_.resize(sim.proxies().size());
   device_haptics_.resize(sim.devices().size());
-  last_proxy_.resize(sim.proxies().size());
-  last_device_.resize(sim.devices().size());
+  window_steps_ = size_t(std::max(1.0, std::round(force_window / (dt > 0 ? dt : 0.7 * sim.dt_rest()))));
+  window_proxy_.resize(window_steps_ * sim.proxies().size());
+  window_device_.resize(window_steps_ * sim.devices().size());
+  sum_proxy_.resize(sim.proxies().size());
+  sum_device_.resize(sim.devices().size());
 }
 
 std::span<const uint8_t> FrameEncoder::scene_description() {
@@ -127,24 +132,33 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
   b.Clear();
   const std::vector<ProxyReport>& pr = sim_.proxy_reports();
   const std::vector<DeviceReport>& dr = sim_.device_reports();
-  // The force over the step just taken: the mean of the contact forces at
-  // its two ends, which is what changed the body's momentum (eq. 9: the
-  // velocity takes half of each end's acceleration). A resting contact
-  // pushes its nodes back on alternate steps, so the force at one instant
-  // flickers between 0 and twice its mean; this mean does not.
+  // The force over the last force window (a millisecond by default): the
+  // mean of the per-step contact forces, which is what changed the body's
+  // momentum over it. A resting contact pushes its nodes back only every few
+  // steps (the paper's projection bounces a node back to where it was, eq.
+  // 13), so the force at one step flickers between 0 and several times its
+  // mean; its mean over the window does not.
+  const size_t slot = window_next_;
+  window_next_ = (window_next_ + 1) % window_steps_;
+  window_filled_ = std::min(window_filled_ + 1, window_steps_);
+  const double inv = 1.0 / double(window_filled_);
   for (size_t j = 0; j < pr.size(); ++j) {
+    Wrench& old = window_proxy_[slot * pr.size() + j];
+    sum_proxy_[j].force += pr[j].force - old.force;
+    sum_proxy_[j].torque += pr[j].torque - old.torque;
+    old = {pr[j].force, pr[j].torque};
     const Pose p = sim_.proxy_pose(int32_t(j));
-    const Vec3 force = 0.5 * (pr[j].force + last_proxy_[j].force), torque = 0.5 * (pr[j].torque + last_proxy_[j].torque);
-    last_proxy_[j] = {pr[j].force, pr[j].torque};
-    proxy_haptics_[j] = wire::ProxyHaptics(to_wire(force), to_wire(torque),
+    proxy_haptics_[j] = wire::ProxyHaptics(to_wire(inv * sum_proxy_[j].force), to_wire(inv * sum_proxy_[j].torque),
                                            wire::ProxyPose(to_wire(p.position), to_wire(p.orientation)),
                                            to_wire(pr[j].stiffness), uint32_t(pr[j].contacts));
   }
   for (size_t d = 0; d < dr.size(); ++d) {
-    const Vec3 force = 0.5 * (dr[d].force + last_device_[d].force), torque = 0.5 * (dr[d].torque + last_device_[d].torque);
-    last_device_[d] = {dr[d].force, dr[d].torque};
-    device_haptics_[d] = wire::DeviceHaptics(to_wire(force), to_wire(torque), to_wire(dr[d].stiffness),
-                                             uint32_t(dr[d].contacts));
+    Wrench& old = window_device_[slot * dr.size() + d];
+    sum_device_[d].force += dr[d].force - old.force;
+    sum_device_[d].torque += dr[d].torque - old.torque;
+    old = {dr[d].force, dr[d].torque};
+    device_haptics_[d] = wire::DeviceHaptics(to_wire(inv * sum_device_[d].force), to_wire(inv * sum_device_[d].torque),
+                                             to_wire(dr[d].stiffness), uint32_t(dr[d].contacts));
   }
   const auto proxies = b.CreateVectorOfStructs(proxy_haptics_.data(), pr.size());
   const auto devices = b.CreateVectorOfStructs(device_haptics_.data(), dr.size());

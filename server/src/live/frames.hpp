@@ -30,13 +30,17 @@ Surface extract_surface(const TetMesh& mesh);
 
 class FrameEncoder {
  public:
-  FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt);
+  // dt: the simulation step the frames come at [s] (0: 0.7 x the critical
+  // step at rest, the live loop's default); force_window: what the haptic
+  // frames' forces are averaged over [s].
+  FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt,
+               double force_window = 1e-3);
 
   const Surface& surface() const { return surface_; }
 
   // Each returns the encoded Envelope, valid until the same call is made again.
   // haptic_frame() is meant for every step: its forces are the means over
-  // the step (see frames.cpp).
+  // the force window (see frames.cpp).
   std::span<const uint8_t> scene_description();
   std::span<const uint8_t> state_frame(int64_t server_time_ns);
   std::span<const uint8_t> haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence);
@@ -57,7 +61,9 @@ class FrameEncoder {
   struct Wrench {
     Vec3 force{0.0}, torque{0.0};
   };
-  std::vector<Wrench> last_proxy_, last_device_;  // at the previous haptic frame
+  // The latest per-step forces (a ring of window_steps_ rows) and their sums.
+  size_t window_steps_ = 1, window_next_ = 0, window_filled_ = 0;
+  std::vector<Wrench> window_proxy_, window_device_, sum_proxy_, sum_device_;
   flatbuffers::FlatBufferBuilder scene_builder_, state_builder_, haptic_builder_;
 };
 

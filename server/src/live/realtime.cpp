@@ -159,6 +159,12 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
     stats_.missed_deadlines = missed;
     stats_.reanchors = reanchors;
     stats_.inputs_dropped = dropped_.load(std::memory_order_relaxed);
+    const bool first_window = stats_.real_time_factor == 0 && seconds(t1 - window_start) >= 0.1;
+    if (first_window) {  // provisional figures until the first full second
+      stats_.real_time_factor = (sim_.time() - window_sim) / seconds(t1 - window_start);
+      stats_.step_mean_us = 1e6 * cost_sum / double(window_steps);
+      stats_.step_max_us = 1e6 * cost_max;
+    }
     if (seconds(t1 - window_start) >= 1.0) {
       stats_.real_time_factor = (sim_.time() - window_sim) / seconds(t1 - window_start);
       stats_.step_mean_us = 1e6 * cost_sum / double(window_steps);

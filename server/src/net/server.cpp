@@ -159,8 +159,16 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       queue_.push_back(nullptr);  // a marker: the pending state goes here
     } else if (kind == Kind::Haptic) {
       if (haptics_queued_ >= server_->options.device_queue) {
-        ++haptics_dropped_;
-        return;  // the device reads too slowly: newer frames are dropped until it catches up
+        // The device reads too slowly: its oldest waiting frame goes (not the
+        // one being written), so what it does read is the newest.
+        for (size_t k = writing_ ? 1 : 0; k < queue_.size(); ++k)
+          if (haptic_flags_[k]) {
+            queue_.erase(queue_.begin() + long(k));
+            haptic_flags_.erase(haptic_flags_.begin() + long(k));
+            --haptics_queued_;
+            ++haptics_dropped_;
+            break;
+          }
       }
       ++haptics_queued_;
       queue_.push_back(message);

@@ -76,7 +76,7 @@ const proto::Envelope* envelope(std::span<const uint8_t> bytes) {
 
 TEST(RealtimeLoop, NeverAheadOfTheClockAndPublishesEveryStep) {
   Simulation sim(poke_spec());
-  FrameEncoder frames(sim, "poke", 1, 0.0);
+  FrameEncoder frames(sim, "poke", 1, 2e-4);
   RealtimeOptions options;
   options.dt = 2e-4;
   RealtimeLoop loop(sim, frames, options);
@@ -120,7 +120,7 @@ TEST(RealtimeLoop, NeverAheadOfTheClockAndPublishesEveryStep) {
 // newest input they had seen.
 TEST(RealtimeLoop, DeviceInputsMoveTheProxyAndTheForceComesBack) {
   Simulation sim(poke_spec());
-  FrameEncoder frames(sim, "poke", 1, 0.0);
+  FrameEncoder frames(sim, "poke", 1, 2e-4);
   RealtimeOptions options;
   options.dt = 2e-4;
   RealtimeLoop loop(sim, frames, options);
@@ -200,7 +200,7 @@ TEST(RealtimeLoop, OverloadIsReportedAsMissedDeadlines) {
 // not for steps, inputs, haptic frames or state frames.
 TEST(RealtimeLoop, SteadyStateAllocatesNothing) {
   Simulation sim(poke_spec());
-  FrameEncoder frames(sim, "poke", 1, 0.0);
+  FrameEncoder frames(sim, "poke", 1, 2e-4);
   RealtimeOptions options;
   options.dt = 2e-4;
   RealtimeLoop loop(sim, frames, options);

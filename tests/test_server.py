@@ -1,0 +1,386 @@
+"""The live server as a real process on loopback, driven by real WebSocket
+clients (the `websockets` package) speaking the protocol through the Python
+codec: roles and the Hello handshake, states and haptic frames, device inputs
+that come back as force, control, telemetry, static files, and each kind of
+bad input refused with its error while the server keeps serving the others."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import glob
+import json
+import os
+import pathlib
+import re
+import signal
+import subprocess
+import time
+import urllib.error
+import urllib.request
+from typing import Any, Iterator
+
+import pytest
+import websockets
+
+from tactile_proto import codec
+from tactile_proto.generated.Control import ControlT
+from tactile_proto.generated.ControlCommand import ControlCommand
+from tactile_proto.generated.DeviceInput import DeviceInputT
+from tactile_proto.generated.ErrorCode import ErrorCode
+from tactile_proto.generated.Hello import HelloT
+from tactile_proto.generated.Pause import PauseT
+from tactile_proto.generated.Ping import PingT
+from tactile_proto.generated.Quatd import QuatdT
+from tactile_proto.generated.Resume import ResumeT
+from tactile_proto.generated.Role import Role
+from tactile_proto.generated.Vec3d import Vec3dT
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+TOKEN = "s3cret"
+
+# A small soft block with a sphere on the "stylus" channel 1 mm above it.
+SCENE: dict[str, Any] = {
+    "name": "live_poke",
+    "mesh": {"primitive": "box", "lo": [-0.02, 0, -0.02], "hi": [0.02, 0.02, 0.02], "cells": [12, 6, 12]},
+    "material": {"model": "neohookean", "E": 30000, "nu": 0.3, "rho": 1000},
+    "boundary": [{"name": "base", "select": {"box": {"lo": [-0.02, 0, -0.02], "hi": [0.02, 0, 0.02]}}, "fixed": True}],
+    "effects": {"damping": {"alpha": 20.0}},
+    "proxies": [{"name": "tip", "device": "stylus", "shape": "sphere", "radius": 0.008, "position": [0, 0.029, 0]}],
+    "run": {"duration": 1.0},  # (headless runs only; the server runs until stopped)
+}
+
+
+def tactile_server() -> str | None:
+    """A built tactile-server: in $TACTILE_BUILD, else the newest under build/."""
+    build = os.environ.get("TACTILE_BUILD")
+    if build:
+        candidate = pathlib.Path(build) if pathlib.Path(build).is_absolute() else ROOT / build
+        if os.access(candidate / "tactile-server", os.X_OK):
+            return str(candidate / "tactile-server")
+    found = [p for p in glob.glob(str(ROOT / "build" / "*" / "tactile-server")) if os.access(p, os.X_OK)]
+    return max(found, key=os.path.getmtime) if found else None
+
+
+@contextlib.contextmanager
+def running_server(tmp_path: pathlib.Path, *args: str) -> Iterator[tuple[int, subprocess.Popen[str]]]:
+    exe = tactile_server()
+    if exe is None:
+        pytest.fail("tactile-server is not built (scripts/setup.sh builds it)")
+    scene = tmp_path / "scene.json"
+    scene.write_text(json.dumps(SCENE))
+    proc = subprocess.Popen([exe, str(scene), "--port", "0", "--token", TOKEN, *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    port = None
+    deadline = time.time() + 30
+    lines = []
+    while time.time() < deadline and proc.stdout is not None:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        m = re.search(r"listening on http://127\.0\.0\.1:(\d+)/", line)
+        if m:
+            port = int(m.group(1))
+            break
+    if port is None:
+        proc.kill()
+        pytest.fail("the server did not start:\n" + "".join(lines))
+    try:
+        yield port, proc
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            pytest.fail("the server did not stop on SIGINT")
+
+
+def url(port: int) -> str:
+    return f"ws://127.0.0.1:{port}/ws"
+
+
+async def hello(ws: Any, role: int, token: str = "", devices: tuple[str, ...] = ()) -> list[Any]:
+    """Says Hello; returns the Welcome and SceneDescription (or raises on an Error)."""
+    await ws.send(codec.encode(codec.make_hello(role, token, "pytest", list(devices))))
+    welcome = codec.decode(await asyncio.wait_for(ws.recv(), 5)).message
+    assert type(welcome).__name__ == "WelcomeT", f"expected Welcome, got {type(welcome).__name__}: {vars(welcome)}"
+    scene = codec.decode(await asyncio.wait_for(ws.recv(), 5)).message
+    assert type(scene).__name__ == "SceneDescriptionT"
+    return [welcome, scene]
+
+
+async def next_of(ws: Any, kind: str, timeout: float = 5.0) -> Any:
+    """The next message of a kind, skipping others."""
+    end = time.monotonic() + timeout
+    while True:
+        msg = codec.decode(await asyncio.wait_for(ws.recv(), max(0.01, end - time.monotonic()))).message
+        if type(msg).__name__ == kind:
+            return msg
+
+
+def device_input(sequence: int, y: float) -> DeviceInputT:
+    d = DeviceInputT()
+    d.device = "stylus"
+    d.sequence = sequence
+    d.deviceTimeNs = time.monotonic_ns()
+    d.position = Vec3dT()
+    d.position.x, d.position.y, d.position.z = 0.0, y, 0.0
+    d.orientation = QuatdT()
+    d.orientation.w, d.orientation.x, d.orientation.y, d.orientation.z = 1.0, 0.0, 0.0, 0.0
+    return d
+
+
+def control(command_type: int, command: Any, request_id: int = 1) -> ControlT:
+    c = ControlT()
+    c.requestId = request_id
+    c.commandType = command_type
+    c.command = command
+    return c
+
+
+# ---- the happy paths ---------------------------------------------------------------------
+
+
+def test_viewer_gets_the_scene_states_and_telemetry(tmp_path: pathlib.Path) -> None:
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port)) as ws:
+            welcome, scene = await hello(ws, Role.Viewer)
+            assert welcome.role == Role.Viewer
+            assert welcome.protocolMajor == codec.PROTOCOL_MAJOR
+            n_vertices = len(scene.surfaceNodes)
+            assert len(scene.restPositions) == 3 * n_vertices and len(scene.triangles) % 3 == 0
+            assert scene.proxies[0].device == "stylus" and list(scene.devices) == ["stylus"]
+            t0 = time.monotonic()
+            states = []
+            telemetry = None
+            while time.monotonic() - t0 < 2.2:
+                msg = codec.decode(await asyncio.wait_for(ws.recv(), 5)).message
+                if type(msg).__name__ == "StateFrameT":
+                    states.append(msg)
+                elif type(msg).__name__ == "TelemetryT":
+                    telemetry = msg  # the latest (the first second's figures come with the second one)
+            # ~30 Hz (the default viewer rate), and never faster.
+            rate = len(states) / 2.2
+            assert 10 <= rate <= 33, rate
+            assert all(len(s.positions) == 3 * n_vertices for s in states)
+            assert [s.step for s in states] == sorted(s.step for s in states)
+            assert telemetry is not None and telemetry.viewers >= 1
+            assert 0.5 < telemetry.realTimeFactor < 1.2
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_path: pathlib.Path) -> None:
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port)) as ws:
+            await hello(ws, Role.Device, TOKEN, ("stylus",))
+            # Haptic frames come at the step rate.
+            first = await next_of(ws, "HapticFrameT")
+            n = 0
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < 0.3:
+                if type(codec.decode(await ws.recv()).message).__name__ == "HapticFrameT":
+                    n += 1
+            assert n > 300, f"{n} haptic frames in 0.3 s"
+            assert first.proxies[0].force.y == 0.0  # not touching yet
+            # Press 3 mm into the top face over 0.2 s at 1 kHz, then hold, reading all along as a device does.
+            frames: list[Any] = []
+
+            async def read() -> None:
+                while True:
+                    msg = codec.decode(await ws.recv()).message
+                    if type(msg).__name__ == "HapticFrameT":
+                        frames.append(msg)
+
+            reader = asyncio.create_task(read())
+            for k in range(1, 201):
+                await ws.send(codec.encode(device_input(k, 0.029 - 0.004 * k / 200)))
+                await asyncio.sleep(0.001)
+            await asyncio.sleep(0.4)
+            reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await reader
+            done = [f for f in frames if f.lastInputSequence == 200]
+            assert done, "no haptic frame saw the last input"
+            # From 0.1 s after the last input took effect (it glides in over one input interval).
+            held = [f for f in done if f.simTime > done[0].simTime + 0.1]
+            assert len(held) > 100
+            forces = [f.proxies[0].force.y for f in held]
+            # Held 3 mm deep, the block pushes the sphere up. (Frame to frame the force still comes in
+            # pulses: the paper's projection bounces resting nodes, and a 1 ms mean does not cover every
+            # gap between them; the bridge's filtering is issue 5's. Here: up on average, and mostly.)
+            assert sum(forces) / len(forces) > 0.2
+            assert sum(1 for x in forces if x > 0) > 0.8 * len(forces)
+            assert min(forces) >= 0.0, "a contact never pulls the sphere in"
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+def test_controller_pauses_and_resumes_and_one_at_a_time(tmp_path: pathlib.Path) -> None:
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port)) as ctl:
+            await hello(ctl, Role.Controller, TOKEN)
+            async with websockets.connect(url(port)) as second:
+                await second.send(codec.encode(codec.make_hello(Role.Controller, TOKEN, "second")))
+                err = codec.decode(await asyncio.wait_for(second.recv(), 5)).message
+                assert type(err).__name__ == "ErrorT" and err.code == ErrorCode.Busy
+            await ctl.send(codec.encode(control(ControlCommand.Pause, PauseT())))
+            await asyncio.sleep(0.2)
+            t1 = await next_of(ctl, "TelemetryT")
+            t2 = await next_of(ctl, "TelemetryT")
+            assert t1.paused and t2.paused and t2.simTime == t1.simTime, "paused: simulated time stands still"
+            await ctl.send(codec.encode(control(ControlCommand.Resume, ResumeT())))
+            t3 = await next_of(ctl, "TelemetryT")
+            t4 = await next_of(ctl, "TelemetryT")
+            assert not t4.paused and t4.simTime > t3.simTime
+            # What this server cannot do yet is refused by name, not ignored.
+            from tactile_proto.generated.Reset import ResetT
+
+            await ctl.send(codec.encode(control(ControlCommand.Reset, ResetT(), request_id=7)))
+            err = await next_of(ctl, "ErrorT")
+            assert err.code == ErrorCode.BadRequest and err.requestId == 7 and "Reset" in err.message
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+def test_ping_is_answered_with_server_times(tmp_path: pathlib.Path) -> None:
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port)) as ws:
+            p = PingT()
+            p.id, p.clientTimeNs = 42, 123
+            await ws.send(codec.encode(p))
+            pong = await next_of(ws, "PongT")
+            assert pong.id == 42 and pong.clientTimeNs == 123
+            assert pong.serverSendNs >= pong.serverReceiveNs > 0
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+# ---- refusals, each with its error, while others are served --------------------------------
+
+
+def test_bad_clients_get_their_errors_and_others_keep_their_frames(tmp_path: pathlib.Path) -> None:
+    async def expect_error(port: int, payload: bytes | str, code: int) -> None:
+        async with websockets.connect(url(port)) as ws:
+            await ws.send(payload)
+            msg = await next_of(ws, "ErrorT")
+            assert msg.code == code, (msg.code, msg.message)
+
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port)) as viewer:
+            await hello(viewer, Role.Viewer)
+            # A wrong token, another major version, garbage, text, and a first message that is not Hello.
+            await expect_error(port, codec.encode(codec.make_hello(Role.Device, "wrong", "x", ["stylus"])),
+                               ErrorCode.Unauthorized)
+            h = codec.make_hello(Role.Viewer)
+            h.protocolMajor = codec.PROTOCOL_MAJOR + 1
+            await expect_error(port, codec.encode(h), ErrorCode.VersionMismatch)
+            await expect_error(port, b"\x00" * 64, ErrorCode.Malformed)
+            good = codec.encode(codec.make_hello(Role.Viewer))
+            await expect_error(port, good[: len(good) // 2], ErrorCode.Malformed)
+            await expect_error(port, "hello as text", ErrorCode.Malformed)
+            await expect_error(port, codec.encode(device_input(1, 0.03)), ErrorCode.WrongRole)
+            # A device naming a channel the scene does not have.
+            await expect_error(port, codec.encode(codec.make_hello(Role.Device, TOKEN, "x", ["nope"])),
+                               ErrorCode.BadRequest)
+            # A viewer sending device input.
+            async with websockets.connect(url(port)) as v2:
+                await hello(v2, Role.Viewer)
+                await v2.send(codec.encode(device_input(1, 0.03)))
+                assert (await next_of(v2, "ErrorT")).code == ErrorCode.WrongRole
+            # An oversized message closes its connection with 1009 (too big).
+            async with websockets.connect(url(port), max_size=None) as big:
+                await big.send(b"\x00" * (200 * 1024))
+                with pytest.raises(websockets.ConnectionClosed) as closed:
+                    for _ in range(100):
+                        await asyncio.wait_for(big.recv(), 5)
+                assert closed.value.rcvd is not None and closed.value.rcvd.code == 1009
+            # Through all of it, the first viewer kept getting states.
+            before = (await next_of(viewer, "StateFrameT")).step
+            after = (await next_of(viewer, "StateFrameT")).step
+            assert after > before
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+def test_a_client_that_never_reads_does_not_slow_the_others(tmp_path: pathlib.Path) -> None:
+    async def run(port: int) -> None:
+        # A device that says Hello and then never reads its haptic frames.
+        stalled = await websockets.connect(url(port), max_queue=1)
+        await hello(stalled, Role.Device, TOKEN, ("stylus",))
+        async with websockets.connect(url(port)) as viewer:
+            await hello(viewer, Role.Viewer)
+            await asyncio.sleep(1.5)
+            t = await next_of(viewer, "TelemetryT")
+            assert t.realTimeFactor > 0.8
+            s1 = await next_of(viewer, "StateFrameT")
+            s2 = await next_of(viewer, "StateFrameT")
+            assert s2.step > s1.step
+        await stalled.close()
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+def test_many_connections_opened_and_dropped_leave_it_serving(tmp_path: pathlib.Path) -> None:
+    async def run(port: int) -> None:
+        for _ in range(200):
+            ws = await websockets.connect(url(port))
+            await ws.close()
+        async with websockets.connect(url(port)) as ws:
+            await hello(ws, Role.Viewer)
+            t = await next_of(ws, "TelemetryT")
+            assert t.viewers == 1, "dropped connections are forgotten"
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+# ---- HTTP and the listening rules ------------------------------------------------------------
+
+
+def test_static_files_and_origins(tmp_path: pathlib.Path) -> None:
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "index.html").write_text("<!doctype html><title>tactile</title>")
+    with running_server(tmp_path, "--static", str(site), "--allow-origin", "https://lab.example") as (port, _):
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/") as r:
+            assert r.status == 200 and b"tactile" in r.read()
+            assert r.headers["Content-Type"].startswith("text/html")
+        with pytest.raises(urllib.error.HTTPError) as e:
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/missing.js")
+        assert e.value.code == 404
+        with pytest.raises(urllib.error.HTTPError) as e:
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/../etc/passwd")
+        assert e.value.code in (400, 404)
+
+        async def origins() -> None:
+            async with websockets.connect(url(port), origin=f"http://127.0.0.1:{port}") as ws:
+                await hello(ws, Role.Viewer)
+            async with websockets.connect(url(port), origin="https://lab.example") as ws:
+                await hello(ws, Role.Viewer)
+            with pytest.raises(websockets.InvalidStatus) as refused:
+                async with websockets.connect(url(port), origin="https://evil.example"):
+                    pass
+            assert refused.value.response.status_code == 403
+
+        asyncio.run(origins())
+
+
+def test_refuses_to_listen_off_loopback_without_a_token(tmp_path: pathlib.Path) -> None:
+    exe = tactile_server()
+    assert exe is not None
+    scene = tmp_path / "scene.json"
+    scene.write_text(json.dumps(SCENE))
+    env = {k: v for k, v in os.environ.items() if k != "TACTILE_TOKEN"}
+    r = subprocess.run([exe, str(scene), "--bind", "0.0.0.0", "--port", "0"], capture_output=True, text=True,
+                       timeout=30, env=env)
+    assert r.returncode == 2
+    assert "without a token" in r.stderr
