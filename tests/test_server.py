@@ -214,7 +214,7 @@ def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_pa
             # gap between them; the bridge's filtering is issue 5's. Here: up on average, and mostly.)
             assert sum(forces) / len(forces) > 0.2
             assert sum(1 for x in forces if x > 0) > 0.8 * len(forces)
-            assert min(forces) >= 0.0, "a contact never pulls the sphere in"
+            assert min(forces) > -1e-9, "a contact never pulls the sphere in (beyond the running sum's round-off)"
 
     with running_server(tmp_path) as (port, _):
         asyncio.run(run(port))
