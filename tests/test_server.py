@@ -168,6 +168,11 @@ def test_viewer_gets_the_scene_states_and_telemetry(tmp_path: pathlib.Path) -> N
             assert [s.step for s in states] == sorted(s.step for s in states)
             assert telemetry is not None and telemetry.viewers >= 1
             assert 0.5 < telemetry.realTimeFactor < 1.2
+            # The cost of each pass the scene has (a fixed base, a proxy), and none for what it lacks (loads).
+            costs = {c.name: c.nsPerStep for c in telemetry.effectCosts}
+            assert costs.get("elastic", 0) > 0 and costs.get("contact", 0) > 0 and costs.get("essential", 0) > 0
+            assert "loads" not in costs
+            assert costs["elastic"] > costs["contact"], costs
 
     with running_server(tmp_path) as (port, _):
         asyncio.run(run(port))

@@ -30,6 +30,7 @@ RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const Realtime
       dt_(options.dt > 0 ? options.dt : 0.7 * sim.dt_rest()),
       state_period_(1.0 / std::max(options.state_rate_hz, 1e-3)),
       inputs_(options.input_capacity) {
+  sim.set_probe(&pass_timer_);
   const std::vector<std::string>& devices = sim.devices();
   drivers_.resize(devices.size());
   for (size_t d = 0; d < devices.size(); ++d) {
@@ -166,6 +167,8 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
       stats_.step_max_us = 1e6 * cost_max;
     }
     if (seconds(t1 - window_start) >= 1.0) {
+      const std::array<double, kPassCount> passes = pass_timer_.take();
+      for (int p = 0; p < kPassCount; ++p) stats_.pass_ns[size_t(p)] = 1e9 * passes[size_t(p)] / double(window_steps);
       stats_.real_time_factor = (sim_.time() - window_sim) / seconds(t1 - window_start);
       stats_.step_mean_us = 1e6 * cost_sum / double(window_steps);
       stats_.step_max_us = 1e6 * cost_max;

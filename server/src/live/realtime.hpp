@@ -16,6 +16,7 @@
 // instead of jumping at 1 kHz inside a 10 kHz simulation.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -63,6 +64,9 @@ struct RealtimeStats {
   int64_t inputs_dropped = 0;     // queue full
   int64_t state_frames = 0;
   int64_t haptic_frames = 0;
+  // Mean time per step in each pass of the stepper over the latest second
+  // [ns]: the cost of each effect (a pass the scene does not ask for is 0).
+  std::array<double, kPassCount> pass_ns{};
   std::string fault;              // the fault that stopped the loop, if any
 };
 
@@ -106,6 +110,23 @@ class RealtimeLoop {
   };
   void apply_inputs();
   void step_once(int64_t now_ns);
+
+  // Times the stepper's passes (the core reads no clock; this layer does).
+  class PassTimer final : public StepProbe {
+   public:
+    void enter(Pass) override { t0_ = Clock::now(); }
+    void leave(Pass p) override { total_[size_t(p)] += std::chrono::duration<double>(Clock::now() - t0_).count(); }
+    std::array<double, kPassCount> take() {
+      const std::array<double, kPassCount> out = total_;
+      total_ = {};
+      return out;
+    }
+
+   private:
+    Clock::time_point t0_;
+    std::array<double, kPassCount> total_{};
+  };
+  PassTimer pass_timer_;
 
   Simulation& sim_;
   FrameEncoder& frames_;

@@ -541,7 +541,10 @@ Bytes Server::Impl::telemetry_message() {
   fb::FlatBufferBuilder b;
   std::vector<fb::Offset<fb::String>> faults;
   if (!st.fault.empty()) faults.push_back(b.CreateString(st.fault));
-  std::vector<fb::Offset<wire::EffectCost>> costs;  // per effect: from the step probe, once wired
+  std::vector<fb::Offset<wire::EffectCost>> costs;  // per pass of the step; those a scene lacks cost 0 and are left out
+  for (int p = 0; p < kPassCount; ++p)
+    if (st.pass_ns[size_t(p)] > 0)
+      costs.push_back(wire::CreateEffectCostDirect(b, to_string(Pass(p)), float(st.pass_ns[size_t(p)])));
   return seal(b, wire::Message::Telemetry,
               wire::CreateTelemetryDirect(b, now_ns(), uint64_t(st.steps), st.sim_time, float(st.step_mean_us),
                                           float(st.step_max_us), float(st.real_time_factor),
