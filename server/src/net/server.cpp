@@ -15,6 +15,7 @@
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
 
+#include "net/inbound.hpp"
 #include "net/mailbox.hpp"
 #include "tactile_generated.h"
 
@@ -235,14 +236,12 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       return send(make_error(wire::ErrorCode::Malformed, "text message: the protocol is binary FlatBuffers"),
                   Kind::Control);
     }
-    fb::Verifier v(data, size);
-    if (!wire::VerifyEnvelopeBuffer(v)) {
+    const Inbound inbound = read_inbound(data, size);
+    if (!inbound) {
       in_.consume(size);
-      return send(make_error(wire::ErrorCode::Malformed,
-                             "not a tactile Envelope (" + std::to_string(size) + " bytes failed verification)"),
-                  Kind::Control);
+      return send(make_error(inbound.error, inbound.message), Kind::Control);
     }
-    const wire::Envelope* e = wire::GetEnvelope(data);
+    const wire::Envelope* e = inbound.envelope;
     dispatch(*e);
     in_.consume(size);
   }
@@ -321,9 +320,8 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       return send(make_error(wire::ErrorCode::BadRequest, "DeviceInput for channel '" + name +
                                                               "', which this connection did not name in its Hello"),
                   Kind::Control);
-    if (!in.position() || !in.orientation())
-      return send(make_error(wire::ErrorCode::BadRequest, "DeviceInput without position or orientation"),
-                  Kind::Control);
+    if (const std::string bad = check_device_input(in); !bad.empty())
+      return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
     const wire::Vec3d& p = *in.position();
     const wire::Quatd& q = *in.orientation();
     DeviceSample s;
@@ -332,10 +330,6 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     s.device_time_ns = in.device_time_ns();
     s.pose.position = Vec3(p.x(), p.y(), p.z());
     const double qn = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
-    if (!std::isfinite(p.x() + p.y() + p.z()) || !(qn > 0.5 && qn < 2.0))
-      return send(make_error(wire::ErrorCode::BadRequest, "DeviceInput with a non-finite position or a "
-                                                          "non-unit orientation"),
-                  Kind::Control);
     s.pose.orientation = Quat(q.w() / qn, q.x() / qn, q.y() / qn, q.z() / qn);
     s.buttons = in.buttons();
     server_->loop.post_input(s);  // a full queue drops it and counts (telemetry)

@@ -1,0 +1,30 @@
+// What a client sent, checked before the server acts on it: the bytes
+// verified as a tactile Envelope holding a message, and the values the
+// server will use in range. Pure (no I/O, no state), so that a fuzzer and the
+// tests can drive it directly (server/fuzz/).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "tactile_generated.h"
+
+namespace tactile {
+
+struct Inbound {
+  const proto::Envelope* envelope = nullptr;  // into the bytes given; null when refused
+  proto::ErrorCode error = proto::ErrorCode::Malformed;
+  std::string message;  // what is wrong, when refused
+  explicit operator bool() const { return envelope != nullptr; }
+};
+
+// Verifies the bytes (FlatBuffers verifier: every offset, length and string
+// inside them) and refuses an Envelope without a message.
+Inbound read_inbound(const uint8_t* data, size_t size);
+
+// "" when a device input is usable: a finite position and an orientation
+// that normalizes (|q| within [0.5, 2]); else what is wrong.
+std::string check_device_input(const proto::DeviceInput& in);
+
+}  // namespace tactile
