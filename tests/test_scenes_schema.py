@@ -34,18 +34,20 @@ def shipped_scenes() -> list[pathlib.Path]:
     return sorted(p for p in SCENES.glob("*.json") if p.name != SCHEMA_PATH.name)
 
 
-def tactile_sim() -> str | None:
-    """A built tactile-sim: $TACTILE_SIM, else in $TACTILE_BUILD, else the newest under build/."""
-    exe = os.environ.get("TACTILE_SIM")
-    if exe:
-        return exe
+def built(name: str) -> str | None:
+    """A built executable of the server tree: in $TACTILE_BUILD, else the newest under build/."""
     build = os.environ.get("TACTILE_BUILD")
     if build:
         candidate = pathlib.Path(build) if pathlib.Path(build).is_absolute() else ROOT / build
-        if os.access(candidate / "tactile-sim", os.X_OK):
-            return str(candidate / "tactile-sim")
-    found = [p for p in glob.glob(str(ROOT / "build" / "*" / "tactile-sim")) if os.access(p, os.X_OK)]
+        if os.access(candidate / name, os.X_OK):
+            return str(candidate / name)
+    found = [p for p in glob.glob(str(ROOT / "build" / "*" / name)) if os.access(p, os.X_OK)]
     return max(found, key=os.path.getmtime) if found else None
+
+
+def tactile_sim() -> str | None:
+    """A built tactile-sim: $TACTILE_SIM, else as built() finds it."""
+    return os.environ.get("TACTILE_SIM") or built("tactile-sim")
 
 
 BEAM: dict[str, Any] = {

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import glob
 import json
 import os
 import pathlib
@@ -22,6 +21,7 @@ from typing import Any, Iterator
 
 import pytest
 import websockets
+from test_scenes_schema import built
 
 from tactile_proto import codec
 from tactile_proto.generated.Control import ControlT
@@ -36,7 +36,6 @@ from tactile_proto.generated.Resume import ResumeT
 from tactile_proto.generated.Role import Role
 from tactile_proto.generated.Vec3d import Vec3dT
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent
 TOKEN = "s3cret"
 
 # A small soft block with a sphere on the "stylus" channel 1 mm above it.
@@ -52,14 +51,7 @@ SCENE: dict[str, Any] = {
 
 
 def tactile_server() -> str | None:
-    """A built tactile-server: in $TACTILE_BUILD, else the newest under build/."""
-    build = os.environ.get("TACTILE_BUILD")
-    if build:
-        candidate = pathlib.Path(build) if pathlib.Path(build).is_absolute() else ROOT / build
-        if os.access(candidate / "tactile-server", os.X_OK):
-            return str(candidate / "tactile-server")
-    found = [p for p in glob.glob(str(ROOT / "build" / "*" / "tactile-server")) if os.access(p, os.X_OK)]
-    return max(found, key=os.path.getmtime) if found else None
+    return built("tactile-server")
 
 
 @contextlib.contextmanager

@@ -31,48 +31,9 @@
 #include "core/stepper.hpp"
 #include "mesh/primitives.hpp"
 
-// ---- allocation counting -----------------------------------------------------
-// Every heap allocation of the process goes through these (operator new calls
-// malloc); counted only while a timed loop of steps runs.
-namespace {
-std::atomic<bool> g_counting{false};
-std::atomic<int64_t> g_allocations{0};
-inline void note_allocation() {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-}
-}  // namespace
-
-extern "C" {
-void* __libc_malloc(size_t);
-void* __libc_calloc(size_t, size_t);
-void* __libc_realloc(void*, size_t);
-void* __libc_memalign(size_t, size_t);
-void* malloc(size_t n) {
-  note_allocation();
-  return __libc_malloc(n);
-}
-void* calloc(size_t n, size_t size) {
-  note_allocation();
-  return __libc_calloc(n, size);
-}
-void* realloc(void* p, size_t n) {
-  note_allocation();
-  return __libc_realloc(p, n);
-}
-void* memalign(size_t alignment, size_t n) {
-  note_allocation();
-  return __libc_memalign(alignment, n);
-}
-void* aligned_alloc(size_t alignment, size_t n) {
-  note_allocation();
-  return __libc_memalign(alignment, n);
-}
-int posix_memalign(void** p, size_t alignment, size_t n) {
-  note_allocation();
-  *p = __libc_memalign(alignment, n);
-  return *p ? 0 : 12;  // ENOMEM
-}
-}
+// Every heap allocation of the process, counted only while a timed loop of
+// steps runs (alloc_count::all).
+#include "app/alloc_count.hpp"
 
 namespace tactile {
 namespace {
@@ -158,20 +119,20 @@ struct Run {
   // Allocations are counted unless `warm_up` (the first step from a state
   // sets up its energy accounting, with a full energy pass).
   double time_steps(int64_t steps, bool warm_up = false) {
-    g_counting = !warm_up;
+    alloc_count::all = !warm_up;
     const Clock::time_point t0 = Clock::now();
     for (int64_t k = 0; k < steps; ++k) {
       if (stepper.step(state, dt)) {
-        g_counting = false;
+        alloc_count::all = false;
         ++faults;
         std::fprintf(stderr, "fault (restarting): %s\n", stepper.fault().message.c_str());
         stepper.clear_fault();
         state = start;
-        g_counting = !warm_up;
+        alloc_count::all = !warm_up;
       }
     }
     const double s = seconds_since(t0) / double(steps);
-    g_counting = false;
+    alloc_count::all = false;
     return s;
   }
 };
@@ -634,6 +595,6 @@ int main(int argc, char** argv) {
   }
 
   std::printf("\n## Allocations inside steps (all timed loops above): %lld\n",
-              static_cast<long long>(g_allocations.load()));
+              static_cast<long long>(alloc_count::count.load()));
   return 0;
 }

@@ -3,7 +3,9 @@ loopback WebSockets with the Python codec, and prints figures (it passes and
 fails nothing):
 
   - latency from a device input to the first haptic frame that has seen it
-    (p50, p99, max), with inputs at 1 kHz;
+    (p50, p99, max), with inputs at 1 kHz pressing the sphere 3 mm in;
+  - how steady the force in the haptic frames is while held (frames at 0,
+    peak over mean);
   - haptic frames delivered against steps taken (gaps in the step numbers are
     frames a device never got);
   - the step time with no viewer and with many viewers at 30 Hz;
@@ -42,6 +44,7 @@ from tactile_proto.generated.Message import Message
 from tactile_proto.generated.Quatd import QuatdT
 from tactile_proto.generated.Role import Role
 from tactile_proto.generated.Vec3d import Vec3dT
+from tactile_proto.generated.Vec3f import Vec3f
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 TOKEN = "bench"
@@ -100,6 +103,7 @@ async def latency_and_delivery(port: int, seconds: float) -> None:
         scene = await say_hello(ws, Role.Device, ["stylus"])
         sent: dict[int, float] = {}
         times: list[float] = []
+        forces: list[float] = []  # the sphere's upward force per frame
         answered: dict[int, float] = {}
         steps: list[int] = []
         newest = 0
@@ -109,6 +113,7 @@ async def latency_and_delivery(port: int, seconds: float) -> None:
             # whole frames at the step rate (the codec's decode is for everything else).
             nonlocal newest
             frame = HapticFrame()
+            vec = Vec3f()
             while True:
                 raw = await ws.recv()
                 now = time.perf_counter()
@@ -119,6 +124,8 @@ async def latency_and_delivery(port: int, seconds: float) -> None:
                 frame.Init(table.Bytes, table.Pos)
                 steps.append(frame.Step())
                 times.append(frame.SimTime())
+                if frame.ProxiesLength() > 0:
+                    forces.append(frame.Proxies(0).Force(vec).Y())
                 seen = frame.LastInputSequence()
                 for s in range(newest + 1, seen + 1):
                     if s in sent and s not in answered:
@@ -146,6 +153,13 @@ async def latency_and_delivery(port: int, seconds: float) -> None:
             missing = sum(max(0, round(g / scene.dt) - 1) for g in gaps)
             print(f"\nhaptic frames received {len(times)}, missing {missing} "
                   f"({100 * missing / (len(times) + missing):.2f} %) over {times[-1] - times[0]:.2f} s simulated\n")
+        # Held 3 mm deep after the first second: how steady is the force a device would feel?
+        held = forces[len(forces) * 3 // 10:] if seconds > 1.5 else []
+        if held and statistics.mean(held) > 0:
+            mean = statistics.mean(held)
+            zeros = sum(1 for f in held if f <= 0)
+            print(f"force while held (1 ms means): mean {mean:.3f} N, frames at 0: {100 * zeros / len(held):.1f} %, "
+                  f"peak {max(held) / mean:.1f} x mean\n")
 
 
 async def viewers_cost(port: int, n: int, seconds: float) -> None:

@@ -180,7 +180,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   touched_now_.clear();
   x_prev_.swap(x_now_);
   for (size_t j = 0; j < n_proxies; ++j) {
-    if (reports_[j].contacts > 0) update_stiffness(int32_t(j), motion_[j].at(t1).position, reports_[j].force);
+    if (reports_[j].contacts > 0) update_stiffness(int32_t(j), pose1_[j].position, reports_[j].force);
     else {
       fit_[j] = Fit{};
       reports_[j].stiffness = glm::dmat3(0.0);

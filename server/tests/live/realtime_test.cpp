@@ -15,32 +15,8 @@
 #include "mesh/primitives.hpp"
 #include "tactile_generated.h"
 
-// Heap allocations made on a thread while it has counting switched on: every
-// allocation of the process goes through malloc (operator new calls it).
-namespace {
-thread_local bool t_counting = false;
-std::atomic<int64_t> g_allocations{0};
-inline void note_allocation() {
-  if (t_counting) g_allocations.fetch_add(1, std::memory_order_relaxed);
-}
-}  // namespace
-extern "C" {
-void* __libc_malloc(size_t);
-void* __libc_calloc(size_t, size_t);
-void* __libc_realloc(void*, size_t);
-void* malloc(size_t n) {
-  note_allocation();
-  return __libc_malloc(n);
-}
-void* calloc(size_t n, size_t size) {
-  note_allocation();
-  return __libc_calloc(n, size);
-}
-void* realloc(void* p, size_t n) {
-  note_allocation();
-  return __libc_realloc(p, n);
-}
-}
+// Heap allocations made on a thread while it has alloc_count::here set.
+#include "app/alloc_count.hpp"
 
 namespace tactile {
 namespace {
@@ -208,7 +184,7 @@ TEST(RealtimeLoop, SteadyStateAllocatesNothing) {
   size_t bytes = 0;
   loop.on_haptic([&](std::span<const uint8_t> m) {
     bytes += m.size();
-    if (++haptics == 200) t_counting = true;  // (the sim thread: counting from here on)
+    if (++haptics == 200) alloc_count::here = true;  // (the sim thread: counting from here on)
   });
   loop.on_state([&](std::span<const uint8_t> m) { bytes += m.size(); });
   std::atomic<bool> stop{false};
@@ -223,14 +199,14 @@ TEST(RealtimeLoop, SteadyStateAllocatesNothing) {
       loop.post_input(s);
     }
   });
-  g_allocations = 0;
+  alloc_count::count = 0;
   loop.run(stop, 0.3);
-  t_counting = false;
+  alloc_count::here = false;
   device.join();
   EXPECT_GT(haptics, 1000);
   EXPECT_GT(bytes, 0u);
   EXPECT_GT(loop.stats().inputs_applied, 100);
-  EXPECT_EQ(g_allocations.load(), 0) << "allocations on the simulation thread in the steady state";
+  EXPECT_EQ(alloc_count::count.load(), 0) << "allocations on the simulation thread in the steady state";
 }
 
 TEST(RealtimeLoop, AFullQueueOrAnUnknownDeviceDropsAndCounts) {
