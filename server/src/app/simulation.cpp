@@ -1,5 +1,6 @@
 #include "app/simulation.hpp"
 
+#include <stdexcept>
 #include <utility>
 
 #include "core/model.hpp"
@@ -13,8 +14,19 @@
 
 namespace tactile {
 
+// What continue_from carries from one engine to another, in double.
+struct Carry {
+  std::vector<double> u, v;
+  double t = 0;
+  int64_t step = 0;
+  double work_loads = 0, work_essential = 0, work_contact = 0, dissipated = 0;
+  std::vector<ProxyMotion> proxy, hand;
+};
+
 struct Simulation::Engine {
   virtual ~Engine() = default;
+  virtual Carry carry_out() const = 0;
+  virtual void carry_in(const Carry& c) = 0;
   virtual const TetMesh& mesh() const = 0;
   virtual int32_t n_nodes() const = 0;
   virtual int32_t n_tets() const = 0;
@@ -55,6 +67,41 @@ class EngineOf final : public Simulation::Engine {
       : model_(std::make_unique<Model<Real>>(build_model<Real>(spec))),
         stepper_(*model_, pool),
         state_(stepper_.make_state()) {}
+
+  Carry carry_out() const override {
+    Carry c;
+    c.u.assign(state_.u.begin(), state_.u.end());
+    c.v.assign(state_.v.begin(), state_.v.end());
+    c.t = state_.t;
+    c.step = state_.step;
+    c.work_loads = state_.work_loads;
+    c.work_essential = state_.work_essential;
+    c.work_contact = state_.work_contact;
+    c.dissipated = state_.dissipated;
+    for (int32_t j = 0; j < int32_t(model_->proxies.size()); ++j) c.proxy.push_back(stepper_.contact().motion(j));
+    for (int32_t h = 0; h < int32_t(model_->hands.size()); ++h) c.hand.push_back(stepper_.contact().hand_motion(h));
+    return c;
+  }
+  void carry_in(const Carry& c) override {
+    if (c.u.size() != state_.u.size() || c.proxy.size() != model_->proxies.size() || c.hand.size() != model_->hands.size())
+      throw std::invalid_argument("continue_from: the other simulation has " + std::to_string(c.u.size() / 3) +
+                                  " nodes, " + std::to_string(c.proxy.size()) + " proxies and " +
+                                  std::to_string(c.hand.size()) + " hands; this one " +
+                                  std::to_string(state_.u.size() / 3) + ", " + std::to_string(model_->proxies.size()) +
+                                  " and " + std::to_string(model_->hands.size()));
+    for (size_t k = 0; k < c.u.size(); ++k) {
+      state_.u[k] = Real(c.u[k]);
+      state_.v[k] = Real(c.v[k]);
+    }
+    state_.t = c.t;
+    state_.step = c.step;
+    state_.work_loads = c.work_loads;
+    state_.work_essential = c.work_essential;
+    state_.work_contact = c.work_contact;
+    state_.dissipated = c.dissipated;
+    for (size_t h = 0; h < c.hand.size(); ++h) stepper_.contact().set_hand_motion(int32_t(h), c.hand[h]);
+    for (size_t j = 0; j < c.proxy.size(); ++j) stepper_.contact().set_motion(int32_t(j), c.proxy[j]);
+  }
 
   const TetMesh& mesh() const override { return model_->mesh; }
   int32_t n_nodes() const override { return model_->n_nodes; }
@@ -146,6 +193,7 @@ Pose Simulation::proxy_pose(int32_t proxy) const { return engine_->proxy_pose(pr
 const std::vector<ProxyReport>& Simulation::proxy_reports() const { return engine_->proxy_reports(); }
 const std::vector<DeviceReport>& Simulation::device_reports() const { return engine_->device_reports(); }
 void Simulation::clear_impulses() { engine_->clear_impulses(); }
+void Simulation::continue_from(const Simulation& other) { engine_->carry_in(other.engine_->carry_out()); }
 const Fault& Simulation::fault() const { return engine_->fault(); }
 void Simulation::set_probe(StepProbe* probe) { engine_->set_probe(probe); }
 

@@ -67,6 +67,15 @@ class Simulation {
   const std::vector<DeviceReport>& device_reports() const;  // (n_devices)
   void clear_impulses();
 
+  // Takes over another simulation's body and proxies: displacements,
+  // velocities, time, step count, energy sums and proxy motions, so that a
+  // model rebuilt with other parameters (scene/parameters.hpp) goes on from
+  // where the old one was. The accelerations are recomputed from this
+  // model's forces at the first step. Both must have the same mesh (node
+  // count), proxies and hands; precisions may differ. Throws
+  // std::invalid_argument otherwise.
+  void continue_from(const Simulation& other);
+
   const Fault& fault() const;
   void set_probe(StepProbe* probe);
 

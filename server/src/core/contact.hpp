@@ -97,6 +97,7 @@ class Contact {
   // Starts the impulse sums of every proxy and device report again.
   void clear_impulses();
   const ProxyMotion& motion(int32_t proxy) const { return motion_[size_t(proxy)]; }
+  const ProxyMotion& hand_motion(int32_t hand) const { return hand_motion_[size_t(hand)]; }
   const std::vector<ProxyReport>& reports() const { return reports_; }
 
   // Forgets the previous positions and contacts (a new or reset state).
