@@ -28,7 +28,8 @@ from tactile_proto.generated.ControlCommand import ControlCommand
 from tactile_proto.generated.Envelope import EnvelopeT
 from tactile_proto.generated.ErrorCode import ErrorCode
 from tactile_proto.generated.Message import Message
-from tactile_proto.generated.ProtocolVersion import ProtocolVersion
+from tactile_proto.generated.ProtocolMajor import ProtocolMajor
+from tactile_proto.generated.ProtocolMinor import ProtocolMinor
 from tactile_proto.generated.Role import Role
 from tactile_proto.generated.StateFrame import StateFrameT
 
@@ -202,7 +203,7 @@ def test_the_schema_reader_sees_every_generated_type():
 
 
 def test_protocol_version_and_identifier_come_from_the_schema():
-    assert (tp.PROTOCOL_MAJOR, tp.PROTOCOL_MINOR) == (ProtocolVersion.Major, ProtocolVersion.Minor)
+    assert (tp.PROTOCOL_MAJOR, tp.PROTOCOL_MINOR) == (ProtocolMajor.Current, ProtocolMinor.Current)
     declared = re.search(r'^file_identifier\s+"(\w{4})"', SCHEMA_PATH.read_text(), re.MULTILINE)
     assert declared is not None and declared.group(1).encode() == tp.FILE_IDENTIFIER
     assert envelope_api.Envelope.EnvelopeBufferHasIdentifier(b"\0\0\0\0" + tp.FILE_IDENTIFIER, 0)
@@ -457,7 +458,7 @@ def test_another_major_version_is_refused_at_hello_with_a_clear_error():
     assert refused.value.code == ErrorCode.VersionMismatch
     welcome = tp.decode(golden("welcome")[1]).message
     welcome.protocolMajor = 0
-    with pytest.raises(tp.ProtocolError, match="peer speaks 0.0"):
+    with pytest.raises(tp.ProtocolError, match="peer speaks 0.1"):
         tp.check_version(welcome)
     with pytest.raises(TypeError):
         tp.check_version(tp.decode(golden("ping")[1]))

@@ -20,17 +20,18 @@ import {
   StateFrame,
   Vec3f,
 } from './generated/tactile_generated';
-import { ProtocolVersion } from './generated/tactile/proto/protocol-version';
+import { ProtocolMajor } from './generated/tactile/proto/protocol-major';
+import { ProtocolMinor } from './generated/tactile/proto/protocol-minor';
 
 export * from './generated/tactile_generated';
 // The runtime's Builder and ByteBuffer, for the generated low-level API.
 export { Builder, ByteBuffer } from 'flatbuffers';
-// flatc 2.0.8 leaves this enum out of tactile_generated.ts (no table uses it).
-export { ProtocolVersion };
+// flatc 2.0.8 leaves these enums out of tactile_generated.ts (no table uses them).
+export { ProtocolMajor, ProtocolMinor };
 
-// The version this codec speaks (the schema's enum ProtocolVersion).
-export const PROTOCOL_MAJOR: number = ProtocolVersion.Major;
-export const PROTOCOL_MINOR: number = ProtocolVersion.Minor;
+// The version this codec speaks (the schema's enums ProtocolMajor and ProtocolMinor).
+export const PROTOCOL_MAJOR: number = ProtocolMajor.Current;
+export const PROTOCOL_MINOR: number = ProtocolMinor.Current;
 export const FILE_IDENTIFIER = 'TCTL';
 
 // The smallest Envelope: root offset (4 bytes) and file identifier (4 bytes).

@@ -12,8 +12,8 @@ import { SCHEMA_PATH, loadVectors, plainFromJson, proto, schema } from './schema
 const vectors = Object.fromEntries(loadVectors().map((v) => [v.name, v]));
 
 test('the protocol version is the schema\'s', () => {
-  assert.equal(proto.PROTOCOL_MAJOR, schema.enums.ProtocolVersion.Major);
-  assert.equal(proto.PROTOCOL_MINOR, schema.enums.ProtocolVersion.Minor);
+  assert.equal(proto.PROTOCOL_MAJOR, schema.enums.ProtocolMajor.Current);
+  assert.equal(proto.PROTOCOL_MINOR, schema.enums.ProtocolMinor.Current);
 });
 
 test('makeHello carries this codec\'s version and the options', () => {

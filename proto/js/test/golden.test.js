@@ -73,7 +73,7 @@ test('typed reads of the vectors see the written values', () => {
   const byName = Object.fromEntries(vectors.map((v) => [v.name, proto.decode(v.bytes).message]));
   const hello = byName.hello;
   assert.ok(hello instanceof proto.HelloT);
-  assert.equal(hello.protocolMajor, proto.ProtocolVersion.Major);
+  assert.equal(hello.protocolMajor, proto.PROTOCOL_MAJOR);
   assert.equal(hello.role, proto.Role.Device);
   assert.equal(hello.token, 's3cret-token');
   assert.equal(hello.devices[1], 'right');

@@ -31,11 +31,12 @@ from .generated.Envelope import Envelope, EnvelopeT
 from .generated.ErrorCode import ErrorCode
 from .generated.Hello import HelloT
 from .generated.Message import Message
-from .generated.ProtocolVersion import ProtocolVersion
+from .generated.ProtocolMajor import ProtocolMajor
+from .generated.ProtocolMinor import ProtocolMinor
 from .generated.Welcome import WelcomeT
 
-PROTOCOL_MAJOR: int = ProtocolVersion.Major
-PROTOCOL_MINOR: int = ProtocolVersion.Minor
+PROTOCOL_MAJOR: int = ProtocolMajor.Current
+PROTOCOL_MINOR: int = ProtocolMinor.Current
 FILE_IDENTIFIER = b"TCTL"  # the schema's file_identifier (tests check it against the generated code)
 
 

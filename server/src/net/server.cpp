@@ -264,7 +264,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
 
   void on_hello(const wire::Hello& h) {
     if (greeted_) return send(make_error(wire::ErrorCode::BadRequest, "Hello sent twice"), Kind::Control);
-    const int major = int(wire::ProtocolVersion::Major), minor = int(wire::ProtocolVersion::Minor);
+    const int major = int(wire::ProtocolMajor::Current), minor = int(wire::ProtocolMinor::Current);
     if (h.protocol_major() != major)
       return refuse(wire::ErrorCode::VersionMismatch,
                     "client speaks protocol " + std::to_string(h.protocol_major()) + "." +

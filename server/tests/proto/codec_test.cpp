@@ -33,7 +33,7 @@ TEST(ProtoCodec, HelloCarriesVersionRoleTokenAndDevices) {
   FlatBufferBuilder b;
   const std::vector<flatbuffers::Offset<flatbuffers::String>> devices = {b.CreateString("left"),
                                                                          b.CreateString("right")};
-  const auto hello = CreateHelloDirect(b, uint16_t(ProtocolVersion::Major), uint16_t(ProtocolVersion::Minor),
+  const auto hello = CreateHelloDirect(b, uint16_t(ProtocolMajor::Current), uint16_t(ProtocolMinor::Current),
                                        Role::Device, "s3cret", "bridge@lab", &devices);
   const std::vector<uint8_t> bytes = seal(b, Message::Hello, hello);
   const Envelope* e = open(bytes);
@@ -41,7 +41,7 @@ TEST(ProtoCodec, HelloCarriesVersionRoleTokenAndDevices) {
   ASSERT_EQ(e->message_type(), Message::Hello);
   const Hello* h = e->message_as_Hello();
   EXPECT_EQ(h->protocol_major(), 1);
-  EXPECT_EQ(h->protocol_minor(), 0);
+  EXPECT_EQ(h->protocol_minor(), 1);
   EXPECT_EQ(h->role(), Role::Device);
   EXPECT_STREQ(h->token()->c_str(), "s3cret");
   EXPECT_STREQ(h->client_name()->c_str(), "bridge@lab");

@@ -112,7 +112,7 @@ TEST(ProtoGolden, GeneratedAccessorsReadTheWrittenValues) {
   const std::string hello = load("hello.tctl");
   const Hello* h = GetEnvelope(hello.data())->message_as_Hello();
   ASSERT_NE(h, nullptr);
-  EXPECT_EQ(h->protocol_major(), uint16_t(ProtocolVersion::Major));
+  EXPECT_EQ(h->protocol_major(), uint16_t(ProtocolMajor::Current));
   EXPECT_EQ(h->role(), Role::Device);
   EXPECT_STREQ(h->token()->c_str(), "s3cret-token");
   EXPECT_STREQ(h->devices()->Get(1)->c_str(), "right");

@@ -13,6 +13,7 @@ export { Hello, HelloT } from './tactile/proto/hello';
 export { LoadScene, LoadSceneT } from './tactile/proto/load-scene';
 export { Mat3f, Mat3fT } from './tactile/proto/mat3f';
 export { Message, unionToMessage, unionListToMessage } from './tactile/proto/message';
+export { Parameter, ParameterT } from './tactile/proto/parameter';
 export { Pause, PauseT } from './tactile/proto/pause';
 export { Ping, PingT } from './tactile/proto/ping';
 export { Pong, PongT } from './tactile/proto/pong';

@@ -182,7 +182,52 @@ class SceneDescription(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(20))
         return o == 0
 
-def SceneDescriptionStart(builder): builder.StartObject(9)
+    # SceneDescription
+    def Parameters(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
+        if o != 0:
+            x = self._tab.Vector(o)
+            x += flatbuffers.number_types.UOffsetTFlags.py_type(j) * 4
+            x = self._tab.Indirect(x)
+            from tactile_proto.generated.Parameter import Parameter
+            obj = Parameter()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+    # SceneDescription
+    def ParametersLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # SceneDescription
+    def ParametersIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
+        return o == 0
+
+    # SceneDescription
+    def Scenes(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
+        if o != 0:
+            a = self._tab.Vector(o)
+            return self._tab.String(a + flatbuffers.number_types.UOffsetTFlags.py_type(j * 4))
+        return ""
+
+    # SceneDescription
+    def ScenesLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # SceneDescription
+    def ScenesIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
+        return o == 0
+
+def SceneDescriptionStart(builder): builder.StartObject(11)
 def Start(builder):
     return SceneDescriptionStart(builder)
 def SceneDescriptionAddSceneName(builder, sceneName): builder.PrependUOffsetTRelativeSlot(0, flatbuffers.number_types.UOffsetTFlags.py_type(sceneName), 0)
@@ -227,9 +272,22 @@ def AddDevices(builder, devices):
 def SceneDescriptionStartDevicesVector(builder, numElems): return builder.StartVector(4, numElems, 4)
 def StartDevicesVector(builder, numElems):
     return SceneDescriptionStartDevicesVector(builder, numElems)
+def SceneDescriptionAddParameters(builder, parameters): builder.PrependUOffsetTRelativeSlot(9, flatbuffers.number_types.UOffsetTFlags.py_type(parameters), 0)
+def AddParameters(builder, parameters):
+    return SceneDescriptionAddParameters(builder, parameters)
+def SceneDescriptionStartParametersVector(builder, numElems): return builder.StartVector(4, numElems, 4)
+def StartParametersVector(builder, numElems):
+    return SceneDescriptionStartParametersVector(builder, numElems)
+def SceneDescriptionAddScenes(builder, scenes): builder.PrependUOffsetTRelativeSlot(10, flatbuffers.number_types.UOffsetTFlags.py_type(scenes), 0)
+def AddScenes(builder, scenes):
+    return SceneDescriptionAddScenes(builder, scenes)
+def SceneDescriptionStartScenesVector(builder, numElems): return builder.StartVector(4, numElems, 4)
+def StartScenesVector(builder, numElems):
+    return SceneDescriptionStartScenesVector(builder, numElems)
 def SceneDescriptionEnd(builder): return builder.EndObject()
 def End(builder):
     return SceneDescriptionEnd(builder)
+import tactile_proto.generated.Parameter
 import tactile_proto.generated.ProxyInfo
 try:
     from typing import List
@@ -249,6 +307,8 @@ class SceneDescriptionT(object):
         self.scalarName = None  # type: str
         self.proxies = None  # type: List[tactile_proto.generated.ProxyInfo.ProxyInfoT]
         self.devices = None  # type: List[str]
+        self.parameters = None  # type: List[tactile_proto.generated.Parameter.ParameterT]
+        self.scenes = None  # type: List[str]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -303,6 +363,18 @@ class SceneDescriptionT(object):
             self.devices = []
             for i in range(sceneDescription.DevicesLength()):
                 self.devices.append(sceneDescription.Devices(i))
+        if not sceneDescription.ParametersIsNone():
+            self.parameters = []
+            for i in range(sceneDescription.ParametersLength()):
+                if sceneDescription.Parameters(i) is None:
+                    self.parameters.append(None)
+                else:
+                    parameter_ = tactile_proto.generated.Parameter.ParameterT.InitFromObj(sceneDescription.Parameters(i))
+                    self.parameters.append(parameter_)
+        if not sceneDescription.ScenesIsNone():
+            self.scenes = []
+            for i in range(sceneDescription.ScenesLength()):
+                self.scenes.append(sceneDescription.Scenes(i))
 
     # SceneDescriptionT
     def Pack(self, builder):
@@ -350,6 +422,22 @@ class SceneDescriptionT(object):
             for i in reversed(range(len(self.devices))):
                 builder.PrependUOffsetTRelative(deviceslist[i])
             devices = builder.EndVector()
+        if self.parameters is not None:
+            parameterslist = []
+            for i in range(len(self.parameters)):
+                parameterslist.append(self.parameters[i].Pack(builder))
+            SceneDescriptionStartParametersVector(builder, len(self.parameters))
+            for i in reversed(range(len(self.parameters))):
+                builder.PrependUOffsetTRelative(parameterslist[i])
+            parameters = builder.EndVector()
+        if self.scenes is not None:
+            sceneslist = []
+            for i in range(len(self.scenes)):
+                sceneslist.append(builder.CreateString(self.scenes[i]))
+            SceneDescriptionStartScenesVector(builder, len(self.scenes))
+            for i in reversed(range(len(self.scenes))):
+                builder.PrependUOffsetTRelative(sceneslist[i])
+            scenes = builder.EndVector()
         SceneDescriptionStart(builder)
         if self.sceneName is not None:
             SceneDescriptionAddSceneName(builder, sceneName)
@@ -367,5 +455,9 @@ class SceneDescriptionT(object):
             SceneDescriptionAddProxies(builder, proxies)
         if self.devices is not None:
             SceneDescriptionAddDevices(builder, devices)
+        if self.parameters is not None:
+            SceneDescriptionAddParameters(builder, parameters)
+        if self.scenes is not None:
+            SceneDescriptionAddScenes(builder, scenes)
         sceneDescription = SceneDescriptionEnd(builder)
         return sceneDescription

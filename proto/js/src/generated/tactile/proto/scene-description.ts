@@ -2,6 +2,7 @@
 
 import * as flatbuffers from 'flatbuffers';
 
+import { Parameter, ParameterT } from '../../tactile/proto/parameter';
 import { ProxyInfo, ProxyInfoT } from '../../tactile/proto/proxy-info';
 
 
@@ -114,8 +115,30 @@ devicesLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+parameters(index: number, obj?:Parameter):Parameter|null {
+  const offset = this.bb!.__offset(this.bb_pos, 22);
+  return offset ? (obj || new Parameter()).__init(this.bb!.__indirect(this.bb!.__vector(this.bb_pos + offset) + index * 4), this.bb!) : null;
+}
+
+parametersLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 22);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
+scenes(index: number):string
+scenes(index: number,optionalEncoding:flatbuffers.Encoding):string|Uint8Array
+scenes(index: number,optionalEncoding?:any):string|Uint8Array|null {
+  const offset = this.bb!.__offset(this.bb_pos, 24);
+  return offset ? this.bb!.__string(this.bb!.__vector(this.bb_pos + offset) + index * 4, optionalEncoding) : null;
+}
+
+scenesLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 24);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startSceneDescription(builder:flatbuffers.Builder) {
-  builder.startObject(9);
+  builder.startObject(11);
 }
 
 static addSceneName(builder:flatbuffers.Builder, sceneNameOffset:flatbuffers.Offset) {
@@ -229,12 +252,44 @@ static startDevicesVector(builder:flatbuffers.Builder, numElems:number) {
   builder.startVector(4, numElems, 4);
 }
 
+static addParameters(builder:flatbuffers.Builder, parametersOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(9, parametersOffset, 0);
+}
+
+static createParametersVector(builder:flatbuffers.Builder, data:flatbuffers.Offset[]):flatbuffers.Offset {
+  builder.startVector(4, data.length, 4);
+  for (let i = data.length - 1; i >= 0; i--) {
+    builder.addOffset(data[i]!);
+  }
+  return builder.endVector();
+}
+
+static startParametersVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(4, numElems, 4);
+}
+
+static addScenes(builder:flatbuffers.Builder, scenesOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(10, scenesOffset, 0);
+}
+
+static createScenesVector(builder:flatbuffers.Builder, data:flatbuffers.Offset[]):flatbuffers.Offset {
+  builder.startVector(4, data.length, 4);
+  for (let i = data.length - 1; i >= 0; i--) {
+    builder.addOffset(data[i]!);
+  }
+  return builder.endVector();
+}
+
+static startScenesVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(4, numElems, 4);
+}
+
 static endSceneDescription(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createSceneDescription(builder:flatbuffers.Builder, sceneNameOffset:flatbuffers.Offset, sceneId:number, dt:number, restPositionsOffset:flatbuffers.Offset, trianglesOffset:flatbuffers.Offset, surfaceNodesOffset:flatbuffers.Offset, scalarNameOffset:flatbuffers.Offset, proxiesOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset):flatbuffers.Offset {
+static createSceneDescription(builder:flatbuffers.Builder, sceneNameOffset:flatbuffers.Offset, sceneId:number, dt:number, restPositionsOffset:flatbuffers.Offset, trianglesOffset:flatbuffers.Offset, surfaceNodesOffset:flatbuffers.Offset, scalarNameOffset:flatbuffers.Offset, proxiesOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, parametersOffset:flatbuffers.Offset, scenesOffset:flatbuffers.Offset):flatbuffers.Offset {
   SceneDescription.startSceneDescription(builder);
   SceneDescription.addSceneName(builder, sceneNameOffset);
   SceneDescription.addSceneId(builder, sceneId);
@@ -245,6 +300,8 @@ static createSceneDescription(builder:flatbuffers.Builder, sceneNameOffset:flatb
   SceneDescription.addScalarName(builder, scalarNameOffset);
   SceneDescription.addProxies(builder, proxiesOffset);
   SceneDescription.addDevices(builder, devicesOffset);
+  SceneDescription.addParameters(builder, parametersOffset);
+  SceneDescription.addScenes(builder, scenesOffset);
   return SceneDescription.endSceneDescription(builder);
 }
 
@@ -258,7 +315,9 @@ unpack(): SceneDescriptionT {
     this.bb!.createScalarList(this.surfaceNodes.bind(this), this.surfaceNodesLength()),
     this.scalarName(),
     this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength()),
-    this.bb!.createScalarList(this.devices.bind(this), this.devicesLength())
+    this.bb!.createScalarList(this.devices.bind(this), this.devicesLength()),
+    this.bb!.createObjList(this.parameters.bind(this), this.parametersLength()),
+    this.bb!.createScalarList(this.scenes.bind(this), this.scenesLength())
   );
 }
 
@@ -273,6 +332,8 @@ unpackTo(_o: SceneDescriptionT): void {
   _o.scalarName = this.scalarName();
   _o.proxies = this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength());
   _o.devices = this.bb!.createScalarList(this.devices.bind(this), this.devicesLength());
+  _o.parameters = this.bb!.createObjList(this.parameters.bind(this), this.parametersLength());
+  _o.scenes = this.bb!.createScalarList(this.scenes.bind(this), this.scenesLength());
 }
 }
 
@@ -286,7 +347,9 @@ constructor(
   public surfaceNodes: (number)[] = [],
   public scalarName: string|Uint8Array|null = null,
   public proxies: (ProxyInfoT)[] = [],
-  public devices: (string)[] = []
+  public devices: (string)[] = [],
+  public parameters: (ParameterT)[] = [],
+  public scenes: (string)[] = []
 ){}
 
 
@@ -298,6 +361,8 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const scalarName = (this.scalarName !== null ? builder.createString(this.scalarName!) : 0);
   const proxies = SceneDescription.createProxiesVector(builder, builder.createObjectOffsetList(this.proxies));
   const devices = SceneDescription.createDevicesVector(builder, builder.createObjectOffsetList(this.devices));
+  const parameters = SceneDescription.createParametersVector(builder, builder.createObjectOffsetList(this.parameters));
+  const scenes = SceneDescription.createScenesVector(builder, builder.createObjectOffsetList(this.scenes));
 
   return SceneDescription.createSceneDescription(builder,
     sceneName,
@@ -308,7 +373,9 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     surfaceNodes,
     scalarName,
     proxies,
-    devices
+    devices,
+    parameters,
+    scenes
   );
 }
 }

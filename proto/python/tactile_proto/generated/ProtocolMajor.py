@@ -2,6 +2,5 @@
 
 # namespace: proto
 
-class ProtocolVersion(object):
-    Minor = 0
-    Major = 1
+class ProtocolMajor(object):
+    Current = 1
