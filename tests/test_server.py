@@ -32,7 +32,11 @@ from tactile_proto.generated.Hello import HelloT
 from tactile_proto.generated.Pause import PauseT
 from tactile_proto.generated.Ping import PingT
 from tactile_proto.generated.Quatd import QuatdT
+from tactile_proto.generated.LoadScene import LoadSceneT
+from tactile_proto.generated.Reset import ResetT
 from tactile_proto.generated.Resume import ResumeT
+from tactile_proto.generated.SetParameter import SetParameterT
+from tactile_proto.generated.StopRecording import StopRecordingT
 from tactile_proto.generated.Role import Role
 from tactile_proto.generated.Vec3d import Vec3dT
 
@@ -183,14 +187,13 @@ def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_pa
                     n += 1
             assert n > 300, f"{n} haptic frames in 0.3 s"
             assert first.proxies[0].force.y == 0.0  # not touching yet
-            # Press 3 mm into the top face over 0.2 s at 1 kHz, then hold, reading all along as a device does.
-            frames: list[Any] = []
+            # Press 3 mm into the top face over 0.2 s at 1 kHz, then hold, reading all along as a device does
+            # (thousands of frames a second: kept as bytes and decoded afterwards, so that the client keeps up).
+            received: list[bytes] = []
 
             async def read() -> None:
                 while True:
-                    msg = codec.decode(await ws.recv()).message
-                    if type(msg).__name__ == "HapticFrameT":
-                        frames.append(msg)
+                    received.append(await ws.recv())
 
             reader = asyncio.create_task(read())
             for k in range(1, 201):
@@ -200,6 +203,7 @@ def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_pa
             reader.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await reader
+            frames = [m for m in (codec.decode(raw).message for raw in received) if type(m).__name__ == "HapticFrameT"]
             done = [f for f in frames if f.lastInputSequence == 200]
             assert done, "no haptic frame saw the last input"
             # From 0.1 s after the last input took effect (it glides in over one input interval).
@@ -235,11 +239,129 @@ def test_controller_pauses_and_resumes_and_one_at_a_time(tmp_path: pathlib.Path)
             t4 = await next_of(ctl, "TelemetryT")
             assert not t4.paused and t4.simTime > t3.simTime
             # What this server cannot do yet is refused by name, not ignored.
-            from tactile_proto.generated.Reset import ResetT
-
-            await ctl.send(codec.encode(control(ControlCommand.Reset, ResetT(), request_id=7)))
+            await ctl.send(codec.encode(control(ControlCommand.StopRecording, StopRecordingT(), request_id=7)))
             err = await next_of(ctl, "ErrorT")
-            assert err.code == ErrorCode.BadRequest and err.requestId == 7 and "Reset" in err.message
+            assert err.code == ErrorCode.BadRequest and err.requestId == 7 and "StopRecording" in err.message
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+def set_parameter(name: str, value: float) -> SetParameterT:
+    p = SetParameterT()
+    p.name, p.value = name, value
+    return p
+
+
+def load(path: str) -> LoadSceneT:
+    l = LoadSceneT()
+    l.path = path
+    return l
+
+
+def parameters(scene: Any) -> dict[str, float]:
+    return {p.name: p.value for p in scene.parameters}
+
+
+def test_controller_sets_parameters_resets_and_loads_scenes(tmp_path: pathlib.Path) -> None:
+    """Gravity turned on sags the block, a stiffer material halves the sag, in the same timeline; a reset starts a new
+    timeline from rest; a load brings another scene from the scene folder; each change reaches every client
+    as a new SceneDescription, and each bad request gets its error."""
+    other = dict(SCENE, name="other", mesh=dict(SCENE["mesh"], cells=[8, 4, 8]))
+    other["proxies"] = [dict(SCENE["proxies"][0], device="pen")]
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    (tmp_path / "broken.json").write_text(json.dumps(dict(SCENE, colour="red")))
+
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port)) as view, websockets.connect(url(port)) as dev, \
+                websockets.connect(url(port)) as ctl:
+            _, scene = await hello(view, Role.Viewer)
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            await hello(ctl, Role.Controller, TOKEN)
+            assert list(scene.scenes) == \
+                ["broken.json", "other.json", "scene.json"]
+            params = parameters(scene)
+            assert params["material.E"] == 30000 and params["damping.alpha"] == 20 and params["effects.damping"] == 1
+
+            # The device reads all along, as a device does (thousands of frames a second: kept as bytes,
+            # decoded at the end, so that the client keeps up).
+            received: list[bytes] = []
+
+            async def read_device() -> None:
+                while True:
+                    received.append(await dev.recv())
+
+            reader = asyncio.create_task(read_device())
+
+            async def settled_sag(after: float) -> tuple[float, Any]:
+                """The largest displacement of the surface once 0.5 s of simulated time has passed since `after`
+                (mass damping at 20/s leaves under 1 % of the transient), and that state."""
+                while True:
+                    state = await next_of(view, "StateFrameT")
+                    if state.simTime > after + 0.5:
+                        return max(state.scalar), state
+
+            # Gravity turned on: the block sags under its own weight. Then twice as stiff: half the sag, in
+            # the same timeline (a small strain: the response is linear).
+            await ctl.send(codec.encode(control(ControlCommand.SetParameter, set_parameter("gravity.y", -9.81), 1)))
+            for ws in (ctl, view):
+                on = await next_of(ws, "SceneDescriptionT")
+                assert parameters(on)["effects.gravity"] == 1 and on.sceneId == scene.sceneId
+            first = await next_of(view, "StateFrameT")
+            soft, before = await settled_sag(first.simTime)
+            await ctl.send(codec.encode(control(ControlCommand.SetParameter, set_parameter("material.E", 60000), 2)))
+            for ws in (ctl, view):
+                changed = await next_of(ws, "SceneDescriptionT")
+                assert parameters(changed)["material.E"] == 60000 and parameters(changed)["effects.gravity"] == 1
+                assert changed.sceneId == scene.sceneId, "a parameter change keeps the timeline"
+            first = await next_of(view, "StateFrameT")
+            assert first.sceneId == scene.sceneId and first.simTime >= before.simTime, "the same timeline goes on"
+            stiff, _ = await settled_sag(first.simTime)
+            # rho g h^2 / (2 E) is 65 um for a free column; the clamped base and the sides make it less.
+            assert 5e-6 < soft < 1e-4, f"sag under gravity {soft} m"
+            assert 1.8 < soft / stiff < 2.2, f"twice as stiff, half the sag: {soft} m then {stiff} m"
+
+            # A value out of range and an unknown name: refused by name, nothing changes.
+            await ctl.send(codec.encode(control(ControlCommand.SetParameter, set_parameter("material.nu", 0.5), 3)))
+            err = await next_of(ctl, "ErrorT")
+            assert err.code == ErrorCode.BadRequest and err.requestId == 3 and "material.nu" in err.message
+            await ctl.send(codec.encode(control(ControlCommand.SetParameter, set_parameter("colour", 1), 4)))
+            err = await next_of(ctl, "ErrorT")
+            assert "no such parameter" in err.message and "damping.alpha" in err.message
+
+            # Reset: a new timeline from rest, the parameter as set.
+            await ctl.send(codec.encode(control(ControlCommand.Reset, ResetT(), 5)))
+            reset = await next_of(view, "SceneDescriptionT")
+            assert reset.sceneId != scene.sceneId and parameters(reset)["material.E"] == 60000
+            state = await next_of(view, "StateFrameT")
+            while state.sceneId != reset.sceneId:
+                state = await next_of(view, "StateFrameT")
+            assert state.simTime < 0.5
+
+            # Load another scene: its surface, its channel; the stylus device is told its channel is gone.
+            await ctl.send(codec.encode(control(ControlCommand.LoadScene, load("other.json"), 6)))
+            loaded = await next_of(view, "SceneDescriptionT")
+            assert loaded.sceneName == "other" and loaded.sceneId not in (scene.sceneId, reset.sceneId)
+            assert len(loaded.restPositions) < len(scene.restPositions)
+            assert list(loaded.devices) == ["pen"]
+            await asyncio.sleep(0.2)
+            reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await reader
+            told = [m for m in (codec.decode(raw).message for raw in received) if type(m).__name__ == "ErrorT"]
+            assert any("no device channel 'stylus'" in m.message for m in told), "the device is told its channel went"
+
+            # Loads that cannot be: not in the folder, outside it, and a broken scene file.
+            for rid, path in ((7, "missing.json"), (8, "../scene.json")):
+                await ctl.send(codec.encode(control(ControlCommand.LoadScene, load(path), rid)))
+                err = await next_of(ctl, "ErrorT")
+                assert err.requestId == rid and "no scene" in err.message and "other.json" in err.message
+            await ctl.send(codec.encode(control(ControlCommand.LoadScene, load("broken.json"), 9)))
+            err = await next_of(ctl, "ErrorT")
+            assert err.requestId == 9 and "broken.json" in err.message and "colour" in err.message
+            # And the server goes on with the scene it had.
+            state = await next_of(view, "StateFrameT")
+            assert state.sceneId == loaded.sceneId
 
     with running_server(tmp_path) as (port, _):
         asyncio.run(run(port))

@@ -10,6 +10,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <optional>
 #include <string>
@@ -23,8 +24,7 @@
 
 #include "app/simulation.hpp"
 #include "core/model.hpp"
-#include "live/frames.hpp"
-#include "live/realtime.hpp"
+#include "live/director.hpp"
 #include "mesh/mesh_error.hpp"
 #include "net/server.hpp"
 #include "scene/scene.hpp"
@@ -45,6 +45,7 @@ constexpr const char* kUsage =
     "  --token T            token devices and controllers must present (default: $TACTILE_TOKEN)\n"
     "  --allow-origin O     also accept WebSockets from browser Origin O (repeatable)\n"
     "  --static DIR         serve DIR over HTTP (e.g. client-web)\n"
+    "  --scenes DIR         scenes a controller may load (default: the scene file's folder)\n"
     "  --dt S               simulation step (default: the scene's fixed step, else 0.7 x critical at rest)\n"
     "  --state-rate HZ      state frames per second to viewers (default 30)\n"
     "  --variant NAME       run this variant of the scene (default: the first)\n"
@@ -62,6 +63,7 @@ struct Options {
   std::optional<double> dt, duration;
   double state_rate = 30;
   std::optional<std::string> variant;
+  std::optional<std::string> scenes_dir;
 };
 
 double number(std::string_view flag, const std::string& text) {
@@ -92,6 +94,7 @@ Options parse_args(int argc, char** argv) {
     } else if (a == "--token") o.server.token = value();
     else if (a == "--allow-origin") o.server.allowed_origins.push_back(value());
     else if (a == "--static") o.server.static_dir = value();
+    else if (a == "--scenes") o.scenes_dir = value();
     else if (a == "--dt") {
       o.dt = number(a, value());
       if (!(*o.dt > 0)) throw BadInput{"--dt must be > 0"};
@@ -124,24 +127,30 @@ int main(int argc, char** argv) {
         if (s.variant == *o.variant) scene = &s;
       if (!scene) throw BadInput{"scene has no variant '" + *o.variant + "'"};
     }
-    Simulation sim(scene->spec);
-    RealtimeOptions ro;
-    ro.dt = o.dt ? *o.dt : scene->spec.integrator.dt;
-    ro.state_rate_hz = o.state_rate;
-    FrameEncoder frames(sim, scene->name, 1, ro.dt > 0 ? ro.dt : 0.7 * sim.dt_rest());  // RealtimeLoop's default
-    RealtimeLoop loop(sim, frames, ro);
+    LiveOptions live;
+    live.dt = o.dt;
+    live.state_rate_hz = o.state_rate;
+    auto first = std::make_shared<LiveScene>(*scene, 1, live);
+    Director director(first);
+    ServerOptions server_options = o.server;
+    server_options.live = live;
+    server_options.scenes_dir =
+        o.scenes_dir ? *o.scenes_dir : std::filesystem::absolute(o.scene).parent_path().string();
+    if (!std::filesystem::is_directory(server_options.scenes_dir))
+      throw BadInput{"--scenes: not a folder: " + server_options.scenes_dir};
 
     boost::asio::io_context ioc(1);
-    Server server(ioc, loop, frames, sim, o.server);
+    Server server(ioc, director, server_options);
+    const Simulation& sim = first->sim();
     std::printf("tactile-server: scene %s%s, %d tets, %d nodes, step %g s, %zu proxies\n", scene->name.c_str(),
-                scene->variant.empty() ? "" : ("/" + scene->variant).c_str(), sim.n_tets(), sim.n_nodes(), loop.dt(),
-                sim.proxies().size());
+                scene->variant.empty() ? "" : ("/" + scene->variant).c_str(), sim.n_tets(), sim.n_nodes(),
+                first->loop().dt(), sim.proxies().size());
     std::printf("tactile-server: listening on http://%s:%u/ (WebSocket on the same port)\n", o.server.bind.c_str(),
                 unsigned(server.port()));
     std::fflush(stdout);
 
     std::thread simulation([&] {
-      loop.run(g_stop, o.duration.value_or(std::numeric_limits<double>::infinity()));
+      director.run(g_stop, o.duration.value_or(std::numeric_limits<double>::infinity()));
       boost::asio::post(ioc, [&] {
         server.stop();
         ioc.stop();
@@ -154,12 +163,13 @@ int main(int argc, char** argv) {
     ioc.run();
     g_stop = true;
     simulation.join();
-    const RealtimeStats st = loop.stats();
+    first.reset();
+    const RealtimeStats st = director.current()->loop().stats();
     std::printf("tactile-server: stopped after %.3f s simulated in %.3f s (real-time factor %.3f, %lld missed deadlines)\n",
                 st.sim_time, st.wall_time, st.wall_time > 0 ? st.sim_time / st.wall_time : 0.0,
                 static_cast<long long>(st.missed_deadlines));
-    if (!st.fault.empty()) {
-      std::fprintf(stderr, "tactile-server: fault: %s\n", st.fault.c_str());
+    if (const std::string fault = director.fault(); !fault.empty()) {
+      std::fprintf(stderr, "tactile-server: fault: %s\n", fault.c_str());
       return 1;
     }
     return 0;

@@ -51,6 +51,7 @@ struct Simulation::Engine {
   virtual void set_proxy_motion(int32_t proxy, const ProxyMotion& m) = 0;
   virtual void set_hand_motion(int32_t hand, const ProxyMotion& m) = 0;
   virtual Pose proxy_pose(int32_t proxy) const = 0;
+  virtual Pose hand_pose(int32_t hand) const = 0;
   virtual const std::vector<ProxyReport>& proxy_reports() const = 0;
   virtual const std::vector<DeviceReport>& device_reports() const = 0;
   virtual void clear_impulses() = 0;
@@ -130,6 +131,7 @@ class EngineOf final : public Simulation::Engine {
   void set_proxy_motion(int32_t proxy, const ProxyMotion& m) override { stepper_.contact().set_motion(proxy, m); }
   void set_hand_motion(int32_t hand, const ProxyMotion& m) override { stepper_.contact().set_hand_motion(hand, m); }
   Pose proxy_pose(int32_t proxy) const override { return stepper_.contact().motion(proxy).at(state_.t); }
+  Pose hand_pose(int32_t hand) const override { return stepper_.contact().hand_motion(hand).at(state_.t); }
   const std::vector<ProxyReport>& proxy_reports() const override { return stepper_.contact().reports(); }
   const std::vector<DeviceReport>& device_reports() const override { return stepper_.contact().device_reports(); }
   void clear_impulses() override { stepper_.contact().clear_impulses(); }
@@ -190,6 +192,7 @@ const std::vector<int32_t>& Simulation::proxy_device() const { return engine_->p
 void Simulation::set_proxy_motion(int32_t proxy, const ProxyMotion& m) { engine_->set_proxy_motion(proxy, m); }
 void Simulation::set_hand_motion(int32_t hand, const ProxyMotion& m) { engine_->set_hand_motion(hand, m); }
 Pose Simulation::proxy_pose(int32_t proxy) const { return engine_->proxy_pose(proxy); }
+Pose Simulation::hand_pose(int32_t hand) const { return engine_->hand_pose(hand); }
 const std::vector<ProxyReport>& Simulation::proxy_reports() const { return engine_->proxy_reports(); }
 const std::vector<DeviceReport>& Simulation::device_reports() const { return engine_->device_reports(); }
 void Simulation::clear_impulses() { engine_->clear_impulses(); }

@@ -61,6 +61,7 @@ class Simulation {
   void set_proxy_motion(int32_t proxy, const ProxyMotion& m);
   void set_hand_motion(int32_t hand, const ProxyMotion& m);
   Pose proxy_pose(int32_t proxy) const;  // at time(), world
+  Pose hand_pose(int32_t hand) const;    // at time(), world
   // What each proxy and each device channel felt in the latest step, with
   // impulse sums since clear_impulses() (mean force = impulse / elapsed).
   const std::vector<ProxyReport>& proxy_reports() const;    // (n_proxies)

@@ -72,7 +72,8 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   sum_device_.resize(sim.devices().size());
 }
 
-std::span<const uint8_t> FrameEncoder::scene_description() {
+std::span<const uint8_t> FrameEncoder::scene_description(std::span<const Parameter> parameters,
+                                                         std::span<const std::string> scenes) {
   fb::FlatBufferBuilder& b = scene_builder_;
   b.Clear();
   const TetMesh& mesh = sim_.mesh();
@@ -88,9 +89,15 @@ std::span<const uint8_t> FrameEncoder::scene_description() {
   }
   std::vector<fb::Offset<fb::String>> devices;
   for (const std::string& d : sim_.devices()) devices.push_back(b.CreateString(d));
+  std::vector<fb::Offset<wire::Parameter>> params;
+  for (const Parameter& p : parameters)
+    params.push_back(wire::CreateParameterDirect(b, p.name.c_str(), p.value, p.min, p.max, p.unit.c_str()));
+  std::vector<fb::Offset<fb::String>> names;
+  for (const std::string& s : scenes) names.push_back(b.CreateString(s));
   return seal(b, wire::Message::SceneDescription,
               wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
-                                                 &surface_.nodes, "displacement_m", &proxies, &devices));
+                                                 &surface_.nodes, "displacement_m", &proxies, &devices, &params,
+                                                 &names));
 }
 
 std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {

@@ -16,6 +16,7 @@
 #include <flatbuffers/flatbuffers.h>
 
 #include "app/simulation.hpp"
+#include "scene/parameters.hpp"
 #include "tactile_generated.h"
 
 namespace tactile {
@@ -41,7 +42,9 @@ class FrameEncoder {
   // Each returns the encoded Envelope, valid until the same call is made again.
   // haptic_frame() is meant for every step: its forces are the means over
   // the force window (see frames.cpp).
-  std::span<const uint8_t> scene_description();
+  // With the parameters a controller may set and the scenes it may load.
+  std::span<const uint8_t> scene_description(std::span<const Parameter> parameters = {},
+                                             std::span<const std::string> scenes = {});
   std::span<const uint8_t> state_frame(int64_t server_time_ns);
   std::span<const uint8_t> haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence);
 

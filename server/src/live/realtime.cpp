@@ -40,8 +40,19 @@ RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const Realtime
       if (sim.hands()[h].device == devices[d]) drv.hand = int32_t(h);
     for (size_t j = 0; j < sim.proxies().size(); ++j)
       if (sim.proxy_device()[j] == int32_t(d) && sim.proxies()[j].hand.empty()) drv.proxies.push_back(int32_t(j));
-    drv.motion = hold(drv.hand >= 0 ? sim.hands()[size_t(drv.hand)].pose
-                                    : (drv.proxies.empty() ? Pose{} : sim.proxy_pose(drv.proxies.front())));
+  }
+  sync_drivers();
+}
+
+void RealtimeLoop::sync_drivers() {
+  for (Driver& drv : drivers_) {
+    if (drv.hand >= 0) {
+      drv.motion = hold(sim_.hand_pose(drv.hand));
+      sim_.set_hand_motion(drv.hand, drv.motion);
+    } else if (!drv.proxies.empty()) {
+      drv.motion = hold(sim_.proxy_pose(drv.proxies.front()));
+      for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, hold(sim_.proxy_pose(j)));
+    }
   }
 }
 
@@ -105,6 +116,7 @@ void RealtimeLoop::step_once(int64_t now_ns) {
 }
 
 void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
+  sync_drivers();
   const double sim_start = sim_.time();
   Clock::time_point anchor = Clock::now();  // wall time of simulated time `anchor_sim`
   double anchor_sim = sim_start;
@@ -120,7 +132,8 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
   Clock::time_point window_start = start;
   double window_sim = sim_start, cost_sum = 0, cost_max = 0;
   int64_t window_steps = 0, missed = 0, reanchors = 0;
-  while (!stop.load(std::memory_order_relaxed) && sim_.time() - sim_start < duration) {
+  while (!stop.load(std::memory_order_relaxed) && !interrupt_.exchange(false, std::memory_order_relaxed) &&
+         sim_.time() - sim_start < duration) {
     if (paused_.load(std::memory_order_relaxed)) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
       anchor = Clock::now();  // on resume, real time runs on from here
@@ -156,6 +169,7 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     stats_.steps = sim_.steps();
     stats_.sim_time = sim_.time() - sim_start;
+    stats_.clock = sim_.time();
     stats_.wall_time = seconds(t1 - start);
     stats_.missed_deadlines = missed;
     stats_.reanchors = reanchors;

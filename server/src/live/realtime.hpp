@@ -54,6 +54,7 @@ struct RealtimeOptions {
 struct RealtimeStats {
   int64_t steps = 0;
   double sim_time = 0;            // [s] since the loop started
+  double clock = 0;               // the simulation's own time [s] (goes on across a parameter change)
   double wall_time = 0;           // [s] since the loop started
   double real_time_factor = 0;    // over the latest second of wall time
   double step_mean_us = 0;        // step cost over the latest second
@@ -86,9 +87,13 @@ class RealtimeLoop {
   // when the queue is full or the device unknown.
   bool post_input(const DeviceSample& sample);
 
-  // Runs on the calling thread until `stop` is set, `duration` of simulated
-  // time has passed, or a step faults.
+  // Runs on the calling thread until `stop` is set, interrupt() is called,
+  // `duration` of simulated time has passed, or a step faults. Each run
+  // starts its proxies from where the simulation has them (held there until
+  // the next input), its clock from now.
   void run(const std::atomic<bool>& stop, double duration = std::numeric_limits<double>::infinity());
+  // From any thread: the current (or next) run returns after its step.
+  void interrupt() { interrupt_.store(true, std::memory_order_relaxed); }
 
   // A snapshot, from any thread (updated every step; the per-second figures
   // once a second).
@@ -108,6 +113,7 @@ class RealtimeLoop {
     int64_t last_device_ns = 0;
     double interval = 0;      // estimated time between its inputs [s]
   };
+  void sync_drivers();
   void apply_inputs();
   void step_once(int64_t now_ns);
 
@@ -142,6 +148,7 @@ class RealtimeLoop {
   RealtimeStats stats_;
   std::atomic<int64_t> dropped_{0};
   std::atomic<bool> paused_{false};
+  std::atomic<bool> interrupt_{false};
 };
 
 }  // namespace tactile

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <iterator>
 #include <optional>
+#include <thread>
 #include <unordered_set>
 
 #include <boost/asio.hpp>
@@ -17,6 +18,7 @@
 
 #include "net/inbound.hpp"
 #include "net/mailbox.hpp"
+#include "scene/parameters.hpp"
 #include "tactile_generated.h"
 
 namespace tactile {
@@ -62,44 +64,101 @@ const char* content_type(const std::filesystem::path& p) {
   return "application/octet-stream";
 }
 
+// The scenes LoadScene may name: the JSON files of the scene folder (not the schema).
+std::vector<std::string> list_scenes(const std::string& dir) {
+  std::vector<std::string> names;
+  if (dir.empty()) return names;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (entry.is_regular_file() && entry.path().extension() == ".json" && name.find(".schema.") == std::string::npos)
+      names.push_back(name);
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
 }  // namespace
 
 class WsSession;
 
+// What the clients are served from for one scene: the mailboxes its loop
+// publishes into (from the simulation thread) and its description.
+struct Feed {
+  std::shared_ptr<LiveScene> live;
+  FrameRing haptics;
+  LatestBox states;
+  Bytes description;
+
+  Feed(std::shared_ptr<LiveScene> l, const std::vector<std::string>& scenes)
+      : live(std::move(l)),
+        haptics(1024, 512 + 128 * (live->sim().proxies().size() + live->sim().devices().size())),
+        states(64 + 20 * 3 * live->frames().surface().nodes.size() + 64 * live->sim().proxies().size()) {
+    const std::vector<uint8_t> d = live->describe(scenes);
+    description = copy_bytes(d.data(), d.size());
+  }
+};
+
 struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   asio::io_context& ioc;
-  RealtimeLoop& loop;
-  const Simulation& sim;
+  Director& director;
   ServerOptions options;
   tcp::acceptor acceptor;
   bool stopped = false;
 
-  // From the simulation thread.
-  FrameRing haptics;
-  LatestBox states;
-  Wakeup wakeup;
+  // Signalled from the simulation thread after each publication.
+  std::shared_ptr<Wakeup> wakeup = std::make_shared<Wakeup>();
   asio::posix::stream_descriptor wake_fd;
   uint64_t wake_value = 0;
 
-  Bytes scene;  // the scene description, encoded once
+  std::shared_ptr<Feed> feed;      // the scene clients are served
+  std::shared_ptr<Feed> incoming;  // handed to the director, not yet running
+  std::vector<std::string> scene_names;
+  bool changing = false;           // a load, reset or parameter change under way
+  uint32_t next_scene_id;
+  std::thread builder;             // builds the scene a change asks for
+
   std::unordered_set<WsSession*> sessions;
   WsSession* controller = nullptr;
   asio::steady_timer telemetry_timer;
-  int64_t haptic_dropped_reported = 0;
 
-  Impl(asio::io_context& io, RealtimeLoop& l, FrameEncoder& frames, const Simulation& s, ServerOptions o)
+  Impl(asio::io_context& io, Director& d, ServerOptions o)
       : ioc(io),
-        loop(l),
-        sim(s),
+        director(d),
         options(std::move(o)),
         acceptor(io),
-        haptics(1024, 512 + 128 * (s.proxies().size() + s.devices().size())),
-        states(64 + 20 * 3 * frames.surface().nodes.size() + 64 * s.proxies().size()),
-        wake_fd(io, ::dup(wakeup.fd())),
+        wake_fd(io, ::dup(wakeup->fd())),
+        scene_names(list_scenes(options.scenes_dir)),
+        next_scene_id(d.current()->id() + 1),
         telemetry_timer(io) {
-    const std::span<const uint8_t> d = frames.scene_description();
-    scene = copy_bytes(d.data(), d.size());
+    feed = std::make_shared<Feed>(d.current(), scene_names);
+    attach(*feed);
   }
+  ~Impl() {
+    if (builder.joinable()) builder.join();
+  }
+
+  // The loop's sinks: copy into the feed's mailboxes and wake the network
+  // thread. The feed outlives the loop's runs: it is released only once the
+  // director has switched away from its scene (installed()).
+  void attach(Feed& f) {
+    Feed* target = &f;
+    std::shared_ptr<Wakeup> wake = wakeup;
+    f.live->loop().on_haptic([target, wake](std::span<const uint8_t> m) {
+      target->haptics.push(m.data(), m.size());
+      wake->signal();
+    });
+    f.live->loop().on_state([target, wake](std::span<const uint8_t> m) {
+      target->states.put(m.data(), m.size());
+      wake->signal();
+    });
+  }
+
+  enum class Change { Reset, Load, Parameter };
+  void change(Change kind, const wire::Control& c);
+  void built(std::shared_ptr<LiveScene> live, bool carry);
+  void installed(const std::shared_ptr<LiveScene>& live);
+  void send_to_controller(const Bytes& message);
 
   void listen();
   void accept();
@@ -282,14 +341,14 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       server_->controller = this;
     }
     if (h.role() == wire::Role::Device) {
-      const std::vector<std::string>& names = server_->sim.devices();
+      const std::vector<std::string>& names = server_->feed->live->sim().devices();
       if (h.devices())
         for (const fb::String* d : *h.devices()) {
-          const auto it = std::find(names.begin(), names.end(), d->str());
-          if (it == names.end())
+          if (std::find(names.begin(), names.end(), d->str()) == names.end())
             return refuse(wire::ErrorCode::BadRequest, "no device channel '" + d->str() + "' in this scene");
-          devices_.push_back(int32_t(it - names.begin()));
+          device_names_.push_back(d->str());
         }
+      bind_devices();
     }
     greeted_ = true;
     role_ = h.role();
@@ -299,7 +358,23 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
               wire::CreateWelcomeDirect(b, uint16_t(major), uint16_t(minor), role_,
                                         server_->options.server_name.c_str(), id_, now_ns())),
          Kind::Control);
-    send(server_->scene, Kind::Control);
+    send(server_->feed->description, Kind::Control);
+  }
+
+  // The current scene's channel index for each channel this device named
+  // (-1 for one the scene lacks: its inputs are dropped, said once here).
+  void bind_devices() {
+    const std::vector<std::string>& names = server_->feed->live->sim().devices();
+    devices_.clear();
+    for (const std::string& d : device_names_) {
+      const auto it = std::find(names.begin(), names.end(), d);
+      devices_.push_back(it == names.end() ? -1 : int32_t(it - names.begin()));
+      if (it == names.end())
+        send(make_error(wire::ErrorCode::BadRequest, "scene '" + server_->feed->live->scene().name +
+                                                         "' has no device channel '" + d +
+                                                         "': its inputs are dropped until a scene has it"),
+             Kind::Control);
+    }
   }
 
   void on_ping(const wire::Ping& p) {
@@ -312,14 +387,14 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   void on_input(const wire::DeviceInput& in) {
     if (role_ != wire::Role::Device)
       return send(make_error(wire::ErrorCode::WrongRole, "DeviceInput needs the device role"), Kind::Control);
-    const std::vector<std::string>& names = server_->sim.devices();
     const std::string name = in.device() ? in.device()->str() : "";
-    const auto it = std::find(names.begin(), names.end(), name);
-    const int32_t index = it == names.end() ? -1 : int32_t(it - names.begin());
-    if (index < 0 || std::find(devices_.begin(), devices_.end(), index) == devices_.end())
+    const auto named = std::find(device_names_.begin(), device_names_.end(), name);
+    if (named == device_names_.end())
       return send(make_error(wire::ErrorCode::BadRequest, "DeviceInput for channel '" + name +
                                                               "', which this connection did not name in its Hello"),
                   Kind::Control);
+    const int32_t index = devices_[size_t(named - device_names_.begin())];
+    if (index < 0) return;  // not in this scene (said at the switch)
     if (const std::string bad = check_device_input(in); !bad.empty())
       return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
     const wire::Vec3d& p = *in.position();
@@ -332,7 +407,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     const double qn = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
     s.pose.orientation = Quat(q.w() / qn, q.x() / qn, q.y() / qn, q.z() / qn);
     s.buttons = in.buttons();
-    server_->loop.post_input(s);  // a full queue drops it and counts (telemetry)
+    server_->feed->live->loop().post_input(s);  // a full queue drops it and counts (telemetry)
   }
 
   void on_control(const wire::Control& c) {
@@ -340,12 +415,16 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       return send(make_error(wire::ErrorCode::WrongRole, "Control needs the controller role", c.request_id()),
                   Kind::Control);
     switch (c.command_type()) {
-      case wire::ControlCommand::Pause: server_->loop.set_paused(true); break;
-      case wire::ControlCommand::Resume: server_->loop.set_paused(false); break;
+      // A pause sent while a change is under way is carried over to the new scene.
+      case wire::ControlCommand::Pause: return server_->director.current()->loop().set_paused(true);
+      case wire::ControlCommand::Resume: return server_->director.current()->loop().set_paused(false);
+      case wire::ControlCommand::Reset: return server_->change(Server::Impl::Change::Reset, c);
+      case wire::ControlCommand::LoadScene: return server_->change(Server::Impl::Change::Load, c);
+      case wire::ControlCommand::SetParameter: return server_->change(Server::Impl::Change::Parameter, c);
       default:
         return send(make_error(wire::ErrorCode::BadRequest,
                                std::string("control command ") + wire::EnumNameControlCommand(c.command_type()) +
-                                   " is not available in this server version (pause and resume are)",
+                                   " is not available in this server version (recording is not built yet)",
                                c.request_id()),
                     Kind::Control);
     }
@@ -381,7 +460,8 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   bool loopback_;
   bool greeted_ = false, closing_ = false, writing_ = false, close_after_write_ = false;
   wire::Role role_ = wire::Role::Viewer;
-  std::vector<int32_t> devices_;
+  std::vector<std::string> device_names_;  // channels named in Hello
+  std::vector<int32_t> devices_;           // their index in the current scene, -1 if absent
   std::deque<Bytes> queue_;          // null entries stand for pending_state_
   std::deque<bool> haptic_flags_;    // per queue entry: a haptic frame
   Bytes pending_state_, current_;
@@ -511,12 +591,12 @@ void Server::Impl::deliver() {
     if (!s->greeted()) continue;
     (s->role() == wire::Role::Device ? devices : viewers).push_back(s);
   }
-  haptics.drain([&](const uint8_t* data, size_t n) {
+  feed->haptics.drain([&](const uint8_t* data, size_t n) {
     if (devices.empty()) return;
     const Bytes frame = copy_bytes(data, n);
     for (WsSession* s : devices) s->send(frame, WsSession::Kind::Haptic);
   });
-  if (const std::vector<uint8_t>* state = states.take()) {
+  if (const std::vector<uint8_t>* state = feed->states.take()) {
     const Bytes frame = copy_bytes(state->data(), state->size());
     for (WsSession* s : sessions)
       if (s->greeted()) s->send(frame, WsSession::Kind::State);
@@ -524,6 +604,7 @@ void Server::Impl::deliver() {
 }
 
 Bytes Server::Impl::telemetry_message() {
+  const RealtimeLoop& loop = feed->live->loop();
   const RealtimeStats st = loop.stats();
   uint32_t viewers = 0, devices = 0, controllers = 0;
   for (WsSession* s : sessions) {
@@ -540,7 +621,7 @@ Bytes Server::Impl::telemetry_message() {
     if (st.pass_ns[size_t(p)] > 0)
       costs.push_back(wire::CreateEffectCostDirect(b, to_string(Pass(p)), float(st.pass_ns[size_t(p)])));
   return seal(b, wire::Message::Telemetry,
-              wire::CreateTelemetryDirect(b, now_ns(), uint64_t(st.steps), st.sim_time, float(st.step_mean_us),
+              wire::CreateTelemetryDirect(b, now_ns(), uint64_t(st.steps), st.clock, float(st.step_mean_us),
                                           float(st.step_max_us), float(st.real_time_factor),
                                           uint64_t(st.missed_deadlines), &costs, viewers, devices, controllers,
                                           &faults, loop.paused()));
@@ -562,19 +643,99 @@ void Server::Impl::close_all() {
   for (WsSession* s : all) s->close();
 }
 
-Server::Server(asio::io_context& ioc, RealtimeLoop& loop, FrameEncoder& frames, const Simulation& sim,
-               ServerOptions options)
-    : impl_(std::make_shared<Impl>(ioc, loop, frames, sim, std::move(options))) {
-  impl_->listen();
-  Impl* impl = impl_.get();
-  // The simulation thread's side: copy into the mailboxes and wake the network thread.
-  loop.on_haptic([impl](std::span<const uint8_t> m) {
-    impl->haptics.push(m.data(), m.size());
-    impl->wakeup.signal();
+// ---- control: reset, load, set a parameter ------------------------------------------------
+
+void Server::Impl::send_to_controller(const Bytes& message) {
+  if (controller) controller->send(message, WsSession::Kind::Control);
+}
+
+void Server::Impl::change(Change kind, const wire::Control& c) {
+  const uint32_t request = c.request_id();
+  if (changing)
+    return send_to_controller(make_error(wire::ErrorCode::Busy,
+                                         "a scene change is under way: wait for its SceneDescription", request));
+  Scene scene = feed->live->scene();
+  std::string load_path;
+  bool carry = false;
+  uint32_t id = next_scene_id;
+  if (kind == Change::Load) {
+    const wire::LoadScene* l = c.command_as_LoadScene();
+    const std::string name = l && l->path() ? l->path()->str() : "";
+    if (std::find(scene_names.begin(), scene_names.end(), name) == scene_names.end()) {
+      std::string known;
+      for (const std::string& n : scene_names) known += (known.empty() ? "" : ", ") + n;
+      return send_to_controller(make_error(
+          wire::ErrorCode::BadRequest,
+          "no scene '" + name + "' on this server; it has: " + (known.empty() ? "none (no scene folder)" : known),
+          request));
+    }
+    load_path = (std::filesystem::path(options.scenes_dir) / name).string();
+  } else if (kind == Change::Parameter) {
+    const wire::SetParameter* p = c.command_as_SetParameter();
+    const std::string name = p && p->name() ? p->name()->str() : "";
+    try {
+      apply_parameter(scene.spec, name, p ? p->value() : 0.0);
+    } catch (const SceneError& e) {
+      return send_to_controller(make_error(wire::ErrorCode::BadRequest, e.what(), request));
+    }
+    // The body goes on under the new parameter, in the same timeline; after
+    // a fault there is no body to carry, and it starts again from rest.
+    carry = director.fault().empty();
+    if (carry) id = feed->live->id();
+  }
+  if (id == next_scene_id) ++next_scene_id;
+  changing = true;
+  if (builder.joinable()) builder.join();
+  // Meshing and model building take from milliseconds to seconds: on their
+  // own thread, never the network's or the simulation's.
+  builder = std::thread([weak = weak_from_this(), &io = ioc, scene = std::move(scene), load_path, id, carry, request,
+                         live_options = options.live]() mutable {
+    try {
+      if (!load_path.empty()) scene = load_scene(load_path).front();
+      auto live = std::make_shared<LiveScene>(std::move(scene), id, live_options);
+      asio::post(io, [weak, live, carry] {
+        if (auto self = weak.lock()) self->built(live, carry);
+      });
+    } catch (const std::exception& e) {
+      asio::post(io, [weak, message = std::string(e.what()), request] {
+        if (auto self = weak.lock()) {
+          self->changing = false;
+          self->send_to_controller(make_error(wire::ErrorCode::BadRequest, message, request));
+        }
+      });
+    }
   });
-  loop.on_state([impl](std::span<const uint8_t> m) {
-    impl->states.put(m.data(), m.size());
-    impl->wakeup.signal();
+}
+
+void Server::Impl::built(std::shared_ptr<LiveScene> live, bool carry) {
+  if (stopped) return;
+  incoming = std::make_shared<Feed>(live, scene_names);
+  attach(*incoming);
+  director.replace(std::move(live), carry);
+}
+
+// On the network thread, once the simulation thread runs `live`: the last
+// frames of the old scene go out, then every client gets the new description.
+void Server::Impl::installed(const std::shared_ptr<LiveScene>& live) {
+  if (stopped || !incoming || incoming->live != live) return;
+  deliver();
+  feed = std::move(incoming);
+  changing = false;
+  for (WsSession* s : sessions) {
+    if (!s->greeted()) continue;
+    s->send(feed->description, WsSession::Kind::Control);
+    if (s->role() == wire::Role::Device) s->bind_devices();
+  }
+  deliver();
+}
+
+Server::Server(asio::io_context& ioc, Director& director, ServerOptions options)
+    : impl_(std::make_shared<Impl>(ioc, director, std::move(options))) {
+  impl_->listen();
+  director.on_installed([weak = std::weak_ptr<Impl>(impl_), &ioc](const std::shared_ptr<LiveScene>& live) {
+    asio::post(ioc, [weak, live] {
+      if (auto self = weak.lock()) self->installed(live);
+    });
   });
   impl_->accept();
   impl_->wait_wakeup();
@@ -588,6 +749,7 @@ uint16_t Server::port() const { return impl_->acceptor.local_endpoint().port(); 
 void Server::stop() {
   if (impl_->stopped) return;
   impl_->stopped = true;
+  if (impl_->builder.joinable()) impl_->builder.join();
   beast::error_code ec;
   impl_->acceptor.close(ec);
   impl_->wake_fd.close(ec);

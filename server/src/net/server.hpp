@@ -7,7 +7,10 @@
 //               rate, latest wins; telemetry once a second.
 //   device      a haptic frame after every step; sends DeviceInput for the
 //               channels it named in Hello. Needs the token.
-//   controller  one at a time: pause, resume. Needs the token.
+//   controller  one at a time: pause, resume, reset, load a scene from the
+//               server's scene folder, set a parameter. Needs the token.
+//               A change is answered by a new SceneDescription to every
+//               client (or an Error naming what is wrong).
 // Every client may Ping (answered with Pong at once).
 //
 // Safety of the service: listens on loopback unless told otherwise, and off
@@ -27,9 +30,7 @@
 
 #include <boost/asio/io_context.hpp>
 
-#include "app/simulation.hpp"
-#include "live/frames.hpp"
-#include "live/realtime.hpp"
+#include "live/director.hpp"
 
 namespace tactile {
 
@@ -47,6 +48,8 @@ struct ServerOptions {
   double hello_timeout_s = 5;
   double idle_timeout_s = 30;
   std::string server_name = "tactile";
+  std::string scenes_dir;                     // where LoadScene finds scenes ("" for none)
+  LiveOptions live;                           // how loaded and reset scenes run
 };
 
 // What the server refuses to start with (a bind off loopback without a
@@ -57,10 +60,10 @@ struct ServerError : std::runtime_error {
 
 class Server {
  public:
-  // Installs itself as the loop's sinks. The loop, the encoder and the
-  // simulation must outlive the server; the loop runs on its own thread.
-  Server(boost::asio::io_context& ioc, RealtimeLoop& loop, FrameEncoder& frames, const Simulation& sim,
-         ServerOptions options);
+  // Installs itself as the sinks of the director's scenes (and its
+  // installed callback). The director must outlive the server; it runs on
+  // its own thread.
+  Server(boost::asio::io_context& ioc, Director& director, ServerOptions options);
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;

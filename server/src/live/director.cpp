@@ -1,0 +1,102 @@
+#include "live/director.hpp"
+
+#include <chrono>
+#include <thread>
+
+#include "scene/parameters.hpp"
+
+namespace tactile {
+
+namespace {
+
+double step_for(const Scene& scene, const Simulation& sim, const LiveOptions& options) {
+  if (options.dt) return *options.dt;
+  if (scene.spec.integrator.dt > 0) return scene.spec.integrator.dt;
+  return 0.7 * sim.dt_rest();  // RealtimeLoop's default, said here so the encoder announces the same
+}
+
+RealtimeOptions loop_options(double dt, const LiveOptions& options) {
+  RealtimeOptions ro;
+  ro.dt = dt;
+  ro.state_rate_hz = options.state_rate_hz;
+  return ro;
+}
+
+}  // namespace
+
+LiveScene::LiveScene(Scene scene, uint32_t id, const LiveOptions& options)
+    : scene_(std::move(scene)),
+      id_(id),
+      sim_(scene_.spec),
+      frames_(sim_, scene_.name, id_, step_for(scene_, sim_, options)),
+      loop_(sim_, frames_, loop_options(step_for(scene_, sim_, options), options)) {}
+
+std::vector<uint8_t> LiveScene::describe(std::span<const std::string> scenes) {
+  const std::vector<Parameter> parameters = list_parameters(scene_.spec);
+  const std::span<const uint8_t> d = frames_.scene_description(parameters, scenes);
+  return {d.begin(), d.end()};
+}
+
+Director::Director(std::shared_ptr<LiveScene> first) : current_(std::move(first)) {}
+
+std::shared_ptr<LiveScene> Director::current() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return current_;
+}
+
+void Director::replace(std::shared_ptr<LiveScene> next, bool carry) {
+  std::shared_ptr<LiveScene> running;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    next_ = std::move(next);
+    carry_ = carry;
+    running = current_;
+  }
+  running->loop().interrupt();
+}
+
+std::string Director::fault() const {
+  if (!faulted_.load()) return "";
+  return current()->loop().stats().fault;
+}
+
+void Director::run(const std::atomic<bool>& stop, double duration) {
+  double ran = 0;
+  std::shared_ptr<LiveScene> scene = current();
+  while (!stop.load(std::memory_order_relaxed)) {
+    if (!faulted_.load()) {
+      scene->loop().run(stop, duration - ran);
+      const RealtimeStats st = scene->loop().stats();
+      ran += st.sim_time;
+      if (ran >= duration - 1e-12) return;
+      if (!st.fault.empty()) {
+        faulted_.store(true);
+        if (duration < std::numeric_limits<double>::infinity()) return;
+      }
+    }
+    std::shared_ptr<LiveScene> next;
+    bool carry = false;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      next = std::move(next_);
+      carry = carry_;
+    }
+    if (!next) {
+      // Interrupted with nothing to switch to (a replacement replaced), or
+      // faulted and waiting for one.
+      if (faulted_.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      continue;
+    }
+    if (carry && !faulted_.load()) next->sim().continue_from(scene->sim());
+    next->loop().set_paused(scene->loop().paused());
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      current_ = next;
+    }
+    faulted_.store(false);
+    scene = std::move(next);
+    if (installed_) installed_(scene);
+  }
+}
+
+}  // namespace tactile

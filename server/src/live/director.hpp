@@ -1,0 +1,97 @@
+// What a controller changes in a live session: the scene that runs, its
+// reset, and its parameters. Each change builds a whole new LiveScene (model,
+// stepper, encoder, loop) off the simulation thread, so that neither meshing
+// nor model building ever stalls a step; the simulation thread then switches
+// to it between two steps. A parameter change carries the body over
+// (Simulation::continue_from); a load or a reset starts from rest with a new
+// scene id, which every frame carries, so a client can tell the timelines apart.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "app/simulation.hpp"
+#include "live/frames.hpp"
+#include "live/realtime.hpp"
+#include "scene/scene.hpp"
+
+namespace tactile {
+
+struct LiveOptions {
+  std::optional<double> dt;  // the step [s]; unset: the scene's fixed step, else 0.7 x the critical step at rest
+  double state_rate_hz = 30;
+};
+
+// One scene running live. Built on any thread; once handed to a Director,
+// its loop runs on the simulation thread and the rest is read-only to others.
+class LiveScene {
+ public:
+  // Builds the model from scene.spec: throws ModelError for a spec the core refuses.
+  LiveScene(Scene scene, uint32_t id, const LiveOptions& options);
+
+  const Scene& scene() const { return scene_; }
+  uint32_t id() const { return id_; }
+  Simulation& sim() { return sim_; }
+  const Simulation& sim() const { return sim_; }
+  FrameEncoder& frames() { return frames_; }
+  RealtimeLoop& loop() { return loop_; }
+  const RealtimeLoop& loop() const { return loop_; }
+
+  // The SceneDescription: surface, proxies, devices, the parameters and
+  // their values, and the scenes a controller may load. Reads only what does
+  // not change while the loop runs; call from one thread at a time.
+  std::vector<uint8_t> describe(std::span<const std::string> scenes);
+
+ private:
+  Scene scene_;
+  uint32_t id_;
+  Simulation sim_;
+  FrameEncoder frames_;
+  RealtimeLoop loop_;
+};
+
+class Director {
+ public:
+  using Installed = std::function<void(const std::shared_ptr<LiveScene>&)>;
+
+  explicit Director(std::shared_ptr<LiveScene> first);
+
+  // From any thread: the scene the simulation thread runs (or is about to).
+  std::shared_ptr<LiveScene> current() const;
+
+  // From any thread: switch to `next` between two steps. With `carry`, next
+  // takes over the current body and proxies (same mesh required). The
+  // paused state carries over either way. A replacement not yet installed
+  // is itself replaced.
+  void replace(std::shared_ptr<LiveScene> next, bool carry);
+
+  // Called on the simulation thread after each switch, before the new
+  // scene's first step. Set before run().
+  void on_installed(Installed f) { installed_ = std::move(f); }
+
+  // Runs on the simulation thread until `stop` is set or `duration` of
+  // simulated time has run over all scenes. A fault stops the scene's
+  // steps (the loop's stats name it) until a replacement comes; with a finite
+  // duration, it ends the run.
+  void run(const std::atomic<bool>& stop, double duration = std::numeric_limits<double>::infinity());
+
+  // The fault that stopped the current scene, "" if it runs.
+  std::string fault() const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::shared_ptr<LiveScene> current_, next_;
+  bool carry_ = false;
+  std::atomic<bool> faulted_{false};
+  Installed installed_;
+};
+
+}  // namespace tactile
