@@ -1,5 +1,6 @@
 #include "app/simulation.hpp"
 
+#include <cmath>
 #include <stdexcept>
 #include <utility>
 
@@ -44,6 +45,7 @@ struct Simulation::Engine {
   virtual void copy_displacement(std::vector<double>& u) const = 0;
   virtual void copy_velocity(std::vector<double>& v) const = 0;
   virtual Vec3 displacement(int32_t node) const = 0;
+  virtual void gather(std::span<const uint32_t> nodes, float* positions, float* norm) const = 0;
   virtual const std::vector<ProxySpec>& proxies() const = 0;
   virtual const std::vector<HandSpec>& hands() const = 0;
   virtual const std::vector<std::string>& devices() const = 0;
@@ -124,6 +126,18 @@ class EngineOf final : public Simulation::Engine {
     const size_t j = 3 * size_t(node);
     return {double(state_.u[j]), double(state_.u[j + 1]), double(state_.u[j + 2])};
   }
+  void gather(std::span<const uint32_t> nodes, float* positions, float* norm) const override {
+    const std::vector<Vec3>& X = model_->mesh.X;
+    const Real* u = state_.u.data();
+    for (size_t k = 0; k < nodes.size(); ++k) {
+      const size_t i = nodes[k];
+      const double ux = double(u[3 * i]), uy = double(u[3 * i + 1]), uz = double(u[3 * i + 2]);
+      positions[3 * k] = float(X[i].x + ux);
+      positions[3 * k + 1] = float(X[i].y + uy);
+      positions[3 * k + 2] = float(X[i].z + uz);
+      norm[k] = float(std::sqrt(ux * ux + uy * uy + uz * uz));
+    }
+  }
   const std::vector<ProxySpec>& proxies() const override { return model_->proxies; }
   const std::vector<HandSpec>& hands() const override { return model_->hands; }
   const std::vector<std::string>& devices() const override { return model_->devices; }
@@ -185,6 +199,9 @@ void Simulation::copy_positions(std::vector<double>& x) const {
 void Simulation::copy_displacement(std::vector<double>& u) const { engine_->copy_displacement(u); }
 void Simulation::copy_velocity(std::vector<double>& v) const { engine_->copy_velocity(v); }
 Vec3 Simulation::displacement(int32_t node) const { return engine_->displacement(node); }
+void Simulation::gather(std::span<const uint32_t> nodes, float* positions, float* displacement_norm) const {
+  engine_->gather(nodes, positions, displacement_norm);
+}
 const std::vector<ProxySpec>& Simulation::proxies() const { return engine_->proxies(); }
 const std::vector<HandSpec>& Simulation::hands() const { return engine_->hands(); }
 const std::vector<std::string>& Simulation::devices() const { return engine_->devices(); }

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -50,6 +51,9 @@ class Simulation {
   void copy_displacement(std::vector<double>& u) const;  // [m] (n_nodes x 3)
   void copy_velocity(std::vector<double>& v) const;      // [m/s] (n_nodes x 3)
   Vec3 displacement(int32_t node) const;                 // [m]
+  // For the listed nodes only, in one pass: positions X + u [m] (n x 3) and
+  // |u| [m] (n), in float, as the state frames carry them.
+  void gather(std::span<const uint32_t> nodes, float* positions, float* displacement_norm) const;
 
   // Rigid proxies (core/contact.hpp) as the model holds them: a hand's
   // proxies carry the hand's device.

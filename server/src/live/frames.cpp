@@ -57,8 +57,6 @@ std::span<const uint8_t> seal(fb::FlatBufferBuilder& b, wire::Message type, fb::
 FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt,
                            double force_window)
     : sim_(sim), scene_name_(std::move(scene_name)), scene_id_(scene_id), dt_(dt), surface_(extract_surface(sim.mesh())) {
-  x_.resize(3 * size_t(sim.n_nodes()));
-  u_.resize(3 * size_t(sim.n_nodes()));
   positions_.resize(3 * surface_.nodes.size());
   scalar_.resize(surface_.nodes.size());
   poses_.resize(sim.proxies().size());
@@ -101,13 +99,7 @@ std::span<const uint8_t> FrameEncoder::scene_description(std::span<const Paramet
 }
 
 std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
-  sim_.copy_positions(x_);
-  sim_.copy_displacement(u_);
-  for (size_t k = 0; k < surface_.nodes.size(); ++k) {
-    const size_t i = 3 * size_t(surface_.nodes[k]);
-    for (size_t c = 0; c < 3; ++c) positions_[3 * k + c] = float(x_[i + c]);
-    scalar_[k] = float(std::sqrt(u_[i] * u_[i] + u_[i + 1] * u_[i + 1] + u_[i + 2] * u_[i + 2]));
-  }
+  sim_.gather(surface_.nodes, positions_.data(), scalar_.data());  // the surface only: not every node
   fb::FlatBufferBuilder& b = state_builder_;
   b.Clear();
   const auto positions = b.CreateVector(positions_);

@@ -54,8 +54,6 @@ class FrameEncoder {
   uint32_t scene_id_;
   double dt_;
   Surface surface_;
-  std::vector<double> x_;       // all node positions (n_nodes x 3)
-  std::vector<double> u_;       // all node displacements (n_nodes x 3)
   std::vector<float> positions_, scalar_;
   std::vector<proto::ProxyPose> poses_;  // per proxy, staged for the builder
   std::vector<proto::Vec3f> forces_;
