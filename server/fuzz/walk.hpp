@@ -6,8 +6,11 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <string_view>
 
 #include "net/inbound.hpp"
+#include "scene/parameters.hpp"
+#include "scene/scene.hpp"
 
 namespace tactile::fuzz {
 
@@ -16,6 +19,20 @@ inline uint64_t read_string(const flatbuffers::String* s) {
   uint64_t h = s->size();
   for (char c : s->string_view()) h = h * 31 + uint8_t(c);
   return h;
+}
+
+// A SetParameter as the server applies it: to a scene's spec (here two
+// materials and a proxy), set or refused with a message.
+inline uint64_t apply_parameter_to_a_spec(const proto::SetParameter& c) {
+  ModelSpec spec;
+  spec.materials.resize(2);
+  spec.proxies.resize(1);
+  try {
+    apply_parameter(spec, c.name() ? c.name()->str() : "", c.value());
+    return 1;
+  } catch (const SceneError& e) {
+    return std::string_view(e.what()).size();
+  }
 }
 
 inline uint64_t walk_inbound(const uint8_t* data, size_t size) {
@@ -40,7 +57,8 @@ inline uint64_t walk_inbound(const uint8_t* data, size_t size) {
       const proto::Control* m = e.message_as_Control();
       h += m->request_id() + uint64_t(m->command_type());
       if (const proto::LoadScene* c = m->command_as_LoadScene()) h += read_string(c->path());
-      if (const proto::SetParameter* c = m->command_as_SetParameter()) h += read_string(c->name());
+      if (const proto::SetParameter* c = m->command_as_SetParameter())
+        h += read_string(c->name()) + apply_parameter_to_a_spec(*c);
       if (const proto::StartRecording* c = m->command_as_StartRecording()) h += read_string(c->path());
       break;
     }
