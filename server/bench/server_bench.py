@@ -1,9 +1,9 @@
 """Live server benchmark: starts tactile-server on a scene, drives it over
-loopback WebSockets with the Python codec, and prints figures (it passes and
-fails nothing):
+loopback WebSockets, and prints figures (it passes and fails nothing):
 
   - latency from a device input to the first haptic frame that has seen it
-    (p50, p99, max), with inputs at 1 kHz pressing the sphere 3 mm in;
+    (p50, p99, max), with inputs at 1 kHz moving the sphere 3 mm down, 2 mm
+    into the body;
   - how steady the force in the haptic frames is while held (frames at 0,
     peak over mean);
   - haptic frames delivered against steps taken (gaps in the step numbers are
@@ -12,9 +12,15 @@ fails nothing):
   - bytes per state frame and per surface vertex; decode cost per frame in Python.
 
   .venv/bin/python server/bench/server_bench.py [--seconds S] [--viewers N] [--scene FILE]
+                                                [--dt S] [--client cpp|python|both]
 
-The client's own time (Python, asyncio) is inside the latency figures: they
-bound the server's share from above.
+The latency, frames and force figures come from the C++ client
+(server/bench/latency_client.cpp) when it is built, else from this Python one
+(--client picks; both runs them one after the other on the same server). The
+client's own time is inside the latency figures, so they bound the server's
+share from above: asyncio's share is large and uneven, the C++ client's a
+write and a read per message (it also splits the latency at the start of the
+step). The viewer figures always come from Python.
 """
 
 from __future__ import annotations
@@ -57,17 +63,26 @@ SCENE: dict[str, Any] = {
     "proxies": [{"name": "tip", "device": "stylus", "shape": "sphere", "radius": 0.008, "position": [0, 0.029, 0]}],
     "run": {"duration": 1.0},
 }
+# The press both clients make: the sphere from 1 mm above the body to 2 mm into it, over the first second.
+PRESS_FROM = (0.0, 0.029, 0.0)
+PRESS_TO = (0.0, 0.026, 0.0)
+
+
+def built(name: str) -> str | None:
+    """A built executable of the server tree: in $TACTILE_BUILD (default build/release), else the newest under build/."""
+    build = pathlib.Path(os.environ.get("TACTILE_BUILD", "build/release"))
+    candidate = (build if build.is_absolute() else ROOT / build) / name
+    if os.access(candidate, os.X_OK):
+        return str(candidate)
+    found = [p for p in glob.glob(str(ROOT / "build" / "*" / name)) if os.access(p, os.X_OK)]
+    return max(found, key=os.path.getmtime) if found else None
 
 
 def server_exe() -> str:
-    build = os.environ.get("TACTILE_BUILD", "build/release")
-    exe = (ROOT / build / "tactile-server") if not os.path.isabs(build) else pathlib.Path(build) / "tactile-server"
-    if exe.exists():
-        return str(exe)
-    found = glob.glob(str(ROOT / "build" / "*" / "tactile-server"))
-    if not found:
+    exe = built("tactile-server")
+    if exe is None:
         sys.exit("tactile-server is not built (scripts/setup.sh)")
-    return max(found, key=os.path.getmtime)
+    return exe
 
 
 def pct(values: list[float], p: float) -> float:
@@ -75,11 +90,12 @@ def pct(values: list[float], p: float) -> float:
     return s[min(len(s) - 1, int(p / 100 * len(s)))]
 
 
-def device_input(seq: int, y: float) -> bytes:
+def device_input(seq: int, a: float) -> bytes:
+    """Input `seq`, a fraction `a` of the way from PRESS_FROM to PRESS_TO."""
     d = DeviceInputT()
     d.device, d.sequence, d.deviceTimeNs = "stylus", seq, time.monotonic_ns()
     d.position = Vec3dT()
-    d.position.x, d.position.y, d.position.z = 0.0, y, 0.0
+    d.position.x, d.position.y, d.position.z = (f + a * (t - f) for f, t in zip(PRESS_FROM, PRESS_TO))
     d.orientation = QuatdT()
     d.orientation.w, d.orientation.x, d.orientation.y, d.orientation.z = 1.0, 0.0, 0.0, 0.0
     return codec.encode(d)
@@ -98,7 +114,8 @@ async def telemetry(ws: Any) -> Any:
             return m
 
 
-async def latency_and_delivery(port: int, seconds: float) -> None:
+async def latency_and_delivery(port: int, seconds: float) -> tuple[float, float] | None:
+    """The Python client's figures; returns latency (p50, p99) [ms]."""
     async with websockets.connect(f"ws://127.0.0.1:{port}/ws", max_queue=None) as ws:
         scene = await say_hello(ws, Role.Device, ["stylus"])
         sent: dict[int, float] = {}
@@ -138,12 +155,12 @@ async def latency_and_delivery(port: int, seconds: float) -> None:
         while time.perf_counter() - t0 < seconds:
             k += 1
             sent[k] = time.perf_counter()
-            await ws.send(device_input(k, 0.029 - 0.003 * min(1.0, k / 1000)))
+            await ws.send(device_input(k, min(1.0, k / 1000)))
             await asyncio.sleep(max(0.0, t0 + k * 0.001 - time.perf_counter()))
         await asyncio.sleep(0.05)
         reader.cancel()
         lat = [v * 1e3 for v in answered.values()]
-        print(f"## Device input to haptic frame (loopback, inputs at 1 kHz, {seconds:g} s)\n")
+        print(f"## Device input to haptic frame (Python client, asyncio, loopback, inputs at 1 kHz, {seconds:g} s)\n")
         print(f"inputs sent {len(sent)}, answered {len(lat)}")
         if lat:
             print(f"latency ms: p50 {statistics.median(lat):.3f}  p99 {pct(lat, 99):.3f}  max {max(lat):.3f}")
@@ -160,6 +177,20 @@ async def latency_and_delivery(port: int, seconds: float) -> None:
             zeros = sum(1 for f in held if f <= 0)
             print(f"force while held (1 ms means): mean {mean:.3f} N, frames at 0: {100 * zeros / len(held):.1f} %, "
                   f"peak {max(held) / mean:.1f} x mean\n")
+        return (statistics.median(lat), pct(lat, 99)) if lat else None
+
+
+def cpp_latency(exe: str, port: int, seconds: float) -> tuple[float, float] | None:
+    """The same phase measured by latency_client, its figures as it prints them; returns latency (p50, p99) [ms]."""
+    cmd = [exe, "--port", str(port), "--token", TOKEN, "--device", "stylus", "--rate", "1000", "--seconds",
+           f"{seconds:g}", "--press", "1", "--from", ",".join(f"{c:g}" for c in PRESS_FROM),
+           "--to", ",".join(f"{c:g}" for c in PRESS_TO)]
+    run = subprocess.run(cmd, stdout=subprocess.PIPE, text=True, check=False)
+    print(run.stdout.rstrip() + "\n")
+    if run.returncode != 0:
+        print(f"latency_client exited with status {run.returncode}\n")
+    m = re.search(r"^\s*total\s+p50\s+([\d.]+)\s+p90\s+[\d.]+\s+p99\s+([\d.]+)", run.stdout, re.M)
+    return (float(m.group(1)), float(m.group(2))) if m else None
 
 
 async def viewers_cost(port: int, n: int, seconds: float) -> None:
@@ -209,13 +240,21 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--viewers", type=int, default=50)
     ap.add_argument("--scene", type=str, default=None)
+    ap.add_argument("--dt", type=float, default=None, help="the server's step [s] (default: the scene's)")
+    ap.add_argument("--client", choices=["cpp", "python", "both"], default=None,
+                    help="who measures latency and frames (default: cpp when latency_client is built, else python)")
     args = ap.parse_args()
+    latency_client = built("latency_client")
+    client = args.client or ("cpp" if latency_client else "python")
+    if client != "python" and latency_client is None:
+        sys.exit("latency_client is not built (cmake --build build/release --target latency_client)")
     with tempfile.TemporaryDirectory() as tmp:
         scene = args.scene
         if scene is None:
             scene = os.path.join(tmp, "scene.json")
             pathlib.Path(scene).write_text(json.dumps(SCENE))
-        proc = subprocess.Popen([server_exe(), scene, "--port", "0", "--token", TOKEN], stdout=subprocess.PIPE,
+        dt = ["--dt", f"{args.dt:g}"] if args.dt else []
+        proc = subprocess.Popen([server_exe(), scene, "--port", "0", "--token", TOKEN, *dt], stdout=subprocess.PIPE,
                                 text=True)
         assert proc.stdout is not None
         port = None
@@ -229,7 +268,13 @@ def main() -> None:
             sys.exit("the server did not start")
         print()
         try:
-            asyncio.run(latency_and_delivery(port, args.seconds))
+            # Python first: the C++ client numbers its inputs on from the server's newest, Python's start at 1.
+            py = asyncio.run(latency_and_delivery(port, args.seconds)) if client != "cpp" else None
+            if client != "python":
+                cpp = cpp_latency(str(latency_client), port, args.seconds)
+                if py and cpp:
+                    print(f"latency ms, p50 / p99: Python client {py[0]:.3f} / {py[1]:.3f}, "
+                          f"C++ client {cpp[0]:.3f} / {cpp[1]:.3f}\n")
             asyncio.run(viewers_cost(port, args.viewers, args.seconds))
         finally:
             proc.send_signal(signal.SIGINT)

@@ -185,6 +185,10 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   void start(http::request<http::string_body> req) {
     server_->sessions.insert(this);
     beast::get_lowest_layer(ws_).expires_never();
+    // Without it, Nagle's algorithm holds each small haptic frame until the
+    // peer's next message acks the previous one: a whole input period of latency.
+    beast::error_code ignored;
+    beast::get_lowest_layer(ws_).socket().set_option(tcp::no_delay(true), ignored);
     websocket::stream_base::timeout t = websocket::stream_base::timeout::suggested(beast::role_type::server);
     t.idle_timeout = std::chrono::milliseconds(int64_t(server_->options.idle_timeout_s * 1000));
     t.keep_alive_pings = true;
