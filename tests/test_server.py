@@ -157,9 +157,10 @@ def test_viewer_gets_the_scene_states_and_telemetry(tmp_path: pathlib.Path) -> N
                     states.append(msg)
                 elif type(msg).__name__ == "TelemetryT":
                     telemetry = msg  # the latest (the first second's figures come with the second one)
-            # ~30 Hz (the default viewer rate), and never faster.
+            # 30 Hz (the default viewer rate, and the rate the states are made at), not faster, and none
+            # lost to the jitter of their publishing.
             rate = len(states) / 2.2
-            assert 10 <= rate <= 33, rate
+            assert 24 <= rate <= 32, rate
             assert all(len(s.positions) == 3 * n_vertices for s in states)
             assert [s.step for s in states] == sorted(s.step for s in states)
             assert telemetry is not None and telemetry.viewers >= 1

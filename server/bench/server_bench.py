@@ -235,6 +235,36 @@ async def viewers_cost(port: int, n: int, seconds: float) -> None:
             print(f"Python decode per message (object API, this client): median {statistics.median(decode_s) * 1e6:.0f} us")
 
 
+async def viewers_cost_cpp(port: int, n: int, seconds: float, exe: str, rounds: int = 3) -> None:
+    """The step time alone and with n viewers (viewer_load: one C++ thread that reads and discards, so that
+    the load is the server's sending, not the clients' decoding), in alternating rounds; medians of the
+    per-second telemetry figures, the first second of each phase left out (it straddles the change)."""
+    async with websockets.connect(f"ws://127.0.0.1:{port}/ws") as probe:
+        scene = await say_hello(probe, Role.Viewer, [])
+        alone: list[float] = []
+        loaded: list[float] = []
+        rates: list[str] = []
+        per_phase = max(2, int(seconds))
+        for _ in range(rounds):
+            await telemetry(probe)
+            for _ in range(per_phase):
+                alone.append((await telemetry(probe)).stepTimeMeanUs)
+            load = await asyncio.create_subprocess_exec(exe, "--port", str(port), "--viewers", str(n), "--seconds",
+                                                        str(per_phase + 1.5), stdout=asyncio.subprocess.PIPE)
+            await telemetry(probe)
+            for _ in range(per_phase):
+                loaded.append((await telemetry(probe)).stepTimeMeanUs)
+            out, _ = await load.communicate()
+            rates.append(out.decode().strip())
+        a, b = statistics.median(alone), statistics.median(loaded)
+        print(f"## {n} viewers (C++ viewer_load), {rounds} rounds of {per_phase} s alone and {per_phase} s loaded\n")
+        for r in rates:
+            print(f"viewer_load: {r}")
+        print(f"step time (server telemetry, median of per-second means) us: alone {a:.1f}, with {n} viewers "
+              f"{b:.1f} ({100 * (b / a - 1):+.1f} %)")
+        print(f"state frame: {len(scene.surfaceNodes)} surface vertices\n")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=5.0)
@@ -275,6 +305,9 @@ def main() -> None:
                 if py and cpp:
                     print(f"latency ms, p50 / p99: Python client {py[0]:.3f} / {py[1]:.3f}, "
                           f"C++ client {cpp[0]:.3f} / {cpp[1]:.3f}\n")
+            viewer_load = built("viewer_load")
+            if viewer_load and client != "python":
+                asyncio.run(viewers_cost_cpp(port, args.viewers, args.seconds, str(viewer_load)))
             asyncio.run(viewers_cost(port, args.viewers, args.seconds))
         finally:
             proc.send_signal(signal.SIGINT)

@@ -211,14 +211,19 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   void send(const Bytes& message, Kind kind) {
     if (closing_) return;
     if (kind == Kind::State) {
-      // Latest wins, at the viewer's rate.
+      // Latest wins, at the viewer's rate on average: each state passed sets
+      // the next one's due time a period on, and a state a little early (a
+      // quarter period: the simulation's publishing jitters) still passes,
+      // or states made at exactly the viewer's rate would lose every other one.
       const auto now = std::chrono::steady_clock::now();
-      if (now - last_state_ < std::chrono::duration<double>(1.0 / server_->options.viewer_rate_hz)) return;
+      const auto period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+          std::chrono::duration<double>(1.0 / server_->options.viewer_rate_hz));
+      if (now + period / 4 < next_state_due_) return;
       if (pending_state_) {
         pending_state_ = message;  // replaces the one not yet sent
         return;
       }
-      last_state_ = now;
+      next_state_due_ = std::max(next_state_due_, now - period) + period;
       pending_state_ = message;
       queue_.push_back(nullptr);  // a marker: the pending state goes here
     } else if (kind == Kind::Haptic) {
@@ -471,7 +476,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   Bytes pending_state_, current_;
   size_t haptics_queued_ = 0;
   int64_t haptics_dropped_ = 0;
-  std::chrono::steady_clock::time_point last_state_{}, last_message_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point next_state_due_{}, last_message_ = std::chrono::steady_clock::now();
   double tokens_ = 1e18;  // clamped to the burst at the first message
   uint64_t id_ = next_id_++;
   static inline uint64_t next_id_ = 1;
