@@ -1,0 +1,204 @@
+"""tactile-bridge: the command line of the device bridge (device-bridge/README.md)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import os
+import pathlib
+import signal
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from . import exchange as ex
+from .bridge import Bridge, Options
+from .drivers import DeviceError
+from .interpolation import MODES
+from .profile import Profile, ProfileError, load_profile
+from .safety import Mode
+
+PROFILES = pathlib.Path(__file__).parent / "profiles"
+log = logging.getLogger("tactile_bridge")
+
+
+def find_profile(name: str) -> Profile:
+    """A profile by path, or by the name of one shipped with the bridge (tactile_bridge/profiles/NAME.toml)."""
+    p = pathlib.Path(name)
+    if p.suffix != ".toml" and not p.exists():
+        shipped = PROFILES / f"{name}.toml"
+        if not shipped.exists():
+            known = ", ".join(sorted(q.stem for q in PROFILES.glob("*.toml")))
+            raise ProfileError(f"no profile {name!r}: not a file, nor a shipped profile ({known})")
+        p = shipped
+    return load_profile(p)
+
+
+class StatusLine:
+    """Loop rate, lateness, delay, link, and per device force and safety state, every `period` seconds."""
+
+    def __init__(self, bridge: Bridge, period: float, stream: Any = sys.stderr) -> None:
+        self.bridge = bridge
+        self.period = period
+        self.stream = stream
+        self.tty = stream.isatty()
+        self.prev_hist = self.histogram()
+        self.prev_ticks = 0
+        self.prev_frames = 0
+        self.prev_t = time.monotonic()
+
+    def histogram(self) -> np.ndarray:
+        x = self.bridge.ex
+        return np.array(x.i[x.hist_base: x.hist_base + ex.HIST_US + 1], dtype=np.int64)  # a copy: no export
+
+    def line(self) -> str:
+        b, x = self.bridge, self.bridge.ex
+        now = time.monotonic()
+        span = max(1e-9, now - self.prev_t)
+        ticks = x.i[ex.H_TICKS]
+        hist = self.histogram()
+        h = hist - self.prev_hist
+        self.prev_hist = hist
+        n = int(h.sum())
+        if n:
+            c = np.cumsum(h)
+            p99 = int(np.searchsorted(c, 0.99 * n))
+            top = int(np.nonzero(h)[0][-1])
+            late = f"late p99 {p99} us max {top if top < ex.HIST_US else '>10000'} us"
+        else:
+            late = "late -"
+        net = b.network
+        rate = (ticks - self.prev_ticks) / span
+        frames = (net.frames - self.prev_frames) / span
+        self.prev_ticks, self.prev_frames, self.prev_t = ticks, net.frames, now
+        link = (f"link {net.scene_name!r} {frames:.0f} st/s rtt {net.sync.last_rtt_ns / 1e6:.2f} ms"
+                if x.i[ex.H_LINK] else f"link down{': ' + net.last_error if net.last_error else ''}")
+        parts = [f"tick {rate:.0f} Hz {late} missed {x.i[ex.H_MISSED]}",
+                 f"delay {x.i[ex.H_DELAY_NS] / 1e6:.2f} ms (step {x.i[ex.H_DT_NS] / 1e6:.2f} + net "
+                 f"{x.i[ex.H_ALLOW_NS] / 1e6:.2f})", link]
+        for k, p in enumerate(b.profiles):
+            bi, bd = x.status_base(k)
+            out = x.d[bd + 3: bd + 6]
+            mag = sum(v * v for v in out) ** 0.5
+            pc = f" pc {x.d[bd + 9]:.1f}" if x.d[bd + 9] > 0 else ""
+            parts.append(f"{p.channel} {Mode(x.i[bi]).name.lower()} |F| {mag:.2f} N{pc}")
+        return " | ".join(parts)
+
+    async def run(self, bridge: Bridge, stop: asyncio.Event) -> None:
+        while not stop.is_set():
+            try:
+                await asyncio.wait_for(stop.wait(), self.period)
+            except asyncio.TimeoutError:
+                pass
+            text = self.line()
+            if self.tty:
+                self.stream.write("\r\x1b[2K" + text[: os.get_terminal_size(self.stream.fileno()).columns - 1])
+            else:
+                self.stream.write(text + "\n")
+            self.stream.flush()
+        if self.tty:
+            self.stream.write("\n")
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(
+        prog="tactile-bridge",
+        description="The device bridge: reads a haptic device, sends its pose to the tactile server, and renders "
+                    "the server's contact force at 1 kHz (the paper's one-step-delay interpolation) under the "
+                    "safety rules of its profile. Without arguments: the simulated arm poking the default "
+                    "scene's beam, on a server at ws://127.0.0.1:8765/.",
+        epilog="Profiles shipped: " + ", ".join(sorted(q.stem for q in PROFILES.glob("*.toml")))
+               + f" (in {PROFILES}). Events and the status line go to stderr.")
+    ap.add_argument("--profile", "-p", action="append", metavar="PROFILE",
+                    help="a device profile (TOML path or shipped name); repeat for several devices (default: sim)")
+    ap.add_argument("--server", default="ws://127.0.0.1:8765/", help="the server's WebSocket URL")
+    ap.add_argument("--token", default=os.environ.get("TACTILE_TOKEN", ""),
+                    help="the server's token (default: $TACTILE_TOKEN)")
+    ap.add_argument("--mode", choices=MODES, default="delay",
+                    help="delay: the paper's one-step delay, interpolated (default); hold: zero-order hold; "
+                         "extrapolate: no delay, from the local stiffness")
+    ap.add_argument("--network", choices=("process", "thread"), default="process",
+                    help="run the tick in its own process (default) or in a thread beside the network")
+    ap.add_argument("--no-passivity", action="store_true", help="turn the passivity observer/controller off")
+    ap.add_argument("--priority", type=int, default=0, metavar="N",
+                    help="run the tick SCHED_FIFO at priority N (needs the right to; 0: normal scheduling)")
+    ap.add_argument("--spin-us", type=int, default=200, help="spin this long before each deadline [us]")
+    ap.add_argument("--seconds", type=float, default=0.0, help="stop after this long (default: run until Ctrl-C)")
+    ap.add_argument("--status", type=float, default=0.5, metavar="S", help="status line every S seconds (0: off)")
+    ap.add_argument("--check", action="store_true", help="check the profiles, print them, and exit")
+    ap.add_argument("--list-hid", action="store_true", help="list the HID devices hidapi sees, and exit")
+    ap.add_argument("-v", "--verbose", action="store_true", help="log link details")
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(levelname).1s %(message)s", stream=sys.stderr)
+    if args.list_hid:
+        from .drivers.hid_device import enumerate_devices, format_device_list
+
+        print(format_device_list(enumerate_devices()))
+        return 0
+    try:
+        profiles = [find_profile(p) for p in (args.profile or ["sim"])]
+    except ProfileError as e:
+        print(f"tactile-bridge: {e}", file=sys.stderr)
+        return 2
+    channels = [p.channel for p in profiles]
+    if len(set(channels)) != len(channels):
+        print(f"tactile-bridge: two profiles drive one channel ({', '.join(channels)})", file=sys.stderr)
+        return 2
+    if args.check:
+        for p in profiles:
+            print(f"{p.path}: {p.name}, driver {p.driver}, channel {p.channel!r}, {p.rate_hz:g} Hz, "
+                  f"max {p.force.max_N:g} N, continuous {p.force.continuous_N:g} N, slew {p.force.slew_N_per_s:g} N/s")
+        return 0
+    opts = Options(url=args.server, token=args.token, mode=args.mode, network=args.network,
+                   passivity=not args.no_passivity, priority=args.priority, spin_us=args.spin_us,
+                   seconds=args.seconds, status_s=args.status)
+    try:
+        bridge = Bridge(profiles, opts)
+    except ValueError as e:
+        print(f"tactile-bridge: {e}", file=sys.stderr)
+        return 2
+    try:
+        bridge.start_tick()
+        bridge.wait_ready()
+    except DeviceError as e:
+        print(f"tactile-bridge: {e}", file=sys.stderr)
+        bridge.stop_tick()
+        bridge.close()
+        return 1
+    log.info("bridge: %s, mode %s, tick in a %s, %g Hz; server %s",
+             ", ".join(f"{p.name} ({p.driver}) on {p.channel!r}" for p in profiles), opts.mode,
+             opts.network, profiles[0].rate_hz, opts.url)
+
+    async def run() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        status = StatusLine(bridge, args.status) if args.status > 0 else None
+        await bridge.serve(stop, status.run if status else None)
+
+    try:
+        asyncio.run(run())
+    finally:
+        bridge.stop_tick()
+        x = bridge.ex
+        hist = x.histogram()
+        n = sum(hist)
+        if n:
+            log.info("bridge: %d ticks, lateness p50 %.0f p99 %.0f p99.9 %.0f max %.0f us, missed %d, "
+                     "%d states", n, ex.percentile_us(hist, 0.5), ex.percentile_us(hist, 0.99),
+                     ex.percentile_us(hist, 0.999), x.i[ex.H_LATE_MAX] / 1e3, x.i[ex.H_MISSED], bridge.network.frames)
+        bridge.close()
+    return 1 if bridge.error else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,80 @@
+"""Passivity observer and controller (Hannaford & Ryu, IEEE T-RO 18(1), 2002), for one device.
+
+The rendered contact is a one-port between the hand and the virtual world. Over ticks of length dT the
+observer sums the energy the world has taken from the hand,
+
+    E(n) = sum_k  -f(k) . v(k) dT           (f: force on the hand [N], v: device velocity [m/s]),
+
+which a passive world keeps at or above zero. Delay and sampling can make a rendered contact give back more
+than it took (a stiff wall rendered a few milliseconds late pumps energy into the hand). When the observed
+energy would go negative, the controller adds a damping force -alpha v with alpha = -E / (v.v dT), just what
+dissipates the excess this tick, bounded by `alpha_max` so the damper itself stays stable at the tick rate.
+
+`correct` gives the force with the damping added; `commit` books the force that was really displayed (after
+the safety layer) so the observer sees what the hand felt. Velocity comes from the device's positions,
+smoothed by a first-order filter (finite differences of a quantized encoder are noisy).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+
+class PassivityController:
+    def __init__(self, period_s: float, *, alpha_max: float = 50.0, velocity_cutoff_hz: float = 200.0,
+                 enabled: bool = True) -> None:
+        self.dt = period_s
+        self.enabled = enabled
+        self.alpha_max = alpha_max                  # [N s/m]
+        self.energy = 0.0                           # E(n) [J]
+        self.dissipated = 0.0                       # by the controller since the start [J]
+        self.alpha = 0.0                            # damping of the latest tick [N s/m]
+        self.active_ticks = 0                       # ticks the controller added damping
+        self.v = [0.0, 0.0, 0.0]                    # filtered device velocity [m/s]
+        self._x = [0.0, 0.0, 0.0]
+        self._have_x = False
+        rc = 1.0 / (2.0 * math.pi * velocity_cutoff_hz)
+        self._smooth = period_s / (rc + period_s)
+        self._out = [0.0, 0.0, 0.0]
+
+    def reset(self) -> None:
+        """Forgets energy and motion (after a disengagement: the next contact starts passive)."""
+        self.energy = 0.0
+        self.alpha = 0.0
+        self._have_x = False
+        self.v[0] = self.v[1] = self.v[2] = 0.0
+
+    def observe_position(self, x: Sequence[float]) -> None:
+        """Updates the velocity estimate from this tick's device position [m]."""
+        if self._have_x:
+            a, inv = self._smooth, 1.0 / self.dt
+            for i in range(3):
+                self.v[i] += a * ((x[i] - self._x[i]) * inv - self.v[i])
+        self._x[0], self._x[1], self._x[2] = x[0], x[1], x[2]
+        self._have_x = True
+
+    def correct(self, f: Sequence[float]) -> list[float]:
+        """The force to display: `f` plus the damping that keeps the observed energy from going negative."""
+        o, v = self._out, self.v
+        o[0], o[1], o[2] = f[0], f[1], f[2]
+        self.alpha = 0.0
+        if not self.enabled:
+            return o
+        vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+        e = self.energy - (f[0] * v[0] + f[1] * v[1] + f[2] * v[2]) * self.dt
+        if e < 0.0 and vv > 1e-12:
+            self.alpha = min(self.alpha_max, -e / (vv * self.dt))
+            o[0] -= self.alpha * v[0]
+            o[1] -= self.alpha * v[1]
+            o[2] -= self.alpha * v[2]
+            self.active_ticks += 1
+        return o
+
+    def commit(self, displayed: Sequence[float]) -> None:
+        """Books the energy of the force the device really displayed this tick [N]."""
+        v = self.v
+        p = -(displayed[0] * v[0] + displayed[1] * v[1] + displayed[2] * v[2]) * self.dt
+        if self.alpha > 0.0:
+            self.dissipated += self.alpha * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) * self.dt
+        self.energy += p
