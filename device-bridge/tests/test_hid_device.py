@@ -20,7 +20,7 @@ from tactile_bridge.drivers.hid_device import (
     make_output_buffer)
 from tactile_bridge.profile import Profile, ProfileError, load_profile, parse_profile
 
-EXAMPLE = pathlib.Path(__file__).resolve().parents[1] / "profiles" / "hid_example.toml"
+EXAMPLE = pathlib.Path(__file__).resolve().parents[1] / "src" / "tactile_bridge" / "profiles" / "hid_example.toml"
 VID, PID, PATH, SERIAL = 0x1209, 0xA1A1, b"/dev/hidraw7", "ARM-0042"
 MS = 1_000_000  # ns per ms
 

@@ -41,6 +41,8 @@ class Options:
     spin_us: int = 200             # the tick spins this long before each deadline
     seconds: float = 0.0           # stop after this long (0: until interrupted)
     status_s: float = 0.5          # status line period (0: none)
+    trace: str = ""                # write every tick of the first trace_s seconds to this CSV
+    trace_s: float = 60.0
 
 
 def _pipe() -> tuple[int, int]:
@@ -64,10 +66,16 @@ def _tick_process(profiles: Sequence[Profile], shm_name: str, wake_fd: int, opts
             x.write_event(time.monotonic_ns(), 11, 0, 0.0, f"device: {e}")
             x.i[ex.H_READY] = -1
             return
+        if opts.trace:
+            tick.start_trace(opts.trace_s)
         for note in prepare_realtime(opts.priority):
             x.write_event(time.monotonic_ns(), 11, 0, 0.0, f"tick: {note}")
         x.i[ex.H_READY] = 1
-        tick.run()
+        try:
+            tick.run()
+        finally:
+            if opts.trace:
+                tick.save_trace(opts.trace)
     finally:
         x.close()
 
@@ -104,12 +112,19 @@ class Bridge:
             self.tick = Tick(self.profiles, devices, self.ex, mode=self.opts.mode, passivity=self.opts.passivity,
                              wake_fd=self.wake_w, spin_ns=self.opts.spin_us * 1000)
             self.tick.open_devices()  # DeviceError reaches the caller
+            if self.opts.trace:
+                self.tick.start_trace(self.opts.trace_s)
             self.ex.i[ex.H_READY] = 1
+            tick = self.tick
 
             def run() -> None:
                 for note in prepare_realtime(self.opts.priority, collector=False):
                     log.warning("tick: %s", note)
-                self.tick.run()  # type: ignore[union-attr]
+                try:
+                    tick.run()
+                finally:
+                    if self.opts.trace:
+                        tick.save_trace(self.opts.trace)
 
             self._thread = threading.Thread(target=run, name="tactile-tick", daemon=True)
             self._thread.start()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import logging
 import os
 import pathlib
@@ -123,11 +124,17 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--network", choices=("process", "thread"), default="process",
                     help="run the tick in its own process (default) or in a thread beside the network")
     ap.add_argument("--no-passivity", action="store_true", help="turn the passivity observer/controller off")
-    ap.add_argument("--priority", type=int, default=0, metavar="N",
-                    help="run the tick SCHED_FIFO at priority N (needs the right to; 0: normal scheduling)")
+    ap.add_argument("--priority", type=int, default=80, metavar="N",
+                    help="run the tick SCHED_FIFO at priority N (default 80; where the system refuses, the tick runs "
+                         "at normal priority and says so; 0: normal scheduling)")
     ap.add_argument("--spin-us", type=int, default=200, help="spin this long before each deadline [us]")
     ap.add_argument("--seconds", type=float, default=0.0, help="stop after this long (default: run until Ctrl-C)")
     ap.add_argument("--status", type=float, default=0.5, metavar="S", help="status line every S seconds (0: off)")
+    ap.add_argument("--trace", metavar="CSV", default="",
+                    help="write every tick (time, position, rendered and output force, safety state) to CSV at exit")
+    ap.add_argument("--trace-seconds", type=float, default=60.0, help="how much --trace keeps [s]")
+    ap.add_argument("--summary", metavar="JSON", default="",
+                    help="write the run's figures (tick lateness percentiles, missed deadlines, delay, link) to JSON")
     ap.add_argument("--check", action="store_true", help="check the profiles, print them, and exit")
     ap.add_argument("--list-hid", action="store_true", help="list the HID devices hidapi sees, and exit")
     ap.add_argument("-v", "--verbose", action="store_true", help="log link details")
@@ -159,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     opts = Options(url=args.server, token=args.token, mode=args.mode, network=args.network,
                    passivity=not args.no_passivity, priority=args.priority, spin_us=args.spin_us,
-                   seconds=args.seconds, status_s=args.status)
+                   seconds=args.seconds, status_s=args.status, trace=args.trace, trace_s=args.trace_seconds)
     try:
         bridge = Bridge(profiles, opts)
     except ValueError as e:
@@ -192,6 +199,19 @@ def main(argv: list[str] | None = None) -> int:
         x = bridge.ex
         hist = x.histogram()
         n = sum(hist)
+        if args.summary:
+            net = bridge.network
+            summary = {
+                "ticks": n, "network": opts.network, "mode": opts.mode, "priority": opts.priority,
+                "late_p50_us": ex.percentile_us(hist, 0.5), "late_p99_us": ex.percentile_us(hist, 0.99),
+                "late_p999_us": ex.percentile_us(hist, 0.999), "late_max_us": x.i[ex.H_LATE_MAX] / 1e3,
+                "missed": x.i[ex.H_MISSED], "reanchors": x.i[ex.H_REANCHORS], "states": net.frames,
+                "bad_states": net.bad_frames, "delay_ms": x.i[ex.H_DELAY_NS] / 1e6, "step_ms": x.i[ex.H_DT_NS] / 1e6,
+                "allowance_ms": x.i[ex.H_ALLOW_NS] / 1e6, "rtt_best_ms": net.sync.best_rtt_ns / 1e6,
+                "clock_offset_us": net.sync.offset_ns(time.monotonic_ns()) / 1e3 if net.sync.synced else None,
+                "connects": net.connects, "events": x.i[ex.H_EVENTS],
+            }
+            pathlib.Path(args.summary).write_text(json.dumps(summary, indent=1) + "\n")
         if n:
             log.info("bridge: %d ticks, lateness p50 %.0f p99 %.0f p99.9 %.0f max %.0f us, missed %d, "
                      "%d states", n, ex.percentile_us(hist, 0.5), ex.percentile_us(hist, 0.99),

@@ -25,12 +25,15 @@ import math
 import os
 import queue
 import select
+import signal
+import sys
 import threading
 import time
 import tty
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Self
 
 from .drivers import serial_protocol as sp
 
@@ -93,6 +96,7 @@ class FirmwareEmulator:
         self._slave = -1
         self.slave_path = ""
         self._streaming = False
+        self._clamping = False
         self._seq = 0
         self._boot_s = 0.0
         self._step_s = 0.0
@@ -105,7 +109,7 @@ class FirmwareEmulator:
 
     # -- control, from any thread ------------------------------------------------------------------------
 
-    def start(self) -> FirmwareEmulator:
+    def start(self) -> Self:
         """Plugs in (pty and link) and starts the firmware thread."""
         if self._thread is not None:
             raise RuntimeError("emulator already started")
@@ -134,7 +138,7 @@ class FirmwareEmulator:
             error, self.error = self.error, None
             raise RuntimeError("emulator firmware thread failed") from error
 
-    def __enter__(self) -> FirmwareEmulator:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -182,7 +186,9 @@ class FirmwareEmulator:
 
     def inject_garbage(self, data: bytes) -> None:
         """Writes `data` to the host between two frames (line noise, a boot message, a cut frame)."""
-        self._call(lambda: self._send(data))
+        def send() -> None:
+            self._send(data)
+        self._call(send)
 
     # -- the firmware thread -----------------------------------------------------------------------------
 
@@ -223,6 +229,7 @@ class FirmwareEmulator:
     def _boot(self) -> None:
         # Power-up: quiet until HELLO, zero force, sequence from 0, device clock from 0.
         self._streaming = False
+        self._clamping = False
         self._seq = 0
         self._boot_s = self._step_s = time.monotonic()
         self.applied_force_N = (0.0, 0.0, 0.0)
@@ -243,7 +250,7 @@ class FirmwareEmulator:
     def _run(self) -> None:
         try:
             self._loop()
-        except BaseException as e:  # kept for stop() to re-raise in the test's thread
+        except Exception as e:  # noqa: BLE001 - kept for stop() to re-raise in the caller's thread
             self.error = e
 
     def _loop(self) -> None:
@@ -308,12 +315,17 @@ class FirmwareEmulator:
             self.applied_force_N = self._clamp(f)
 
     def _clamp(self, f: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The firmware's rules for a FORCE: unused axes ignored, non-finite is zero, clamped to max_force_N."""
+        if not all(math.isfinite(c) for c in f):
+            return (0.0, 0.0, 0.0)
         fx, fy, fz = (f[i] if i < self.axes else 0.0 for i in range(3))
         magnitude = math.sqrt(fx * fx + fy * fy + fz * fz)
-        if magnitude > self.max_force_N:
+        clamping = magnitude > self.max_force_N
+        if clamping and not self._clamping and self._streaming:  # once per episode, not per frame
+            self._send(sp.encode_fault(self._next_seq(), sp.FAULT_FORCE_LIMIT, "force clamped"))
+        self._clamping = clamping
+        if clamping:
             s = self.max_force_N / magnitude
-            if self._streaming:
-                self._send(sp.encode_fault(self._next_seq(), sp.FAULT_FORCE_LIMIT, "force clamped"))
             return (fx * s, fy * s, fz * s)
         return (fx, fy, fz)
 
@@ -386,6 +398,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                            max_force_N=args.max_force)
     if args.hand is not None:
         emu.set_hand_target(args.hand)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))  # unplug cleanly (remove the link) on kill too
     emu.start()
     print(f"{emu.name}: {emu.link} -> {emu.slave_path} ({args.rate:g} Hz, {args.axes} axes); Ctrl-C stops",
           flush=True)

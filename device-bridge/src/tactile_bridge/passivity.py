@@ -10,9 +10,13 @@ than it took (a stiff wall rendered a few milliseconds late pumps energy into th
 energy would go negative, the controller adds a damping force -alpha v with alpha = -E / (v.v dT), just what
 dissipates the excess this tick, bounded by `alpha_max` so the damper itself stays stable at the tick rate.
 
-`correct` gives the force with the damping added; `commit` books the force that was really displayed (after
-the safety layer) so the observer sees what the hand felt. Velocity comes from the device's positions,
-smoothed by a first-order filter (finite differences of a quantized encoder are noisy).
+The observer books each tick's displayed force against the displacement it acted over (from this tick's
+position to the next), `-f(n) . (x(n+1) - x(n))`, which is the work the hand really exchanged; booking
+it against the velocity of the interval before (the textbook f(n) v(n) dT with a backward-difference v)
+over-counts what a stiff contact absorbs and lets a delayed wall gain energy. `observe_position` books the
+previous force; `correct` gives this tick's force with the damping added, predicting its work from the
+velocity estimate; `commit` keeps the force that was really displayed (after the safety layer). Velocity
+for the prediction comes from the positions, smoothed by a first-order filter.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ class PassivityController:
         rc = 1.0 / (2.0 * math.pi * velocity_cutoff_hz)
         self._smooth = period_s / (rc + period_s)
         self._out = [0.0, 0.0, 0.0]
+        self._f = [0.0, 0.0, 0.0]     # the force displayed since the latest position [N]
 
     def reset(self) -> None:
         """Forgets energy and motion (after a disengagement: the next contact starts passive)."""
@@ -44,13 +49,17 @@ class PassivityController:
         self.alpha = 0.0
         self._have_x = False
         self.v[0] = self.v[1] = self.v[2] = 0.0
+        self._f[0] = self._f[1] = self._f[2] = 0.0
 
     def observe_position(self, x: Sequence[float]) -> None:
-        """Updates the velocity estimate from this tick's device position [m]."""
+        """Books the work of the force displayed since the latest position; updates the velocity estimate."""
         if self._have_x:
-            a, inv = self._smooth, 1.0 / self.dt
-            for i in range(3):
-                self.v[i] += a * ((x[i] - self._x[i]) * inv - self.v[i])
+            a, inv, f = self._smooth, 1.0 / self.dt, self._f
+            dx, dy, dz = x[0] - self._x[0], x[1] - self._x[1], x[2] - self._x[2]
+            self.energy -= f[0] * dx + f[1] * dy + f[2] * dz
+            self.v[0] += a * (dx * inv - self.v[0])
+            self.v[1] += a * (dy * inv - self.v[1])
+            self.v[2] += a * (dz * inv - self.v[2])
         self._x[0], self._x[1], self._x[2] = x[0], x[1], x[2]
         self._have_x = True
 
@@ -72,9 +81,8 @@ class PassivityController:
         return o
 
     def commit(self, displayed: Sequence[float]) -> None:
-        """Books the energy of the force the device really displayed this tick [N]."""
-        v = self.v
-        p = -(displayed[0] * v[0] + displayed[1] * v[1] + displayed[2] * v[2]) * self.dt
+        """Keeps the force the device really displays this tick [N]: its work is booked at the next position."""
+        self._f[0], self._f[1], self._f[2] = displayed[0], displayed[1], displayed[2]
         if self.alpha > 0.0:
+            v = self.v
             self.dissipated += self.alpha * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) * self.dt
-        self.energy += p

@@ -9,9 +9,12 @@ tick, under these rules (DESIGN.md "Safety", issue 5), in this order:
      HOLD_S after the newest state arrived, then fades linearly to zero at ZERO_S; past that, forces
      disengage.
   3. The magnitude never exceeds max_N (the vector is scaled, its direction kept).
-  4. The mean magnitude over any 10 s window stays within continuous_N: a soft limit lets the force above
-     continuous_N only by the unspent budget spread over SOFT_HORIZON_S, so it settles smoothly; a hard
-     limit, after the slew limit, makes the rule exact whatever the command does.
+  4. The mean magnitude over any 10 s window stays within continuous_N, by a token bucket: it fills at
+     SUSTAIN * continuous_N, holds at most (1 - SUSTAIN) * continuous_N * 10 s, and the force spends from it,
+     so any 10 s of output sums to at most the rate times 10 s plus what the bucket holds: continuous_N times
+     10 s, exactly. The limit is the fill rate plus the bucket's contents spread over BUCKET_S: a command
+     above it uses the bucket up smoothly and settles at SUSTAIN * continuous_N. A check over the window
+     itself, after the slew limit, stands behind it (the bucket keeps it from ever acting).
   5. The force vector changes by at most slew_N_per_s per second (the profile guarantees that max_N can
      reach zero in 40 ms, so rule 1 and rule 2 finish within their times).
   6. Start-up, and after every disengagement: the output is zero until the command has stayed below
@@ -34,7 +37,8 @@ from .profile import ForceLimits
 HOLD_S = 0.010          # states stop: hold the last force this long after it arrived...
 ZERO_S = 0.050          # ...and reach zero by this long after it arrived
 WINDOW_S = 10.0         # the continuous limit's averaging window
-SOFT_HORIZON_S = 1.0    # the soft continuous limit spreads the unspent budget over this time
+SUSTAIN = 0.95          # rule 4: the bucket's fill rate, relative to continuous_N
+BUCKET_S = 0.05         # rule 4: the limit spreads the bucket's contents over this time (its decay when used up)
 
 
 class Kind(IntEnum):
@@ -103,6 +107,8 @@ class Safety:
         self.window_next = 0
         self.window_sum = 0.0
         self.window_ticks = 0
+        self.bucket_cap = (1.0 - SUSTAIN) * limits.continuous_N * WINDOW_S   # [N s]
+        self.bucket = self.bucket_cap
         self.events = 0
 
     # ---- events ------------------------------------------------------------------------------------
@@ -159,7 +165,7 @@ class Safety:
                 tx, ty, tz = cx * scale, cy * scale, cz * scale
             elif self.mode == Mode.WAITING and scale == 1.0:
                 # Rule 6: engage only after a small command for engage_ticks.
-                if math.sqrt(cx * cx + cy * cy + cz * cz) <= lim.engage_below_N:
+                if math.hypot(cx, cy, cz) <= lim.engage_below_N:
                     self.small_ticks += 1
                     if self.small_ticks >= lim.engage_ticks:
                         self.mode = Mode.RAMPING
@@ -179,7 +185,7 @@ class Safety:
             self.mode = Mode.ENGAGED
 
         # Rule 3: the maximum.
-        mag = math.sqrt(tx * tx + ty * ty + tz * tz)
+        mag = math.hypot(tx, ty, tz)  # (no overflow for huge finite commands)
         if mag > lim.max_N:
             s = lim.max_N / mag
             tx, ty, tz = tx * s, ty * s, tz * s
@@ -190,17 +196,16 @@ class Safety:
         elif self.clipping and mag < 0.9 * lim.max_N:
             self.clipping = False
 
-        # Rule 4, soft: above continuous_N only by the unspent budget over SOFT_HORIZON_S.
-        budget = lim.continuous_N * WINDOW_S - self.window_sum * self.dt      # [N s]
-        soft = lim.continuous_N + max(0.0, budget) / SOFT_HORIZON_S
+        # Rule 4: the fill rate plus the bucket spread over BUCKET_S.
+        soft = SUSTAIN * lim.continuous_N + self.bucket / BUCKET_S
         if mag > soft:
             s = soft / mag
             tx, ty, tz = tx * s, ty * s, tz * s
             if not self.limiting:
                 self.limiting = True
                 self._event(now_ns, Kind.CONTINUOUS_LIMIT,
-                            f"mean force over {WINDOW_S:g} s near continuous_N {lim.continuous_N:g} N: limited "
-                            f"to {soft:.3g} N")
+                            f"mean force near continuous_N {lim.continuous_N:g} N over {WINDOW_S:g} s: limited to "
+                            f"{soft:.3g} N")
         elif self.limiting and mag < 0.9 * soft:
             self.limiting = False
 
@@ -224,6 +229,7 @@ class Safety:
             ox, oy, oz = ox * s, oy * s, oz * s
             mag = max(0.0, hard)
         o[0], o[1], o[2] = ox, oy, oz
+        self.bucket = min(self.bucket_cap, self.bucket + (SUSTAIN * lim.continuous_N - mag) * self.dt)
         self.window_sum += mag - leaving
         self.window[self.window_next] = mag
         self.window_next = (self.window_next + 1) % n

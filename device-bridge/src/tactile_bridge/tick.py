@@ -21,12 +21,20 @@ import os
 import time
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 from . import exchange as ex
 from .drivers import Device, DeviceSample
 from .interpolation import ForceRender, StateHistory
 from .passivity import PassivityController
 from .profile import Profile
 from .safety import Inputs, Kind, Mode, Safety, SafetyEvent
+
+
+# One row per tick and device: bridge time [s], device, safety mode, device position (scene) [m] (3),
+# rendered force (scene) [N] (3), output force (device frame) [N] (3), passivity damping [N s/m], newest step.
+TRACE_COLUMNS = ("t_s", "device", "safety", "x_m", "y_m", "z_m", "fx_N", "fy_N", "fz_N",
+                 "out_x_N", "out_y_N", "out_z_N", "pc_alpha", "step")
 
 
 class Channel:
@@ -69,6 +77,21 @@ class Tick:
         self.channels = [Channel(k, p, d, exchange, mode, passivity, self._event)
                          for k, (p, d) in enumerate(zip(profiles, devices))]
         self._hist = ex.H_INTS
+        self.trace: np.ndarray | None = None   # (capacity x TRACE_COLUMNS), see start_trace
+        self.trace_rows = 0
+
+    def start_trace(self, seconds: float) -> None:
+        """Keeps every tick of every device for the first `seconds` (preallocated; written by save_trace)."""
+        rows = int(seconds * 1e9 / self.period_ns) * len(self.channels)
+        self.trace = np.zeros((rows, len(TRACE_COLUMNS)))
+        self.trace_rows = 0
+
+    def save_trace(self, path: str) -> None:
+        """The kept ticks as CSV (TRACE_COLUMNS)."""
+        if self.trace is None:
+            return
+        np.savetxt(path, self.trace[: self.trace_rows], delimiter=",", header=",".join(TRACE_COLUMNS),
+                   comments="", fmt="%.9g")
 
     # ---- events ------------------------------------------------------------------------------------
 
@@ -149,6 +172,17 @@ class Tick:
             if ch.safety.mode == Mode.WAITING or (fd[0] == 0.0 and fd[1] == 0.0 and fd[2] == 0.0):
                 pc.reset()  # out of contact nothing is stored: the next contact starts passive
             dev.write_force(now_ns, out)
+
+            tr = self.trace
+            if tr is not None and self.trace_rows < len(tr):
+                row = tr[self.trace_rows]
+                row[0], row[1], row[2] = now_ns * 1e-9, k, int(ch.safety.mode)
+                row[3:6] = ch.position
+                row[6:9] = ch.f_scene
+                row[9:12] = out
+                row[12] = pc.alpha
+                row[13] = h.step[h.newest()] if h.count else -1
+                self.trace_rows += 1
 
             # Status for the status line (single words).
             bi, bd = x.status_base(k)

@@ -33,7 +33,7 @@ from . import Device, DeviceError, DeviceSample
 from . import serial_protocol as sp
 
 if TYPE_CHECKING:
-    from ..profile import Profile
+    from ..profile import Fields, Profile
 
 HELLO_REPEAT_S = 0.1        # during a handshake, HELLO again this often (boards that reset on open)
 READ_CHUNK = 4096
@@ -50,7 +50,7 @@ class SerialConfig:
     handshake_s: float = 1.0    # how long to wait for INFO and the first STATE after opening
 
 
-def parse_config(table: dict[str, Any], where: str, fields: Any) -> SerialConfig:
+def parse_config(table: dict[str, Any], where: str, fields: type[Fields]) -> SerialConfig:
     """[serial] from a profile; `fields` is profile.Fields, whose refusals name the field."""
     f = fields(table, where, ("port", "baud", "reconnect_s", "stale_ms", "handshake_s"))
     return SerialConfig(
@@ -272,6 +272,8 @@ class SerialDevice(Device):
                 ready, _, _ = select.select([fd, self._wake_r], [], [], min(deadline, next_hello) - now)
                 if self._stop.is_set():
                     raise _Stopped
+                if self._wake_r in ready:
+                    _drain(self._wake_r)  # a wake-up meant for the link that just failed
                 if fd not in ready:
                     continue
                 data = os.read(fd, READ_CHUNK)

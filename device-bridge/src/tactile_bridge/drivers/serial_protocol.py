@@ -12,7 +12,6 @@ emulator (tactile_bridge.emulator) plays the firmware with the same codec.
 from __future__ import annotations
 
 import binascii
-import math
 import struct
 from collections import deque
 from collections.abc import Iterator, Sequence
@@ -155,11 +154,9 @@ def decode_hello(payload: bytes) -> int:
 
 
 def decode_force(payload: bytes) -> tuple[float, float, float]:
-    """Force [N] (3); a component that is not finite reads as 0 (the firmware's rule, docs "FORCE")."""
+    """Force [N] (3) as sent; a firmware treats a non-finite one as zero (docs "FORCE")."""
     _need(payload, FORCE_SIZE, "FORCE")
     fx, fy, fz = _FORCE.unpack_from(payload)
-    if not (math.isfinite(fx) and math.isfinite(fy) and math.isfinite(fz)):
-        return (0.0, 0.0, 0.0)
     return (fx, fy, fz)
 
 

@@ -1,0 +1,206 @@
+"""Benchmarks of the device bridge against the real server, printing figures (device-bridge/README.md).
+
+  lateness   the tick's lateness (p50, p99, p99.9, max) and missed deadlines over --seconds with the network
+             active and the server stepping, for the tick in a process and in a thread, with and without
+             SCHED_FIFO: the figures that chose the default (--network process, --priority 80).
+  modes      the force error of each rendering mode (delay, hold, extrapolate) against a ground truth at 1 kHz
+             (the same motion run headless with a 1 ms control interval), and the latency each adds (the lag
+             that best aligns its force with the truth), with the server stepping slower than the tick.
+
+  .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
+  .venv/bin/python device-bridge/bench/bridge_bench.py modes --seconds 12
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import json
+import os
+import pathlib
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+BRIDGE = pathlib.Path(sys.executable).with_name("tactile-bridge")
+TOKEN = "bench"
+
+# A soft block of the paper's size (a few hundred nodes), a sphere on "stylus" 5 mm above it.
+SCENE: dict[str, Any] = {
+    "name": "bridge_bench",
+    "mesh": {"primitive": "box", "lo": [-0.03, 0, -0.03], "hi": [0.03, 0.03, 0.03], "cells": [8, 4, 8]},
+    "material": {"model": "neohookean", "E": 30000, "nu": 0.3, "rho": 1000},
+    "boundary": [{"name": "floor", "select": {"plane": {"point": [0, 0, 0], "normal": [0, 1, 0]}}, "fixed": True}],
+    "effects": {"damping": {"alpha": 20.0}},
+    "proxies": [{"name": "tip", "device": "stylus", "shape": "sphere", "radius": 0.01, "position": [0, 0.045, 0]}],
+    "run": {"duration": 1.0},
+}
+
+# The arm pokes 12 mm (5 mm of it air) every 3 s, yielding to the force as a hand does.
+PROFILE = """
+name = "bench"
+driver = "sim"
+channel = "stylus"
+[workspace]
+offset_m = [0.0, 0.045, 0.0]
+[force]
+max_N = 4.0
+continuous_N = 3.0
+slew_N_per_s = 400.0
+gain = {gain}
+[sim]
+script = "{script}"
+direction = [0.0, -1.0, 0.0]
+depth_m = 0.012
+period_s = 3.0
+stroke_m = 0.02
+hand_stiffness_N_per_m = {hand_k}
+hand_damping_Ns_per_m = 6.0
+mass_kg = 0.2
+"""
+
+
+def built(name: str) -> str:
+    build = pathlib.Path(os.environ.get("TACTILE_BUILD", "build/release"))
+    exe = (build if build.is_absolute() else ROOT / build) / name
+    if not os.access(exe, os.X_OK):
+        sys.exit(f"{name} is not built (scripts/setup.sh)")
+    return str(exe)
+
+
+@contextlib.contextmanager
+def server(tmp: pathlib.Path, scene: dict[str, Any], *args: str) -> Iterator[int]:
+    path = tmp / "scene.json"
+    path.write_text(json.dumps(scene))
+    proc = subprocess.Popen([built("tactile-server"), str(path), "--port", "0", "--token", TOKEN, *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    port = None
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        m = re.search(r"listening on http://127\.0\.0\.1:(\d+)/", line)
+        if m:
+            port = int(m.group(1))
+            break
+    if port is None:
+        sys.exit("the server did not start")
+    threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()  # type: ignore[union-attr]
+    try:
+        yield port
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(10)
+
+
+def run_bridge(tmp: pathlib.Path, port: int, seconds: float, *args: str, script: str = "poke",
+               gain: float = 1.0, hand_k: float = 150.0) -> tuple[dict[str, Any], pathlib.Path]:
+    profile = tmp / "bench.toml"
+    profile.write_text(PROFILE.format(script=script, gain=gain, hand_k=hand_k))
+    summary = tmp / "summary.json"
+    trace = tmp / "trace.csv"
+    r = subprocess.run([str(BRIDGE), "--profile", str(profile), "--server", f"ws://127.0.0.1:{port}/",
+                        "--token", TOKEN, "--seconds", str(seconds), "--status", "0", "--summary", str(summary),
+                        "--trace", str(trace), "--trace-seconds", str(seconds + 2), *args],
+                       capture_output=True, text=True, timeout=seconds + 60)
+    if r.returncode != 0:
+        sys.exit(f"the bridge failed ({r.returncode}):\n{r.stderr[-3000:]}")
+    return json.loads(summary.read_text()), trace
+
+
+# ---- lateness ---------------------------------------------------------------------------------------------
+
+def lateness(args: argparse.Namespace) -> None:
+    configs = [("process", 80), ("process", 0), ("thread", 80), ("thread", 0)]
+    print(f"tick lateness over {args.seconds:g} s at 1 kHz, server stepping at {args.dt * 1e3:g} ms with a haptic "
+          f"frame per step, simulated arm poking (2 cores, shared)")
+    print(f"{'tick in':>8} {'FIFO':>5} {'p50 us':>8} {'p99 us':>8} {'p99.9 us':>9} {'max us':>8} {'missed':>7} "
+          f"{'ticks':>7} {'states':>7} {'delay ms':>9}")
+    with tempfile.TemporaryDirectory() as d, server(pathlib.Path(d), SCENE, "--dt", str(args.dt)) as port:
+        for network, prio in configs:
+            s, _ = run_bridge(pathlib.Path(d), port, args.seconds, "--network", network, "--priority", str(prio))
+            print(f"{network:>8} {prio:>5} {s['late_p50_us']:>8.0f} {s['late_p99_us']:>8.0f} "
+                  f"{s['late_p999_us']:>9.0f} {s['late_max_us']:>8.0f} {s['missed']:>7} {s['ticks']:>7} "
+                  f"{s['states']:>7} {s['delay_ms']:>9.2f}", flush=True)
+
+
+# ---- modes ------------------------------------------------------------------------------------------------
+
+def truth(tmp: pathlib.Path, t: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """The force on the sphere moved along (t, pos) by a headless run with a 1 ms control interval (N x 3)."""
+    scene = json.loads(json.dumps(SCENE))
+    scene["name"] = "bridge_bench_truth"
+    keep = np.arange(0, len(t), 1)
+    keys = [{"t": float(t[i] - t[0]), "position": [float(v) for v in pos[i]]} for i in keep]
+    scene["proxies"][0]["position"] = keys[0]["position"]
+    scene["proxies"][0]["script"] = {"easing": "linear", "keyframes": keys}
+    scene["run"] = {"duration": float(t[-1] - t[0]), "frame_rate": 50, "vtu_every": 1}
+    path = tmp / "truth.json"
+    path.write_text(json.dumps(scene))
+    out = tmp / "truth_out"
+    subprocess.run([built("tactile-sim"), "run", str(path), "--out", str(out), "--no-vtu", "--quiet"],
+                   check=True, capture_output=True)
+    rows = list(csv.DictReader(next(out.rglob("forces.csv")).open()))
+    tt = np.array([float(r["t_s"]) for r in rows])
+    f = np.array([[float(r["fx_N"]), float(r["fy_N"]), float(r["fz_N"])] for r in rows])
+    return np.stack([np.interp(t - t[0], tt, f[:, k]) for k in range(3)], axis=1)
+
+
+def best_lag(a: np.ndarray, b: np.ndarray, max_lag: int = 30) -> int:
+    """The shift (ticks) of `a` after `b` that fits best: min RMS of a[i] - b[i - lag]."""
+    errs = [np.sqrt(np.mean((a[max_lag:] - b[max_lag - k: len(b) - k]) ** 2)) for k in range(max_lag)]
+    return int(np.argmin(errs))
+
+
+def modes(args: argparse.Namespace) -> None:
+    print(f"force error of each mode against the force at 1 kHz (headless, same motion), server step "
+          f"{args.dt * 1e3:g} ms, arm following its script open-loop (gain 0), {args.seconds:g} s each; in contact only")
+    print(f"{'mode':>12} {'rms N':>8} {'max N':>8} {'rms %':>7} {'lag ms':>7} {'rms at lag N':>13} {'delay ms':>9}")
+    with tempfile.TemporaryDirectory() as d:
+        tmp = pathlib.Path(d)
+        with server(tmp, SCENE, "--dt", str(args.dt)) as port:
+            runs = {}
+            for mode in ("delay", "hold", "extrapolate"):
+                s, trace = run_bridge(tmp, port, args.seconds, "--mode", mode, gain=0.0, hand_k=2000.0)
+                tr = np.genfromtxt(trace, delimiter=",", names=True)
+                runs[mode] = (s, tr)
+        for mode, (s, tr) in runs.items():
+            live = tr[tr["safety"] >= 1]  # from engagement on
+            live = live[2000:]             # after the first press starts
+            t = live["t_s"]
+            pos = np.stack([live["x_m"], live["y_m"], live["z_m"]], axis=1)
+            f = np.stack([live["fx_N"], live["fy_N"], live["fz_N"]], axis=1)
+            ref = truth(tmp / mode, t, pos) if (tmp / mode).mkdir() is None else None
+            contact = np.linalg.norm(ref, axis=1) > 0.05
+            err = np.linalg.norm(f - ref, axis=1)[contact]
+            rms = float(np.sqrt(np.mean(err ** 2)))
+            scale = float(np.sqrt(np.mean(np.linalg.norm(ref[contact], axis=1) ** 2)))
+            lag = best_lag(f[:, 1], ref[:, 1])
+            shifted = np.linalg.norm(f[lag:] - ref[: len(ref) - lag], axis=1)[contact[lag:]]
+            print(f"{mode:>12} {rms:>8.3f} {err.max():>8.3f} {100 * rms / scale:>7.1f} {lag:>7d} "
+                  f"{float(np.sqrt(np.mean(shifted ** 2))):>13.3f} {s['delay_ms']:>9.2f}", flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="what", required=True)
+    a = sub.add_parser("lateness")
+    a.add_argument("--seconds", type=float, default=60.0)
+    a.add_argument("--dt", type=float, default=1e-3, help="server step [s]")
+    b = sub.add_parser("modes")
+    b.add_argument("--seconds", type=float, default=12.0)
+    b.add_argument("--dt", type=float, default=4e-3, help="server step [s] (slower than the 1 ms tick)")
+    args = ap.parse_args()
+    {"lateness": lateness, "modes": modes}[args.what](args)
+
+
+if __name__ == "__main__":
+    main()

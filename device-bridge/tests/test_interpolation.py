@@ -1,0 +1,219 @@
+"""StateHistory and ForceRender (interpolation.py): the one-step delay is exact on forces linear in time and
+never leaves the two bracketing forces; 'hold' and 'extrapolate' follow their formulas."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tactile_bridge.interpolation import MODES, ForceRender, StateHistory
+
+ZERO_K = (0.0,) * 9
+ZERO_X = (0.0, 0.0, 0.0)
+
+
+def push_forces(h: StateHistory, t_ns: np.ndarray, forces: np.ndarray) -> None:
+    """Pushes states (t_ns[i], forces[i]) with arrival = t and step = i, out of contact."""
+    for i, (t, f) in enumerate(zip(t_ns, forces)):
+        h.push(int(t), int(t), i, [float(v) for v in f], ZERO_K, ZERO_X, 0)
+
+
+def uneven_times(rng: np.random.Generator, n: int, t0_ns: int = 1_000_000_000) -> np.ndarray:
+    """n increasing state times [ns], spaced unevenly between 0.3 ms and 7 ms."""
+    gaps = rng.integers(300_000, 7_000_000, size=n)
+    return t0_ns + np.cumsum(gaps)
+
+
+# ---- delay: exact on linear histories ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("delay_ns", [0, 1_000_000, 2_500_000, 7_000_000])
+def test_delay_mode_is_exact_on_forces_linear_in_time(delay_ns: int) -> None:
+    rng = np.random.default_rng(20240611 + delay_ns)
+    for _trial in range(20):
+        n = int(rng.integers(3, 40))
+        t = uneven_times(rng, n)
+        slope = rng.uniform(-500.0, 500.0, size=3)         # [N/s]
+        f0 = rng.uniform(-5.0, 5.0, size=3)                # [N] at t[0]
+
+        def law(t_ns: float, f0: np.ndarray = f0, slope: np.ndarray = slope, t0: int = int(t[0])) -> np.ndarray:
+            return f0 + slope * ((t_ns - t0) * 1e-9)
+
+        h = StateHistory(64)
+        push_forces(h, t, np.array([law(float(ti)) for ti in t]))
+        r = ForceRender(h, "delay")
+        r.delay_ns = delay_ns
+        out = [0.0, 0.0, 0.0]
+        # Display times strictly inside the kept span, including the states' own times.
+        display = np.concatenate([rng.integers(int(t[0]), int(t[-1]), size=50), t])
+        for td in display:
+            now = int(td) + delay_ns
+            assert r.render(now, ZERO_X, out) is True
+            assert r.display_t_ns == int(td)
+            assert r.past_newest is False
+            want = law(float(td))
+            scale = max(1.0, float(np.max(np.abs([law(float(t[0])), law(float(t[-1]))]))))
+            np.testing.assert_allclose(out, want, rtol=0, atol=1e-12 * scale)
+
+
+def test_delay_mode_interpolates_between_the_two_bracketing_states() -> None:
+    rng = np.random.default_rng(7)
+    for _trial in range(30):
+        n = int(rng.integers(2, 60))
+        t = uneven_times(rng, n)
+        # Nonlinear, jumpy histories: random forces, each axis on its own scale.
+        forces = rng.normal(0.0, 1.0, size=(n, 3)) * np.array([0.01, 3.0, 1e3])
+        h = StateHistory(64)
+        push_forces(h, t, forces)
+        r = ForceRender(h, "delay")
+        r.delay_ns = int(rng.integers(0, 5_000_000))
+        out = [0.0, 0.0, 0.0]
+        for td in rng.integers(int(t[0]), int(t[-1]) + 1, size=200):
+            r.render(int(td) + r.delay_ns, ZERO_X, out)
+            b = int(np.searchsorted(t, td, side="left"))   # t[b-1] < td <= t[b]
+            a = b if t[b] == td else b - 1
+            lo = np.minimum(forces[a], forces[b])
+            hi = np.maximum(forces[a], forces[b])
+            tol = 4 * np.spacing(np.maximum(np.abs(lo), np.abs(hi)))   # a few ulps of rounding
+            assert np.all(out >= lo - tol) and np.all(out <= hi + tol), (td, out, forces[a], forces[b])
+            # And at the fraction the time gives (the linear law between a and b).
+            if a != b:
+                s = (td - t[a]) / (t[b] - t[a])
+                np.testing.assert_allclose(out, (1 - s) * forces[a] + s * forces[b], rtol=1e-12,
+                                           atol=1e-12 * float(np.max(np.abs(forces[[a, b]]))))
+
+
+def test_display_time_past_the_newest_holds_the_newest_and_flags_it() -> None:
+    h = StateHistory(8)
+    t = np.array([10, 12, 15], dtype=np.int64) * 1_000_000
+    forces = np.array([[1.0, 2.0, 3.0], [2.0, 0.0, -1.0], [0.5, -0.25, 4.0]])
+    push_forces(h, t, forces)
+    r = ForceRender(h, "delay")
+    r.delay_ns = 2_000_000
+    out = [9.0, 9.0, 9.0]
+    for now in (int(t[-1]) + r.delay_ns + 1, int(t[-1]) + 50_000_000):
+        assert r.render(now, ZERO_X, out) is True
+        assert out == [0.5, -0.25, 4.0]
+        assert r.past_newest is True
+    # Exactly at the newest: the newest, and not past it.
+    r.render(int(t[-1]) + r.delay_ns, ZERO_X, out)
+    assert out == [0.5, -0.25, 4.0]
+    assert r.past_newest is False
+
+
+def test_display_time_before_the_oldest_kept_gives_the_oldest() -> None:
+    h = StateHistory(8)
+    t = np.array([10, 12, 15], dtype=np.int64) * 1_000_000
+    forces = np.array([[1.0, 2.0, 3.0], [2.0, 0.0, -1.0], [0.5, -0.25, 4.0]])
+    push_forces(h, t, forces)
+    r = ForceRender(h, "delay")
+    r.delay_ns = 3_000_000
+    out = [0.0, 0.0, 0.0]
+    assert r.render(int(t[0]) + r.delay_ns - 1, ZERO_X, out) is True
+    assert out == [1.0, 2.0, 3.0]
+    assert r.past_newest is False
+    r.render(0, ZERO_X, out)
+    assert out == [1.0, 2.0, 3.0]
+
+
+def test_ring_overwrite_keeps_the_newest_capacity_states() -> None:
+    cap = 16
+    h = StateHistory(cap)
+    n = 3 * cap + 5
+    t = (np.arange(n, dtype=np.int64) + 1) * 1_000_000
+    forces = np.stack([np.arange(n, dtype=float), -np.arange(n, dtype=float), np.full(n, 0.5)], axis=1)
+    push_forces(h, t, forces)
+    assert h.count == n
+    kept = sorted(h.step)
+    assert kept == list(range(n - cap, n))
+    assert h.step[h.newest()] == n - 1
+    r = ForceRender(h, "delay")
+    out = [0.0, 0.0, 0.0]
+    # Before the oldest kept (which is state n - cap): that state, not anything overwritten.
+    r.render(int(t[n - cap - 1]), ZERO_X, out)
+    assert out == forces[n - cap].tolist()
+    # Half-way between two kept states: their mean.
+    r.render(int(t[n - 3]) + 500_000, ZERO_X, out)
+    np.testing.assert_allclose(out, 0.5 * (forces[n - 3] + forces[n - 2]), rtol=1e-15)
+    # bracket() sees only the kept ones.
+    a, b = h.bracket(int(t[n - cap]) + 1)
+    assert (h.step[a], h.step[b]) == (n - cap, n - cap + 1)
+
+
+# ---- hold and extrapolate -------------------------------------------------------------------------
+
+
+def test_hold_mode_returns_the_newest_force_at_once() -> None:
+    rng = np.random.default_rng(3)
+    h = StateHistory(8)
+    r = ForceRender(h, "hold")
+    r.delay_ns = 5_000_000   # ignored by hold
+    out = [0.0, 0.0, 0.0]
+    t = 1_000_000_000
+    for i in range(20):
+        f = rng.normal(size=3).tolist()
+        k = rng.normal(size=9).tolist()
+        h.push(t, t, i, f, k, rng.normal(size=3).tolist(), int(rng.integers(0, 3)))
+        assert r.render(t, rng.normal(size=3).tolist(), out) is True
+        assert out == f
+        assert r.display_t_ns == t
+        assert r.past_newest is False
+        r.render(t + 1, ZERO_X, out)
+        assert out == f and r.past_newest is True
+        t += int(rng.integers(100_000, 3_000_000))
+
+
+def test_extrapolate_mode_is_the_newest_force_plus_stiffness_times_motion() -> None:
+    rng = np.random.default_rng(11)
+    h = StateHistory(8)
+    r = ForceRender(h, "extrapolate")
+    out = [0.0, 0.0, 0.0]
+    for i in range(50):
+        f_n = rng.uniform(-3, 3, size=3)
+        K_n = rng.uniform(-2000, 2000, size=(3, 3))            # [N/m]
+        x_n = rng.uniform(-0.2, 0.2, size=3)
+        h.push(1_000_000 * (i + 1), 1_000_000 * (i + 1), i, f_n.tolist(), K_n.ravel().tolist(), x_n.tolist(),
+               int(rng.integers(1, 5)))
+        x = x_n + rng.normal(0.0, 0.005, size=3)
+        assert r.render(1_000_000 * (i + 1) + 700_000, x.tolist(), out) is True
+        want = f_n + K_n @ (x - x_n)
+        np.testing.assert_allclose(out, want, rtol=1e-13, atol=1e-13 * float(np.abs(K_n).max()) * 0.2)
+
+
+def test_extrapolate_mode_out_of_contact_returns_the_newest_force() -> None:
+    h = StateHistory(4)
+    r = ForceRender(h, "extrapolate")
+    k = [1e4] * 9
+    h.push(5, 5, 0, [0.25, -0.5, 1.0], k, [0.0, 0.0, 0.0], 0)
+    out = [0.0, 0.0, 0.0]
+    r.render(10, [0.1, 0.2, 0.3], out)
+    assert out == [0.25, -0.5, 1.0]
+    # The same state in contact: the stiffness term is there (a check that the branch above mattered).
+    h.push(6, 6, 1, [0.25, -0.5, 1.0], k, [0.0, 0.0, 0.0], 1)
+    r.render(10, [0.1, 0.2, 0.3], out)
+    np.testing.assert_allclose(out, [0.25 + 6e3, -0.5 + 6e3, 1.0 + 6e3], rtol=1e-15)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_empty_history_gives_zero_and_false(mode: str) -> None:
+    r = ForceRender(StateHistory(4), mode)
+    out = [1.0, -2.0, math.pi]
+    assert r.render(123_456_789, [0.1, 0.2, 0.3], out) is False
+    assert out == [0.0, 0.0, 0.0]
+    # After clear() the history is empty again.
+    h = r.history
+    h.push(1, 1, 0, [1.0, 1.0, 1.0], ZERO_K, ZERO_X, 0)
+    assert r.render(2, ZERO_X, out) is True and out == [1.0, 1.0, 1.0]
+    h.clear()
+    assert r.render(3, ZERO_X, out) is False and out == [0.0, 0.0, 0.0]
+
+
+def test_invalid_mode_is_refused_naming_the_modes() -> None:
+    with pytest.raises(ValueError) as e:
+        ForceRender(StateHistory(4), "cubic")
+    msg = str(e.value)
+    assert "cubic" in msg
+    for m in MODES:
+        assert m in msg
