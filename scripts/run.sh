@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Sets everything up, then runs the main job: the live server on the default
 # scene, serving client-web over HTTP and the protocol over WebSocket on one
-# port; it prints the URL to open and runs until Ctrl-C.
+# port, and the device bridge with the simulated arm poking the scene through
+# it (TACTILE_DEVICE=PROFILE picks another device profile, =none runs no
+# bridge). It prints the URL to open and runs until Ctrl-C.
 #   scripts/run.sh [SCENE.json] [tactile-server options...]
 # The headless simulator: build/release/tactile-sim run SCENE.json --out out
 set -euo pipefail
@@ -10,4 +12,37 @@ cd "$root"
 scripts/setup.sh
 scene="${1:-server/scenes/default.json}"
 shift || true
-exec "${TACTILE_BUILD:-build/release}/tactile-server" "$scene" --static client-web "$@"
+build="${TACTILE_BUILD:-build/release}"
+device="${TACTILE_DEVICE:-sim}"
+# A token of this run's own: the device role needs one.
+token="${TACTILE_TOKEN:-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')}"
+log="$(mktemp)"
+server=""
+bridge=""
+stop() {
+  [ -n "$bridge" ] && kill -INT "$bridge" 2>/dev/null || true
+  [ -n "$server" ] && kill -INT "$server" 2>/dev/null || true
+  wait 2>/dev/null || true
+  rm -f "$log"
+}
+trap stop EXIT
+trap 'exit 130' INT TERM
+
+"$build/tactile-server" "$scene" --static client-web --token "$token" "$@" > >(tee "$log") 2>&1 &
+server=$!
+url=""
+for _ in $(seq 1 600); do
+  url="$(grep -o 'listening on http://[^ ]*' "$log" | head -n1 | cut -d' ' -f3 || true)"
+  [ -n "$url" ] && break
+  kill -0 "$server" 2>/dev/null || break
+  sleep 0.1
+done
+if [ -n "$url" ] && [ "$device" != "none" ]; then
+  .venv/bin/tactile-bridge --server "${url/http:/ws:}" --token "$token" --profile "$device" --status 5 &
+  bridge=$!
+fi
+set +e
+wait "$server"
+status=$?
+server=""
+exit "$status"

@@ -109,6 +109,10 @@ struct IntegratorSpec {
   UnstablePolicy unstable = UnstablePolicy::Subdivide;  // fixed dt above the critical step
   int32_t threads = 1;             // element and node passes split this many ways
   double energy_tolerance = 0.05;  // energy growth allowed beyond the work done, relative
+  // The energy balance is checked over windows of this much simulated time [s]: the quadrature errors of
+  // the work sums (second order per step) add up without bound over a live session of hours, and the
+  // guard is there for blow-ups, which grow within milliseconds.
+  double energy_window = 1.0;
 };
 
 struct ModelSpec {

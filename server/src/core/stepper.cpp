@@ -325,6 +325,7 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     Energy e0 = compute_energy(s);
     e0.discrete = -0.125 * dt * dt * initial_ma2_;
     energy_reference_ = e0.balance();
+    energy_window_start_ = double(s.t);
     energy_ = e0;  // the kinetic energy at t_n for the dissipation trapezoid below
     energy_scale_ = std::fabs(e0.kinetic) + std::fabs(e0.elastic) + std::fabs(e0.gravity);
     energy_started_ = true;
@@ -455,6 +456,9 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
       msg << "energy grew by " << growth << " J beyond the work done (allowed " << allowed
           << " J); highest strain energy in elements " << list_ids(ids);
       fault = make_fault(Fault::Kind::EnergyGrowth, s, msg.str(), std::move(ids));
+    } else if (double(s.t) - energy_window_start_ >= model_.integrator.energy_window) {
+      energy_reference_ = energy_.balance();  // the next window's growth counts from here
+      energy_window_start_ = double(s.t);
     }
   }
   leave(Pass::Guard);

@@ -163,7 +163,8 @@ class Stepper {
   // body (trapezoid) shows in the balance a step later.
   double contact_given_ = 0;
   Energy energy_;
-  double energy_reference_ = 0;  // balance at the first step
+  double energy_reference_ = 0;  // balance at the start of the current window (the first step at first)
+  double energy_window_start_ = 0;  // simulated time the current window started [s]
   double energy_scale_ = 0;      // running max of the energy magnitudes [J]
   bool energy_started_ = false;
   Fault fault_;

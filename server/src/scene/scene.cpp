@@ -388,7 +388,8 @@ Effects read_effects(const Json& j, const Origin& o) {
 }
 
 IntegratorSpec read_integrator(const Json& j, const Origin& o) {
-  const Fields f(j, "integrator", o, {"precision", "dt", "safety", "unstable", "threads", "energy_tolerance"});
+  const Fields f(j, "integrator", o, {"precision", "dt", "safety", "unstable", "threads", "energy_tolerance",
+                                           "energy_window"});
   IntegratorSpec s;
   if (const Json* p = f.find("precision"))
     s.precision = scene_json::read_choice(*p, f.path("precision"), o, {"float", "double"}) == "float"
@@ -412,6 +413,7 @@ IntegratorSpec read_integrator(const Json& j, const Origin& o) {
                      : UnstablePolicy::Subdivide;
   s.threads = int32_t(f.integer_or("threads", 1, 256, 1));
   s.energy_tolerance = f.positive_or("energy_tolerance", s.energy_tolerance);
+  s.energy_window = f.positive_or("energy_window", s.energy_window);
   return s;
 }
 
