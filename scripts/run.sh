@@ -20,7 +20,8 @@ log="$(mktemp)"
 server=""
 bridge=""
 stop() {
-  [ -n "$bridge" ] && kill -INT "$bridge" 2>/dev/null || true
+  # TERM, not INT: a background job of a script starts with INT ignored.
+  [ -n "$bridge" ] && kill -TERM "$bridge" 2>/dev/null || true
   [ -n "$server" ] && kill -INT "$server" 2>/dev/null || true
   wait 2>/dev/null || true
   rm -f "$log"

@@ -52,9 +52,10 @@ def _pipe() -> tuple[int, int]:
     return r, w
 
 
-def _tick_process(profiles: Sequence[Profile], shm_name: str, wake_fd: int, opts: Options) -> None:
+def _tick_process(profiles: Sequence[Profile], shm_name: str, wake_fd: int, opts: Options, parent: int) -> None:
     """The tick's own process: opens the devices, ticks, and closes them (zero force) when told to stop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops us through the exchange
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     x = ex.Exchange(len(profiles), name=shm_name)
     try:
         devices = [make_device(p) for p in profiles]
@@ -72,7 +73,7 @@ def _tick_process(profiles: Sequence[Profile], shm_name: str, wake_fd: int, opts
             x.write_event(time.monotonic_ns(), 11, 0, 0.0, f"tick: {note}")
         x.i[ex.H_READY] = 1
         try:
-            tick.run()
+            tick.run(parent_pid=parent)
         finally:
             if opts.trace:
                 tick.save_trace(opts.trace)
@@ -104,7 +105,8 @@ class Bridge:
         if self.opts.network == "process":
             ctx = multiprocessing.get_context("fork")
             self._process = ctx.Process(target=_tick_process, name="tactile-tick",
-                                        args=(self.profiles, self.ex.name, self.wake_w, self.opts), daemon=True)
+                                        args=(self.profiles, self.ex.name, self.wake_w, self.opts, os.getpid()),
+                                        daemon=True)
             self._process.start()
         else:
             devices = self.devices or [make_device(p) for p in self.profiles]

@@ -212,8 +212,9 @@ class Tick:
             except Exception:  # noqa: BLE001 - closing the others matters more
                 pass
 
-    def run(self) -> None:
-        """Ticks until the exchange's stop word is set; closes the devices (zero force) on the way out."""
+    def run(self, parent_pid: int = 0) -> None:
+        """Ticks until the exchange's stop word is set (or, with `parent_pid`, that process is gone); closes the
+        devices (zero force) on the way out."""
         x = self.ex
         xi = x.i
         clock = self.clock
@@ -241,6 +242,8 @@ class Tick:
                 self.tick_once(now)
                 xi[ex.H_TICKS] += 1
                 xi[ex.H_TICK_ALIVE] = now
+                if parent_pid and xi[ex.H_TICKS] % 100 == 0 and os.getppid() != parent_pid:
+                    break  # the network side died without a word: stop, leaving the device at zero force
                 deadline += period
                 if now - deadline > self.max_backlog * period:
                     xi[ex.H_REANCHORS] += 1
