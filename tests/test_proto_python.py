@@ -31,6 +31,7 @@ from tactile_proto.generated.Message import Message
 from tactile_proto.generated.ProtocolMajor import ProtocolMajor
 from tactile_proto.generated.ProtocolMinor import ProtocolMinor
 from tactile_proto.generated.Role import Role
+from tactile_proto.generated.SafetyKind import SafetyKind
 from tactile_proto.generated.StateFrame import StateFrameT
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -265,6 +266,12 @@ def test_decoded_values_are_the_written_ones():
     assert (control.command.name, control.command.value) == ("damping.alpha", 2.5)
     error = tp.decode(golden("error")[1]).message
     assert error.code == ErrorCode.VersionMismatch
+    haptic = tp.decode(golden("haptic_frame")[1]).message
+    assert haptic.devicePoses[1].position.y == np.float32(0.4) and haptic.devicePoses[1].orientation.z == 0.5
+    assert haptic.deviceInputSequences.dtype == np.uint64 and list(haptic.deviceInputSequences) == [4242, 977]
+    safety = tp.decode(golden("safety_event")[1]).message
+    assert (safety.device, safety.kind, safety.forceN) == ("stylus", SafetyKind.Clipped, 5.0)
+    assert (safety.deviceTimeNs, safety.serverTimeNs) == (5000250123, 987654521012)
 
 
 # ---- (e) float arrays are views into the message ---------------------------------------------------------

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import math
 import os
 import pathlib
 import re
@@ -27,6 +28,7 @@ from tactile_proto import codec
 from tactile_proto.generated.Control import ControlT
 from tactile_proto.generated.ControlCommand import ControlCommand
 from tactile_proto.generated.DeviceInput import DeviceInputT
+from tactile_proto.generated.Envelope import Envelope
 from tactile_proto.generated.ErrorCode import ErrorCode
 from tactile_proto.generated.Hello import HelloT
 from tactile_proto.generated.Pause import PauseT
@@ -37,7 +39,10 @@ from tactile_proto.generated.Reset import ResetT
 from tactile_proto.generated.Resume import ResumeT
 from tactile_proto.generated.SetParameter import SetParameterT
 from tactile_proto.generated.StopRecording import StopRecordingT
+from tactile_proto.generated.Message import Message
 from tactile_proto.generated.Role import Role
+from tactile_proto.generated.SafetyEvent import SafetyEventT
+from tactile_proto.generated.SafetyKind import SafetyKind
 from tactile_proto.generated.Vec3d import Vec3dT
 
 TOKEN = "s3cret"
@@ -97,6 +102,12 @@ def url(port: int) -> str:
     return f"ws://127.0.0.1:{port}/ws"
 
 
+# For a client that stops reading while frames still stream in: the websockets client stops reading its
+# socket once max_queue messages wait unread, so at close it would not see the server's Close frame behind
+# them and would wait out close_timeout (10 s). Unbounded, it reads on and closes at once.
+READ_ON = {"max_queue": None}
+
+
 async def hello(ws: Any, role: int, token: str = "", devices: tuple[str, ...] = ()) -> list[Any]:
     """Says Hello; returns the Welcome and SceneDescription (or raises on an Error)."""
     await ws.send(codec.encode(codec.make_hello(role, token, "pytest", list(devices))))
@@ -116,16 +127,40 @@ async def next_of(ws: Any, kind: str, timeout: float = 5.0) -> Any:
             return msg
 
 
-def device_input(sequence: int, y: float) -> DeviceInputT:
+def message_type(raw: bytes) -> int:
+    """The type of a message, read without decoding it (Message.HapticFrame...)."""
+    return int(Envelope.GetRootAs(raw, 0).MessageType())
+
+
+async def next_error(ws: Any, timeout: float = 5.0) -> Any:
+    """The next Error on a device's connection: the haptic frames (thousands a second) are skipped without
+    being decoded, so that the client keeps up."""
+    end = time.monotonic() + timeout
+    while True:
+        raw = await asyncio.wait_for(ws.recv(), max(0.01, end - time.monotonic()))
+        if message_type(raw) == Message.Error:
+            return codec.decode(raw).message
+
+
+def device_input(sequence: int, y: float, x: float = 0.0, z: float = 0.0,
+                 orientation: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)) -> DeviceInputT:
     d = DeviceInputT()
     d.device = "stylus"
     d.sequence = sequence
     d.deviceTimeNs = time.monotonic_ns()
     d.position = Vec3dT()
-    d.position.x, d.position.y, d.position.z = 0.0, y, 0.0
+    d.position.x, d.position.y, d.position.z = x, y, z
     d.orientation = QuatdT()
-    d.orientation.w, d.orientation.x, d.orientation.y, d.orientation.z = 1.0, 0.0, 0.0, 0.0
+    d.orientation.w, d.orientation.x, d.orientation.y, d.orientation.z = orientation
     return d
+
+
+def safety_event(kind: int = SafetyKind.Clipped, message: str = "force 6.5 N over the limit: scaled to 5 N",
+                 force_N: float = 5.0, device: str = "stylus") -> SafetyEventT:
+    e = SafetyEventT()
+    e.device, e.kind, e.message, e.forceN = device, kind, message, force_N
+    e.deviceTimeNs = 123_456_789_012
+    return e  # server_time_ns 0: the server stamps it
 
 
 def control(command_type: int, command: Any, request_id: int = 1) -> ControlT:
@@ -220,6 +255,133 @@ def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_pa
 
     with running_server(tmp_path) as (port, _):
         asyncio.run(run(port))
+
+
+def test_haptic_frames_carry_the_device_pose_and_its_newest_input(tmp_path: pathlib.Path) -> None:
+    """Per device channel, each haptic frame says where the channel's proxy was at its step and which of the
+    channel's inputs it had seen: the pose follows the inputs, the sequence is the newest one sent."""
+    turn = (math.cos(math.radians(15)), 0.0, math.sin(math.radians(15)), 0.0)  # 30 degrees about y
+    target = (0.005, 0.035, -0.003)  # above the block: no contact on the way
+
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as ws:
+            await hello(ws, Role.Device, TOKEN, ("stylus",))
+            first = await next_of(ws, "HapticFrameT")
+            assert list(first.deviceInputSequences) == [0], "no input seen yet"
+            p = first.devicePoses[0]
+            assert (p.position.x, p.position.y, p.position.z) == pytest.approx((0, 0.029, 0), abs=1e-7)
+            assert (p.orientation.w, p.orientation.y) == (1.0, 0.0)
+            received: list[bytes] = []
+
+            async def read() -> None:
+                while True:
+                    received.append(await ws.recv())
+
+            reader = asyncio.create_task(read())
+            # 50 inputs at 1 kHz from where it rests to the target, turning, sequences 501..550.
+            sent = []
+            for k in range(1, 51):
+                a = k / 50
+                sent.append(500 + k)
+                await ws.send(codec.encode(device_input(500 + k, 0.029 + a * (target[1] - 0.029), a * target[0],
+                                                        a * target[2], turn)))
+                await asyncio.sleep(0.001)
+            await asyncio.sleep(0.2)  # the last input glides in over one input interval
+            reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await reader
+            frames = [codec.decode(raw).message for raw in received if message_type(raw) == Message.HapticFrame]
+            assert len(frames) > 200
+            sequences = [int(f.deviceInputSequences[0]) for f in frames]
+            assert sequences == sorted(sequences) and set(sequences) <= {0, *sent}
+            assert len(set(sequences)) > 10, "the frames follow the inputs as they come"
+            last = frames[-1]
+            assert sequences[-1] == 550 and last.lastInputSequence == 550
+            pose = last.devicePoses[0]
+            assert (pose.position.x, pose.position.y, pose.position.z) == pytest.approx(target, abs=1e-6)
+            assert (pose.orientation.w, pose.orientation.x, pose.orientation.y, pose.orientation.z) == \
+                pytest.approx(turn, abs=1e-6)
+            # A channel that drives one proxy alone: the device pose is that proxy's, in every frame.
+            for f in frames[:: max(1, len(frames) // 50)]:
+                d, q = f.devicePoses[0], f.proxies[0].pose
+                assert (d.position.x, d.position.y, d.position.z) == (q.position.x, q.position.y, q.position.z)
+                assert (d.orientation.w, d.orientation.y) == (q.orientation.w, q.orientation.y)
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+def test_safety_events_are_stamped_logged_and_relayed_to_viewers_and_controllers(tmp_path: pathlib.Path) -> None:
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as dev, websockets.connect(url(port), **READ_ON) as view, \
+                websockets.connect(url(port), **READ_ON) as ctl:
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            await hello(view, Role.Viewer)
+            await hello(ctl, Role.Controller, TOKEN)
+            # A 1.1 viewer: its codec would refuse a message type it does not know, so it gets none.
+            old = await websockets.connect(url(port), **READ_ON)
+            old_hello = codec.make_hello(Role.Viewer)
+            old_hello.protocolMinor = 1
+            await old.send(codec.encode(old_hello))
+            assert message_type(await asyncio.wait_for(old.recv(), 5)) == Message.Welcome
+            before = time.monotonic_ns()  # the server's clock is the same monotonic clock
+            await dev.send(codec.encode(safety_event()))
+            for ws in (view, ctl):
+                got = await next_of(ws, "SafetyEventT")
+                assert before <= got.serverTimeNs <= time.monotonic_ns(), "stamped with the server clock on relay"
+                assert (got.device, got.kind, got.message, got.forceN, got.deviceTimeNs) == \
+                    ("stylus", SafetyKind.Clipped, "force 6.5 N over the limit: scaled to 5 N", 5.0, 123_456_789_012)
+            old_types = []  # what it gets over the next 0.3 s (states keep coming: a timeout alone would not end it)
+            end = time.monotonic() + 0.3
+            with contextlib.suppress(asyncio.TimeoutError):
+                while time.monotonic() < end:
+                    old_types.append(message_type(await asyncio.wait_for(old.recv(), end - time.monotonic())))
+            assert Message.StateFrame in old_types and Message.SafetyEvent not in old_types
+            await old.close()
+
+            # Refused, each by name, and not relayed: a channel this device did not name, a kind this version
+            # does not know, a force that is not finite, a message over the bound; and from a viewer.
+            await dev.send(codec.encode(safety_event(device="left")))
+            err = await next_error(dev)
+            assert err.code == ErrorCode.BadRequest and "'left'" in err.message and "Hello" in err.message
+            await dev.send(codec.encode(safety_event(kind=99)))
+            err = await next_error(dev)
+            assert err.code == ErrorCode.BadRequest and "unknown kind 99" in err.message
+            await dev.send(codec.encode(safety_event(force_N=math.nan)))
+            err = await next_error(dev)
+            assert err.code == ErrorCode.BadRequest and "finite" in err.message
+            await dev.send(codec.encode(safety_event(message="x" * 5000)))
+            err = await next_error(dev)
+            assert err.code == ErrorCode.BadRequest and "5000 bytes" in err.message
+            await view.send(codec.encode(safety_event()))
+            err = await next_of(view, "ErrorT")
+            assert err.code == ErrorCode.WrongRole and "Device role" in err.message
+            await dev.send(codec.encode(safety_event(SafetyKind.Disengaged, "states stopped: force to zero", 0.0)))
+            got = await next_of(view, "SafetyEventT")
+            assert (got.kind, got.message) == (SafetyKind.Disengaged, "states stopped: force to zero")
+
+            # Over 100 events a second: the excess is dropped, the device told once, the connection kept;
+            # the events relayed come in order, none lost to the states the viewer gets meanwhile.
+            for k in range(250):
+                await dev.send(codec.encode(safety_event(SafetyKind.Other, f"burst {k}", 1.0)))
+            err = await next_error(dev)
+            assert err.code == ErrorCode.RateLimited and "100 safety events per second" in err.message
+            burst = []
+            with contextlib.suppress(asyncio.TimeoutError):
+                while True:
+                    burst.append(await next_of(view, "SafetyEventT", timeout=0.5))
+            numbers = [int(e.message.split()[1]) for e in burst]
+            assert 95 <= len(numbers) <= 130, len(numbers)
+            assert numbers == sorted(numbers) and numbers[:90] == list(range(90))
+            assert message_type(await asyncio.wait_for(dev.recv(), 5)) == Message.HapticFrame, "still served"
+
+    with running_server(tmp_path) as (port, proc):
+        asyncio.run(run(port))
+    assert proc.stdout is not None
+    log = proc.stdout.read()
+    assert "safety: stylus Clipped force 6.5 N over the limit: scaled to 5 N" in log, log[-2000:]
+    assert "safety: stylus Disengaged states stopped: force to zero" in log
+    assert "dropped" in log, "the events dropped over the rate limit are counted"
 
 
 def test_controller_pauses_and_resumes_and_one_at_a_time(tmp_path: pathlib.Path) -> None:

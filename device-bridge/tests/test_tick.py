@@ -157,6 +157,8 @@ def test_faults_zero_the_force_within_the_slew_limit(rig: Rig, fault: str) -> No
         assert out[first + 8] > 0.0
         assert out[-1] == 0.0
     assert expect in [e[1] for e in rig.events()]
+    # the force each event carries is a magnitude, finite and >= 0, as the server accepts it
+    assert all(math.isfinite(e[3]) and e[3] >= 0.0 for e in rig.events())
     assert rig.tick.channels[0].safety.mode == Mode.WAITING
 
 

@@ -157,16 +157,18 @@ def read_state(data: bytes) -> float:
 
 
 class HapticData:
-    """What a HapticFrame carries: 23 numbers per proxy (force, torque, pose, stiffness, contacts) and 16
-    per device (force, torque, stiffness, contacts)."""
+    """What a HapticFrame carries: 23 numbers per proxy (force, torque, pose, stiffness, contacts) and 24
+    per device (force, torque, stiffness, contacts; pose; newest input sequence)."""
 
     def __init__(self, n_proxies: int, rng: np.random.Generator) -> None:
         self.proxies = [rng.uniform(-1, 1, 22).tolist() + [3] for _ in range(n_proxies)]
         self.devices = [rng.uniform(-1, 1, 15).tolist() + [3 * n_proxies]]
+        self.device_poses = [rng.uniform(-1, 1, 7).tolist()]
+        self.sequences = np.full(1, 42, dtype=np.uint64)
 
 
 def encode_haptic(d: HapticData) -> bytes:
-    b = flatbuffers.Builder(128 + 92 * len(d.proxies) + 64 * len(d.devices))
+    b = flatbuffers.Builder(128 + 92 * len(d.proxies) + 100 * len(d.devices))
     # A vector of structs is written back to front.
     hf.HapticFrameStartProxiesVector(b, len(d.proxies))
     for p in reversed(d.proxies):
@@ -176,6 +178,11 @@ def encode_haptic(d: HapticData) -> bytes:
     for dev in reversed(d.devices):
         CreateDeviceHaptics(b, *dev)
     devices = b.EndVector()
+    hf.HapticFrameStartDevicePosesVector(b, len(d.device_poses))
+    for pose in reversed(d.device_poses):
+        CreateProxyPose(b, *pose)
+    device_poses = b.EndVector()
+    sequences = b.CreateNumpyVector(d.sequences)
     hf.HapticFrameStart(b)
     hf.HapticFrameAddSceneId(b, 1)
     hf.HapticFrameAddStep(b, 1000)
@@ -184,6 +191,8 @@ def encode_haptic(d: HapticData) -> bytes:
     hf.HapticFrameAddLastInputSequence(b, 42)
     hf.HapticFrameAddProxies(b, proxies)
     hf.HapticFrameAddDevices(b, devices)
+    hf.HapticFrameAddDevicePoses(b, device_poses)
+    hf.HapticFrameAddDeviceInputSequences(b, sequences)
     return seal(b, Message.HapticFrame, hf.HapticFrameEnd(b))
 
 
@@ -195,6 +204,9 @@ def decode_haptic(data: bytes) -> float:
         s += _sum_fields(p.pose.orientation) + _sum_fields(p.stiffness) + p.contacts
     for dev in frame.devices:
         s += _sum_fields(dev.force) + _sum_fields(dev.torque) + _sum_fields(dev.stiffness) + dev.contacts
+    for pose in frame.devicePoses:
+        s += _sum_fields(pose.position) + _sum_fields(pose.orientation)
+    s += float(frame.deviceInputSequences.sum())
     return s
 
 
@@ -211,6 +223,10 @@ def read_haptic(data: bytes) -> float:
     for i in range(frame.DevicesLength()):
         dev = frame.Devices(i)
         s += _read_vec(dev.Force(x)) + _read_vec(dev.Torque(x)) + _read_mat(dev.Stiffness(m)) + dev.Contacts()
+    for i in range(frame.DevicePosesLength()):
+        p = frame.DevicePoses(i)
+        s += _read_vec(p.Position(x)) + _read_quat(p.Orientation(q))
+    s += float(frame.DeviceInputSequencesAsNumpy().sum())
     return s
 
 

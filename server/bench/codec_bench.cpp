@@ -129,6 +129,8 @@ double read_haptic(std::span<const uint8_t> bytes, bool verify) {
     s += sum(p->force()) + sum(p->torque()) + sum(p->pose()) + sum(p->stiffness()) + p->contacts();
   for (const wire::DeviceHaptics* d : *f->devices())
     s += sum(d->force()) + sum(d->torque()) + sum(d->stiffness()) + d->contacts();
+  for (const wire::ProxyPose* p : *f->device_poses()) s += sum(*p);
+  for (uint64_t q : *f->device_input_sequences()) s += double(q);
   return s;
 }
 
@@ -166,8 +168,10 @@ size_t build_state(flatbuffers::FlatBufferBuilder& b, const StateArrays& a) {
 }
 
 struct HapticArrays {
-  std::vector<wire::ProxyHaptics> proxies;  // (n_proxies)
+  std::vector<wire::ProxyHaptics> proxies;   // (n_proxies)
   std::vector<wire::DeviceHaptics> devices;  // (n_devices)
+  std::vector<wire::ProxyPose> device_poses;  // (n_devices)
+  std::vector<uint64_t> sequences;           // (n_devices)
 };
 
 HapticArrays copy_haptic(std::span<const uint8_t> bytes) {
@@ -175,6 +179,8 @@ HapticArrays copy_haptic(std::span<const uint8_t> bytes) {
   HapticArrays a;
   for (const wire::ProxyHaptics* p : *f->proxies()) a.proxies.push_back(*p);
   for (const wire::DeviceHaptics* d : *f->devices()) a.devices.push_back(*d);
+  for (const wire::ProxyPose* p : *f->device_poses()) a.device_poses.push_back(*p);
+  a.sequences.assign(f->device_input_sequences()->begin(), f->device_input_sequences()->end());
   return a;
 }
 
@@ -182,8 +188,10 @@ size_t build_haptic(flatbuffers::FlatBufferBuilder& b, const HapticArrays& a) {
   b.Clear();
   const auto proxies = b.CreateVectorOfStructs(a.proxies.data(), a.proxies.size());
   const auto devices = b.CreateVectorOfStructs(a.devices.data(), a.devices.size());
+  const auto device_poses = b.CreateVectorOfStructs(a.device_poses.data(), a.device_poses.size());
+  const auto sequences = b.CreateVector(a.sequences);
   return seal(b, wire::Message::HapticFrame,
-              wire::CreateHapticFrame(b, 1, 1000, 0.2, 123456789, 42, proxies, devices));
+              wire::CreateHapticFrame(b, 1, 1000, 0.2, 123456789, 42, proxies, devices, device_poses, sequences));
 }
 
 struct Row {
@@ -238,13 +246,15 @@ int run(int argc, char** argv) {
     Simulation sim(slab_spec(200, n_proxies));  // a haptic frame does not depend on the mesh
     sim.advance(1e-3);
     FrameEncoder frames(sim, "bench", 1, 0.0);
-    const std::span<const uint8_t> first = frames.haptic_frame(123456789, 42);
+    frames.add_step_forces();
+    const std::vector<uint64_t> sequences(sim.devices().size(), 42);  // the newest input per channel
+    const std::span<const uint8_t> first = frames.haptic_frame(123456789, 42, sequences);
     const std::vector<uint8_t> bytes(first.begin(), first.end());
     const HapticArrays arrays = copy_haptic(bytes);
     Row r;
     r.name = "haptic " + std::to_string(n_proxies) + "p/" + std::to_string(sim.devices().size()) + "d";
     r.bytes = bytes.size();
-    r.encode = time_per_call([&] { return double(frames.haptic_frame(123456789, 42).size()); }, repeats);
+    r.encode = time_per_call([&] { return double(frames.haptic_frame(123456789, 42, sequences).size()); }, repeats);
     r.builder = time_per_call([&] { return double(build_haptic(builder, arrays)); }, repeats);
     r.decode = time_per_call([&] { return read_haptic(bytes, true); }, repeats);
     r.read = time_per_call([&] { return read_haptic(bytes, false); }, repeats);

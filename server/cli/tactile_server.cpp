@@ -48,6 +48,8 @@ constexpr const char* kUsage =
     "  --scenes DIR         scenes a controller may load (default: the scene file's folder)\n"
     "  --dt S               simulation step (default: the scene's fixed step, else 0.7 x critical at rest)\n"
     "  --state-rate HZ      state frames per second to viewers (default 30)\n"
+    "  --haptic-rate HZ     haptic frames per second to devices at most (default: one after every step)\n"
+    "  --force-window S     haptic forces are means over S, and over the frame interval at least (default 0.001)\n"
     "  --variant NAME       run this variant of the scene (default: the first)\n"
     "  --duration S         stop after S simulated seconds (default: run until stopped)\n"
     "\n"
@@ -62,6 +64,8 @@ struct Options {
   ServerOptions server;
   std::optional<double> dt, duration;
   double state_rate = 30;
+  double haptic_rate = 0;
+  double force_window = 1e-3;
   std::optional<std::string> variant;
   std::optional<std::string> scenes_dir;
 };
@@ -101,6 +105,12 @@ Options parse_args(int argc, char** argv) {
     } else if (a == "--state-rate") {
       o.state_rate = number(a, value());
       if (!(o.state_rate > 0)) throw BadInput{"--state-rate must be > 0"};
+    } else if (a == "--haptic-rate") {
+      o.haptic_rate = number(a, value());
+      if (!(o.haptic_rate > 0)) throw BadInput{"--haptic-rate must be > 0"};
+    } else if (a == "--force-window") {
+      o.force_window = number(a, value());
+      if (!(o.force_window > 0 && o.force_window <= 0.1)) throw BadInput{"--force-window must be in (0, 0.1] s"};
     } else if (a == "--variant") o.variant = value();
     else if (a == "--duration") o.duration = number(a, value());
     else if (!a.empty() && a[0] == '-') throw BadInput{"unknown option " + a};
@@ -130,6 +140,8 @@ int main(int argc, char** argv) {
     LiveOptions live;
     live.dt = o.dt;
     live.state_rate_hz = o.state_rate;
+    live.haptic_rate_hz = o.haptic_rate;
+    live.force_window = o.force_window;
     auto first = std::make_shared<LiveScene>(*scene, 1, live);
     Director director(first);
     ServerOptions server_options = o.server;
@@ -145,6 +157,10 @@ int main(int argc, char** argv) {
     std::printf("tactile-server: scene %s%s, %d tets, %d nodes, step %g s, %zu proxies\n", scene->name.c_str(),
                 scene->variant.empty() ? "" : ("/" + scene->variant).c_str(), sim.n_tets(), sim.n_nodes(),
                 first->loop().dt(), sim.proxies().size());
+    const double every = double(first->loop().haptic_every());
+    std::printf("tactile-server: haptic frames every %g step%s (%.0f Hz), forces over %g ms\n", every,
+                every == 1 ? "" : "s", 1.0 / (every * first->loop().dt()),
+                1e3 * double(first->frames().force_window_steps()) * first->loop().dt());
     std::printf("tactile-server: listening on http://%s:%u/ (WebSocket on the same port)\n", o.server.bind.c_str(),
                 unsigned(server.port()));
     std::fflush(stdout);

@@ -62,6 +62,12 @@ inline uint64_t walk_inbound(const uint8_t* data, size_t size) {
       if (const proto::StartRecording* c = m->command_as_StartRecording()) h += read_string(c->path());
       break;
     }
+    case proto::Message::SafetyEvent: {
+      const proto::SafetyEvent* m = e.message_as_SafetyEvent();
+      h += read_string(m->device()) + read_string(m->message()) + uint64_t(m->kind()) + uint64_t(m->device_time_ns()) +
+           check_safety_event(*m).size();
+      break;
+    }
     case proto::Message::Ping: h += e.message_as_Ping()->id(); break;
     case proto::Message::StateFrame: {  // (servers send these; read them anyway: bytes are bytes)
       const proto::StateFrame* m = e.message_as_StateFrame();

@@ -81,6 +81,9 @@ def _tick_process(profiles: Sequence[Profile], shm_name: str, wake_fd: int, opts
         x.close()
 
 
+NETWORK_NICE = -10  # the network process's nice value when the tick runs SCHED_FIFO
+
+
 class Bridge:
     def __init__(self, profiles: Sequence[Profile], opts: Options, devices: Sequence[Device] | None = None) -> None:
         if opts.network not in ("thread", "process"):
@@ -108,6 +111,14 @@ class Bridge:
                                         args=(self.profiles, self.ex.name, self.wake_w, self.opts, os.getpid()),
                                         daemon=True)
             self._process.start()
+            if self.opts.priority > 0:
+                # The network side feeds the tick its states: on a busy machine it is what runs late first
+                # (states that arrive late lengthen the display delay), so it goes ahead of ordinary
+                # processes too, below the tick.
+                try:
+                    os.setpriority(os.PRIO_PROCESS, 0, NETWORK_NICE)
+                except OSError as e:
+                    log.info("network: nice %d refused (%s): at normal priority", NETWORK_NICE, e.strerror)
         else:
             devices = self.devices or [make_device(p) for p in self.profiles]
             self.devices = devices

@@ -78,7 +78,7 @@ class StatusLine:
         link = (f"link {net.scene_name!r} {frames:.0f} st/s rtt {net.sync.last_rtt_ns / 1e6:.2f} ms"
                 if x.i[ex.H_LINK] else f"link down{': ' + net.last_error if net.last_error else ''}")
         parts = [f"tick {rate:.0f} Hz {late} missed {x.i[ex.H_MISSED]}",
-                 f"delay {x.i[ex.H_DELAY_NS] / 1e6:.2f} ms (step {x.i[ex.H_DT_NS] / 1e6:.2f} + net "
+                 f"delay {x.i[ex.H_DELAY_NS] / 1e6:.2f} ms (state interval {x.i[ex.H_DT_NS] / 1e6:.2f} + net "
                  f"{x.i[ex.H_ALLOW_NS] / 1e6:.2f})", link]
         for k, p in enumerate(b.profiles):
             bi, bd = x.status_base(k)
@@ -206,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
                 "late_p50_us": ex.percentile_us(hist, 0.5), "late_p99_us": ex.percentile_us(hist, 0.99),
                 "late_p999_us": ex.percentile_us(hist, 0.999), "late_max_us": x.i[ex.H_LATE_MAX] / 1e3,
                 "missed": x.i[ex.H_MISSED], "reanchors": x.i[ex.H_REANCHORS], "states": net.frames,
-                "bad_states": net.bad_frames, "delay_ms": x.i[ex.H_DELAY_NS] / 1e6, "step_ms": x.i[ex.H_DT_NS] / 1e6,
+                "bad_states": net.bad_frames, "delay_ms": x.i[ex.H_DELAY_NS] / 1e6, "state_interval_ms": x.i[ex.H_DT_NS] / 1e6,
                 "allowance_ms": x.i[ex.H_ALLOW_NS] / 1e6, "rtt_best_ms": net.sync.best_rtt_ns / 1e6,
                 "clock_offset_us": net.sync.offset_ns(time.monotonic_ns()) / 1e3 if net.sync.synced else None,
                 "connects": net.connects, "events": x.i[ex.H_EVENTS],

@@ -33,7 +33,7 @@ H_LINK = 2                 # 1 while connected to the server with a scene
 H_SCENE_GEN = 3            # bumped for every new scene (reset, load): the tick forgets old states
 H_FAULT = 4                # 1 while the server reports a fault
 H_DELAY_NS = 5             # display delay of the 'delay' mode [ns]
-H_DT_NS = 6                # simulation step [ns]
+H_DT_NS = 6                # interval between states: the simulation step, or longer if the server skips [ns]
 H_TICKS = 7                # ticks done
 H_MISSED = 8               # ticks that started more than one period late
 H_REANCHORS = 9            # stalls the tick gave up catching up on
@@ -183,7 +183,9 @@ class Exchange:
         raw = message.encode("utf-8")[:EVENT_TEXT]
         i[bi] = 2 * count + 1
         i[bi + 1], i[bi + 2], i[bi + 3], i[bi + 4] = time_ns, kind, device, len(raw)
-        self.d[self._ev_d + slot] = force_N if math.isfinite(force_N) else -1.0
+        # the force at the event: a magnitude, finite and >= 0 as the protocol wants (a non-finite force
+        # is the event's cause, named in its message)
+        self.d[self._ev_d + slot] = abs(force_N) if math.isfinite(force_N) else 0.0
         self.text[slot * EVENT_TEXT: slot * EVENT_TEXT + len(raw)] = raw
         i[bi] = 2 * count + 2
         i[H_EVENTS] = count + 1

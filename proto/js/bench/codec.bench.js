@@ -139,12 +139,17 @@ function readState(bytes) {
 
 // ---- haptic frames ---------------------------------------------------------
 
-// 23 numbers per proxy (force, torque, pose, stiffness, contacts), 16 per
-// device (force, torque, stiffness, contacts).
+// 23 numbers per proxy (force, torque, pose, stiffness, contacts), 24 per
+// device (force, torque, stiffness, contacts; pose; newest input sequence).
 function makeHaptic(nProxies) {
   const proxies = [];
   for (let j = 0; j < nProxies; j++) proxies.push([...uniform(22, -1, 1), 3]);
-  return { proxies, devices: [[...uniform(15, -1, 1), 3 * nProxies]] };
+  return {
+    proxies,
+    devices: [[...uniform(15, -1, 1), 3 * nProxies]],
+    devicePoses: [uniform(7, -1, 1)],
+    sequences: [42n],
+  };
 }
 
 function encodeHaptic(b, d) {
@@ -156,7 +161,12 @@ function encodeHaptic(b, d) {
   HapticFrame.startDevicesVector(b, d.devices.length);
   for (let j = d.devices.length - 1; j >= 0; j--) DeviceHaptics.createDeviceHaptics(b, ...d.devices[j]);
   const devices = b.endVector();
-  const frame = HapticFrame.createHapticFrame(b, 1, 1000n, 0.2, 123456789n, 42n, proxies, devices);
+  HapticFrame.startDevicePosesVector(b, d.devicePoses.length);
+  for (let j = d.devicePoses.length - 1; j >= 0; j--) ProxyPose.createProxyPose(b, ...d.devicePoses[j]);
+  const devicePoses = b.endVector();
+  const sequences = HapticFrame.createDeviceInputSequencesVector(b, d.sequences);
+  const frame = HapticFrame.createHapticFrame(b, 1, 1000n, 0.2, 123456789n, 42n, proxies, devices, devicePoses,
+    sequences);
   return seal(b, Message.HapticFrame, frame);
 }
 
@@ -173,6 +183,8 @@ function decodeHaptic(bytes) {
     s += sumMat(p.stiffness) + p.contacts;
   }
   for (const d of f.devices) s += sumVec(d.force) + sumVec(d.torque) + sumMat(d.stiffness) + d.contacts;
+  for (const pose of f.devicePoses) s += sumVec(pose.position) + sumQuat(pose.orientation);
+  for (const q of f.deviceInputSequences) s += Number(q);
   return s;
 }
 
@@ -197,6 +209,12 @@ function readHaptic(bytes) {
     f.devices(i, d);
     s += readVec(d.force()) + readVec(d.torque()) + readMat(d.stiffness()) + d.contacts();
   }
+  const pose = new ProxyPose();
+  for (let i = 0; i < f.devicePosesLength(); i++) {
+    f.devicePoses(i, pose);
+    s += readVec(pose.position()) + readQuat(pose.orientation());
+  }
+  for (let i = 0; i < f.deviceInputSequencesLength(); i++) s += Number(f.deviceInputSequences(i));
   return s;
 }
 

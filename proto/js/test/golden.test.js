@@ -84,6 +84,15 @@ test('typed reads of the vectors see the written values', () => {
   assert.equal(state.proxies[1].orientation.x, 0.5);
   assert.equal(byName.haptic_frame.proxies[0].stiffness.m12, 5);
   assert.equal(byName.haptic_frame.devices[0].contacts, 12);
+  assert.equal(byName.haptic_frame.devicePoses[1].position.y, Math.fround(0.4));
+  assert.deepEqual(byName.haptic_frame.deviceInputSequences, [4242n, 977n]);
+  const safety = byName.safety_event;
+  assert.ok(safety instanceof proto.SafetyEventT);
+  assert.equal(safety.device, 'stylus');
+  assert.equal(safety.kind, proto.SafetyKind.Clipped);
+  assert.equal(safety.deviceTimeNs, 5000250123n);
+  assert.equal(safety.serverTimeNs, 987654521012n);
+  assert.equal(safety.forceN, 5);
   assert.equal(byName.device_input.orientation.w, 0.7071067811865476);
   assert.equal(byName.control_set_parameter.command.value, 2.5);
   assert.equal(byName.error.code, proto.ErrorCode.VersionMismatch);

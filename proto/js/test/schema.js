@@ -48,7 +48,8 @@ export function parseSchema(text) {
 
 export const schema = parseSchema(readFileSync(SCHEMA_PATH, 'utf8'));
 
-const camel = (name) => name.replace(/_([a-z0-9])/g, (_, c) => c.toUpperCase());
+// (flatc's camel case: force_N -> forceN, as protocol_major -> protocolMajor.)
+const camel = (name) => name.replace(/_([a-zA-Z0-9])/g, (_, c) => c.toUpperCase());
 const isVector = (type) => type.startsWith('[');
 const elementOf = (type) => type.slice(1, -1);
 

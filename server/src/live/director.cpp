@@ -1,6 +1,8 @@
 #include "live/director.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <thread>
 
 #include "scene/parameters.hpp"
@@ -19,7 +21,16 @@ RealtimeOptions loop_options(double dt, const LiveOptions& options) {
   RealtimeOptions ro;
   ro.dt = dt;
   ro.state_rate_hz = options.state_rate_hz;
+  ro.haptic_rate_hz = options.haptic_rate_hz;
   return ro;
+}
+
+// The haptic forces' window: as asked, and never shorter than the interval
+// between haptic frames, so that every step's force reaches a frame.
+double window_for(double dt, const LiveOptions& options) {
+  double w = options.force_window;
+  if (options.haptic_rate_hz > 0) w = std::max(w, std::ceil(1.0 / (options.haptic_rate_hz * dt) - 1e-9) * dt);
+  return w;
 }
 
 }  // namespace
@@ -28,7 +39,7 @@ LiveScene::LiveScene(Scene scene, uint32_t id, const LiveOptions& options)
     : scene_(std::move(scene)),
       id_(id),
       sim_(scene_.spec),
-      frames_(sim_, scene_.name, id_, step_for(scene_, sim_, options)),
+      frames_(sim_, scene_.name, id_, step_for(scene_, sim_, options), window_for(step_for(scene_, sim_, options), options)),
       loop_(sim_, frames_, loop_options(step_for(scene_, sim_, options), options)) {}
 
 std::vector<uint8_t> LiveScene::describe(std::span<const std::string> scenes) {

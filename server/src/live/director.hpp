@@ -28,6 +28,8 @@ namespace tactile {
 struct LiveOptions {
   std::optional<double> dt;  // the step [s]; unset: the scene's fixed step, else 0.7 x the critical step at rest
   double state_rate_hz = 30;
+  double haptic_rate_hz = 0;   // haptic frames per second at most (0: after every step)
+  double force_window = 1e-3;  // haptic forces are means over this [s], and at least over the frame interval
 };
 
 // One scene running live. Built on any thread; once handed to a Director,

@@ -27,6 +27,13 @@ Surface extract_surface(const TetMesh& mesh) {
   return s;
 }
 
+int32_t compute_device_hand(const Simulation& sim, int32_t device) {
+  const std::string& name = sim.devices()[size_t(device)];
+  for (size_t h = 0; h < sim.hands().size(); ++h)
+    if (sim.hands()[h].device == name) return int32_t(h);
+  return -1;
+}
+
 namespace {
 
 wire::Vec3f to_wire(const Vec3& v) { return {float(v.x), float(v.y), float(v.z)}; }
@@ -63,7 +70,17 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   forces_.resize(sim.proxies().size());
   proxy_haptics_.resize(sim.proxies().size());
   device_haptics_.resize(sim.devices().size());
+  device_poses_.resize(sim.devices().size());
+  input_sequences_.resize(sim.devices().size());
+  device_hand_.resize(sim.devices().size());
+  device_proxy_.assign(sim.devices().size(), -1);
+  for (size_t d = 0; d < sim.devices().size(); ++d) device_hand_[d] = compute_device_hand(sim, int32_t(d));
+  // (Every channel has a proxy: the model makes its channels from them.)
+  for (size_t j = sim.proxies().size(); j-- > 0;) device_proxy_[size_t(sim.proxy_device()[j])] = int32_t(j);
+  // An even number of steps: a resting contact's bounce often pulses every
+  // other step, which an odd window would turn into a frame-to-frame flicker.
   window_steps_ = size_t(std::max(1.0, std::round(force_window / (dt > 0 ? dt : 0.7 * sim.dt_rest()))));
+  window_steps_ += window_steps_ % 2;
   window_proxy_.resize(window_steps_ * sim.proxies().size());
   window_device_.resize(window_steps_ * sim.devices().size());
   sum_proxy_.resize(sim.proxies().size());
@@ -126,41 +143,70 @@ std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
   return seal(b, wire::Message::StateFrame, f.Finish());
 }
 
-std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence) {
-  fb::FlatBufferBuilder& b = haptic_builder_;
-  b.Clear();
-  const std::vector<ProxyReport>& pr = sim_.proxy_reports();
-  const std::vector<DeviceReport>& dr = sim_.device_reports();
+void FrameEncoder::add_step_forces() {
   // The force over the last force window (a millisecond by default): the
   // mean of the per-step contact forces, which is what changed the body's
   // momentum over it. A resting contact pushes its nodes back only every few
   // steps (the paper's projection bounces a node back to where it was, eq.
   // 13), so the force at one step flickers between 0 and several times its
   // mean; its mean over the window does not.
+  // Each entry is the mean over the latest advance, its impulse over its
+  // time: an advance the stepper split into sub-steps counts all of them (the
+  // force of its last sub-step alone would alias with the bounce, which often
+  // comes every other step).
+  const std::vector<ProxyReport>& pr = sim_.proxy_reports();
+  const std::vector<DeviceReport>& dr = sim_.device_reports();
+  const auto mean = [](const ContactReport& r) {
+    return r.elapsed > 0 ? Wrench{r.impulse / r.elapsed, r.angular_impulse / r.elapsed} : Wrench{r.force, r.torque};
+  };
   const size_t slot = window_next_;
   window_next_ = (window_next_ + 1) % window_steps_;
   window_filled_ = std::min(window_filled_ + 1, window_steps_);
-  const double inv = 1.0 / double(window_filled_);
   for (size_t j = 0; j < pr.size(); ++j) {
     Wrench& old = window_proxy_[slot * pr.size() + j];
-    sum_proxy_[j].force += pr[j].force - old.force;
-    sum_proxy_[j].torque += pr[j].torque - old.torque;
-    old = {pr[j].force, pr[j].torque};
+    const Wrench now = mean(pr[j]);
+    sum_proxy_[j].force += now.force - old.force;
+    sum_proxy_[j].torque += now.torque - old.torque;
+    old = now;
+  }
+  for (size_t d = 0; d < dr.size(); ++d) {
+    Wrench& old = window_device_[slot * dr.size() + d];
+    const Wrench now = mean(dr[d]);
+    sum_device_[d].force += now.force - old.force;
+    sum_device_[d].torque += now.torque - old.torque;
+    old = now;
+  }
+}
+
+std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence,
+                                                    std::span<const uint64_t> input_sequences) {
+  fb::FlatBufferBuilder& b = haptic_builder_;
+  b.Clear();
+  const std::vector<ProxyReport>& pr = sim_.proxy_reports();
+  const std::vector<DeviceReport>& dr = sim_.device_reports();
+  const double inv = 1.0 / double(std::max<size_t>(window_filled_, 1));
+  for (size_t j = 0; j < pr.size(); ++j) {
     const Pose p = sim_.proxy_pose(int32_t(j));
     proxy_haptics_[j] = wire::ProxyHaptics(to_wire(inv * sum_proxy_[j].force), to_wire(inv * sum_proxy_[j].torque),
                                            wire::ProxyPose(to_wire(p.position), to_wire(p.orientation)),
                                            to_wire(pr[j].stiffness), uint32_t(pr[j].contacts));
   }
   for (size_t d = 0; d < dr.size(); ++d) {
-    Wrench& old = window_device_[slot * dr.size() + d];
-    sum_device_[d].force += dr[d].force - old.force;
-    sum_device_[d].torque += dr[d].torque - old.torque;
-    old = {dr[d].force, dr[d].torque};
     device_haptics_[d] = wire::DeviceHaptics(to_wire(inv * sum_device_[d].force), to_wire(inv * sum_device_[d].torque),
                                              to_wire(dr[d].stiffness), uint32_t(dr[d].contacts));
+    // A lone proxy's pose is the one just staged for it; a hand's is its own.
+    if (device_hand_[d] >= 0) {
+      const Pose p = sim_.hand_pose(device_hand_[d]);
+      device_poses_[d] = wire::ProxyPose(to_wire(p.position), to_wire(p.orientation));
+    } else {
+      device_poses_[d] = proxy_haptics_[size_t(device_proxy_[d])].pose();
+    }
+    input_sequences_[d] = d < input_sequences.size() ? input_sequences[d] : 0;
   }
   const auto proxies = b.CreateVectorOfStructs(proxy_haptics_.data(), pr.size());
   const auto devices = b.CreateVectorOfStructs(device_haptics_.data(), dr.size());
+  const auto device_poses = b.CreateVectorOfStructs(device_poses_.data(), dr.size());
+  const auto sequences = b.CreateVector(input_sequences_.data(), dr.size());
   wire::HapticFrameBuilder f(b);
   f.add_scene_id(scene_id_);
   f.add_step(uint64_t(sim_.steps()));
@@ -169,6 +215,8 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
   f.add_last_input_sequence(last_input_sequence);
   f.add_proxies(proxies);
   f.add_devices(devices);
+  f.add_device_poses(device_poses);
+  f.add_device_input_sequences(sequences);
   return seal(b, wire::Message::HapticFrame, f.Finish());
 }
 

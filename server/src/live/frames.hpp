@@ -29,24 +29,38 @@ struct Surface {
 };
 Surface extract_surface(const TetMesh& mesh);
 
+// The hand a device channel drives (an index into Simulation::hands()), or -1
+// when it drives proxies alone; the live loop moves it, the haptic frames
+// report its pose.
+int32_t compute_device_hand(const Simulation& sim, int32_t device);
+
 class FrameEncoder {
  public:
   // dt: the simulation step the frames come at [s] (0: 0.7 x the critical
   // step at rest, the live loop's default); force_window: what the haptic
-  // frames' forces are averaged over [s].
+  // frames' forces are averaged over [s] (an even number of steps, at least two).
   FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt,
                double force_window = 1e-3);
 
   const Surface& surface() const { return surface_; }
+  // What the haptic frames' forces are averaged over, in steps.
+  size_t force_window_steps() const { return window_steps_; }
 
   // Each returns the encoded Envelope, valid until the same call is made again.
-  // haptic_frame() is meant for every step: its forces are the means over
-  // the force window (see frames.cpp).
   // With the parameters a controller may set and the scenes it may load.
   std::span<const uint8_t> scene_description(std::span<const Parameter> parameters = {},
                                              std::span<const std::string> scenes = {});
   std::span<const uint8_t> state_frame(int64_t server_time_ns);
-  std::span<const uint8_t> haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence);
+  // After every advance: adds its mean contact forces (impulse over time
+  // since the simulation's last clear_impulses(), which the caller then
+  // clears) to the force window.
+  void add_step_forces();
+  // After a step, every step or every few: its forces are the means over the
+  // force window (see frames.cpp). last_input_sequence: the newest DeviceInput sequence
+  // across all channels; input_sequences: the newest per channel (n_devices;
+  // channels past its end read 0).
+  std::span<const uint8_t> haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence,
+                                        std::span<const uint64_t> input_sequences = {});
 
  private:
   const Simulation& sim_;
@@ -59,6 +73,10 @@ class FrameEncoder {
   std::vector<proto::Vec3f> forces_;
   std::vector<proto::ProxyHaptics> proxy_haptics_;
   std::vector<proto::DeviceHaptics> device_haptics_;
+  std::vector<proto::ProxyPose> device_poses_;  // per device channel, staged for the builder
+  std::vector<uint64_t> input_sequences_;       // per device channel
+  // What each device channel's pose is: its hand (>= 0), else its first proxy.
+  std::vector<int32_t> device_hand_, device_proxy_;  // (n_devices)
   struct Wrench {
     Vec3 force{0.0}, torque{0.0};
   };

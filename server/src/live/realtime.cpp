@@ -1,9 +1,11 @@
 #include "live/realtime.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <thread>
 
 #include <immintrin.h>
+#include <sys/prctl.h>
 
 namespace tactile {
 
@@ -12,9 +14,11 @@ namespace {
 // A stall longer than this is not caught up on: the loop re-anchors its
 // clock and says so, rather than running a burst of steps faster than real time.
 constexpr double kMaxBacklog = 0.05;  // [s]
-// Sleeping is coarse (the kernel's timer slack); the last stretch before a
-// deadline is spun.
-constexpr double kSpinWindow = 200e-6;  // [s]
+// Sleeping wakes late by the kernel's timer slack (50 us by default; the
+// loop asks for 1 us) plus the wake-up latency; the last stretch before a
+// deadline is spun. Spinning is paid for by whatever else the machine runs
+// (a bridge beside the server on the same cores), so it is kept short.
+constexpr double kSpinWindow = 60e-6;  // [s]
 
 double seconds(RealtimeLoop::Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
@@ -30,14 +34,16 @@ RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const Realtime
       dt_(options.dt > 0 ? options.dt : 0.7 * sim.dt_rest()),
       state_period_(1.0 / std::max(options.state_rate_hz, 1e-3)),
       inputs_(options.input_capacity) {
+  if (options.haptic_rate_hz > 0)
+    haptic_every_ = std::max<int64_t>(1, int64_t(std::ceil(1.0 / (options.haptic_rate_hz * dt_) - 1e-9)));
   sim.set_probe(&pass_timer_);
   const std::vector<std::string>& devices = sim.devices();
   drivers_.resize(devices.size());
+  device_sequences_.resize(devices.size());
   for (size_t d = 0; d < devices.size(); ++d) {
     Driver& drv = drivers_[d];
     drv.interval = options.input_interval;
-    for (size_t h = 0; h < sim.hands().size(); ++h)
-      if (sim.hands()[h].device == devices[d]) drv.hand = int32_t(h);
+    drv.hand = compute_device_hand(sim, int32_t(d));
     for (size_t j = 0; j < sim.proxies().size(); ++j)
       if (sim.proxy_device()[j] == int32_t(d) && sim.proxies()[j].hand.empty()) drv.proxies.push_back(int32_t(j));
   }
@@ -87,6 +93,7 @@ void RealtimeLoop::apply_inputs() {
     if (drv.hand >= 0) sim_.set_hand_motion(drv.hand, m);
     for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);
     last_sequence_ = std::max(last_sequence_, s.sequence);
+    device_sequences_[size_t(s.device)] = s.sequence;  // the latest, even when a restarted bridge counts from 1 again
     ++applied;
   }
   if (applied) {
@@ -103,7 +110,13 @@ void RealtimeLoop::step_once(int64_t now_ns) {
     stats_.fault = report.fault.message;
     return;
   }
-  if (haptic_sink_) haptic_sink_(frames_.haptic_frame(now_ns, last_sequence_));
+  frames_.add_step_forces();
+  sim_.clear_impulses();
+  const bool haptic = ++since_haptic_ >= haptic_every_;
+  if (haptic) {
+    since_haptic_ = 0;
+    if (haptic_sink_) haptic_sink_(frames_.haptic_frame(now_ns, last_sequence_, device_sequences_));
+  }
   bool state = false;
   if (sim_.time() + 1e-12 >= next_state_) {
     next_state_ += state_period_;
@@ -111,11 +124,13 @@ void RealtimeLoop::step_once(int64_t now_ns) {
     state = true;
   }
   std::lock_guard<std::mutex> lock(stats_mutex_);
-  ++stats_.haptic_frames;
+  if (haptic) ++stats_.haptic_frames;
   if (state) ++stats_.state_frames;
 }
 
 void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
+  // This thread's sleeps end within a microsecond of their deadline, not 50.
+  prctl(PR_SET_TIMERSLACK, 1000UL, 0UL, 0UL, 0UL);
   sync_drivers();
   const double sim_start = sim_.time();
   Clock::time_point anchor = Clock::now();  // wall time of simulated time `anchor_sim`

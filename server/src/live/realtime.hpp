@@ -1,7 +1,8 @@
 // The live simulation loop: steps the body paced to the monotonic clock,
 // moves the proxies from the device inputs that reach it through a bounded
-// lock-free queue, and publishes an encoded haptic frame after every step and
-// a state frame at the state rate, without waiting for anyone who reads them.
+// lock-free queue, and publishes an encoded haptic frame after every step (or
+// every few, when the step is shorter than the haptic rate needs) and a state
+// frame at the state rate, without waiting for anyone who reads them.
 //
 // Pacing: the step to simulated time t starts only once the wall clock (from
 // the loop's start) has reached t, so a published state is never ahead of
@@ -47,6 +48,10 @@ struct RealtimeOptions {
   // lowers) with room to spare, so that a step is one sub-step, not two.
   double dt = 0;
   double state_rate_hz = 30;     // state frames per simulated second
+  // Haptic frames per simulated second at most: one every ceil(1 / (rate x
+  // dt)) steps; 0: after every step. Every step's force still counts: the
+  // encoder's force window spans at least the interval between frames.
+  double haptic_rate_hz = 0;
   double input_interval = 1e-3;  // expected time between a device's inputs until measured [s]
   size_t input_capacity = 4096;  // queued device samples before new ones are dropped
 };
@@ -79,6 +84,8 @@ class RealtimeLoop {
   RealtimeLoop(Simulation& sim, FrameEncoder& frames, const RealtimeOptions& options);
 
   double dt() const { return dt_; }
+  // Steps between haptic frames (1: every step).
+  int64_t haptic_every() const { return haptic_every_; }
   // Called on the simulation thread with each encoded message; must not block.
   void on_haptic(Sink sink) { haptic_sink_ = std::move(sink); }
   void on_state(Sink sink) { state_sink_ = std::move(sink); }
@@ -141,8 +148,10 @@ class RealtimeLoop {
   Sink haptic_sink_, state_sink_;
   SpscRing<DeviceSample> inputs_;
   std::vector<Driver> drivers_;
-  uint64_t last_sequence_ = 0;
+  uint64_t last_sequence_ = 0;              // the newest input's sequence, across channels
+  std::vector<uint64_t> device_sequences_;  // the newest input's sequence per channel (n_devices)
   double next_state_ = 0;
+  int64_t haptic_every_ = 1, since_haptic_ = 0;
 
   mutable std::mutex stats_mutex_;
   RealtimeStats stats_;

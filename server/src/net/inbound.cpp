@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include <flatbuffers/util.h>
+
 namespace tactile {
 
 Inbound read_inbound(const uint8_t* data, size_t size) {
@@ -27,6 +29,38 @@ std::string check_device_input(const proto::DeviceInput& in) {
   const proto::Quatd& q = *in.orientation();
   const double n = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
   if (!(n > 0.5 && n < 2.0)) return "DeviceInput with an orientation that is not a unit quaternion (|q| = " + std::to_string(n) + ")";
+  return "";
+}
+
+namespace {
+
+bool is_utf8(const flatbuffers::String& s) {
+  const char* p = s.c_str();
+  const char* end = p + s.size();
+  // (A sequence cut short at the end meets the string's 0, which ends it as invalid.)
+  while (p < end)
+    if (flatbuffers::FromUTF8(&p) < 0) return false;
+  return p == end;
+}
+
+}  // namespace
+
+std::string check_safety_event(const proto::SafetyEvent& ev) {
+  if (!ev.device() || ev.device()->size() == 0) return "SafetyEvent without a device channel";
+  if (ev.device()->size() > kMaxSafetyDeviceBytes)
+    return "SafetyEvent with a device channel of " + std::to_string(ev.device()->size()) + " bytes (at most " +
+           std::to_string(kMaxSafetyDeviceBytes) + ")";
+  if (!is_utf8(*ev.device())) return "SafetyEvent with a device channel that is not UTF-8";
+  if (ev.message() && ev.message()->size() > kMaxSafetyMessageBytes)
+    return "SafetyEvent with a message of " + std::to_string(ev.message()->size()) + " bytes (at most " +
+           std::to_string(kMaxSafetyMessageBytes) + ")";
+  if (ev.message() && !is_utf8(*ev.message())) return "SafetyEvent with a message that is not UTF-8";
+  if (ev.kind() > proto::SafetyKind::MAX)
+    return "SafetyEvent of unknown kind " + std::to_string(int(ev.kind())) + " (this server knows 0 to " +
+           std::to_string(int(proto::SafetyKind::MAX)) + ")";
+  if (!std::isfinite(ev.force_N()) || ev.force_N() < 0)
+    return "SafetyEvent with force_N = " + std::to_string(ev.force_N()) +
+           ": a force magnitude is finite and >= 0 (send the last finite one)";
   return "";
 }
 

@@ -27,4 +27,14 @@ Inbound read_inbound(const uint8_t* data, size_t size);
 // that normalizes (|q| within [0.5, 2]); else what is wrong.
 std::string check_device_input(const proto::DeviceInput& in);
 
+// What a SafetyEvent's strings may hold [bytes]: a channel name, a cause.
+constexpr size_t kMaxSafetyDeviceBytes = 128;
+constexpr size_t kMaxSafetyMessageBytes = 512;
+
+// "" when a safety event may be relayed: a channel named, strings of UTF-8
+// within their bounds, a kind this version knows, a finite force magnitude
+// (>= 0); else what is wrong. (Whether the sender drives that channel is the
+// connection's to check.)
+std::string check_safety_event(const proto::SafetyEvent& ev);
+
 }  // namespace tactile

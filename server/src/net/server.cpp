@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <deque>
 #include <filesystem>
 #include <fstream>
@@ -52,6 +53,14 @@ Bytes make_error(wire::ErrorCode code, const std::string& message, uint32_t requ
   return seal(b, wire::Message::Error, wire::CreateErrorDirect(b, code, message.c_str(), request_id));
 }
 
+// A string for a one-line log: control characters shown as '?'.
+std::string printable(const fb::String* s) {
+  std::string out = s ? s->str() : "";
+  for (char& c : out)
+    if (uint8_t(c) < 0x20 || c == 0x7f) c = '?';
+  return out;
+}
+
 const char* content_type(const std::filesystem::path& p) {
   const std::string ext = p.extension().string();
   if (ext == ".html") return "text/html; charset=utf-8";
@@ -92,7 +101,8 @@ struct Feed {
 
   Feed(std::shared_ptr<LiveScene> l, const std::vector<std::string>& scenes)
       : live(std::move(l)),
-        haptics(1024, 512 + 128 * (live->sim().proxies().size() + live->sim().devices().size())),
+        // (a haptic frame: ~92 B per proxy, ~100 B per device channel, ~150 B besides)
+        haptics(1024, 512 + 128 * live->sim().proxies().size() + 160 * live->sim().devices().size()),
         states(64 + 20 * 3 * live->frames().surface().nodes.size() + 64 * live->sim().proxies().size()) {
     const std::vector<uint8_t> d = live->describe(scenes);
     description = copy_bytes(d.data(), d.size());
@@ -180,6 +190,12 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   ~WsSession() {
     server_->sessions.erase(this);
     if (server_->controller == this) server_->controller = nullptr;
+    if (safety_dropped_ > 0)
+      std::fprintf(stderr, "safety: connection %llu sent %lld events over the limit of %g per second: dropped\n",
+                   (unsigned long long)id_, (long long)safety_dropped_, server_->options.max_safety_events_per_s);
+    if (events_dropped_ > 0)
+      std::fprintf(stderr, "safety: connection %llu (%s) read too slowly and missed %lld safety events\n",
+                   (unsigned long long)id_, wire::EnumNameRole(role_), (long long)events_dropped_);
   }
 
   void start(http::request<http::string_body> req) {
@@ -204,10 +220,15 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
 
   wire::Role role() const { return role_; }
   bool greeted() const { return greeted_; }
+  // SafetyEvent came in 1.2: a 1.1 codec refuses a message type it does not know.
+  bool reads_safety_events() const { return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 2; }
   bool drives_devices() const { return greeted_ && role_ == wire::Role::Device; }
 
-  // Queues a message; `kind` decides what a slow reader loses.
-  enum class Kind { Control, State, Haptic };
+  // Queues a message; `kind` decides what a slow reader loses: a State is
+  // replaced by the next, a Haptic frame or an Event (SafetyEvent) beyond its
+  // bound drops the oldest of its kind waiting (counted), a Control message
+  // is never dropped.
+  enum class Kind { Control, State, Haptic, Event };
   void send(const Bytes& message, Kind kind) {
     if (closing_) return;
     if (kind == Kind::State) {
@@ -226,28 +247,26 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       next_state_due_ = std::max(next_state_due_, now - period) + period;
       pending_state_ = message;
       queue_.push_back(nullptr);  // a marker: the pending state goes here
-    } else if (kind == Kind::Haptic) {
-      if (haptics_queued_ >= server_->options.device_queue) {
-        // The device reads too slowly: its oldest waiting frame goes (not the
-        // one being written), so what it does read is the newest.
+    } else if (kind == Kind::Haptic || kind == Kind::Event) {
+      // A reader too slow: its oldest waiting message of the kind goes (not
+      // the one being written), so what it does read is the newest.
+      const bool haptic = kind == Kind::Haptic;
+      size_t& queued = haptic ? haptics_queued_ : events_queued_;
+      if (queued >= (haptic ? server_->options.device_queue : server_->options.event_queue))
         for (size_t k = writing_ ? 1 : 0; k < queue_.size(); ++k)
-          if (haptic_flags_[k]) {
+          if (kinds_[k] == kind) {
             queue_.erase(queue_.begin() + long(k));
-            haptic_flags_.erase(haptic_flags_.begin() + long(k));
-            --haptics_queued_;
-            ++haptics_dropped_;
+            kinds_.erase(kinds_.begin() + long(k));
+            --queued;
+            ++(haptic ? haptics_dropped_ : events_dropped_);
             break;
           }
-      }
-      ++haptics_queued_;
+      ++queued;
       queue_.push_back(message);
-      haptic_flags_.push_back(true);
-      write();
-      return;
     } else {
       queue_.push_back(message);
     }
-    haptic_flags_.push_back(false);
+    kinds_.push_back(kind);
     write();
   }
 
@@ -323,6 +342,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       case wire::Message::Ping: return on_ping(*e.message_as_Ping());
       case wire::Message::DeviceInput: return on_input(*e.message_as_DeviceInput());
       case wire::Message::Control: return on_control(*e.message_as_Control());
+      case wire::Message::SafetyEvent: return on_safety_event(*e.message_as_SafetyEvent());
       default:
         return send(make_error(wire::ErrorCode::WrongRole, std::string("a client may not send ") +
                                                                wire::EnumNameMessage(e.message_type())),
@@ -361,6 +381,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     }
     greeted_ = true;
     role_ = h.role();
+    protocol_minor_ = h.protocol_minor();
     hello_timer_.cancel();
     fb::FlatBufferBuilder b;
     send(seal(b, wire::Message::Welcome,
@@ -419,6 +440,52 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     server_->feed->live->loop().post_input(s);  // a full queue drops it and counts (telemetry)
   }
 
+  // A device's safety event: checked, rate limited, stamped with the server
+  // clock, logged, and relayed to every viewer and controller (of protocol
+  // 1.2 or later: see reads_safety_events).
+  void on_safety_event(const wire::SafetyEvent& ev) {
+    if (role_ != wire::Role::Device)
+      return send(make_error(wire::ErrorCode::WrongRole,
+                             std::string("SafetyEvent needs the Device role; this connection has the ") +
+                                 wire::EnumNameRole(role_) + " role"),
+                  Kind::Control);
+    if (const std::string bad = check_safety_event(ev); !bad.empty())
+      return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
+    const std::string name = ev.device()->str();  // UTF-8 and bounded: checked
+    if (std::find(device_names_.begin(), device_names_.end(), name) == device_names_.end())
+      return send(make_error(wire::ErrorCode::BadRequest, "SafetyEvent for channel '" + name +
+                                                              "', which this connection did not name in its Hello"),
+                  Kind::Control);
+    // A token bucket of max_safety_events_per_s, a second's burst; beyond it
+    // events are dropped and counted, and the device is told once per run of drops.
+    const auto now = std::chrono::steady_clock::now();
+    const double rate = server_->options.max_safety_events_per_s;
+    safety_tokens_ = std::min(rate, safety_tokens_ + rate * std::chrono::duration<double>(now - last_safety_).count());
+    last_safety_ = now;
+    if (safety_tokens_ < 1) {
+      ++safety_dropped_;
+      if (!safety_limited_)
+        send(make_error(wire::ErrorCode::RateLimited, "more than " + std::to_string(int64_t(rate)) +
+                                                          " safety events per second: dropped, not relayed (" +
+                                                          std::to_string(safety_dropped_) + " so far)"),
+             Kind::Control);
+      safety_limited_ = true;
+      return;
+    }
+    safety_tokens_ -= 1;
+    safety_limited_ = false;
+    fb::FlatBufferBuilder b(128 + name.size() + (ev.message() ? ev.message()->size() : 0));
+    const auto device = b.CreateString(ev.device());
+    const auto message = b.CreateString(ev.message());
+    const Bytes relayed = seal(b, wire::Message::SafetyEvent,
+                               wire::CreateSafetyEvent(b, device, ev.device_time_ns(), now_ns(), ev.kind(), message,
+                                                       ev.force_N()));
+    std::fprintf(stderr, "safety: %s %s %s (%.3f N)\n", printable(ev.device()).c_str(),
+                 wire::EnumNameSafetyKind(ev.kind()), printable(ev.message()).c_str(), double(ev.force_N()));
+    for (WsSession* s : server_->sessions)
+      if (s->reads_safety_events()) s->send(relayed, Kind::Event);
+  }
+
   void on_control(const wire::Control& c) {
     if (role_ != wire::Role::Controller)
       return send(make_error(wire::ErrorCode::WrongRole, "Control needs the controller role", c.request_id()),
@@ -450,9 +517,10 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     current_ = message;
     ws_.async_write(asio::buffer(*current_), [self = shared_from_this()](beast::error_code ec, size_t) {
       self->writing_ = false;
-      if (self->haptic_flags_.front()) --self->haptics_queued_;
+      if (self->kinds_.front() == Kind::Haptic) --self->haptics_queued_;
+      if (self->kinds_.front() == Kind::Event) --self->events_queued_;
       self->queue_.pop_front();
-      self->haptic_flags_.pop_front();
+      self->kinds_.pop_front();
       self->current_.reset();
       if (ec) {
         self->closing_ = true;
@@ -469,15 +537,21 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   bool loopback_;
   bool greeted_ = false, closing_ = false, writing_ = false, close_after_write_ = false;
   wire::Role role_ = wire::Role::Viewer;
+  uint16_t protocol_minor_ = 0;            // the client's, from its Hello
   std::vector<std::string> device_names_;  // channels named in Hello
   std::vector<int32_t> devices_;           // their index in the current scene, -1 if absent
   std::deque<Bytes> queue_;          // null entries stand for pending_state_
-  std::deque<bool> haptic_flags_;    // per queue entry: a haptic frame
+  std::deque<Kind> kinds_;          // per queue entry
   Bytes pending_state_, current_;
-  size_t haptics_queued_ = 0;
-  int64_t haptics_dropped_ = 0;
+  size_t haptics_queued_ = 0, events_queued_ = 0;
+  int64_t haptics_dropped_ = 0, events_dropped_ = 0;  // (events: safety events relayed to this reader)
   std::chrono::steady_clock::time_point next_state_due_{}, last_message_ = std::chrono::steady_clock::now();
   double tokens_ = 1e18;  // clamped to the burst at the first message
+  // Safety events this device sent: their own bucket, and those dropped over it.
+  std::chrono::steady_clock::time_point last_safety_ = std::chrono::steady_clock::now();
+  double safety_tokens_ = 1e18;
+  bool safety_limited_ = false;
+  int64_t safety_dropped_ = 0;
   uint64_t id_ = next_id_++;
   static inline uint64_t next_id_ = 1;
 

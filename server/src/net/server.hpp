@@ -4,13 +4,17 @@
 //
 // Roles (granted at Hello, proto/tactile.fbs):
 //   viewer      the scene description, then state frames at up to the state
-//               rate, latest wins; telemetry once a second.
-//   device      a haptic frame after every step; sends DeviceInput for the
-//               channels it named in Hello. Needs the token.
+//               rate, latest wins; telemetry once a second; the devices'
+//               safety events as they come.
+//   device      a haptic frame after every step; sends DeviceInput and
+//               SafetyEvent for the channels it named in Hello (its safety
+//               events, stamped with the server clock and logged on stderr,
+//               go to every viewer and controller). Needs the token.
 //   controller  one at a time: pause, resume, reset, load a scene from the
 //               server's scene folder, set a parameter. Needs the token.
 //               A change is answered by a new SceneDescription to every
-//               client (or an Error naming what is wrong).
+//               client (or an Error naming what is wrong). Gets the
+//               devices' safety events too.
 // Every client may Ping (answered with Pong at once).
 //
 // Safety of the service: listens on loopback unless told otherwise, and off
@@ -19,8 +23,8 @@
 // number of connections are bounded; a client that has not said Hello in
 // time, or has gone silent, is closed. Each refusal is an Error naming what
 // is wrong (or an HTTP status with a message). A slow client loses frames
-// (latest wins for states, a bounded queue for haptic frames): it never
-// slows the simulation or another client.
+// (latest wins for states, bounded queues for haptic frames and safety
+// events): it never slows the simulation or another client.
 #pragma once
 
 #include <cstdint>
@@ -45,6 +49,8 @@ struct ServerOptions {
   size_t max_message_bytes = 64 * 1024;       // inbound
   double max_messages_per_s = 5000;           // inbound per connection (burst: a second's worth)
   size_t device_queue = 256;                  // haptic frames queued per device before the oldest drop
+  double max_safety_events_per_s = 100;       // relayed per device connection (burst: a second's worth); more drop
+  size_t event_queue = 256;                   // safety events queued per reader before the oldest drop
   double hello_timeout_s = 5;
   double idle_timeout_s = 30;
   std::string server_name = "tactile";

@@ -41,7 +41,7 @@ TEST(ProtoCodec, HelloCarriesVersionRoleTokenAndDevices) {
   ASSERT_EQ(e->message_type(), Message::Hello);
   const Hello* h = e->message_as_Hello();
   EXPECT_EQ(h->protocol_major(), 1);
-  EXPECT_EQ(h->protocol_minor(), 1);
+  EXPECT_EQ(h->protocol_minor(), 2);
   EXPECT_EQ(h->role(), Role::Device);
   EXPECT_STREQ(h->token()->c_str(), "s3cret");
   EXPECT_STREQ(h->client_name()->c_str(), "bridge@lab");
@@ -109,7 +109,9 @@ TEST(ProtoCodec, StateAndHapticFramesRoundTrip) {
   const std::vector<ProxyHaptics> ph = {
       ProxyHaptics(Vec3f(0, 2, 0), Vec3f(0, 0, 0.01f), ProxyPose(Vec3f(0, 0.05f, 0), Quatf(1, 0, 0, 0)), k, 12)};
   const std::vector<DeviceHaptics> dh = {DeviceHaptics(Vec3f(0, 2, 0), Vec3f(0, 0, 0.01f), k, 12)};
-  const auto haptic = CreateHapticFrameDirect(hb, 7, 99, 0.0099, 5, 98, &ph, &dh);
+  const std::vector<ProxyPose> device_poses = {ProxyPose(Vec3f(0, 0.05f, 0), Quatf(1, 0, 0, 0))};
+  const std::vector<uint64_t> sequences = {98};
+  const auto haptic = CreateHapticFrameDirect(hb, 7, 99, 0.0099, 5, 98, &ph, &dh, &device_poses, &sequences);
   const std::vector<uint8_t> hbytes = seal(hb, Message::HapticFrame, haptic);
   const HapticFrame* h = open(hbytes)->message_as_HapticFrame();
   ASSERT_NE(h, nullptr);
@@ -117,6 +119,41 @@ TEST(ProtoCodec, StateAndHapticFramesRoundTrip) {
   EXPECT_FLOAT_EQ(h->proxies()->Get(0)->force().y(), 2.0f);
   EXPECT_FLOAT_EQ(h->proxies()->Get(0)->stiffness().m11(), -700.0f);
   EXPECT_EQ(h->devices()->Get(0)->contacts(), 12u);
+  EXPECT_FLOAT_EQ(h->device_poses()->Get(0)->position().y(), 0.05f);
+  EXPECT_EQ(h->device_input_sequences()->Get(0), 98u);
+
+  // A 1.1 peer's frame, without the fields 1.2 added: it verifies, and they read as absent.
+  FlatBufferBuilder old;
+  const std::vector<uint8_t> obytes =
+      seal(old, Message::HapticFrame, CreateHapticFrameDirect(old, 7, 99, 0.0099, 5, 98, &ph, &dh));
+  const HapticFrame* o = open(obytes)->message_as_HapticFrame();
+  ASSERT_NE(o, nullptr);
+  EXPECT_EQ(o->device_poses(), nullptr);
+  EXPECT_EQ(o->device_input_sequences(), nullptr);
+}
+
+TEST(ProtoCodec, SafetyEventRoundTrips) {
+  FlatBufferBuilder b;
+  const std::vector<uint8_t> bytes =
+      seal(b, Message::SafetyEvent,
+           CreateSafetyEventDirect(b, "stylus", 5000250123ll, 0, SafetyKind::Stale, "no state for 12 ms: fading",
+                                   1.25f));
+  const SafetyEvent* ev = open(bytes)->message_as_SafetyEvent();
+  ASSERT_NE(ev, nullptr);
+  EXPECT_STREQ(ev->device()->c_str(), "stylus");
+  EXPECT_EQ(ev->device_time_ns(), 5000250123ll);
+  EXPECT_EQ(ev->server_time_ns(), 0);
+  EXPECT_EQ(ev->kind(), SafetyKind::Stale);
+  EXPECT_STREQ(ev->message()->c_str(), "no state for 12 ms: fading");
+  EXPECT_FLOAT_EQ(ev->force_N(), 1.25f);
+  // The kinds the bridge's safety layer numbers the same way (device-bridge: safety.Kind).
+  EXPECT_EQ(int(SafetyKind::Engaged), 0);
+  EXPECT_EQ(int(SafetyKind::Passivity), 10);
+  EXPECT_EQ(int(SafetyKind::Other), 11);
+  EXPECT_EQ(SafetyKind::MAX, SafetyKind::Other);
+  // New message types go last: the 1.1 numbers stay.
+  EXPECT_EQ(int(Message::Error), 11);
+  EXPECT_EQ(int(Message::SafetyEvent), 12);
 }
 
 TEST(ProtoCodec, InputControlTelemetrySyncAndError) {

@@ -78,7 +78,7 @@ TEST(ProtoGolden, EveryMessageTypeHasAVector) {
 
 TEST(ProtoGolden, VectorsMatchTheSchemaAndRoundTripThroughTheCppCodec) {
   const std::vector<fs::path> files = vector_files();
-  ASSERT_GE(files.size(), 17u);
+  ASSERT_GE(files.size(), 18u);
   for (const fs::path& json_path : files) {
     SCOPED_TRACE(json_path.filename().string());
     std::unique_ptr<flatbuffers::Parser> p = make_parser();
@@ -130,6 +130,20 @@ TEST(ProtoGolden, GeneratedAccessorsReadTheWrittenValues) {
   ASSERT_NE(hf, nullptr);
   EXPECT_FLOAT_EQ(hf->proxies()->Get(0)->stiffness().m12(), 5.0f);
   EXPECT_EQ(hf->devices()->Get(0)->contacts(), 12u);
+  ASSERT_EQ(hf->device_poses()->size(), 2u);
+  EXPECT_FLOAT_EQ(hf->device_poses()->Get(1)->position().y(), 0.4f);
+  EXPECT_FLOAT_EQ(hf->device_poses()->Get(1)->orientation().z(), 0.5f);
+  ASSERT_EQ(hf->device_input_sequences()->size(), 2u);
+  EXPECT_EQ(hf->device_input_sequences()->Get(1), 977u);
+
+  const std::string safety = load("safety_event.tctl");
+  const SafetyEvent* se = GetEnvelope(safety.data())->message_as_SafetyEvent();
+  ASSERT_NE(se, nullptr);
+  EXPECT_STREQ(se->device()->c_str(), "stylus");
+  EXPECT_EQ(se->kind(), SafetyKind::Clipped);
+  EXPECT_EQ(se->device_time_ns(), 5000250123);
+  EXPECT_EQ(se->server_time_ns(), 987654521012);
+  EXPECT_FLOAT_EQ(se->force_N(), 5.0f);
 
   const std::string input = load("device_input.tctl");
   const DeviceInput* in = GetEnvelope(input.data())->message_as_DeviceInput();

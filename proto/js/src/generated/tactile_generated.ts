@@ -26,6 +26,8 @@ export { Quatf, QuatfT } from './tactile/proto/quatf';
 export { Reset, ResetT } from './tactile/proto/reset';
 export { Resume, ResumeT } from './tactile/proto/resume';
 export { Role } from './tactile/proto/role';
+export { SafetyEvent, SafetyEventT } from './tactile/proto/safety-event';
+export { SafetyKind } from './tactile/proto/safety-kind';
 export { SceneDescription, SceneDescriptionT } from './tactile/proto/scene-description';
 export { SetParameter, SetParameterT } from './tactile/proto/set-parameter';
 export { StartRecording, StartRecordingT } from './tactile/proto/start-recording';

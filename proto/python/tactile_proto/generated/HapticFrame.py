@@ -111,7 +111,58 @@ class HapticFrame(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(16))
         return o == 0
 
-def HapticFrameStart(builder): builder.StartObject(7)
+    # HapticFrame
+    def DevicePoses(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(18))
+        if o != 0:
+            x = self._tab.Vector(o)
+            x += flatbuffers.number_types.UOffsetTFlags.py_type(j) * 28
+            from tactile_proto.generated.ProxyPose import ProxyPose
+            obj = ProxyPose()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+    # HapticFrame
+    def DevicePosesLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(18))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # HapticFrame
+    def DevicePosesIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(18))
+        return o == 0
+
+    # HapticFrame
+    def DeviceInputSequences(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(20))
+        if o != 0:
+            a = self._tab.Vector(o)
+            return self._tab.Get(flatbuffers.number_types.Uint64Flags, a + flatbuffers.number_types.UOffsetTFlags.py_type(j * 8))
+        return 0
+
+    # HapticFrame
+    def DeviceInputSequencesAsNumpy(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(20))
+        if o != 0:
+            return self._tab.GetVectorAsNumpy(flatbuffers.number_types.Uint64Flags, o)
+        return 0
+
+    # HapticFrame
+    def DeviceInputSequencesLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(20))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # HapticFrame
+    def DeviceInputSequencesIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(20))
+        return o == 0
+
+def HapticFrameStart(builder): builder.StartObject(9)
 def Start(builder):
     return HapticFrameStart(builder)
 def HapticFrameAddSceneId(builder, sceneId): builder.PrependUint32Slot(0, sceneId, 0)
@@ -141,11 +192,24 @@ def AddDevices(builder, devices):
 def HapticFrameStartDevicesVector(builder, numElems): return builder.StartVector(64, numElems, 4)
 def StartDevicesVector(builder, numElems):
     return HapticFrameStartDevicesVector(builder, numElems)
+def HapticFrameAddDevicePoses(builder, devicePoses): builder.PrependUOffsetTRelativeSlot(7, flatbuffers.number_types.UOffsetTFlags.py_type(devicePoses), 0)
+def AddDevicePoses(builder, devicePoses):
+    return HapticFrameAddDevicePoses(builder, devicePoses)
+def HapticFrameStartDevicePosesVector(builder, numElems): return builder.StartVector(28, numElems, 4)
+def StartDevicePosesVector(builder, numElems):
+    return HapticFrameStartDevicePosesVector(builder, numElems)
+def HapticFrameAddDeviceInputSequences(builder, deviceInputSequences): builder.PrependUOffsetTRelativeSlot(8, flatbuffers.number_types.UOffsetTFlags.py_type(deviceInputSequences), 0)
+def AddDeviceInputSequences(builder, deviceInputSequences):
+    return HapticFrameAddDeviceInputSequences(builder, deviceInputSequences)
+def HapticFrameStartDeviceInputSequencesVector(builder, numElems): return builder.StartVector(8, numElems, 8)
+def StartDeviceInputSequencesVector(builder, numElems):
+    return HapticFrameStartDeviceInputSequencesVector(builder, numElems)
 def HapticFrameEnd(builder): return builder.EndObject()
 def End(builder):
     return HapticFrameEnd(builder)
 import tactile_proto.generated.DeviceHaptics
 import tactile_proto.generated.ProxyHaptics
+import tactile_proto.generated.ProxyPose
 try:
     from typing import List
 except:
@@ -162,6 +226,8 @@ class HapticFrameT(object):
         self.lastInputSequence = 0  # type: int
         self.proxies = None  # type: List[tactile_proto.generated.ProxyHaptics.ProxyHapticsT]
         self.devices = None  # type: List[tactile_proto.generated.DeviceHaptics.DeviceHapticsT]
+        self.devicePoses = None  # type: List[tactile_proto.generated.ProxyPose.ProxyPoseT]
+        self.deviceInputSequences = None  # type: List[int]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -200,6 +266,21 @@ class HapticFrameT(object):
                 else:
                     deviceHaptics_ = tactile_proto.generated.DeviceHaptics.DeviceHapticsT.InitFromObj(hapticFrame.Devices(i))
                     self.devices.append(deviceHaptics_)
+        if not hapticFrame.DevicePosesIsNone():
+            self.devicePoses = []
+            for i in range(hapticFrame.DevicePosesLength()):
+                if hapticFrame.DevicePoses(i) is None:
+                    self.devicePoses.append(None)
+                else:
+                    proxyPose_ = tactile_proto.generated.ProxyPose.ProxyPoseT.InitFromObj(hapticFrame.DevicePoses(i))
+                    self.devicePoses.append(proxyPose_)
+        if not hapticFrame.DeviceInputSequencesIsNone():
+            if np is None:
+                self.deviceInputSequences = []
+                for i in range(hapticFrame.DeviceInputSequencesLength()):
+                    self.deviceInputSequences.append(hapticFrame.DeviceInputSequences(i))
+            else:
+                self.deviceInputSequences = hapticFrame.DeviceInputSequencesAsNumpy()
 
     # HapticFrameT
     def Pack(self, builder):
@@ -213,6 +294,19 @@ class HapticFrameT(object):
             for i in reversed(range(len(self.devices))):
                 self.devices[i].Pack(builder)
             devices = builder.EndVector()
+        if self.devicePoses is not None:
+            HapticFrameStartDevicePosesVector(builder, len(self.devicePoses))
+            for i in reversed(range(len(self.devicePoses))):
+                self.devicePoses[i].Pack(builder)
+            devicePoses = builder.EndVector()
+        if self.deviceInputSequences is not None:
+            if np is not None and type(self.deviceInputSequences) is np.ndarray:
+                deviceInputSequences = builder.CreateNumpyVector(self.deviceInputSequences)
+            else:
+                HapticFrameStartDeviceInputSequencesVector(builder, len(self.deviceInputSequences))
+                for i in reversed(range(len(self.deviceInputSequences))):
+                    builder.PrependUint64(self.deviceInputSequences[i])
+                deviceInputSequences = builder.EndVector()
         HapticFrameStart(builder)
         HapticFrameAddSceneId(builder, self.sceneId)
         HapticFrameAddStep(builder, self.step)
@@ -223,5 +317,9 @@ class HapticFrameT(object):
             HapticFrameAddProxies(builder, proxies)
         if self.devices is not None:
             HapticFrameAddDevices(builder, devices)
+        if self.devicePoses is not None:
+            HapticFrameAddDevicePoses(builder, devicePoses)
+        if self.deviceInputSequences is not None:
+            HapticFrameAddDeviceInputSequences(builder, deviceInputSequences)
         hapticFrame = HapticFrameEnd(builder)
         return hapticFrame

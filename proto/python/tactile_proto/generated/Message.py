@@ -15,6 +15,7 @@ class Message(object):
     Ping = 9
     Pong = 10
     Error = 11
+    SafetyEvent = 12
 
 def MessageCreator(unionType, table):
     from flatbuffers.table import Table
@@ -53,4 +54,7 @@ def MessageCreator(unionType, table):
     if unionType == Message().Error:
         import tactile_proto.generated.Error
         return tactile_proto.generated.Error.ErrorT.InitFromBuf(table.Bytes, table.Pos)
+    if unionType == Message().SafetyEvent:
+        import tactile_proto.generated.SafetyEvent
+        return tactile_proto.generated.SafetyEvent.SafetyEventT.InitFromBuf(table.Bytes, table.Pos)
     return None

@@ -4,6 +4,7 @@ import * as flatbuffers from 'flatbuffers';
 
 import { DeviceHaptics, DeviceHapticsT } from '../../tactile/proto/device-haptics';
 import { ProxyHaptics, ProxyHapticsT } from '../../tactile/proto/proxy-haptics';
+import { ProxyPose, ProxyPoseT } from '../../tactile/proto/proxy-pose';
 
 
 export class HapticFrame {
@@ -69,8 +70,28 @@ devicesLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+devicePoses(index: number, obj?:ProxyPose):ProxyPose|null {
+  const offset = this.bb!.__offset(this.bb_pos, 18);
+  return offset ? (obj || new ProxyPose()).__init(this.bb!.__vector(this.bb_pos + offset) + index * 28, this.bb!) : null;
+}
+
+devicePosesLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 18);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
+deviceInputSequences(index: number):bigint|null {
+  const offset = this.bb!.__offset(this.bb_pos, 20);
+  return offset ? this.bb!.readUint64(this.bb!.__vector(this.bb_pos + offset) + index * 8) : BigInt(0);
+}
+
+deviceInputSequencesLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 20);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startHapticFrame(builder:flatbuffers.Builder) {
-  builder.startObject(7);
+  builder.startObject(9);
 }
 
 static addSceneId(builder:flatbuffers.Builder, sceneId:number) {
@@ -109,12 +130,36 @@ static startDevicesVector(builder:flatbuffers.Builder, numElems:number) {
   builder.startVector(64, numElems, 4);
 }
 
+static addDevicePoses(builder:flatbuffers.Builder, devicePosesOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(7, devicePosesOffset, 0);
+}
+
+static startDevicePosesVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(28, numElems, 4);
+}
+
+static addDeviceInputSequences(builder:flatbuffers.Builder, deviceInputSequencesOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(8, deviceInputSequencesOffset, 0);
+}
+
+static createDeviceInputSequencesVector(builder:flatbuffers.Builder, data:bigint[]):flatbuffers.Offset {
+  builder.startVector(8, data.length, 8);
+  for (let i = data.length - 1; i >= 0; i--) {
+    builder.addInt64(data[i]!);
+  }
+  return builder.endVector();
+}
+
+static startDeviceInputSequencesVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(8, numElems, 8);
+}
+
 static endHapticFrame(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createHapticFrame(builder:flatbuffers.Builder, sceneId:number, step:bigint, simTime:number, serverTimeNs:bigint, lastInputSequence:bigint, proxiesOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset):flatbuffers.Offset {
+static createHapticFrame(builder:flatbuffers.Builder, sceneId:number, step:bigint, simTime:number, serverTimeNs:bigint, lastInputSequence:bigint, proxiesOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, devicePosesOffset:flatbuffers.Offset, deviceInputSequencesOffset:flatbuffers.Offset):flatbuffers.Offset {
   HapticFrame.startHapticFrame(builder);
   HapticFrame.addSceneId(builder, sceneId);
   HapticFrame.addStep(builder, step);
@@ -123,6 +168,8 @@ static createHapticFrame(builder:flatbuffers.Builder, sceneId:number, step:bigin
   HapticFrame.addLastInputSequence(builder, lastInputSequence);
   HapticFrame.addProxies(builder, proxiesOffset);
   HapticFrame.addDevices(builder, devicesOffset);
+  HapticFrame.addDevicePoses(builder, devicePosesOffset);
+  HapticFrame.addDeviceInputSequences(builder, deviceInputSequencesOffset);
   return HapticFrame.endHapticFrame(builder);
 }
 
@@ -134,7 +181,9 @@ unpack(): HapticFrameT {
     this.serverTimeNs(),
     this.lastInputSequence(),
     this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength()),
-    this.bb!.createObjList(this.devices.bind(this), this.devicesLength())
+    this.bb!.createObjList(this.devices.bind(this), this.devicesLength()),
+    this.bb!.createObjList(this.devicePoses.bind(this), this.devicePosesLength()),
+    this.bb!.createScalarList(this.deviceInputSequences.bind(this), this.deviceInputSequencesLength())
   );
 }
 
@@ -147,6 +196,8 @@ unpackTo(_o: HapticFrameT): void {
   _o.lastInputSequence = this.lastInputSequence();
   _o.proxies = this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength());
   _o.devices = this.bb!.createObjList(this.devices.bind(this), this.devicesLength());
+  _o.devicePoses = this.bb!.createObjList(this.devicePoses.bind(this), this.devicePosesLength());
+  _o.deviceInputSequences = this.bb!.createScalarList(this.deviceInputSequences.bind(this), this.deviceInputSequencesLength());
 }
 }
 
@@ -158,13 +209,17 @@ constructor(
   public serverTimeNs: bigint = BigInt('0'),
   public lastInputSequence: bigint = BigInt('0'),
   public proxies: (ProxyHapticsT)[] = [],
-  public devices: (DeviceHapticsT)[] = []
+  public devices: (DeviceHapticsT)[] = [],
+  public devicePoses: (ProxyPoseT)[] = [],
+  public deviceInputSequences: (bigint)[] = []
 ){}
 
 
 pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const proxies = builder.createStructOffsetList(this.proxies, HapticFrame.startProxiesVector);
   const devices = builder.createStructOffsetList(this.devices, HapticFrame.startDevicesVector);
+  const devicePoses = builder.createStructOffsetList(this.devicePoses, HapticFrame.startDevicePosesVector);
+  const deviceInputSequences = HapticFrame.createDeviceInputSequencesVector(builder, this.deviceInputSequences);
 
   return HapticFrame.createHapticFrame(builder,
     this.sceneId,
@@ -173,7 +228,9 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     this.serverTimeNs,
     this.lastInputSequence,
     proxies,
-    devices
+    devices,
+    devicePoses,
+    deviceInputSequences
   );
 }
 }

@@ -7,6 +7,7 @@ import { HapticFrame, HapticFrameT } from '../../tactile/proto/haptic-frame';
 import { Hello, HelloT } from '../../tactile/proto/hello';
 import { Ping, PingT } from '../../tactile/proto/ping';
 import { Pong, PongT } from '../../tactile/proto/pong';
+import { SafetyEvent, SafetyEventT } from '../../tactile/proto/safety-event';
 import { SceneDescription, SceneDescriptionT } from '../../tactile/proto/scene-description';
 import { StateFrame, StateFrameT } from '../../tactile/proto/state-frame';
 import { Telemetry, TelemetryT } from '../../tactile/proto/telemetry';
@@ -25,13 +26,14 @@ export enum Message {
   Telemetry = 8,
   Ping = 9,
   Pong = 10,
-  Error = 11
+  Error = 11,
+  SafetyEvent = 12
 }
 
 export function unionToMessage(
   type: Message,
-  accessor: (obj:Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SceneDescription|StateFrame|Telemetry|Welcome|null
-): Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SceneDescription|StateFrame|Telemetry|Welcome|null {
+  accessor: (obj:Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null
+): Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
   switch(Message[type]) {
     case 'NONE': return null; 
     case 'Hello': return accessor(new Hello())! as Hello;
@@ -45,15 +47,16 @@ export function unionToMessage(
     case 'Ping': return accessor(new Ping())! as Ping;
     case 'Pong': return accessor(new Pong())! as Pong;
     case 'Error': return accessor(new Error())! as Error;
+    case 'SafetyEvent': return accessor(new SafetyEvent())! as SafetyEvent;
     default: return null;
   }
 }
 
 export function unionListToMessage(
   type: Message, 
-  accessor: (index: number, obj:Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SceneDescription|StateFrame|Telemetry|Welcome|null, 
+  accessor: (index: number, obj:Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null, 
   index: number
-): Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SceneDescription|StateFrame|Telemetry|Welcome|null {
+): Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
   switch(Message[type]) {
     case 'NONE': return null; 
     case 'Hello': return accessor(index, new Hello())! as Hello;
@@ -67,6 +70,7 @@ export function unionListToMessage(
     case 'Ping': return accessor(index, new Ping())! as Ping;
     case 'Pong': return accessor(index, new Pong())! as Pong;
     case 'Error': return accessor(index, new Error())! as Error;
+    case 'SafetyEvent': return accessor(index, new SafetyEvent())! as SafetyEvent;
     default: return null;
   }
 }
