@@ -13,9 +13,12 @@ namespace tactile {
 namespace {
 
 constexpr int32_t kClusterNodes = 32;
-// Weight of the previous steps in the stiffness fit, per step of motion:
-// about the last 50 steps count.
-constexpr double kFitMemory = 0.98;
+// Weight of the previous segments in the stiffness fit, per segment: about
+// the last 10 count. A segment closes after an even number of steps once the
+// proxy has moved kFitMinMotion from where it began, or after kFitMaxSteps.
+constexpr double kFitMemory = 0.9;
+constexpr double kFitMinMotion = 5e-6;  // [m]
+constexpr int32_t kFitMaxSteps = 64;
 
 bool boxes_meet(const Vec3& alo, const Vec3& ahi, const Vec3& blo, const Vec3& bhi) {
   return alo.x <= bhi.x && blo.x <= ahi.x && alo.y <= bhi.y && blo.y <= ahi.y && alo.z <= bhi.z && blo.z <= ahi.z;
@@ -180,7 +183,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   touched_now_.clear();
   x_prev_.swap(x_now_);
   for (size_t j = 0; j < n_proxies; ++j) {
-    if (reports_[j].contacts > 0) update_stiffness(int32_t(j), pose1_[j].position, reports_[j].force);
+    if (reports_[j].contacts > 0) update_stiffness(int32_t(j), pose1_[j].position, reports_[j].force, dt);
     else {
       fit_[j] = Fit{};
       reports_[j].stiffness = glm::dmat3(0.0);
@@ -274,13 +277,26 @@ void Contact<Real>::contact_node(State<Real>& s, int32_t k, int32_t proxy, const
 }
 
 template <class Real>
-void Contact<Real>::update_stiffness(int32_t proxy, const Vec3& position, const Vec3& force) {
+void Contact<Real>::update_stiffness(int32_t proxy, const Vec3& position, const Vec3& force, double dt) {
   Fit& f = fit_[size_t(proxy)];
   ProxyReport& r = reports_[size_t(proxy)];
+  if (f.seg_steps == 0) f.seg_start = position;
+  f.seg_impulse += force * dt;
+  f.seg_moment += position * dt;
+  f.seg_time += dt;
+  ++f.seg_steps;
+  const Vec3 moved = position - f.seg_start;
+  if (f.seg_steps % 2 != 0 || (glm::dot(moved, moved) < kFitMinMotion * kFitMinMotion && f.seg_steps < kFitMaxSteps))
+    return;
+  const Vec3 mean_force = f.seg_impulse / f.seg_time;
+  const Vec3 mean_position = f.seg_moment / f.seg_time;
+  f.seg_impulse = f.seg_moment = Vec3(0.0);
+  f.seg_time = 0;
+  f.seg_steps = 0;
   if (f.has_last) {
-    const Vec3 dx = position - f.last_position;
+    const Vec3 dx = mean_position - f.last_position;
     if (glm::dot(dx, dx) > 0) {
-      const Vec3 dF = force - f.last_force;
+      const Vec3 dF = mean_force - f.last_force;
       f.fx = kFitMemory * f.fx + glm::outerProduct(dF, dx);
       f.xx = kFitMemory * f.xx + glm::outerProduct(dx, dx);
       // K = S_fx (S_xx + eps I)^-1; eps keeps directions never moved along at
@@ -289,8 +305,8 @@ void Contact<Real>::update_stiffness(int32_t proxy, const Vec3& position, const 
       r.stiffness = f.fx * glm::inverse(f.xx + glm::dmat3(eps));
     }
   }
-  f.last_position = position;
-  f.last_force = force;
+  f.last_position = mean_position;
+  f.last_force = mean_force;
   f.has_last = true;
 }
 

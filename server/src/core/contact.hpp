@@ -119,7 +119,7 @@ class Contact {
   };
   void contact_node(State<Real>& s, int32_t k, int32_t proxy, const Pose& p0, const Pose& p1, double dt,
                     ContactSums& sums);
-  void update_stiffness(int32_t proxy, const Vec3& position, const Vec3& force);
+  void update_stiffness(int32_t proxy, const Vec3& position, const Vec3& force, double dt);
 
   const Model<Real>& model_;
   std::vector<ProxyMotion> motion_;
@@ -139,10 +139,18 @@ class Contact {
   std::vector<Vec3> lo_, hi_;        // per proxy: box its bounding sphere sweeps over the step
   // Secant fit of the stiffness per proxy: exponentially weighted sums of
   // dF dx^T and dx dx^T over the steps the proxy moved in contact.
+  // The stiffness fit works on segments of an even number of steps over
+  // which the proxy moved a little (kFitMinMotion): their mean force and
+  // mean position. Per step, the force pulses with the contact's bounce
+  // (often every other step) while the proxy moves micrometres, and dF/dx
+  // from single steps is that noise over nearly nothing.
   struct Fit {
     glm::dmat3 fx{0.0}, xx{0.0};
-    Vec3 last_position{0.0}, last_force{0.0};
+    Vec3 last_position{0.0}, last_force{0.0};  // the latest closed segment's means
     bool has_last = false;
+    Vec3 seg_impulse{0.0}, seg_moment{0.0}, seg_start{0.0};  // the open segment: sum F dt, sum x dt, x at its start
+    double seg_time = 0;
+    int32_t seg_steps = 0;
   };
   std::vector<Fit> fit_;
   double alpha_ = 0;  // Rayleigh mass damping [1/s], for q = m (1 + alpha dt / 2)
