@@ -20,6 +20,7 @@ import json
 import os
 import pathlib
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -118,18 +119,63 @@ def run_bridge(tmp: pathlib.Path, port: int, seconds: float, *args: str, script:
 
 # ---- lateness ---------------------------------------------------------------------------------------------
 
+def cyclictest(seconds: float) -> subprocess.Popen[str] | None:
+    """The machine's own wake-up latency beside the bridge: rt-tests' cyclictest, a C loop at SCHED_FIFO 79 waking
+    every 1 ms (None where it is not installed or may not run)."""
+    exe = shutil.which("cyclictest")
+    if exe is None:
+        return None
+    return subprocess.Popen([exe, "-t1", "-p", "79", "-i", "1000", "-D", str(int(seconds)), "-m", "-q", "-h", "20000"],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+
+
+def cyclictest_figures(proc: subprocess.Popen[str] | None) -> tuple[float, float, float] | None:
+    """(p99, p99.9, max) of cyclictest's latencies [us], from its histogram."""
+    if proc is None:
+        return None
+    out, _ = proc.communicate(timeout=120)
+    counts = [(int(a), int(b)) for a, b in (ln.split()[:2] for ln in out.splitlines() if ln[:1].isdigit())]
+    m = re.search(r"# Max Latencies:\s*(\d+)", out)
+    total = sum(c for _, c in counts)
+    if proc.returncode != 0 or not total or m is None:
+        return None
+    cum, p99, p999 = 0, None, None
+    for us, c in counts:
+        cum += c
+        if p99 is None and cum >= 0.99 * total:
+            p99 = us
+        if p999 is None and cum >= 0.999 * total:
+            p999 = us
+    return float(p99 or 0), float(p999 or 0), float(m.group(1))
+
+
+def steal_ms() -> float:
+    """CPU time the hypervisor has taken from this (virtual) machine since boot, all CPUs [ms]."""
+    with open("/proc/stat") as f:
+        fields = f.readline().split()
+    return 1000.0 * int(fields[8]) / os.sysconf("SC_CLK_TCK") if len(fields) > 8 else 0.0
+
+
 def lateness(args: argparse.Namespace) -> None:
     configs = [("process", 80), ("process", 0), ("thread", 80), ("thread", 0)]
     print(f"tick lateness over {args.seconds:g} s at 1 kHz, server stepping at {args.dt * 1e3:g} ms with a haptic "
           f"frame per step, simulated arm poking (2 cores, shared)")
+    print("  steal: CPU time the hypervisor took from this virtual machine meanwhile, per second (a tick cannot run\n"
+          "  while its virtual CPU is not running, whatever its priority); C: rt-tests' cyclictest beside it, a C loop\n"
+          "  at SCHED_FIFO 79 waking every 1 ms: what compiled code gets from this machine at the same time")
     print(f"{'tick in':>8} {'FIFO':>5} {'p50 us':>8} {'p99 us':>8} {'p99.9 us':>9} {'max us':>8} {'missed':>7} "
-          f"{'ticks':>7} {'states':>7} {'delay ms':>9}")
+          f"{'ticks':>7} {'states':>7} {'delay ms':>9} {'steal ms/s':>11} {'C p99':>6} {'C p99.9':>8} {'C max':>6}")
     with tempfile.TemporaryDirectory() as d, server(pathlib.Path(d), SCENE, "--dt", str(args.dt)) as port:
         for network, prio in configs:
+            st0, t0 = steal_ms(), time.monotonic()
+            ref = cyclictest(args.seconds)
             s, _ = run_bridge(pathlib.Path(d), port, args.seconds, "--network", network, "--priority", str(prio))
+            steal = (steal_ms() - st0) / (time.monotonic() - t0)
+            c = cyclictest_figures(ref)
+            cref = f"{c[0]:>6.0f} {c[1]:>8.0f} {c[2]:>6.0f}" if c else f"{'-':>6} {'-':>8} {'-':>6}"
             print(f"{network:>8} {prio:>5} {s['late_p50_us']:>8.0f} {s['late_p99_us']:>8.0f} "
                   f"{s['late_p999_us']:>9.0f} {s['late_max_us']:>8.0f} {s['missed']:>7} {s['ticks']:>7} "
-                  f"{s['states']:>7} {s['delay_ms']:>9.2f}", flush=True)
+                  f"{s['states']:>7} {s['delay_ms']:>9.2f} {steal:>11.1f} {cref}", flush=True)
 
 
 # ---- modes ------------------------------------------------------------------------------------------------
