@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import glob
 import json
 import os
@@ -194,11 +195,13 @@ def cpp_latency(exe: str, port: int, seconds: float) -> tuple[float, float] | No
 
 
 async def viewers_cost(port: int, n: int, seconds: float) -> None:
-    async with websockets.connect(f"ws://127.0.0.1:{port}/ws") as probe:
+    # The probe is read only before and after the viewers' run: without keepalive pings (they would go
+    # unanswered behind its unread frames and end it) and with its frames queued unbounded meanwhile.
+    async with websockets.connect(f"ws://127.0.0.1:{port}/ws", ping_interval=None, max_queue=None) as probe:
         scene = await say_hello(probe, Role.Viewer, [])
         await telemetry(probe)
         base = await telemetry(probe)
-        conns = [await websockets.connect(f"ws://127.0.0.1:{port}/ws") for _ in range(n)]
+        conns = [await websockets.connect(f"ws://127.0.0.1:{port}/ws", ping_interval=None) for _ in range(n)]
         for c in conns:
             await say_hello(c, Role.Viewer, [])
         frames = [0] * n
@@ -217,6 +220,9 @@ async def viewers_cost(port: int, n: int, seconds: float) -> None:
 
         tasks = [asyncio.create_task(drain(i, c)) for i, c in enumerate(conns)]
         await asyncio.sleep(seconds)
+        with contextlib.suppress(asyncio.TimeoutError):  # past what queued on the probe meanwhile
+            while True:
+                await asyncio.wait_for(probe.recv(), 0.005)
         loaded = await telemetry(probe)
         for t in tasks:
             t.cancel()
@@ -239,7 +245,9 @@ async def viewers_cost_cpp(port: int, n: int, seconds: float, exe: str, rounds: 
     """The step time alone and with n viewers (viewer_load: one C++ thread that reads and discards, so that
     the load is the server's sending, not the clients' decoding), in alternating rounds; medians of the
     per-second telemetry figures, the first second of each phase left out (it straddles the change)."""
-    async with websockets.connect(f"ws://127.0.0.1:{port}/ws") as probe:
+    # The probe is read only before and after the viewers' run: without keepalive pings (they would go
+    # unanswered behind its unread frames and end it) and with its frames queued unbounded meanwhile.
+    async with websockets.connect(f"ws://127.0.0.1:{port}/ws", ping_interval=None, max_queue=None) as probe:
         scene = await say_hello(probe, Role.Viewer, [])
         alone: list[float] = []
         loaded: list[float] = []
