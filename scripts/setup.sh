@@ -51,6 +51,19 @@ if [ ! -f "$js/dist/tactile-proto.js" ] ||
   npm --prefix "$js" run -s build
 fi
 
+# --- JavaScript (the browser view, client-web) ------------------------------
+web=client-web
+if ! cmp -s "$web/package-lock.json" "$web/node_modules/.setup-package-lock.json" 2>/dev/null; then
+  echo "setup: installing JavaScript packages ($web/package-lock.json)"
+  (cd "$web" && npm ci --ignore-scripts --no-audit --no-fund)
+  cp "$web/package-lock.json" "$web/node_modules/.setup-package-lock.json"
+fi
+if [ ! -f "$web/dist/app.js" ] ||
+   [ -n "$(find "$web/src" "$js/src" "$web/package.json" "$web/package-lock.json" -newer "$web/dist/app.js" -print -quit)" ]; then
+  echo "setup: building the browser view ($web/dist)"
+  npm --prefix "$web" run -s build
+fi
+
 # --- C++ build -------------------------------------------------------------
 build="${TACTILE_BUILD:-build/release}"
 if [ ! -f "$build/build.ninja" ]; then

@@ -1,0 +1,166 @@
+// The browser view: connects to the server that serves this page, says Hello as a viewer, builds the
+// scene from its SceneDescription and draws the body from its state frames, interpolated to the
+// screen's rate.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+
+import {
+  Message, Role, decode, encode, makeHello, messageTypeOf, readStateFrame, checkVersion,
+} from '../../proto/js/src/index.ts';
+import { cssGradient } from './colormap.js';
+import { FrameBuffer } from './frames.js';
+import { SceneView } from './view.js';
+
+const $ = (id) => document.getElementById(id);
+const status = (text) => { $('status').textContent = text; };
+
+// Shadows and multisampling where a GPU draws; without them where the CPU does (SwiftShader, llvmpipe:
+// headless browsers, remote desktops), which they would slow to a few frames a second.
+// ?quality=high or ?quality=low overrides.
+function softwareRendering() {
+  const gl = document.createElement('canvas').getContext('webgl2');
+  if (!gl) return true;
+  const info = gl.getExtension('WEBGL_debug_renderer_info');
+  const name = info ? String(gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) : '';
+  gl.getExtension('WEBGL_lose_context')?.loseContext();
+  return /swiftshader|llvmpipe|software/i.test(name);
+}
+const quality = new URLSearchParams(location.search).get('quality') ?? (softwareRendering() ? 'low' : 'high');
+const renderer = new THREE.WebGLRenderer({ antialias: quality === 'high', preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio);
+renderer.shadowMap.enabled = quality === 'high';
+$('view').appendChild(renderer.domElement);
+const scene = new THREE.Scene();
+scene.background = new THREE.Color(0x20242c);
+const camera = new THREE.PerspectiveCamera(40, 1, 0.001, 100);
+const controls = new OrbitControls(camera, renderer.domElement);
+scene.add(new THREE.HemisphereLight(0xdde6ff, 0x303030, 1.2));
+const sun = new THREE.DirectionalLight(0xffffff, 2.0);
+sun.castShadow = true;
+sun.shadow.mapSize.set(1024, 1024);
+scene.add(sun);
+scene.add(sun.target);
+$('legend-bar').style.background = cssGradient();
+
+// What the tests read (and a person can, in the console).
+const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality };
+window.tactile = stats;
+
+let view = null;
+let buffer = null;
+let ground = null;
+
+function resize() {
+  const w = $('view').clientWidth;
+  const h = $('view').clientHeight;
+  renderer.setSize(w, h, false);
+  camera.aspect = w / Math.max(1, h);
+  camera.updateProjectionMatrix();
+}
+window.addEventListener('resize', resize);
+
+function onScene(d) {
+  if (view) view.dispose();
+  view = new SceneView(scene, d);
+  stats.view = view;
+  buffer = new FrameBuffer(view.positions.length, view.scalars.length);
+  stats.sceneId = d.sceneId;
+  stats.sceneName = d.sceneName || '';
+  stats.vertices = view.positions.length / 3;
+  $('scene').textContent = `${stats.sceneName}: ${stats.vertices} surface vertices, step ${(d.dt * 1e3).toFixed(3)} ms`;
+  $('legend-name').textContent = d.scalarName || 'scalar';
+  // Frame the body: look at its centre from the front, above.
+  const s = view.geometry.boundingSphere;
+  const c = s.center;
+  const r = s.radius || 0.05;
+  controls.target.copy(c);
+  camera.position.set(c.x + 1.6 * r, c.y + 1.4 * r, c.z + 2.6 * r);
+  camera.near = r / 100;
+  camera.far = r * 100;
+  camera.updateProjectionMatrix();
+  sun.position.set(c.x + 2 * r, c.y + 5 * r, c.z + 3 * r);
+  sun.target.position.copy(c);
+  const cam = sun.shadow.camera;
+  cam.left = cam.bottom = -3 * r;
+  cam.right = cam.top = 3 * r;
+  cam.near = r / 10;
+  cam.far = 20 * r;
+  cam.updateProjectionMatrix();
+  if (ground) { ground.geometry.dispose(); ground.material.dispose(); scene.remove(ground); }
+  view.geometry.computeBoundingBox();
+  ground = new THREE.Mesh(new THREE.PlaneGeometry(12 * r, 12 * r).rotateX(-Math.PI / 2),
+                          new THREE.ShadowMaterial({ opacity: 0.35 }));
+  ground.position.set(c.x, view.geometry.boundingBox.min.y - 1e-4, c.z);
+  ground.receiveShadow = true;
+  scene.add(ground);
+  resize();
+}
+
+function onMessage(data) {
+  const type = messageTypeOf(data);
+  if (type === Message.StateFrame) {
+    if (!buffer) return;
+    const f = readStateFrame(data);
+    if (f.sceneId !== stats.sceneId) return;
+    if (buffer.push(f.positions, f.scalar, f.simTime, performance.now() / 1000)) {
+      stats.frames += 1;
+      stats.lastStep = Number(f.step);
+      view.updateProxies(f.proxies, f.contactForces);
+      const forces = [];
+      for (let j = 0; j < view.proxies.length; j++) {
+        const n = Math.hypot(f.contactForces[3 * j], f.contactForces[3 * j + 1], f.contactForces[3 * j + 2]);
+        forces.push(`${view.proxies[j].name || 'proxy ' + j}: ${n.toFixed(3)} N`);
+      }
+      $('forces').textContent = forces.join('  ');
+      $('time').textContent = `t = ${f.simTime.toFixed(3)} s`;
+    }
+    return;
+  }
+  const m = decode(data);
+  switch (m.messageType) {
+    case Message.Welcome: checkVersion(m.message); break;
+    case Message.SceneDescription: onScene(m.message); break;
+    case Message.Error: status(`server: ${m.message.message}`); stats.errors.push(m.message.message); break;
+    default: break;
+  }
+}
+
+function connect() {
+  const url = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/`;
+  const ws = new WebSocket(url);
+  ws.binaryType = 'arraybuffer';
+  ws.onopen = () => {
+    status(`connected to ${url}`);
+    ws.send(encode(makeHello({ role: Role.Viewer, clientName: 'client-web' })));
+  };
+  ws.onmessage = (e) => {
+    try {
+      onMessage(new Uint8Array(e.data));
+    } catch (err) {
+      status(`bad message: ${err.message}`);
+      stats.errors.push(String(err.message));
+    }
+  };
+  ws.onclose = () => {
+    status('disconnected: reconnecting');
+    setTimeout(connect, 1000);
+  };
+}
+
+function frame() {
+  requestAnimationFrame(frame);
+  if (view && buffer && buffer.count > 0) {
+    buffer.sample(performance.now() / 1000, view.positions, view.scalars);
+    view.updateSurface();
+    const [lo, hi] = view.scalarRange;
+    $('legend-lo').textContent = lo.toPrecision(3);
+    $('legend-hi').textContent = hi.toPrecision(3);
+  }
+  controls.update();
+  renderer.render(scene, camera);
+  stats.rendered += 1;
+}
+
+resize();
+connect();
+frame();
