@@ -9,6 +9,7 @@ import {
 } from '../../proto/js/src/index.ts';
 import { cssGradient } from './colormap.js';
 import { FrameBuffer } from './frames.js';
+import { TelemetryPanel } from './telemetry.js';
 import { SceneView } from './view.js';
 
 const $ = (id) => document.getElementById(id);
@@ -41,6 +42,7 @@ sun.shadow.mapSize.set(1024, 1024);
 scene.add(sun);
 scene.add(sun.target);
 $('legend-bar').style.background = cssGradient();
+const telemetry = new TelemetryPanel($('telemetry'));
 
 // What the tests read (and a person can, in the console).
 const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality };
@@ -121,6 +123,8 @@ function onMessage(data) {
     case Message.Welcome: checkVersion(m.message); break;
     case Message.SceneDescription: onScene(m.message); break;
     case Message.Error: status(`server: ${m.message.message}`); stats.errors.push(m.message.message); break;
+    case Message.Telemetry: telemetry.update(m.message); stats.telemetry = m.message; break;
+    case Message.SafetyEvent: telemetry.safety(m.message); break;
     default: break;
   }
 }

@@ -90,6 +90,19 @@ test('the page draws the live body from the server\'s frames', { timeout: 120000
     assert.ok(rate > 20 && rate < 40, `${rate} state frames a second (30 configured)`);
     assert.ok(b.rendered - a.rendered > 20, `${b.rendered - a.rendered} renders in 2 s`);
 
+    // The telemetry panel shows the server's figures (its latest Telemetry, about once a second).
+    await page.waitForFunction(() => window.tactile.telemetry, null, { timeout: 10000 });
+    await page.waitForTimeout(1500);
+    const panel = await page.evaluate(() => {
+      const t = window.tactile.telemetry;
+      return { text: document.querySelector('#telemetry .figures').textContent, rtf: t.realTimeFactor,
+               step: t.stepTimeMeanUs, viewers: t.viewers };
+    });
+    assert.ok(panel.text.includes(`real-time factor ${panel.rtf.toFixed(3)}`), panel.text);
+    assert.ok(panel.text.includes(`step ${panel.step.toFixed(1)} us`), panel.text);
+    assert.ok(panel.viewers >= 1 && panel.text.includes(`${panel.viewers} viewers`), panel.text);
+    assert.ok(panel.rtf > 0.5 && panel.rtf < 1.5, `real-time factor ${panel.rtf}`);
+
     // A rendered scene: the screenshot is kept, and its pixels are not all one colour.
     fs.mkdirSync(ARTEFACTS, { recursive: true });
     const shot = path.join(ARTEFACTS, 'e2e_twist.png');
