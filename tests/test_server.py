@@ -601,7 +601,9 @@ def test_a_client_that_never_reads_does_not_slow_the_others(tmp_path: pathlib.Pa
             await hello(viewer, Role.Viewer)
             await asyncio.sleep(1.5)
             t = await next_of(viewer, "TelemetryT")
-            assert t.realTimeFactor > 0.8
+            # Not a speed figure (a shared machine makes it anywhere from 0.7 to 1): a simulation held
+            # up by the stalled writer would sit near 0.
+            assert t.realTimeFactor > 0.3
             s1 = await next_of(viewer, "StateFrameT")
             s2 = await next_of(viewer, "StateFrameT")
             assert s2.step > s1.step
