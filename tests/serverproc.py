@@ -18,13 +18,14 @@ from test_scenes_schema import built
 
 
 @contextlib.contextmanager
-def server_process(tmp_path: pathlib.Path, scene: dict[str, Any], token: str,
-                   *args: str) -> Iterator[tuple[int, subprocess.Popen[str]]]:
-    """Yields (port, process) of a tactile-server running `scene`; fails the test if it does not start or stop."""
+def server_process(tmp_path: pathlib.Path, scene: dict[str, Any], token: str, *args: str,
+                   file_name: str | None = None) -> Iterator[tuple[int, subprocess.Popen[str]]]:
+    """Yields (port, process) of a tactile-server running `scene` (written to tmp_path/file_name, by default
+    its name .json); fails the test if it does not start or stop."""
     exe = built("tactile-server")
     if exe is None:
         pytest.fail("tactile-server is not built (scripts/setup.sh builds it)")
-    path = tmp_path / f"{scene.get('name', 'scene')}.json"
+    path = tmp_path / (file_name or f"{scene.get('name', 'scene')}.json")
     path.write_text(json.dumps(scene))
     proc = subprocess.Popen([exe, str(path), "--port", "0", "--token", token, *args], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
@@ -43,9 +44,11 @@ def server_process(tmp_path: pathlib.Path, scene: dict[str, Any], token: str,
     if port is None:
         proc.kill()
         pytest.fail("the server did not start:\n" + "".join(lines))
-    # Keep reading what it prints, so that a full pipe never stalls it; the lines stay on proc.lines.
+    # Keep reading what it prints, so that a full pipe never stalls it; the lines stay on proc.lines, all of
+    # them once the context has ended.
     proc.lines = lines  # type: ignore[attr-defined]
-    threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")), daemon=True).start()  # type: ignore[union-attr]
+    reader = threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")), daemon=True)  # type: ignore[union-attr]
+    reader.start()
     try:
         yield port, proc
     finally:
@@ -55,3 +58,4 @@ def server_process(tmp_path: pathlib.Path, scene: dict[str, Any], token: str,
         except subprocess.TimeoutExpired:
             proc.kill()
             pytest.fail("the server did not stop on SIGINT")
+        reader.join(timeout=5)

@@ -12,8 +12,6 @@ import json
 import math
 import os
 import pathlib
-import re
-import signal
 import subprocess
 import time
 import urllib.error
@@ -22,6 +20,7 @@ from typing import Any, Iterator
 
 import pytest
 import websockets
+from serverproc import server_process
 from test_scenes_schema import built
 
 from tactile_proto import codec
@@ -65,37 +64,9 @@ def tactile_server() -> str | None:
 
 @contextlib.contextmanager
 def running_server(tmp_path: pathlib.Path, *args: str) -> Iterator[tuple[int, subprocess.Popen[str]]]:
-    exe = tactile_server()
-    if exe is None:
-        pytest.fail("tactile-server is not built (scripts/setup.sh builds it)")
-    scene = tmp_path / "scene.json"
-    scene.write_text(json.dumps(SCENE))
-    proc = subprocess.Popen([exe, str(scene), "--port", "0", "--token", TOKEN, *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
-    port = None
-    deadline = time.time() + 30
-    lines = []
-    while time.time() < deadline and proc.stdout is not None:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        m = re.search(r"listening on http://127\.0\.0\.1:(\d+)/", line)
-        if m:
-            port = int(m.group(1))
-            break
-    if port is None:
-        proc.kill()
-        pytest.fail("the server did not start:\n" + "".join(lines))
-    try:
+    """The server on SCENE with the token, options `args`; what it printed is on proc.lines."""
+    with server_process(tmp_path, SCENE, TOKEN, *args, file_name="scene.json") as (port, proc):
         yield port, proc
-    finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            pytest.fail("the server did not stop on SIGINT")
 
 
 def url(port: int) -> str:
@@ -377,8 +348,7 @@ def test_safety_events_are_stamped_logged_and_relayed_to_viewers_and_controllers
 
     with running_server(tmp_path) as (port, proc):
         asyncio.run(run(port))
-    assert proc.stdout is not None
-    log = proc.stdout.read()
+    log = "".join(proc.lines)  # type: ignore[attr-defined]
     assert "safety: stylus Clipped force 6.5 N over the limit: scaled to 5 N" in log, log[-2000:]
     assert "safety: stylus Disengaged states stopped: force to zero" in log
     assert "dropped" in log, "the events dropped over the rate limit are counted"
