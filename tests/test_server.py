@@ -163,10 +163,12 @@ def test_viewer_gets_the_scene_states_and_telemetry(tmp_path: pathlib.Path) -> N
                     states.append(msg)
                 elif type(msg).__name__ == "TelemetryT":
                     telemetry = msg  # the latest (the first second's figures come with the second one)
-            # 30 Hz (the default viewer rate, and the rate the states are made at), not faster, and none
-            # lost to the jitter of their publishing.
-            rate = len(states) / 2.2
-            assert 24 <= rate <= 32, rate
+            # 30 Hz of simulated time (the default viewer rate, and the rate the states are made at), not
+            # faster, and none lost to the jitter of their publishing. (Per wall second it is as fast as the
+            # shared machine lets the simulation run: only a floor is checked.)
+            assert len(states) > 0.5 * 30 * 2.2, f"{len(states)} states in 2.2 s"
+            rate = (len(states) - 1) / (states[-1].simTime - states[0].simTime)
+            assert 28.5 <= rate <= 31.5, rate
             assert all(len(s.positions) == 3 * n_vertices for s in states)
             assert [s.step for s in states] == sorted(s.step for s in states)
             assert telemetry is not None and telemetry.viewers >= 1
