@@ -185,16 +185,19 @@ def test_viewer_gets_the_scene_states_and_telemetry(tmp_path: pathlib.Path) -> N
 
 def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_path: pathlib.Path) -> None:
     async def run(port: int) -> None:
-        async with websockets.connect(url(port)) as ws:
+        async with websockets.connect(url(port), **READ_ON) as ws:
             await hello(ws, Role.Device, TOKEN, ("stylus",))
             # Haptic frames come at the step rate.
             first = await next_of(ws, "HapticFrameT")
-            n = 0
+            n, last = 0, first
             t0 = time.monotonic()
             while time.monotonic() - t0 < 0.3:
-                if type(codec.decode(await ws.recv()).message).__name__ == "HapticFrameT":
-                    n += 1
-            assert n > 300, f"{n} haptic frames in 0.3 s"
+                msg = codec.decode(await ws.recv()).message
+                if type(msg).__name__ == "HapticFrameT":
+                    n, last = n + 1, msg
+            # One per step (as many steps as a shared host lets it make in 0.3 s: a floor only).
+            assert n > 30, f"{n} haptic frames in 0.3 s"
+            assert n >= 0.9 * (last.step - first.step), f"{n} haptic frames over {last.step - first.step} steps"
             assert first.proxies[0].force.y == 0.0  # not touching yet
             # Press 3 mm into the top face over 0.2 s at 1 kHz, then hold, reading all along as a device does
             # (thousands of frames a second: kept as bytes and decoded afterwards, so that the client keeps up).
@@ -208,7 +211,18 @@ def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_pa
             for k in range(1, 201):
                 await ws.send(codec.encode(device_input(k, 0.029 - 0.004 * k / 200)))
                 await asyncio.sleep(0.001)
-            await asyncio.sleep(0.4)
+            # Hold until a quarter of a simulated second has passed since the last input was seen, however
+            # slowly a shared host lets the simulation run (only the newest frame is decoded meanwhile).
+            seen_at = None
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline:
+                await asyncio.sleep(0.05)
+                last = codec.decode(received[-1]).message if received else None
+                if type(last).__name__ != "HapticFrameT" or last.lastInputSequence != 200:
+                    continue
+                seen_at = last.simTime if seen_at is None else seen_at
+                if last.simTime > seen_at + 0.25:
+                    break
             reader.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await reader
@@ -217,7 +231,10 @@ def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_pa
             assert done, "no haptic frame saw the last input"
             # From 0.1 s after the last input took effect (it glides in over one input interval).
             held = [f for f in done if f.simTime > done[0].simTime + 0.1]
-            assert len(held) > 20, f"{len(held)} frames held"  # (as many as a shared host lets it step)
+            assert len(held) > 50, (
+                f"{len(held)} frames held of {len(frames)}, {len(done)} after the last input "
+                f"(simulated {done[0].simTime:.4f} s to {done[-1].simTime:.4f} s)"
+            )  # (of 150 or more steps: some may be dropped)
             forces = [f.proxies[0].force.y for f in held]
             # Held 3 mm deep, the block pushes the sphere up. (Frame to frame the force still comes in
             # pulses: the paper's projection bounces resting nodes, and a 1 ms mean does not cover every
@@ -226,8 +243,10 @@ def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_pa
             assert sum(1 for x in forces if x > 0) > 0.8 * len(forces)
             assert min(forces) > -1e-9, "a contact never pulls the sphere in (beyond the running sum's round-off)"
 
-    with running_server(tmp_path) as (port, _):
+    with running_server(tmp_path) as (port, proc):
         asyncio.run(run(port))
+        # However a loaded host bunches the inputs (a faster press), the simulation goes on without a fault.
+        assert not [line for line in proc.lines if "fault" in line], proc.lines
 
 
 def test_haptic_frames_carry_the_device_pose_and_its_newest_input(tmp_path: pathlib.Path) -> None:

@@ -107,6 +107,10 @@ class Contact {
   // the work the contact forces did on the body over the step (trapezoid on
   // the nodes' displacements, like the natural loads').
   ContactSums apply(State<Real>& s, double t0, double t1, double dt);
+  // Surface nodes the latest apply() pushed (ids into surface_nodes()).
+  const std::vector<int32_t>& pushed() const { return touched_prev_; }
+  // The free surface nodes contact tests, as node ids.
+  const std::vector<int32_t>& surface_nodes() const { return surface_; }
 
  private:
   struct Memory {

@@ -57,9 +57,12 @@ struct Energy {
   // Central differences conserve 1/2 m v_{n-1/2}.v_{n+1/2} rather than
   // 1/2 m |v_n|^2; the difference is -dt^2/8 sum m |a|^2 [J].
   double discrete = 0;
+  // The sum of the changes of `discrete` made by restating it with a new
+  // step size (not energy the body gained or lost) [J].
+  double restated = 0;
   // Conserved: kinetic + elastic + gravity - work_loads - work_essential - work_contact + dissipated.
   double balance() const {
-    return kinetic + discrete + elastic + gravity - work_loads - work_essential - work_contact + dissipated;
+    return kinetic + discrete - restated + elastic + gravity - work_loads - work_essential - work_contact + dissipated;
   }
 };
 

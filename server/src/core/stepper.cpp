@@ -111,6 +111,22 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
   load_force_.assign(loaded_.size(), Vec3(0.0));
   a_prescribed_.assign(3 * model_.constrained.size(), Real(0));
   v_prescribed_.assign(3 * model_.constrained.size(), Real(0));
+  if (!model_.proxies.empty()) {
+    const std::vector<int32_t>& surface = contact_.surface_nodes();
+    std::vector<int32_t> index(size_t(model_.n_nodes), -1);
+    for (size_t k = 0; k < surface.size(); ++k) index[size_t(surface[k])] = int32_t(k);
+    contact_tet_begin_.assign(surface.size() + 1, 0);
+    for (const Tet& t : model_.mesh.tets)
+      for (int32_t i : t)
+        if (index[size_t(i)] >= 0) ++contact_tet_begin_[size_t(index[size_t(i)]) + 1];
+    for (size_t k = 0; k < surface.size(); ++k) contact_tet_begin_[k + 1] += contact_tet_begin_[k];
+    contact_tets_.assign(size_t(contact_tet_begin_.back()), 0);
+    std::vector<int32_t> fill(contact_tet_begin_.begin(), contact_tet_begin_.end() - 1);
+    for (size_t e = 0; e < model_.mesh.tets.size(); ++e)
+      for (int32_t i : model_.mesh.tets[e])
+        if (index[size_t(i)] >= 0) contact_tets_[size_t(fill[size_t(index[size_t(i)])]++)] = int32_t(e);
+    tet_mark_.assign(size_t(model_.n_tets), 0);
+  }
 }
 
 template <class Real>
@@ -329,7 +345,15 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     energy_ = e0;  // the kinetic energy at t_n for the dissipation trapezoid below
     energy_scale_ = std::fabs(e0.kinetic) + std::fabs(e0.elastic) + std::fabs(e0.gravity);
     energy_started_ = true;
+  } else if (dt != energy_dt_ && energy_dt_ > 0) {
+    // The modified energy's -dt^2/8 sum m|a|^2 is measured with the step
+    // that follows: a new step size restates it at t_n. That is no energy
+    // the body gained or lost: the balance leaves the change out.
+    const double restated = energy_.discrete * (dt * dt) / (energy_dt_ * energy_dt_);
+    energy_.restated += restated - energy_.discrete;
+    energy_.discrete = restated;
   }
+  energy_dt_ = dt;
   // Positions at t_n of the nodes whose work is accounted.
   // In the order apply_essential_rates reads them: set by set, not sorted.
   size_t held = 0;
@@ -518,6 +542,8 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
     }
     dt_critical_ = std::min(sweep_last_, sweep_min_);
   }
+  if (!contact_tets_.empty() && !contact_.pushed().empty())
+    dt_critical_ = std::min(dt_critical_, compute_contact_critical_dt(s));
   report.dt_critical = dt_critical_;
   const double fixed = model_.integrator.dt;
   int64_t n = 1;
@@ -537,14 +563,36 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
   } else {
     n = static_cast<int64_t>(std::ceil(frame_dt / (model_.integrator.safety * dt_critical_)));
   }
-  const double dt = frame_dt / double(n);
+  double dt = frame_dt / double(n);
   report.dt = dt;
+  double covered = 0;
   for (int64_t k = 0; k < n; ++k) {
     if (Fault f = step(s, dt)) {
       report.fault = std::move(f);
       break;
     }
     ++report.substeps;
+    covered += dt;
+    // A proxy that squashes the elements under it within the interval: the
+    // rest of the interval is split again at their new critical step.
+    if (contact_tets_.empty() || contact_.pushed().empty()) continue;
+    const double dc = compute_contact_critical_dt(s);
+    if (dc >= dt_critical_) continue;
+    dt_critical_ = report.dt_critical = dc;
+    if (dt <= model_.integrator.safety * dc || k + 1 == n) continue;
+    if (fixed > 0 && model_.integrator.unstable == UnstablePolicy::Refuse) {
+      std::ostringstream msg;
+      msg << "integrator.dt = " << fixed << " s exceeds the critical step " << dc
+          << " s of the elements a proxy squashes; refused (set integrator.unstable to \"subdivide\" to split it)";
+      report.fault = make_fault(Fault::Kind::StepTooLarge, s, msg.str(), {});
+      break;
+    }
+    const double rest = frame_dt - covered;
+    const int64_t m = static_cast<int64_t>(std::ceil(rest / (model_.integrator.safety * dc)));
+    dt = rest / double(m);
+    n = k + 1 + m;
+    report.dt = std::min(report.dt, dt);
+    report.subdivided = report.subdivided || fixed > 0;
   }
   return report;
 }
@@ -557,38 +605,57 @@ double Stepper<Real>::compute_critical_dt(const State<Real>& s) const {
 template <class Real>
 double Stepper<Real>::compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const {
   double dt = model_.dt_rest;
-  const TetMesh& mesh = model_.mesh;
-  for (size_t e = size_t(begin); e < size_t(end); ++e) {
-    // Small strain (eqs. 2-3) has one stiffness K for every configuration: its rest step holds throughout.
-    if (model_.tet_model[e] == MaterialModel::Linear) continue;
-    const Tet& t = mesh.tets[e];
-    Vec3 x[4];
-    for (int c = 0; c < 4; ++c) {
-      const size_t i = size_t(t[size_t(c)]);
-      x[c] = mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
-    }
-    // Current altitude over rest altitude: a squashed element has a shorter crossing time.
-    const double V = std::fabs(compute_tet_volume(x[0], x[1], x[2], x[3]));
-    double amax = 0;
-    amax = std::max(amax, glm::length(glm::cross(x[2] - x[1], x[3] - x[1])));
-    amax = std::max(amax, glm::length(glm::cross(x[2] - x[0], x[3] - x[0])));
-    amax = std::max(amax, glm::length(glm::cross(x[1] - x[0], x[3] - x[0])));
-    amax = std::max(amax, glm::length(glm::cross(x[1] - x[0], x[2] - x[0])));
-    const double h = amax > 0 ? 6.0 * V / amax : 0.0;
-    const double ratio = std::min(1.0, h / model_.tet_altitude[e]);
-    const glm::dmat3 Ds(x[1] - x[0], x[2] - x[0], x[3] - x[0]);
-    const Vec3& X0 = mesh.X[size_t(t[0])];
-    const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
-    const glm::dmat3 Fg = Ds * glm::inverse(Dm);
-    double F[9];
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) F[3 * r + c] = Fg[c][r];
-    const double k = material::stiffening(model_.tet_model[e], F);
-    // An element squashed flat has h = 0; it is the guards' job, not a zero step's.
-    const double dte = model_.tet_dt[e] * std::max(ratio, 0.05) / std::sqrt(k);
-    dt = std::min(dt, dte);
-  }
+  for (size_t e = size_t(begin); e < size_t(end); ++e) dt = std::min(dt, element_critical_dt(s, e));
   return dt;
+}
+
+template <class Real>
+double Stepper<Real>::compute_contact_critical_dt(const State<Real>& s) {
+  double dt = model_.dt_rest;
+  if (++mark_ == 0) {  // wrapped: no tet may keep a mark of this pass
+    std::fill(tet_mark_.begin(), tet_mark_.end(), 0u);
+    mark_ = 1;
+  }
+  for (int32_t k : contact_.pushed())
+    for (int32_t j = contact_tet_begin_[size_t(k)]; j < contact_tet_begin_[size_t(k) + 1]; ++j) {
+      const size_t e = size_t(contact_tets_[size_t(j)]);
+      if (tet_mark_[e] == mark_) continue;
+      tet_mark_[e] = mark_;
+      dt = std::min(dt, element_critical_dt(s, e));
+    }
+  return dt;
+}
+
+template <class Real>
+double Stepper<Real>::element_critical_dt(const State<Real>& s, size_t e) const {
+  // Small strain (eqs. 2-3) has one stiffness K for every configuration: its rest step holds throughout.
+  if (model_.tet_model[e] == MaterialModel::Linear) return model_.dt_rest;
+  const TetMesh& mesh = model_.mesh;
+  const Tet& t = mesh.tets[e];
+  Vec3 x[4];
+  for (int c = 0; c < 4; ++c) {
+    const size_t i = size_t(t[size_t(c)]);
+    x[c] = mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
+  }
+  // Current altitude over rest altitude: a squashed element has a shorter crossing time.
+  const double V = std::fabs(compute_tet_volume(x[0], x[1], x[2], x[3]));
+  double amax = 0;
+  amax = std::max(amax, glm::length(glm::cross(x[2] - x[1], x[3] - x[1])));
+  amax = std::max(amax, glm::length(glm::cross(x[2] - x[0], x[3] - x[0])));
+  amax = std::max(amax, glm::length(glm::cross(x[1] - x[0], x[3] - x[0])));
+  amax = std::max(amax, glm::length(glm::cross(x[1] - x[0], x[2] - x[0])));
+  const double h = amax > 0 ? 6.0 * V / amax : 0.0;
+  const double ratio = std::min(1.0, h / model_.tet_altitude[e]);
+  const glm::dmat3 Ds(x[1] - x[0], x[2] - x[0], x[3] - x[0]);
+  const Vec3& X0 = mesh.X[size_t(t[0])];
+  const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
+  const glm::dmat3 Fg = Ds * glm::inverse(Dm);
+  double F[9];
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) F[3 * r + c] = Fg[c][r];
+  const double k = material::stiffening(model_.tet_model[e], F);
+  // An element squashed flat has h = 0; it is the guards' job, not a zero step's.
+  return model_.tet_dt[e] * std::max(ratio, 0.05) / std::sqrt(k);
 }
 
 template <class Real>

@@ -82,6 +82,9 @@ class Stepper {
   double compute_critical_dt(const State<Real>& s) const;
   // The same over the elements [begin, end) only (tet ids).
   double compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const;
+  // The same over the elements around the surface nodes the latest step's
+  // contact pushed (the model's rest step when it pushed none).
+  double compute_contact_critical_dt(const State<Real>& s);
 
   // All energies from a full pass (not the hot path).
   Energy compute_energy(const State<Real>& s) const;
@@ -167,12 +170,20 @@ class Stepper {
   double energy_window_start_ = 0;  // simulated time the current window started [s]
   double energy_scale_ = 0;      // running max of the energy magnitudes [J]
   bool energy_started_ = false;
+  double energy_dt_ = 0;         // the step the latest energies were measured with [s]
   Fault fault_;
   double dt_critical_ = 0;
   int64_t dt_refreshed_at_ = -1;  // step of the last complete sweep, -1 before the first
   double sweep_last_ = 0;         // estimate of the last complete sweep [s]
   double sweep_min_ = 0;          // of the sweep under way, so far [s]
   int32_t sweep_next_ = 0;        // first element the next call examines
+  // A proxy squashes the elements under it faster than the sweep comes
+  // round: those around the nodes it pushed are examined after every step.
+  std::vector<int32_t> contact_tet_begin_;  // per contact surface node: range in contact_tets_ (+1)
+  std::vector<int32_t> contact_tets_;       // the tets around each contact surface node
+  std::vector<uint32_t> tet_mark_;          // per tet: the pass that last examined it (n_tets)
+  uint32_t mark_ = 0;
+  double element_critical_dt(const State<Real>& s, size_t e) const;
 };
 
 }  // namespace tactile

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <thread>
 
 #include "scene/parameters.hpp"
@@ -82,6 +83,8 @@ void Director::run(const std::atomic<bool>& stop, double duration) {
       if (ran >= duration - 1e-12) return;
       if (!st.fault.empty()) {
         faulted_.store(true);
+        std::fprintf(stderr, "tactile-server: the simulation stopped at t = %.6f s on a fault: %s (a reset or a scene load starts it again)\n",
+                     scene->sim().time(), st.fault.c_str());
         if (duration < std::numeric_limits<double>::infinity()) return;
       }
     }
