@@ -40,6 +40,10 @@ for _ in $(seq 1 600); do
   kill -0 "$server" 2>/dev/null || break
   sleep 0.1
 done
+if [ -n "$url" ]; then
+  # The token lets the page drive a free device channel with the mouse, and control the scene.
+  echo "run: open ${url}?token=${token} in a browser (drag the body to poke it)"
+fi
 if [ -n "$url" ] && [ "$device" != "none" ]; then
   .venv/bin/tactile-bridge --server "${url/http:/ws:}" --token "$token" --profile "$device" --status 5 &
   bridge=$!

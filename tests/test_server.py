@@ -659,3 +659,28 @@ def test_refuses_to_listen_off_loopback_without_a_token(tmp_path: pathlib.Path) 
                        timeout=30, env=env)
     assert r.returncode == 2
     assert "without a token" in r.stderr
+
+
+def test_a_device_channel_is_driven_by_one_device_at_a_time(tmp_path: pathlib.Path) -> None:
+    """A second device naming a channel another device drives is refused with Busy, naming the channel (two
+    would pull its proxy both ways); once the first has gone, the channel is free again."""
+
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as first:
+            await hello(first, Role.Device, TOKEN, ("stylus",))
+            async with websockets.connect(url(port), **READ_ON) as second:
+                await second.send(codec.encode(codec.make_hello(Role.Device, TOKEN, "pytest", ["stylus"])))
+                error = codec.decode(await asyncio.wait_for(second.recv(), 5)).message
+                assert type(error).__name__ == "ErrorT" and error.code == ErrorCode.Busy
+                assert "'stylus'" in error.message and "another device" in error.message
+        for _ in range(50):  # the first connection's close reaches the server
+            async with websockets.connect(url(port), **READ_ON) as again:
+                await again.send(codec.encode(codec.make_hello(Role.Device, TOKEN, "pytest", ["stylus"])))
+                reply = codec.decode(await asyncio.wait_for(again.recv(), 5)).message
+                if type(reply).__name__ == "WelcomeT":
+                    return
+            await asyncio.sleep(0.05)
+        raise AssertionError("the channel stayed taken after its device left")
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))

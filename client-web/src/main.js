@@ -9,6 +9,7 @@ import {
 } from '../../proto/js/src/index.ts';
 import { cssGradient } from './colormap.js';
 import { FrameBuffer } from './frames.js';
+import { PointerDevice } from './pointer.js';
 import { TelemetryPanel } from './telemetry.js';
 import { SceneView } from './view.js';
 
@@ -26,7 +27,11 @@ function softwareRendering() {
   gl.getExtension('WEBGL_lose_context')?.loseContext();
   return /swiftshader|llvmpipe|software/i.test(name);
 }
-const quality = new URLSearchParams(location.search).get('quality') ?? (softwareRendering() ? 'low' : 'high');
+const query = new URLSearchParams(location.search);
+const quality = query.get('quality') ?? (softwareRendering() ? 'low' : 'high');
+// The device and controller roles need the server's token: ?token=... (scripts/run.sh prints the URL with it).
+const token = query.get('token') || '';
+const wsUrl = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/`;
 const renderer = new THREE.WebGLRenderer({ antialias: quality === 'high', preserveDrawingBuffer: true });
 renderer.setPixelRatio(window.devicePixelRatio);
 renderer.shadowMap.enabled = quality === 'high';
@@ -43,9 +48,18 @@ scene.add(sun);
 scene.add(sun.target);
 $('legend-bar').style.background = cssGradient();
 const telemetry = new TelemetryPanel($('telemetry'));
+const pointer = new PointerDevice({ canvas: renderer.domElement, camera, controls, token,
+                                    onStatus: (text) => { $('poke').textContent = text; } });
 
 // What the tests read (and a person can, in the console).
 const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality };
+stats.pointer = pointer;
+// Where a scene point [m] is drawn, in CSS pixels of the page (for tests that point at the body).
+stats.project = (x, y, z) => {
+  const v = new THREE.Vector3(x, y, z).project(camera);
+  const r = renderer.domElement.getBoundingClientRect();
+  return [r.left + ((v.x + 1) / 2) * r.width, r.top + ((1 - v.y) / 2) * r.height];
+};
 window.tactile = stats;
 
 let view = null;
@@ -96,6 +110,7 @@ function onScene(d) {
   ground.receiveShadow = true;
   scene.add(ground);
   resize();
+  pointer.setScene(d, view, wsUrl);
 }
 
 function onMessage(data) {
@@ -108,6 +123,7 @@ function onMessage(data) {
       stats.frames += 1;
       stats.lastStep = Number(f.step);
       view.updateProxies(f.proxies, f.contactForces);
+      pointer.observe(f.proxies);
       const forces = [];
       for (let j = 0; j < view.proxies.length; j++) {
         const n = Math.hypot(f.contactForces[3 * j], f.contactForces[3 * j + 1], f.contactForces[3 * j + 2]);
@@ -123,14 +139,14 @@ function onMessage(data) {
     case Message.Welcome: checkVersion(m.message); break;
     case Message.SceneDescription: onScene(m.message); break;
     case Message.Error: status(`server: ${m.message.message}`); stats.errors.push(m.message.message); break;
-    case Message.Telemetry: telemetry.update(m.message); stats.telemetry = m.message; break;
+    case Message.Telemetry: telemetry.update(m.message, pointer.latencies); stats.telemetry = m.message; break;
     case Message.SafetyEvent: telemetry.safety(m.message); break;
     default: break;
   }
 }
 
 function connect() {
-  const url = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/`;
+  const url = wsUrl;
   const ws = new WebSocket(url);
   ws.binaryType = 'arraybuffer';
   ws.onopen = () => {
@@ -153,6 +169,13 @@ function connect() {
 
 function frame() {
   requestAnimationFrame(frame);
+  const now = performance.now();
+  pointer.tick(now);
+  if (pointer.channel) {
+    const f = pointer.force.length();
+    $('feel').textContent = `${pointer.channel} feels ${f.toFixed(3)} N` +
+      (Number.isFinite(pointer.latencyMs) ? `, input to force ${pointer.latencyMs.toFixed(1)} ms` : '');
+  }
   if (view && buffer && buffer.count > 0) {
     buffer.sample(performance.now() / 1000, view.positions, view.scalars);
     view.updateSurface();

@@ -1,6 +1,7 @@
-// The telemetry panel: the server's figures as text, and the step time and real-time factor over the
-// last minute as a plot (a 2D canvas, redrawn when a Telemetry arrives, about once a second). Safety
-// events relayed from device bridges are listed with their time and cause.
+// The telemetry panel: the server's figures as text, and the step time, the real-time factor and (while
+// this page drives a device) the input-to-force latency over the last minute as a plot (a 2D canvas,
+// redrawn when a Telemetry arrives, about once a second). Safety events relayed from device bridges are
+// listed with their time and cause.
 
 import { SafetyKind } from '../../proto/js/src/index.ts';
 
@@ -15,16 +16,21 @@ export class TelemetryPanel {
     this.events = element.querySelector('.events');
     this.stepUs = new Float64Array(SPAN);
     this.rtf = new Float64Array(SPAN);
+    this.latency = new Float64Array(SPAN).fill(NaN);
     this.count = 0;
     this.latest = null;
   }
 
-  // A TelemetryT (object API).
-  update(t) {
+  // A TelemetryT (object API); `latencies`: this page's latest input-to-force round trips [ms] (the
+  // ones since the previous call are summarised: median and 95th percentile).
+  update(t, latencies = []) {
     this.latest = t;
     const k = this.count % SPAN;
     this.stepUs[k] = t.stepTimeMeanUs;
     this.rtf[k] = t.realTimeFactor;
+    const fresh = latencies.splice(0).sort((a, b) => a - b);
+    const pick = (q) => fresh[Math.min(fresh.length - 1, Math.floor(q * fresh.length))];
+    this.latency[k] = fresh.length ? pick(0.5) : NaN;
     this.count += 1;
     const costs = (t.effectCosts || []).filter((c) => c.nsPerStep > 0)
       .map((c) => `${c.name} ${(c.nsPerStep / 1000).toFixed(1)}`).join(', ');
@@ -33,6 +39,7 @@ export class TelemetryPanel {
       `${t.realTimeFactor.toFixed(3)}, missed ${t.missedDeadlines}${t.paused ? ', paused' : ''}\n` +
       `clients: ${t.viewers} viewers, ${t.devices} devices, ${t.controllers} controllers\n` +
       (costs ? `cost per step (us): ${costs}\n` : '') +
+      (fresh.length ? `input to force: median ${pick(0.5).toFixed(1)} ms, p95 ${pick(0.95).toFixed(1)} ms\n` : '') +
       ((t.faults || []).length ? `faults: ${t.faults.join('; ')}` : '');
     this.draw();
   }
@@ -60,20 +67,26 @@ export class TelemetryPanel {
     const series = (values, scale, colour) => {
       g.strokeStyle = colour;
       g.beginPath();
+      let open = false;
       for (let i = 0; i < n; i++) {
         const v = values[(this.count - n + i) % SPAN];
+        if (!Number.isFinite(v)) { open = false; continue; }
         const x = (i / (SPAN - 1)) * w;
         const y = h - Math.min(1, v / scale) * (h - 2) - 1;
-        if (i === 0) g.moveTo(x, y);
+        if (!open) g.moveTo(x, y);
         else g.lineTo(x, y);
+        open = true;
       }
       g.stroke();
     };
     series(this.stepUs, top, '#7fc8ff');
     series(this.rtf, 1.25, '#ffd166');
+    series(this.latency, 50, '#ef6f6c');
     g.fillStyle = '#aab';
     g.fillText(`step time (0-${top.toFixed(0)} us)`, 4, 10);
     g.fillStyle = '#ffd166';
     g.fillText('real-time factor (0-1.25)', 4, 22);
+    g.fillStyle = '#ef6f6c';
+    g.fillText('input to force (0-50 ms)', 4, 34);
   }
 }

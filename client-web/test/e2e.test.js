@@ -38,10 +38,10 @@ const SCENE = {
   run: { duration: 60 },
 };
 
-async function startServer(dir) {
-  const scenePath = path.join(dir, 'e2e_twist.json');
-  fs.writeFileSync(scenePath, JSON.stringify(SCENE));
-  const proc = spawn(serverExe(), [scenePath, '--port', '0', '--static', path.join(root, 'client-web')],
+async function startServer(dir, scene = SCENE, ...args) {
+  const scenePath = path.join(dir, `${scene.name}.json`);
+  fs.writeFileSync(scenePath, JSON.stringify(scene));
+  const proc = spawn(serverExe(), [scenePath, '--port', '0', '--static', path.join(root, 'client-web'), ...args],
                      { stdio: ['ignore', 'pipe', 'pipe'] });
   let out = '';
   const port = await new Promise((resolve, reject) => {
@@ -123,6 +123,89 @@ test('the page draws the live body from the server\'s frames', { timeout: 120000
     assert.deepEqual(problems, [], problems.join('\n'));
     const quality = await page.evaluate(() => window.tactile.quality);
     console.log(`e2e: ${scene.vertices} vertices, ${rate} state frames/s, ${(b.rendered - a.rendered) / 2} renders/s (${quality} quality), moved ${moved.toFixed(4)} m, ${spread} colours; screenshot ${shot}`);
+  } finally {
+    await browser.close();
+    proc.kill('SIGINT');
+  }
+});
+
+// A soft block, its base fixed, with a sphere on the 'mouse' channel waiting 3 cm above it.
+const POKE = {
+  name: 'e2e_poke',
+  mesh: { primitive: 'box', lo: [-0.03, 0, -0.03], hi: [0.03, 0.03, 0.03], cells: [6, 3, 6] },
+  material: { model: 'neohookean', E: 20000, nu: 0.3, rho: 1000 },
+  boundary: [{ name: 'base', select: { box: { lo: [-0.03, 0, -0.03], hi: [0.03, 0, 0.03] } }, fixed: true }],
+  effects: { damping: { alpha: 20.0 } },
+  proxies: [{ name: 'finger', device: 'mouse', shape: 'sphere', radius: 0.01, position: [0, 0.07, 0] }],
+  run: { duration: 60 },
+};
+
+test('a mouse drag on the body moves the mouse\'s proxy and deforms the mesh near it', { timeout: 120000 }, async () => {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-e2e-'));
+  const { proc, port } = await startServer(dir, POKE, '--token', 'e2e-secret');
+  const browser = await chromium.launch({
+    executablePath: CHROMIUM,
+    args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'],
+  });
+  try {
+    const page = await browser.newPage({ viewport: { width: 800, height: 600 } });
+    const problems = [];
+    page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
+    page.on('pageerror', (e) => problems.push(`page: ${e.message}`));
+    await page.goto(`http://127.0.0.1:${port}/?token=e2e-secret`);
+    await page.waitForFunction(() => window.tactile && window.tactile.frames >= 5 && window.tactile.pointer.channel
+                               && window.tactile.pointer.home, null, { timeout: 30000 });
+    const state = () => page.evaluate(() => {
+      const t = window.tactile;
+      const p = t.view.proxies[0].position;
+      return { proxy: [p.x, p.y, p.z], x: Array.from(t.view.positions), force: t.pointer.force.length(),
+               latency: t.pointer.latencyMs, poke: document.getElementById('poke').textContent,
+               feel: document.getElementById('feel').textContent };
+    });
+    const before = await state();
+    assert.match(before.poke, /drag the body to press with 'mouse'/);
+    assert.ok(Math.abs(before.proxy[1] - 0.07) < 1e-3, `the proxy waits at ${before.proxy}`);
+
+    // Press on the top face's centre, then stroke 1 cm along x.
+    const at = await page.evaluate(() => window.tactile.project(0, 0.03, 0));
+    const to = await page.evaluate(() => window.tactile.project(0.01, 0.03, 0));
+    await page.mouse.move(at[0], at[1]);
+    await page.mouse.down();
+    for (let k = 1; k <= 10; k++) {
+      await page.mouse.move(at[0] + ((to[0] - at[0]) * k) / 10, at[1] + ((to[1] - at[1]) * k) / 10);
+      await page.waitForTimeout(50);
+    }
+    await page.waitForTimeout(1500);
+    const pressed = await state();
+    await page.mouse.up();
+
+    // The proxy came down onto the block (its centre within a radius of the top face)...
+    const [px, py, pz] = pressed.proxy;
+    assert.ok(py < 0.03 + 0.01 && py > 0.015, `the proxy's centre is at y = ${py} m (top face at 0.03 m, radius 0.01 m)`);
+    assert.ok(px > 0.003, `the stroke moved the proxy along x to ${px} m`);
+    // ...the surface under it was pushed down, and far from it hardly at all.
+    let near = 0;
+    let far = 0;
+    const rest = before.x;
+    for (let i = 0; i < rest.length; i += 3) {
+      const d = Math.hypot(rest[i] - px, rest[i + 2] - pz);
+      const dy = rest[i + 1] - pressed.x[i + 1];
+      if (d < 0.012 && rest[i + 1] > 0.029) near = Math.max(near, dy);
+      if (d > 0.035) far = Math.max(far, Math.abs(dy));
+    }
+    assert.ok(near > 1e-3, `the surface under the proxy went down ${near} m`);
+    assert.ok(far < 0.3 * near, `far from the proxy the surface moved ${far} m, under it ${near} m`);
+    // The force it would feel is shown, and the input's round trip was measured.
+    assert.ok(pressed.force > 0.05, `the mouse channel feels ${pressed.force} N`);
+    assert.match(pressed.feel, new RegExp(`mouse feels ${pressed.force.toFixed(1)}`));
+    assert.ok(Number.isFinite(pressed.latency) && pressed.latency > 0, `input to force ${pressed.latency} ms`);
+
+    // Let go: the proxy goes back where it waited.
+    await page.waitForFunction(() => window.tactile.view.proxies[0].position.y > 0.065, null, { timeout: 10000 });
+    fs.mkdirSync(ARTEFACTS, { recursive: true });
+    await page.screenshot({ path: path.join(ARTEFACTS, 'e2e_poke.png') });
+    assert.deepEqual(problems, [], problems.join('\n'));
+    console.log(`e2e poke: proxy at (${px.toFixed(4)}, ${py.toFixed(4)}, ${pz.toFixed(4)}) m, surface down ${(1e3 * near).toFixed(2)} mm under it, ${(1e3 * far).toFixed(2)} mm far away, ${pressed.force.toFixed(3)} N, input to force ${pressed.latency.toFixed(1)} ms`);
   } finally {
     await browser.close();
     proc.kill('SIGINT');

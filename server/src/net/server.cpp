@@ -223,6 +223,9 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   // SafetyEvent came in 1.2: a 1.1 codec refuses a message type it does not know.
   bool reads_safety_events() const { return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 2; }
   bool drives_devices() const { return greeted_ && role_ == wire::Role::Device; }
+  bool drives(const std::string& channel) const {
+    return drives_devices() && std::find(device_names_.begin(), device_names_.end(), channel) != device_names_.end();
+  }
 
   // Queues a message; `kind` decides what a slow reader loses: a State is
   // replaced by the next, a Haptic frame or an Event (SafetyEvent) beyond its
@@ -375,6 +378,11 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
         for (const fb::String* d : *h.devices()) {
           if (std::find(names.begin(), names.end(), d->str()) == names.end())
             return refuse(wire::ErrorCode::BadRequest, "no device channel '" + d->str() + "' in this scene");
+          // One device drives a channel: two would pull its proxy both ways.
+          for (const WsSession* other : server_->sessions)
+            if (other != this && other->drives(d->str()))
+              return refuse(wire::ErrorCode::Busy, "device channel '" + d->str() + "' is driven by another device "
+                                                   "(connection " + std::to_string(other->id_) + ")");
           device_names_.push_back(d->str());
         }
       bind_devices();

@@ -1,0 +1,199 @@
+// The mouse (and touch, and pen) as a device, for when no arm is at hand: it takes a device channel of
+// the scene over the device role (with the token the server requires for it), and a drag on the body
+// moves that channel's proxy: it presses where the pointer went down, follows the pointer across the
+// view, and the wheel sets how deep. The force the channel feels comes back in the haptic frames.
+import * as THREE from 'three';
+
+import {
+  ByteBuffer, DeviceInputT, Envelope, EnvelopeT, ErrorCode, HapticFrame, Message, QuatdT, Role, Vec3dT,
+  decode, encode, makeHello, messageTypeOf,
+} from '../../proto/js/src/index.ts';
+import { channelOrder, pressTarget } from './press.js';
+
+export class PointerDevice {
+  // `canvas`, `camera`, `controls` (OrbitControls, paused while dragging); `token` for the device role;
+  // `onStatus(text)` for what it is doing.
+  constructor({ canvas, camera, controls, token, onStatus }) {
+    this.canvas = canvas;
+    this.camera = camera;
+    this.controls = controls;
+    this.token = token;
+    this.onStatus = onStatus;
+    this.ws = null;
+    this.channel = null;        // the channel it drives, once the server welcomed it
+    this.channelIndex = -1;     // in SceneDescription.devices
+    this.proxy = -1;            // the first proxy of that channel (index in the scene)
+    this.radius = 0.01;
+    this.home = null;           // where that proxy waits: its pose before any input [m]
+    this.target = new THREE.Vector3();
+    this.dragging = false;
+    this.depth = 0;             // how far past the grabbed surface [m]
+    this.sequence = 0;
+    this.sent = new Map();      // sequence -> performance.now() it was sent, for the latency
+    this.latencyMs = NaN;       // input to the haptic frame that had seen it, latest
+    this.force = new THREE.Vector3();  // what the channel felt, latest haptic frame [N]
+    this.latencies = [];        // the latest input round trips [ms]
+    this.ray = new THREE.Raycaster();
+    this.ndc = new THREE.Vector2();
+    this.plane = { point: new THREE.Vector3(), normal: new THREE.Vector3() };
+    this.view = null;
+    canvas.addEventListener('pointerdown', (e) => this.down(e));
+    canvas.addEventListener('pointermove', (e) => this.move(e));
+    canvas.addEventListener('pointerup', (e) => this.up(e));
+    canvas.addEventListener('pointercancel', (e) => this.up(e));
+    canvas.addEventListener('wheel', (e) => this.wheel(e), { passive: false });
+  }
+
+  // A new scene (or the first): its channels may differ, so the connection starts again.
+  setScene(description, view, url) {
+    this.view = view;
+    this.close();
+    this.home = null;
+    this.channel = null;
+    if (!this.token) {
+      this.onStatus('poke: the device role needs the token (open the URL with ?token=...)');
+      return;
+    }
+    const devices = description.devices || [];
+    this.tryChannels(url, description, channelOrder(devices), 0);
+  }
+
+  tryChannels(url, description, order, k) {
+    if (k >= order.length) {
+      this.onStatus(order.length ? 'poke: every device channel is driven by a device' : 'poke: this scene has no device channel');
+      return;
+    }
+    const channel = order[k];
+    const ws = new WebSocket(url);
+    ws.binaryType = 'arraybuffer';
+    this.ws = ws;
+    let welcomed = false;
+    ws.onopen = () => ws.send(encode(makeHello({ role: Role.Device, token: this.token, clientName: 'client-web mouse',
+                                                  devices: [channel] })));
+    ws.onmessage = (e) => {
+      const data = new Uint8Array(e.data);
+      const type = messageTypeOf(data);
+      if (type === Message.HapticFrame) { this.onHaptic(data, performance.now()); return; }
+      if (type === Message.Welcome) {
+        welcomed = true;
+        this.channel = channel;
+        this.channelIndex = (description.devices || []).indexOf(channel);
+        this.proxy = (description.proxies || []).findIndex((p) => p.device === channel);
+        this.radius = this.proxy >= 0 ? description.proxies[this.proxy].radius || 0.01 : 0.01;
+        this.depth = 0.3 * this.radius;
+        this.onStatus(`poke: drag the body to press with '${channel}' (wheel: deeper or shallower)`);
+        return;
+      }
+      if (type === Message.Error) {
+        const err = decode(data).message;
+        if (!welcomed && err.code === ErrorCode.Busy) {
+          ws.onclose = null;
+          ws.close();
+          this.tryChannels(url, description, order, k + 1);
+        } else {
+          this.onStatus(`poke: ${err.message}`);
+        }
+      }
+    };
+    ws.onclose = () => {
+      if (this.ws === ws) {
+        this.channel = null;
+        this.onStatus('poke: the device connection closed');
+      }
+    };
+  }
+
+  close() {
+    if (this.ws) {
+      this.ws.onclose = null;
+      this.ws.close();
+      this.ws = null;
+    }
+    this.dragging = false;
+    this.controls.enabled = true;
+  }
+
+  // From each state frame: the proxies' poses (n x 7). The first one seen is where the proxy waits.
+  observe(poses) {
+    if (this.proxy < 0 || this.home || 7 * this.proxy + 2 >= poses.length) return;
+    this.home = new THREE.Vector3(poses[7 * this.proxy], poses[7 * this.proxy + 1], poses[7 * this.proxy + 2]);
+  }
+
+  pointerRay(e) {
+    const r = this.canvas.getBoundingClientRect();
+    this.ndc.set(((e.clientX - r.left) / r.width) * 2 - 1, -((e.clientY - r.top) / r.height) * 2 + 1);
+    this.ray.setFromCamera(this.ndc, this.camera);
+    return this.ray.ray;
+  }
+
+  down(e) {
+    if (!this.channel || !this.view || this.proxy < 0 || e.button > 0) return;
+    this.pointerRay(e);
+    const hit = this.ray.intersectObject(this.view.mesh, false)[0];
+    if (!hit) return;  // not on the body: the view turns instead
+    this.plane.point.copy(hit.point);
+    // The face's outward normal (the body is drawn untransformed: its local frame is the scene's).
+    this.plane.normal.copy(hit.face.normal).normalize();
+    if (!this.aim(e)) return;
+    this.dragging = true;
+    this.controls.enabled = false;
+    this.canvas.setPointerCapture(e.pointerId);
+    e.preventDefault();
+  }
+
+  move(e) {
+    if (this.dragging) this.aim(e);
+  }
+
+  up(e) {
+    if (!this.dragging) return;
+    this.dragging = false;
+    this.controls.enabled = true;
+    if (this.canvas.hasPointerCapture(e.pointerId)) this.canvas.releasePointerCapture(e.pointerId);
+  }
+
+  wheel(e) {
+    if (!this.dragging) return;
+    e.preventDefault();
+    this.depth = Math.min(2 * this.radius, Math.max(0, this.depth - 1e-3 * this.radius * e.deltaY));
+  }
+
+  aim(e) {
+    return pressTarget(this.pointerRay(e), this.plane.point, this.plane.normal, this.radius, this.depth, this.target);
+  }
+
+  // Once per animation frame: sends the pose (the target while dragging, home otherwise: the server
+  // glides between inputs over their interval).
+  tick(now) {
+    if (!this.channel || !this.ws || this.ws.readyState !== WebSocket.OPEN) return;
+    const to = this.dragging ? this.target : this.home;
+    if (to) {
+      this.sequence += 1;
+      const input = new DeviceInputT(this.channel, BigInt(this.sequence), BigInt(Math.round(now * 1e6)),
+                                     new Vec3dT(to.x, to.y, to.z), new QuatdT(1, 0, 0, 0), this.dragging ? 1 : 0);
+      this.ws.send(encode(new EnvelopeT(Message.DeviceInput, input)));
+      this.sent.set(this.sequence, now);
+      if (this.sent.size > 600) this.sent.delete(this.sent.keys().next().value);
+    }
+  }
+
+  // Each haptic frame as it arrives (a few thousand a second, read in place, nothing copied): the force,
+  // and the first frame that had seen an input gives that input's round trip.
+  onHaptic(bytes, now) {
+    const env = Envelope.getRootAsEnvelope(new ByteBuffer(bytes));
+    const frame = env.message(new HapticFrame());
+    if (!frame || this.channelIndex < 0 || this.channelIndex >= frame.devicesLength()) return;
+    const f = frame.devices(this.channelIndex).force();
+    this.force.set(f.x(), f.y(), f.z());
+    if (this.channelIndex < frame.deviceInputSequencesLength()) {
+      const seen = Number(frame.deviceInputSequences(this.channelIndex));
+      const at = this.sent.get(seen);
+      if (at !== undefined) {
+        this.latencyMs = now - at;
+        this.sent.delete(seen);
+        this.latencies.push(this.latencyMs);
+        if (this.latencies.length > 256) this.latencies.shift();
+      }
+    }
+  }
+}
