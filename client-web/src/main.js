@@ -8,6 +8,7 @@ import {
   Message, Role, decode, encode, makeHello, messageTypeOf, readStateFrame, checkVersion,
 } from '../../proto/js/src/index.ts';
 import { cssGradient } from './colormap.js';
+import { ControlPanel } from './controls.js';
 import { FrameBuffer } from './frames.js';
 import { PointerDevice } from './pointer.js';
 import { TelemetryPanel } from './telemetry.js';
@@ -53,7 +54,9 @@ const pointer = new PointerDevice({ canvas: renderer.domElement, camera, control
 
 // What the tests read (and a person can, in the console).
 const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality };
+const controlPanel = new ControlPanel($('controls'), { token, url: wsUrl });
 stats.pointer = pointer;
+stats.controls = controlPanel;
 // Where a scene point [m] is drawn, in CSS pixels of the page (for tests that point at the body).
 stats.project = (x, y, z) => {
   const v = new THREE.Vector3(x, y, z).project(camera);
@@ -111,6 +114,7 @@ function onScene(d) {
   scene.add(ground);
   resize();
   pointer.setScene(d, view, wsUrl);
+  controlPanel.setDescription(d);
 }
 
 function onMessage(data) {
@@ -139,7 +143,11 @@ function onMessage(data) {
     case Message.Welcome: checkVersion(m.message); break;
     case Message.SceneDescription: onScene(m.message); break;
     case Message.Error: status(`server: ${m.message.message}`); stats.errors.push(m.message.message); break;
-    case Message.Telemetry: telemetry.update(m.message, pointer.latencies); stats.telemetry = m.message; break;
+    case Message.Telemetry:
+      telemetry.update(m.message, pointer.latencies);
+      controlPanel.setPaused(m.message.paused);
+      stats.telemetry = m.message;
+      break;
     case Message.SafetyEvent: telemetry.safety(m.message); break;
     default: break;
   }

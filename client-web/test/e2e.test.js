@@ -211,3 +211,87 @@ test('a mouse drag on the body moves the mouse\'s proxy and deforms the mesh nea
     proc.kill('SIGINT');
   }
 });
+
+test('with the token, the control panel pauses, resumes, sets parameters, loads a scene and names errors', { timeout: 120000 }, async () => {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-e2e-'));
+  const { proc, port } = await startServer(dir, POKE, '--token', 'e2e-secret');
+  const browser = await chromium.launch({
+    executablePath: CHROMIUM,
+    args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'],
+  });
+  try {
+    const page = await browser.newPage({ viewport: { width: 800, height: 700 } });
+    const problems = [];
+    page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
+    page.on('pageerror', (e) => problems.push(`page: ${e.message}`));
+    await page.goto(`http://127.0.0.1:${port}/?token=e2e-secret`);
+    await page.waitForFunction(() => window.tactile && window.tactile.frames >= 3, null, { timeout: 30000 });
+    const message = () => page.textContent('#controls .message');
+    // Waits for fn(arg) in the page; on a timeout, says what it waited for and what the panel said.
+    const until = async (what, fn, arg = null, timeout = 15000) => {
+      try {
+        await page.waitForFunction(fn, arg, { timeout });
+      } catch (e) {
+        throw new Error(`${what}: ${e.message}; the panel says "${await message()}"`);
+      }
+    };
+    await page.click('#controls button:text("take control")');
+    await until('control granted', () => window.tactile.controls.granted, null, 10000);
+    assert.equal(await message(), 'in control');
+
+    // Pause: the telemetry says so and the simulated time stands still; resume: it runs on.
+    await page.click('#controls button[name=pause]');
+    await until('paused', () => window.tactile.telemetry && window.tactile.telemetry.paused, null, 10000);
+    const t0 = await page.evaluate(() => window.tactile.telemetry.simTime);
+    await page.waitForTimeout(1200);
+    const t1 = await page.evaluate(() => window.tactile.telemetry.simTime);
+    assert.equal(t1, t0, 'paused, the simulated time moved');
+    assert.equal(await page.textContent('#controls button[name=pause]'), 'resume');
+    await page.click('#controls button[name=pause]');
+    await until('resumed', (t) => !window.tactile.telemetry.paused && window.tactile.telemetry.simTime > t, t0,
+                               10000);
+
+    // A parameter: the server sends a new description with the value, and the panel shows it.
+    await page.fill('#controls input[data-parameter="damping.alpha"]', '35');
+    await page.dispatchEvent('#controls input[data-parameter="damping.alpha"]', 'change');
+    await until('damping.alpha = 35 in the new description', () => {
+      const i = document.querySelector('#controls input[data-parameter="damping.alpha"]');
+      return i && Number(i.value) === 35;
+    }, null, 15000);
+    // One out of its range is refused, naming it.
+    await page.fill('#controls input[data-parameter="material.nu"]', '0.7');
+    await page.dispatchEvent('#controls input[data-parameter="material.nu"]', 'change');
+    await until('material.nu = 0.7 refused', () => /set material\.nu: .*material\.nu/.test(document.querySelector('#controls .message').textContent),
+                               null, 10000);
+    // An effect off: its switch comes back unchecked in the new description.
+    await page.click('#controls input[data-parameter="effects.damping"]');
+    await until('damping switched off', () => {
+      const i = document.querySelector('#controls input[data-parameter="effects.damping"]');
+      return i && !i.checked && window.tactile.controls.description.parameters
+        .some((p) => p.name === 'effects.damping' && p.value === 0);
+    }, null, 15000);
+
+    // Load a scene from the server's list: a new scene id.
+    const id = await page.evaluate(() => window.tactile.sceneId);
+    const options = await page.$$eval('#controls select[name=scene] option', (os) => os.map((o) => o.value));
+    assert.ok(options.includes('e2e_poke.json'), options.join(', '));
+    await page.selectOption('#controls select[name=scene]', 'e2e_poke.json');
+    await page.click('#controls button:text("load")');
+    await until('the scene loaded', (old) => window.tactile.sceneId !== old && window.tactile.frames > 0, id, 30000);
+    const after = await page.evaluate(() => window.tactile.controls.description.parameters
+      .find((p) => p.name === 'damping.alpha').value);
+    assert.equal(after, 20, 'the loaded scene has its own damping again');
+
+    // Recording: the server's answer is shown (until recording is built, an error that says so).
+    await page.click('#controls button:text("record")');
+    await until('the recording answered', () => /^record e2e_poke\.mcap: .*record/.test(document.querySelector('#controls .message').textContent),
+                               null, 10000);
+    fs.mkdirSync(ARTEFACTS, { recursive: true });
+    await page.screenshot({ path: path.join(ARTEFACTS, 'e2e_controls.png') });
+    assert.deepEqual(problems, [], problems.join('\n'));
+    console.log(`e2e controls: paused at t = ${t0.toFixed(3)} s, damping set and switched off, scene reloaded; record: ${await message()}`);
+  } finally {
+    await browser.close();
+    proc.kill('SIGINT');
+  }
+});

@@ -1,0 +1,149 @@
+// The controller's panel: with the token, "take control" opens a controller connection (one at a time on
+// a server) and the panel offers what the scene description lists: the scenes this server may load, pause,
+// resume and reset, every parameter with its range (switches for the effects), and recording. Each
+// change goes as a Control with its own request id; the server answers with the change itself (a new
+// description, telemetry showing the pause) or an Error naming what is wrong, shown here.
+import {
+  ControlCommand, ControlT, EnvelopeT, ErrorCode, LoadSceneT, Message, PauseT, ResetT, ResumeT, Role,
+  SetParameterT, StartRecordingT, StopRecordingT, decode, encode, makeHello, messageTypeOf,
+} from '../../proto/js/src/index.ts';
+
+const el = (tag, attrs = {}, ...children) => {
+  const e = document.createElement(tag);
+  Object.assign(e, attrs);
+  for (const c of children) e.append(c);
+  return e;
+};
+
+export class ControlPanel {
+  constructor(element, { token, url }) {
+    this.element = element;
+    this.token = token;
+    this.url = url;
+    this.ws = null;
+    this.granted = false;
+    this.requestId = 0;
+    this.pending = new Map();   // request id -> what it asked, for the answer
+    this.description = null;
+    this.paused = false;
+    this.head = el('div', { className: 'head' });
+    this.take = el('button', { textContent: 'take control', disabled: !token,
+                               title: token ? '' : 'the controller role needs the token: open the URL with ?token=...' });
+    this.take.addEventListener('click', () => (this.granted ? this.release() : this.connect()));
+    this.head.append(this.take);
+    this.body = el('div', { className: 'body' });
+    this.message = el('div', { className: 'message' });
+    element.append(this.head, this.body, this.message);
+    this.say(token ? '' : 'controls need the token (?token=...)');
+  }
+
+  say(text) { this.message.textContent = text; }
+
+  connect() {
+    const ws = new WebSocket(this.url);
+    ws.binaryType = 'arraybuffer';
+    this.ws = ws;
+    ws.onopen = () => ws.send(encode(makeHello({ role: Role.Controller, token: this.token, clientName: 'client-web' })));
+    ws.onmessage = (e) => {
+      const data = new Uint8Array(e.data);
+      const type = messageTypeOf(data);
+      if (type === Message.Welcome) {
+        this.granted = true;
+        this.take.textContent = 'release control';
+        this.say('in control');
+        this.build();
+      } else if (type === Message.Error) {
+        const err = decode(data).message;
+        const asked = this.pending.get(err.requestId);
+        this.pending.delete(err.requestId);
+        this.say(asked ? `${asked}: ${err.message}` : err.message);
+        if (!this.granted && err.code === ErrorCode.Busy) this.say('another controller is connected');
+      }
+    };
+    ws.onclose = () => {
+      if (this.ws !== ws) return;
+      this.ws = null;
+      this.granted = false;
+      this.take.textContent = 'take control';
+      this.build();
+    };
+  }
+
+  release() {
+    if (this.ws) this.ws.close();
+  }
+
+  // From the viewer connection: every description (a load, a reset, a parameter set) and telemetry.
+  setDescription(d) {
+    this.description = d;
+    this.build();
+  }
+
+  setPaused(paused) {
+    if (paused === this.paused) return;
+    this.paused = paused;
+    if (this.pauseButton) this.pauseButton.textContent = paused ? 'resume' : 'pause';
+  }
+
+  send(type, command, what) {
+    if (!this.ws || !this.granted) return;
+    this.requestId += 1;
+    this.pending.set(this.requestId, what);  // (answered by an Error, or by the change: the latest 64 kept)
+    if (this.pending.size > 64) this.pending.delete(this.pending.keys().next().value);
+    this.ws.send(encode(new EnvelopeT(Message.Control, new ControlT(this.requestId, type, command))));
+    this.say(`${what}…`);
+  }
+
+  build() {
+    this.body.replaceChildren();
+    const d = this.description;
+    if (!this.granted || !d) return;
+    // Scenes, and the run.
+    const picker = el('select', { name: 'scene' });
+    for (const s of d.scenes || []) picker.append(el('option', { value: s, textContent: s }));
+    const load = el('button', { textContent: 'load', disabled: !(d.scenes || []).length });
+    load.addEventListener('click', () => {
+      this.send(ControlCommand.LoadScene, new LoadSceneT(picker.value), `load ${picker.value}`);
+    });
+    this.pauseButton = el('button', { textContent: this.paused ? 'resume' : 'pause', name: 'pause' });
+    this.pauseButton.addEventListener('click', () => {
+      if (this.paused) this.send(ControlCommand.Resume, new ResumeT(), 'resume');
+      else this.send(ControlCommand.Pause, new PauseT(), 'pause');
+    });
+    const reset = el('button', { textContent: 'reset', name: 'reset' });
+    reset.addEventListener('click', () => this.send(ControlCommand.Reset, new ResetT(), 'reset'));
+    this.body.append(el('div', { className: 'row' }, picker, load), el('div', { className: 'row' }, this.pauseButton, reset));
+    // Parameters: a switch for on/off, a number field (applied on change) for the rest.
+    const table = el('div', { className: 'params' });
+    for (const p of d.parameters || []) {
+      const name = p.name;
+      let input;
+      if (p.unit === 'on/off') {
+        input = el('input', { type: 'checkbox', checked: p.value !== 0 });
+        input.addEventListener('change', () => {
+          this.send(ControlCommand.SetParameter, new SetParameterT(name, input.checked ? 1 : 0), `set ${name}`);
+        });
+      } else {
+        input = el('input', { type: 'number', value: String(p.value), min: String(p.min), max: String(p.max),
+                              step: 'any' });
+        input.addEventListener('change', () => {
+          const v = Number(input.value);
+          if (!Number.isFinite(v)) { this.say(`${name}: not a number`); return; }
+          this.send(ControlCommand.SetParameter, new SetParameterT(name, v), `set ${name}`);
+        });
+      }
+      input.dataset.parameter = name;
+      table.append(el('label', { textContent: `${name} ` }, input, el('span', { textContent: ` ${p.unit}` })));
+    }
+    this.body.append(table);
+    // Recording.
+    const file = el('input', { type: 'text', value: `${d.sceneName || 'session'}.mcap`, name: 'record-path' });
+    const start = el('button', { textContent: 'record' });
+    start.addEventListener('click', () => {
+      this.send(ControlCommand.StartRecording, new StartRecordingT(file.value), `record ${file.value}`);
+    });
+    const stop = el('button', { textContent: 'stop recording' });
+    stop.addEventListener('click', () => this.send(ControlCommand.StopRecording, new StopRecordingT(), 'stop recording'));
+    this.body.append(el('div', { className: 'row' }, file, start, stop));
+  }
+}
