@@ -53,7 +53,8 @@ const pointer = new PointerDevice({ canvas: renderer.domElement, camera, control
                                     onStatus: (text) => { $('poke').textContent = text; } });
 
 // What the tests read (and a person can, in the console).
-const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality };
+const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality,
+                decodeMs: [], frameMs: [] };
 const controlPanel = new ControlPanel($('controls'), { token, url: wsUrl });
 stats.pointer = pointer;
 stats.controls = controlPanel;
@@ -66,6 +67,7 @@ stats.project = (x, y, z) => {
 window.tactile = stats;
 
 let view = null;
+let coloured = -1;  // stats.frames when the colours were last set
 let buffer = null;
 let ground = null;
 
@@ -80,7 +82,7 @@ window.addEventListener('resize', resize);
 
 function onScene(d) {
   if (view) view.dispose();
-  view = new SceneView(scene, d);
+  view = new SceneView(scene, d, quality);
   stats.view = view;
   buffer = new FrameBuffer(view.positions.length, view.scalars.length);
   stats.sceneId = d.sceneId;
@@ -121,9 +123,13 @@ function onMessage(data) {
   const type = messageTypeOf(data);
   if (type === Message.StateFrame) {
     if (!buffer) return;
+    const t0 = performance.now();
     const f = readStateFrame(data);
     if (f.sceneId !== stats.sceneId) return;
-    if (buffer.push(f.positions, f.scalar, f.simTime, performance.now() / 1000)) {
+    const kept = buffer.push(f.positions, f.scalar, f.simTime, performance.now() / 1000);
+    stats.decodeMs.push(performance.now() - t0);  // read in place and copied into the buffer
+    if (stats.decodeMs.length > 256) stats.decodeMs.shift();
+    if (kept) {
       stats.frames += 1;
       stats.lastStep = Number(f.step);
       view.updateProxies(f.proxies, f.contactForces);
@@ -185,8 +191,10 @@ function frame() {
       (Number.isFinite(pointer.latencyMs) ? `, input to force ${pointer.latencyMs.toFixed(1)} ms` : '');
   }
   if (view && buffer && buffer.count > 0) {
-    buffer.sample(performance.now() / 1000, view.positions, view.scalars);
-    view.updateSurface();
+    buffer.sample(performance.now() / 1000, view.nextPositions, view.scalars);
+    // Colours at the state rate (a new state came), positions at the screen's.
+    view.updateSurface(stats.frames !== coloured);
+    coloured = stats.frames;
     const [lo, hi] = view.scalarRange;
     $('legend-lo').textContent = lo.toPrecision(3);
     $('legend-hi').textContent = hi.toPrecision(3);
@@ -194,6 +202,8 @@ function frame() {
   controls.update();
   renderer.render(scene, camera);
   stats.rendered += 1;
+  stats.frameMs.push(performance.now() - now);  // this frame's work: interpolate, normals, colours, draw
+  if (stats.frameMs.length > 256) stats.frameMs.shift();
 }
 
 resize();

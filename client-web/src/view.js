@@ -7,32 +7,50 @@ import { viridis } from './colormap.js';
 const SHAPES = ['sphere', 'capsule', 'box', 'plane'];
 
 export class SceneView {
-  constructor(scene, description) {
+  // `quality`: 'high' shades physically (MeshStandardMaterial); 'low' (software renderers) with Lambert's
+  // diffuse light, a fraction of the cost per pixel.
+  constructor(scene, description, quality = 'high') {
     this.root = new THREE.Group();
     scene.add(this.root);
     const rest = description.restPositions;
     const n = rest.length / 3;
-    this.positions = new Float32Array(rest);
     this.scalars = new Float32Array(n);
     this.colors = new Float32Array(3 * n);
     this.scalarRange = [0, 1e-9];
-    const geometry = new THREE.BufferGeometry();
-    this.positionAttr = new THREE.BufferAttribute(this.positions, 3);
-    this.positionAttr.setUsage(THREE.DynamicDrawUsage);
+    this.smooth = quality === 'high';
+    // Two copies of the surface, drawn in turn: each frame writes the one the previous frame did not draw.
+    // (A vertex buffer that the frame before drew from is still in use; writing it makes a software
+    // renderer wait or copy, which at 10 k vertices costs more than the drawing.) The colours, which
+    // change at the state rate, are one buffer both share; the triangles too.
     this.colorAttr = new THREE.BufferAttribute(this.colors, 3);
     this.colorAttr.setUsage(THREE.DynamicDrawUsage);
-    geometry.setAttribute('position', this.positionAttr);
-    geometry.setAttribute('color', this.colorAttr);
-    geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(description.triangles), 1));
-    geometry.computeVertexNormals();
-    geometry.computeBoundingSphere();
-    this.geometry = geometry;
-    const material = new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.55, metalness: 0.0,
-                                                     side: THREE.DoubleSide });
-    this.mesh = new THREE.Mesh(geometry, material);
-    this.mesh.castShadow = true;
-    this.mesh.receiveShadow = true;
-    this.root.add(this.mesh);
+    const index = new THREE.BufferAttribute(new Uint32Array(description.triangles), 1);
+    // Software renderers (quality low): Lambert's diffuse light with each triangle's own normal, taken from
+    // screen-space derivatives, so that no normals are computed or sent per frame; GPUs: smooth normals and
+    // physically based shading.
+    const material = this.smooth
+      ? new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.55, metalness: 0.0, side: THREE.DoubleSide })
+      : new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide, flatShading: true });
+    this.surfaces = [0, 1].map(() => {
+      const geometry = new THREE.BufferGeometry();
+      const positions = new Float32Array(rest);
+      const attr = new THREE.BufferAttribute(positions, 3);
+      attr.setUsage(THREE.DynamicDrawUsage);
+      geometry.setAttribute('position', attr);
+      geometry.setAttribute('color', this.colorAttr);
+      geometry.setIndex(index);
+      if (this.smooth) geometry.computeVertexNormals();
+      geometry.computeBoundingSphere();
+      const mesh = new THREE.Mesh(geometry, material);
+      mesh.castShadow = true;
+      mesh.receiveShadow = true;
+      mesh.frustumCulled = false;  // it deforms past its rest bounds; it is the scene's subject anyway
+      this.root.add(mesh);
+      return { geometry, positions, attr, mesh };
+    });
+    this.front = 0;  // the copy drawn last, and the one raycasts and readers see
+    this.surfaces[1].mesh.visible = false;
+    const geometry = this.geometry;
     this.size = geometry.boundingSphere.radius || 0.05;
 
     this.proxies = (description.proxies || []).map((p) => this.makeProxy(p));
@@ -82,11 +100,22 @@ export class SceneView {
     this.colorAttr.needsUpdate = true;
   }
 
-  // After this.positions and this.scalars were written.
-  updateSurface() {
-    this.positionAttr.needsUpdate = true;
-    this.geometry.computeVertexNormals();
-    this.setScalars(this.scalars);
+  // The copy drawn last: its positions are the latest drawn [m] (n x 3).
+  get geometry() { return this.surfaces[this.front].geometry; }
+  get mesh() { return this.surfaces[this.front].mesh; }
+  get positions() { return this.surfaces[this.front].positions; }
+  // Where the next frame's positions go: the copy not drawn last.
+  get nextPositions() { return this.surfaces[1 - this.front].positions; }
+
+  // After nextPositions (and, when `scalarsChanged`, this.scalars) were written: that copy is drawn next.
+  updateSurface(scalarsChanged = true) {
+    const next = this.surfaces[1 - this.front];
+    next.attr.needsUpdate = true;
+    if (this.smooth) next.geometry.computeVertexNormals();
+    next.mesh.visible = true;
+    this.surfaces[this.front].mesh.visible = false;
+    this.front = 1 - this.front;
+    if (scalarsChanged) this.setScalars(this.scalars);
   }
 
   // Proxy poses (n x 7: position, orientation w x y z) and forces (n x 3) from a state frame.
