@@ -72,6 +72,7 @@ def test_bridge_presses_the_block_and_the_force_settles(tmp_path: pathlib.Path) 
     profile = tmp_path / "closed_loop.toml"
     profile.write_text(PROFILE)
     states: list[tuple[float, float]] = []  # (sim time, height of the block's top under the sphere)
+    statuses: list[Any] = []  # the bridge's DeviceStatus, relayed by the server
 
     with server_process(tmp_path, SCENE, TOKEN, "--haptic-rate", "2000") as (port, server):
         bridge = subprocess.Popen(
@@ -93,6 +94,8 @@ def test_bridge_presses_the_block_and_the_force_settles(tmp_path: pathlib.Path) 
                         rest = np.asarray(m.restPositions, dtype=np.float64).reshape(-1, 3)
                         near = np.nonzero((np.hypot(rest[:, 0], rest[:, 2]) < 0.004) & (rest[:, 1] > TOP - 1e-6))[0]
                         assert len(near) > 0
+                    elif type(m).__name__ == "DeviceStatusT":
+                        statuses.append(m)
                     elif isinstance(m, StateFrameT) and near is not None:
                         x = np.asarray(m.positions, dtype=np.float64).reshape(-1, 3)
                         states.append((m.simTime, float(x[near, 1].min())))
@@ -102,6 +105,17 @@ def test_bridge_presses_the_block_and_the_force_settles(tmp_path: pathlib.Path) 
     print(out)
     assert bridge.returncode == 0, out
     assert "engaged" in out, out
+
+    # About once a second the bridge says how its loop keeps time, and the server relays it to the viewers,
+    # stamped: the tick at its 1 kHz, the delay as its two parts, the mode it runs.
+    assert len(statuses) >= 5, f"{len(statuses)} device statuses in 10 s"
+    assert all(st.device == "stylus" and st.mode == "delay" and st.serverTimeNs > 0 for st in statuses)
+    rates = sorted(st.tickRateHz for st in statuses[1:])
+    assert 900 < rates[len(rates) // 2] < 1100, rates
+    for st in statuses:
+        assert abs(st.displayDelayMs - (st.stateIntervalMs + st.jitterAllowanceMs)) < 1e-3, vars(st)
+        assert 0 <= st.latenessP99Us <= st.latenessMaxUs or st.latenessMaxUs == 0, vars(st)
+    assert any(st.forceN > 0.1 for st in statuses), [st.forceN for st in statuses]
 
     # The force the bridge rendered, every tick (its trace), in 50 ms means, from the tick's start (the
     # arm's script starts with it): pressing 0-4 s, holding from 4 s.

@@ -272,6 +272,9 @@ def test_decoded_values_are_the_written_ones():
     safety = tp.decode(golden("safety_event")[1]).message
     assert (safety.device, safety.kind, safety.forceN) == ("stylus", SafetyKind.Clipped, 5.0)
     assert (safety.deviceTimeNs, safety.serverTimeNs) == (5000250123, 987654521012)
+    status = tp.decode(golden("device_status")[1]).message
+    assert (status.device, status.mode, status.missedTicks) == ("stylus", "delay", 3)
+    assert (status.tickRateHz, status.latenessP99Us, status.displayDelayMs) == (1000.0, 42.5, 1.25)
 
 
 # ---- (e) float arrays are views into the message ---------------------------------------------------------

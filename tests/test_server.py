@@ -684,3 +684,40 @@ def test_a_device_channel_is_driven_by_one_device_at_a_time(tmp_path: pathlib.Pa
 
     with running_server(tmp_path) as (port, _):
         asyncio.run(run(port))
+
+
+def test_device_status_is_relayed_stamped_to_viewers_and_bad_figures_are_refused(tmp_path: pathlib.Path) -> None:
+    """A device's DeviceStatus (1.3) reaches the viewers with the server's time; one with a non-finite
+    figure, an unknown mode or another channel gets an Error naming it; a viewer may not send one."""
+    from tactile_proto.generated.DeviceStatus import DeviceStatusT
+
+    def status(**changes: Any) -> DeviceStatusT:
+        st = DeviceStatusT()
+        st.device, st.deviceTimeNs, st.mode = "stylus", 123, "delay"
+        st.tickRateHz, st.latenessP99Us, st.latenessMaxUs, st.missedTicks = 1000.0, 40.0, 200.0, 2
+        st.stateIntervalMs, st.jitterAllowanceMs, st.displayDelayMs, st.forceN = 0.5, 0.25, 0.75, 0.5
+        for k, v in changes.items():
+            setattr(st, k, v)
+        return st
+
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as viewer, \
+                websockets.connect(url(port), **READ_ON) as device:
+            await hello(viewer, Role.Viewer)
+            await hello(device, Role.Device, TOKEN, ("stylus",))
+            await device.send(codec.encode(status()))
+            got = await next_of(viewer, "DeviceStatusT")
+            assert (got.device, got.mode, got.missedTicks, got.displayDelayMs) == ("stylus", "delay", 2, 0.75)
+            assert got.serverTimeNs > 0 and got.deviceTimeNs == 123
+            for bad, words in ((status(latenessP99Us=math.nan), "lateness_p99_us"),
+                               (status(mode="fast"), "mode 'fast'"),
+                               (status(device="other"), "'other'")):
+                await device.send(codec.encode(bad))
+                err = await next_error(device)
+                assert err.code == ErrorCode.BadRequest and words in err.message, err.message
+            await viewer.send(codec.encode(status()))
+            err = await next_of(viewer, "ErrorT")
+            assert err.code == ErrorCode.WrongRole and "DeviceStatus" in err.message
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))

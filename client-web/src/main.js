@@ -155,6 +155,7 @@ function onMessage(data) {
       stats.telemetry = m.message;
       break;
     case Message.SafetyEvent: telemetry.safety(m.message); break;
+    case Message.DeviceStatus: telemetry.deviceStatus(m.message); stats.deviceStatus = m.message; break;
     default: break;
   }
 }

@@ -12,6 +12,8 @@ import { fileURLToPath } from 'node:url';
 
 import { chromium } from 'playwright-core';
 
+import * as proto from '../../proto/js/dist/tactile-proto.js';
+
 const here = path.dirname(fileURLToPath(import.meta.url));
 const root = path.resolve(here, '..', '..');
 const CHROMIUM = process.env.TACTILE_CHROMIUM || '/usr/bin/chromium';
@@ -136,7 +138,8 @@ const POKE = {
   material: { model: 'neohookean', E: 20000, nu: 0.3, rho: 1000 },
   boundary: [{ name: 'base', select: { box: { lo: [-0.03, 0, -0.03], hi: [0.03, 0, 0.03] } }, fixed: true }],
   effects: { damping: { alpha: 20.0 } },
-  proxies: [{ name: 'finger', device: 'mouse', shape: 'sphere', radius: 0.01, position: [0, 0.07, 0] }],
+  proxies: [{ name: 'finger', device: 'mouse', shape: 'sphere', radius: 0.01, position: [0, 0.07, 0] },
+            { name: 'tip', device: 'stylus', shape: 'sphere', radius: 0.005, position: [0.06, 0.07, 0.06] }],
   run: { duration: 60 },
 };
 
@@ -281,6 +284,28 @@ test('with the token, the control panel pauses, resumes, sets parameters, loads 
     const after = await page.evaluate(() => window.tactile.controls.description.parameters
       .find((p) => p.name === 'damping.alpha').value);
     assert.equal(after, 20, 'the loaded scene has its own damping again');
+
+    // A device bridge's status (protocol 1.3): a device on the 'stylus' channel reports its loop's timing;
+    // the panel shows it as the server relayed it, and plots it.
+    const hello = Array.from(proto.encode(proto.makeHello({ role: proto.Role.Device, token: 'e2e-secret',
+                                                             clientName: 'e2e bridge', devices: ['stylus'] })));
+    const st = new proto.DeviceStatusT('stylus', 1n, 0n, 1000, 40, 250, 2n, 1.75, 0.5, 1.25, 'delay', 0.5);
+    const report = Array.from(proto.encode(new proto.EnvelopeT(proto.Message.DeviceStatus, st)));
+    await page.evaluate(([h, r]) => new Promise((resolve, reject) => {
+      const ws = new WebSocket(`ws://${location.host}/`);
+      ws.binaryType = 'arraybuffer';
+      ws.onopen = () => {
+        ws.send(new Uint8Array(h));
+        let n = 0;
+        const timer = setInterval(() => { ws.send(new Uint8Array(r)); if (++n === 12) { clearInterval(timer); resolve(); } }, 250);
+      };
+      ws.onerror = () => reject(new Error('the device connection failed'));
+      window.e2eBridge = ws;
+    }), [hello, report]);
+    await until('the bridge status shown', () => /bridge stylus: tick 1000 Hz, late p99 40 us \(max 250\), missed 2, delay 1\.75 ms \(0\.50 \+ 1\.25\), delay, 0\.50 N/
+      .test(document.querySelector('#telemetry .figures').textContent), null, 10000);
+    const plotted = await page.evaluate(() => window.tactile.deviceStatus.serverTimeNs > 0n);
+    assert.ok(plotted, 'the relayed status carries the server time');
 
     // Recording: the server's answer is shown (until recording is built, an error that says so).
     await page.click('#controls button:text("record")');

@@ -94,7 +94,7 @@ class Bridge:
         self.opts = opts
         self.ex = ex.Exchange(len(profiles), shared=opts.network == "process")
         self.wake_r, self.wake_w = _pipe()
-        self.network = Network(opts.url, opts.token, self.profiles, self.ex, self.wake_r)
+        self.network = Network(opts.url, opts.token, self.profiles, self.ex, self.wake_r, mode=opts.mode)
         self.devices = list(devices) if devices is not None else None
         self.tick: Tick | None = None
         self._thread: threading.Thread | None = None

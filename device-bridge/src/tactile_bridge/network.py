@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import logging
+import math
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -45,6 +46,10 @@ try:  # protocol 1.2: safety events for the viewers
     from tactile_proto.generated.SafetyEvent import SafetyEventT
 except ImportError:  # pragma: no cover - an older generated codec
     SafetyEventT = None
+try:  # protocol 1.3: the loop's timing for the viewers
+    from tactile_proto.generated.DeviceStatus import DeviceStatusT
+except ImportError:  # pragma: no cover - an older generated codec
+    DeviceStatusT = None
 
 
 class LinkError(RuntimeError):
@@ -53,7 +58,8 @@ class LinkError(RuntimeError):
 
 class Network:
     def __init__(self, url: str, token: str, profiles: Sequence[Profile], exchange: ex.Exchange, wake_fd: int,
-                 *, client_name: str = "tactile-bridge", lateness_window: int = 2000,
+                 *, client_name: str = "tactile-bridge", lateness_window: int = 2000, mode: str = "delay",
+                 status_s: float = 1.0,
                  reconnect_s: float = 0.5, ping_s: float = 0.2,
                  clock: Callable[[], int] = time.monotonic_ns) -> None:
         self.url = url
@@ -65,6 +71,9 @@ class Network:
         self.reconnect_s = reconnect_s
         self.ping_s = ping_s
         self.clock = clock
+        self.mode = mode
+        self.status_s = status_s
+        self._status_at = (time.monotonic(), exchange.i[ex.H_TICKS], exchange.histogram())
         self.sync = ClockSync()
         self.reader = HapticReader(len(self.profiles))
         self.channels = [-1] * len(self.profiles)     # wire device index per bridge device
@@ -270,6 +279,42 @@ class Network:
             if now >= next_delay:
                 next_delay = now + 0.1
                 self._update_delay()
+            if now >= self._status_at[0] + self.status_s:
+                self._send_status(now)
+
+    def status_messages(self, now: float) -> list[Any]:
+        """Per channel, how the loop kept time since the previous call (DeviceStatusT)."""
+        x = self.ex
+        t0, ticks0, hist0 = self._status_at
+        ticks, hist = x.i[ex.H_TICKS], x.histogram()
+        self._status_at = (now, ticks, hist)
+        h = [b - a for a, b in zip(hist0, hist)]
+        p99 = ex.percentile_us(h, 0.99)
+        top = max((us for us, n in enumerate(h) if n), default=math.nan)
+        out = []
+        for k, p in enumerate(self.profiles):
+            _, bd = x.status_base(k)
+            m = DeviceStatusT()
+            m.device, m.deviceTimeNs, m.mode = p.channel, self.clock(), self.mode
+            m.tickRateHz = (ticks - ticks0) / max(1e-9, now - t0)
+            m.latenessP99Us = 0.0 if math.isnan(p99) else p99
+            m.latenessMaxUs = 0.0 if math.isnan(top) else float(top)
+            m.missedTicks = int(x.i[ex.H_MISSED])
+            m.stateIntervalMs = x.i[ex.H_DT_NS] / 1e6
+            m.jitterAllowanceMs = x.i[ex.H_ALLOW_NS] / 1e6
+            m.displayDelayMs = x.i[ex.H_DELAY_NS] / 1e6
+            m.forceN = math.sqrt(sum(v * v for v in x.d[bd + 3: bd + 6]))
+            out.append(m)
+        return out
+
+    def _send_status(self, now: float) -> None:
+        messages = self.status_messages(now)
+        ws = self._ws
+        if DeviceStatusT is None or ws is None or self.server_minor < 3:
+            return
+        for m, channel in zip(messages, self.channels):
+            if channel >= 0:
+                asyncio.ensure_future(self._send_quietly(ws, encode(m)))
 
     def _update_delay(self) -> None:
         if len(self.lateness) < 20:

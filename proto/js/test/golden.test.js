@@ -93,6 +93,13 @@ test('typed reads of the vectors see the written values', () => {
   assert.equal(safety.deviceTimeNs, 5000250123n);
   assert.equal(safety.serverTimeNs, 987654521012n);
   assert.equal(safety.forceN, 5);
+  const status = byName.device_status;
+  assert.ok(status instanceof proto.DeviceStatusT);
+  assert.equal(status.device, 'stylus');
+  assert.equal(status.mode, 'delay');
+  assert.equal(status.missedTicks, 3n);
+  assert.equal(status.latenessP99Us, 42.5);
+  assert.equal(status.displayDelayMs, 1.25);
   assert.equal(byName.device_input.orientation.w, 0.7071067811865476);
   assert.equal(byName.control_set_parameter.command.value, 2.5);
   assert.equal(byName.error.code, proto.ErrorCode.VersionMismatch);

@@ -1,6 +1,7 @@
 #include "net/inbound.hpp"
 
 #include <cmath>
+#include <utility>
 
 #include <flatbuffers/util.h>
 
@@ -61,6 +62,26 @@ std::string check_safety_event(const proto::SafetyEvent& ev) {
   if (!std::isfinite(ev.force_N()) || ev.force_N() < 0)
     return "SafetyEvent with force_N = " + std::to_string(ev.force_N()) +
            ": a force magnitude is finite and >= 0 (send the last finite one)";
+  return "";
+}
+
+std::string check_device_status(const proto::DeviceStatus& st) {
+  if (!st.device() || st.device()->size() == 0) return "DeviceStatus without a device channel";
+  if (st.device()->size() > kMaxSafetyDeviceBytes || !is_utf8(*st.device()))
+    return "DeviceStatus with a device channel that is not UTF-8 of at most " + std::to_string(kMaxSafetyDeviceBytes) +
+           " bytes";
+  const std::string mode = st.mode() ? st.mode()->str() : "";
+  if (mode != "delay" && mode != "hold" && mode != "extrapolate")
+    return "DeviceStatus with mode '" + (st.mode() && is_utf8(*st.mode()) && mode.size() <= 32 ? mode : std::string("?")) +
+           "' (delay, hold or extrapolate)";
+  const std::pair<const char*, float> figures[] = {
+      {"tick_rate_hz", st.tick_rate_hz()},         {"lateness_p99_us", st.lateness_p99_us()},
+      {"lateness_max_us", st.lateness_max_us()},   {"display_delay_ms", st.display_delay_ms()},
+      {"state_interval_ms", st.state_interval_ms()}, {"jitter_allowance_ms", st.jitter_allowance_ms()},
+      {"force_N", st.force_N()}};
+  for (const auto& [name, value] : figures)
+    if (!std::isfinite(value) || value < 0)
+      return std::string("DeviceStatus with ") + name + " = " + std::to_string(value) + ": finite and >= 0";
   return "";
 }
 

@@ -36,5 +36,8 @@ constexpr size_t kMaxSafetyMessageBytes = 512;
 // (>= 0); else what is wrong. (Whether the sender drives that channel is the
 // connection's to check.)
 std::string check_safety_event(const proto::SafetyEvent& ev);
+// What is wrong with a DeviceStatus (a channel, UTF-8 strings within bounds,
+// figures finite and >= 0, a known mode), or "" when nothing is.
+std::string check_device_status(const proto::DeviceStatus& st);
 
 }  // namespace tactile

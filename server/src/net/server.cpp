@@ -222,16 +222,18 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   bool greeted() const { return greeted_; }
   // SafetyEvent came in 1.2: a 1.1 codec refuses a message type it does not know.
   bool reads_safety_events() const { return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 2; }
+  // DeviceStatus came in 1.3.
+  bool reads_device_status() const { return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 3; }
   bool drives_devices() const { return greeted_ && role_ == wire::Role::Device; }
   bool drives(const std::string& channel) const {
     return drives_devices() && std::find(device_names_.begin(), device_names_.end(), channel) != device_names_.end();
   }
 
   // Queues a message; `kind` decides what a slow reader loses: a State is
-  // replaced by the next, a Haptic frame or an Event (SafetyEvent) beyond its
-  // bound drops the oldest of its kind waiting (counted), a Control message
-  // is never dropped.
-  enum class Kind { Control, State, Haptic, Event };
+  // replaced by the next, a Haptic frame, an Event (SafetyEvent) or a Status
+  // (DeviceStatus) beyond its bound drops the oldest of its kind waiting
+  // (counted), a Control message is never dropped.
+  enum class Kind { Control, State, Haptic, Event, Status };
   void send(const Bytes& message, Kind kind) {
     if (closing_) return;
     if (kind == Kind::State) {
@@ -250,11 +252,11 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       next_state_due_ = std::max(next_state_due_, now - period) + period;
       pending_state_ = message;
       queue_.push_back(nullptr);  // a marker: the pending state goes here
-    } else if (kind == Kind::Haptic || kind == Kind::Event) {
+    } else if (kind == Kind::Haptic || kind == Kind::Event || kind == Kind::Status) {
       // A reader too slow: its oldest waiting message of the kind goes (not
       // the one being written), so what it does read is the newest.
       const bool haptic = kind == Kind::Haptic;
-      size_t& queued = haptic ? haptics_queued_ : events_queued_;
+      size_t& queued = haptic ? haptics_queued_ : kind == Kind::Event ? events_queued_ : statuses_queued_;
       if (queued >= (haptic ? server_->options.device_queue : server_->options.event_queue))
         for (size_t k = writing_ ? 1 : 0; k < queue_.size(); ++k)
           if (kinds_[k] == kind) {
@@ -346,6 +348,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       case wire::Message::DeviceInput: return on_input(*e.message_as_DeviceInput());
       case wire::Message::Control: return on_control(*e.message_as_Control());
       case wire::Message::SafetyEvent: return on_safety_event(*e.message_as_SafetyEvent());
+      case wire::Message::DeviceStatus: return on_device_status(*e.message_as_DeviceStatus());
       default:
         return send(make_error(wire::ErrorCode::WrongRole, std::string("a client may not send ") +
                                                                wire::EnumNameMessage(e.message_type())),
@@ -494,6 +497,41 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       if (s->reads_safety_events()) s->send(relayed, Kind::Event);
   }
 
+  // A device's status (how its loop keeps time): checked, at most a few a
+  // second per connection (more are dropped: it is a figure, not an event),
+  // stamped with the server clock and relayed to every viewer and controller
+  // of protocol 1.3 or later.
+  void on_device_status(const wire::DeviceStatus& st) {
+    if (role_ != wire::Role::Device)
+      return send(make_error(wire::ErrorCode::WrongRole,
+                             std::string("DeviceStatus needs the Device role; this connection has the ") +
+                                 wire::EnumNameRole(role_) + " role"),
+                  Kind::Control);
+    if (const std::string bad = check_device_status(st); !bad.empty())
+      return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
+    const std::string name = st.device()->str();
+    if (std::find(device_names_.begin(), device_names_.end(), name) == device_names_.end())
+      return send(make_error(wire::ErrorCode::BadRequest, "DeviceStatus for channel '" + name +
+                                                              "', which this connection did not name in its Hello"),
+                  Kind::Control);
+    const auto now = std::chrono::steady_clock::now();
+    constexpr double kRate = 10;  // per second, a second's burst
+    status_tokens_ = std::min(kRate, status_tokens_ + kRate * std::chrono::duration<double>(now - last_status_).count());
+    last_status_ = now;
+    if (status_tokens_ < 1) return;
+    status_tokens_ -= 1;
+    fb::FlatBufferBuilder b(256 + name.size());
+    const auto device = b.CreateString(st.device());
+    const auto mode = b.CreateString(st.mode());
+    const Bytes relayed =
+        seal(b, wire::Message::DeviceStatus,
+             wire::CreateDeviceStatus(b, device, st.device_time_ns(), now_ns(), st.tick_rate_hz(), st.lateness_p99_us(),
+                                      st.lateness_max_us(), st.missed_ticks(), st.display_delay_ms(),
+                                      st.state_interval_ms(), st.jitter_allowance_ms(), mode, st.force_N()));
+    for (WsSession* s : server_->sessions)
+      if (s->reads_device_status()) s->send(relayed, Kind::Status);
+  }
+
   void on_control(const wire::Control& c) {
     if (role_ != wire::Role::Controller)
       return send(make_error(wire::ErrorCode::WrongRole, "Control needs the controller role", c.request_id()),
@@ -527,6 +565,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       self->writing_ = false;
       if (self->kinds_.front() == Kind::Haptic) --self->haptics_queued_;
       if (self->kinds_.front() == Kind::Event) --self->events_queued_;
+      if (self->kinds_.front() == Kind::Status) --self->statuses_queued_;
       self->queue_.pop_front();
       self->kinds_.pop_front();
       self->current_.reset();
@@ -551,13 +590,15 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   std::deque<Bytes> queue_;          // null entries stand for pending_state_
   std::deque<Kind> kinds_;          // per queue entry
   Bytes pending_state_, current_;
-  size_t haptics_queued_ = 0, events_queued_ = 0;
+  size_t haptics_queued_ = 0, events_queued_ = 0, statuses_queued_ = 0;
   int64_t haptics_dropped_ = 0, events_dropped_ = 0;  // (events: safety events relayed to this reader)
   std::chrono::steady_clock::time_point next_state_due_{}, last_message_ = std::chrono::steady_clock::now();
   double tokens_ = 1e18;  // clamped to the burst at the first message
   // Safety events this device sent: their own bucket, and those dropped over it.
   std::chrono::steady_clock::time_point last_safety_ = std::chrono::steady_clock::now();
   double safety_tokens_ = 1e18;
+  std::chrono::steady_clock::time_point last_status_ = std::chrono::steady_clock::now();
+  double status_tokens_ = 1e18;  // (clamped to the burst at the first status)
   bool safety_limited_ = false;
   int64_t safety_dropped_ = 0;
   uint64_t id_ = next_id_++;

@@ -41,7 +41,7 @@ TEST(ProtoCodec, HelloCarriesVersionRoleTokenAndDevices) {
   ASSERT_EQ(e->message_type(), Message::Hello);
   const Hello* h = e->message_as_Hello();
   EXPECT_EQ(h->protocol_major(), 1);
-  EXPECT_EQ(h->protocol_minor(), 2);
+  EXPECT_EQ(h->protocol_minor(), 3);
   EXPECT_EQ(h->role(), Role::Device);
   EXPECT_STREQ(h->token()->c_str(), "s3cret");
   EXPECT_STREQ(h->client_name()->c_str(), "bridge@lab");
@@ -130,6 +130,26 @@ TEST(ProtoCodec, StateAndHapticFramesRoundTrip) {
   ASSERT_NE(o, nullptr);
   EXPECT_EQ(o->device_poses(), nullptr);
   EXPECT_EQ(o->device_input_sequences(), nullptr);
+}
+
+TEST(ProtoCodec, DeviceStatusRoundTrips) {
+  FlatBufferBuilder b;
+  const std::vector<uint8_t> bytes =
+      seal(b, Message::DeviceStatus,
+           CreateDeviceStatusDirect(b, "stylus", 7000123456ll, 0, 1000.0f, 42.5f, 310.0f, 3, 1.25f, 0.5f, 0.75f,
+                                    "delay", 0.875f));
+  const DeviceStatus* st = open(bytes)->message_as_DeviceStatus();
+  ASSERT_NE(st, nullptr);
+  EXPECT_STREQ(st->device()->c_str(), "stylus");
+  EXPECT_EQ(st->device_time_ns(), 7000123456ll);
+  EXPECT_FLOAT_EQ(st->tick_rate_hz(), 1000.0f);
+  EXPECT_FLOAT_EQ(st->lateness_p99_us(), 42.5f);
+  EXPECT_EQ(st->missed_ticks(), 3u);
+  EXPECT_FLOAT_EQ(st->display_delay_ms(), st->state_interval_ms() + st->jitter_allowance_ms());
+  EXPECT_STREQ(st->mode()->c_str(), "delay");
+  // Added in 1.3, after SafetyEvent (1.2): the older numbers stay.
+  EXPECT_EQ(int(Message::SafetyEvent), 12);
+  EXPECT_EQ(int(Message::DeviceStatus), 13);
 }
 
 TEST(ProtoCodec, SafetyEventRoundTrips) {

@@ -4,6 +4,7 @@ export { Control, ControlT } from './tactile/proto/control';
 export { ControlCommand, unionToControlCommand, unionListToControlCommand } from './tactile/proto/control-command';
 export { DeviceHaptics, DeviceHapticsT } from './tactile/proto/device-haptics';
 export { DeviceInput, DeviceInputT } from './tactile/proto/device-input';
+export { DeviceStatus, DeviceStatusT } from './tactile/proto/device-status';
 export { EffectCost, EffectCostT } from './tactile/proto/effect-cost';
 export { Envelope, EnvelopeT } from './tactile/proto/envelope';
 export { Error, ErrorT } from './tactile/proto/error';

@@ -59,6 +59,7 @@ def End(builder):
     return EnvelopeEnd(builder)
 import tactile_proto.generated.Control
 import tactile_proto.generated.DeviceInput
+import tactile_proto.generated.DeviceStatus
 import tactile_proto.generated.Error
 import tactile_proto.generated.HapticFrame
 import tactile_proto.generated.Hello
@@ -80,7 +81,7 @@ class EnvelopeT(object):
     # EnvelopeT
     def __init__(self):
         self.messageType = 0  # type: int
-        self.message = None  # type: Union[None, tactile_proto.generated.Hello.HelloT, tactile_proto.generated.Welcome.WelcomeT, tactile_proto.generated.SceneDescription.SceneDescriptionT, tactile_proto.generated.StateFrame.StateFrameT, tactile_proto.generated.HapticFrame.HapticFrameT, tactile_proto.generated.DeviceInput.DeviceInputT, tactile_proto.generated.Control.ControlT, tactile_proto.generated.Telemetry.TelemetryT, tactile_proto.generated.Ping.PingT, tactile_proto.generated.Pong.PongT, tactile_proto.generated.Error.ErrorT, tactile_proto.generated.SafetyEvent.SafetyEventT]
+        self.message = None  # type: Union[None, tactile_proto.generated.Hello.HelloT, tactile_proto.generated.Welcome.WelcomeT, tactile_proto.generated.SceneDescription.SceneDescriptionT, tactile_proto.generated.StateFrame.StateFrameT, tactile_proto.generated.HapticFrame.HapticFrameT, tactile_proto.generated.DeviceInput.DeviceInputT, tactile_proto.generated.Control.ControlT, tactile_proto.generated.Telemetry.TelemetryT, tactile_proto.generated.Ping.PingT, tactile_proto.generated.Pong.PongT, tactile_proto.generated.Error.ErrorT, tactile_proto.generated.SafetyEvent.SafetyEventT, tactile_proto.generated.DeviceStatus.DeviceStatusT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):

@@ -16,6 +16,7 @@ class Message(object):
     Pong = 10
     Error = 11
     SafetyEvent = 12
+    DeviceStatus = 13
 
 def MessageCreator(unionType, table):
     from flatbuffers.table import Table
@@ -57,4 +58,7 @@ def MessageCreator(unionType, table):
     if unionType == Message().SafetyEvent:
         import tactile_proto.generated.SafetyEvent
         return tactile_proto.generated.SafetyEvent.SafetyEventT.InitFromBuf(table.Bytes, table.Pos)
+    if unionType == Message().DeviceStatus:
+        import tactile_proto.generated.DeviceStatus
+        return tactile_proto.generated.DeviceStatus.DeviceStatusT.InitFromBuf(table.Bytes, table.Pos)
     return None

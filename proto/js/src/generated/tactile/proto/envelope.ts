@@ -4,6 +4,7 @@ import * as flatbuffers from 'flatbuffers';
 
 import { Control, ControlT } from '../../tactile/proto/control';
 import { DeviceInput, DeviceInputT } from '../../tactile/proto/device-input';
+import { DeviceStatus, DeviceStatusT } from '../../tactile/proto/device-status';
 import { Error, ErrorT } from '../../tactile/proto/error';
 import { HapticFrame, HapticFrameT } from '../../tactile/proto/haptic-frame';
 import { Hello, HelloT } from '../../tactile/proto/hello';
@@ -106,7 +107,7 @@ unpackTo(_o: EnvelopeT): void {
 export class EnvelopeT {
 constructor(
   public messageType: Message = Message.NONE,
-  public message: ControlT|DeviceInputT|ErrorT|HapticFrameT|HelloT|PingT|PongT|SafetyEventT|SceneDescriptionT|StateFrameT|TelemetryT|WelcomeT|null = null
+  public message: ControlT|DeviceInputT|DeviceStatusT|ErrorT|HapticFrameT|HelloT|PingT|PongT|SafetyEventT|SceneDescriptionT|StateFrameT|TelemetryT|WelcomeT|null = null
 ){}
 
 

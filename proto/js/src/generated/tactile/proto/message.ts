@@ -2,6 +2,7 @@
 
 import { Control, ControlT } from '../../tactile/proto/control';
 import { DeviceInput, DeviceInputT } from '../../tactile/proto/device-input';
+import { DeviceStatus, DeviceStatusT } from '../../tactile/proto/device-status';
 import { Error, ErrorT } from '../../tactile/proto/error';
 import { HapticFrame, HapticFrameT } from '../../tactile/proto/haptic-frame';
 import { Hello, HelloT } from '../../tactile/proto/hello';
@@ -27,13 +28,14 @@ export enum Message {
   Ping = 9,
   Pong = 10,
   Error = 11,
-  SafetyEvent = 12
+  SafetyEvent = 12,
+  DeviceStatus = 13
 }
 
 export function unionToMessage(
   type: Message,
-  accessor: (obj:Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null
-): Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
+  accessor: (obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null
+): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
   switch(Message[type]) {
     case 'NONE': return null; 
     case 'Hello': return accessor(new Hello())! as Hello;
@@ -48,15 +50,16 @@ export function unionToMessage(
     case 'Pong': return accessor(new Pong())! as Pong;
     case 'Error': return accessor(new Error())! as Error;
     case 'SafetyEvent': return accessor(new SafetyEvent())! as SafetyEvent;
+    case 'DeviceStatus': return accessor(new DeviceStatus())! as DeviceStatus;
     default: return null;
   }
 }
 
 export function unionListToMessage(
   type: Message, 
-  accessor: (index: number, obj:Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null, 
+  accessor: (index: number, obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null, 
   index: number
-): Control|DeviceInput|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
+): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
   switch(Message[type]) {
     case 'NONE': return null; 
     case 'Hello': return accessor(index, new Hello())! as Hello;
@@ -71,6 +74,7 @@ export function unionListToMessage(
     case 'Pong': return accessor(index, new Pong())! as Pong;
     case 'Error': return accessor(index, new Error())! as Error;
     case 'SafetyEvent': return accessor(index, new SafetyEvent())! as SafetyEvent;
+    case 'DeviceStatus': return accessor(index, new DeviceStatus())! as DeviceStatus;
     default: return null;
   }
 }
