@@ -17,6 +17,17 @@ export function viridis(u, out, o = 0) {
   out[o + 2] = a[2] + f * (b[2] - a[2]);
 }
 
+// The map as 256 RGB byte triples, index = round(255 u): a table for colouring many vertices at once.
+export function viridisBytes() {
+  const out = new Uint8Array(3 * 256);
+  const rgb = new Float32Array(3);
+  for (let k = 0; k < 256; k++) {
+    viridis(k / 255, rgb, 0);
+    for (let c = 0; c < 3; c++) out[3 * k + c] = Math.round(255 * rgb[c]);
+  }
+  return out;
+}
+
 // The CSS gradient of the map, for the legend.
 export function cssGradient() {
   const c = STOPS.map((s, k) => `rgb(${s.map((v) => Math.round(255 * v)).join(',')}) ${(100 * k) / (STOPS.length - 1)}%`);

@@ -57,12 +57,17 @@ export class FrameBuffer {
     return Math.min(this.tb, this.tb - this.interval + Math.max(0, now - this.arrival));
   }
 
+  // The weight of the newer frame at local time `now` (0..1): what a shader mixes the two with.
+  weight(now) {
+    const t = this.displayTime(now);
+    const span = this.tb - this.ta;
+    return span > 0 ? Math.min(1, Math.max(0, (t - this.ta) / span)) : 1;
+  }
+
   // Writes the positions (and scalars) at local time `now` into `out` (and `outScalars`); returns the
   // weight of the newer frame (0..1).
   sample(now, out, outScalars = null) {
-    const t = this.displayTime(now);
-    const span = this.tb - this.ta;
-    const w = span > 0 ? Math.min(1, Math.max(0, (t - this.ta) / span)) : 1;
+    const w = this.weight(now);
     const a = this.a;
     const b = this.b;
     const v = 1 - w;

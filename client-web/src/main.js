@@ -54,7 +54,7 @@ const pointer = new PointerDevice({ canvas: renderer.domElement, camera, control
 
 // What the tests read (and a person can, in the console).
 const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality,
-                decodeMs: [], frameMs: [] };
+                decodeMs: [], slotMs: [], frameMs: [] };
 const controlPanel = new ControlPanel($('controls'), { token, url: wsUrl });
 stats.pointer = pointer;
 stats.controls = controlPanel;
@@ -67,7 +67,6 @@ stats.project = (x, y, z) => {
 window.tactile = stats;
 
 let view = null;
-let coloured = -1;  // stats.frames when the colours were last set
 let buffer = null;
 let ground = null;
 
@@ -130,6 +129,10 @@ function onMessage(data) {
     stats.decodeMs.push(performance.now() - t0);  // read in place and copied into the buffer
     if (stats.decodeMs.length > 256) stats.decodeMs.shift();
     if (kept) {
+      const t1 = performance.now();
+      view.pushState(buffer.b, buffer.sb, buffer.a, buffer.sa);
+      stats.slotMs.push(performance.now() - t1);  // quantized and coloured into the free slot
+      if (stats.slotMs.length > 256) stats.slotMs.shift();
       stats.frames += 1;
       stats.lastStep = Number(f.step);
       view.updateProxies(f.proxies, f.contactForces);
@@ -192,10 +195,7 @@ function frame() {
       (Number.isFinite(pointer.latencyMs) ? `, input to force ${pointer.latencyMs.toFixed(1)} ms` : '');
   }
   if (view && buffer && buffer.count > 0) {
-    buffer.sample(performance.now() / 1000, view.nextPositions, view.scalars);
-    // Colours at the state rate (a new state came), positions at the screen's.
-    view.updateSurface(stats.frames !== coloured);
-    coloured = stats.frames;
+    view.setMix(buffer.weight(now / 1000));
     const [lo, hi] = view.scalarRange;
     $('legend-lo').textContent = lo.toPrecision(3);
     $('legend-hi').textContent = hi.toPrecision(3);

@@ -129,7 +129,7 @@ export class PointerDevice {
   down(e) {
     if (!this.channel || !this.view || this.proxy < 0 || e.button > 0) return;
     this.pointerRay(e);
-    const hit = this.ray.intersectObject(this.view.mesh, false)[0];
+    const hit = this.ray.intersectObject(this.view.pick, false)[0];
     if (!hit) return;  // not on the body: the view turns instead
     this.plane.point.copy(hit.point);
     // The face's outward normal (the body is drawn untransformed: its local frame is the scene's).

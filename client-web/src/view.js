@@ -1,56 +1,87 @@
-// The three.js scene of one SceneDescription: the body's surface (positions and colours updated in
-// place each frame), the proxies drawn as their shapes, and an arrow per proxy for its contact force.
+// The three.js scene of one SceneDescription: the body's surface, the proxies drawn as their shapes, and
+// an arrow per proxy for its contact force.
+//
+// The surface is interpolated on the GPU: each state frame is written once, when it arrives, into one of
+// three vertex-buffer slots (positions as 16-bit integers over a box around the body, colours as bytes);
+// the vertex shader mixes the older and the newer of the two slots in use with the weight the frame
+// buffer gives for the display time, so that a screen frame sends one number, not the surface. The slot
+// written is the one no recent frame drew: writing a vertex buffer the GPU may still read makes a software
+// renderer wait or copy, which at 20 k vertices costs more than drawing (tens of ms a frame). Normals are
+// each triangle's own, from screen-space derivatives (flat shading): nothing is computed per frame on the CPU.
 import * as THREE from 'three';
 
-import { viridis } from './colormap.js';
+import { viridisBytes } from './colormap.js';
+
+const VIRIDIS = viridisBytes();
 
 const SHAPES = ['sphere', 'capsule', 'box', 'plane'];
 
 export class SceneView {
-  // `quality`: 'high' shades physically (MeshStandardMaterial); 'low' (software renderers) with Lambert's
-  // diffuse light, a fraction of the cost per pixel.
+  // `quality`: 'high' shades physically (MeshStandardMaterial) with shadows; 'low' (software renderers)
+  // with Lambert's diffuse light, a fraction of the cost per pixel.
   constructor(scene, description, quality = 'high') {
     this.root = new THREE.Group();
     scene.add(this.root);
-    const rest = description.restPositions;
+    const rest = new Float32Array(description.restPositions);
     const n = rest.length / 3;
-    this.scalars = new Float32Array(n);
-    this.colors = new Float32Array(3 * n);
+    this.n = n;
+    this.positions = new Float32Array(rest);  // the newest state's positions [m] (CPU copy: picking, readers)
+    this.scalars = new Float32Array(n);       // and its scalars
     this.scalarRange = [0, 1e-9];
-    this.smooth = quality === 'high';
-    // Two copies of the surface, drawn in turn: each frame writes the one the previous frame did not draw.
-    // (A vertex buffer that the frame before drew from is still in use; writing it makes a software
-    // renderer wait or copy, which at 10 k vertices costs more than the drawing.) The colours, which
-    // change at the state rate, are one buffer both share; the triangles too.
-    this.colorAttr = new THREE.BufferAttribute(this.colors, 3);
-    this.colorAttr.setUsage(THREE.DynamicDrawUsage);
+    // The box positions are quantized over: a cube around the rest shape, three times its size; widened
+    // when a state leaves it.
+    const box = new THREE.Box3().setFromArray(rest);
+    this.centre = box.getCenter(new THREE.Vector3());
+    this.half = Math.max(1e-3, 1.5 * Math.max(...box.getSize(new THREE.Vector3()).toArray()));
     const index = new THREE.BufferAttribute(new Uint32Array(description.triangles), 1);
-    // Software renderers (quality low): Lambert's diffuse light with each triangle's own normal, taken from
-    // screen-space derivatives, so that no normals are computed or sent per frame; GPUs: smooth normals and
-    // physically based shading.
-    const material = this.smooth
-      ? new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.55, metalness: 0.0, side: THREE.DoubleSide })
-      : new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide, flatShading: true });
-    this.surfaces = [0, 1].map(() => {
-      const geometry = new THREE.BufferGeometry();
-      const positions = new Float32Array(rest);
-      const attr = new THREE.BufferAttribute(positions, 3);
-      attr.setUsage(THREE.DynamicDrawUsage);
-      geometry.setAttribute('position', attr);
-      geometry.setAttribute('color', this.colorAttr);
-      geometry.setIndex(index);
-      if (this.smooth) geometry.computeVertexNormals();
-      geometry.computeBoundingSphere();
-      const mesh = new THREE.Mesh(geometry, material);
-      mesh.castShadow = true;
-      mesh.receiveShadow = true;
-      mesh.frustumCulled = false;  // it deforms past its rest bounds; it is the scene's subject anyway
-      this.root.add(mesh);
-      return { geometry, positions, attr, mesh };
+    const geometry = new THREE.BufferGeometry();
+    geometry.setIndex(index);
+    geometry.setAttribute('position', new THREE.BufferAttribute(rest, 3));  // bounds only: the shader moves it
+    this.slots = [0, 1, 2].map(() => {
+      const p = new THREE.BufferAttribute(new Int16Array(3 * n), 3, true);
+      const c = new THREE.BufferAttribute(new Uint8Array(3 * n), 3, true);
+      p.setUsage(THREE.DynamicDrawUsage);
+      c.setUsage(THREE.DynamicDrawUsage);
+      return { p, c };
     });
-    this.front = 0;  // the copy drawn last, and the one raycasts and readers see
-    this.surfaces[1].mesh.visible = false;
-    const geometry = this.geometry;
+    this.older = 0;
+    this.newer = 1;
+    this.uniforms = { surfaceMix: { value: 1 }, surfaceCentre: { value: this.centre }, surfaceHalf: { value: this.half } };
+    for (const k of [0, 1]) this.writeSlot(this.slots[k], rest, this.scalars);
+    this.bindSlots(geometry);
+    geometry.computeBoundingSphere();
+    this.geometry = geometry;
+    const inject = (shader, colours) => {
+      Object.assign(shader.uniforms, this.uniforms);
+      shader.vertexShader = 'attribute vec3 posA;\nattribute vec3 posB;\nattribute vec3 colA;\nattribute vec3 colB;\n' +
+        'uniform float surfaceMix;\nuniform vec3 surfaceCentre;\nuniform float surfaceHalf;\n' +
+        shader.vertexShader.replace('#include <begin_vertex>',
+          'vec3 transformed = surfaceCentre + surfaceHalf * mix(posA, posB, surfaceMix);');
+      if (colours) {
+        shader.vertexShader = shader.vertexShader.replace('#include <color_vertex>',
+          'vColor = mix(colA, colB, surfaceMix);');
+      }
+    };
+    const material = quality === 'high'
+      ? new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.55, metalness: 0.0, side: THREE.DoubleSide,
+                                         flatShading: true })
+      : new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide, flatShading: true });
+    material.onBeforeCompile = (shader) => inject(shader, true);
+    this.mesh = new THREE.Mesh(geometry, material);
+    this.mesh.frustumCulled = false;  // it deforms past its rest bounds; it is the scene's subject anyway
+    this.mesh.castShadow = true;
+    this.mesh.receiveShadow = true;
+    // The shadow pass draws the surface where the shader puts it too.
+    const depth = new THREE.MeshDepthMaterial({ depthPacking: THREE.RGBADepthPacking });
+    depth.onBeforeCompile = (shader) => inject(shader, false);
+    this.mesh.customDepthMaterial = depth;
+    this.root.add(this.mesh);
+    // What a pointer picks: the newest state's surface, on the CPU (never drawn).
+    const pickGeometry = new THREE.BufferGeometry();
+    pickGeometry.setIndex(index);
+    this.pickAttr = new THREE.BufferAttribute(this.positions, 3);
+    pickGeometry.setAttribute('position', this.pickAttr);
+    this.pick = new THREE.Mesh(pickGeometry, new THREE.MeshBasicMaterial({ side: THREE.DoubleSide }));
     this.size = geometry.boundingSphere.radius || 0.05;
 
     this.proxies = (description.proxies || []).map((p) => this.makeProxy(p));
@@ -62,7 +93,6 @@ export class SceneView {
     });
     this.forces = new Float32Array(3 * this.proxies.length);
     this.tmp = new THREE.Vector3();
-    this.setScalars(this.scalars);
   }
 
   makeProxy(info) {
@@ -84,38 +114,77 @@ export class SceneView {
     return mesh;
   }
 
-  // Scalars to colours, over the range seen so far (it only widens, so colours do not flicker).
-  setScalars(scalars) {
+  bindSlots(geometry = this.geometry) {
+    const a = this.slots[this.older];
+    const b = this.slots[this.newer];
+    geometry.setAttribute('posA', a.p);
+    geometry.setAttribute('posB', b.p);
+    geometry.setAttribute('colA', a.c);
+    geometry.setAttribute('colB', b.c);
+  }
+
+  // Positions quantized over the box, and scalars as colours over the range seen so far (it only widens,
+  // so that colours do not flicker).
+  writeSlot(slot, positions, scalars) {
+    const p = slot.p.array;
+    const k = 32767 / this.half;
+    const c = this.centre;
+    for (let i = 0; i < positions.length; i += 3) {
+      p[i] = Math.round((positions[i] - c.x) * k);
+      p[i + 1] = Math.round((positions[i + 1] - c.y) * k);
+      p[i + 2] = Math.round((positions[i + 2] - c.z) * k);
+    }
+    slot.p.needsUpdate = true;
+    const [lo, hi] = this.scalarRange;
+    const scale = 255 / (hi - lo || 1);
+    const col = slot.c.array;
+    for (let i = 0; i < scalars.length; i++) {
+      const u = (scalars[i] - lo) * scale;
+      const k = 3 * (u >= 255 ? 255 : u > 0 ? Math.round(u) : 0);  // (NaN reads as 0)
+      col[3 * i] = VIRIDIS[k];
+      col[3 * i + 1] = VIRIDIS[k + 1];
+      col[3 * i + 2] = VIRIDIS[k + 2];
+    }
+    slot.c.needsUpdate = true;
+  }
+
+  // A new state (positions [m], n x 3; scalars, n): written once into the free slot, which becomes the
+  // newer; `older` (the frame before it, as the frame buffer holds it) is rewritten only when the box or
+  // the colour range had to widen.
+  pushState(positions, scalars, older, olderScalars) {
+    let far = 0;
+    const c = this.centre;
+    for (let i = 0; i < positions.length; i += 3) {
+      far = Math.max(far, Math.abs(positions[i] - c.x), Math.abs(positions[i + 1] - c.y), Math.abs(positions[i + 2] - c.z));
+    }
     let lo = this.scalarRange[0];
     let hi = this.scalarRange[1];
     for (let i = 0; i < scalars.length; i++) {
-      const v = scalars[i];
-      if (v < lo) lo = v;
-      if (v > hi) hi = v;
+      if (scalars[i] < lo) lo = scalars[i];
+      if (scalars[i] > hi) hi = scalars[i];
+    }
+    const widened = far > this.half || lo < this.scalarRange[0] || hi > this.scalarRange[1];
+    if (far > this.half) {
+      while (this.half < far) this.half *= 2;
+      this.uniforms.surfaceHalf.value = this.half;
     }
     this.scalarRange[0] = lo;
     this.scalarRange[1] = hi;
-    const span = hi - lo || 1;
-    for (let i = 0; i < scalars.length; i++) viridis((scalars[i] - lo) / span, this.colors, 3 * i);
-    this.colorAttr.needsUpdate = true;
+    const free = 3 - this.older - this.newer;
+    this.writeSlot(this.slots[free], positions, scalars);
+    this.older = this.newer;
+    this.newer = free;
+    if (widened) this.writeSlot(this.slots[this.older], older, olderScalars);
+    this.bindSlots();
+    this.positions.set(positions);
+    this.scalars.set(scalars);
+    this.pickAttr.needsUpdate = true;
+    this.pick.geometry.computeBoundingSphere();
   }
 
-  // The copy drawn last: its positions are the latest drawn [m] (n x 3).
-  get geometry() { return this.surfaces[this.front].geometry; }
-  get mesh() { return this.surfaces[this.front].mesh; }
-  get positions() { return this.surfaces[this.front].positions; }
-  // Where the next frame's positions go: the copy not drawn last.
-  get nextPositions() { return this.surfaces[1 - this.front].positions; }
-
-  // After nextPositions (and, when `scalarsChanged`, this.scalars) were written: that copy is drawn next.
-  updateSurface(scalarsChanged = true) {
-    const next = this.surfaces[1 - this.front];
-    next.attr.needsUpdate = true;
-    if (this.smooth) next.geometry.computeVertexNormals();
-    next.mesh.visible = true;
-    this.surfaces[this.front].mesh.visible = false;
-    this.front = 1 - this.front;
-    if (scalarsChanged) this.setScalars(this.scalars);
+  // The weight of the newer state on screen now (0..1).
+  setMix(w) {
+    this.uniforms.surfaceMix.value = w;
   }
 
   // Proxy poses (n x 7: position, orientation w x y z) and forces (n x 3) from a state frame.
@@ -144,6 +213,8 @@ export class SceneView {
   }
 
   dispose() {
+    this.pick.geometry.dispose();
+    this.pick.material.dispose();
     this.root.traverse((o) => {
       if (o.geometry) o.geometry.dispose();
       if (o.material) o.material.dispose();
