@@ -79,20 +79,6 @@ const browser = await chromium.launch({
   args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist', ...(process.env.UNTHROTTLED ? ['--disable-gpu-vsync',
          '--disable-frame-rate-limit'] : [])],
 });
-// The browser at nice 10 (itself and every process it starts, now and later): the server it watches is
-// the service and keeps its share of the two cores; the page draws with what is left.
-function reniceTree(pid) {
-  const children = (p) => {
-    try {
-      return fs.readFileSync(`/proc/${p}/task/${p}/children`, 'utf8').trim().split(/\s+/).filter(Boolean).map(Number);
-    } catch { return []; }
-  };
-  const all = [pid];
-  for (let i = 0; i < all.length; i++) all.push(...children(all[i]));
-  for (const p of all) {
-    try { os.setPriority(p, 10); } catch { /* gone */ }
-  }
-}
 const seconds = Number(opts.seconds);
 console.log(`render_bench: headless Chromium, ${os.cpus().length} cores, ${seconds} s per size, 1024 x 768`);
 console.log('  vertices  triangles  quality  fps (drawn/s)  frame work ms (median, p95)  state read+copy ms (median, p95)  state to slot ms (median, p95)  states/s');
@@ -103,11 +89,6 @@ try {
     const { proc, port } = await startServer(scenePath);
     try {
       const page = await browser.newPage({ viewport: { width: 1024, height: 768 } });
-      for (const pid of fs.readFileSync(`/proc/${process.pid}/task/${process.pid}/children`, 'utf8').trim().split(/\s+/)) {
-        let name = '';
-        try { name = fs.readFileSync(`/proc/${pid}/comm`, 'utf8').trim(); } catch { /* gone */ }
-        if (name.startsWith('chrom')) reniceTree(Number(pid));
-      }
       await page.goto(`http://127.0.0.1:${port}/${opts.quality ? `?quality=${opts.quality}` : ''}`);
       await page.waitForFunction(() => window.tactile && window.tactile.frames >= 3, null, { timeout: 120000 });
       await page.waitForTimeout(1000);  // past the start-up
