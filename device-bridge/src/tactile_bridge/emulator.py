@@ -365,8 +365,10 @@ class FirmwareEmulator:
         t_us = int((now_s - self._boot_s) * 1e6)
         # The position as the host will decode it (float32), for tests that compare.
         frame = sp.encode_state(seq, t_us, self.position_m, self.buttons)
-        if self._send(frame):
-            self.sent_states.append((seq, sp.decode_state(frame[sp.HEADER_SIZE:-sp.CRC_SIZE]).position_m))
+        # Recorded before it is written: the host may read it before this thread runs again.
+        self.sent_states.append((seq, sp.decode_state(frame[sp.HEADER_SIZE:-sp.CRC_SIZE]).position_m))
+        if not self._send(frame):
+            self.sent_states.pop()  # (only this thread appends)
 
     def _send(self, data: bytes) -> bool:
         """Writes to the host; drops it (False) when the host does not read, as a USB device would."""
