@@ -5,17 +5,13 @@
 // call), the time to read a state frame and copy it into the frame buffer, and the time to write it into
 // a vertex-buffer slot (quantized positions, colours).
 //   node client-web/bench/render_bench.mjs [--seconds S] [--sizes 50,100,157] [--quality low|high]
-import { spawn } from 'node:child_process';
-import fs from 'node:fs';
 import os from 'node:os';
-import path from 'node:path';
-import { fileURLToPath } from 'node:url';
 import { parseArgs } from 'node:util';
 
 import { chromium } from 'playwright-core';
 
-const here = path.dirname(fileURLToPath(import.meta.url));
-const root = path.resolve(here, '..', '..');
+import { CHROMIUM, SWIFTSHADER, startServer } from '../test/live.js';
+
 const { values: opts } = parseArgs({
   options: {
     seconds: { type: 'string', default: '6' },
@@ -44,24 +40,6 @@ function plate(n) {
   };
 }
 
-async function startServer(scenePath) {
-  const exe = path.resolve(root, opts.build, 'tactile-server');
-  const proc = spawn(exe, [scenePath, '--port', '0', '--static', path.join(root, 'client-web')],
-                     { stdio: ['ignore', 'pipe', 'pipe'] });
-  let out = '';
-  const port = await new Promise((resolve, reject) => {
-    const timer = setTimeout(() => reject(new Error(`the server did not start:\n${out}`)), 120000);
-    proc.stdout.on('data', (d) => {
-      out += d;
-      const m = /listening on http:\/\/127\.0\.0\.1:(\d+)\//.exec(out);
-      if (m) { clearTimeout(timer); resolve(Number(m[1])); }
-    });
-    proc.stderr.on('data', (d) => { out += d; });
-    proc.on('exit', (code) => reject(new Error(`the server exited (${code}):\n${out}`)));
-  });
-  return { proc, port };
-}
-
 const median = (xs) => {
   const s = [...xs].sort((a, b) => a - b);
   return s.length ? s[Math.floor(s.length / 2)] : NaN;
@@ -71,12 +49,11 @@ const pct = (xs, q) => {
   return s.length ? s[Math.min(s.length - 1, Math.floor(q * s.length))] : NaN;
 };
 
-const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-render-bench-'));
 const browser = await chromium.launch({
-  executablePath: process.env.TACTILE_CHROMIUM || '/usr/bin/chromium',
+  executablePath: CHROMIUM,
   // Unthrottled (no vsync, no frame-rate cap): what the machine can draw, not headless mode's software
   // frame pacing (16 fps at 1024 x 768 whatever the scene); a display caps it at its refresh rate.
-  args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist', ...(process.env.UNTHROTTLED ? ['--disable-gpu-vsync',
+  args: [...SWIFTSHADER, ...(process.env.UNTHROTTLED ? ['--disable-gpu-vsync',
          '--disable-frame-rate-limit'] : [])],
 });
 const seconds = Number(opts.seconds);
@@ -84,9 +61,7 @@ console.log(`render_bench: headless Chromium, ${os.cpus().length} cores, ${secon
 console.log('  vertices  triangles  quality  fps (drawn/s)  frame work ms (median, p95)  state read+copy ms (median, p95)  state to slot ms (median, p95)  states/s');
 try {
   for (const n of opts.sizes.split(',').map(Number)) {
-    const scenePath = path.join(dir, `plate_${n}.json`);
-    fs.writeFileSync(scenePath, JSON.stringify(plate(n)));
-    const { proc, port } = await startServer(scenePath);
+    const { proc, port } = await startServer(plate(n), [], { build: opts.build });
     try {
       const page = await browser.newPage({ viewport: { width: 1024, height: 768 } });
       await page.goto(`http://127.0.0.1:${port}/${opts.quality ? `?quality=${opts.quality}` : ''}`);

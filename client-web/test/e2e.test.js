@@ -3,28 +3,14 @@
 // console error, the mesh's vertices change from frame to frame at about the state rate, and a
 // screenshot (kept in test-results/) shows a rendered scene, not a blank canvas.
 import assert from 'node:assert/strict';
-import { spawn } from 'node:child_process';
 import fs from 'node:fs';
-import os from 'node:os';
 import path from 'node:path';
 import test from 'node:test';
-import { fileURLToPath } from 'node:url';
-
-import { chromium } from 'playwright-core';
 
 import * as proto from '../../proto/js/dist/tactile-proto.js';
+import { openLive, root } from './live.js';
 
-const here = path.dirname(fileURLToPath(import.meta.url));
-const root = path.resolve(here, '..', '..');
-const CHROMIUM = process.env.TACTILE_CHROMIUM || '/usr/bin/chromium';
 const ARTEFACTS = path.join(root, 'client-web', 'test-results');
-
-function serverExe() {
-  const build = process.env.TACTILE_BUILD || 'build/release';
-  const exe = path.resolve(root, build, 'tactile-server');
-  assert.ok(fs.existsSync(exe), `tactile-server is not built at ${exe} (scripts/setup.sh builds it)`);
-  return exe;
-}
 
 // A column fixed at its base whose lid turns about its axis at 36 degrees a second, for a minute.
 const SCENE = {
@@ -40,38 +26,10 @@ const SCENE = {
   run: { duration: 60 },
 };
 
-async function startServer(dir, scene = SCENE, ...args) {
-  const scenePath = path.join(dir, `${scene.name}.json`);
-  fs.writeFileSync(scenePath, JSON.stringify(scene));
-  const proc = spawn(serverExe(), [scenePath, '--port', '0', '--static', path.join(root, 'client-web'), ...args],
-                     { stdio: ['ignore', 'pipe', 'pipe'] });
-  let out = '';
-  const port = await new Promise((resolve, reject) => {
-    const timer = setTimeout(() => reject(new Error(`the server did not start:\n${out}`)), 30000);
-    proc.stdout.on('data', (d) => {
-      out += d;
-      const m = /listening on http:\/\/127\.0\.0\.1:(\d+)\//.exec(out);
-      if (m) { clearTimeout(timer); resolve(Number(m[1])); }
-    });
-    proc.stderr.on('data', (d) => { out += d; });
-    proc.on('exit', (code) => reject(new Error(`the server exited (${code}):\n${out}`)));
-  });
-  return { proc, port };
-}
-
 test('the page draws the live body from the server\'s frames', { timeout: 120000 }, async () => {
-  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-e2e-'));
-  const { proc, port } = await startServer(dir);
-  const browser = await chromium.launch({
-    executablePath: CHROMIUM,
-    args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'],
-  });
+  const live = await openLive(SCENE, { query: process.env.TACTILE_QUALITY ? `?quality=${process.env.TACTILE_QUALITY}` : '' });
+  const { page, problems } = live;
   try {
-    const page = await browser.newPage({ viewport: { width: 800, height: 600 } });
-    const problems = [];
-    page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
-    page.on('pageerror', (e) => problems.push(`page: ${e.message}`));
-    await page.goto(`http://127.0.0.1:${port}/${process.env.TACTILE_QUALITY ? '?quality=' + process.env.TACTILE_QUALITY : ''}`);
     await page.waitForFunction(() => window.tactile && window.tactile.frames >= 5, null, { timeout: 30000 });
     const scene = await page.evaluate(() => ({ name: window.tactile.sceneName, vertices: window.tactile.vertices }));
     assert.equal(scene.name, 'e2e_twist');
@@ -126,8 +84,7 @@ test('the page draws the live body from the server\'s frames', { timeout: 120000
     const quality = await page.evaluate(() => window.tactile.quality);
     console.log(`e2e: ${scene.vertices} vertices, ${rate} state frames/s, ${(b.rendered - a.rendered) / 2} renders/s (${quality} quality), moved ${moved.toFixed(4)} m, ${spread} colours; screenshot ${shot}`);
   } finally {
-    await browser.close();
-    proc.kill('SIGINT');
+    await live.close();
   }
 });
 
@@ -144,18 +101,9 @@ const POKE = {
 };
 
 test('a mouse drag on the body moves the mouse\'s proxy and deforms the mesh near it', { timeout: 120000 }, async () => {
-  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-e2e-'));
-  const { proc, port } = await startServer(dir, POKE, '--token', 'e2e-secret');
-  const browser = await chromium.launch({
-    executablePath: CHROMIUM,
-    args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'],
-  });
+  const live = await openLive(POKE, { args: ['--token', 'e2e-secret'], query: '?token=e2e-secret' });
+  const { page, problems } = live;
   try {
-    const page = await browser.newPage({ viewport: { width: 800, height: 600 } });
-    const problems = [];
-    page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
-    page.on('pageerror', (e) => problems.push(`page: ${e.message}`));
-    await page.goto(`http://127.0.0.1:${port}/?token=e2e-secret`);
     await page.waitForFunction(() => window.tactile && window.tactile.frames >= 5 && window.tactile.pointer.channel
                                && window.tactile.pointer.home, null, { timeout: 30000 });
     const state = () => page.evaluate(() => {
@@ -210,24 +158,15 @@ test('a mouse drag on the body moves the mouse\'s proxy and deforms the mesh nea
     assert.deepEqual(problems, [], problems.join('\n'));
     console.log(`e2e poke: proxy at (${px.toFixed(4)}, ${py.toFixed(4)}, ${pz.toFixed(4)}) m, surface down ${(1e3 * near).toFixed(2)} mm under it, ${(1e3 * far).toFixed(2)} mm far away, ${pressed.force.toFixed(3)} N, input to force ${pressed.latency.toFixed(1)} ms`);
   } finally {
-    await browser.close();
-    proc.kill('SIGINT');
+    await live.close();
   }
 });
 
 test('with the token, the control panel pauses, resumes, sets parameters, loads a scene and names errors', { timeout: 120000 }, async () => {
-  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-e2e-'));
-  const { proc, port } = await startServer(dir, POKE, '--token', 'e2e-secret');
-  const browser = await chromium.launch({
-    executablePath: CHROMIUM,
-    args: ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'],
-  });
+  const live = await openLive(POKE, { args: ['--token', 'e2e-secret'], query: '?token=e2e-secret',
+                                      viewport: { width: 800, height: 700 } });
+  const { page, problems } = live;
   try {
-    const page = await browser.newPage({ viewport: { width: 800, height: 700 } });
-    const problems = [];
-    page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
-    page.on('pageerror', (e) => problems.push(`page: ${e.message}`));
-    await page.goto(`http://127.0.0.1:${port}/?token=e2e-secret`);
     await page.waitForFunction(() => window.tactile && window.tactile.frames >= 3, null, { timeout: 30000 });
     const message = () => page.textContent('#controls .message');
     // Waits for fn(arg) in the page; on a timeout, says what it waited for and what the panel said.
@@ -316,7 +255,6 @@ test('with the token, the control panel pauses, resumes, sets parameters, loads 
     assert.deepEqual(problems, [], problems.join('\n'));
     console.log(`e2e controls: paused at t = ${t0.toFixed(3)} s, damping set and switched off, scene reloaded; record: ${await message()}`);
   } finally {
-    await browser.close();
-    proc.kill('SIGINT');
+    await live.close();
   }
 });

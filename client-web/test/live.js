@@ -1,0 +1,61 @@
+// A real tactile-server serving this folder, and a page of it in Debian's Chromium (playwright-core,
+// SwiftShader): what the end-to-end tests and the render benchmark start.
+import assert from 'node:assert/strict';
+import { spawn } from 'node:child_process';
+import fs from 'node:fs';
+import os from 'node:os';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+
+import { chromium } from 'playwright-core';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+export const root = path.resolve(here, '..', '..');
+export const CHROMIUM = process.env.TACTILE_CHROMIUM || '/usr/bin/chromium';
+export const SWIFTSHADER = ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'];
+
+export function serverExe(build = process.env.TACTILE_BUILD || 'build/release') {
+  const exe = path.resolve(root, build, 'tactile-server');
+  assert.ok(fs.existsSync(exe), `tactile-server is not built at ${exe} (scripts/setup.sh builds it)`);
+  return exe;
+}
+
+// Writes `scene` (an object) into a fresh folder and starts the server on it on a free port, with `args`.
+export async function startServer(scene, args = [], { build, timeoutMs = 120000 } = {}) {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-live-'));
+  const scenePath = path.join(dir, `${scene.name}.json`);
+  fs.writeFileSync(scenePath, JSON.stringify(scene));
+  const proc = spawn(serverExe(build), [scenePath, '--port', '0', '--static', path.join(root, 'client-web'), ...args],
+                     { stdio: ['ignore', 'pipe', 'pipe'] });
+  let out = '';
+  const port = await new Promise((resolve, reject) => {
+    const timer = setTimeout(() => reject(new Error(`the server did not start:\n${out}`)), timeoutMs);
+    proc.stdout.on('data', (d) => {
+      out += d;
+      const m = /listening on http:\/\/127\.0\.0\.1:(\d+)\//.exec(out);
+      if (m) { clearTimeout(timer); resolve(Number(m[1])); }
+    });
+    proc.stderr.on('data', (d) => { out += d; });
+    proc.on('exit', (code) => reject(new Error(`the server exited (${code}):\n${out}`)));
+  });
+  return { proc, port };
+}
+
+// The server on `scene` and a page of it at `query` (e.g. '?token=...'); `problems` collects console errors
+// and page errors. close() ends both.
+export async function openLive(scene, { args = [], query = '', viewport = { width: 800, height: 600 } } = {}) {
+  const { proc, port } = await startServer(scene, args);
+  const browser = await chromium.launch({ executablePath: CHROMIUM, args: SWIFTSHADER });
+  const page = await browser.newPage({ viewport });
+  const problems = [];
+  page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
+  page.on('pageerror', (e) => problems.push(`page: ${e.message}`));
+  await page.goto(`http://127.0.0.1:${port}/${query}`);
+  return {
+    port, page, problems,
+    close: async () => {
+      await browser.close();
+      proc.kill('SIGINT');
+    },
+  };
+}
