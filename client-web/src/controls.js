@@ -17,7 +17,6 @@ const el = (tag, attrs = {}, ...children) => {
 
 export class ControlPanel {
   constructor(element, { token, url }) {
-    this.element = element;
     this.token = token;
     this.url = url;
     this.ws = null;

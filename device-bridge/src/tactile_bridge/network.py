@@ -308,9 +308,12 @@ class Network:
         return out
 
     def _send_status(self, now: float) -> None:
-        messages = self.status_messages(now)
+        if DeviceStatusT is None:  # an older generated codec: nothing to send them with
+            self._status_at = (now, self.ex.i[ex.H_TICKS], self.ex.histogram())
+            return
+        messages = self.status_messages(now)  # (also starts the next window)
         ws = self._ws
-        if DeviceStatusT is None or ws is None or self.server_minor < 3:
+        if ws is None or self.server_minor < 3:
             return
         for m, channel in zip(messages, self.channels):
             if channel >= 0:

@@ -574,12 +574,13 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
     ++report.substeps;
     covered += dt;
     // A proxy that squashes the elements under it within the interval: the
-    // rest of the interval is split again at their new critical step.
-    if (contact_tets_.empty() || contact_.pushed().empty()) continue;
+    // rest of the interval is split again at their new critical step. (After
+    // the last step the next advance() looks, before it plans its steps.)
+    if (k + 1 == n || contact_tets_.empty() || contact_.pushed().empty()) continue;
     const double dc = compute_contact_critical_dt(s);
     if (dc >= dt_critical_) continue;
     dt_critical_ = report.dt_critical = dc;
-    if (dt <= model_.integrator.safety * dc || k + 1 == n) continue;
+    if (dt <= model_.integrator.safety * dc) continue;
     if (fixed > 0 && model_.integrator.unstable == UnstablePolicy::Refuse) {
       std::ostringstream msg;
       msg << "integrator.dt = " << fixed << " s exceeds the critical step " << dc
