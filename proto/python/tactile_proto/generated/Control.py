@@ -72,7 +72,9 @@ import tactile_proto.generated.LoadScene
 import tactile_proto.generated.Pause
 import tactile_proto.generated.Reset
 import tactile_proto.generated.Resume
+import tactile_proto.generated.Seek
 import tactile_proto.generated.SetParameter
+import tactile_proto.generated.SetSpeed
 import tactile_proto.generated.StartRecording
 import tactile_proto.generated.StopRecording
 try:
@@ -86,7 +88,7 @@ class ControlT(object):
     def __init__(self):
         self.requestId = 0  # type: int
         self.commandType = 0  # type: int
-        self.command = None  # type: Union[None, tactile_proto.generated.LoadScene.LoadSceneT, tactile_proto.generated.Reset.ResetT, tactile_proto.generated.Pause.PauseT, tactile_proto.generated.Resume.ResumeT, tactile_proto.generated.SetParameter.SetParameterT, tactile_proto.generated.StartRecording.StartRecordingT, tactile_proto.generated.StopRecording.StopRecordingT]
+        self.command = None  # type: Union[None, tactile_proto.generated.LoadScene.LoadSceneT, tactile_proto.generated.Reset.ResetT, tactile_proto.generated.Pause.PauseT, tactile_proto.generated.Resume.ResumeT, tactile_proto.generated.SetParameter.SetParameterT, tactile_proto.generated.StartRecording.StartRecordingT, tactile_proto.generated.StopRecording.StopRecordingT, tactile_proto.generated.Seek.SeekT, tactile_proto.generated.SetSpeed.SetSpeedT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):

@@ -11,6 +11,8 @@ class ControlCommand(object):
     SetParameter = 5
     StartRecording = 6
     StopRecording = 7
+    Seek = 8
+    SetSpeed = 9
 
 def ControlCommandCreator(unionType, table):
     from flatbuffers.table import Table
@@ -37,4 +39,10 @@ def ControlCommandCreator(unionType, table):
     if unionType == ControlCommand().StopRecording:
         import tactile_proto.generated.StopRecording
         return tactile_proto.generated.StopRecording.StopRecordingT.InitFromBuf(table.Bytes, table.Pos)
+    if unionType == ControlCommand().Seek:
+        import tactile_proto.generated.Seek
+        return tactile_proto.generated.Seek.SeekT.InitFromBuf(table.Bytes, table.Pos)
+    if unionType == ControlCommand().SetSpeed:
+        import tactile_proto.generated.SetSpeed
+        return tactile_proto.generated.SetSpeed.SetSpeedT.InitFromBuf(table.Bytes, table.Pos)
     return None

@@ -17,6 +17,7 @@ class Message(object):
     Error = 11
     SafetyEvent = 12
     DeviceStatus = 13
+    ReplayStatus = 14
 
 def MessageCreator(unionType, table):
     from flatbuffers.table import Table
@@ -61,4 +62,7 @@ def MessageCreator(unionType, table):
     if unionType == Message().DeviceStatus:
         import tactile_proto.generated.DeviceStatus
         return tactile_proto.generated.DeviceStatus.DeviceStatusT.InitFromBuf(table.Bytes, table.Pos)
+    if unionType == Message().ReplayStatus:
+        import tactile_proto.generated.ReplayStatus
+        return tactile_proto.generated.ReplayStatus.ReplayStatusT.InitFromBuf(table.Bytes, table.Pos)
     return None

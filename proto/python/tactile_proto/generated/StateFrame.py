@@ -158,7 +158,18 @@ class StateFrame(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(18))
         return o == 0
 
-def StateFrameStart(builder): builder.StartObject(8)
+    # StateFrame
+    def Energies(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(20))
+        if o != 0:
+            x = o + self._tab.Pos
+            from tactile_proto.generated.Energies import Energies
+            obj = Energies()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+def StateFrameStart(builder): builder.StartObject(9)
 def Start(builder):
     return StateFrameStart(builder)
 def StateFrameAddSceneId(builder, sceneId): builder.PrependUint32Slot(0, sceneId, 0)
@@ -197,13 +208,17 @@ def AddContactForces(builder, contactForces):
 def StateFrameStartContactForcesVector(builder, numElems): return builder.StartVector(12, numElems, 4)
 def StartContactForcesVector(builder, numElems):
     return StateFrameStartContactForcesVector(builder, numElems)
+def StateFrameAddEnergies(builder, energies): builder.PrependStructSlot(8, flatbuffers.number_types.UOffsetTFlags.py_type(energies), 0)
+def AddEnergies(builder, energies):
+    return StateFrameAddEnergies(builder, energies)
 def StateFrameEnd(builder): return builder.EndObject()
 def End(builder):
     return StateFrameEnd(builder)
+import tactile_proto.generated.Energies
 import tactile_proto.generated.ProxyPose
 import tactile_proto.generated.Vec3f
 try:
-    from typing import List
+    from typing import List, Optional
 except:
     pass
 
@@ -219,6 +234,7 @@ class StateFrameT(object):
         self.scalar = None  # type: List[float]
         self.proxies = None  # type: List[tactile_proto.generated.ProxyPose.ProxyPoseT]
         self.contactForces = None  # type: List[tactile_proto.generated.Vec3f.Vec3fT]
+        self.energies = None  # type: Optional[tactile_proto.generated.Energies.EnergiesT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -270,6 +286,8 @@ class StateFrameT(object):
                 else:
                     vec3f_ = tactile_proto.generated.Vec3f.Vec3fT.InitFromObj(stateFrame.ContactForces(i))
                     self.contactForces.append(vec3f_)
+        if stateFrame.Energies() is not None:
+            self.energies = tactile_proto.generated.Energies.EnergiesT.InitFromObj(stateFrame.Energies())
 
     # StateFrameT
     def Pack(self, builder):
@@ -312,5 +330,8 @@ class StateFrameT(object):
             StateFrameAddProxies(builder, proxies)
         if self.contactForces is not None:
             StateFrameAddContactForces(builder, contactForces)
+        if self.energies is not None:
+            energies = self.energies.Pack(builder)
+            StateFrameAddEnergies(builder, energies)
         stateFrame = StateFrameEnd(builder)
         return stateFrame

@@ -150,7 +150,28 @@ class Telemetry(object):
             return bool(self._tab.Get(flatbuffers.number_types.BoolFlags, o + self._tab.Pos))
         return False
 
-def TelemetryStart(builder): builder.StartObject(13)
+    # Telemetry
+    def Recording(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(30))
+        if o != 0:
+            return self._tab.String(o + self._tab.Pos)
+        return None
+
+    # Telemetry
+    def RecordedMessages(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(32))
+        if o != 0:
+            return self._tab.Get(flatbuffers.number_types.Uint64Flags, o + self._tab.Pos)
+        return 0
+
+    # Telemetry
+    def RecordedBytes(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(34))
+        if o != 0:
+            return self._tab.Get(flatbuffers.number_types.Uint64Flags, o + self._tab.Pos)
+        return 0
+
+def TelemetryStart(builder): builder.StartObject(16)
 def Start(builder):
     return TelemetryStart(builder)
 def TelemetryAddServerTimeNs(builder, serverTimeNs): builder.PrependInt64Slot(0, serverTimeNs, 0)
@@ -198,6 +219,15 @@ def StartFaultsVector(builder, numElems):
 def TelemetryAddPaused(builder, paused): builder.PrependBoolSlot(12, paused, 0)
 def AddPaused(builder, paused):
     return TelemetryAddPaused(builder, paused)
+def TelemetryAddRecording(builder, recording): builder.PrependUOffsetTRelativeSlot(13, flatbuffers.number_types.UOffsetTFlags.py_type(recording), 0)
+def AddRecording(builder, recording):
+    return TelemetryAddRecording(builder, recording)
+def TelemetryAddRecordedMessages(builder, recordedMessages): builder.PrependUint64Slot(14, recordedMessages, 0)
+def AddRecordedMessages(builder, recordedMessages):
+    return TelemetryAddRecordedMessages(builder, recordedMessages)
+def TelemetryAddRecordedBytes(builder, recordedBytes): builder.PrependUint64Slot(15, recordedBytes, 0)
+def AddRecordedBytes(builder, recordedBytes):
+    return TelemetryAddRecordedBytes(builder, recordedBytes)
 def TelemetryEnd(builder): return builder.EndObject()
 def End(builder):
     return TelemetryEnd(builder)
@@ -224,6 +254,9 @@ class TelemetryT(object):
         self.controllers = 0  # type: int
         self.faults = None  # type: List[str]
         self.paused = False  # type: bool
+        self.recording = None  # type: str
+        self.recordedMessages = 0  # type: int
+        self.recordedBytes = 0  # type: int
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -264,6 +297,9 @@ class TelemetryT(object):
             for i in range(telemetry.FaultsLength()):
                 self.faults.append(telemetry.Faults(i))
         self.paused = telemetry.Paused()
+        self.recording = telemetry.Recording()
+        self.recordedMessages = telemetry.RecordedMessages()
+        self.recordedBytes = telemetry.RecordedBytes()
 
     # TelemetryT
     def Pack(self, builder):
@@ -283,6 +319,8 @@ class TelemetryT(object):
             for i in reversed(range(len(self.faults))):
                 builder.PrependUOffsetTRelative(faultslist[i])
             faults = builder.EndVector()
+        if self.recording is not None:
+            recording = builder.CreateString(self.recording)
         TelemetryStart(builder)
         TelemetryAddServerTimeNs(builder, self.serverTimeNs)
         TelemetryAddStep(builder, self.step)
@@ -299,5 +337,9 @@ class TelemetryT(object):
         if self.faults is not None:
             TelemetryAddFaults(builder, faults)
         TelemetryAddPaused(builder, self.paused)
+        if self.recording is not None:
+            TelemetryAddRecording(builder, recording)
+        TelemetryAddRecordedMessages(builder, self.recordedMessages)
+        TelemetryAddRecordedBytes(builder, self.recordedBytes)
         telemetry = TelemetryEnd(builder)
         return telemetry

@@ -4,7 +4,9 @@ import { LoadScene, LoadSceneT } from '../../tactile/proto/load-scene';
 import { Pause, PauseT } from '../../tactile/proto/pause';
 import { Reset, ResetT } from '../../tactile/proto/reset';
 import { Resume, ResumeT } from '../../tactile/proto/resume';
+import { Seek, SeekT } from '../../tactile/proto/seek';
 import { SetParameter, SetParameterT } from '../../tactile/proto/set-parameter';
+import { SetSpeed, SetSpeedT } from '../../tactile/proto/set-speed';
 import { StartRecording, StartRecordingT } from '../../tactile/proto/start-recording';
 import { StopRecording, StopRecordingT } from '../../tactile/proto/stop-recording';
 
@@ -17,13 +19,15 @@ export enum ControlCommand {
   Resume = 4,
   SetParameter = 5,
   StartRecording = 6,
-  StopRecording = 7
+  StopRecording = 7,
+  Seek = 8,
+  SetSpeed = 9
 }
 
 export function unionToControlCommand(
   type: ControlCommand,
-  accessor: (obj:LoadScene|Pause|Reset|Resume|SetParameter|StartRecording|StopRecording) => LoadScene|Pause|Reset|Resume|SetParameter|StartRecording|StopRecording|null
-): LoadScene|Pause|Reset|Resume|SetParameter|StartRecording|StopRecording|null {
+  accessor: (obj:LoadScene|Pause|Reset|Resume|Seek|SetParameter|SetSpeed|StartRecording|StopRecording) => LoadScene|Pause|Reset|Resume|Seek|SetParameter|SetSpeed|StartRecording|StopRecording|null
+): LoadScene|Pause|Reset|Resume|Seek|SetParameter|SetSpeed|StartRecording|StopRecording|null {
   switch(ControlCommand[type]) {
     case 'NONE': return null; 
     case 'LoadScene': return accessor(new LoadScene())! as LoadScene;
@@ -33,15 +37,17 @@ export function unionToControlCommand(
     case 'SetParameter': return accessor(new SetParameter())! as SetParameter;
     case 'StartRecording': return accessor(new StartRecording())! as StartRecording;
     case 'StopRecording': return accessor(new StopRecording())! as StopRecording;
+    case 'Seek': return accessor(new Seek())! as Seek;
+    case 'SetSpeed': return accessor(new SetSpeed())! as SetSpeed;
     default: return null;
   }
 }
 
 export function unionListToControlCommand(
   type: ControlCommand, 
-  accessor: (index: number, obj:LoadScene|Pause|Reset|Resume|SetParameter|StartRecording|StopRecording) => LoadScene|Pause|Reset|Resume|SetParameter|StartRecording|StopRecording|null, 
+  accessor: (index: number, obj:LoadScene|Pause|Reset|Resume|Seek|SetParameter|SetSpeed|StartRecording|StopRecording) => LoadScene|Pause|Reset|Resume|Seek|SetParameter|SetSpeed|StartRecording|StopRecording|null, 
   index: number
-): LoadScene|Pause|Reset|Resume|SetParameter|StartRecording|StopRecording|null {
+): LoadScene|Pause|Reset|Resume|Seek|SetParameter|SetSpeed|StartRecording|StopRecording|null {
   switch(ControlCommand[type]) {
     case 'NONE': return null; 
     case 'LoadScene': return accessor(index, new LoadScene())! as LoadScene;
@@ -51,6 +57,8 @@ export function unionListToControlCommand(
     case 'SetParameter': return accessor(index, new SetParameter())! as SetParameter;
     case 'StartRecording': return accessor(index, new StartRecording())! as StartRecording;
     case 'StopRecording': return accessor(index, new StopRecording())! as StopRecording;
+    case 'Seek': return accessor(index, new Seek())! as Seek;
+    case 'SetSpeed': return accessor(index, new SetSpeed())! as SetSpeed;
     default: return null;
   }
 }

@@ -7,7 +7,9 @@ import { LoadScene, LoadSceneT } from '../../tactile/proto/load-scene';
 import { Pause, PauseT } from '../../tactile/proto/pause';
 import { Reset, ResetT } from '../../tactile/proto/reset';
 import { Resume, ResumeT } from '../../tactile/proto/resume';
+import { Seek, SeekT } from '../../tactile/proto/seek';
 import { SetParameter, SetParameterT } from '../../tactile/proto/set-parameter';
+import { SetSpeed, SetSpeedT } from '../../tactile/proto/set-speed';
 import { StartRecording, StartRecordingT } from '../../tactile/proto/start-recording';
 import { StopRecording, StopRecordingT } from '../../tactile/proto/stop-recording';
 
@@ -102,7 +104,7 @@ export class ControlT {
 constructor(
   public requestId: number = 0,
   public commandType: ControlCommand = ControlCommand.NONE,
-  public command: LoadSceneT|PauseT|ResetT|ResumeT|SetParameterT|StartRecordingT|StopRecordingT|null = null
+  public command: LoadSceneT|PauseT|ResetT|ResumeT|SeekT|SetParameterT|SetSpeedT|StartRecordingT|StopRecordingT|null = null
 ){}
 
 

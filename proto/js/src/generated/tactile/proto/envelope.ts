@@ -11,6 +11,7 @@ import { Hello, HelloT } from '../../tactile/proto/hello';
 import { Message, unionToMessage, unionListToMessage } from '../../tactile/proto/message';
 import { Ping, PingT } from '../../tactile/proto/ping';
 import { Pong, PongT } from '../../tactile/proto/pong';
+import { ReplayStatus, ReplayStatusT } from '../../tactile/proto/replay-status';
 import { SafetyEvent, SafetyEventT } from '../../tactile/proto/safety-event';
 import { SceneDescription, SceneDescriptionT } from '../../tactile/proto/scene-description';
 import { StateFrame, StateFrameT } from '../../tactile/proto/state-frame';
@@ -107,7 +108,7 @@ unpackTo(_o: EnvelopeT): void {
 export class EnvelopeT {
 constructor(
   public messageType: Message = Message.NONE,
-  public message: ControlT|DeviceInputT|DeviceStatusT|ErrorT|HapticFrameT|HelloT|PingT|PongT|SafetyEventT|SceneDescriptionT|StateFrameT|TelemetryT|WelcomeT|null = null
+  public message: ControlT|DeviceInputT|DeviceStatusT|ErrorT|HapticFrameT|HelloT|PingT|PongT|ReplayStatusT|SafetyEventT|SceneDescriptionT|StateFrameT|TelemetryT|WelcomeT|null = null
 ){}
 
 

@@ -8,6 +8,7 @@ import { HapticFrame, HapticFrameT } from '../../tactile/proto/haptic-frame';
 import { Hello, HelloT } from '../../tactile/proto/hello';
 import { Ping, PingT } from '../../tactile/proto/ping';
 import { Pong, PongT } from '../../tactile/proto/pong';
+import { ReplayStatus, ReplayStatusT } from '../../tactile/proto/replay-status';
 import { SafetyEvent, SafetyEventT } from '../../tactile/proto/safety-event';
 import { SceneDescription, SceneDescriptionT } from '../../tactile/proto/scene-description';
 import { StateFrame, StateFrameT } from '../../tactile/proto/state-frame';
@@ -29,13 +30,14 @@ export enum Message {
   Pong = 10,
   Error = 11,
   SafetyEvent = 12,
-  DeviceStatus = 13
+  DeviceStatus = 13,
+  ReplayStatus = 14
 }
 
 export function unionToMessage(
   type: Message,
-  accessor: (obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null
-): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
+  accessor: (obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null
+): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
   switch(Message[type]) {
     case 'NONE': return null; 
     case 'Hello': return accessor(new Hello())! as Hello;
@@ -51,15 +53,16 @@ export function unionToMessage(
     case 'Error': return accessor(new Error())! as Error;
     case 'SafetyEvent': return accessor(new SafetyEvent())! as SafetyEvent;
     case 'DeviceStatus': return accessor(new DeviceStatus())! as DeviceStatus;
+    case 'ReplayStatus': return accessor(new ReplayStatus())! as ReplayStatus;
     default: return null;
   }
 }
 
 export function unionListToMessage(
   type: Message, 
-  accessor: (index: number, obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null, 
+  accessor: (index: number, obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null, 
   index: number
-): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
+): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
   switch(Message[type]) {
     case 'NONE': return null; 
     case 'Hello': return accessor(index, new Hello())! as Hello;
@@ -75,6 +78,7 @@ export function unionListToMessage(
     case 'Error': return accessor(index, new Error())! as Error;
     case 'SafetyEvent': return accessor(index, new SafetyEvent())! as SafetyEvent;
     case 'DeviceStatus': return accessor(index, new DeviceStatus())! as DeviceStatus;
+    case 'ReplayStatus': return accessor(index, new ReplayStatus())! as ReplayStatus;
     default: return null;
   }
 }

@@ -2,6 +2,7 @@
 
 import * as flatbuffers from 'flatbuffers';
 
+import { Energies, EnergiesT } from '../../tactile/proto/energies';
 import { ProxyPose, ProxyPoseT } from '../../tactile/proto/proxy-pose';
 import { Vec3f, Vec3fT } from '../../tactile/proto/vec3f';
 
@@ -94,8 +95,13 @@ contactForcesLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+energies(obj?:Energies):Energies|null {
+  const offset = this.bb!.__offset(this.bb_pos, 20);
+  return offset ? (obj || new Energies()).__init(this.bb_pos + offset, this.bb!) : null;
+}
+
 static startStateFrame(builder:flatbuffers.Builder) {
-  builder.startObject(8);
+  builder.startObject(9);
 }
 
 static addSceneId(builder:flatbuffers.Builder, sceneId:number) {
@@ -172,23 +178,15 @@ static startContactForcesVector(builder:flatbuffers.Builder, numElems:number) {
   builder.startVector(12, numElems, 4);
 }
 
+static addEnergies(builder:flatbuffers.Builder, energiesOffset:flatbuffers.Offset) {
+  builder.addFieldStruct(8, energiesOffset, 0);
+}
+
 static endStateFrame(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createStateFrame(builder:flatbuffers.Builder, sceneId:number, step:bigint, simTime:number, serverTimeNs:bigint, positionsOffset:flatbuffers.Offset, scalarOffset:flatbuffers.Offset, proxiesOffset:flatbuffers.Offset, contactForcesOffset:flatbuffers.Offset):flatbuffers.Offset {
-  StateFrame.startStateFrame(builder);
-  StateFrame.addSceneId(builder, sceneId);
-  StateFrame.addStep(builder, step);
-  StateFrame.addSimTime(builder, simTime);
-  StateFrame.addServerTimeNs(builder, serverTimeNs);
-  StateFrame.addPositions(builder, positionsOffset);
-  StateFrame.addScalar(builder, scalarOffset);
-  StateFrame.addProxies(builder, proxiesOffset);
-  StateFrame.addContactForces(builder, contactForcesOffset);
-  return StateFrame.endStateFrame(builder);
-}
 
 unpack(): StateFrameT {
   return new StateFrameT(
@@ -199,7 +197,8 @@ unpack(): StateFrameT {
     this.bb!.createScalarList(this.positions.bind(this), this.positionsLength()),
     this.bb!.createScalarList(this.scalar.bind(this), this.scalarLength()),
     this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength()),
-    this.bb!.createObjList(this.contactForces.bind(this), this.contactForcesLength())
+    this.bb!.createObjList(this.contactForces.bind(this), this.contactForcesLength()),
+    (this.energies() !== null ? this.energies()!.unpack() : null)
   );
 }
 
@@ -213,6 +212,7 @@ unpackTo(_o: StateFrameT): void {
   _o.scalar = this.bb!.createScalarList(this.scalar.bind(this), this.scalarLength());
   _o.proxies = this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength());
   _o.contactForces = this.bb!.createObjList(this.contactForces.bind(this), this.contactForcesLength());
+  _o.energies = (this.energies() !== null ? this.energies()!.unpack() : null);
 }
 }
 
@@ -225,7 +225,8 @@ constructor(
   public positions: (number)[] = [],
   public scalar: (number)[] = [],
   public proxies: (ProxyPoseT)[] = [],
-  public contactForces: (Vec3fT)[] = []
+  public contactForces: (Vec3fT)[] = [],
+  public energies: EnergiesT|null = null
 ){}
 
 
@@ -235,15 +236,17 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const proxies = builder.createStructOffsetList(this.proxies, StateFrame.startProxiesVector);
   const contactForces = builder.createStructOffsetList(this.contactForces, StateFrame.startContactForcesVector);
 
-  return StateFrame.createStateFrame(builder,
-    this.sceneId,
-    this.step,
-    this.simTime,
-    this.serverTimeNs,
-    positions,
-    scalar,
-    proxies,
-    contactForces
-  );
+  StateFrame.startStateFrame(builder);
+  StateFrame.addSceneId(builder, this.sceneId);
+  StateFrame.addStep(builder, this.step);
+  StateFrame.addSimTime(builder, this.simTime);
+  StateFrame.addServerTimeNs(builder, this.serverTimeNs);
+  StateFrame.addPositions(builder, positions);
+  StateFrame.addScalar(builder, scalar);
+  StateFrame.addProxies(builder, proxies);
+  StateFrame.addContactForces(builder, contactForces);
+  StateFrame.addEnergies(builder, (this.energies !== null ? this.energies!.pack(builder) : 0));
+
+  return StateFrame.endStateFrame(builder);
 }
 }

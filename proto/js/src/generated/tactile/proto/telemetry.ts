@@ -100,8 +100,25 @@ paused():boolean {
   return offset ? !!this.bb!.readInt8(this.bb_pos + offset) : false;
 }
 
+recording():string|null
+recording(optionalEncoding:flatbuffers.Encoding):string|Uint8Array|null
+recording(optionalEncoding?:any):string|Uint8Array|null {
+  const offset = this.bb!.__offset(this.bb_pos, 30);
+  return offset ? this.bb!.__string(this.bb_pos + offset, optionalEncoding) : null;
+}
+
+recordedMessages():bigint {
+  const offset = this.bb!.__offset(this.bb_pos, 32);
+  return offset ? this.bb!.readUint64(this.bb_pos + offset) : BigInt('0');
+}
+
+recordedBytes():bigint {
+  const offset = this.bb!.__offset(this.bb_pos, 34);
+  return offset ? this.bb!.readUint64(this.bb_pos + offset) : BigInt('0');
+}
+
 static startTelemetry(builder:flatbuffers.Builder) {
-  builder.startObject(13);
+  builder.startObject(16);
 }
 
 static addServerTimeNs(builder:flatbuffers.Builder, serverTimeNs:bigint) {
@@ -180,12 +197,24 @@ static addPaused(builder:flatbuffers.Builder, paused:boolean) {
   builder.addFieldInt8(12, +paused, +false);
 }
 
+static addRecording(builder:flatbuffers.Builder, recordingOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(13, recordingOffset, 0);
+}
+
+static addRecordedMessages(builder:flatbuffers.Builder, recordedMessages:bigint) {
+  builder.addFieldInt64(14, recordedMessages, BigInt('0'));
+}
+
+static addRecordedBytes(builder:flatbuffers.Builder, recordedBytes:bigint) {
+  builder.addFieldInt64(15, recordedBytes, BigInt('0'));
+}
+
 static endTelemetry(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createTelemetry(builder:flatbuffers.Builder, serverTimeNs:bigint, step:bigint, simTime:number, stepTimeMeanUs:number, stepTimeMaxUs:number, realTimeFactor:number, missedDeadlines:bigint, effectCostsOffset:flatbuffers.Offset, viewers:number, devices:number, controllers:number, faultsOffset:flatbuffers.Offset, paused:boolean):flatbuffers.Offset {
+static createTelemetry(builder:flatbuffers.Builder, serverTimeNs:bigint, step:bigint, simTime:number, stepTimeMeanUs:number, stepTimeMaxUs:number, realTimeFactor:number, missedDeadlines:bigint, effectCostsOffset:flatbuffers.Offset, viewers:number, devices:number, controllers:number, faultsOffset:flatbuffers.Offset, paused:boolean, recordingOffset:flatbuffers.Offset, recordedMessages:bigint, recordedBytes:bigint):flatbuffers.Offset {
   Telemetry.startTelemetry(builder);
   Telemetry.addServerTimeNs(builder, serverTimeNs);
   Telemetry.addStep(builder, step);
@@ -200,6 +229,9 @@ static createTelemetry(builder:flatbuffers.Builder, serverTimeNs:bigint, step:bi
   Telemetry.addControllers(builder, controllers);
   Telemetry.addFaults(builder, faultsOffset);
   Telemetry.addPaused(builder, paused);
+  Telemetry.addRecording(builder, recordingOffset);
+  Telemetry.addRecordedMessages(builder, recordedMessages);
+  Telemetry.addRecordedBytes(builder, recordedBytes);
   return Telemetry.endTelemetry(builder);
 }
 
@@ -217,7 +249,10 @@ unpack(): TelemetryT {
     this.devices(),
     this.controllers(),
     this.bb!.createScalarList(this.faults.bind(this), this.faultsLength()),
-    this.paused()
+    this.paused(),
+    this.recording(),
+    this.recordedMessages(),
+    this.recordedBytes()
   );
 }
 
@@ -236,6 +271,9 @@ unpackTo(_o: TelemetryT): void {
   _o.controllers = this.controllers();
   _o.faults = this.bb!.createScalarList(this.faults.bind(this), this.faultsLength());
   _o.paused = this.paused();
+  _o.recording = this.recording();
+  _o.recordedMessages = this.recordedMessages();
+  _o.recordedBytes = this.recordedBytes();
 }
 }
 
@@ -253,13 +291,17 @@ constructor(
   public devices: number = 0,
   public controllers: number = 0,
   public faults: (string)[] = [],
-  public paused: boolean = false
+  public paused: boolean = false,
+  public recording: string|Uint8Array|null = null,
+  public recordedMessages: bigint = BigInt('0'),
+  public recordedBytes: bigint = BigInt('0')
 ){}
 
 
 pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const effectCosts = Telemetry.createEffectCostsVector(builder, builder.createObjectOffsetList(this.effectCosts));
   const faults = Telemetry.createFaultsVector(builder, builder.createObjectOffsetList(this.faults));
+  const recording = (this.recording !== null ? builder.createString(this.recording!) : 0);
 
   return Telemetry.createTelemetry(builder,
     this.serverTimeNs,
@@ -274,7 +316,10 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     this.devices,
     this.controllers,
     faults,
-    this.paused
+    this.paused,
+    recording,
+    this.recordedMessages,
+    this.recordedBytes
   );
 }
 }
