@@ -140,6 +140,10 @@ std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
   f.add_scalar(scalar);
   f.add_proxies(pose_vec);
   f.add_contact_forces(force_vec);
+  const Energy& e = sim_.energy();
+  const wire::Energies energies(e.kinetic, e.elastic, e.gravity, e.work_loads, e.work_essential, e.work_contact,
+                                e.dissipated, e.discrete, e.restated);
+  f.add_energies(&energies);
   return seal(b, wire::Message::StateFrame, f.Finish());
 }
 

@@ -11,7 +11,7 @@ class Energies(object):
 
     @classmethod
     def SizeOf(cls):
-        return 56
+        return 72
 
     # Energies
     def Init(self, buf, pos):
@@ -31,9 +31,15 @@ class Energies(object):
     def WorkContact(self): return self._tab.Get(flatbuffers.number_types.Float64Flags, self._tab.Pos + flatbuffers.number_types.UOffsetTFlags.py_type(40))
     # Energies
     def Dissipated(self): return self._tab.Get(flatbuffers.number_types.Float64Flags, self._tab.Pos + flatbuffers.number_types.UOffsetTFlags.py_type(48))
+    # Energies
+    def Discrete(self): return self._tab.Get(flatbuffers.number_types.Float64Flags, self._tab.Pos + flatbuffers.number_types.UOffsetTFlags.py_type(56))
+    # Energies
+    def Restated(self): return self._tab.Get(flatbuffers.number_types.Float64Flags, self._tab.Pos + flatbuffers.number_types.UOffsetTFlags.py_type(64))
 
-def CreateEnergies(builder, kinetic, elastic, gravity, workLoads, workEssential, workContact, dissipated):
-    builder.Prep(8, 56)
+def CreateEnergies(builder, kinetic, elastic, gravity, workLoads, workEssential, workContact, dissipated, discrete, restated):
+    builder.Prep(8, 72)
+    builder.PrependFloat64(restated)
+    builder.PrependFloat64(discrete)
     builder.PrependFloat64(dissipated)
     builder.PrependFloat64(workContact)
     builder.PrependFloat64(workEssential)
@@ -55,6 +61,8 @@ class EnergiesT(object):
         self.workEssential = 0.0  # type: float
         self.workContact = 0.0  # type: float
         self.dissipated = 0.0  # type: float
+        self.discrete = 0.0  # type: float
+        self.restated = 0.0  # type: float
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -79,7 +87,9 @@ class EnergiesT(object):
         self.workEssential = energies.WorkEssential()
         self.workContact = energies.WorkContact()
         self.dissipated = energies.Dissipated()
+        self.discrete = energies.Discrete()
+        self.restated = energies.Restated()
 
     # EnergiesT
     def Pack(self, builder):
-        return CreateEnergies(builder, self.kinetic, self.elastic, self.gravity, self.workLoads, self.workEssential, self.workContact, self.dissipated)
+        return CreateEnergies(builder, self.kinetic, self.elastic, self.gravity, self.workLoads, self.workEssential, self.workContact, self.dissipated, self.discrete, self.restated)

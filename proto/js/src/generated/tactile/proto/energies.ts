@@ -41,12 +41,22 @@ dissipated():number {
   return this.bb!.readFloat64(this.bb_pos + 48);
 }
 
-static sizeOf():number {
-  return 56;
+discrete():number {
+  return this.bb!.readFloat64(this.bb_pos + 56);
 }
 
-static createEnergies(builder:flatbuffers.Builder, kinetic: number, elastic: number, gravity: number, work_loads: number, work_essential: number, work_contact: number, dissipated: number):flatbuffers.Offset {
-  builder.prep(8, 56);
+restated():number {
+  return this.bb!.readFloat64(this.bb_pos + 64);
+}
+
+static sizeOf():number {
+  return 72;
+}
+
+static createEnergies(builder:flatbuffers.Builder, kinetic: number, elastic: number, gravity: number, work_loads: number, work_essential: number, work_contact: number, dissipated: number, discrete: number, restated: number):flatbuffers.Offset {
+  builder.prep(8, 72);
+  builder.writeFloat64(restated);
+  builder.writeFloat64(discrete);
   builder.writeFloat64(dissipated);
   builder.writeFloat64(work_contact);
   builder.writeFloat64(work_essential);
@@ -66,7 +76,9 @@ unpack(): EnergiesT {
     this.workLoads(),
     this.workEssential(),
     this.workContact(),
-    this.dissipated()
+    this.dissipated(),
+    this.discrete(),
+    this.restated()
   );
 }
 
@@ -79,6 +91,8 @@ unpackTo(_o: EnergiesT): void {
   _o.workEssential = this.workEssential();
   _o.workContact = this.workContact();
   _o.dissipated = this.dissipated();
+  _o.discrete = this.discrete();
+  _o.restated = this.restated();
 }
 }
 
@@ -90,7 +104,9 @@ constructor(
   public workLoads: number = 0.0,
   public workEssential: number = 0.0,
   public workContact: number = 0.0,
-  public dissipated: number = 0.0
+  public dissipated: number = 0.0,
+  public discrete: number = 0.0,
+  public restated: number = 0.0
 ){}
 
 
@@ -102,7 +118,9 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     this.workLoads,
     this.workEssential,
     this.workContact,
-    this.dissipated
+    this.dissipated,
+    this.discrete,
+    this.restated
   );
 }
 }
