@@ -1,0 +1,140 @@
+#include "record/recorder.hpp"
+
+#include <cstdio>
+
+namespace tactile {
+
+const char* topic_name(Topic t) {
+  switch (t) {
+    case Topic::Scene: return "/scene";
+    case Topic::State: return "/state";
+    case Topic::Haptic: return "/haptic";
+    case Topic::Input: return "/input";
+    case Topic::Control: return "/control";
+    case Topic::Error: return "/error";
+    case Topic::Telemetry: return "/telemetry";
+    case Topic::Safety: return "/safety";
+    case Topic::DeviceStatus: return "/device_status";
+  }
+  return "?";
+}
+
+namespace {
+
+int64_t steady_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+int64_t unix_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace
+
+Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderOptions options)
+    : path_(path), options_(options), writer_(path, "", "tactile-server"),
+      epoch_offset_ns_(unix_now_ns() - steady_now_ns()) {
+  const uint16_t schema = writer_.add_schema("tactile.proto.Envelope", "flatbuffer", tactile_bfbs());
+  for (int t = 0; t < kTopicCount; ++t) channel_[t] = writer_.add_channel(schema, topic_name(Topic(t)), "flatbuffer");
+  mcap::Map meta = metadata;
+  meta["started_unix_ns"] = std::to_string(unix_now_ns());
+  writer_.add_metadata("tactile", meta);
+  stats_.path = path;
+  thread_ = std::thread([this] { run(); });
+}
+
+Recorder::~Recorder() {
+  stop();
+  wait();
+}
+
+bool Recorder::post(Topic topic, int64_t steady_ns, int64_t publish_ns, std::span<const uint8_t> bytes) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (stopping_) return false;
+  if (queued_bytes_ + bytes.size() > options_.queue_bytes) {
+    stats_.fault = "the recording could not keep up with the session (" + std::to_string(queued_bytes_ >> 20) +
+                   " MiB waiting for the disk): stopped, what was written stays readable";
+    stopping_ = true;
+    wake_.notify_one();
+    return false;
+  }
+  const int64_t log_ns = steady_ns + epoch_offset_ns_;
+  queue_.push_back({topic, log_ns, publish_ns ? publish_ns + epoch_offset_ns_ : log_ns,
+                    std::vector<uint8_t>(bytes.begin(), bytes.end())});
+  queued_bytes_ += bytes.size();
+  wake_.notify_one();
+  return true;
+}
+
+void Recorder::fail(const std::string& fault) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (stopping_) return;
+  stats_.fault = fault;
+  stopping_ = true;
+  wake_.notify_one();
+}
+
+void Recorder::stop() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  stopping_ = true;
+  wake_.notify_one();
+}
+
+void Recorder::wait() {
+  if (thread_.joinable()) thread_.join();
+}
+
+RecorderStats Recorder::stats() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return stats_;
+}
+
+void Recorder::run() {
+  using Clock = std::chrono::steady_clock;
+  std::deque<Item> batch;
+  Clock::time_point chunk_opened{};
+  bool stopping = false;
+  std::string error;
+  while (!stopping) {
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      const auto ready = [&] { return stopping_ || !queue_.empty(); };
+      if (writer_.chunk_empty()) wake_.wait(lock, ready);
+      else wake_.wait_until(lock, chunk_opened + std::chrono::duration<double>(options_.chunk_seconds), ready);
+      batch.swap(queue_);
+      queued_bytes_ = 0;
+      stopping = stopping_;
+    }
+    try {
+      for (Item& item : batch) {
+        if (writer_.chunk_empty()) chunk_opened = Clock::now();
+        writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes);
+        if (writer_.chunk_bytes() >= options_.chunk_bytes) writer_.close_chunk();
+      }
+      batch.clear();
+      if (!writer_.chunk_empty() && Clock::now() - chunk_opened >= std::chrono::duration<double>(options_.chunk_seconds))
+        writer_.close_chunk();
+    } catch (const mcap::McapError& e) {
+      error = e.what();
+      break;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    stats_.messages = writer_.messages();
+    stats_.bytes = writer_.bytes();
+  }
+  try {
+    if (error.empty()) writer_.finish();
+  } catch (const mcap::McapError& e) {
+    error = e.what();
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!error.empty() && stats_.fault.empty()) stats_.fault = error;
+  stopping_ = true;
+  queue_.clear();
+  stats_.messages = writer_.messages();
+  stats_.bytes = writer_.bytes();
+  stats_.finished = true;
+}
+
+}  // namespace tactile

@@ -1,0 +1,99 @@
+// A recording of a live session (proto/RECORDING.md): every message the
+// server publishes or receives, each as its protocol bytes, written to an
+// MCAP file on a thread of its own, so that neither the simulation nor the
+// network ever waits on the disk.
+//
+// The network thread post()s each message (the simulation's frames reach
+// it through the feed's recording rings, which never overwrite); a queue
+// over its bound is a fault that stops the recording, reported, never
+// silent loss. Chunks close at chunk_bytes or chunk_seconds after their
+// first message, each in one write: a process killed mid-recording loses
+// at most the chunk it had open.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "record/mcap.hpp"
+
+namespace tactile {
+
+enum class Topic : uint8_t { Scene, State, Haptic, Input, Control, Error, Telemetry, Safety, DeviceStatus };
+inline constexpr int kTopicCount = 9;
+const char* topic_name(Topic t);  // "/scene", "/state", ...
+
+struct RecorderOptions {
+  size_t chunk_bytes = 1 << 20;
+  double chunk_seconds = 0.25;
+  size_t queue_bytes = size_t(256) << 20;  // posted, not yet written, before it is a fault
+};
+
+struct RecorderStats {
+  std::string path;
+  uint64_t messages = 0;  // written (in the file or its open chunk)
+  uint64_t bytes = 0;
+  std::string fault;      // what stopped it early, "" if nothing
+  bool finished = false;  // the file is closed
+};
+
+class Recorder {
+ public:
+  // Creates the file and writes its header, schema, channels and the
+  // `tactile` metadata; throws mcap::McapError naming the path.
+  Recorder(const std::string& path, const mcap::Map& metadata, RecorderOptions options = {});
+  ~Recorder();  // stop() and wait for the file to close
+  Recorder(const Recorder&) = delete;
+  Recorder& operator=(const Recorder&) = delete;
+
+  // From one thread: a message at `steady_ns` (steady_clock), publish_ns
+  // its own server time (0: the same). False when the recording no longer
+  // takes messages (stopped, or its fault).
+  bool post(Topic topic, int64_t steady_ns, int64_t publish_ns, std::span<const uint8_t> bytes);
+  // Records that the simulation dropped frames this recording needed.
+  void fail(const std::string& fault);
+
+  // Writes what was posted, closes the file; returns at once. The writer
+  // thread ends once the file is closed (stats().finished).
+  void stop();
+  void wait();  // until the file is closed
+
+  RecorderStats stats() const;
+  const std::string& path() const { return path_; }
+
+ private:
+  struct Item {
+    Topic topic;
+    int64_t log_ns, publish_ns;
+    std::vector<uint8_t> bytes;
+  };
+  void run();
+
+  std::string path_;
+  RecorderOptions options_;
+  mcap::Writer writer_;
+  uint16_t channel_[kTopicCount] = {};
+  int64_t epoch_offset_ns_;  // steady -> Unix time, fixed at the start
+
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  std::deque<Item> queue_;
+  size_t queued_bytes_ = 0;
+  bool stopping_ = false;
+  RecorderStats stats_;
+  std::thread thread_;
+};
+
+// The protocol's binary schema (flatc --binary --schema proto/tactile.fbs),
+// embedded at build time.
+std::span<const uint8_t> tactile_bfbs();
+
+}  // namespace tactile

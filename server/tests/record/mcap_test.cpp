@@ -1,0 +1,211 @@
+// The MCAP writer and reader: what is written reads back; a file cut short
+// anywhere reads back every chunk closed before the cut; a damaged chunk is
+// reported and skipped, never read as data. (The same files against the
+// reference readers: tests/test_recording.py.)
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <thread>
+
+#include "record/mcap.hpp"
+#include "record/recorder.hpp"
+#include "temp_dir.hpp"
+
+namespace tactile {
+namespace {
+
+std::vector<uint8_t> payload(int i) {
+  std::vector<uint8_t> p(size_t(5 + i % 37));
+  for (size_t k = 0; k < p.size(); ++k) p[k] = uint8_t(i * 31 + int(k));
+  return p;
+}
+
+std::vector<uint8_t> read_bytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
+}
+void write_bytes(const std::string& path, const std::vector<uint8_t>& b) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  f.write(reinterpret_cast<const char*>(b.data()), std::streamsize(b.size()));
+}
+
+// 200 messages on two channels, a chunk closed every 20; returns the byte
+// offset in the file where each chunk ends (after its message indexes).
+std::vector<uint64_t> write_sample(const std::string& path, bool finish = true) {
+  mcap::Writer w(path, "", "test");
+  const uint8_t schema_data[3] = {1, 2, 3};
+  const uint16_t s = w.add_schema("tactile.proto.Envelope", "flatbuffer", schema_data);
+  const uint16_t a = w.add_channel(s, "/a", "flatbuffer");
+  const uint16_t b = w.add_channel(s, "/b", "flatbuffer", {{"k", "v"}});
+  w.add_metadata("tactile", {{"scene_name", "block"}});
+  std::vector<uint64_t> ends;
+  for (int i = 0; i < 200; ++i) {
+    w.write(i % 3 == 0 ? b : a, uint64_t(1000 + i), uint64_t(2000 + i), payload(i));
+    if (i % 20 == 19) {
+      w.close_chunk();
+      ends.push_back(w.bytes());
+    }
+  }
+  if (finish) w.finish();
+  return ends;
+}
+
+TEST(Mcap, WhatIsWrittenReadsBack) {
+  test::TempDir dir;
+  const std::string path = dir.file("a.mcap");
+  write_sample(path);
+  const mcap::Recording r = mcap::read_file(path);
+  EXPECT_TRUE(r.complete);
+  EXPECT_TRUE(r.problems.empty()) << r.problems.front();
+  EXPECT_EQ(r.library, "test");
+  ASSERT_EQ(r.messages.size(), 200u);
+  EXPECT_EQ(r.chunks, 10u);
+  for (int i = 0; i < 200; ++i) {
+    const mcap::Message& m = r.messages[size_t(i)];
+    EXPECT_EQ(r.channels.at(m.channel).topic, i % 3 == 0 ? "/b" : "/a");
+    EXPECT_EQ(m.log_time, uint64_t(1000 + i));
+    EXPECT_EQ(m.publish_time, uint64_t(2000 + i));
+    EXPECT_EQ(m.data, payload(i)) << i;
+  }
+  // Sequences count per channel.
+  EXPECT_EQ(r.messages[3].sequence, 1u);  // the second on /b
+  EXPECT_EQ(r.messages[2].sequence, 1u);  // the second on /a
+  ASSERT_EQ(r.metadata.size(), 1u);
+  EXPECT_EQ(r.metadata[0].second.at("scene_name"), "block");
+  EXPECT_EQ(r.channels.at(r.channel_of("/b")).metadata.at("k"), "v");
+}
+
+TEST(Mcap, AFileCutAnywhereReadsBackEveryChunkBeforeTheCut) {
+  test::TempDir dir;
+  const std::string path = dir.file("a.mcap");
+  const std::vector<uint64_t> ends = write_sample(path);
+  const std::vector<uint8_t> whole = read_bytes(path);
+  const std::string cut = dir.file("cut.mcap");
+  int cuts = 0;
+  for (size_t n = 8; n < whole.size(); n += 7) {
+    write_bytes(cut, std::vector<uint8_t>(whole.begin(), whole.begin() + std::ptrdiff_t(n)));
+    const mcap::Recording r = mcap::read_file(cut);
+    size_t chunks_before = 0;
+    while (chunks_before < ends.size() && ends[chunks_before] <= n) ++chunks_before;
+    // Every message of each chunk that ends before the cut (the message
+    // indexes after a chunk are not needed to read it: >= its records).
+    EXPECT_GE(r.messages.size(), 20 * chunks_before) << "cut at " << n;
+    EXPECT_LE(r.messages.size(), 20 * (chunks_before + 1)) << "cut at " << n;
+    for (size_t i = 0; i < r.messages.size(); ++i) ASSERT_EQ(r.messages[i].data, payload(int(i))) << n;
+    EXPECT_FALSE(r.complete);
+    EXPECT_FALSE(r.problems.empty()) << "cut at " << n << " went unreported";
+    ++cuts;
+  }
+  EXPECT_GT(cuts, 100);
+}
+
+TEST(Mcap, ADamagedChunkIsReportedAndSkipped) {
+  test::TempDir dir;
+  const std::string path = dir.file("a.mcap");
+  const std::vector<uint64_t> ends = write_sample(path);
+  std::vector<uint8_t> bytes = read_bytes(path);
+  // A byte in the middle of the fourth chunk's records.
+  const size_t at = size_t(ends[2] + (ends[3] - ends[2]) / 2);
+  bytes[at] ^= 0x40;
+  write_bytes(path, bytes);
+  const mcap::Recording r = mcap::read_file(path);
+  ASSERT_EQ(r.problems.size(), 1u);
+  EXPECT_NE(r.problems[0].find("fails its CRC"), std::string::npos) << r.problems[0];
+  ASSERT_EQ(r.messages.size(), 180u);
+  for (const mcap::Message& m : r.messages) {
+    EXPECT_FALSE(m.log_time >= 1060 && m.log_time < 1080) << "a message of the damaged chunk was read";
+  }
+  EXPECT_TRUE(r.complete);
+}
+
+TEST(Mcap, NotAnMcapFileIsRefusedByName) {
+  test::TempDir dir;
+  const std::string path = dir.write("x.mcap", "{\"not\": \"mcap\"}");
+  try {
+    mcap::read_file(path);
+    FAIL() << "read a JSON file as MCAP";
+  } catch (const mcap::McapError& e) {
+    EXPECT_NE(std::string(e.what()).find("not an MCAP file"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(mcap::Writer(dir.file("no/such/folder/a.mcap"), "", "t"), mcap::McapError);
+}
+
+TEST(Recorder, EveryPostedMessageIsWrittenInOrderPerTopic) {
+  test::TempDir dir;
+  const std::string path = dir.file("r.mcap");
+  {
+    Recorder rec(path, {{"scene_name", "block"}}, {.chunk_bytes = 4096, .chunk_seconds = 0.25});
+    for (int i = 0; i < 3000; ++i)
+      ASSERT_TRUE(rec.post(i % 2 ? Topic::Haptic : Topic::Input, 1'000'000 + i, i % 2 ? 500 + i : 0, payload(i)));
+    rec.stop();
+    rec.wait();
+    const RecorderStats st = rec.stats();
+    EXPECT_TRUE(st.finished);
+    EXPECT_EQ(st.messages, 3000u);
+    EXPECT_TRUE(st.fault.empty()) << st.fault;
+    EXPECT_FALSE(rec.post(Topic::Input, 0, 0, payload(0)));  // stopped: takes no more
+  }
+  const mcap::Recording r = mcap::read_file(path);
+  ASSERT_TRUE(r.complete);
+  ASSERT_EQ(r.messages.size(), 3000u);
+  EXPECT_GT(r.chunks, 10u);  // closed by size
+  const uint16_t haptic = r.channel_of("/haptic"), input = r.channel_of("/input");
+  ASSERT_NE(haptic, 0);
+  ASSERT_NE(input, 0);
+  EXPECT_EQ(r.channels.size(), size_t(kTopicCount));
+  const uint64_t offset = r.messages[0].log_time - 1'000'000;  // steady -> Unix: a constant
+  EXPECT_GT(offset, uint64_t(1.6e18));
+  for (int i = 0; i < 3000; ++i) {
+    const mcap::Message& m = r.messages[size_t(i)];
+    EXPECT_EQ(m.channel, i % 2 ? haptic : input);
+    EXPECT_EQ(m.log_time, offset + uint64_t(1'000'000 + i));
+    EXPECT_EQ(m.publish_time, i % 2 ? offset + uint64_t(500 + i) : m.log_time);
+    EXPECT_EQ(m.data, payload(i));
+  }
+  ASSERT_EQ(r.metadata.size(), 1u);
+  EXPECT_EQ(r.metadata[0].second.at("scene_name"), "block");
+  EXPECT_EQ(r.metadata[0].second.count("started_unix_ns"), 1u);
+}
+
+TEST(Recorder, AChunkClosesWithinItsTimeEvenWhenTheSessionIsQuiet) {
+  test::TempDir dir;
+  const std::string path = dir.file("r.mcap");
+  Recorder rec(path, {}, {.chunk_bytes = 1 << 20, .chunk_seconds = 0.05});
+  ASSERT_TRUE(rec.post(Topic::Telemetry, 1, 0, payload(1)));
+  // Without a footer yet, the file already holds the message once its chunk
+  // has closed by time (a kill now would keep it).
+  mcap::Recording r;
+  for (int i = 0; i < 200 && r.messages.empty(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    r = mcap::read_file(path);
+  }
+  ASSERT_EQ(r.messages.size(), 1u);
+  EXPECT_FALSE(r.complete);
+  rec.stop();
+  rec.wait();
+  EXPECT_TRUE(mcap::read_file(path).complete);
+}
+
+TEST(Recorder, AQueueOverItsBoundIsAFaultAndTheFileStaysReadable) {
+  test::TempDir dir;
+  const std::string path = dir.file("r.mcap");
+  Recorder rec(path, {}, {.chunk_bytes = 1 << 20, .chunk_seconds = 0.25, .queue_bytes = 64 << 10});
+  const std::vector<uint8_t> big(16 << 10, 7);
+  int accepted = 0;
+  for (int i = 0; i < 1000; ++i)
+    if (rec.post(Topic::State, i, 0, big)) ++accepted;
+    else break;
+  rec.wait();
+  const RecorderStats st = rec.stats();
+  EXPECT_LT(accepted, 1000);
+  EXPECT_NE(st.fault.find("could not keep up"), std::string::npos) << st.fault;
+  EXPECT_TRUE(st.finished);
+  const mcap::Recording r = mcap::read_file(path);
+  EXPECT_TRUE(r.complete);
+  EXPECT_EQ(r.messages.size(), size_t(accepted));
+}
+
+}  // namespace
+}  // namespace tactile
