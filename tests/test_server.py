@@ -392,7 +392,7 @@ def test_controller_pauses_and_resumes_and_one_at_a_time(tmp_path: pathlib.Path)
             t3 = await next_of(ctl, "TelemetryT")
             t4 = await next_of(ctl, "TelemetryT")
             assert not t4.paused and t4.simTime > t3.simTime
-            # What this server cannot do yet is refused by name, not ignored.
+            # With no recording under way, StopRecording is refused by name, not ignored.
             await ctl.send(codec.encode(control(ControlCommand.StopRecording, StopRecordingT(), request_id=7)))
             err = await next_of(ctl, "ErrorT")
             assert err.code == ErrorCode.BadRequest and err.requestId == 7 and "StopRecording" in err.message

@@ -52,6 +52,8 @@ constexpr const char* kUsage =
     "  --force-window S     haptic forces are means over S, and over the frame interval at least (default 0.001)\n"
     "  --variant NAME       run this variant of the scene (default: the first)\n"
     "  --duration S         stop after S simulated seconds (default: run until stopped)\n"
+    "  --recordings DIR     where a controller's StartRecording writes (MCAP; default: none, refused)\n"
+    "  --record FILE        record the session from the start into FILE (MCAP), until stopped\n"
     "\n"
     "exit status: 0 stopped, 1 a fault stopped the simulation, 2 bad input\n";
 
@@ -113,6 +115,8 @@ Options parse_args(int argc, char** argv) {
       if (!(o.force_window > 0 && o.force_window <= 0.1)) throw BadInput{"--force-window must be in (0, 0.1] s"};
     } else if (a == "--variant") o.variant = value();
     else if (a == "--duration") o.duration = number(a, value());
+    else if (a == "--recordings") o.server.recordings_dir = value();
+    else if (a == "--record") o.server.record = value();
     else if (!a.empty() && a[0] == '-') throw BadInput{"unknown option " + a};
     else if (o.scene.empty()) o.scene = a;
     else throw BadInput{"one scene only (got " + o.scene + " and " + a + ")"};

@@ -1,7 +1,9 @@
 #include "net/server.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
+#include <ctime>
 #include <cstdio>
 #include <deque>
 #include <filesystem>
@@ -19,6 +21,7 @@
 
 #include "net/inbound.hpp"
 #include "net/mailbox.hpp"
+#include "record/recorder.hpp"
 #include "scene/parameters.hpp"
 #include "tactile_generated.h"
 
@@ -54,12 +57,12 @@ Bytes make_error(wire::ErrorCode code, const std::string& message, uint32_t requ
 }
 
 // A string for a one-line log: control characters shown as '?'.
-std::string printable(const fb::String* s) {
-  std::string out = s ? s->str() : "";
+std::string printable_text(std::string out) {
   for (char& c : out)
     if (uint8_t(c) < 0x20 || c == 0x7f) c = '?';
   return out;
 }
+std::string printable(const fb::String* s) { return printable_text(s ? s->str() : ""); }
 
 const char* content_type(const std::filesystem::path& p) {
   const std::string ext = p.extension().string();
@@ -91,6 +94,18 @@ std::vector<std::string> list_scenes(const std::string& dir) {
 
 class WsSession;
 
+// What a recording takes from the simulation thread: every frame, in rings
+// that never overwrite (a full ring drops the new frame and counts it: a
+// recording fault). Made when a recording first starts on a feed and kept
+// with it, since the simulation thread may be pushing into it.
+struct RecordTap {
+  FrameRing states, haptics;
+  int64_t states_dropped = 0, haptics_dropped = 0;  // counted by the rings when the recording started
+  RecordTap(size_t state_bytes, size_t haptic_bytes)
+      : states(64, state_bytes),       // two seconds of states at 30 Hz
+        haptics(16384, haptic_bytes) {}  // 1.6 s of haptic frames at 10 kHz
+};
+
 // What the clients are served from for one scene: the mailboxes its loop
 // publishes into (from the simulation thread) and its description.
 struct Feed {
@@ -98,15 +113,22 @@ struct Feed {
   FrameRing haptics;
   LatestBox states;
   Bytes description;
+  std::unique_ptr<RecordTap> tap;     // set before `recording` turns true, kept after
+  std::atomic<bool> recording{false};
 
   Feed(std::shared_ptr<LiveScene> l, const std::vector<std::string>& scenes)
       : live(std::move(l)),
         // (a haptic frame: ~92 B per proxy, ~100 B per device channel, ~150 B besides)
-        haptics(1024, 512 + 128 * live->sim().proxies().size() + 160 * live->sim().devices().size()),
-        states(64 + 20 * 3 * live->frames().surface().nodes.size() + 64 * live->sim().proxies().size()) {
+        haptics(1024, haptic_bytes()),
+        states(state_bytes()) {
     const std::vector<uint8_t> d = live->describe(scenes);
     description = copy_bytes(d.data(), d.size());
   }
+  // The most a state frame takes: positions and scalar per surface vertex, poses and forces per proxy.
+  size_t state_bytes() const {
+    return 256 + 20 * 3 * live->frames().surface().nodes.size() + 64 * live->sim().proxies().size();
+  }
+  size_t haptic_bytes() const { return 512 + 128 * live->sim().proxies().size() + 160 * live->sim().devices().size(); }
 };
 
 struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
@@ -132,6 +154,9 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   WsSession* controller = nullptr;
   asio::steady_timer telemetry_timer;
 
+  std::unique_ptr<Recorder> recorder;               // the recording under way
+  std::vector<std::unique_ptr<Recorder>> finishing;  // stopped, closing their files
+
   Impl(asio::io_context& io, Director& d, ServerOptions o)
       : ioc(io),
         director(d),
@@ -156,13 +181,26 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
     std::shared_ptr<Wakeup> wake = wakeup;
     f.live->loop().on_haptic([target, wake](std::span<const uint8_t> m) {
       target->haptics.push(m.data(), m.size());
+      if (target->recording.load(std::memory_order_acquire)) target->tap->haptics.push(m.data(), m.size());
       wake->signal();
     });
     f.live->loop().on_state([target, wake](std::span<const uint8_t> m) {
       target->states.put(m.data(), m.size());
+      if (target->recording.load(std::memory_order_acquire)) target->tap->states.push(m.data(), m.size());
       wake->signal();
     });
   }
+
+  // Recording (record/recorder.hpp): each returns "" or what is wrong.
+  // `name`: a file name in the recordings folder ("" picks one); with
+  // any_path, a path (the command line's --record).
+  std::string start_recording(const std::string& name, bool any_path = false);
+  void stop_recording();
+  void record(Topic topic, const uint8_t* data, size_t n, int64_t time_ns);
+  void record(Topic topic, const Bytes& m) { record(topic, m->data(), m->size(), now_ns()); }
+  void drain_tap(Feed& f);
+  void tap_feed(Feed& f);
+  std::string check_recorder();  // a fault that stopped the recording, once
 
   enum class Change { Reset, Load, Parameter };
   void change(Change kind, const wire::Control& c);
@@ -175,7 +213,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   void wait_wakeup();
   void deliver();
   void tick_telemetry();
-  Bytes telemetry_message();
+  Bytes telemetry_message(const std::string& extra_fault);
   bool origin_allowed(const std::string& origin) const;
   void close_all();
 };
@@ -235,6 +273,9 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   // (counted), a Control message is never dropped.
   enum class Kind { Control, State, Haptic, Event, Status };
   void send(const Bytes& message, Kind kind) {
+    if (kind == Kind::Control && role_ == wire::Role::Controller && greeted_ &&
+        wire::GetEnvelope(message->data())->message_type() == wire::Message::Error)
+      server_->record(Topic::Error, message);
     if (closing_) return;
     if (kind == Kind::State) {
       // Latest wins, at the viewer's rate on average: each state passed sets
@@ -334,7 +375,9 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       return send(make_error(inbound.error, inbound.message), Kind::Control);
     }
     const wire::Envelope* e = inbound.envelope;
+    raw_ = {data, size};  // what a recording keeps of an input or a control
     dispatch(*e);
+    raw_ = {};
     in_.consume(size);
   }
 
@@ -449,6 +492,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     s.pose.orientation = Quat(q.w() / qn, q.x() / qn, q.y() / qn, q.z() / qn);
     s.buttons = in.buttons();
     server_->feed->live->loop().post_input(s);  // a full queue drops it and counts (telemetry)
+    server_->record(Topic::Input, raw_.data(), raw_.size(), now_ns());
   }
 
   // A device's safety event: checked, rate limited, stamped with the server
@@ -495,6 +539,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
                  wire::EnumNameSafetyKind(ev.kind()), printable(ev.message()).c_str(), double(ev.force_N()));
     for (WsSession* s : server_->sessions)
       if (s->reads_safety_events()) s->send(relayed, Kind::Event);
+    server_->record(Topic::Safety, relayed);
   }
 
   // A device's status (how its loop keeps time): checked, at most a few a
@@ -530,12 +575,14 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
                                       st.state_interval_ms(), st.jitter_allowance_ms(), mode, st.force_N()));
     for (WsSession* s : server_->sessions)
       if (s->reads_device_status()) s->send(relayed, Kind::Status);
+    server_->record(Topic::DeviceStatus, relayed);
   }
 
   void on_control(const wire::Control& c) {
     if (role_ != wire::Role::Controller)
       return send(make_error(wire::ErrorCode::WrongRole, "Control needs the controller role", c.request_id()),
                   Kind::Control);
+    server_->record(Topic::Control, raw_.data(), raw_.size(), now_ns());
     switch (c.command_type()) {
       // A pause sent while a change is under way is carried over to the new scene.
       case wire::ControlCommand::Pause: return server_->director.current()->loop().set_paused(true);
@@ -543,10 +590,24 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       case wire::ControlCommand::Reset: return server_->change(Server::Impl::Change::Reset, c);
       case wire::ControlCommand::LoadScene: return server_->change(Server::Impl::Change::Load, c);
       case wire::ControlCommand::SetParameter: return server_->change(Server::Impl::Change::Parameter, c);
+      case wire::ControlCommand::StartRecording: {
+        const wire::StartRecording* r = c.command_as_StartRecording();
+        if (const std::string bad = server_->start_recording(r && r->path() ? r->path()->str() : ""); !bad.empty())
+          return send(make_error(bad.starts_with("a recording") ? wire::ErrorCode::Busy : wire::ErrorCode::BadRequest,
+                                 bad, c.request_id()),
+                      Kind::Control);
+        return;
+      }
+      case wire::ControlCommand::StopRecording:
+        if (!server_->recorder)
+          return send(make_error(wire::ErrorCode::BadRequest, "StopRecording: no recording is under way",
+                                 c.request_id()),
+                      Kind::Control);
+        return server_->stop_recording();
       default:
         return send(make_error(wire::ErrorCode::BadRequest,
                                std::string("control command ") + wire::EnumNameControlCommand(c.command_type()) +
-                                   " is not available in this server version (recording is not built yet)",
+                                   " is for a server replaying a recording; this one runs a live scene",
                                c.request_id()),
                     Kind::Control);
     }
@@ -587,6 +648,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   uint16_t protocol_minor_ = 0;            // the client's, from its Hello
   std::vector<std::string> device_names_;  // channels named in Hello
   std::vector<int32_t> devices_;           // their index in the current scene, -1 if absent
+  std::span<const uint8_t> raw_;           // the message being dispatched
   std::deque<Bytes> queue_;          // null entries stand for pending_state_
   std::deque<Kind> kinds_;          // per queue entry
   Bytes pending_state_, current_;
@@ -718,6 +780,7 @@ void Server::Impl::wait_wakeup() {
 }
 
 void Server::Impl::deliver() {
+  drain_tap(*feed);
   std::vector<WsSession*> devices, viewers;
   for (WsSession* s : sessions) {
     if (!s->greeted()) continue;
@@ -735,7 +798,130 @@ void Server::Impl::deliver() {
   }
 }
 
-Bytes Server::Impl::telemetry_message() {
+// ---- recording ---------------------------------------------------------------------------
+
+void Server::Impl::record(Topic topic, const uint8_t* data, size_t n, int64_t time_ns) {
+  if (recorder) recorder->post(topic, time_ns, 0, {data, n});
+}
+
+void Server::Impl::tap_feed(Feed& f) {
+  if (!f.tap) f.tap = std::make_unique<RecordTap>(f.state_bytes(), f.haptic_bytes());
+  // Frames left from an earlier recording's last moments are not this one's.
+  f.tap->states.drain([](const uint8_t*, size_t) {});
+  f.tap->haptics.drain([](const uint8_t*, size_t) {});
+  f.tap->states_dropped = f.tap->states.dropped();
+  f.tap->haptics_dropped = f.tap->haptics.dropped();
+  f.recording.store(true, std::memory_order_release);
+}
+
+// Every frame the simulation published since the last drain, stamped with
+// its own server time.
+void Server::Impl::drain_tap(Feed& f) {
+  if (!recorder || !f.tap) return;
+  f.tap->haptics.drain([&](const uint8_t* data, size_t n) {
+    record(Topic::Haptic, data, n, wire::GetEnvelope(data)->message_as_HapticFrame()->server_time_ns());
+  });
+  f.tap->states.drain([&](const uint8_t* data, size_t n) {
+    record(Topic::State, data, n, wire::GetEnvelope(data)->message_as_StateFrame()->server_time_ns());
+  });
+  const int64_t lost_h = f.tap->haptics.dropped() - f.tap->haptics_dropped;
+  const int64_t lost_s = f.tap->states.dropped() - f.tap->states_dropped;
+  if (lost_h > 0 || lost_s > 0)
+    recorder->fail("the simulation published frames faster than the recording took them (" +
+                   std::to_string(lost_h) + " haptic and " + std::to_string(lost_s) +
+                   " state frames had no room): stopped, what was written stays readable");
+}
+
+namespace {
+
+std::string read_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return in ? std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()) : "";
+}
+
+}  // namespace
+
+std::string Server::Impl::start_recording(const std::string& name, bool any_path) {
+  if (recorder) return "a recording is under way ('" + recorder->path() + "'): stop it first";
+  std::string path = name;
+  if (!any_path) {
+    if (options.recordings_dir.empty())
+      return "StartRecording: this server has no recordings folder (start it with --recordings DIR)";
+    std::string file = name;
+    if (file.empty()) {
+      const std::time_t t = std::time(nullptr);
+      char stamp[32];
+      std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", std::gmtime(&t));
+      file = std::string("session-") + stamp + ".mcap";
+    }
+    const bool plain = file.size() <= 128 && file[0] != '.' &&
+                       std::all_of(file.begin(), file.end(), [](char ch) {
+                         return std::isalnum(static_cast<unsigned char>(ch)) || ch == '.' || ch == '_' || ch == '-';
+                       });
+    if (!plain)
+      return "StartRecording: '" + printable_text(file) +
+             "' is not a plain file name (letters, digits, '.', '_', '-'; not starting with '.'; at most 128)";
+    if (!file.ends_with(".mcap")) file += ".mcap";
+    std::error_code ec;
+    std::filesystem::create_directories(options.recordings_dir, ec);
+    path = (std::filesystem::path(options.recordings_dir) / file).string();
+    if (std::filesystem::exists(path, ec))
+      return "StartRecording: '" + file + "' is already in the recordings folder: pick another name";
+  }
+  const Scene& scene = feed->live->scene();
+  mcap::Map meta{{"scene_name", scene.name},
+                 {"scene_path", scene.path},
+                 {"scene_file", read_text(scene.path)},
+                 {"variant", scene.variant},
+                 {"scene_id", std::to_string(feed->live->id())},
+                 {"dt", std::to_string(feed->live->loop().dt())},
+                 {"server", options.server_name}};
+  try {
+    recorder = std::make_unique<Recorder>(path, meta);
+  } catch (const mcap::McapError& e) {
+    return std::string("StartRecording: ") + e.what();
+  }
+  std::fprintf(stderr, "recording: %s\n", path.c_str());
+  record(Topic::Scene, feed->description);
+  tap_feed(*feed);
+  if (incoming) tap_feed(*incoming);
+  const Bytes t = telemetry_message("");
+  for (WsSession* s : sessions)
+    if (s->greeted()) s->send(t, WsSession::Kind::Control);
+  return "";
+}
+
+void Server::Impl::stop_recording() {
+  if (!recorder) return;
+  for (Feed* f : {feed.get(), incoming.get()}) {
+    if (!f) continue;
+    f->recording.store(false, std::memory_order_release);
+    drain_tap(*f);
+  }
+  recorder->stop();
+  const RecorderStats st = recorder->stats();
+  std::fprintf(stderr, "recording: stopped %s\n", st.path.c_str());
+  finishing.push_back(std::move(recorder));
+  const Bytes t = telemetry_message("");
+  for (WsSession* s : sessions)
+    if (s->greeted()) s->send(t, WsSession::Kind::Control);
+}
+
+std::string Server::Impl::check_recorder() {
+  std::erase_if(finishing, [](const std::unique_ptr<Recorder>& r) {
+    if (!r->stats().finished) return false;
+    r->wait();
+    return true;
+  });
+  if (!recorder) return "";
+  const std::string fault = recorder->stats().fault;
+  if (fault.empty()) return "";
+  std::fprintf(stderr, "recording: %s: %s\n", recorder->path().c_str(), fault.c_str());
+  stop_recording();
+  return "recording: " + fault;
+}
+
+Bytes Server::Impl::telemetry_message(const std::string& extra_fault) {
   const RealtimeLoop& loop = feed->live->loop();
   const RealtimeStats st = loop.stats();
   uint32_t viewers = 0, devices = 0, controllers = 0;
@@ -748,6 +934,8 @@ Bytes Server::Impl::telemetry_message() {
   fb::FlatBufferBuilder b;
   std::vector<fb::Offset<fb::String>> faults;
   if (!st.fault.empty()) faults.push_back(b.CreateString(st.fault));
+  if (!extra_fault.empty()) faults.push_back(b.CreateString(extra_fault));
+  const RecorderStats rec = recorder ? recorder->stats() : RecorderStats{};
   std::vector<fb::Offset<wire::EffectCost>> costs;  // per pass of the step; those a scene lacks cost 0 and are left out
   for (int p = 0; p < kPassCount; ++p)
     if (st.pass_ns[size_t(p)] > 0)
@@ -756,16 +944,19 @@ Bytes Server::Impl::telemetry_message() {
               wire::CreateTelemetryDirect(b, now_ns(), uint64_t(st.steps), st.clock, float(st.step_mean_us),
                                           float(st.step_max_us), float(st.real_time_factor),
                                           uint64_t(st.missed_deadlines), &costs, viewers, devices, controllers,
-                                          &faults, loop.paused()));
+                                          &faults, loop.paused(),
+                                          std::filesystem::path(rec.path).filename().string().c_str(), rec.messages,
+                                          rec.bytes));
 }
 
 void Server::Impl::tick_telemetry() {
   telemetry_timer.expires_after(std::chrono::seconds(1));
   telemetry_timer.async_wait([self = shared_from_this()](beast::error_code ec) {
     if (ec || self->stopped) return;
-    const Bytes t = self->telemetry_message();
+    const Bytes t = self->telemetry_message(self->check_recorder());
     for (WsSession* s : self->sessions)
       if (s->greeted()) s->send(t, WsSession::Kind::Control);
+    self->record(Topic::Telemetry, t);
     self->tick_telemetry();
   });
 }
@@ -843,6 +1034,7 @@ void Server::Impl::built(std::shared_ptr<LiveScene> live, bool carry) {
   if (stopped) return;
   incoming = std::make_shared<Feed>(live, scene_names);
   attach(*incoming);
+  if (recorder) tap_feed(*incoming);
   director.replace(std::move(live), carry);
 }
 
@@ -853,6 +1045,7 @@ void Server::Impl::installed(const std::shared_ptr<LiveScene>& live) {
   deliver();
   feed = std::move(incoming);
   changing = false;
+  record(Topic::Scene, feed->description);
   for (WsSession* s : sessions) {
     if (!s->greeted()) continue;
     s->send(feed->description, WsSession::Kind::Control);
@@ -864,6 +1057,8 @@ void Server::Impl::installed(const std::shared_ptr<LiveScene>& live) {
 Server::Server(asio::io_context& ioc, Director& director, ServerOptions options)
     : impl_(std::make_shared<Impl>(ioc, director, std::move(options))) {
   impl_->listen();
+  if (!impl_->options.record.empty())
+    if (const std::string bad = impl_->start_recording(impl_->options.record, true); !bad.empty()) throw ServerError(bad);
   director.on_installed([weak = std::weak_ptr<Impl>(impl_), &ioc](const std::shared_ptr<LiveScene>& live) {
     asio::post(ioc, [weak, live] {
       if (auto self = weak.lock()) self->installed(live);
@@ -886,6 +1081,9 @@ void Server::stop() {
   impl_->acceptor.close(ec);
   impl_->wake_fd.close(ec);
   impl_->telemetry_timer.cancel();
+  impl_->stop_recording();
+  for (auto& r : impl_->finishing) r->wait();  // closed files, with their summaries
+  impl_->finishing.clear();
   impl_->close_all();
 }
 

@@ -55,6 +55,8 @@ struct ServerOptions {
   double idle_timeout_s = 30;
   std::string server_name = "tactile";
   std::string scenes_dir;                     // where LoadScene finds scenes ("" for none)
+  std::string recordings_dir;                 // where StartRecording writes ("" refuses it)
+  std::string record;                         // a recording to start with the server (any path), "" for none
   LiveOptions live;                           // how loaded and reset scenes run
 };
 

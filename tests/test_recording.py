@@ -1,0 +1,221 @@
+"""Recording a live session (proto/RECORDING.md): the real server records into MCAP, started and stopped by a
+controller or from its command line; the files are read with the reference reader (`mcap` on PyPI) with its
+CRC checks on. Lossless: every haptic frame of every step and every state the simulation published is in the
+file, with every device input and control. Crash-safe: a server killed with SIGKILL leaves a file that reads
+back all but its last moments."""
+
+from __future__ import annotations
+
+import asyncio
+import pathlib
+import signal
+import time
+from collections import defaultdict
+from typing import Any
+
+import websockets
+from mcap.reader import make_reader
+from mcap.records import Footer
+from mcap.records import Message as McapMessage
+from mcap.stream_reader import StreamReader
+from serverproc import server_process
+from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, url
+
+from tactile_proto import codec
+from tactile_proto.generated.ControlCommand import ControlCommand
+from tactile_proto.generated.ErrorCode import ErrorCode
+from tactile_proto.generated.Pause import PauseT
+from tactile_proto.generated.Resume import ResumeT
+from tactile_proto.generated.Role import Role
+from tactile_proto.generated.Seek import SeekT
+from tactile_proto.generated.StartRecording import StartRecordingT
+from tactile_proto.generated.StopRecording import StopRecordingT
+
+
+def start(name: str, request_id: int = 1) -> Any:
+    s = StartRecordingT()
+    s.path = name
+    return control(ControlCommand.StartRecording, s, request_id)
+
+
+def read_closed(path: pathlib.Path) -> dict[str, list[tuple[int, Any]]]:
+    """A closed recording through the reference reader's index, CRCs checked: topic -> [(log_time, message)]."""
+    out: dict[str, list[tuple[int, Any]]] = defaultdict(list)
+    with path.open("rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None, "a closed recording has its summary"
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            assert schema.name == "tactile.proto.Envelope" and schema.encoding == "flatbuffer"
+            assert channel.message_encoding == "flatbuffer"
+            out[channel.topic].append((message.log_time, codec.decode(message.data).message))
+        assert summary.statistics.message_count == sum(len(v) for v in out.values())
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+    out["@meta"] = [(0, meta)]
+    return out
+
+
+def read_cut(path: pathlib.Path) -> tuple[list[tuple[str, int, bytes]], bool]:
+    """A recording that may have been cut short, read in file order with the stream reader (CRCs checked) up to
+    where it ends: ([(topic, log_time, data)], complete)."""
+    channels: dict[int, str] = {}
+    messages: list[tuple[str, int, bytes]] = []
+    complete = False
+    with path.open("rb") as f:
+        try:
+            for record in StreamReader(f, validate_crcs=True).records:
+                if type(record).__name__ == "Channel":
+                    channels[record.id] = record.topic
+                elif isinstance(record, McapMessage):
+                    messages.append((channels[record.channel_id], record.log_time, record.data))
+                elif isinstance(record, Footer):
+                    complete = True
+        except Exception as e:  # the end of a cut file: a record cut short
+            assert "crc" not in str(e).lower(), f"a CRC failed in a recording cut short: {e}"
+    return messages, complete
+
+
+def test_a_controller_records_every_frame_input_and_control_of_the_session(tmp_path: pathlib.Path) -> None:
+    rec_dir = tmp_path / "recordings"
+    sent_inputs = 0
+
+    async def run(port: int) -> None:
+        nonlocal sent_inputs
+        async with websockets.connect(url(port), **READ_ON) as ctl, websockets.connect(url(port), **READ_ON) as dev:
+            await hello(ctl, Role.Controller, TOKEN)
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            await ctl.send(codec.encode(start("poke", request_id=3)))
+            t = await next_of(ctl, "TelemetryT")
+            assert t.recording == "poke.mcap", t.recording
+
+            async def drain() -> None:
+                while True:
+                    await dev.recv()
+
+            reader = asyncio.create_task(drain())
+            for k in range(1, 301):  # a press, 3 mm into the block over 0.3 s
+                await dev.send(codec.encode(device_input(k, 0.029 - 0.004 * min(k, 200) / 200)))
+                sent_inputs += 1
+                await asyncio.sleep(0.001)
+            await ctl.send(codec.encode(control(ControlCommand.Pause, PauseT(), request_id=4)))
+            await ctl.send(codec.encode(control(ControlCommand.Seek, SeekT(), request_id=5)))  # refused: live
+            err = await next_of(ctl, "ErrorT")
+            assert err.requestId == 5 and "replay" in err.message
+            await ctl.send(codec.encode(control(ControlCommand.Resume, ResumeT(), request_id=6)))
+            await asyncio.sleep(1.2)  # a telemetry or two
+            await ctl.send(codec.encode(control(ControlCommand.StopRecording, StopRecordingT(), request_id=7)))
+            for _ in range(3):  # (one sent before the stop may come first)
+                t = await next_of(ctl, "TelemetryT")
+                if not t.recording:
+                    break
+            assert not t.recording and t.recordedMessages == 0
+            reader.cancel()
+
+    with running_server(tmp_path, "--recordings", str(rec_dir)) as (port, proc):
+        asyncio.run(run(port))
+    path = rec_dir / "poke.mcap"
+    got = read_closed(path)
+    meta = got["@meta"][0][1]["tactile"]
+    assert meta["scene_name"] == SCENE["name"] and '"live_poke"' in meta["scene_file"]
+    scenes = [m for _, m in got["/scene"]]
+    assert len(scenes) == 1 and scenes[0].sceneName == "live_poke"
+    # Lossless: a haptic frame for every step of the loop from the first recorded to the last (one per step
+    # here: each a step dt of simulated time on, however many sub-steps a deep press made the stepper take),
+    # and a state every state period of simulated time.
+    haptic = [m for _, m in got["/haptic"]]
+    dt = scenes[0].dt
+    assert len(haptic) > 100
+    steps_between = [round((b.simTime - a.simTime) / dt, 6) for a, b in zip(haptic, haptic[1:])]
+    assert set(steps_between) == {1.0}, f"a haptic frame is missing: {sorted(set(steps_between))[-3:]} steps apart"
+    states = [m for _, m in got["/state"]]
+    times = [s.simTime for s in states]
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    assert len(states) > 20 and max(gaps) < 1.5 / 30, f"a state is missing: gaps up to {max(gaps):.4f} s"
+    # Every input the device sent, in order; the controls (after the start) and the error answered.
+    inputs = [m for _, m in got["/input"]]
+    assert [i.sequence for i in inputs] == list(range(1, sent_inputs + 1))
+    controls = [m.requestId for _, m in got["/control"]]
+    assert controls == [4, 5, 6, 7]
+    assert [e.requestId for _, e in got["/error"]] == [5]
+    assert len(got["/telemetry"]) >= 1
+    # The press shows in the recording: the force rises, and the energy account is there (StateFrame.energies).
+    assert max(h.proxies[0].force.y for h in haptic) > 0.2
+    last = states[-1].energies
+    assert last.workContact != 0.0 and last.kinetic >= 0.0 and last.elastic > 0.0
+    # Frames are stamped with their own server time: in order per topic.
+    for topic in ("/haptic", "/state", "/input"):
+        stamps = [t for t, _ in got[topic]]
+        assert stamps == sorted(stamps), topic
+
+
+def test_recording_requests_are_refused_by_name(tmp_path: pathlib.Path) -> None:
+    rec_dir = tmp_path / "recordings"
+    rec_dir.mkdir()
+    (rec_dir / "taken.mcap").write_bytes(b"not mine")
+
+    async def run(port: int, with_dir: bool) -> None:
+        async with websockets.connect(url(port), **READ_ON) as ctl:
+            await hello(ctl, Role.Controller, TOKEN)
+
+            async def refused(message: Any, code: int, *words: str) -> None:
+                await ctl.send(codec.encode(message))
+                err = await next_of(ctl, "ErrorT")
+                assert err.code == code and all(w in err.message for w in words), (err.code, err.message)
+
+            await refused(control(ControlCommand.StopRecording, StopRecordingT()), ErrorCode.BadRequest,
+                          "no recording")
+            if not with_dir:
+                await refused(start("a"), ErrorCode.BadRequest, "no recordings folder", "--recordings")
+                return
+            await refused(start("../escape"), ErrorCode.BadRequest, "not a plain file name")
+            await refused(start(".hidden"), ErrorCode.BadRequest, "not a plain file name")
+            await refused(start("taken"), ErrorCode.BadRequest, "taken.mcap", "already")
+            await ctl.send(codec.encode(start("")))  # a name picked by the server
+            t = await next_of(ctl, "TelemetryT")
+            name = t.recording
+            assert name.startswith("session-") and name.endswith(".mcap")
+            await refused(start("second"), ErrorCode.Busy, "under way", name)
+
+    with running_server(tmp_path, "--recordings", str(rec_dir)) as (port, _):
+        asyncio.run(run(port, True))
+    assert (rec_dir / "taken.mcap").read_bytes() == b"not mine"
+    picked = [p for p in rec_dir.iterdir() if p.name.startswith("session-")]
+    assert len(picked) == 1 and read_closed(picked[0])["/scene"], "the server closes its recording when it stops"
+    assert not (tmp_path / "escape.mcap").exists()
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port, False))
+
+
+def test_a_server_killed_mid_recording_leaves_a_file_that_reads_back_to_its_last_moments(
+        tmp_path: pathlib.Path) -> None:
+    """SIGKILL while a device presses: the file (no summary, maybe a record cut short) reads back in order,
+    every chunk's CRC good, up to less than a second before the kill."""
+    losses = []
+    for kill in range(3):
+        path = tmp_path / f"killed{kill}.mcap"
+
+        async def press(port: int) -> None:
+            async with websockets.connect(url(port), **READ_ON) as dev:
+                await hello(dev, Role.Device, TOKEN, ("stylus",))
+                for k in range(1, 800 + 300 * kill):
+                    await dev.send(codec.encode(device_input(k, 0.029 - 0.003 * min(k, 300) / 300)))
+                    await asyncio.sleep(0.001)
+
+        with server_process(tmp_path, SCENE, TOKEN, "--record", str(path), file_name="scene.json") as (port, proc):
+            asyncio.run(press(port))
+            killed_ns = time.time_ns()
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=10)
+            proc.send_signal = lambda _sig: None  # (the context's SIGINT: it is gone)
+        messages, complete = read_cut(path)
+        assert not complete, "a killed server wrote no footer"
+        topics = {t for t, _, _ in messages}
+        assert {"/scene", "/haptic", "/state", "/input"} <= topics, topics
+        inputs = [codec.decode(d).message.sequence for t, _, d in messages if t == "/input"]
+        assert inputs == list(range(1, len(inputs) + 1)), "inputs in order, none missing before the cut"
+        newest = max(t for _, t, _ in messages)
+        losses.append((killed_ns - newest) / 1e9)
+    # What a kill loses: from the newest message kept to the kill (chunks close every quarter second).
+    assert max(losses) < 1.0, f"lost up to {max(losses):.3f} s of the session"
+    print(f"\nkills: {len(losses)}, lost at most {max(losses) * 1000:.0f} ms "
+          f"(each: {', '.join(f'{x * 1000:.0f} ms' for x in losses)})")
