@@ -35,9 +35,11 @@ using namespace tactile;
 
 constexpr const char* kUsage =
     "usage: tactile-server SCENE.json [options]\n"
+    "       tactile-server --replay RECORDING.mcap [options]\n"
     "\n"
     "Runs the scene in real time and serves it: WebSocket clients (viewers, devices, a controller)\n"
-    "and static files over HTTP, on one port.\n"
+    "and static files over HTTP, on one port. With --replay, serves a recording the same way, at its\n"
+    "recorded pace (a controller may pause, resume, seek and change the speed).\n"
     "\n"
     "options:\n"
     "  --bind ADDR          listen address (default 127.0.0.1; off loopback a token is required)\n"
@@ -70,6 +72,7 @@ struct Options {
   double force_window = 1e-3;
   std::optional<std::string> variant;
   std::optional<std::string> scenes_dir;
+  std::string replay;
 };
 
 double number(std::string_view flag, const std::string& text) {
@@ -117,11 +120,13 @@ Options parse_args(int argc, char** argv) {
     else if (a == "--duration") o.duration = number(a, value());
     else if (a == "--recordings") o.server.recordings_dir = value();
     else if (a == "--record") o.server.record = value();
+    else if (a == "--replay") o.replay = value();
     else if (!a.empty() && a[0] == '-') throw BadInput{"unknown option " + a};
     else if (o.scene.empty()) o.scene = a;
     else throw BadInput{"one scene only (got " + o.scene + " and " + a + ")"};
   }
-  if (o.scene.empty()) throw BadInput{"no scene given"};
+  if (!o.replay.empty() && !o.scene.empty()) throw BadInput{"a scene or --replay, not both"};
+  if (o.scene.empty() && o.replay.empty()) throw BadInput{"no scene given"};
   o.server.viewer_rate_hz = o.state_rate;
   return o;
 }
@@ -130,9 +135,32 @@ std::atomic<bool> g_stop{false};
 
 }  // namespace
 
+// Serves a recording until a signal stops it.
+int replay(const Options& o) {
+  Replay replay(o.replay);
+  boost::asio::io_context ioc(1);
+  Server server(ioc, replay, o.server);
+  std::printf("tactile-server: replaying %s: %zu messages over %.3f s\n", o.replay.c_str(), replay.items().size(),
+              replay.duration());
+  for (const std::string& p : replay.problems()) std::printf("tactile-server: %s: %s\n", o.replay.c_str(), p.c_str());
+  std::printf("tactile-server: listening on http://%s:%u/ (WebSocket on the same port)\n", o.server.bind.c_str(),
+              unsigned(server.port()));
+  std::fflush(stdout);
+  boost::asio::signal_set signals(ioc, SIGINT, SIGTERM);
+  signals.async_wait([&](const boost::system::error_code& ec, int) {
+    if (ec) return;
+    server.stop();
+    ioc.stop();
+  });
+  ioc.run();
+  std::printf("tactile-server: stopped\n");
+  return 0;
+}
+
 int main(int argc, char** argv) {
   try {
     const Options o = parse_args(argc, argv);
+    if (!o.replay.empty()) return replay(o);
     const std::vector<Scene> scenes = load_scene(o.scene);
     const Scene* scene = &scenes.front();
     if (o.variant) {
@@ -206,6 +234,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "tactile-server: %s\n", e.what());
     return 2;
   } catch (const ServerError& e) {
+    std::fprintf(stderr, "tactile-server: %s\n", e.what());
+    return 2;
+  } catch (const mcap::McapError& e) {
     std::fprintf(stderr, "tactile-server: %s\n", e.what());
     return 2;
   }

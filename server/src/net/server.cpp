@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <chrono>
 #include <ctime>
 #include <cstdio>
@@ -22,6 +23,7 @@
 #include "net/inbound.hpp"
 #include "net/mailbox.hpp"
 #include "record/recorder.hpp"
+#include "record/replay.hpp"
 #include "scene/parameters.hpp"
 #include "tactile_generated.h"
 
@@ -108,11 +110,14 @@ struct RecordTap {
 
 // What the clients are served from for one scene: the mailboxes its loop
 // publishes into (from the simulation thread) and its description.
+// A replayed scene has no loop: its description alone (live == nullptr).
 struct Feed {
   std::shared_ptr<LiveScene> live;
   FrameRing haptics;
   LatestBox states;
   Bytes description;
+  std::string scene_name;
+  std::vector<std::string> devices;   // channels, in the order haptic frames list them
   std::unique_ptr<RecordTap> tap;     // set before `recording` turns true, kept after
   std::atomic<bool> recording{false};
 
@@ -120,9 +125,18 @@ struct Feed {
       : live(std::move(l)),
         // (a haptic frame: ~92 B per proxy, ~100 B per device channel, ~150 B besides)
         haptics(1024, haptic_bytes()),
-        states(state_bytes()) {
+        states(state_bytes()),
+        scene_name(live->scene().name),
+        devices(live->sim().devices()) {
     const std::vector<uint8_t> d = live->describe(scenes);
     description = copy_bytes(d.data(), d.size());
+  }
+  // A recorded SceneDescription (Envelope bytes, verified by the caller).
+  explicit Feed(Bytes recorded) : haptics(1, 0), states(0), description(std::move(recorded)) {
+    const wire::SceneDescription* d = wire::GetEnvelope(description->data())->message_as_SceneDescription();
+    if (d->scene_name()) scene_name = d->scene_name()->str();
+    if (d->devices())
+      for (const fb::String* name : *d->devices()) devices.push_back(name->str());
   }
   // The most a state frame takes: positions and scalar per surface vertex, poses and forces per proxy.
   size_t state_bytes() const {
@@ -133,7 +147,8 @@ struct Feed {
 
 struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   asio::io_context& ioc;
-  Director& director;
+  Director* director;  // the live session, or
+  Replay* replay;      // a recording played back (one of the two)
   ServerOptions options;
   tcp::acceptor acceptor;
   bool stopped = false;
@@ -154,20 +169,34 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   WsSession* controller = nullptr;
   asio::steady_timer telemetry_timer;
 
+  asio::steady_timer replay_timer;
+  Replay::Clock::time_point replay_status_due{};
+  void tick_replay();
+  Bytes replay_status();
+  void serve_replayed(const Replay::Item& item);
+  void show_replay_position();  // the scene and state at the position, after a seek
+  void replay_control(const wire::Control& c, WsSession& from);
+
   std::unique_ptr<Recorder> recorder;               // the recording under way
   std::vector<std::unique_ptr<Recorder>> finishing;  // stopped, closing their files
 
-  Impl(asio::io_context& io, Director& d, ServerOptions o)
+  Impl(asio::io_context& io, Director* d, Replay* r, ServerOptions o)
       : ioc(io),
         director(d),
+        replay(r),
         options(std::move(o)),
         acceptor(io),
         wake_fd(io, ::dup(wakeup->fd())),
-        scene_names(list_scenes(options.scenes_dir)),
-        next_scene_id(d.current()->id() + 1),
-        telemetry_timer(io) {
-    feed = std::make_shared<Feed>(d.current(), scene_names);
-    attach(*feed);
+        scene_names(d ? list_scenes(options.scenes_dir) : std::vector<std::string>{}),
+        next_scene_id(d ? d->current()->id() + 1 : 0),
+        telemetry_timer(io),
+        replay_timer(io) {
+    if (d) {
+      feed = std::make_shared<Feed>(d->current(), scene_names);
+      attach(*feed);
+    } else {
+      feed = std::make_shared<Feed>(copy_bytes(r->first_scene().bytes.data(), r->first_scene().bytes.size()));
+    }
   }
   ~Impl() {
     if (builder.joinable()) builder.join();
@@ -262,6 +291,8 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   bool reads_safety_events() const { return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 2; }
   // DeviceStatus came in 1.3.
   bool reads_device_status() const { return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 3; }
+  // ReplayStatus in 1.4.
+  bool reads_replay_status() const { return greeted_ && protocol_minor_ >= 4; }
   bool drives_devices() const { return greeted_ && role_ == wire::Role::Device; }
   bool drives(const std::string& channel) const {
     return drives_devices() && std::find(device_names_.begin(), device_names_.end(), channel) != device_names_.end();
@@ -419,7 +450,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       server_->controller = this;
     }
     if (h.role() == wire::Role::Device) {
-      const std::vector<std::string>& names = server_->feed->live->sim().devices();
+      const std::vector<std::string>& names = server_->feed->devices;
       if (h.devices())
         for (const fb::String* d : *h.devices()) {
           if (std::find(names.begin(), names.end(), d->str()) == names.end())
@@ -443,18 +474,23 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
                                         server_->options.server_name.c_str(), id_, now_ns())),
          Kind::Control);
     send(server_->feed->description, Kind::Control);
+    if (server_->replay) {  // where the replay is: the body as it was there, and the playback
+      if (const Replay::Item* st = server_->replay->state_before(); st && role_ != wire::Role::Device)
+        send(copy_bytes(st->bytes.data(), st->bytes.size()), Kind::State);
+      if (reads_replay_status()) send(server_->replay_status(), Kind::Control);
+    }
   }
 
   // The current scene's channel index for each channel this device named
   // (-1 for one the scene lacks: its inputs are dropped, said once here).
   void bind_devices() {
-    const std::vector<std::string>& names = server_->feed->live->sim().devices();
+    const std::vector<std::string>& names = server_->feed->devices;
     devices_.clear();
     for (const std::string& d : device_names_) {
       const auto it = std::find(names.begin(), names.end(), d);
       devices_.push_back(it == names.end() ? -1 : int32_t(it - names.begin()));
       if (it == names.end())
-        send(make_error(wire::ErrorCode::BadRequest, "scene '" + server_->feed->live->scene().name +
+        send(make_error(wire::ErrorCode::BadRequest, "scene '" + server_->feed->scene_name +
                                                          "' has no device channel '" + d +
                                                          "': its inputs are dropped until a scene has it"),
              Kind::Control);
@@ -491,7 +527,8 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     const double qn = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
     s.pose.orientation = Quat(q.w() / qn, q.x() / qn, q.y() / qn, q.z() / qn);
     s.buttons = in.buttons();
-    server_->feed->live->loop().post_input(s);  // a full queue drops it and counts (telemetry)
+    // (A replay simulates nothing: its inputs move nothing.)
+    if (server_->feed->live) server_->feed->live->loop().post_input(s);  // a full queue drops it and counts
     server_->record(Topic::Input, raw_.data(), raw_.size(), now_ns());
   }
 
@@ -583,10 +620,11 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       return send(make_error(wire::ErrorCode::WrongRole, "Control needs the controller role", c.request_id()),
                   Kind::Control);
     server_->record(Topic::Control, raw_.data(), raw_.size(), now_ns());
+    if (server_->replay) return server_->replay_control(c, *this);
     switch (c.command_type()) {
       // A pause sent while a change is under way is carried over to the new scene.
-      case wire::ControlCommand::Pause: return server_->director.current()->loop().set_paused(true);
-      case wire::ControlCommand::Resume: return server_->director.current()->loop().set_paused(false);
+      case wire::ControlCommand::Pause: return server_->director->current()->loop().set_paused(true);
+      case wire::ControlCommand::Resume: return server_->director->current()->loop().set_paused(false);
       case wire::ControlCommand::Reset: return server_->change(Server::Impl::Change::Reset, c);
       case wire::ControlCommand::LoadScene: return server_->change(Server::Impl::Change::Load, c);
       case wire::ControlCommand::SetParameter: return server_->change(Server::Impl::Change::Parameter, c);
@@ -780,6 +818,7 @@ void Server::Impl::wait_wakeup() {
 }
 
 void Server::Impl::deliver() {
+  if (!feed->live) return;  // a replay sends as it goes (tick_replay)
   drain_tap(*feed);
   std::vector<WsSession*> devices, viewers;
   for (WsSession* s : sessions) {
@@ -796,6 +835,115 @@ void Server::Impl::deliver() {
     for (WsSession* s : sessions)
       if (s->greeted()) s->send(frame, WsSession::Kind::State);
   }
+}
+
+// ---- replay: a recording served as the live session was ------------------------------------
+
+void Server::Impl::tick_replay() {
+  const auto now = Replay::Clock::now();
+  replay->due(now, [&](const Replay::Item& item) { serve_replayed(item); });
+  if (now >= replay_status_due) {
+    const Bytes status = replay_status();
+    for (WsSession* s : sessions)
+      if (s->reads_replay_status()) s->send(status, WsSession::Kind::Control);
+    replay_status_due = now + std::chrono::milliseconds(100);
+  }
+  // Until the next message is due or the next status, whichever is first.
+  const auto wait = std::min<Replay::Clock::duration>(
+      std::chrono::duration_cast<Replay::Clock::duration>(std::chrono::duration<double>(replay->next_due_in(now))),
+      replay_status_due - now);
+  replay_timer.expires_after(std::max<Replay::Clock::duration>(wait, std::chrono::microseconds(50)));
+  replay_timer.async_wait([self = shared_from_this()](beast::error_code ec) {
+    if (!ec && !self->stopped) self->tick_replay();
+  });
+}
+
+void Server::Impl::serve_replayed(const Replay::Item& item) {
+  const Bytes m = copy_bytes(item.bytes.data(), item.bytes.size());
+  switch (item.topic) {
+    case Topic::Scene:
+      if (*m == *feed->description) return;
+      feed = std::make_shared<Feed>(m);
+      for (WsSession* s : sessions) {
+        if (!s->greeted()) continue;
+        s->send(m, WsSession::Kind::Control);
+        if (s->role() == wire::Role::Device) s->bind_devices();
+      }
+      return;
+    case Topic::State:
+      for (WsSession* s : sessions)
+        if (s->greeted() && s->role() != wire::Role::Device) s->send(m, WsSession::Kind::State);
+      return;
+    case Topic::Haptic:  // a bridge plays the recorded forces to its device, under its safety rules
+      for (WsSession* s : sessions)
+        if (s->drives_devices()) s->send(m, WsSession::Kind::Haptic);
+      return;
+    case Topic::Telemetry:
+      for (WsSession* s : sessions)
+        if (s->greeted()) s->send(m, WsSession::Kind::Control);
+      return;
+    case Topic::Safety:
+      for (WsSession* s : sessions)
+        if (s->reads_safety_events()) s->send(m, WsSession::Kind::Event);
+      return;
+    case Topic::DeviceStatus:
+      for (WsSession* s : sessions)
+        if (s->reads_device_status()) s->send(m, WsSession::Kind::Status);
+      return;
+    case Topic::Input:
+    case Topic::Control:
+    case Topic::Error: return;  // what clients sent: kept in the file, not served
+  }
+}
+
+void Server::Impl::show_replay_position() {
+  if (const Replay::Item* scene = replay->scene_before()) serve_replayed(*scene);
+  if (const Replay::Item* state = replay->state_before()) serve_replayed(*state);
+}
+
+Bytes Server::Impl::replay_status() {
+  fb::FlatBufferBuilder b;
+  const auto now = Replay::Clock::now();
+  return seal(b, wire::Message::ReplayStatus,
+              wire::CreateReplayStatusDirect(b, std::filesystem::path(replay->path()).filename().string().c_str(),
+                                             replay->duration(), replay->position(now), replay->speed(),
+                                             replay->paused()));
+}
+
+void Server::Impl::replay_control(const wire::Control& c, WsSession& from) {
+  const auto now = Replay::Clock::now();
+  switch (c.command_type()) {
+    case wire::ControlCommand::Pause: replay->pause(now); break;
+    case wire::ControlCommand::Resume: replay->play(now); break;
+    case wire::ControlCommand::Seek: {
+      const double t = c.command_as_Seek() ? c.command_as_Seek()->time_s() : 0;
+      if (!std::isfinite(t))
+        return from.send(make_error(wire::ErrorCode::BadRequest, "Seek: time_s is not finite", c.request_id()),
+                         WsSession::Kind::Control);
+      replay->seek(t, now);
+      show_replay_position();
+      break;
+    }
+    case wire::ControlCommand::SetSpeed:
+      try {
+        replay->set_speed(c.command_as_SetSpeed() ? c.command_as_SetSpeed()->speed() : 0, now);
+      } catch (const std::invalid_argument& e) {
+        return from.send(make_error(wire::ErrorCode::BadRequest, std::string("SetSpeed: ") + e.what(), c.request_id()),
+                         WsSession::Kind::Control);
+      }
+      break;
+    default:
+      return from.send(make_error(wire::ErrorCode::BadRequest,
+                                  std::string(wire::EnumNameControlCommand(c.command_type())) +
+                                      " needs a live session; this server replays the recording '" +
+                                      std::filesystem::path(replay->path()).filename().string() + "'",
+                                  c.request_id()),
+                       WsSession::Kind::Control);
+  }
+  // The change, to everyone at once (and the timer re-armed for the new pace).
+  replay_status_due = now;
+  replay_timer.cancel();
+  tick_replay();
 }
 
 // ---- recording ---------------------------------------------------------------------------
@@ -1003,7 +1151,7 @@ void Server::Impl::change(Change kind, const wire::Control& c) {
     }
     // The body goes on under the new parameter, in the same timeline; after
     // a fault there is no body to carry, and it starts again from rest.
-    carry = director.fault().empty();
+    carry = director->fault().empty();
     if (carry) id = feed->live->id();
   }
   if (id == next_scene_id) ++next_scene_id;
@@ -1035,7 +1183,7 @@ void Server::Impl::built(std::shared_ptr<LiveScene> live, bool carry) {
   incoming = std::make_shared<Feed>(live, scene_names);
   attach(*incoming);
   if (recorder) tap_feed(*incoming);
-  director.replace(std::move(live), carry);
+  director->replace(std::move(live), carry);
 }
 
 // On the network thread, once the simulation thread runs `live`: the last
@@ -1054,8 +1202,16 @@ void Server::Impl::installed(const std::shared_ptr<LiveScene>& live) {
   deliver();
 }
 
+Server::Server(asio::io_context& ioc, Replay& replay, ServerOptions options)
+    : impl_(std::make_shared<Impl>(ioc, nullptr, &replay, std::move(options))) {
+  impl_->listen();
+  impl_->accept();
+  replay.play(Replay::Clock::now());
+  impl_->tick_replay();
+}
+
 Server::Server(asio::io_context& ioc, Director& director, ServerOptions options)
-    : impl_(std::make_shared<Impl>(ioc, director, std::move(options))) {
+    : impl_(std::make_shared<Impl>(ioc, &director, nullptr, std::move(options))) {
   impl_->listen();
   if (!impl_->options.record.empty())
     if (const std::string bad = impl_->start_recording(impl_->options.record, true); !bad.empty()) throw ServerError(bad);
@@ -1081,6 +1237,7 @@ void Server::stop() {
   impl_->acceptor.close(ec);
   impl_->wake_fd.close(ec);
   impl_->telemetry_timer.cancel();
+  impl_->replay_timer.cancel();
   impl_->stop_recording();
   for (auto& r : impl_->finishing) r->wait();  // closed files, with their summaries
   impl_->finishing.clear();

@@ -35,6 +35,7 @@
 #include <boost/asio/io_context.hpp>
 
 #include "live/director.hpp"
+#include "record/replay.hpp"
 
 namespace tactile {
 
@@ -72,6 +73,12 @@ class Server {
   // installed callback). The director must outlive the server; it runs on
   // its own thread.
   Server(boost::asio::io_context& ioc, Director& director, ServerOptions options);
+  // Serves a recording as the live session was served (the same messages,
+  // at their recorded pace): viewers get its states, devices its haptic
+  // frames, a controller may Pause, Resume, Seek and SetSpeed, and every
+  // client of protocol 1.4 gets a ReplayStatus ten times a second. Starts
+  // playing at once; at the end it pauses. The replay must outlive the server.
+  Server(boost::asio::io_context& ioc, Replay& replay, ServerOptions options);
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
