@@ -7,10 +7,14 @@ back all but its last moments."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import pathlib
+import re
 import signal
+import subprocess
 import time
 from collections import defaultdict
+from collections.abc import Iterator
 from typing import Any
 
 import websockets
@@ -19,6 +23,7 @@ from mcap.records import Footer
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 from serverproc import server_process
+from test_scenes_schema import built
 from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, url
 
 from tactile_proto import codec
@@ -28,6 +33,7 @@ from tactile_proto.generated.Pause import PauseT
 from tactile_proto.generated.Resume import ResumeT
 from tactile_proto.generated.Role import Role
 from tactile_proto.generated.Seek import SeekT
+from tactile_proto.generated.SetSpeed import SetSpeedT
 from tactile_proto.generated.StartRecording import StartRecordingT
 from tactile_proto.generated.StopRecording import StopRecordingT
 
@@ -219,3 +225,176 @@ def test_a_server_killed_mid_recording_leaves_a_file_that_reads_back_to_its_last
     assert max(losses) < 1.0, f"lost up to {max(losses):.3f} s of the session"
     print(f"\nkills: {len(losses)}, lost at most {max(losses) * 1000:.0f} ms "
           f"(each: {', '.join(f'{x * 1000:.0f} ms' for x in losses)})")
+
+
+
+# ---- replay -------------------------------------------------------------------------------------
+
+
+def record_a_press(tmp_path: pathlib.Path, name: str = "press.mcap") -> pathlib.Path:
+    """A closed recording of a second or more: a device presses the block and holds."""
+    path = tmp_path / name
+
+    async def press(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as dev:
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            for k in range(1, 1000):
+                await dev.send(codec.encode(device_input(k, 0.029 - 0.003 * min(k, 300) / 300)))
+                await asyncio.sleep(0.001)
+
+    with server_process(tmp_path, SCENE, TOKEN, "--record", str(path), file_name="scene.json") as (port, _):
+        asyncio.run(press(port))
+    return path
+
+
+@contextlib.contextmanager
+def replaying(tmp_path: pathlib.Path, recording: pathlib.Path) -> Iterator[tuple[int, subprocess.Popen[str]]]:
+    exe = built("tactile-server")
+    proc = subprocess.Popen([exe, "--replay", str(recording), "--port", "0", "--token", TOKEN],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    port = None
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        lines.append(line)
+        if m := re.search(r"listening on http://127\.0\.0\.1:(\d+)/", line):
+            port = int(m.group(1))
+            break
+    assert port is not None, "".join(lines)
+    proc.lines = lines  # type: ignore[attr-defined]
+    try:
+        yield port, proc
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=10)
+
+
+def test_a_replay_serves_the_recorded_session_as_it_was_served_live(tmp_path: pathlib.Path) -> None:
+    recording = record_a_press(tmp_path)
+    got = read_closed(recording)
+    recorded_states = {s.step: s for _, s in got["/state"]}
+    recorded_haptic = {h.step: h for _, h in got["/haptic"]}
+    span = (got["/state"][-1][0] - got["/state"][0][0]) / 1e9
+
+    async def watch(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as viewer, \
+                websockets.connect(url(port), **READ_ON) as dev:
+            _, scene = await hello(viewer, Role.Viewer)
+            assert scene.sceneName == "live_poke" and scene.sceneId == got["/scene"][0][1].sceneId
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            states, statuses, haptic = [], [], []
+            t0 = time.monotonic()
+
+            async def read_device() -> None:
+                while True:
+                    m = codec.decode(await dev.recv()).message
+                    if type(m).__name__ == "HapticFrameT":
+                        haptic.append(m)
+
+            reader = asyncio.create_task(read_device())
+            while time.monotonic() - t0 < span + 5:
+                m = codec.decode(await asyncio.wait_for(viewer.recv(), 5)).message
+                kind = type(m).__name__
+                if kind == "StateFrameT":
+                    states.append((time.monotonic(), m))
+                elif kind == "ReplayStatusT":
+                    statuses.append(m)
+                    if m.paused and m.positionS >= m.durationS - 1e-9 and len(states) > 5:
+                        break
+            reader.cancel()
+        # The states are the recorded ones, in order, each as it was recorded (not re-simulated).
+        steps = [s.step for _, s in states]
+        assert steps == sorted(steps) and len(states) > 10
+        for _, s in states:
+            r = recorded_states[s.step]
+            assert s.simTime == r.simTime and (s.positions == r.positions).all()
+            assert s.energies.elastic == r.energies.elastic
+        # At the recorded pace: the states' span as received is the recorded span (within the host's noise).
+        played = states[-1][0] - states[0][0]
+        recorded = (max(steps) - min(steps)) and (recorded_states[max(steps)].serverTimeNs -
+                                                   recorded_states[min(steps)].serverTimeNs) / 1e9
+        assert 0.7 * recorded < played < 1.3 * recorded + 0.3, (played, recorded)
+        # The device got the recorded haptic frames, as recorded.
+        assert len(haptic) > 100
+        for h in haptic[:: max(1, len(haptic) // 50)]:
+            r = recorded_haptic[h.step]
+            assert h.simTime == r.simTime and h.proxies[0].force.y == r.proxies[0].force.y
+        assert max(h.proxies[0].force.y for h in haptic) > 0.2  # the press, played back
+        # The playback was reported: ten times a second, the position moving on, paused at the end.
+        assert statuses[0].path == recording.name and abs(statuses[0].durationS - statuses[-1].durationS) < 1e-12
+        positions = [s.positionS for s in statuses]
+        assert positions == sorted(positions) and statuses[-1].paused
+
+    with replaying(tmp_path, recording) as (port, proc):
+        asyncio.run(watch(port))
+        assert "replaying" in proc.lines[0]
+
+
+def test_a_controller_pauses_seeks_and_sets_the_speed_of_a_replay(tmp_path: pathlib.Path) -> None:
+    recording = record_a_press(tmp_path)
+    got = read_closed(recording)
+    first_state = got["/state"][0][1].simTime
+
+    async def control_it(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as ctl:
+            await hello(ctl, Role.Controller, TOKEN)
+            await ctl.send(codec.encode(control(ControlCommand.Pause, PauseT(), 1)))
+            status = await next_of(ctl, "ReplayStatusT")
+            while not status.paused:
+                status = await next_of(ctl, "ReplayStatusT")
+            held = status.positionS
+            await asyncio.sleep(0.3)
+            status = await next_of(ctl, "ReplayStatusT")
+            assert status.paused and status.positionS == held, "paused: the position stands"
+            # Seek: the body as it was there comes at once (the newest state before the position).
+            seek = SeekT()
+            seek.timeS = 0.5
+            await ctl.send(codec.encode(control(ControlCommand.Seek, seek, 2)))
+            state = await next_of(ctl, "StateFrameT")
+            wanted = [s for t, s in got["/state"] if (t - got["/scene"][0][0]) / 1e9 <= 0.5]
+            assert state.step == wanted[-1].step and state.simTime >= first_state
+            status = await next_of(ctl, "ReplayStatusT")
+            assert abs(status.positionS - 0.5) < 1e-9 and status.paused
+            speed = SetSpeedT()
+            speed.speed = 2.0
+            await ctl.send(codec.encode(control(ControlCommand.SetSpeed, speed, 3)))
+            await ctl.send(codec.encode(control(ControlCommand.Resume, ResumeT(), 4)))
+            # Read on for a while (so that no status waits in a queue): the position runs at twice wall time.
+            seen = []
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < 0.6:
+                st = await next_of(ctl, "ReplayStatusT")
+                if not st.paused:
+                    seen.append((time.monotonic(), st.positionS, st.speed))
+            assert len(seen) >= 3 and all(sp == 2.0 for _, _, sp in seen)
+            rate = (seen[-1][1] - seen[0][1]) / (seen[-1][0] - seen[0][0])
+            assert 1.4 < rate < 2.8, f"at twice the recorded pace: {rate:.2f}"
+            # What a replay cannot do is refused by name.
+            speed.speed = 100.0
+            await ctl.send(codec.encode(control(ControlCommand.SetSpeed, speed, 5)))
+            err = await next_of(ctl, "ErrorT")
+            assert err.requestId == 5 and "(0, 16]" in err.message
+            await ctl.send(codec.encode(start("again", 6)))
+            err = await next_of(ctl, "ErrorT")
+            assert err.requestId == 6 and "live session" in err.message and recording.name in err.message
+
+    with replaying(tmp_path, recording) as (port, _):
+        asyncio.run(control_it(port))
+
+
+def test_a_replay_of_a_killed_recording_plays_what_it_holds_and_bad_files_are_refused(tmp_path: pathlib.Path) -> None:
+    whole = record_a_press(tmp_path)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) * 2 // 3])  # as a kill leaves it: no summary, a record cut short
+    with replaying(tmp_path, cut) as (_, proc):
+        time.sleep(0.2)
+    out = "".join(proc.lines)
+    assert "cut short" in out, out
+    not_mcap = tmp_path / "scene.json"
+    r = subprocess.run([built("tactile-server"), "--replay", str(not_mcap), "--port", "0"], capture_output=True,
+                       text=True, timeout=30)
+    assert r.returncode == 2 and "not an MCAP file" in r.stderr, r.stderr
+    r = subprocess.run([built("tactile-server"), "--replay", str(tmp_path / "none.mcap"), "--port", "0"],
+                       capture_output=True, text=True, timeout=30)
+    assert r.returncode == 2 and "none.mcap" in r.stderr, r.stderr
