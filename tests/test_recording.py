@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import pathlib
 import re
 import signal
 import subprocess
 import time
+import urllib.error
+import urllib.request
 from collections import defaultdict
 from collections.abc import Iterator
 from typing import Any
@@ -119,6 +122,21 @@ def test_a_controller_records_every_frame_input_and_control_of_the_session(tmp_p
 
     with running_server(tmp_path, "--recordings", str(rec_dir)) as (port, proc):
         asyncio.run(run(port))
+        # The recordings folder over HTTP: a listing, and each file to download (Foxglove opens it).
+        for _ in range(50):  # (the file closes on the recorder's thread)
+            listing = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{port}/recordings/", timeout=5).read())
+            if listing and listing[0]["bytes"] == (rec_dir / "poke.mcap").stat().st_size:
+                break
+            time.sleep(0.1)
+        assert [f["name"] for f in listing] == ["poke.mcap"]
+        body = urllib.request.urlopen(f"http://127.0.0.1:{port}/recordings/poke.mcap", timeout=5).read()
+        assert body == (rec_dir / "poke.mcap").read_bytes()
+        for bad, status in (("..%2Fscene.json", 400), ("scene.json", 400), ("none.mcap", 404)):
+            try:
+                urllib.request.urlopen(f"http://127.0.0.1:{port}/recordings/{bad}", timeout=5)
+                raise AssertionError(f"/recordings/{bad} was served")
+            except urllib.error.HTTPError as e:
+                assert e.code == status, (bad, e.code)
     path = rec_dir / "poke.mcap"
     got = read_closed(path)
     meta = got["@meta"][0][1]["tactile"]

@@ -741,6 +741,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     }
     if (req.method() != http::verb::get && req.method() != http::verb::head)
       return respond(req, http::status::method_not_allowed, "only GET and HEAD\n");
+    const std::string full(req.target());
+    if (full.starts_with("/recordings/")) return serve_recording(req, full.substr(12, full.find('?') - 12));
     if (server_->options.static_dir.empty())
       return respond(req, http::status::not_found, "this server serves no files (no static folder set)\n");
     std::string target(req.target().substr(0, req.target().find('?')));
@@ -752,6 +754,33 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     if (!in || std::filesystem::is_directory(path)) return respond(req, http::status::not_found, "not found\n");
     std::string body((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     respond(req, http::status::ok, std::move(body), content_type(path));
+  }
+
+  // The recordings folder: "/recordings/" lists its MCAP files (JSON: name,
+  // bytes), "/recordings/NAME" downloads one (Foxglove opens it).
+  void serve_recording(const http::request<http::string_body>& req, const std::string& name) {
+    const std::string& dir = server_->options.recordings_dir;
+    if (dir.empty()) return respond(req, http::status::not_found, "this server keeps no recordings (--recordings)\n");
+    std::error_code ec;
+    if (name.empty()) {
+      std::vector<std::pair<std::string, uintmax_t>> files;
+      for (const auto& entry : std::filesystem::directory_iterator(dir, ec))
+        if (entry.is_regular_file() && entry.path().extension() == ".mcap")
+          files.emplace_back(entry.path().filename().string(), entry.file_size(ec));
+      std::sort(files.begin(), files.end());
+      std::string body = "[";
+      for (const auto& [n, size] : files)
+        body += std::string(body.size() > 1 ? "," : "") + "{\"name\":\"" + n + "\",\"bytes\":" + std::to_string(size) + "}";
+      return respond(req, http::status::ok, body + "]\n", "application/json");
+    }
+    const bool plain = name[0] != '.' && std::all_of(name.begin(), name.end(), [](char ch) {
+      return std::isalnum(static_cast<unsigned char>(ch)) || ch == '.' || ch == '_' || ch == '-';
+    });
+    if (!plain || !name.ends_with(".mcap")) return respond(req, http::status::bad_request, "not a recording's name\n");
+    std::ifstream in(std::filesystem::path(dir) / name, std::ios::binary);
+    if (!in) return respond(req, http::status::not_found, "no recording '" + name + "'\n");
+    std::string body((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    respond(req, http::status::ok, std::move(body), "application/octet-stream");
   }
 
   void respond(const http::request<http::string_body>& req, http::status status, std::string body,
