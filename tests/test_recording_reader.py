@@ -16,6 +16,7 @@ import shutil
 import struct
 import subprocess
 import sys
+import tempfile
 import tomllib
 import xml.etree.ElementTree as ET
 import zlib
@@ -239,12 +240,9 @@ def binary_schema() -> bytes:
     """The schema as RECORDING.md stores it (flatc --binary --schema); the reader does not read it."""
     if shutil.which("flatc") is None:
         return b""
-    out = pathlib.Path(subprocess.run(["mktemp", "-d"], capture_output=True, text=True, check=True).stdout.strip())
-    try:
-        subprocess.run(["flatc", "--binary", "--schema", "-o", str(out), str(SCHEMA_PATH)], check=True)
-        return (out / "tactile.bfbs").read_bytes()
-    finally:
-        shutil.rmtree(out)
+    with tempfile.TemporaryDirectory() as out:
+        subprocess.run(["flatc", "--binary", "--schema", "-o", out, str(SCHEMA_PATH)], check=True, capture_output=True)
+        return (pathlib.Path(out) / "tactile.bfbs").read_bytes()
 
 
 def write_server_layout(path: pathlib.Path, messages: tuple[Written, ...] = (), chunk_size: int = 2000) -> pathlib.Path:
@@ -629,6 +627,17 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
             (d.device, d.sequence, d.deviceTimeNs, d.buttons)
         assert [float(row[c]) for c in ("x_m", "y_m", "z_m", "qw")] == [d.position.x, d.position.y, d.position.z, 1.0]
     assert not list(tmp_path.glob("*.pvd"))
+
+
+def test_forces_of_frames_no_scene_names_are_named_by_index(tmp_path):
+    """A recording whose /scene was lost (here: never written) still exports its forces."""
+    frames = [w for w in session() if w.topic == "/haptic"][:3]
+    result = export(open_recording(write_recording(tmp_path / "noscene.mcap", frames)), tmp_path / "out",
+                    surface=False)
+    rows = read_csv(tmp_path / "out" / "forces.csv")
+    assert list(rows[0])[4:] == [f"device.device0.f{a}_N" for a in "xyz"] + [f"proxy.proxy0.f{a}_N" for a in "xyz"]
+    assert [f32(r["proxy.proxy0.fz_N"]) for r in rows] == [np.float32(w.message.proxies[0].force.z) for w in frames]
+    assert any("which no scene read names: their columns are named by index" in n for n in result.notes)
 
 
 def test_vtu_series_hold_the_written_surfaces(tmp_path, closed):
