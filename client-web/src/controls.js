@@ -25,6 +25,8 @@ export class ControlPanel {
     this.pending = new Map();   // request id -> what it asked, for the answer
     this.description = null;
     this.paused = false;
+    this.replaying = false;    // the server replays a recording: only the timeline steers it
+    this.queued = [];          // sent once control is granted (sendWhenGranted)
     this.head = el('div', { className: 'head' });
     this.take = el('button', { textContent: 'take control', disabled: !token,
                                title: token ? '' : 'the controller role needs the token: open the URL with ?token=...' });
@@ -51,6 +53,7 @@ export class ControlPanel {
         this.take.textContent = 'release control';
         this.say('in control');
         this.build();
+        for (const [type, command, what] of this.queued.splice(0)) this.send(type, command, what);
       } else if (type === Message.Error) {
         const err = decode(data).message;
         const asked = this.pending.get(err.requestId);
@@ -66,6 +69,19 @@ export class ControlPanel {
       this.take.textContent = 'take control';
       this.build();
     };
+  }
+
+  // Sends now if in control, else takes control first (the page has the token) and sends then.
+  sendWhenGranted(type, command, what) {
+    if (this.granted) { this.send(type, command, what); return; }
+    this.queued.push([type, command, what]);
+    if (!this.ws) this.connect();
+  }
+
+  setReplaying(replaying) {
+    if (replaying === this.replaying) return;
+    this.replaying = replaying;
+    this.build();
   }
 
   release() {
@@ -97,6 +113,11 @@ export class ControlPanel {
     this.body.replaceChildren();
     const d = this.description;
     if (!this.granted || !d) return;
+    if (this.replaying) {
+      this.body.append(el('div', { textContent: 'replaying a recording: the timeline steers it; scenes, parameters '
+                                                 + 'and recording need a live session' }));
+      return;
+    }
     // Scenes, and the run.
     const picker = el('select', { name: 'scene' });
     for (const s of d.scenes || []) picker.append(el('option', { value: s, textContent: s }));

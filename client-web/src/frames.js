@@ -21,6 +21,11 @@ export class FrameBuffer {
     this.interval = 1 / 30;                    // between frames, smoothed [s]
   }
 
+  // Forgets the frames (a replay sought back in time): the next push starts over.
+  reset() {
+    this.count = 0;
+  }
+
   // Adds a frame (positions, scalars: array-likes of the right lengths; simTime [s]; now: local clock [s]).
   push(positions, scalars, simTime, now) {
     if (positions.length !== this.a.length) {

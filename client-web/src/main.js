@@ -12,6 +12,7 @@ import { ControlPanel } from './controls.js';
 import { FrameBuffer } from './frames.js';
 import { PointerDevice } from './pointer.js';
 import { TelemetryPanel } from './telemetry.js';
+import { Timeline } from './timeline.js';
 import { SceneView } from './view.js';
 
 const $ = (id) => document.getElementById(id);
@@ -56,6 +57,8 @@ const pointer = new PointerDevice({ canvas: renderer.domElement, camera, control
 const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality,
                 decodeMs: [], slotMs: [], frameMs: [] };
 const controlPanel = new ControlPanel($('controls'), { token, url: wsUrl });
+const timeline = new Timeline($('timeline'), controlPanel);
+stats.timeline = timeline;
 stats.pointer = pointer;
 stats.controls = controlPanel;
 // Where a scene point [m] is drawn, in CSS pixels of the page (for tests that point at the body).
@@ -125,6 +128,7 @@ function onMessage(data) {
     const t0 = performance.now();
     const f = readStateFrame(data);
     if (f.sceneId !== stats.sceneId) return;
+    if (buffer.count > 0 && f.simTime < buffer.tb) buffer.reset();  // a replay sought back
     const kept = buffer.push(f.positions, f.scalar, f.simTime, performance.now() / 1000);
     stats.decodeMs.push(performance.now() - t0);  // read in place and copied into the buffer
     if (stats.decodeMs.length > 256) stats.decodeMs.shift();
@@ -159,6 +163,11 @@ function onMessage(data) {
       break;
     case Message.SafetyEvent: telemetry.safety(m.message); break;
     case Message.DeviceStatus: telemetry.deviceStatus(m.message); stats.deviceStatus = m.message; break;
+    case Message.ReplayStatus:
+      timeline.update(m.message);
+      controlPanel.setReplaying(true);
+      stats.replay = m.message;
+      break;
     default: break;
   }
 }

@@ -20,12 +20,9 @@ export function serverExe(build = process.env.TACTILE_BUILD || 'build/release') 
   return exe;
 }
 
-// Writes `scene` (an object) into a fresh folder and starts the server on it on a free port, with `args`.
-export async function startServer(scene, args = [], { build, timeoutMs = 120000 } = {}) {
-  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-live-'));
-  const scenePath = path.join(dir, `${scene.name}.json`);
-  fs.writeFileSync(scenePath, JSON.stringify(scene));
-  const proc = spawn(serverExe(build), [scenePath, '--port', '0', '--static', path.join(root, 'client-web'), ...args],
+// Starts tactile-server with `argv` (after the executable), serving this folder on a free port.
+export async function spawnServer(argv, { build, timeoutMs = 120000 } = {}) {
+  const proc = spawn(serverExe(build), [...argv, '--port', '0', '--static', path.join(root, 'client-web')],
                      { stdio: ['ignore', 'pipe', 'pipe'] });
   let out = '';
   const port = await new Promise((resolve, reject) => {
@@ -38,19 +35,34 @@ export async function startServer(scene, args = [], { build, timeoutMs = 120000 
     proc.stderr.on('data', (d) => { out += d; });
     proc.on('exit', (code) => reject(new Error(`the server exited (${code}):\n${out}`)));
   });
+  proc.output = () => out;
   return { proc, port };
 }
 
-// The server on `scene` and a page of it at `query` (e.g. '?token=...'); `problems` collects console errors
-// and page errors. close() ends both.
-export async function openLive(scene, { args = [], query = '', viewport = { width: 800, height: 600 } } = {}) {
-  const { proc, port } = await startServer(scene, args);
+// Writes `scene` (an object) into a fresh folder and starts the server on it on a free port, with `args`.
+export async function startServer(scene, args = [], options = {}) {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-live-'));
+  const scenePath = path.join(dir, `${scene.name}.json`);
+  fs.writeFileSync(scenePath, JSON.stringify(scene));
+  return spawnServer([scenePath, ...args], options);
+}
+
+// A page of the server at `port` in Chromium; `problems` collects console errors and page errors.
+export async function openPage(port, { query = '', viewport = { width: 800, height: 600 } } = {}) {
   const browser = await chromium.launch({ executablePath: CHROMIUM, args: SWIFTSHADER });
   const page = await browser.newPage({ viewport });
   const problems = [];
   page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
   page.on('pageerror', (e) => problems.push(`page: ${e.message}`));
   await page.goto(`http://127.0.0.1:${port}/${query}`);
+  return { browser, page, problems };
+}
+
+// The server on `scene` and a page of it at `query` (e.g. '?token=...'); `problems` collects console errors
+// and page errors. close() ends both.
+export async function openLive(scene, { args = [], query = '', viewport = { width: 800, height: 600 } } = {}) {
+  const { proc, port } = await startServer(scene, args);
+  const { browser, page, problems } = await openPage(port, { query, viewport });
   return {
     port, page, problems,
     close: async () => {

@@ -171,6 +171,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
 
   asio::steady_timer replay_timer;
   Replay::Clock::time_point replay_status_due{};
+  bool replay_started = false;
   void tick_replay();
   Bytes replay_status();
   void serve_replayed(const Replay::Item& item);
@@ -474,6 +475,13 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
                                         server_->options.server_name.c_str(), id_, now_ns())),
          Kind::Control);
     send(server_->feed->description, Kind::Control);
+    if (server_->replay && !server_->replay_started) {  // the first client starts the playback
+      server_->replay_started = true;
+      server_->replay->play(Replay::Clock::now());
+      server_->replay_status_due = Replay::Clock::now();
+      server_->replay_timer.cancel();
+      server_->tick_replay();
+    }
     if (server_->replay) {  // where the replay is: the body as it was there, and the playback
       if (const Replay::Item* st = server_->replay->state_before(); st && role_ != wire::Role::Device)
         send(copy_bytes(st->bytes.data(), st->bytes.size()), Kind::State);
@@ -1235,7 +1243,6 @@ Server::Server(asio::io_context& ioc, Replay& replay, ServerOptions options)
     : impl_(std::make_shared<Impl>(ioc, nullptr, &replay, std::move(options))) {
   impl_->listen();
   impl_->accept();
-  replay.play(Replay::Clock::now());
   impl_->tick_replay();
 }
 

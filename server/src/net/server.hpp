@@ -77,7 +77,8 @@ class Server {
   // at their recorded pace): viewers get its states, devices its haptic
   // frames, a controller may Pause, Resume, Seek and SetSpeed, and every
   // client of protocol 1.4 gets a ReplayStatus ten times a second. Starts
-  // playing at once; at the end it pauses. The replay must outlive the server.
+  // playing when the first client says Hello; at the end it pauses. The
+  // replay must outlive the server.
   Server(boost::asio::io_context& ioc, Replay& replay, ServerOptions options);
   ~Server();
   Server(const Server&) = delete;
