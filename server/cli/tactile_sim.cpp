@@ -13,6 +13,8 @@
 
 #include "app/headless.hpp"
 #include "app/simulation.hpp"
+#include "live/resim.hpp"
+#include "record/mcap.hpp"
 #include "core/model.hpp"
 #include "mesh/mesh_error.hpp"
 #include "scene/scene.hpp"
@@ -26,6 +28,11 @@ constexpr const char* kUsage =
     "  tactile-sim run SCENE.json [options]   run a scene headless, write VTU frames, frames.csv, summary.json\n"
     "                                         (and forces.csv, devices.csv when it has proxies)\n"
     "  tactile-sim check SCENE.json           load and validate; print mesh quality and the critical step\n"
+    "  tactile-sim resim RECORDING.mcap [--scene OTHER.json] [--variant V] [--out RESIM.mcap]\n"
+    "                                         feed a recording's device inputs to the simulator again, each\n"
+    "                                         before the same step as live; with its own scene the states come\n"
+    "                                         out bit for bit as recorded (exit 1 when one differs); with\n"
+    "                                         another, compare the two: tactile-recording compare REC RESIM\n"
     "  tactile-sim --help\n"
     "\n"
     "run options:\n"
@@ -50,6 +57,7 @@ struct Options {
   std::optional<Precision> precision;
   std::optional<int32_t> threads;
   std::optional<std::string> variant;
+  std::optional<std::string> other_scene, resim_out;
   bool vtu = true, quiet = false;
 };
 
@@ -86,6 +94,8 @@ Options parse_args(int argc, char** argv) {
       o.threads = int32_t(n);
     } else if (a == "--variant") {
       o.variant = value(i);
+    } else if (a == "--scene") {
+      o.other_scene = value(i);
     } else if (a == "--no-vtu") {
       o.vtu = false;
     } else if (a == "--quiet") {
@@ -101,8 +111,9 @@ Options parse_args(int argc, char** argv) {
     }
   }
   if (o.command.empty()) throw BadInput{"no command given"};
-  if (o.command != "run" && o.command != "check") throw BadInput{"unknown command " + o.command};
-  if (o.scene.empty()) throw BadInput{o.command + " needs a scene file"};
+  if (o.command != "run" && o.command != "check" && o.command != "resim") throw BadInput{"unknown command " + o.command};
+  if (o.scene.empty()) throw BadInput{o.command + (o.command == "resim" ? " needs a recording" : " needs a scene file")};
+  if (o.other_scene && o.command != "resim") throw BadInput{"--scene is for resim"};
   return o;
 }
 
@@ -140,6 +151,36 @@ int check(const Options& o) {
               << " s (more if the body is squashed or stiffened)\n";
   }
   std::cout << "ok\n";
+  return 0;
+}
+
+int resim(const Options& o) {
+  ResimOptions r;
+  r.recording = o.scene;
+  r.scene = o.other_scene.value_or("");
+  r.variant = o.variant.value_or("");
+  if (o.out != "out") r.out = o.out;  // (--out names the re-simulation's recording here)
+  const ResimReport rep = resimulate(r);
+  std::cout << "resim " << o.scene << " on scene " << rep.scene_name << ": " << rep.steps << " steps, " << rep.inputs
+            << " inputs applied\n";
+  if (!r.out.empty()) std::cout << "  wrote " << r.out << "\n";
+  if (!rep.note.empty()) std::cout << "  note: " << rep.note << "\n";
+  if (r.scene.empty()) {
+    std::cout << "  states: " << rep.states_identical << " of " << rep.states_matched << " identical bit for bit; "
+              << "haptic frames: " << rep.haptic_identical << " of " << rep.haptic_matched << "\n";
+    const bool identical = rep.states_matched > 0 && rep.states_identical == rep.states_matched &&
+                           rep.haptic_identical == rep.haptic_matched;
+    if (!identical) {
+      std::cout << "  first difference at t = " << rep.first_difference_time << " s; largest: position "
+                << rep.max_position_difference << " m, force " << rep.max_force_difference << " N\n";
+      return 1;
+    }
+    std::cout << "  identical\n";
+  } else {
+    std::cout << "  " << rep.states_matched << " states and " << rep.haptic_matched
+              << " haptic frames at the recorded times; largest differences: position " << rep.max_position_difference
+              << " m, force " << rep.max_force_difference << " N\n";
+  }
   return 0;
 }
 
@@ -190,6 +231,7 @@ int main(int argc, char** argv) {
       std::cout << kUsage;
       return 0;
     }
+    if (o.command == "resim") return resim(o);
     return o.command == "check" ? check(o) : run(o);
   } catch (const BadInput& e) {
     std::cerr << "tactile-sim: " << e.message << "\n\n" << kUsage;
@@ -201,6 +243,12 @@ int main(int argc, char** argv) {
     std::cerr << "tactile-sim: " << e.what() << "\n";
     return 2;
   } catch (const MeshError& e) {
+    std::cerr << "tactile-sim: " << e.what() << "\n";
+    return 2;
+  } catch (const ResimError& e) {
+    std::cerr << "tactile-sim: " << e.what() << "\n";
+    return 2;
+  } catch (const mcap::McapError& e) {
     std::cerr << "tactile-sim: " << e.what() << "\n";
     return 2;
   } catch (const std::exception& e) {

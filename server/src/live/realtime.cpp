@@ -28,6 +28,20 @@ int64_t nanoseconds(RealtimeLoop::Clock::time_point t) {
 
 }  // namespace
 
+DeviceSample device_sample(const proto::DeviceInput& in, int32_t device) {
+  const proto::Vec3d& p = *in.position();
+  const proto::Quatd& q = *in.orientation();
+  DeviceSample s;
+  s.device = device;
+  s.sequence = in.sequence();
+  s.device_time_ns = in.device_time_ns();
+  s.pose.position = Vec3(p.x(), p.y(), p.z());
+  const double qn = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
+  s.pose.orientation = Quat(q.w() / qn, q.x() / qn, q.y() / qn, q.z() / qn);
+  s.buttons = in.buttons();
+  return s;
+}
+
 RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const RealtimeOptions& options)
     : sim_(sim),
       frames_(frames),
@@ -94,6 +108,7 @@ void RealtimeLoop::apply_inputs() {
     for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);
     last_sequence_ = std::max(last_sequence_, s.sequence);
     device_sequences_[size_t(s.device)] = s.sequence;  // the latest, even when a restarted bridge counts from 1 again
+    if (applied_sink_) applied_sink_({loop_steps_, s.device, s.sequence});
     ++applied;
   }
   if (applied) {
@@ -104,6 +119,7 @@ void RealtimeLoop::apply_inputs() {
 
 void RealtimeLoop::step_once(int64_t now_ns) {
   apply_inputs();
+  ++loop_steps_;
   const AdvanceReport report = sim_.advance(dt_);
   if (report.fault) {
     std::lock_guard<std::mutex> lock(stats_mutex_);
@@ -131,17 +147,10 @@ void RealtimeLoop::step_once(int64_t now_ns) {
 void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
   // This thread's sleeps end within a microsecond of their deadline, not 50.
   prctl(PR_SET_TIMERSLACK, 1000UL, 0UL, 0UL, 0UL);
-  sync_drivers();
   const double sim_start = sim_.time();
   Clock::time_point anchor = Clock::now();  // wall time of simulated time `anchor_sim`
   double anchor_sim = sim_start;
-  next_state_ = sim_start;
-  if (state_sink_) state_sink_(frames_.state_frame(nanoseconds(anchor)));
-  {
-    std::lock_guard<std::mutex> lock(stats_mutex_);
-    ++stats_.state_frames;
-  }
-  next_state_ += state_period_;
+  begin(nanoseconds(anchor));
 
   const Clock::time_point start = anchor;
   Clock::time_point window_start = start;
@@ -216,6 +225,17 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
     stats_.step_mean_us = 1e6 * cost_sum / double(window_steps);
     stats_.step_max_us = 1e6 * cost_max;
   }
+}
+
+void RealtimeLoop::begin(int64_t stamp_ns) {
+  sync_drivers();
+  next_state_ = sim_.time();
+  if (state_sink_) state_sink_(frames_.state_frame(stamp_ns));
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++stats_.state_frames;
+  }
+  next_state_ += state_period_;
 }
 
 RealtimeStats RealtimeLoop::stats() const {

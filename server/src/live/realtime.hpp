@@ -42,6 +42,20 @@ struct DeviceSample {
   uint32_t buttons = 0;
 };
 
+// The sample a checked DeviceInput (net/inbound.cpp) becomes: the one
+// conversion the live server and a re-simulation share, so that both move
+// the proxy by the same bits.
+DeviceSample device_sample(const proto::DeviceInput& in, int32_t device);
+
+// An input the loop applied: which one, and before which of its steps (a
+// recording keeps these, so that a re-simulation applies the same inputs at
+// the same steps).
+struct AppliedInput {
+  int64_t loop_step;       // steps this loop had taken when it applied the input
+  int32_t device;
+  uint64_t sequence;
+};
+
 struct RealtimeOptions {
   // Step [s]; 0 picks 0.7 x the critical step at rest: under the stepper's
   // own limit (safety 0.9 x the current critical step, which stiffening
@@ -89,6 +103,8 @@ class RealtimeLoop {
   // Called on the simulation thread with each encoded message; must not block.
   void on_haptic(Sink sink) { haptic_sink_ = std::move(sink); }
   void on_state(Sink sink) { state_sink_ = std::move(sink); }
+  // Called on the simulation thread with each input as it is applied; must not block.
+  void on_applied(std::function<void(const AppliedInput&)> sink) { applied_sink_ = std::move(sink); }
 
   // From one producer thread: queues a device's pose; false (and counted)
   // when the queue is full or the device unknown.
@@ -101,6 +117,14 @@ class RealtimeLoop {
   void run(const std::atomic<bool>& stop, double duration = std::numeric_limits<double>::infinity());
   // From any thread: the current (or next) run returns after its step.
   void interrupt() { interrupt_.store(true, std::memory_order_relaxed); }
+
+  // Unpaced, on one thread, for a re-simulation: begin() does what run()
+  // does at its start (holds the proxies where they are, publishes the
+  // first state); step() applies the queued inputs and takes one step,
+  // publishing as run() does, stamped `stamp_ns`. Not with run().
+  void begin(int64_t stamp_ns);
+  void step(int64_t stamp_ns) { step_once(stamp_ns); }
+  int64_t loop_steps() const { return loop_steps_; }
 
   // A snapshot, from any thread (updated every step; the per-second figures
   // once a second).
@@ -146,6 +170,8 @@ class RealtimeLoop {
   double dt_;
   double state_period_;
   Sink haptic_sink_, state_sink_;
+  std::function<void(const AppliedInput&)> applied_sink_;
+  int64_t loop_steps_ = 0;  // step_once calls
   SpscRing<DeviceSample> inputs_;
   std::vector<Driver> drivers_;
   uint64_t last_sequence_ = 0;              // the newest input's sequence, across channels

@@ -4,6 +4,7 @@
 #include <cctype>
 #include <cmath>
 #include <chrono>
+#include <cstring>
 #include <ctime>
 #include <cstdio>
 #include <deque>
@@ -101,11 +102,12 @@ class WsSession;
 // recording fault). Made when a recording first starts on a feed and kept
 // with it, since the simulation thread may be pushing into it.
 struct RecordTap {
-  FrameRing states, haptics;
-  int64_t states_dropped = 0, haptics_dropped = 0;  // counted by the rings when the recording started
+  FrameRing states, haptics, applied;
+  int64_t states_dropped = 0, haptics_dropped = 0, applied_dropped = 0;  // by the rings when the recording started
   RecordTap(size_t state_bytes, size_t haptic_bytes)
-      : states(64, state_bytes),       // two seconds of states at 30 Hz
-        haptics(16384, haptic_bytes) {}  // 1.6 s of haptic frames at 10 kHz
+      : states(64, state_bytes),         // two seconds of states at 30 Hz
+        haptics(16384, haptic_bytes),    // 1.6 s of haptic frames at 10 kHz
+        applied(16384, sizeof(AppliedInput)) {}  // of inputs at 10 kHz
 };
 
 // What the clients are served from for one scene: the mailboxes its loop
@@ -218,6 +220,10 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
       target->states.put(m.data(), m.size());
       if (target->recording.load(std::memory_order_acquire)) target->tap->states.push(m.data(), m.size());
       wake->signal();
+    });
+    f.live->loop().on_applied([target](const AppliedInput& a) {
+      if (target->recording.load(std::memory_order_acquire))
+        target->tap->applied.push(reinterpret_cast<const uint8_t*>(&a), sizeof a);
     });
   }
 
@@ -525,16 +531,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     if (index < 0) return;  // not in this scene (said at the switch)
     if (const std::string bad = check_device_input(in); !bad.empty())
       return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
-    const wire::Vec3d& p = *in.position();
-    const wire::Quatd& q = *in.orientation();
-    DeviceSample s;
-    s.device = index;
-    s.sequence = in.sequence();
-    s.device_time_ns = in.device_time_ns();
-    s.pose.position = Vec3(p.x(), p.y(), p.z());
-    const double qn = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
-    s.pose.orientation = Quat(q.w() / qn, q.x() / qn, q.y() / qn, q.z() / qn);
-    s.buttons = in.buttons();
+    const DeviceSample s = device_sample(in, index);
     // (A replay simulates nothing: its inputs move nothing.)
     if (server_->feed->live) server_->feed->live->loop().post_input(s);  // a full queue drops it and counts
     server_->record(Topic::Input, raw_.data(), raw_.size(), now_ns());
@@ -929,7 +926,8 @@ void Server::Impl::serve_replayed(const Replay::Item& item) {
       return;
     case Topic::Input:
     case Topic::Control:
-    case Topic::Error: return;  // what clients sent: kept in the file, not served
+    case Topic::Error:
+    case Topic::Applied: return;  // what clients sent, what the simulation applied: kept in the file, not served
   }
 }
 
@@ -994,8 +992,10 @@ void Server::Impl::tap_feed(Feed& f) {
   // Frames left from an earlier recording's last moments are not this one's.
   f.tap->states.drain([](const uint8_t*, size_t) {});
   f.tap->haptics.drain([](const uint8_t*, size_t) {});
+  f.tap->applied.drain([](const uint8_t*, size_t) {});
   f.tap->states_dropped = f.tap->states.dropped();
   f.tap->haptics_dropped = f.tap->haptics.dropped();
+  f.tap->applied_dropped = f.tap->applied.dropped();
   f.recording.store(true, std::memory_order_release);
 }
 
@@ -1009,15 +1009,33 @@ void Server::Impl::drain_tap(Feed& f) {
   f.tap->states.drain([&](const uint8_t* data, size_t n) {
     record(Topic::State, data, n, wire::GetEnvelope(data)->message_as_StateFrame()->server_time_ns());
   });
+  const int64_t now = now_ns();
+  f.tap->applied.drain([&](const uint8_t* data, size_t) {
+    AppliedInput a;
+    std::memcpy(&a, data, sizeof a);
+    char json[128];
+    const int n = std::snprintf(json, sizeof json, R"({"loop_step":%lld,"device":%d,"sequence":%llu})",
+                                static_cast<long long>(a.loop_step), int(a.device),
+                                static_cast<unsigned long long>(a.sequence));
+    record(Topic::Applied, reinterpret_cast<const uint8_t*>(json), size_t(n), now);
+  });
   const int64_t lost_h = f.tap->haptics.dropped() - f.tap->haptics_dropped;
   const int64_t lost_s = f.tap->states.dropped() - f.tap->states_dropped;
-  if (lost_h > 0 || lost_s > 0)
+  const int64_t lost_a = f.tap->applied.dropped() - f.tap->applied_dropped;
+  if (lost_h > 0 || lost_s > 0 || lost_a > 0)
     recorder->fail("the simulation published frames faster than the recording took them (" +
-                   std::to_string(lost_h) + " haptic and " + std::to_string(lost_s) +
-                   " state frames had no room): stopped, what was written stays readable");
+                   std::to_string(lost_h) + " haptic and " + std::to_string(lost_s) + " state frames, " +
+                   std::to_string(lost_a) + " applied inputs had no room): stopped, what was written stays readable");
 }
 
 namespace {
+
+// A double as text that reads back to the same bits.
+std::string exact(double v) {
+  char s[32];
+  std::snprintf(s, sizeof s, "%.17g", v);
+  return s;
+}
 
 std::string read_text(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -1059,7 +1077,10 @@ std::string Server::Impl::start_recording(const std::string& name, bool any_path
                  {"scene_file", read_text(scene.path)},
                  {"variant", scene.variant},
                  {"scene_id", std::to_string(feed->live->id())},
-                 {"dt", std::to_string(feed->live->loop().dt())},
+                 {"dt", exact(feed->live->loop().dt())},
+                 {"state_rate_hz", exact(options.live.state_rate_hz)},
+                 {"haptic_rate_hz", exact(options.live.haptic_rate_hz)},
+                 {"force_window", exact(options.live.force_window)},
                  {"server", options.server_name}};
   try {
     recorder = std::make_unique<Recorder>(path, meta);

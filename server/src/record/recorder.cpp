@@ -1,6 +1,7 @@
 #include "record/recorder.hpp"
 
 #include <cstdio>
+#include <string_view>
 
 namespace tactile {
 
@@ -15,6 +16,7 @@ const char* topic_name(Topic t) {
     case Topic::Telemetry: return "/telemetry";
     case Topic::Safety: return "/safety";
     case Topic::DeviceStatus: return "/device_status";
+    case Topic::Applied: return "/applied";
   }
   return "?";
 }
@@ -36,7 +38,18 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
     : path_(path), options_(options), writer_(path, "", "tactile-server"),
       epoch_offset_ns_(unix_now_ns() - steady_now_ns()) {
   const uint16_t schema = writer_.add_schema("tactile.proto.Envelope", "flatbuffer", tactile_bfbs());
-  for (int t = 0; t < kTopicCount; ++t) channel_[t] = writer_.add_channel(schema, topic_name(Topic(t)), "flatbuffer");
+  static constexpr char kAppliedSchema[] =
+      R"({"title":"tactile.AppliedInput","type":"object","properties":{)"
+      R"("loop_step":{"type":"integer","description":"steps the loop had taken when it applied the input"},)"
+      R"("device":{"type":"integer","description":"channel index, SceneDescription.devices order"},)"
+      R"("sequence":{"type":"integer","description":"the DeviceInput's sequence"}}})";
+  const std::string_view applied_schema(kAppliedSchema);
+  const uint16_t applied = writer_.add_schema(
+      "tactile.AppliedInput", "jsonschema",
+      {reinterpret_cast<const uint8_t*>(applied_schema.data()), applied_schema.size()});
+  for (int t = 0; t < kTopicCount; ++t)
+    channel_[t] = Topic(t) == Topic::Applied ? writer_.add_channel(applied, topic_name(Topic(t)), "json")
+                                             : writer_.add_channel(schema, topic_name(Topic(t)), "flatbuffer");
   mcap::Map meta = metadata;
   meta["started_unix_ns"] = std::to_string(unix_now_ns());
   writer_.add_metadata("tactile", meta);
@@ -50,7 +63,9 @@ Recorder::~Recorder() {
 }
 
 bool Recorder::post(Topic topic, int64_t steady_ns, int64_t publish_ns, std::span<const uint8_t> bytes) {
-  std::lock_guard<std::mutex> lock(mutex_);
+  std::unique_lock<std::mutex> lock(mutex_);
+  if (options_.wait_for_room)
+    room_.wait(lock, [&] { return stopping_ || queued_bytes_ == 0 || queued_bytes_ + bytes.size() <= options_.queue_bytes; });
   if (stopping_) return false;
   if (queued_bytes_ + bytes.size() > options_.queue_bytes) {
     stats_.fault = "the recording could not keep up with the session (" + std::to_string(queued_bytes_ >> 20) +
@@ -106,6 +121,7 @@ void Recorder::run() {
       queued_bytes_ = 0;
       stopping = stopping_;
     }
+    room_.notify_all();
     try {
       for (Item& item : batch) {
         if (writer_.chunk_empty()) chunk_opened = Clock::now();
@@ -131,6 +147,7 @@ void Recorder::run() {
   std::lock_guard<std::mutex> lock(mutex_);
   if (!error.empty() && stats_.fault.empty()) stats_.fault = error;
   stopping_ = true;
+  room_.notify_all();
   queue_.clear();
   stats_.messages = writer_.messages();
   stats_.bytes = writer_.bytes();

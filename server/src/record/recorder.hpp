@@ -27,14 +27,19 @@
 
 namespace tactile {
 
-enum class Topic : uint8_t { Scene, State, Haptic, Input, Control, Error, Telemetry, Safety, DeviceStatus };
-inline constexpr int kTopicCount = 9;
+// Each an Envelope of the protocol (flatbuffer), but Applied: a JSON object
+// {"loop_step", "device", "sequence"} per input the simulation applied, in
+// the order applied (what a re-simulation replays).
+enum class Topic : uint8_t { Scene, State, Haptic, Input, Control, Error, Telemetry, Safety, DeviceStatus, Applied };
+inline constexpr int kTopicCount = 10;
 const char* topic_name(Topic t);  // "/scene", "/state", ...
 
 struct RecorderOptions {
   size_t chunk_bytes = 1 << 20;
   double chunk_seconds = 0.25;
   size_t queue_bytes = size_t(256) << 20;  // posted, not yet written, before it is a fault
+  // An offline writer (a re-simulation) waits for room instead: post() blocks.
+  bool wait_for_room = false;
 };
 
 struct RecorderStats {
@@ -84,7 +89,7 @@ class Recorder {
   int64_t epoch_offset_ns_;  // steady -> Unix time, fixed at the start
 
   mutable std::mutex mutex_;
-  std::condition_variable wake_;
+  std::condition_variable wake_, room_;
   std::deque<Item> queue_;
   size_t queued_bytes_ = 0;
   bool stopping_ = false;

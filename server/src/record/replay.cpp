@@ -20,6 +20,7 @@ proto::Message message_of(Topic t) {
     case Topic::Telemetry: return proto::Message::Telemetry;
     case Topic::Safety: return proto::Message::SafetyEvent;
     case Topic::DeviceStatus: return proto::Message::DeviceStatus;
+    case Topic::Applied: return proto::Message::NONE;  // JSON, for re-simulation: not served
   }
   return proto::Message::NONE;
 }
@@ -38,7 +39,7 @@ Replay::Replay(const std::string& path) : path_(path) {
   size_t bad = 0;
   for (mcap::Message& m : rec.messages) {
     const auto it = std::find_if(topics.begin(), topics.end(), [&](const auto& p) { return p.first == m.channel; });
-    if (it == topics.end()) continue;
+    if (it == topics.end() || it->second == Topic::Applied) continue;
     // Served to clients as they are: each must be a whole Envelope of its topic's type.
     flatbuffers::Verifier v(m.data.data(), m.data.size());
     if (!proto::VerifyEnvelopeBuffer(v) ||

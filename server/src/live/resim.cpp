@@ -1,0 +1,292 @@
+#include "live/resim.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <deque>
+#include <map>
+#include <memory>
+#include <optional>
+
+#include <nlohmann/json.hpp>
+
+#include "live/director.hpp"
+#include "record/mcap.hpp"
+#include "record/recorder.hpp"
+#include "tactile_generated.h"
+
+namespace tactile {
+namespace {
+
+namespace wire = proto;
+
+const mcap::Map& tactile_metadata(const mcap::Recording& rec, const std::string& path) {
+  for (const auto& [name, map] : rec.metadata)
+    if (name == "tactile") return map;
+  throw ResimError("recording '" + path + "' has no 'tactile' metadata: not a tactile-server recording");
+}
+
+const std::string& field(const mcap::Map& m, const std::string& key, const std::string& path) {
+  const auto it = m.find(key);
+  if (it == m.end() || it->second.empty())
+    throw ResimError("recording '" + path + "' lacks '" + key + "' in its metadata (recorded by an older server?)");
+  return it->second;
+}
+
+double number(const mcap::Map& m, const std::string& key, const std::string& path) {
+  const std::string& text = field(m, key, path);
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (*end != '\0' || !std::isfinite(v)) throw ResimError("recording '" + path + "': metadata " + key + " is not a number");
+  return v;
+}
+
+template <class T>
+bool same_vector(const flatbuffers::Vector<T>* a, const flatbuffers::Vector<T>* b) {
+  const size_t na = a ? a->size() : 0, nb = b ? b->size() : 0;
+  if (na != nb) return false;
+  return na == 0 || std::memcmp(a->Data(), b->Data(), na * sizeof(T)) == 0;
+}
+template <class T>
+bool same_structs(const flatbuffers::Vector<const T*>* a, const flatbuffers::Vector<const T*>* b) {
+  const size_t na = a ? a->size() : 0, nb = b ? b->size() : 0;
+  if (na != nb) return false;
+  return na == 0 || std::memcmp(a->Data(), b->Data(), na * sizeof(T)) == 0;
+}
+
+// Field by field, the server's clock aside.
+bool same_state(const wire::StateFrame& a, const wire::StateFrame& b) {
+  const bool energies = (!a.energies() && !b.energies()) ||
+                        (a.energies() && b.energies() && std::memcmp(a.energies(), b.energies(), sizeof(wire::Energies)) == 0);
+  return a.scene_id() == b.scene_id() && a.step() == b.step() && a.sim_time() == b.sim_time() &&
+         same_vector(a.positions(), b.positions()) && same_vector(a.scalar(), b.scalar()) &&
+         same_structs(a.proxies(), b.proxies()) && same_structs(a.contact_forces(), b.contact_forces()) && energies;
+}
+bool same_haptic(const wire::HapticFrame& a, const wire::HapticFrame& b) {
+  return a.scene_id() == b.scene_id() && a.step() == b.step() && a.sim_time() == b.sim_time() &&
+         a.last_input_sequence() == b.last_input_sequence() && same_structs(a.proxies(), b.proxies()) &&
+         same_structs(a.devices(), b.devices()) && same_structs(a.device_poses(), b.device_poses()) &&
+         same_vector(a.device_input_sequences(), b.device_input_sequences());
+}
+
+// Recorded frames of one scene by the bits of their simulated time.
+uint64_t key(double t) {
+  uint64_t k;
+  std::memcpy(&k, &t, sizeof k);
+  return k;
+}
+
+}  // namespace
+
+ResimReport resimulate(const ResimOptions& o) {
+  const mcap::Recording rec = mcap::read_file(o.recording);
+  const mcap::Map& meta = tactile_metadata(rec, o.recording);
+
+  // The recorded session: its first scene, from its start.
+  const uint16_t ch_scene = rec.channel_of("/scene"), ch_state = rec.channel_of("/state"),
+                 ch_haptic = rec.channel_of("/haptic"), ch_input = rec.channel_of("/input"),
+                 ch_applied = rec.channel_of("/applied");
+  if (!ch_applied)
+    throw ResimError("recording '" + o.recording + "' has no /applied channel (recorded by an older server?)");
+  const wire::SceneDescription* recorded_scene = nullptr;
+  for (const mcap::Message& m : rec.messages)
+    if (m.channel == ch_scene) {
+      recorded_scene = wire::GetEnvelope(m.data.data())->message_as_SceneDescription();
+      break;
+    }
+  if (!recorded_scene) throw ResimError("recording '" + o.recording + "' holds no scene description");
+  const uint32_t scene_id = recorded_scene->scene_id();
+  std::vector<std::string> recorded_devices;
+  if (recorded_scene->devices())
+    for (const flatbuffers::String* d : *recorded_scene->devices()) recorded_devices.push_back(d->str());
+
+  ResimReport report;
+  std::map<uint64_t, const wire::StateFrame*> states;
+  std::map<uint64_t, const wire::HapticFrame*> haptics;
+  double first_state = -1, last_state = 0;
+  bool later_scene = false;
+  for (const mcap::Message& m : rec.messages) {
+    if (m.channel == ch_state) {
+      const wire::StateFrame* f = wire::GetEnvelope(m.data.data())->message_as_StateFrame();
+      if (!f) continue;
+      if (f->scene_id() != scene_id) {
+        later_scene = true;
+        continue;
+      }
+      if (first_state < 0) first_state = f->sim_time();
+      last_state = std::max(last_state, f->sim_time());
+      states[key(f->sim_time())] = f;
+    } else if (m.channel == ch_haptic) {
+      const wire::HapticFrame* f = wire::GetEnvelope(m.data.data())->message_as_HapticFrame();
+      if (f && f->scene_id() == scene_id) haptics[key(f->sim_time())] = f;
+    }
+  }
+  if (first_state != 0.0)
+    throw ResimError("recording '" + o.recording + "' starts at t = " + std::to_string(first_state) +
+                     " s of its scene: a re-simulation starts from the scene's start (record with --record, "
+                     "or from a load or reset)");
+  if (later_scene) report.note = "the recording goes on in a later scene (a load, reset or parameter change): "
+                                 "re-simulated up to it";
+
+  // What the loop applied, and the inputs themselves.
+  struct Applied {
+    int64_t loop_step;
+    int32_t device;
+    uint64_t sequence;
+  };
+  std::vector<Applied> applied;
+  for (const mcap::Message& m : rec.messages)
+    if (m.channel == ch_applied) {
+      const auto j = nlohmann::json::parse(m.data.begin(), m.data.end(), nullptr, false);
+      if (j.is_discarded() || !j.contains("loop_step") || !j.contains("device") || !j.contains("sequence"))
+        throw ResimError("recording '" + o.recording + "': an /applied message is not {loop_step, device, sequence}");
+      applied.push_back({j["loop_step"].get<int64_t>(), j["device"].get<int32_t>(), j["sequence"].get<uint64_t>()});
+    }
+  std::map<std::pair<std::string, uint64_t>, std::deque<const mcap::Message*>> inputs;
+  for (const mcap::Message& m : rec.messages)
+    if (m.channel == ch_input) {
+      const wire::DeviceInput* in = wire::GetEnvelope(m.data.data())->message_as_DeviceInput();
+      if (in && in->device()) inputs[{in->device()->str(), in->sequence()}].push_back(&m);
+    }
+
+  // The scene: the recorded one (its file as it was), or another.
+  Scene scene;
+  {
+    std::vector<Scene> scenes;
+    std::string variant = o.variant;
+    if (o.scene.empty()) {
+      const auto j = nlohmann::json::parse(field(meta, "scene_file", o.recording), nullptr, false);
+      if (j.is_discarded()) throw ResimError("recording '" + o.recording + "': its scene file is not JSON");
+      scenes = parse_scene(j, field(meta, "scene_path", o.recording));
+      if (variant.empty() && meta.count("variant")) variant = meta.at("variant");
+    } else {
+      scenes = load_scene(o.scene);
+    }
+    const Scene* chosen = &scenes.front();
+    if (!variant.empty()) {
+      chosen = nullptr;
+      for (const Scene& s : scenes)
+        if (s.variant == variant) chosen = &s;
+      if (!chosen) throw ResimError("scene has no variant '" + variant + "'");
+    }
+    scene = *chosen;
+  }
+  LiveOptions lo;
+  lo.dt = number(meta, "dt", o.recording);
+  lo.state_rate_hz = number(meta, "state_rate_hz", o.recording);
+  lo.haptic_rate_hz = number(meta, "haptic_rate_hz", o.recording);
+  lo.force_window = number(meta, "force_window", o.recording);
+  LiveScene live(scene, scene_id, lo);
+  report.scene_name = scene.name;
+  // Channels by name: another scene may order them otherwise, or lack one.
+  std::vector<int32_t> device_index;
+  for (const std::string& name : recorded_devices) {
+    const auto& names = live.sim().devices();
+    const auto it = std::find(names.begin(), names.end(), name);
+    device_index.push_back(it == names.end() ? -1 : int32_t(it - names.begin()));
+  }
+
+  std::unique_ptr<Recorder> out;
+  if (!o.out.empty()) {
+    mcap::Map m = meta;
+    m["scene_name"] = scene.name;
+    m["scene_path"] = scene.path;
+    m["resimulated_from"] = o.recording;
+    if (!o.scene.empty()) m.erase("scene_file");  // (its own file is at scene_path)
+    out = std::make_unique<Recorder>(o.out, m, RecorderOptions{.wait_for_room = true});
+    const std::vector<uint8_t> d = live.describe({});
+    out->post(Topic::Scene, 0, 0, d);
+  }
+  const bool same_scene = o.scene.empty();
+
+  live.loop().on_state([&](std::span<const uint8_t> bytes) {
+    const wire::StateFrame* f = wire::GetEnvelope(bytes.data())->message_as_StateFrame();
+    ++report.states;
+    if (out) out->post(Topic::State, int64_t(std::llround(f->sim_time() * 1e9)), 0, bytes);
+    const auto it = states.find(key(f->sim_time()));
+    if (it == states.end()) return;
+    ++report.states_matched;
+    const wire::StateFrame& r = *it->second;
+    if (same_scene && same_state(*f, r)) {
+      ++report.states_identical;
+      return;
+    }
+    if (report.first_difference_time < 0) report.first_difference_time = f->sim_time();
+    if (f->positions() && r.positions() && f->positions()->size() == r.positions()->size())
+      for (size_t i = 0; i < f->positions()->size(); ++i)
+        report.max_position_difference =
+            std::max(report.max_position_difference, double(std::fabs(f->positions()->Get(i) - r.positions()->Get(i))));
+  });
+  live.loop().on_haptic([&](std::span<const uint8_t> bytes) {
+    const wire::HapticFrame* f = wire::GetEnvelope(bytes.data())->message_as_HapticFrame();
+    ++report.haptic;
+    if (out) out->post(Topic::Haptic, int64_t(std::llround(f->sim_time() * 1e9)), 0, bytes);
+    const auto it = haptics.find(key(f->sim_time()));
+    if (it == haptics.end()) return;
+    ++report.haptic_matched;
+    const wire::HapticFrame& r = *it->second;
+    if (same_scene && same_haptic(*f, r)) {
+      ++report.haptic_identical;
+      return;
+    }
+    if (f->proxies() && r.proxies())
+      for (size_t j = 0; j < std::min(f->proxies()->size(), r.proxies()->size()); ++j) {
+        const wire::Vec3f& a = f->proxies()->Get(j)->force();
+        const wire::Vec3f& b = r.proxies()->Get(j)->force();
+        report.max_force_difference =
+            std::max(report.max_force_difference, std::hypot(double(a.x() - b.x()), double(a.y() - b.y()), double(a.z() - b.z())));
+      }
+  });
+
+  RealtimeLoop& loop = live.loop();
+  const Simulation& sim = live.sim();
+  loop.begin(0);
+  size_t next = 0;
+  while (sim.time() < last_state - 0.5 * loop.dt()) {
+    const int64_t k = loop.loop_steps();
+    for (; next < applied.size() && applied[next].loop_step <= k; ++next) {
+      const Applied& a = applied[next];
+      if (a.device < 0 || size_t(a.device) >= recorded_devices.size())
+        throw ResimError("recording '" + o.recording + "': an input applied on channel " + std::to_string(a.device) +
+                         ", which its scene lacks");
+      const std::string& name = recorded_devices[size_t(a.device)];
+      auto found = inputs.find({name, a.sequence});
+      if (found == inputs.end() || found->second.empty())
+        throw ResimError("recording '" + o.recording + "': input " + std::to_string(a.sequence) + " of channel '" +
+                         name + "' was applied but is not in the recording");
+      const mcap::Message* m = found->second.front();
+      found->second.pop_front();
+      if (device_index[size_t(a.device)] < 0) continue;  // another scene without this channel: noted below
+      const wire::DeviceInput* in = wire::GetEnvelope(m->data.data())->message_as_DeviceInput();
+      loop.post_input(device_sample(*in, device_index[size_t(a.device)]));
+      ++report.inputs;
+      if (out) {
+        out->post(Topic::Input, int64_t(std::llround(sim.time() * 1e9)), 0, m->data);
+        char json[128];
+        const int n = std::snprintf(json, sizeof json, R"({"loop_step":%lld,"device":%d,"sequence":%llu})",
+                                    static_cast<long long>(k), int(device_index[size_t(a.device)]),
+                                    static_cast<unsigned long long>(a.sequence));
+        out->post(Topic::Applied, int64_t(std::llround(sim.time() * 1e9)), 0,
+                  {reinterpret_cast<const uint8_t*>(json), size_t(n)});
+      }
+    }
+    loop.step(int64_t(std::llround((sim.time() + loop.dt()) * 1e9)));
+    ++report.steps;
+    if (const std::string fault = loop.stats().fault; !fault.empty()) {
+      report.note += std::string(report.note.empty() ? "" : "; ") + "the re-simulation stopped on a fault at t = " +
+                     std::to_string(sim.time()) + " s: " + fault;
+      break;
+    }
+  }
+  for (size_t d = 0; d < device_index.size(); ++d)
+    if (device_index[d] < 0)
+      report.note += std::string(report.note.empty() ? "" : "; ") + "scene '" + scene.name + "' has no channel '" +
+                     recorded_devices[d] + "': its inputs were left out";
+  if (out) {
+    out->stop();
+    out->wait();
+    if (const std::string fault = out->stats().fault; !fault.empty()) throw ResimError("writing " + o.out + ": " + fault);
+  }
+  return report;
+}
+
+}  // namespace tactile
