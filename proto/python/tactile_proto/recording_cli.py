@@ -1,4 +1,4 @@
-"""tactile-recording: what a recording (proto/RECORDING.md) holds, and its export to CSV and VTU.
+"""tactile-recording: what a recording (proto/RECORDING.md) holds, its export to CSV and VTU, and two compared.
 
     tactile-recording info FILE                            duration, messages per topic, scene, complete or
                                                            truncated, and what could not be read
@@ -6,19 +6,32 @@
                                                            CSV tables and/or a VTU series of every Nth state
                                                            (neither flag: both); tactile_proto/export.py says
                                                            what each holds
+    tactile-recording compare A B --out DIR [--tolerance S]
+                                                           two recordings of one session side by side (a live
+                                                           one and a re-simulation of its inputs): frames of
+                                                           each file's first scene paired by sim time (within
+                                                           half a step), device and proxy forces, surface
+                                                           displacement (vertex by vertex, or at the proxies
+                                                           when the meshes differ); writes compare.csv and
+                                                           compare.png, prints whether they are identical bit
+                                                           for bit or their largest differences;
+                                                           tactile_proto/compare.py says what each holds
 
 Exit status: 0 when the file was read (a truncated or damaged one included: the problems are printed), 2 when
-it is no recording or cannot be opened.
+it is no recording or cannot be opened; for compare, 0 when the two could be compared, 2 when not (no common
+time span, a file that cannot be read, no matplotlib for the plot).
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
+import pathlib
 import sys
 from collections import Counter
 
 from .codec import ProtocolError, decode
+from .compare import CompareError, compare, plot, plot_available, summarize, write_csv
 from .export import export
 from .recording import TOPICS, Recording, RecordingError, open_recording
 
@@ -74,8 +87,17 @@ def _count(text: str) -> int:
     return n
 
 
+def _seconds(text: str) -> float:
+    s = float(text)
+    if not s > 0:
+        raise argparse.ArgumentTypeError(f"{text}: give a time above 0 [s]")
+    return s
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="tactile-recording", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="tactile-recording", description=__doc__.split("\n")[0],
+                                     epilog="\n".join(__doc__.split("\n")[2:]),
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest="command", required=True)
     info = commands.add_parser("info", help="duration, messages per topic, scene, complete or truncated, problems")
     info.add_argument("file")
@@ -86,11 +108,58 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     out.add_argument("--vtu", action="store_true", help="surface-<scene_id>.pvd and its .vtu files (needs meshio)")
     out.add_argument("--every", type=_count, default=1, metavar="N",
                      help="VTU of every Nth state frame of each scene (default 1: all of them)")
+    both = commands.add_parser(
+        "compare", help="two recordings of one session side by side: compare.csv, compare.png and a summary",
+        description="Pairs the frames of the first scene of A and B by sim time (B's nearest to each of A's, "
+                    "within half a step), compares the device and proxy forces and the surface (vertex by vertex "
+                    "when the vertex counts agree, else the displacement at each proxy), writes compare.csv and "
+                    "compare.png into DIR and prints whether they are identical bit for bit or their largest "
+                    "differences. Exit status 0 when they could be compared, 2 when not.")
+    both.add_argument("a", metavar="A", help="a recording, e.g. the live session's")
+    both.add_argument("b", metavar="B", help="another recording of the same session, e.g. its re-simulation")
+    both.add_argument("--out", required=True, metavar="DIR", help="folder to write into (made if missing)")
+    both.add_argument("--tolerance", type=_seconds, metavar="S",
+                      help="pair frames whose sim times differ by S [s] at most (default: half the larger step)")
     return parser.parse_args(argv)
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    """`compare`: the summary on stdout, notes and problems on stderr."""
+    if not plot_available():
+        print("tactile-recording: compare draws compare.png with matplotlib, which is not installed "
+              "(pip install 'tactile-proto[plot]', or matplotlib==3.10.3 as tests/requirements.txt pins it)",
+              file=sys.stderr)
+        return 2
+    try:
+        recordings = open_recording(args.a), open_recording(args.b)
+        comparison = compare(*recordings, tolerance_s=args.tolerance)
+        out = pathlib.Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        rows = write_csv(comparison, out / "compare.csv")
+        plot(comparison, out / "compare.png")
+    except (RecordingError, CompareError, OSError, RuntimeError) as e:
+        print(f"tactile-recording: cannot compare: {e}", file=sys.stderr)
+        return 2
+    print(summarize(comparison))
+    print(f"{out / 'compare.csv'}: {rows} rows")
+    print(f"{out / 'compare.png'}")
+    for which, recording, frames in (("A", recordings[0], comparison.a), ("B", recordings[1], comparison.b)):
+        for note in frames.notes:
+            print(f"note: {which}: {note}", file=sys.stderr)
+        if not recording.complete:
+            print(f"note: {which} is truncated (not closed): what was whole before the cut is compared",
+                  file=sys.stderr)
+        for problem in recording.problems:
+            print(f"problem: {which}: {problem}", file=sys.stderr)
+    for note in comparison.notes:
+        print(f"note: {note}", file=sys.stderr)
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.command == "compare":
+        return run_compare(args)
     try:
         recording = open_recording(args.file)
         if args.command == "info":
