@@ -178,7 +178,8 @@ function connect() {
   ws.binaryType = 'arraybuffer';
   ws.onopen = () => {
     status(`connected to ${url}`);
-    ws.send(encode(makeHello({ role: Role.Viewer, clientName: 'client-web' })));
+    // (Off loopback every role needs the token, the viewer's too.)
+    ws.send(encode(makeHello({ role: Role.Viewer, token, clientName: 'client-web' })));
   };
   ws.onmessage = (e) => {
     try {

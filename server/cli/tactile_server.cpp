@@ -56,6 +56,7 @@ constexpr const char* kUsage =
     "  --duration S         stop after S simulated seconds (default: run until stopped)\n"
     "  --recordings DIR     where a controller's StartRecording writes (MCAP; default: none, refused)\n"
     "  --record FILE        record the session from the start into FILE (MCAP), until stopped\n"
+    "  --replay FILE        serve the recording FILE (MCAP) instead of a scene; it plays from the first client\n"
     "\n"
     "exit status: 0 stopped, 1 a fault stopped the simulation, 2 bad input\n";
 

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstring>
 #include <deque>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <optional>
@@ -68,11 +69,18 @@ bool same_haptic(const wire::HapticFrame& a, const wire::HapticFrame& b) {
          same_vector(a.device_input_sequences(), b.device_input_sequences());
 }
 
-// Recorded frames of one scene by the bits of their simulated time.
-uint64_t key(double t) {
-  uint64_t k;
-  std::memcpy(&k, &t, sizeof k);
-  return k;
+// The recorded frame nearest in simulated time to t, within `within`, or nullptr.
+template <class Frame>
+const Frame* nearest(const std::map<double, const Frame*>& frames, double t, double within) {
+  auto it = frames.lower_bound(t);
+  const Frame* best = nullptr;
+  double gap = within;
+  if (it != frames.end() && it->first - t <= gap) {
+    best = it->second;
+    gap = it->first - t;
+  }
+  if (it != frames.begin() && t - std::prev(it)->first <= gap) best = std::prev(it)->second;
+  return best;
 }
 
 }  // namespace
@@ -100,9 +108,9 @@ ResimReport resimulate(const ResimOptions& o) {
     for (const flatbuffers::String* d : *recorded_scene->devices()) recorded_devices.push_back(d->str());
 
   ResimReport report;
-  std::map<uint64_t, const wire::StateFrame*> states;
-  std::map<uint64_t, const wire::HapticFrame*> haptics;
-  double first_state = -1, last_state = 0;
+  std::map<double, const wire::StateFrame*> states;  // by simulated time
+  std::map<double, const wire::HapticFrame*> haptics;
+  double first_state = -1, last_frame = 0;  // of the first scene, any kind
   bool later_scene = false;
   for (const mcap::Message& m : rec.messages) {
     if (m.channel == ch_state) {
@@ -113,11 +121,13 @@ ResimReport resimulate(const ResimOptions& o) {
         continue;
       }
       if (first_state < 0) first_state = f->sim_time();
-      last_state = std::max(last_state, f->sim_time());
-      states[key(f->sim_time())] = f;
+      last_frame = std::max(last_frame, f->sim_time());
+      states[f->sim_time()] = f;
     } else if (m.channel == ch_haptic) {
       const wire::HapticFrame* f = wire::GetEnvelope(m.data.data())->message_as_HapticFrame();
-      if (f && f->scene_id() == scene_id) haptics[key(f->sim_time())] = f;
+      if (!f || f->scene_id() != scene_id) continue;
+      haptics[f->sim_time()] = f;
+      last_frame = std::max(last_frame, f->sim_time());
     }
   }
   if (first_state != 0.0)
@@ -202,10 +212,12 @@ ResimReport resimulate(const ResimOptions& o) {
     const wire::StateFrame* f = wire::GetEnvelope(bytes.data())->message_as_StateFrame();
     ++report.states;
     if (out) out->post(Topic::State, int64_t(std::llround(f->sim_time() * 1e9)), 0, bytes);
-    const auto it = states.find(key(f->sim_time()));
-    if (it == states.end()) return;
+    // The same scene steps to the same times, bit for bit; another may
+    // subdivide its steps otherwise, and lands within half a step.
+    const wire::StateFrame* found = nearest(states, f->sim_time(), same_scene ? 0.0 : 0.5 * lo.dt.value());
+    if (!found) return;
     ++report.states_matched;
-    const wire::StateFrame& r = *it->second;
+    const wire::StateFrame& r = *found;
     if (same_scene && same_state(*f, r)) {
       ++report.states_identical;
       return;
@@ -220,10 +232,10 @@ ResimReport resimulate(const ResimOptions& o) {
     const wire::HapticFrame* f = wire::GetEnvelope(bytes.data())->message_as_HapticFrame();
     ++report.haptic;
     if (out) out->post(Topic::Haptic, int64_t(std::llround(f->sim_time() * 1e9)), 0, bytes);
-    const auto it = haptics.find(key(f->sim_time()));
-    if (it == haptics.end()) return;
+    const wire::HapticFrame* found = nearest(haptics, f->sim_time(), same_scene ? 0.0 : 0.5 * lo.dt.value());
+    if (!found) return;
     ++report.haptic_matched;
-    const wire::HapticFrame& r = *it->second;
+    const wire::HapticFrame& r = *found;
     if (same_scene && same_haptic(*f, r)) {
       ++report.haptic_identical;
       return;
@@ -241,7 +253,7 @@ ResimReport resimulate(const ResimOptions& o) {
   const Simulation& sim = live.sim();
   loop.begin(0);
   size_t next = 0;
-  while (sim.time() < last_state - 0.5 * loop.dt()) {
+  while (sim.time() < last_frame - 0.5 * loop.dt()) {
     const int64_t k = loop.loop_steps();
     for (; next < applied.size() && applied[next].loop_step <= k; ++next) {
       const Applied& a = applied[next];

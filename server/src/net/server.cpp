@@ -766,6 +766,16 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   void serve_recording(const http::request<http::string_body>& req, const std::string& name) {
     const std::string& dir = server_->options.recordings_dir;
     if (dir.empty()) return respond(req, http::status::not_found, "this server keeps no recordings (--recordings)\n");
+    // A recording holds a whole session: off loopback, only with the token (?token=...), as every role needs.
+    beast::error_code peer_ec;
+    const bool loopback = stream_.socket().remote_endpoint(peer_ec).address().is_loopback() && !peer_ec;
+    if (!loopback) {
+      const std::string target(req.target());
+      const size_t q = target.find("token=");
+      const std::string given = q == std::string::npos ? "" : target.substr(q + 6, target.find('&', q) - q - 6);
+      if (server_->options.token.empty() || given != server_->options.token)
+        return respond(req, http::status::unauthorized, "recordings need the token off loopback (?token=...)\n");
+    }
     std::error_code ec;
     if (name.empty()) {
       std::vector<std::pair<std::string, uintmax_t>> files;

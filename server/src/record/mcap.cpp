@@ -6,6 +6,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 
@@ -476,6 +477,10 @@ uint16_t Recording::channel_of(const std::string& topic) const {
 }
 
 Recording read_file(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw McapError("cannot read recording '" + path + "': " +
+                    (std::filesystem::exists(path, ec) ? "not a file" : "no such file"));
   std::ifstream f(path, std::ios::binary);
   if (!f) throw McapError("cannot read recording '" + path + "'");
   const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
