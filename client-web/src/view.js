@@ -24,6 +24,7 @@ export class SceneView {
     scene.add(this.root);
     const rest = new Float32Array(description.restPositions);
     const n = rest.length / 3;
+    this.rest = rest;                         // the rest shape [m] (readers: tests pick vertices by it)
     this.positions = new Float32Array(rest);  // the newest state's positions [m] (CPU copy: picking, readers)
     this.scalars = new Float32Array(n);       // and its scalars
     this.scalarRange = [0, 1e-9];

@@ -532,9 +532,10 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     if (const std::string bad = check_device_input(in); !bad.empty())
       return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
     const DeviceSample s = device_sample(in, index);
+    // Recorded first: stamped before the simulation can apply it.
+    server_->record(Topic::Input, raw_.data(), raw_.size(), now_ns());
     // (A replay simulates nothing: its inputs move nothing.)
     if (server_->feed->live) server_->feed->live->loop().post_input(s);  // a full queue drops it and counts
-    server_->record(Topic::Input, raw_.data(), raw_.size(), now_ns());
   }
 
   // A device's safety event: checked, rate limited, stamped with the server
