@@ -30,6 +30,7 @@ from test_scenes_schema import built
 from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, url
 
 from tactile_proto import codec
+from tactile_proto.recording import open_recording
 from tactile_proto.generated.ControlCommand import ControlCommand
 from tactile_proto.generated.ErrorCode import ErrorCode
 from tactile_proto.generated.Pause import PauseT
@@ -170,6 +171,7 @@ def test_a_controller_records_every_frame_input_and_control_of_the_session(tmp_p
     assert all(a["device"] == 0 for a in applied)
     loop_steps = [a["loop_step"] for a in applied]
     assert loop_steps == sorted(loop_steps) and loop_steps[-1] > loop_steps[0]
+    assert list(open_recording(path).applied()) == applied  # (tactile-recording's reader agrees)
     controls = [m.requestId for _, m in got["/control"]]
     assert controls == [4, 5, 6, 7]
     assert [e.requestId for _, e in got["/error"]] == [5]

@@ -12,7 +12,10 @@ loopback WebSockets, and prints figures (it passes and fails nothing):
   - bytes per state frame and per surface vertex; decode cost per frame in Python.
 
   .venv/bin/python server/bench/server_bench.py [--seconds S] [--viewers N] [--scene FILE]
-                                                [--dt S] [--client cpp|python|both]
+                                                [--dt S] [--client cpp|python|both] [--record]
+
+With --record the server records the whole run (--record FILE, MCAP): run it with and without to see
+what recording costs the loop (the figures above, side by side), and what the file holds.
 
 The latency, frames and force figures come from the C++ client
 (server/bench/latency_client.cpp) when it is built, else from this Python one
@@ -279,6 +282,7 @@ def main() -> None:
     ap.add_argument("--viewers", type=int, default=50)
     ap.add_argument("--scene", type=str, default=None)
     ap.add_argument("--dt", type=float, default=None, help="the server's step [s] (default: the scene's)")
+    ap.add_argument("--record", action="store_true", help="the server records the run (MCAP) meanwhile")
     ap.add_argument("--client", choices=["cpp", "python", "both"], default=None,
                     help="who measures latency and frames (default: cpp when latency_client is built, else python)")
     args = ap.parse_args()
@@ -292,8 +296,10 @@ def main() -> None:
             scene = os.path.join(tmp, "scene.json")
             pathlib.Path(scene).write_text(json.dumps(SCENE))
         dt = ["--dt", f"{args.dt:g}"] if args.dt else []
-        proc = subprocess.Popen([server_exe(), scene, "--port", "0", "--token", TOKEN, *dt], stdout=subprocess.PIPE,
-                                text=True)
+        recording = os.path.join(tmp, "bench.mcap")
+        record = ["--record", recording] if args.record else []
+        proc = subprocess.Popen([server_exe(), scene, "--port", "0", "--token", TOKEN, *dt, *record],
+                                stdout=subprocess.PIPE, text=True)
         assert proc.stdout is not None
         port = None
         for line in proc.stdout:
@@ -319,8 +325,15 @@ def main() -> None:
             asyncio.run(viewers_cost(port, args.viewers, args.seconds))
         finally:
             proc.send_signal(signal.SIGINT)
-            out, _ = proc.communicate(timeout=10)
+            out, _ = proc.communicate(timeout=30)
             print("\n" + out.strip())
+        if args.record:
+            from tactile_proto.recording import open_recording
+            rec = open_recording(recording)
+            counts = rec.summary_counts() or {}
+            size = os.path.getsize(recording)
+            print(f"\nrecording: {size / 1e6:.1f} MB, {sum(counts.values())} messages "
+                  f"({', '.join(f'{t} {n}' for t, n in sorted(counts.items()))}), complete: {rec.complete}")
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ check (mcap.stream_reader.get_chunk_data_stream).
 from __future__ import annotations
 
 import io
+import json
 import os
 import struct
 import zlib
@@ -72,6 +73,8 @@ TOPICS: dict[str, str] = {
     "/safety": "SafetyEvent",
     "/device_status": "DeviceStatus",
 }
+# Topics of JSON objects, not Envelopes (RECORDING.md): topic -> their schema's name.
+JSON_TOPICS: dict[str, str] = {"/applied": "tactile.AppliedInput"}
 
 _HEAD = struct.Struct("<BQ")  # a record's opcode and body length [bytes]
 _COMPRESSIONS = ("", "zstd", "lz4")  # what mcap 1.2.2 decompresses (it reads any other name as "")
@@ -341,7 +344,7 @@ class Recording:
         if topics is None:
             return None
         wanted = {topics} if isinstance(topics, str) else set(topics)
-        known = set(TOPICS) | set(self.topics)
+        known = set(TOPICS) | set(JSON_TOPICS) | set(self.topics)
         unknown = sorted(wanted - known)
         if unknown:
             raise RecordingError(f"unknown topic{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}: a "
@@ -424,11 +427,19 @@ class Recording:
         for channel, message in self._records(wanted):
             yield RecordedMessage(channel.topic, message.log_time, message.publish_time, message.data)
 
+    def applied(self) -> Iterator[dict[str, int]]:
+        """The inputs the simulation applied, in order (/applied, JSON): {"loop_step", "device", "sequence"}."""
+        for m in self.messages(["/applied"] if "/applied" in self.topics else []):
+            yield json.loads(m.data)
+
     def decoded(self, topics: Iterable[str] | str | None = None) -> Iterator[DecodedMessage]:
         """messages(), decoded: (topic, log_time_ns, EnvelopeT). A message that does not decode, or that is
-        not the type its topic holds (TOPICS), is a problem and skipped."""
+        not the type its topic holds (TOPICS), is a problem and skipped. The JSON topics (JSON_TOPICS) hold no
+        Envelopes: they are left out here (applied() reads /applied)."""
         wanted = self._wanted(topics)
         for channel, message in self._records(wanted):
+            if channel.topic in JSON_TOPICS:
+                continue
             where = (channel.id, message.log_time, message.sequence, len(message.data))
             schema = self._schemas.get(channel.schema_id)
             if channel.message_encoding != MESSAGE_ENCODING or (schema is not None and schema.name != SCHEMA_NAME):
@@ -458,5 +469,5 @@ def open_recording(path: str | os.PathLike[str]) -> Recording:
     return Recording(path)
 
 
-__all__ = ["MAGIC", "MESSAGE_ENCODING", "METADATA_NAME", "SCHEMA_NAME", "TOPICS", "DecodedMessage",
+__all__ = ["JSON_TOPICS", "MAGIC", "MESSAGE_ENCODING", "METADATA_NAME", "SCHEMA_NAME", "TOPICS", "DecodedMessage",
            "RecordedMessage", "Recording", "RecordingError", "open_recording"]
