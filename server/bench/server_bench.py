@@ -330,7 +330,7 @@ def main() -> None:
         if args.record:
             from tactile_proto.recording import open_recording
             rec = open_recording(recording)
-            counts = rec.summary_counts() or {}
+            counts = rec.summary_counts or {}
             size = os.path.getsize(recording)
             print(f"\nrecording: {size / 1e6:.1f} MB, {sum(counts.values())} messages "
                   f"({', '.join(f'{t} {n}' for t, n in sorted(counts.items()))}), complete: {rec.complete}")
