@@ -7,20 +7,22 @@ mid-session leaves a recording that replays too."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import pathlib
+import re
 import signal
 import subprocess
 import sys
-import threading
 import time
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 import pytest
 from serverproc import server_process
-from test_bridge_closed_loop import RADIUS, SCENE, TOP
+from test_bridge_closed_loop import PROFILE, RADIUS, SCENE, TOP
 from test_scenes_schema import built
 
 from tactile_proto.recording import open_recording
@@ -34,27 +36,11 @@ TOKEN = "session-e2e"
 pytestmark = pytest.mark.skipif(not pathlib.Path(os.environ.get("TACTILE_CHROMIUM", "/usr/bin/chromium")).exists(),
                                 reason="Debian's chromium is not installed (scripts/setup.sh installs it)")
 
-# The simulated arm: the sphere starts 5 mm above the block and the hand presses 14 mm over 2 s, then holds.
-SIM_PROFILE = f"""
-name = "e2e_sim"
-driver = "sim"
-channel = "stylus"
-[workspace]
-offset_m = [0.0, {TOP + RADIUS + 0.005}, 0.0]
-[force]
-max_N = 4.0
-continuous_N = 3.0
-slew_N_per_s = 200.0
-[sim]
-script = "poke"
-direction = [0.0, -1.0, 0.0]
-depth_m = 0.014
-period_s = 8.0
-repeat = false
-mass_kg = 0.2
-hand_stiffness_N_per_m = 150.0
-hand_damping_Ns_per_m = 6.0
-"""
+# The closed-loop test's simulated arm (the sphere starts 5 mm above the block), pressing 14 mm over 2 s, then
+# holding.
+SIM_PROFILE = PROFILE.replace('name = "closed_loop"', 'name = "e2e_sim"').replace("depth_m = 0.020", "depth_m = 0.014") \
+    .replace("period_s = 16.0", "period_s = 8.0")
+assert "depth_m = 0.014" in SIM_PROFILE and "period_s = 8.0" in SIM_PROFILE
 
 
 def watch_page(url: str, seconds: float, out: pathlib.Path, screenshot: pathlib.Path | None = None) -> subprocess.Popen:
@@ -138,8 +124,9 @@ def shown_as_recorded(seen: dict[str, Any], got: dict[str, list[Any]]) -> int:
     return checked
 
 
-def replay_in_page(tmp_path: pathlib.Path, recording: pathlib.Path, seconds: float, name: str) -> dict[str, Any]:
-    """Serves the recording (--replay) to a page for `seconds` of wall time; what the page saw."""
+@contextlib.contextmanager
+def replay_server(recording: pathlib.Path) -> Iterator[int]:
+    """tactile-server --replay on the recording (serving client-web); yields its port."""
     proc = subprocess.Popen([built("tactile-server"), "--replay", str(recording), "--port", "0", "--static",
                              str(ROOT / "client-web"), "--token", TOKEN], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
@@ -151,13 +138,19 @@ def replay_in_page(tmp_path: pathlib.Path, recording: pathlib.Path, seconds: flo
                 port = int(line.split("127.0.0.1:")[1].split("/")[0])
                 break
         assert port is not None, "the replay server did not start"
+        yield port
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=10)
+
+
+def replay_in_page(tmp_path: pathlib.Path, recording: pathlib.Path, seconds: float, name: str) -> dict[str, Any]:
+    """Serves the recording (--replay) to a page for `seconds` of wall time; what the page saw."""
+    with replay_server(recording) as port:
         out = tmp_path / f"{name}.json"
         ARTEFACTS.mkdir(exist_ok=True)
         page = watch_page(f"http://127.0.0.1:{port}/?token={TOKEN}", seconds, out, ARTEFACTS / f"{name}.png")
         return page_result(page, out)
-    finally:
-        proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=10)
 
 
 def check_recording(path: pathlib.Path, bridge_trace: pathlib.Path | None) -> tuple[Any, dict[str, list[Any]]]:
@@ -247,8 +240,6 @@ def test_the_simulated_arm_presses_the_page_shows_it_the_recording_holds_it_and_
 
 def test_the_serial_arm_through_the_firmware_emulator_presses_and_the_recording_holds_it(
         tmp_path: pathlib.Path) -> None:
-    from tactile_bridge.emulator import FirmwareEmulator
-
     link = tmp_path / "arm"
     profile = tmp_path / "e2e_serial.toml"
     profile.write_text(f"""
@@ -269,41 +260,41 @@ reconnect_s = 0.2
 stale_ms = 50
 handshake_s = 1.0
 """)
-    emu = FirmwareEmulator(str(link), rate_hz=1000.0, axes=3, max_force_N=5.0)
-    emu.set_hand_target((0.0, 0.0, 0.0))  # held with the sphere 5 mm above the block, until the bridge engages
-    emu.start()
+    # The firmware on a pty, in a process of its own (as a real arm's is its own): the stylus rests with the
+    # sphere 5 mm above the block until 2 s after the bridge's HELLO (forces engage only while small), then
+    # the hand pulls it 10 mm down, into the block.
+    emu = subprocess.Popen([sys.executable, "-m", "tactile_bridge.emulator", "--link", str(link), "--hand", "0",
+                            "-0.010", "0", "--hand-after", "2"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                           text=True)
     recording = tmp_path / "serial.mcap"
     live_page = tmp_path / "live.json"
+    trace = tmp_path / "trace.csv"
     try:
+        deadline = time.monotonic() + 10
+        while not link.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert link.exists(), "the firmware emulator did not start"
         with server_process(tmp_path, SCENE, TOKEN, "--haptic-rate", "2000", "--static", str(ROOT / "client-web"),
                             "--record", str(recording)) as (port, server):
             page = watch_page(f"http://127.0.0.1:{port}/?token={TOKEN}", 8, live_page)
             time.sleep(2)
-            bridge_proc = subprocess.Popen(
+            bridge = subprocess.run(
                 [str(BRIDGE), "--profile", str(profile), "--server", f"ws://127.0.0.1:{port}/", "--token", TOKEN,
-                 "--seconds", "6"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-            lines: list[str] = []
-            reader = threading.Thread(target=lambda: lines.extend(iter(bridge_proc.stdout.readline, "")),  # type: ignore[union-attr]
-                                      daemon=True)
-            reader.start()
-            # Forces engage only once they are small: the hand presses 10 mm down once the bridge has engaged.
-            deadline = time.monotonic() + 20
-            while not any("engaged" in line for line in lines) and time.monotonic() < deadline:
-                time.sleep(0.05)
-            assert any("engaged" in line for line in lines), "the bridge did not engage:\n" + "".join(lines)
-            emu.set_hand_target((0.0, -0.010, 0.0))
-            bridge_proc.wait(timeout=60)
-            reader.join(timeout=5)
-            bridge = subprocess.CompletedProcess(bridge_proc.args, bridge_proc.returncode, "".join(lines), "")
+                 "--seconds", "6", "--trace", str(trace)], capture_output=True, text=True, timeout=60)
             seen = page_result(page, live_page)
-        assert bridge.returncode == 0, bridge.stdout + bridge.stderr
-        # The firmware got forces from the bridge, pushing the stylus up (out of the block), within its limit.
-        forces = np.array(emu.received_forces)
-        assert len(forces) > 1000, f"{len(forces)} FORCE frames"
-        assert forces[:, 1].max() > 0.05 and np.abs(forces).max() <= 3.0 + 1e-6, \
-            (forces[:, 1].max(), emu.position_m, deepest(seen), bridge.stdout[:6000])
     finally:
-        emu.stop()
+        emu.send_signal(signal.SIGINT)
+        emu_out, _ = emu.communicate(timeout=10)
+    print(bridge.stdout, bridge.stderr, emu_out)  # (shown when the test fails)
+    assert bridge.returncode == 0, bridge.stdout + bridge.stderr
+    assert "hand takes hold" in emu_out, emu_out
+    # The bridge sent the firmware forces pushing the stylus up, out of the block, within its limit: its
+    # trace, and the firmware's own count of FORCE frames.
+    tr = np.genfromtxt(trace, delimiter=",", names=True)
+    out = np.hypot(np.hypot(tr["out_x_N"], tr["out_y_N"]), tr["out_z_N"])
+    assert tr["out_y_N"].max() > 0.05 and out.max() <= 3.0 + 1e-6, (tr["out_y_N"].max(), out.max())
+    forces = [int(m) for m in re.findall(r"forces (\d+)", emu_out)]
+    assert forces and max(forces) > 1000, f"FORCE frames the firmware got: {forces}"
     assert deepest(seen) < TOP - 2e-3, f"the page's block top went down to {deepest(seen):.4f} m only"
     check_recording(recording, None)
 
@@ -358,20 +349,12 @@ def test_a_bridge_plays_a_recordings_forces_to_its_device_under_its_safety_rules
     limited.write_text(SIM_PROFILE.replace("max_N = 4.0", f"max_N = {recorded_max / 2:.3f}")
                        .replace("continuous_N = 3.0", f"continuous_N = {recorded_max / 2:.3f}"))
     trace = tmp_path / "replayed.csv"
-    proc = subprocess.Popen([built("tactile-server"), "--replay", str(recording), "--port", "0", "--token", TOKEN],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        assert proc.stdout is not None
-        port = next(int(line.split("127.0.0.1:")[1].split("/")[0]) for line in proc.stdout
-                    if "listening on http://127.0.0.1:" in line)
+    with replay_server(recording) as port:
         # The replay starts with the bridge's Hello and lasts as long as the session did (about 5 s); the bridge
         # stays on after its end.
         bridge = subprocess.run([str(BRIDGE), "--profile", str(limited), "--server", f"ws://127.0.0.1:{port}/",
                                  "--token", TOKEN, "--seconds", "9", "--trace", str(trace)],
                                 capture_output=True, text=True, timeout=60)
-    finally:
-        proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=10)
     assert bridge.returncode == 0, bridge.stdout + bridge.stderr
     tr = np.genfromtxt(trace, delimiter=",", names=True)
     out = np.hypot(np.hypot(tr["out_x_N"], tr["out_y_N"]), tr["out_z_N"])

@@ -4,19 +4,29 @@
 // frames the page drew per second, the time of one frame's work in the page (the mix weight and the draw
 // call), the time to read a state frame and copy it into the frame buffer, and the time to write it into
 // a vertex-buffer slot (quantized positions, colours).
+//
+// --source live: the page watches the live server, which simulates the plate on the same two cores (the
+// browser gets what the simulation leaves). --source replay (the default): the plate's session is
+// recorded first (tactile-server --record), then replayed to the page (--replay serves it at its recorded
+// pace and simulates nothing): the page has the machine to itself, as a viewer on another machine than
+// the server has.
 //   node client-web/bench/render_bench.mjs [--seconds S] [--sizes 50,100,157] [--quality low|high]
+//                                          [--source replay|live]
+import fs from 'node:fs';
 import os from 'node:os';
+import path from 'node:path';
 import { parseArgs } from 'node:util';
 
 import { chromium } from 'playwright-core';
 
-import { CHROMIUM, SWIFTSHADER, startServer } from '../test/live.js';
+import { CHROMIUM, SWIFTSHADER, spawnServer, startServer } from '../test/live.js';
 
 const { values: opts } = parseArgs({
   options: {
     seconds: { type: 'string', default: '6' },
     sizes: { type: 'string', default: '50,100,157' },
     quality: { type: 'string', default: '' },
+    source: { type: 'string', default: 'replay' },
     build: { type: 'string', default: process.env.TACTILE_BUILD || 'build/release' },
   },
 });
@@ -57,11 +67,26 @@ const browser = await chromium.launch({
          '--disable-frame-rate-limit'] : [])],
 });
 const seconds = Number(opts.seconds);
-console.log(`render_bench: headless Chromium, ${os.cpus().length} cores, ${seconds} s per size, 1024 x 768`);
+if (!['live', 'replay'].includes(opts.source)) throw new Error(`--source: live or replay, not ${opts.source}`);
+console.log(`render_bench: headless Chromium, ${os.cpus().length} cores, ${seconds} s per size, 1024 x 768, ` +
+            `states from the ${opts.source === 'live' ? 'live server (simulating beside the page)' : 'replay of a recording'}`);
+
+// The server the page watches: the live plate, or a replay of its recording (made first: long enough in
+// wall time for the measurement, at whatever pace the simulation kept).
+async function serve(n) {
+  if (opts.source === 'live') return startServer(plate(n), [], { build: opts.build });
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-render-'));
+  const recording = path.join(dir, `plate_${n}.mcap`);
+  const rec = await startServer(plate(n), ['--record', recording], { build: opts.build });
+  await new Promise((resolve) => setTimeout(resolve, 1000 * (seconds + 6)));
+  rec.proc.kill('SIGINT');
+  await new Promise((resolve) => rec.proc.on('exit', resolve));
+  return spawnServer(['--replay', recording], { build: opts.build });
+}
 console.log('  vertices  triangles  quality  fps (drawn/s)  frame work ms (median, p95)  state read+copy ms (median, p95)  state to slot ms (median, p95)  states/s');
 try {
   for (const n of opts.sizes.split(',').map(Number)) {
-    const { proc, port } = await startServer(plate(n), [], { build: opts.build });
+    const { proc, port } = await serve(n);
     try {
       const page = await browser.newPage({ viewport: { width: 1024, height: 768 } });
       await page.goto(`http://127.0.0.1:${port}/${opts.quality ? `?quality=${opts.quality}` : ''}`);

@@ -8,7 +8,8 @@ import {
   SetParameterT, StartRecordingT, StopRecordingT, decode, encode, makeHello, messageTypeOf,
 } from '../../proto/js/src/index.ts';
 
-const el = (tag, attrs = {}, ...children) => {
+// An element with properties and children.
+export const el = (tag, attrs = {}, ...children) => {
   const e = document.createElement(tag);
   Object.assign(e, attrs);
   for (const c of children) e.append(c);

@@ -50,7 +50,9 @@ scene.add(sun);
 scene.add(sun.target);
 $('legend-bar').style.background = cssGradient();
 const telemetry = new TelemetryPanel($('telemetry'));
+// ?device=NAME: the channel the mouse drives (default: one meant for the page, such as 'mouse').
 const pointer = new PointerDevice({ canvas: renderer.domElement, camera, controls, token,
+                                    wanted: query.get('device') || '',
                                     onStatus: (text) => { $('poke').textContent = text; } });
 
 // What the tests read (and a person can, in the console).

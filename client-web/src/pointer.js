@@ -13,8 +13,9 @@ import { channelOrder, pressTarget } from './press.js';
 export class PointerDevice {
   // `canvas`, `camera`, `controls` (OrbitControls, paused while dragging); `token` for the device role;
   // `onStatus(text)` for what it is doing.
-  constructor({ canvas, camera, controls, token, onStatus }) {
+  constructor({ canvas, camera, controls, token, onStatus, wanted = '' }) {
     this.canvas = canvas;
+    this.wanted = wanted;  // the channel ?device= names, or '' for those meant for the page
     this.camera = camera;
     this.controls = controls;
     this.token = token;
@@ -55,7 +56,14 @@ export class PointerDevice {
       return;
     }
     const devices = description.devices || [];
-    this.tryChannels(url, description, channelOrder(devices), 0);
+    const order = channelOrder(devices, this.wanted);
+    if (!order.length) {
+      this.onStatus(this.wanted ? `poke: this scene has no device channel '${this.wanted}'`
+        : devices.length ? `poke: no channel for the page (${devices.join(', ')} are the arms'; ?device=NAME takes one)`
+          : 'poke: this scene has no device channel');
+      return;
+    }
+    this.tryChannels(url, description, order, 0);
   }
 
   tryChannels(url, description, order, k) {

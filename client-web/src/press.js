@@ -1,9 +1,11 @@
 // The geometry of a poke with the pointer, apart from the browser so that node's tests can run it.
 
-// The order channels are tried in: one meant for the mouse first, then any other free one.
-export function channelOrder(devices) {
-  const preferred = devices.filter((d) => /mouse|pointer|browser/i.test(d));
-  return [...preferred, ...devices.filter((d) => !preferred.includes(d))];
+// The channels the page may drive, in the order it tries them: the one `wanted` names (?device=...), or
+// else those meant for the page (mouse, pointer, finger, touch, browser). A channel meant for an arm is
+// left to its bridge: the page taking it first would shut the arm out (one device drives a channel).
+export function channelOrder(devices, wanted = '') {
+  if (wanted) return devices.includes(wanted) ? [wanted] : [];
+  return devices.filter((d) => /mouse|pointer|finger|touch|browser/i.test(d));
 }
 
 // Where the proxy's centre goes for a pointer ray: the ray meets the plane tangent to the body where it

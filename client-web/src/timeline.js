@@ -5,13 +5,7 @@
 import {
   ControlCommand, PauseT, ResumeT, SeekT, SetSpeedT,
 } from '../../proto/js/src/index.ts';
-
-const el = (tag, attrs = {}, ...children) => {
-  const e = document.createElement(tag);
-  Object.assign(e, attrs);
-  for (const c of children) e.append(c);
-  return e;
-};
+import { el } from './controls.js';
 
 export const SPEEDS = [0.25, 0.5, 1, 2, 4];
 

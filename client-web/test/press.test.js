@@ -6,9 +6,11 @@ import * as THREE from 'three';
 
 import { channelOrder, pressTarget } from '../src/press.js';
 
-test('a channel meant for the mouse is tried first, then the others in the scene\'s order', () => {
-  assert.deepEqual(channelOrder(['stylus', 'mouse', 'left']), ['mouse', 'stylus', 'left']);
-  assert.deepEqual(channelOrder(['stylus', 'left']), ['stylus', 'left']);
+test('the page takes the channels meant for it, or the one ?device= names, never an arm\'s', () => {
+  assert.deepEqual(channelOrder(['stylus', 'mouse', 'left', 'finger2']), ['mouse', 'finger2']);
+  assert.deepEqual(channelOrder(['stylus', 'left']), []);
+  assert.deepEqual(channelOrder(['stylus', 'left'], 'left'), ['left']);
+  assert.deepEqual(channelOrder(['stylus', 'mouse'], 'nope'), []);
   assert.deepEqual(channelOrder([]), []);
 });
 

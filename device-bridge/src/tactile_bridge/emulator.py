@@ -395,17 +395,31 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--max-force", type=float, default=5.0, help="max force [N] (default 5)")
     ap.add_argument("--hand", type=float, nargs=3, metavar=("X", "Y", "Z"),
                     help="a hand holds the stylus and pulls it toward this point [m]")
+    ap.add_argument("--hand-after", type=float, default=0.0, metavar="S",
+                    help="the hand takes hold only S seconds after the host's first HELLO (the stylus rests at 0 "
+                         "until then: a bridge engages its forces only while they are small)")
     args = ap.parse_args(argv)
     emu = FirmwareEmulator(args.link, rate_hz=args.rate, axes=args.axes, name=args.name,
                            max_force_N=args.max_force)
-    if args.hand is not None:
+    if args.hand is not None and args.hand_after <= 0:
         emu.set_hand_target(args.hand)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))  # unplug cleanly (remove the link) on kill too
     emu.start()
+    waiting = args.hand is not None and args.hand_after > 0  # for the hand to take hold
+    hand_at: float | None = None
     print(f"{emu.name}: {emu.link} -> {emu.slave_path} ({args.rate:g} Hz, {args.axes} axes); Ctrl-C stops",
           flush=True)
     try:
         while True:
+            if waiting:
+                if hand_at is None and emu.hellos > 0:
+                    hand_at = time.monotonic() + args.hand_after
+                time.sleep(0.05)
+                if hand_at is not None and time.monotonic() >= hand_at:
+                    emu.set_hand_target(args.hand)
+                    print(f"hand takes hold: toward {args.hand} m", flush=True)
+                    waiting = False
+                continue
             time.sleep(1.0)
             x = emu.position_m
             f = emu.applied_force_N

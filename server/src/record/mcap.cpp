@@ -124,18 +124,33 @@ void Writer::emit(const std::vector<uint8_t>& bytes) {
   offset_ += bytes.size();
 }
 
+// A schema's or a channel's record: written once at the start, and again in the summary.
+void Writer::put(std::vector<uint8_t>& b, const SchemaInfo& s) {
+  Out o{b};
+  const size_t r = o.begin_record(kSchema);
+  o.u16(s.id);
+  o.str(s.name);
+  o.str(s.encoding);
+  o.u32(uint32_t(s.data.size()));
+  o.bytes(s.data);
+  o.end_record(r);
+}
+void Writer::put(std::vector<uint8_t>& b, const ChannelInfo& c) {
+  Out o{b};
+  const size_t r = o.begin_record(kChannel);
+  o.u16(c.id);
+  o.u16(c.schema);
+  o.str(c.topic);
+  o.str(c.encoding);
+  o.map(c.metadata);
+  o.end_record(r);
+}
+
 uint16_t Writer::add_schema(const std::string& name, const std::string& encoding, std::span<const uint8_t> data) {
   const uint16_t id = uint16_t(schemas_.size() + 1);
   schemas_.push_back({id, name, encoding, std::vector<uint8_t>(data.begin(), data.end())});
   out_.clear();
-  Out o{out_};
-  const size_t r = o.begin_record(kSchema);
-  o.u16(id);
-  o.str(name);
-  o.str(encoding);
-  o.u32(uint32_t(data.size()));
-  o.bytes(data);
-  o.end_record(r);
+  put(out_, schemas_.back());
   emit(out_);
   return id;
 }
@@ -145,14 +160,7 @@ uint16_t Writer::add_channel(uint16_t schema, const std::string& topic, const st
   const uint16_t id = uint16_t(channels_.size() + 1);
   channels_.push_back({id, schema, topic, message_encoding, metadata, 0, 0, {}});
   out_.clear();
-  Out o{out_};
-  const size_t r = o.begin_record(kChannel);
-  o.u16(id);
-  o.u16(schema);
-  o.str(topic);
-  o.str(message_encoding);
-  o.map(metadata);
-  o.end_record(r);
+  put(out_, channels_.back());
   emit(out_);
   return id;
 }
@@ -248,26 +256,10 @@ void Writer::finish() {
     if (length > 0) groups.push_back({op, start, length});
   };
   group(kSchema, [&] {
-    for (const SchemaInfo& s : schemas_) {
-      const size_t q = o.begin_record(kSchema);
-      o.u16(s.id);
-      o.str(s.name);
-      o.str(s.encoding);
-      o.u32(uint32_t(s.data.size()));
-      o.bytes(s.data);
-      o.end_record(q);
-    }
+    for (const SchemaInfo& s : schemas_) put(out_, s);
   });
   group(kChannel, [&] {
-    for (const ChannelInfo& c : channels_) {
-      const size_t q = o.begin_record(kChannel);
-      o.u16(c.id);
-      o.u16(c.schema);
-      o.str(c.topic);
-      o.str(c.encoding);
-      o.map(c.metadata);
-      o.end_record(q);
-    }
+    for (const ChannelInfo& c : channels_) put(out_, c);
   });
   group(kStatistics, [&] {
     const size_t q = o.begin_record(kStatistics);

@@ -83,6 +83,8 @@ class Writer {
     std::string name;
   };
   void emit(const std::vector<uint8_t>& bytes);  // to the file, counting its CRC and offset
+  static void put(std::vector<uint8_t>& b, const SchemaInfo& s);
+  static void put(std::vector<uint8_t>& b, const ChannelInfo& c);
 
   int fd_ = -1;
   std::string path_;
