@@ -5,7 +5,8 @@
 # it (TACTILE_DEVICE=PROFILE picks another device profile, =none runs no
 # bridge). It prints the URL to open and runs until Ctrl-C. Haptic frames go out
 # at 2 kHz at most: the default scene steps at 7.7 kHz, and a bridge ticking at
-# 1 kHz needs no more (a later --haptic-rate among the options wins).
+# 1 kHz needs no more (a later --haptic-rate among the options wins). The page's
+# record button writes into recordings/ (a later --recordings wins).
 #   scripts/run.sh [SCENE.json] [tactile-server options...]
 # The headless simulator: build/release/tactile-sim run SCENE.json --out out
 set -euo pipefail
@@ -31,7 +32,8 @@ stop() {
 trap stop EXIT
 trap 'exit 130' INT TERM
 
-"$build/tactile-server" "$scene" --static client-web --token "$token" --haptic-rate 2000 "$@" > >(tee "$log") 2>&1 &
+"$build/tactile-server" "$scene" --static client-web --token "$token" --haptic-rate 2000 --recordings recordings \
+  "$@" > >(tee "$log") 2>&1 &
 server=$!
 url=""
 for _ in $(seq 1 600); do
