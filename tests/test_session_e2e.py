@@ -153,7 +153,7 @@ def replay_in_page(tmp_path: pathlib.Path, recording: pathlib.Path, seconds: flo
         return page_result(page, out)
 
 
-def check_recording(path: pathlib.Path, bridge_trace: pathlib.Path | None) -> tuple[Any, dict[str, list[Any]]]:
+def check_recording(path: pathlib.Path) -> tuple[Any, dict[str, list[Any]]]:
     rec, got = recorded(path)
     # Every input the bridge sent reached the recording, in order, none missing (1 kHz from the arm; a bridge
     # whose device reconnects counts from 1 again: each run of sequences is whole).
@@ -228,7 +228,7 @@ def test_the_simulated_arm_presses_the_page_shows_it_the_recording_holds_it_and_
     assert steps[-1] > steps[0] and seen["samples"][-1]["frames"] > 30
 
     # The recording holds it all: each state the page drew is in it, as drawn...
-    _, got = check_recording(recording, trace)
+    _, got = check_recording(recording)
     assert shown_as_recorded(seen, got) > 5
     # ...and its replay shows the page the same states: the press.
     replayed = replay_in_page(tmp_path, recording, 9, "session_replay")
@@ -296,7 +296,7 @@ handshake_s = 1.0
     forces = [int(m) for m in re.findall(r"forces (\d+)", emu_out)]
     assert forces and max(forces) > 1000, f"FORCE frames the firmware got: {forces}"
     assert deepest(seen) < TOP - 2e-3, f"the page's block top went down to {deepest(seen):.4f} m only"
-    check_recording(recording, None)
+    check_recording(recording)
 
 
 def test_a_recording_cut_by_killing_the_server_reads_back_and_its_replay_drives_the_page(
