@@ -68,10 +68,13 @@ hand_stiffness_N_per_m = 150.0
 hand_damping_Ns_per_m = 6.0
 """
 
+ENGAGED = 2  # the trace's safety mode when the force goes out as the server gives it (tactile_bridge.safety.Mode)
+
+
 def test_bridge_presses_the_block_and_the_force_settles(tmp_path: pathlib.Path) -> None:
     profile = tmp_path / "closed_loop.toml"
     profile.write_text(PROFILE)
-    states: list[tuple[float, float]] = []  # (sim time, height of the block's top under the sphere)
+    states: list[tuple[float, float, float]] = []  # (sim time, the block's top under the sphere, the sphere's y)
     statuses: list[Any] = []  # the bridge's DeviceStatus, relayed by the server
 
     with server_process(tmp_path, SCENE, TOKEN, "--haptic-rate", "2000") as (port, server):
@@ -98,7 +101,7 @@ def test_bridge_presses_the_block_and_the_force_settles(tmp_path: pathlib.Path) 
                         statuses.append(m)
                     elif isinstance(m, StateFrameT) and near is not None:
                         x = np.asarray(m.positions, dtype=np.float64).reshape(-1, 3)
-                        states.append((m.simTime, float(x[near, 1].min())))
+                        states.append((m.simTime, float(x[near, 1].min()), m.proxies[0].position.y))
 
         asyncio.run(watch())
         out, _ = bridge.communicate(timeout=20)
@@ -133,21 +136,37 @@ def test_bridge_presses_the_block_and_the_force_settles(tmp_path: pathlib.Path) 
     f_mean = float(f_hold.mean())
     # The force rises as the hand presses: it ends well above zero, pointing up (out of the block).
     assert f_mean > 0.5, f"held force {f_mean:.3f} N; bridge said:\n{out}"
-    assert f[press].max() <= 1.25 * f_mean, f"overshoot: peak {f[press].max():.3f} N over a held {f_mean:.3f} N"
-    # Settled without oscillation: the held force wanders by a few percent at most in nine bins of ten. (A
-    # bin or two can dip when a shared host stalls the states for a moment and the safety layer fades the
-    # force: that is the safety rule at work, not an oscillation.)
-    spread = float(np.percentile(np.abs(f_hold - np.median(f_hold)), 90))
-    assert spread < 0.05 * f_mean, f"held force {f_mean:.3f} N, 90 % of 50 ms means within {spread:.3f} N"
-    wander = float(np.percentile(np.abs(y[hold] - np.median(y[hold])), 90))
+    # The loop's own behaviour is judged on the bins the host left alone: where it stalled the bridge's tick (a
+    # gap over 20 ms) or the states (the safety layer holding or fading the force), the arm is pushed off its
+    # path and rings down for a few tenths of a second (its own damping: 0.2 kg on 150 N/m with 6 N s/m). That
+    # is the safety rule at work and the arm's dynamics, not the loop's; an oscillating loop wanders in every bin.
+    gap = np.diff(t_b, prepend=t_b[0])
+    stalled = np.bincount(bins, (tr["safety"] != ENGAGED) | (gap > 0.020), minlength=len(f)) > 0
+    disturbed = np.convolve(stalled, np.ones(10), mode="full")[: len(f)] > 0  # that bin and the next 0.45 s
+    calm = hold & ~disturbed
+    # The force rises as the hand presses, without overshoot.
+    pressing = press & ~disturbed
+    assert pressing.sum() >= 20, f"the host stalled {press.sum() - pressing.sum()} of {press.sum()} bins while pressing"
+    assert f[pressing].max() <= 1.25 * f_mean, \
+        f"overshoot: peak {f[pressing].max():.3f} N over a held {f_mean:.3f} N"
+    # Settled without oscillation: the held force wanders by a few percent at most in nine bins of ten.
+    assert calm.sum() >= 20, (f"the host stalled the bridge or its states in {hold.sum() - calm.sum()} of "
+                              f"{hold.sum()} bins while holding (or the 0.45 s after): too busy to judge")
+    spread = float(np.percentile(np.abs(f[calm] - np.median(f[calm])), 90))
+    assert spread < 0.05 * f_mean, (f"held force {f_mean:.3f} N, 90 % of {calm.sum()} undisturbed 50 ms means "
+                                    f"within {spread:.3f} N")
+    wander = float(np.percentile(np.abs(y[calm] - np.median(y[calm])), 90))
     assert wander < 2.5e-4, f"the sphere moves {wander * 1e3:.2f} mm (90 % of 50 ms means) while held"
     # The body is deformed as the sphere says: the top under it is pressed down to the sphere's bottom.
     y_hold = float(y[hold].mean())
-    t_s = np.array([s[0] for s in states])
-    held_states = t_s > t_s[-1] - 3.0
-    top_hold = float(np.mean(np.array([s[1] for s in states])[held_states]))
-    assert abs(top_hold - (y_hold - RADIUS)) < 1.0e-3, \
-        f"surface at {top_hold:.4f} m, sphere bottom {y_hold - RADIUS:.4f} m"
+    # In every state the server published while the sphere was held there (the viewer's, by the sphere's pose
+    # in it: after the bridge leaves, the sphere is let go and the block springs back).
+    held_states = [(top, py) for _, top, py in states if abs(py - y_hold) < 2e-4]
+    assert len(held_states) > 30, f"{len(held_states)} states with the sphere held at {y_hold:.4f} m"
+    top_hold = float(np.mean([top for top, _ in held_states]))
+    gap_hold = max(abs(top - (py - RADIUS)) for top, py in held_states)
+    assert gap_hold < 1.0e-3, f"surface at {top_hold:.4f} m, sphere bottom {y_hold - RADIUS:.4f} m (up to " \
+                              f"{gap_hold * 1e3:.2f} mm apart in one state)"
     assert top_hold < TOP - 2e-3, f"the block is hardly pressed (top at {top_hold:.4f} m)"
 
     # ...and its force is what the same indentation gives in a static headless run.

@@ -118,7 +118,6 @@ void RealtimeLoop::apply_inputs() {
 }
 
 void RealtimeLoop::step_once(int64_t now_ns) {
-  apply_inputs();
   ++loop_steps_;
   const AdvanceReport report = sim_.advance(dt_);
   if (report.fault) {
@@ -182,8 +181,11 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
         ++reanchors;
       }
     }
+    // The inputs first, then the stamp: a frame is never stamped before an
+    // input it saw (a thread preempted between the two would make it so).
     const Clock::time_point t0 = Clock::now();
-    step_once(nanoseconds(t0));
+    apply_inputs();
+    step_once(nanoseconds(Clock::now()));
     const Clock::time_point t1 = Clock::now();
     const double cost = seconds(t1 - t0);
     cost_sum += cost;

@@ -123,7 +123,10 @@ class RealtimeLoop {
   // first state); step() applies the queued inputs and takes one step,
   // publishing as run() does, stamped `stamp_ns`. Not with run().
   void begin(int64_t stamp_ns);
-  void step(int64_t stamp_ns) { step_once(stamp_ns); }
+  void step(int64_t stamp_ns) {
+    apply_inputs();
+    step_once(stamp_ns);
+  }
   int64_t loop_steps() const { return loop_steps_; }
 
   // A snapshot, from any thread (updated every step; the per-second figures
@@ -146,6 +149,7 @@ class RealtimeLoop {
   };
   void sync_drivers();
   void apply_inputs();
+  // One step after the inputs are applied; its frames stamped `now_ns`.
   void step_once(int64_t now_ns);
 
   // Times the stepper's passes (the core reads no clock; this layer does).
