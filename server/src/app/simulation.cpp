@@ -28,6 +28,7 @@ struct Simulation::Engine {
   virtual ~Engine() = default;
   virtual Carry carry_out() const = 0;
   virtual void carry_in(const Carry& c) = 0;
+  virtual void set_initial_state(const std::vector<double>& u, const std::vector<double>& v) = 0;
   virtual const TetMesh& mesh() const = 0;
   virtual int32_t n_nodes() const = 0;
   virtual int32_t n_tets() const = 0;
@@ -104,6 +105,22 @@ class EngineOf final : public Simulation::Engine {
     state_.dissipated = c.dissipated;
     for (size_t h = 0; h < c.hand.size(); ++h) stepper_.contact().set_hand_motion(int32_t(h), c.hand[h]);
     for (size_t j = 0; j < c.proxy.size(); ++j) stepper_.contact().set_motion(int32_t(j), c.proxy[j]);
+  }
+
+  void set_initial_state(const std::vector<double>& u, const std::vector<double>& v) override {
+    if (state_.step != 0)
+      throw std::logic_error("set_initial_state: the simulation has taken " + std::to_string(state_.step) +
+                             " steps; an initial state is set before the first");
+    if (u.size() != state_.u.size() || v.size() != state_.v.size())
+      throw std::invalid_argument("set_initial_state: " + std::to_string(u.size() / 3) + " displacements and " +
+                                  std::to_string(v.size() / 3) + " velocities for " +
+                                  std::to_string(state_.u.size() / 3) + " nodes");
+    for (size_t k = 0; k < u.size(); ++k) {
+      if (!std::isfinite(u[k]) || !std::isfinite(v[k]))
+        throw std::invalid_argument("set_initial_state: node " + std::to_string(k / 3) + " has a non-finite value");
+      state_.u[k] = Real(u[k]);
+      state_.v[k] = Real(v[k]);
+    }
   }
 
   const TetMesh& mesh() const override { return model_->mesh; }
@@ -214,6 +231,9 @@ const std::vector<ProxyReport>& Simulation::proxy_reports() const { return engin
 const std::vector<DeviceReport>& Simulation::device_reports() const { return engine_->device_reports(); }
 void Simulation::clear_impulses() { engine_->clear_impulses(); }
 void Simulation::continue_from(const Simulation& other) { engine_->carry_in(other.engine_->carry_out()); }
+void Simulation::set_initial_state(const std::vector<double>& u, const std::vector<double>& v) {
+  engine_->set_initial_state(u, v);
+}
 const Fault& Simulation::fault() const { return engine_->fault(); }
 void Simulation::set_probe(StepProbe* probe) { engine_->set_probe(probe); }
 

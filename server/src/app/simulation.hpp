@@ -80,6 +80,11 @@ class Simulation {
   // count), proxies and hands; precisions may differ. Throws
   // std::invalid_argument otherwise.
   void continue_from(const Simulation& other);
+  // Before the first step: starts from displacement u [m] and velocity v
+  // [m/s] (n_nodes x 3) instead of rest (constrained nodes still follow their
+  // conditions). Throws std::logic_error after a step, std::invalid_argument
+  // on a size mismatch or a non-finite value.
+  void set_initial_state(const std::vector<double>& u, const std::vector<double>& v);
 
   const Fault& fault() const;
   void set_probe(StepProbe* probe);

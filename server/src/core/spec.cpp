@@ -11,7 +11,18 @@ namespace tactile {
 ProfileValue compute_profile(const MotionProfile& p, double t) {
   const double tau = t - p.start;
   if (tau <= 0.0) return {0.0, 0.0, 0.0};
-  if (p.kind == MotionProfile::Kind::ConstantRate) return {p.rate * tau, p.rate, 0.0};
+  if (p.kind == MotionProfile::Kind::ConstantRate) {
+    // The rate eases in over `duration` (cycloidal: zero acceleration at both
+    // ends), s' = rate (x - sin(2 pi x) / (2 pi)), x = tau / T, and s is its
+    // integral: a spin that started at full rate would be a velocity jump, an
+    // impulse no step size resolves.
+    const double T = p.duration;
+    if (T <= 0.0) return {p.rate * tau, p.rate, 0.0};
+    if (tau >= T) return {p.rate * (tau - 0.5 * T), p.rate, 0.0};
+    const double x = tau / T, w = 2.0 * std::numbers::pi;
+    return {p.rate * T * (0.5 * x * x + (std::cos(w * x) - 1.0) / (w * w)), p.rate * (x - std::sin(w * x) / w),
+            p.rate / T * (1.0 - std::cos(w * x))};
+  }
   if (p.duration <= 0.0 || tau >= p.duration) return {p.target, 0.0, 0.0};
   // Cycloidal ramp s = target (tau/T - sin(w tau)/(2 pi)), w = 2 pi / T: zero
   // velocity and acceleration at both ends, so a prescribed motion starts and

@@ -36,12 +36,13 @@ struct NodeSelector {
 // A scalar s(t) with its first two derivatives, used as an angle [rad] or a
 // displacement [m] along a direction. Ramp eases in and out (cycloidal: zero
 // velocity and acceleration at both ends) from 0 to `target` over
-// [start, start + duration], then holds.
+// [start, start + duration], then holds. ConstantRate turns at `rate`, its
+// rate eased in over [start, start + duration] the same way (0: at once).
 struct MotionProfile {
   enum class Kind : uint8_t { Ramp, ConstantRate };
   Kind kind = Kind::Ramp;
   double start = 0.0;     // [s]
-  double duration = 0.0;  // Ramp [s]
+  double duration = 0.0;  // Ramp; ConstantRate: its spin-up [s]
   double target = 0.0;    // Ramp: final value
   double rate = 0.0;      // ConstantRate: value per second
 };

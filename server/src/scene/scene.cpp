@@ -147,13 +147,14 @@ EssentialBc read_boundary(const Json& j, const std::string& path, const Origin& 
     bc.angle = read_ramp(g, "angle_deg", kDegree);
   }
   if (const Json* r = f.find("spin")) {
-    const Fields g(*r, f.path("spin"), o, {"centre", "axis", "rate_deg_s", "start"});
+    const Fields g(*r, f.path("spin"), o, {"centre", "axis", "rate_deg_s", "start", "spin_up"});
     bc.centre = g.vec3("centre");
     bc.axis = scene_json::read_direction(g.at("axis"), g.path("axis"), o);
     MotionProfile p;
     p.kind = MotionProfile::Kind::ConstantRate;
     p.rate = g.number("rate_deg_s") * kDegree;
     p.start = g.non_negative_or("start", 0.0);
+    p.duration = g.positive_or("spin_up", 0.1);  // a spin at full rate at once would be an impulse
     bc.angle = p;
   }
   if (const Json* t = f.find("translate")) {

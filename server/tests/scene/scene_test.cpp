@@ -452,6 +452,25 @@ TEST(SceneErrors, MisplacedAndConflictingFields) {
   j["boundary"][0]["rotate"] = json::parse(R"({ "centre": [0, 0, 0], "axis": [0, 0, 0], "angle_deg": 10, "duration": 1 })");
   j["boundary"][0].erase("fixed");
   expect_scene_error(dir, "s.json", j, {"boundary[0].rotate.axis: must be a nonzero vector"});
+  // A spin eases in: its spin-up cannot be zero (a velocity jump, an impulse no step resolves).
+  j = make_beam_scene();
+  j["boundary"][0]["spin"] = json::parse(R"({ "centre": [0, 0, 0], "axis": [1, 0, 0], "rate_deg_s": 90, "spin_up": 0 })");
+  j["boundary"][0].erase("fixed");
+  expect_scene_error(dir, "s.json", j, {"boundary[0].spin.spin_up"});
+}
+
+TEST(Scene, ASpinEasesInOverItsSpinUpByDefault) {
+  SceneDir dir;
+  json j = make_beam_scene();
+  j["boundary"][0]["spin"] = json::parse(R"({ "centre": [0, 0.05, 0.05], "axis": [1, 0, 0], "rate_deg_s": 90 })");
+  j["boundary"][0].erase("fixed");
+  const EssentialBc bc = load_scene(dir.write_json("spin.json", j)).at(0).spec.essential.at(0);
+  ASSERT_TRUE(bc.angle.has_value());
+  EXPECT_EQ(bc.angle->kind, MotionProfile::Kind::ConstantRate);
+  EXPECT_DOUBLE_EQ(bc.angle->duration, 0.1);
+  EXPECT_EQ(compute_profile(*bc.angle, 0.0).ds, 0.0);
+  j["boundary"][0]["spin"]["spin_up"] = 0.25;
+  EXPECT_DOUBLE_EQ(load_scene(dir.write_json("spin2.json", j)).at(0).spec.essential.at(0).angle->duration, 0.25);
 }
 
 TEST(SceneErrors, VariantErrorsNameTheVariant) {

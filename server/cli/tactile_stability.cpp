@@ -1,0 +1,124 @@
+// tactile-stability: the hard-case stability suite (study/stability.hpp),
+// case by case, as a table with pass or fail and the figures behind it.
+//
+// Exit codes: 0 every case passed, 1 a case failed, 2 bad command line.
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <string>
+#include <string_view>
+
+#include <nlohmann/json.hpp>
+
+#include "app/progress.hpp"
+#include "study/stability.hpp"
+
+namespace {
+
+using namespace tactile::study;
+
+constexpr const char* kUsage =
+    "usage: tactile-stability [--quick] [--only TEXT] [--seed N] [--json FILE] [--quiet]\n"
+    "  --quick      the short version (coarse meshes, shorter runs), as ctest runs it\n"
+    "  --only TEXT  only the cases whose name (group/material/mesh) contains TEXT\n"
+    "  --seed N     seed of the random velocities and device input (default 1)\n"
+    "  --json FILE  also write every case's figures as JSON\n"
+    "  --quiet      no progress bar\n"
+    "exit status: 0 all passed, 1 a case failed, 2 bad command line\n";
+
+std::string figure(double v, const char* f) {
+  if (v < 0) return "-";
+  char s[32];
+  std::snprintf(s, sizeof s, f, v);
+  return s;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  SuiteOptions options;
+  std::string json_path;
+  bool progress = true;
+  for (int i = 1; i < argc; ++i) {
+    const std::string_view a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "tactile-stability: %s needs a value\n%s", argv[i], kUsage);
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--quick") options.quick = true;
+    else if (a == "--only") options.filter = value();
+    else if (a == "--json") json_path = value();
+    else if (a == "--quiet") progress = false;
+    else if (a == "--seed") {
+      const std::string s = value();
+      char* end = nullptr;
+      options.seed = std::strtoull(s.c_str(), &end, 10);
+      if (s.empty() || *end != '\0') {
+        std::fprintf(stderr, "tactile-stability: --seed wants a whole number, got '%s'\n", s.c_str());
+        return 2;
+      }
+    } else if (a == "--help" || a == "-h") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else {
+      std::fprintf(stderr, "tactile-stability: unknown argument '%s'\n%s", argv[i], kUsage);
+      return 2;
+    }
+  }
+
+  const std::vector<StabilityCase> cases = stability_cases(options);
+  if (cases.empty()) {
+    std::fprintf(stderr, "tactile-stability: no case matches '%s'\n", options.filter.c_str());
+    return 2;
+  }
+  std::printf("%-44s %-9s %-5s %6s %9s %7s %6s %7s %7s %8s %6s  %s\n", "case", "expects", "pass", "tets", "steps",
+              "size", "drift", "depth", "force", "substeps", "wall", "outcome");
+  std::printf("%-44s %-9s %-5s %6s %9s %7s %6s %7s %7s %8s %6s\n", "", "", "", "", "", "x rest", "%", "mm", "N", "max",
+              "s");
+  nlohmann::json all = nlohmann::json::array();
+  int failed = 0;
+  tactile::ProgressBar bar(stderr, progress, "stability");
+  for (size_t k = 0; k < cases.size(); ++k) {
+    bar.update(double(k) / double(cases.size()), cases[k].name);
+    const CaseOutcome r = cases[k].run();
+    bar.finish();
+    if (!r.pass) ++failed;
+    std::printf("%-44s %-9s %-5s %6d %9lld %7s %6s %7s %7s %8d %6.1f  %s%s%s\n", r.name.c_str(), to_string(r.expect),
+                r.pass ? "pass" : "FAIL", r.tets, static_cast<long long>(r.steps), figure(r.size_ratio, "%.2f").c_str(),
+                figure(r.energy_drift < 0 ? -1 : 100 * r.energy_drift, "%.2f").c_str(),
+                figure(r.peak_force_N < 0 ? -1 : r.penetration_mm, "%.2f").c_str(), figure(r.peak_force_N, "%.2f").c_str(),
+                r.substeps_max, r.wall_s, r.outcome.c_str(), r.pass ? "" : " -- ", r.why.c_str());
+    std::fflush(stdout);
+    all.push_back({{"name", r.name},
+                   {"group", r.group},
+                   {"material", r.material},
+                   {"mesh", r.mesh},
+                   {"expects", to_string(r.expect)},
+                   {"pass", r.pass},
+                   {"outcome", r.outcome},
+                   {"why", r.why},
+                   {"tets", r.tets},
+                   {"steps", r.steps},
+                   {"sim_time_s", r.sim_time},
+                   {"wall_s", r.wall_s},
+                   {"size_ratio", r.size_ratio},
+                   {"size_limit", r.size_limit},
+                   {"energy_drift", r.energy_drift < 0 ? nlohmann::json() : nlohmann::json(r.energy_drift)},
+                   {"penetration_mm", r.penetration_mm},
+                   {"peak_force_N", r.peak_force_N < 0 ? nlohmann::json() : nlohmann::json(r.peak_force_N)},
+                   {"substeps_max", r.substeps_max}});
+  }
+  std::printf("\n%zu cases: %zu passed, %d failed\n", cases.size(), cases.size() - size_t(failed), failed);
+  if (!json_path.empty()) {
+    std::ofstream f(json_path);
+    f << all.dump(1) << "\n";
+    if (!f) {
+      std::fprintf(stderr, "tactile-stability: could not write %s\n", json_path.c_str());
+      return 2;
+    }
+  }
+  return failed ? 1 : 0;
+}

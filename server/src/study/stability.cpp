@@ -1,0 +1,723 @@
+#include "study/stability.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <limits>
+#include <map>
+#include <memory>
+#include <array>
+#include <numbers>
+#include <random>
+#include <sstream>
+#include <utility>
+
+#include <glm/gtc/quaternion.hpp>
+
+#include "app/simulation.hpp"
+#include "core/spec.hpp"
+#include "mesh/primitives.hpp"
+#include "mesh/quality.hpp"
+#include "mesh/tetgen.hpp"
+
+namespace tactile::study {
+
+const char* to_string(Expect e) {
+  switch (e) {
+    case Expect::Runs: return "runs";
+    case Expect::MayFault: return "may fault";
+    case Expect::Caught: return "caught";
+  }
+  return "?";
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr double kPi = std::numbers::pi;
+constexpr MaterialModel kModels[] = {MaterialModel::Linear, MaterialModel::StVK, MaterialModel::Corotational,
+                                     MaterialModel::NeoHookean};
+
+// One run of a case: a model, what drives it, and what it must show.
+struct Scenario {
+  ModelSpec spec;
+  double duration = 0.1;   // simulated [s]
+  int64_t min_steps = 0;   // or run until this many steps (the long run)
+  double interval = 1e-3;  // control interval: one advance() per interval, as a device loop
+  // Sets the proxies' motion over [t0, t1] before each interval.
+  std::function<void(Simulation&, double t0, double t1)> drive;
+  // Sets the state before the first step.
+  std::function<void(Simulation&)> init;
+  bool conservative = false;  // energy drift checked
+  double size_limit = 2.0;    // largest bounding-box diagonal over the rest one
+  Expect expect = Expect::Runs;
+  // After the run (when it did not fault): "" or what is wrong.
+  std::function<std::string(const Simulation&)> final_check;
+};
+
+std::string fmt(const char* f, double a) {
+  char s[96];
+  std::snprintf(s, sizeof s, f, a);
+  return s;
+}
+
+double diagonal(const std::vector<double>& x) {
+  Vec3 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+  for (size_t i = 0; i + 2 < x.size(); i += 3)
+    for (int d = 0; d < 3; ++d) {
+      lo[d] = std::min(lo[d], x[i + size_t(d)]);
+      hi[d] = std::max(hi[d], x[i + size_t(d)]);
+    }
+  return glm::length(hi - lo);
+}
+
+// The nodes on the body's boundary (on a face of one tet only): the contact keeps these out of the
+// proxies; the nodes inside the body are behind them.
+std::vector<int32_t> surface_nodes(const TetMesh& mesh) {
+  std::map<std::array<int32_t, 3>, int> faces;
+  for (const Tet& t : mesh.tets)
+    for (int skip = 0; skip < 4; ++skip) {
+      std::array<int32_t, 3> f{};
+      int k = 0;
+      for (int c = 0; c < 4; ++c)
+        if (c != skip) f[size_t(k++)] = int32_t(t[c]);
+      std::sort(f.begin(), f.end());
+      ++faces[f];
+    }
+  std::vector<char> on(size_t(mesh.n_nodes()), 0);
+  for (const auto& [f, n] : faces)
+    if (n == 1)
+      for (int32_t i : f) on[size_t(i)] = 1;
+  std::vector<int32_t> out;
+  for (int32_t i = 0; i < mesh.n_nodes(); ++i)
+    if (on[size_t(i)]) out.push_back(i);
+  return out;
+}
+
+// How deep the surface nodes are inside the proxies: the deepest [m], and the deepest relative to its proxy's
+// trust depth (past which the contact can no longer push a node back out the way it came in: tunnelled).
+struct Depth {
+  double deepest = 0, of_trust = 0;
+};
+Depth deepest_inside(const Simulation& sim, const std::vector<int32_t>& nodes, const std::vector<double>& x) {
+  Depth d;
+  for (size_t j = 0; j < sim.proxies().size(); ++j) {
+    const Pose pose = sim.proxy_pose(int32_t(j));
+    const ProxyGeometry& g = sim.proxies()[j].geometry;
+    const double trust = trust_depth(g);
+    for (int32_t i : nodes) {
+      const size_t k = 3 * size_t(i);
+      const double phi = locate(g, pose.to_local(Vec3(x[k], x[k + 1], x[k + 2]))).phi;
+      d.deepest = std::max(d.deepest, -phi);
+      d.of_trust = std::max(d.of_trust, -phi / trust);
+    }
+  }
+  return d;
+}
+
+bool all_finite(const std::vector<double>& v) {
+  return std::all_of(v.begin(), v.end(), [](double a) { return std::isfinite(a); });
+}
+
+// Runs a scenario and judges it.
+CaseOutcome run_scenario(Scenario sc, CaseOutcome out) {
+  out.expect = sc.expect;
+  out.size_limit = sc.size_limit;
+  const Clock::time_point t0 = Clock::now();
+  auto fail = [&](std::string why) {
+    if (out.why.empty()) out.why = std::move(why);
+  };
+  std::unique_ptr<Simulation> sim_ptr;
+  try {
+    sim_ptr = std::make_unique<Simulation>(sc.spec);
+  } catch (const std::exception& e) {
+    out.outcome = std::string("refused at load: ") + e.what();
+    fail("the model was refused at load");
+    out.wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    return out;
+  }
+  Simulation& sim = *sim_ptr;
+  out.tets = sim.n_tets();
+  if (sc.init) sc.init(sim);
+
+  std::vector<double> x, u, v;
+  sim.copy_positions(x);
+  const double rest_diag = diagonal(x);
+  const bool has_proxies = !sim.proxies().empty();
+  if (has_proxies) out.peak_force_N = 0;
+  const std::vector<int32_t> surface = has_proxies ? surface_nodes(sim.mesh()) : std::vector<int32_t>{};
+  const Depth initial = has_proxies ? deepest_inside(sim, surface, x) : Depth{};
+  double of_trust = 0;
+
+  double balance0 = 0, in_play = 0, drift = 0;
+  bool energy_started = false, subdivided = false;
+  Fault fault;
+  while (sim.time() < sc.duration - 1e-12 || sim.steps() < sc.min_steps) {
+    const double t = sim.time();
+    if (sc.drive) sc.drive(sim, t, t + sc.interval);
+    const AdvanceReport r = sim.advance(sc.interval);
+    out.substeps_max = std::max(out.substeps_max, r.substeps);
+    subdivided = subdivided || r.subdivided;
+    if (r.fault) {
+      fault = r.fault;
+      break;
+    }
+    sim.copy_positions(x);
+    sim.copy_velocity(v);
+    if (!all_finite(x) || !all_finite(v)) {
+      fail("a non-finite position or velocity at t = " + fmt("%.4f s", sim.time()) + " with no fault reported");
+      break;
+    }
+    out.size_ratio = std::max(out.size_ratio, diagonal(x) / rest_diag);
+    if (has_proxies) {
+      const Depth depth = deepest_inside(sim, surface, x);
+      out.penetration_mm = std::max(out.penetration_mm, 1e3 * depth.deepest);
+      of_trust = std::max(of_trust, depth.of_trust);
+      for (const DeviceReport& d : sim.device_reports())
+        if (d.elapsed > 0) out.peak_force_N = std::max(out.peak_force_N, glm::length(d.impulse) / d.elapsed);
+      sim.clear_impulses();
+    }
+    const Energy& e = sim.energy();
+    if (!energy_started) {
+      balance0 = e.balance();
+      energy_started = true;
+    }
+    in_play = std::max(in_play, e.kinetic + e.elastic);
+    drift = std::max(drift, std::abs(e.balance() - balance0));
+  }
+  out.steps = sim.steps();
+  out.sim_time = sim.time();
+
+  // What happened.
+  if (fault) {
+    std::ostringstream s;
+    s << "fault: " << to_string(fault.kind) << fmt(" at t = %.4f s", fault.t);
+    if (!fault.elements.empty()) s << " (" << fault.elements.size() << " tets named)";
+    out.outcome = s.str();
+  } else if (subdivided) {
+    out.outcome = "ran, subdivided (up to " + std::to_string(out.substeps_max) + " sub-steps an interval)";
+  } else {
+    out.outcome = "ran";
+  }
+
+  // The checks.
+  if (fault) {
+    if (fault.message.empty()) fail("a fault with no message");
+    const bool names_elements = fault.kind == Fault::Kind::Inverted || fault.kind == Fault::Kind::NonFinite;
+    if (names_elements && fault.elements.empty()) fail("an " + std::string(to_string(fault.kind)) + " fault naming no element");
+    // Stopped for good: the next interval gives the fault again and takes no step.
+    const int64_t steps = sim.steps();
+    const AdvanceReport again = sim.advance(sc.interval);
+    if (!again.fault || sim.steps() != steps) fail("the simulation went on after its fault");
+    switch (sc.expect) {
+      case Expect::Runs: fail("faulted: " + fault.message); break;
+      case Expect::MayFault: break;
+      case Expect::Caught:
+        if (fault.kind != Fault::Kind::StepTooLarge) fail("faulted other than by refusing the step: " + fault.message);
+        break;
+    }
+  } else if (sc.expect == Expect::Caught && !subdivided) {
+    fail("a step above the critical one ran unsubdivided");
+  }
+  if (out.size_ratio > sc.size_limit)
+    fail("the body grew to " + fmt("%.2f", out.size_ratio) + " times its rest size");
+  if (sc.conservative && energy_started) {
+    out.energy_drift = in_play > 0 ? drift / in_play : 0;
+    if (out.energy_drift > 0.10) fail("energy drifted by " + fmt("%.1f %%", 100 * out.energy_drift));
+  }
+  // A node may sit in a proxy by the few steps of motion the contact takes to stop it (deeper under a large
+  // force on a light node: about dt^2 F / 2m a step), but not past the depth the contact can push it back
+  // from; nor deeper than it started.
+  if (has_proxies && of_trust > std::max(1.0, initial.of_trust + 1e-9))
+    fail("a surface node went " + fmt("%.0f %%", 100 * of_trust) + " of its proxy's trust depth into it (tunnelled)");
+  if (!fault && sc.final_check) {
+    const std::string bad = sc.final_check(sim);
+    if (!bad.empty()) fail(bad);
+  }
+  out.pass = out.why.empty();
+  out.wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  return out;
+}
+
+// ---- building blocks -----------------------------------------------------------------------------------
+
+struct Level {
+  const char* name;
+  int k;  // resolution multiplier
+};
+constexpr Level kCoarse{"coarse", 1}, kFine{"fine", 2};
+
+NodeSelector plane_y(double y) {
+  NodeSelector s;
+  s.kind = NodeSelector::Kind::Plane;
+  s.point = Vec3(0, y, 0);
+  s.normal = Vec3(0, 1, 0);
+  s.tolerance = 1e-9;
+  return s;
+}
+
+NodeSelector box_of(Vec3 lo, Vec3 hi) {
+  NodeSelector s;
+  s.kind = NodeSelector::Kind::Box;
+  s.lo = lo;
+  s.hi = hi;
+  s.tolerance = 1e-9;
+  return s;
+}
+
+EssentialBc fixed_bc(std::string name, NodeSelector where) {
+  EssentialBc bc;
+  bc.name = std::move(name);
+  bc.where = std::move(where);
+  return bc;
+}
+
+ModelSpec base_spec(TetMesh mesh, MaterialModel model, double E = 1e5, double nu = 0.3) {
+  ModelSpec spec;
+  spec.mesh = std::move(mesh);
+  spec.materials = {MaterialSpec{model, E, nu, 1000}};
+  return spec;
+}
+
+void damp(ModelSpec& spec, double alpha) {
+  spec.effects.damping = true;
+  spec.effects.alpha = alpha;
+}
+
+void gravity(ModelSpec& spec) {
+  spec.effects.gravity = true;
+  spec.effects.g = Vec3(0, -9.81, 0);
+}
+
+// A column 0.1 x 0.3 x 0.1 m, base at y = 0 (the paper's Fig. 2 proportions).
+constexpr double kColW = 0.1, kColH = 0.3;
+TetMesh column(Level l) {
+  return make_box(Vec3(-kColW / 2, 0, -kColW / 2), Vec3(kColW / 2, kColH, kColW / 2), {3 * l.k, 9 * l.k, 3 * l.k});
+}
+
+// A block 6 x 3 x 6 cm, base at y = 0 (the poke scenes' block).
+constexpr double kBlockW = 0.06, kBlockH = 0.03;
+TetMesh block(Level l) {
+  return make_box(Vec3(-kBlockW / 2, 0, -kBlockW / 2), Vec3(kBlockW / 2, kBlockH, kBlockW / 2),
+                  {6 * l.k, 3 * l.k, 6 * l.k});
+}
+
+// A 2 cm cube, base at y = 0.
+constexpr double kCube = 0.02;
+TetMesh cube(Level l) {
+  return make_box(Vec3(-kCube / 2, 0, -kCube / 2), Vec3(kCube / 2, kCube, kCube / 2), {3 * l.k, 3 * l.k, 3 * l.k});
+}
+
+// A plate 5 x 5 cm, 2 mm thick, top at y = 0.
+constexpr double kPlateW = 0.05, kPlateT = 0.002;
+TetMesh plate(Level l) {
+  return make_box(Vec3(-kPlateW / 2, -kPlateT, -kPlateW / 2), Vec3(kPlateW / 2, 0, kPlateW / 2),
+                  {10 * l.k, 1 * l.k, 10 * l.k});
+}
+// Its four edges, fixed.
+std::vector<EssentialBc> plate_edges() {
+  const double h = kPlateW / 2, t = kPlateT, in = h - 1e-6;  // the z edges stop short of the x edges' corners
+  return {fixed_bc("x-", box_of(Vec3(-h, -t, -h), Vec3(-h, 0, h))), fixed_bc("x+", box_of(Vec3(h, -t, -h), Vec3(h, 0, h))),
+          fixed_bc("z-", box_of(Vec3(-in, -t, -h), Vec3(in, 0, -h))), fixed_bc("z+", box_of(Vec3(-in, -t, h), Vec3(in, 0, h)))};
+}
+
+ProxySpec sphere_proxy(std::string name, double radius, Vec3 at) {
+  ProxySpec p;
+  p.name = name;
+  p.device = std::move(name);
+  p.geometry.shape = ProxyShape::Sphere;
+  p.geometry.radius = radius;
+  p.pose.position = at;
+  return p;
+}
+
+// Moves proxy j over [t0, t1] to where `path(t1)` says (as a device input each interval would).
+void follow(Simulation& sim, int32_t j, double t0, double t1, const std::function<Vec3(double)>& path) {
+  ProxyMotion m;
+  m.t0 = t0;
+  m.t1 = t1;
+  m.from = sim.proxy_pose(j);
+  m.to = m.from;
+  m.to.position = path(t1);
+  sim.set_proxy_motion(j, m);
+}
+
+// Smooth 0 -> 1 over [a, b] (cycloidal), 0 before and 1 after.
+double ease(double t, double a, double b) {
+  if (t <= a) return 0;
+  if (t >= b) return 1;
+  const double s = (t - a) / (b - a);
+  return s - std::sin(2 * kPi * s) / (2 * kPi);
+}
+
+int32_t nearest_node(const TetMesh& mesh, Vec3 p) {
+  int32_t best = 0;
+  double d = std::numeric_limits<double>::infinity();
+  for (int32_t i = 0; i < mesh.n_nodes(); ++i)
+    if (const double e = glm::length(mesh.X[size_t(i)] - p); e < d) d = e, best = i;
+  return best;
+}
+
+// The tets of the current configuration with det F <= 0.
+int32_t count_inverted(const Simulation& sim) {
+  std::vector<double> x;
+  sim.copy_positions(x);
+  auto at = [&](int32_t i) { return Vec3(x[3 * size_t(i)], x[3 * size_t(i) + 1], x[3 * size_t(i) + 2]); };
+  int32_t n = 0;
+  for (const Tet& t : sim.mesh().tets)
+    if (compute_tet_volume(at(t[0]), at(t[1]), at(t[2]), at(t[3])) <= 0) ++n;
+  return n;
+}
+
+// ---- the cases -------------------------------------------------------------------------------------------
+
+// Where the physics says a model cannot go on, the case expects a reported fault of it rather than a run.
+// StVK's stress has a maximum in compression (at 1/sqrt(3): past ~42 %) and it cannot invert: squashed past
+// that, its elements fold and the guard stops it, as it must.
+Expect stvk_may_fault(MaterialModel m) { return m == MaterialModel::StVK ? Expect::MayFault : Expect::Runs; }
+
+Scenario twist(MaterialModel m, Level l, bool quick) {
+  // The lid turned 450 degrees (the paper's 90 and on, past a full turn), then held.
+  Scenario sc;
+  sc.spec = base_spec(column(l), m);
+  damp(sc.spec, 5.0);
+  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  EssentialBc lid = fixed_bc("lid", plane_y(kColH));
+  lid.centre = Vec3(0, kColH, 0);
+  lid.axis = Vec3(0, 1, 0);
+  lid.angle = MotionProfile{MotionProfile::Kind::Ramp, 0.0, quick ? 0.75 : 1.5, 2.5 * kPi, 0.0};
+  sc.spec.essential.push_back(lid);
+  sc.duration = quick ? 1.0 : 2.0;
+  sc.expect = stvk_may_fault(m);
+  return sc;
+}
+
+Scenario spin(MaterialModel m, Level l, bool quick) {
+  // The lid spun up to two turns a second within 0.1 s, the base held: the column winds up.
+  Scenario sc;
+  sc.spec = base_spec(column(l), m);
+  damp(sc.spec, 5.0);
+  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  EssentialBc lid = fixed_bc("lid", plane_y(kColH));
+  lid.centre = Vec3(0, kColH, 0);
+  lid.axis = Vec3(0, 1, 0);
+  lid.angle = MotionProfile{MotionProfile::Kind::ConstantRate, 0.0, 0.1, 0.0, 4 * kPi};
+  sc.spec.essential.push_back(lid);
+  sc.duration = quick ? 0.3 : 0.6;
+  sc.expect = stvk_may_fault(m);
+  return sc;
+}
+
+Scenario compress(MaterialModel m, Level l, bool quick) {
+  // A plate pressed down 60 % of the block's height, held, lifted away: the block springs back.
+  Scenario sc;
+  sc.spec = base_spec(block(l), m);
+  damp(sc.spec, 10.0);
+  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  ProxySpec p;
+  p.name = p.device = "plate";
+  p.geometry.shape = ProxyShape::Box;
+  p.geometry.half_extents = Vec3(0.05, 0.01, 0.05);
+  p.geometry.radius = 0.002;
+  const double y0 = kBlockH + 0.01 + 0.002 + 1e-4;  // just above the top (the rounding adds to the half extents)
+  p.pose.position = Vec3(0, y0, 0);
+  sc.spec.proxies.push_back(p);
+  const double s = quick ? 0.5 : 1.0;
+  sc.drive = [=](Simulation& sim, double, double t1) {
+    follow(sim, 0, sim.time(), t1, [&](double t) {
+      const double down = 0.6 * kBlockH * (ease(t, 0, 0.4 * s) - ease(t, 0.6 * s, 1.0 * s));
+      return Vec3(0, y0 - down, 0);
+    });
+  };
+  sc.duration = 1.4 * s;
+  sc.expect = stvk_may_fault(m);
+  sc.final_check = [](const Simulation& sim) -> std::string {
+    // Released: the block has come back up (no element left inverted, its top near the rest height).
+    if (const int32_t n = count_inverted(sim); n > 0) return std::to_string(n) + " tets still inverted after release";
+    std::vector<double> x;
+    sim.copy_positions(x);
+    double top = -1;
+    for (size_t i = 1; i < x.size(); i += 3) top = std::max(top, x[i]);
+    if (top < 0.9 * kBlockH) return "the block stayed squashed after release (top at " + fmt("%.4f m)", top);
+    return "";
+  };
+  return sc;
+}
+
+Scenario bad_start(MaterialModel m, Level l, double through) {
+  // The block's top corner node pushed down `through` cell heights at the start: 1 puts it on the plane of
+  // the cell's lower face (tets flattened), 1.5 through it (tets inverted). Damped, it must recover.
+  Scenario sc;
+  sc.spec = base_spec(block(l), m);
+  damp(sc.spec, 20.0);
+  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  const double h = kBlockH / (3 * l.k);
+  const int32_t corner = nearest_node(sc.spec.mesh, Vec3(kBlockW / 2, kBlockH, kBlockW / 2));
+  sc.init = [=](Simulation& sim) {
+    std::vector<double> u(3 * size_t(sim.n_nodes()), 0.0), v(u.size(), 0.0);
+    u[3 * size_t(corner) + 1] = -through * h;
+    sim.set_initial_state(u, v);
+  };
+  sc.duration = 0.3;
+  sc.expect = stvk_may_fault(m);
+  sc.final_check = [](const Simulation& sim) -> std::string {
+    if (const int32_t n = count_inverted(sim); n > 0) return std::to_string(n) + " tets still inverted at the end";
+    return "";
+  };
+  return sc;
+}
+
+Scenario under_gravity(MaterialModel m, TetMesh mesh, double E, double nu, double duration) {
+  // Base fixed, no damping: the body sags and swings under its weight, and the energy balance holds.
+  Scenario sc;
+  sc.spec = base_spec(std::move(mesh), m, E, nu);
+  gravity(sc.spec);
+  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  sc.duration = duration;
+  sc.conservative = true;
+  return sc;
+}
+
+Scenario time_step(MaterialModel m, Level l, double factor, UnstablePolicy policy) {
+  // A fixed step of `factor` times the critical estimate at rest (conservative: gravity, no damping).
+  Scenario sc = under_gravity(m, block(l), 1e5, 0.3, 0.1);
+  const double dt_rest = Simulation(sc.spec).dt_rest();
+  sc.spec.integrator.dt = factor * dt_rest;
+  sc.spec.integrator.unstable = policy;
+  sc.interval = 4 * sc.spec.integrator.dt;  // four steps an interval, each at the fixed step
+  sc.expect = factor < 1 ? Expect::Runs : Expect::Caught;
+  return sc;
+}
+
+Scenario impact(MaterialModel m, Level l, bool) {
+  // A 5 mm sphere at 10 m/s through where a 2 mm plate (edges fixed) is: it must carry the plate along.
+  Scenario sc;
+  sc.spec = base_spec(plate(l), m, 1e6);
+  damp(sc.spec, 20.0);
+  sc.spec.essential = plate_edges();
+  const double r = 0.005, y0 = 0.010, travel = 0.022, speed = 10.0;
+  sc.spec.proxies.push_back(sphere_proxy("ball", r, Vec3(0, y0 + r, 0)));
+  const double t_end = travel / speed;
+  sc.drive = [=](Simulation& sim, double, double t1) {
+    follow(sim, 0, sim.time(), t1, [&](double t) { return Vec3(0, y0 + r - speed * std::min(t, t_end), 0); });
+  };
+  sc.interval = 1e-4;  // the ball's path in steps of 1 mm
+  sc.duration = 0.05;
+  sc.expect = stvk_may_fault(m);
+  const int32_t centre = nearest_node(sc.spec.mesh, Vec3(0, 0, 0));
+  sc.final_check = [=](const Simulation& sim) -> std::string {
+    // No tunnelling: the plate's centre is under the ball, not back at rest above it.
+    const double y = sim.mesh().X[size_t(centre)].y + sim.displacement(centre).y;
+    const double bottom = sim.proxy_pose(0).position.y - r;
+    if (y > bottom + 0.5e-3) return "the ball went through the plate (its centre at " + fmt("%.4f m", y) +
+                                    ", the ball's bottom at " + fmt("%.4f m)", bottom);
+    return "";
+  };
+  return sc;
+}
+
+Scenario inside(MaterialModel m, Level l, bool) {
+  // A sphere that starts half inside the block, held, then lifted out: nodes inside stay put, none goes
+  // deeper, nothing is thrown out.
+  Scenario sc;
+  sc.spec = base_spec(block(l), m);
+  damp(sc.spec, 10.0);
+  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  const double r = 0.008;
+  const Vec3 start(0, kBlockH, 0);
+  sc.spec.proxies.push_back(sphere_proxy("ball", r, start));
+  sc.drive = [=](Simulation& sim, double, double t1) {
+    follow(sim, 0, sim.time(), t1, [&](double t) { return start + Vec3(0, 0.02 * ease(t, 0.2, 0.4), 0); });
+  };
+  sc.duration = 0.5;
+  sc.expect = Expect::Runs;
+  return sc;
+}
+
+Scenario pinch(MaterialModel m, Level l, bool) {
+  // Two spheres close on the plate's centre from above and below until they overlap by 1 mm: the nodes
+  // between have nowhere to go. Held, then parted.
+  Scenario sc;
+  sc.spec = base_spec(plate(l), m, 1e5);
+  damp(sc.spec, 20.0);
+  sc.spec.essential = plate_edges();
+  const double r = 0.005, gap = 0.003;
+  const double top0 = r + gap, bottom0 = -kPlateT - r - gap;
+  const double close = gap + kPlateT / 2 + 0.0005;  // each travels past the mid-plane by 0.5 mm
+  sc.spec.proxies.push_back(sphere_proxy("upper", r, Vec3(0, top0, 0)));
+  sc.spec.proxies.push_back(sphere_proxy("lower", r, Vec3(0, bottom0, 0)));
+  sc.drive = [=](Simulation& sim, double, double t1) {
+    const auto s = [&](double t) { return ease(t, 0, 0.2) - ease(t, 0.3, 0.5); };
+    follow(sim, 0, sim.time(), t1, [&](double t) { return Vec3(0, top0 - close * s(t), 0); });
+    follow(sim, 1, sim.time(), t1, [&](double t) { return Vec3(0, bottom0 + close * s(t), 0); });
+  };
+  sc.duration = 0.6;
+  sc.expect = stvk_may_fault(m);
+  return sc;
+}
+
+Scenario drag(MaterialModel m, Level l, bool) {
+  // A sphere pressed 5 mm in and dragged 4 cm across the block at 1 m/s with friction mu = 1, then lifted.
+  Scenario sc;
+  sc.spec = base_spec(block(l), m);
+  damp(sc.spec, 10.0);
+  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  sc.spec.effects.friction = true;
+  const double r = 0.01;
+  const Vec3 above(-0.02, kBlockH + r + 0.001, 0);
+  ProxySpec p = sphere_proxy("ball", r, above);
+  p.friction = 1.0;
+  sc.spec.proxies.push_back(p);
+  sc.drive = [=](Simulation& sim, double, double t1) {
+    follow(sim, 0, sim.time(), t1, [&](double t) {
+      return above + Vec3(0.04 * ease(t, 0.1, 0.14), -0.006 * (ease(t, 0, 0.1) - ease(t, 0.15, 0.25)), 0);
+    });
+  };
+  sc.duration = 0.35;
+  sc.expect = stvk_may_fault(m);
+  return sc;
+}
+
+// A ring's surface with few segments, meshed by TetGen with no quality bound: slivers.
+TetMesh sliver_mesh(Level l) {
+  SurfaceMesh s;
+  const int n_major = 10 * l.k, n_minor = 5 * l.k;
+  const double R = 0.03, r = 0.012;
+  for (int i = 0; i < n_major; ++i)
+    for (int j = 0; j < n_minor; ++j) {
+      const double a = 2 * kPi * i / n_major, b = 2 * kPi * j / n_minor;
+      s.vertices.push_back(Vec3((R + r * std::cos(b)) * std::cos(a), r * std::sin(b) + r, (R + r * std::cos(b)) * std::sin(a)));
+    }
+  auto id = [&](int i, int j) { return int32_t(((i + n_major) % n_major) * n_minor + (j + n_minor) % n_minor); };
+  for (int i = 0; i < n_major; ++i)
+    for (int j = 0; j < n_minor; ++j) {
+      s.triangles.push_back(Tri{id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      s.triangles.push_back(Tri{id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+  TetgenOptions o;
+  o.max_radius_edge_ratio = 0;  // no quality refinement
+  return tetrahedralize(s, o);
+}
+
+Scenario slivers(MaterialModel m, Level l, bool) {
+  // The ring rests on its lowest nodes, sags under gravity and is poked by a sphere.
+  Scenario sc;
+  sc.spec = base_spec(sliver_mesh(l), m);
+  damp(sc.spec, 10.0);
+  gravity(sc.spec);
+  sc.spec.essential.push_back(fixed_bc("base", box_of(Vec3(-1, -1, -1), Vec3(1, 0.002, 1))));
+  const double r = 0.006;
+  const Vec3 above(0.03, 2 * 0.012 + r + 0.001, 0);
+  sc.spec.proxies.push_back(sphere_proxy("ball", r, above));
+  sc.drive = [=](Simulation& sim, double, double t1) {
+    follow(sim, 0, sim.time(), t1, [&](double t) { return above - Vec3(0, 0.008 * (ease(t, 0, 0.15) - ease(t, 0.2, 0.35)), 0); });
+  };
+  sc.duration = 0.4;
+  return sc;
+}
+
+Scenario random_velocity(MaterialModel m, Level l, uint64_t seed) {
+  // A free block with a random velocity at every node (about 0.3 m/s, no net momentum), no damping: it
+  // rattles, and its energy holds.
+  Scenario sc;
+  sc.spec = base_spec(block(l), m);
+  sc.duration = 0.2;
+  sc.conservative = true;
+  sc.init = [=](Simulation& sim) {
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> n(0.0, 0.3);
+    std::vector<double> u(3 * size_t(sim.n_nodes()), 0.0), v(u.size());
+    Vec3 mean(0.0);
+    for (size_t i = 0; i < v.size(); ++i) v[i] = n(rng);
+    for (size_t i = 0; i < v.size(); i += 3) mean += Vec3(v[i], v[i + 1], v[i + 2]);
+    mean /= double(sim.n_nodes());
+    for (size_t i = 0; i < v.size(); i += 3)
+      for (int d = 0; d < 3; ++d) v[i + size_t(d)] -= mean[d];
+    sim.set_initial_state(u, v);
+  };
+  sc.size_limit = 2.0;
+  return sc;
+}
+
+Scenario random_input(MaterialModel m, Level l, uint64_t seed, int64_t steps) {
+  // A sphere driven by random device input every millisecond (a random walk of the target, up to
+  // 0.3 m/s, in and out of the block and across it), with friction: the long live session.
+  Scenario sc;
+  sc.spec = base_spec(block(l), m);
+  damp(sc.spec, 10.0);
+  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  sc.spec.effects.friction = true;
+  const double r = 0.008;
+  const Vec3 start(0, kBlockH + r + 0.002, 0);
+  ProxySpec p = sphere_proxy("stylus", r, start);
+  p.friction = 0.3;
+  sc.spec.proxies.push_back(p);
+  auto rng = std::make_shared<std::mt19937_64>(seed);
+  auto vel = std::make_shared<Vec3>(0.0);
+  sc.drive = [=](Simulation& sim, double, double t1) {
+    std::normal_distribution<double> n(0.0, 1.0);
+    const double dt = t1 - sim.time();
+    // An Ornstein-Uhlenbeck velocity (about 0.3 m/s, correlated over 50 ms), pulled back towards the start
+    // so the walk stays over the block, never deeper than 8 mm.
+    const Vec3 at = sim.proxy_pose(0).position;
+    const Vec3 kick(n(*rng), n(*rng), n(*rng));
+    *vel += -(*vel) * (dt / 0.05) + kick * (0.3 * std::sqrt(2 * dt / 0.05)) - (at - start) * (dt * 20.0);
+    Vec3 to = at + *vel * dt;
+    to.y = std::clamp(to.y, kBlockH + r - 0.008, start.y + 0.01);
+    to.x = std::clamp(to.x, -0.025, 0.025);
+    to.z = std::clamp(to.z, -0.025, 0.025);
+    follow(sim, 0, sim.time(), t1, [&](double) { return to; });
+  };
+  sc.duration = 0;
+  sc.min_steps = steps;
+  sc.expect = stvk_may_fault(m);
+  return sc;
+}
+
+}  // namespace
+
+std::vector<StabilityCase> stability_cases(const SuiteOptions& o) {
+  std::vector<StabilityCase> cases;
+  const bool quick = o.quick;
+  std::vector<Level> levels{kCoarse};
+  if (!quick) levels.push_back(kFine);
+  auto add = [&](const std::string& group, MaterialModel m, Level l, std::function<Scenario()> make) {
+    CaseOutcome head;
+    head.group = group;
+    head.material = std::string(to_string(m));
+    head.mesh = l.name;
+    head.name = group + "/" + head.material + "/" + head.mesh;
+    if (!o.filter.empty() && head.name.find(o.filter) == std::string::npos) return;
+    cases.push_back({head.name, [head, make = std::move(make)] { return run_scenario(make(), head); }});
+  };
+  for (const Level l : levels) {
+    for (MaterialModel m : kModels) {
+      add("twist_450deg", m, l, [=] { return twist(m, l, quick); });
+      add("spin_720deg_s", m, l, [=] { return spin(m, l, quick); });
+      add("compress_60pct_release", m, l, [=] { return compress(m, l, quick); });
+      add("flattened_start", m, l, [=] { return bad_start(m, l, 1.0); });
+      add("inverted_start", m, l, [=] { return bad_start(m, l, 1.5); });
+      add("nu_0.49", m, l, [=] { return under_gravity(m, block(l), 1e5, 0.49, quick ? 0.1 : 0.3); });
+      add("soft_1kPa", m, l, [=] { return under_gravity(m, cube(l), 1e3, 0.3, quick ? 0.3 : 1.0); });
+      add("stiff_1MPa", m, l, [=] { return under_gravity(m, cube(l), 1e6, 0.3, quick ? 0.05 : 0.2); });
+      add("dt_0.9x", m, l, [=] { return time_step(m, l, 0.9, UnstablePolicy::Subdivide); });
+      add("dt_1.5x_subdivide", m, l, [=] { return time_step(m, l, 1.5, UnstablePolicy::Subdivide); });
+      add("dt_1.5x_refuse", m, l, [=] { return time_step(m, l, 1.5, UnstablePolicy::Refuse); });
+      add("dt_3x_subdivide", m, l, [=] { return time_step(m, l, 3.0, UnstablePolicy::Subdivide); });
+      add("dt_3x_refuse", m, l, [=] { return time_step(m, l, 3.0, UnstablePolicy::Refuse); });
+      add("impact_10m_s", m, l, [=] { return impact(m, l, quick); });
+      add("proxy_inside", m, l, [=] { return inside(m, l, quick); });
+      add("pinch", m, l, [=] { return pinch(m, l, quick); });
+      add("drag_friction", m, l, [=] { return drag(m, l, quick); });
+      add("slivers", m, l, [=] { return slivers(m, l, quick); });
+      add("random_velocity", m, l, [=, seed = o.seed] { return random_velocity(m, l, seed); });
+      add(quick ? "random_input_50k" : "random_input_1M", m, l,
+          [=, seed = o.seed] { return random_input(m, l, seed, quick ? 50'000 : 1'000'000); });
+    }
+  }
+  return cases;
+}
+
+}  // namespace tactile::study

@@ -1,0 +1,75 @@
+// The hard-case stability suite: the explicit FEM pushed where explicit FEM
+// breaks -- large twists and spins, compression past StVK's limit, inverted
+// and flattened elements, near-incompressible, very soft and stiff
+// materials, time steps above the critical one, fast and pinching proxies,
+// sliver meshes, random velocities and a long run of random device input --
+// each case at two mesh resolutions and for every material it applies to.
+//
+// A case passes when
+//   - every position and velocity stays finite, at every control interval;
+//   - the body's bounding box stays within twice its rest size (its
+//     diagonal), unless the case's load says otherwise;
+//   - on a conservative run (no damping, contact or moving boundary), the
+//     energy balance drifts by at most 10 % of the energy in play;
+//   - no body node gets deeper into a proxy than the contact lets it (no
+//     tunnelling);
+//   - what it expects happens: `Runs` ends without a fault; `MayFault` may
+//     stop on a fault, which must name its kind and the elements at fault,
+//     and after which the simulation stays stopped (no step, no force: the
+//     server then stops publishing, and the bridge takes the force to zero);
+//     `Caught` has a step above the critical one subdivided or refused,
+//     never run.
+//
+// The suite is plain C++ over the core (Simulation); `tactile-stability`
+// (cli/) prints it as a table, and the short version runs in ctest.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace tactile::study {
+
+enum class Expect : uint8_t {
+  Runs,      // no fault
+  MayFault,  // a fault is allowed (the model cannot take the case) if it is reported
+  Caught,    // a step above the critical one: subdivided or refused
+};
+const char* to_string(Expect e);
+
+struct CaseOutcome {
+  std::string name;      // "group/material/mesh"
+  std::string group, material, mesh;
+  Expect expect = Expect::Runs;
+  bool pass = false;
+  std::string outcome;   // what happened, in words ("ran", "fault: inverted at t = ...", "subdivided x4")
+  std::string why;       // the first check that failed; empty on a pass
+  int32_t tets = 0;
+  int64_t steps = 0;
+  double sim_time = 0;   // [s]
+  double wall_s = 0;     // [s]
+  double size_ratio = 0;       // largest bounding-box diagonal over the rest one
+  double size_limit = 2.0;     // what the case allows
+  double energy_drift = -1;    // |balance change| / energy in play; -1 when the run is not conservative
+  double penetration_mm = 0;   // deepest body node inside a proxy at a control instant [mm]
+  double peak_force_N = -1;    // largest mean force on a device over a control interval; -1 without proxies
+  int32_t substeps_max = 0;    // most sub-steps in one control interval
+};
+
+struct SuiteOptions {
+  bool quick = false;       // the short version: the coarse meshes and shorter runs
+  std::string filter;       // run only cases whose name contains this
+  uint64_t seed = 1;        // random velocities and device input
+};
+
+struct StabilityCase {
+  std::string name;
+  std::function<CaseOutcome()> run;
+};
+
+// The suite's cases, in a fixed order, built lazily (a case builds its mesh
+// when run).
+std::vector<StabilityCase> stability_cases(const SuiteOptions& options);
+
+}  // namespace tactile::study
