@@ -34,9 +34,6 @@ const std::map<std::string, std::string>& known_failures() {
        "node-only contact: on the coarse plate (5 mm cells, stretched) the 5 mm ball slips between surface nodes "
        "and passes through; the fine plate holds. Needs proxy-face contact."},
       {"impact_10m_s/neohookean/coarse", "as impact_10m_s/corotational/coarse"},
-      {"random_input_50k/linear/coarse",
-       "a surface node sinks to 4.9 mm in the 8 mm ball as friction drags it across the linear block (the "
-       "velocity-level contact does not undo a penetration that builds over steps)."},
   };
   return known;
 }
