@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <sstream>
 
@@ -84,6 +85,14 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
     part_.push_back({0, static_cast<int32_t>(model_.blocks.size()), 0, model_.n_nodes});
   }
   n_parts_ = static_cast<int32_t>(part_.size());
+  // The elastic energy is a sum of densities that cancel to nearly nothing at
+  // small strain (psi = mu/2 (I1 - 3) - ..., I1 ~ 3), each carrying a round-off
+  // of a few eps (mu + lambda) V. In float that is far above the energy of a
+  // small deformation, and the balance cannot be checked finer than it.
+  double stiffness_volume = 0;
+  for (size_t e = 0; e < model_.tet_volume.size(); ++e)
+    stiffness_volume += (model_.tet_mu[e] + model_.tet_lambda[e]) * model_.tet_volume[e];
+  energy_floor_ = 16.0 * double(std::numeric_limits<Real>::epsilon()) * stiffness_volume;
   // A force array per part, each starting on a cache line (16 nodes: 4 lines
   // of float, 8 of double). The corrector reads a part's array only over the
   // nodes its elements touch: parts of a Morton-ordered mesh touch nearly
@@ -457,7 +466,7 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
                              std::fabs(s.work_loads) + std::fabs(s.work_essential) + std::fabs(s.work_contact) + s.dissipated;
     energy_scale_ = std::max(energy_scale_, magnitude);
     const double growth = energy_.balance() - energy_reference_;
-    const double allowed = model_.integrator.energy_tolerance * energy_scale_ + 1e-12;
+    const double allowed = model_.integrator.energy_tolerance * energy_scale_ + energy_floor_ + 1e-12;
     // Past the critical step the balance stays conserved while the motion
     // grows without bound (kinetic + discrete falls as fast as kinetic +
     // elastic rises), so the physical energy is checked too, against all the

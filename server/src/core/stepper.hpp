@@ -169,6 +169,7 @@ class Stepper {
   double energy_reference_ = 0;  // balance at the start of the current window (the first step at first)
   double energy_window_start_ = 0;  // simulated time the current window started [s]
   double energy_scale_ = 0;      // running max of the energy magnitudes [J]
+  double energy_floor_ = 0;      // the elastic energy's round-off in Real: the balance's resolution [J]
   bool energy_started_ = false;
   double energy_dt_ = 0;         // the step the latest energies were measured with [s]
   Fault fault_;

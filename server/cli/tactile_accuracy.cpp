@@ -1,0 +1,93 @@
+// tactile-accuracy: runs the accuracy-cost study (study/accuracy.hpp) and
+// writes its records as JSON, for server/bench/accuracy_report.py to plot.
+//
+// Exit codes: 0 done, 1 a run failed to build (the message says which), 2 bad command line.
+#include <cstdio>
+#include <exception>
+#include <fstream>
+#include <string>
+#include <string_view>
+
+#include <nlohmann/json.hpp>
+
+#include "app/progress.hpp"
+#include "study/accuracy.hpp"
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: tactile-accuracy --out FILE.json [--quick] [--scenes DIR] [--only PROBLEM] [--quiet]\n"
+    "  --quick         coarse levels and fewer variations (seconds), as the test suite runs it\n"
+    "  --scenes DIR    the shipped scenes (fig2_twist.json, fig3_cantilever.json); default server/scenes\n"
+    "  --only PROBLEM  cantilever_deflection, cantilever_frequency, wave_speed, rotation, fig3_tip, fig2_area\n"
+    "                  or realtime\n"
+    "  --quiet         no progress bar\n";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace tactile::study;
+  AccuracyOptions options;
+  std::string out_path;
+  bool progress = true;
+  for (int i = 1; i < argc; ++i) {
+    const std::string_view a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "tactile-accuracy: %s needs a value\n%s", argv[i], kUsage);
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "--quick") options.quick = true;
+    else if (a == "--out") out_path = value();
+    else if (a == "--scenes") options.scenes = value();
+    else if (a == "--only") options.only = value();
+    else if (a == "--quiet") progress = false;
+    else if (a == "--help" || a == "-h") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else {
+      std::fprintf(stderr, "tactile-accuracy: unknown argument '%s'\n%s", argv[i], kUsage);
+      return 2;
+    }
+  }
+  if (out_path.empty()) {
+    std::fprintf(stderr, "tactile-accuracy: --out FILE.json is needed\n%s", kUsage);
+    return 2;
+  }
+  tactile::ProgressBar bar(stderr, progress, "accuracy");
+  options.progress = [&](size_t done, size_t total, const std::string& what) {
+    bar.update(total ? double(done) / double(total) : 1.0, what);
+  };
+  AccuracyResults results;
+  try {
+    results = run_accuracy_study(options);
+  } catch (const std::exception& e) {
+    bar.finish();
+    std::fprintf(stderr, "tactile-accuracy: %s\n", e.what());
+    return 1;
+  }
+  bar.finish();
+  nlohmann::json records = nlohmann::json::array(), realtime = nlohmann::json::array();
+  for (const AccuracyRecord& r : results.records)
+    records.push_back({{"problem", r.problem}, {"material", r.material}, {"level", r.level}, {"tets", r.tets},
+                       {"safety", r.safety}, {"precision", r.precision}, {"value", r.value},
+                       {"reference", r.reference}, {"error", r.error}, {"unit", r.unit}, {"steps", r.steps},
+                       {"sim_time_s", r.sim_time}, {"wall_s", r.wall_s}, {"us_per_step", r.us_per_step},
+                       {"tet_steps_per_s", r.tet_steps_per_s}, {"fault", r.fault}});
+  for (const RealtimeRecord& r : results.realtime)
+    realtime.push_back({{"material", r.material}, {"precision", r.precision}, {"tets", r.tets},
+                        {"interval_ms", r.interval_ms}, {"substeps", r.substeps},
+                        {"largest_realtime_tets", r.largest_realtime_tets},
+                        {"estimated_max_tets", r.estimated_max_tets}});
+  std::ofstream f(out_path);
+  f << nlohmann::json{{"quick", options.quick}, {"records", records}, {"realtime", realtime}}.dump(1) << "\n";
+  if (!f) {
+    std::fprintf(stderr, "tactile-accuracy: could not write %s\n", out_path.c_str());
+    return 2;
+  }
+  std::printf("tactile-accuracy: %zu records, %zu real-time scans -> %s\n", results.records.size(),
+              results.realtime.size(), out_path.c_str());
+  return 0;
+}

@@ -1,0 +1,466 @@
+#include "study/accuracy.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <numbers>
+#include <stdexcept>
+#include <utility>
+
+#include <glm/geometric.hpp>
+#include <nlohmann/json.hpp>
+
+#include "app/section.hpp"
+#include "app/simulation.hpp"
+#include "core/spec.hpp"
+#include "mesh/primitives.hpp"
+#include "scene/scene.hpp"
+
+namespace tactile::study {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr double kPi = std::numbers::pi;
+constexpr MaterialModel kModels[] = {MaterialModel::Linear, MaterialModel::StVK, MaterialModel::Corotational,
+                                     MaterialModel::NeoHookean};
+constexpr Precision kPrecisions[] = {Precision::Float, Precision::Double};
+
+const char* name_of(Precision p) { return p == Precision::Float ? "float" : "double"; }
+
+// Steps a simulation in intervals to `duration`, timing only the stepping; `each` sees it after every interval.
+struct Stepped {
+  int64_t steps = 0;
+  double wall = 0;
+  std::string fault;
+};
+Stepped step_for(Simulation& sim, double duration, double interval,
+                 const std::function<void(const Simulation&)>& each = {}) {
+  Stepped out;
+  const int64_t steps0 = sim.steps();
+  while (sim.time() < duration - 1e-12) {
+    const Clock::time_point t0 = Clock::now();
+    const AdvanceReport r = sim.advance(std::min(interval, duration - sim.time()));
+    out.wall += std::chrono::duration<double>(Clock::now() - t0).count();
+    if (r.fault) {
+      out.fault = r.fault.message;
+      break;
+    }
+    if (each) each(sim);
+  }
+  out.steps = sim.steps() - steps0;
+  return out;
+}
+
+AccuracyRecord make_record(std::string problem, MaterialModel m, int32_t level, const Simulation& sim, double safety,
+                           Precision p, const Stepped& s) {
+  AccuracyRecord r;
+  r.problem = std::move(problem);
+  r.material = std::string(to_string(m));
+  r.level = level;
+  r.tets = sim.n_tets();
+  r.safety = safety;
+  r.precision = name_of(p);
+  r.steps = s.steps;
+  r.sim_time = sim.time();
+  r.wall_s = s.wall;
+  r.us_per_step = s.steps > 0 ? 1e6 * s.wall / double(s.steps) : 0;
+  r.tet_steps_per_s = s.wall > 0 ? double(sim.n_tets()) * double(s.steps) / s.wall : 0;
+  r.fault = s.fault;
+  return r;
+}
+
+std::vector<int32_t> nodes_where(const TetMesh& mesh, const std::function<bool(const Vec3&)>& on) {
+  std::vector<int32_t> out;
+  for (int32_t i = 0; i < mesh.n_nodes(); ++i)
+    if (on(mesh.X[size_t(i)])) out.push_back(i);
+  return out;
+}
+
+double mean_displacement(const Simulation& sim, const std::vector<int32_t>& nodes, int axis) {
+  double sum = 0;
+  for (int32_t i : nodes) sum += sim.displacement(i)[axis];
+  return nodes.empty() ? 0 : sum / double(nodes.size());
+}
+
+// ---- the cantilever against beam theory ------------------------------------------------------------------
+
+// Length L along x, square section h = L / 10, clamped at x = 0; 10 n x n x n cells (the centred split, which
+// bends without the Kuhn split's bias).
+struct Beam {
+  double L = 1.0, h = 0.1, E = 1e6, nu = 0.3, rho = 1000;
+  double I() const { return h * h * h * h / 12; }
+  double A() const { return h * h; }
+  double omega1() const { return 3.5160 * std::sqrt(E * I() / (rho * A())) / (L * L); }  // [rad/s]
+  double f1() const { return 0.55959 * std::sqrt(E * I() / (rho * A())) / (L * L); }   // [Hz]
+  // Timoshenko, with Cowper's shear coefficient.
+  double deflection(double P) const {
+    const double G = E / (2 * (1 + nu)), kappa = 10 * (1 + nu) / (12 + 11 * nu);
+    return P * L * L * L / (3 * E * I()) + P * L / (kappa * G * A());
+  }
+  ModelSpec spec(MaterialModel m, int n, Precision p, double safety) const {
+    ModelSpec s;
+    s.mesh = make_box(Vec3(0.0), Vec3(L, h, h), {10 * n, n, n}, BoxSplit::centred24);
+    s.materials = {MaterialSpec{m, E, nu, rho}};
+    s.integrator.precision = p;
+    s.integrator.safety = safety;
+    EssentialBc clamp;
+    clamp.name = "clamp";
+    clamp.where.kind = NodeSelector::Kind::Plane;
+    clamp.where.normal = Vec3(1, 0, 0);
+    clamp.where.point = Vec3(0.0);
+    s.essential = {clamp};
+    return s;
+  }
+  std::vector<int32_t> end_nodes(const TetMesh& mesh) const {
+    return nodes_where(mesh, [&](const Vec3& X) { return std::fabs(X.x - L) < 1e-9; });
+  }
+};
+
+AccuracyRecord cantilever_deflection(MaterialModel m, int n, Precision p) {
+  // A tip load that bends the beam by L / 1000 (the linear range), settled by damping critical for the first
+  // mode: its error falls as (1 + w t) exp(-w t), 5e-4 at w t = 10.
+  const Beam beam;
+  const double P = 3 * beam.E * beam.I() * 1e-3 / (beam.L * beam.L);
+  ModelSpec spec = beam.spec(m, n, p, 0.9);
+  NaturalLoad load;
+  load.name = "tip";
+  load.where.kind = NodeSelector::Kind::Plane;
+  load.where.normal = Vec3(1, 0, 0);
+  load.where.point = Vec3(beam.L, 0, 0);
+  load.force = Vec3(0, -P, 0);
+  spec.loads = {load};
+  spec.effects.damping = true;
+  spec.effects.alpha = 2 * beam.omega1();
+  Simulation sim(spec);
+  const Stepped s = step_for(sim, 10 / beam.omega1(), 0.05 / beam.omega1());
+  AccuracyRecord r = make_record("cantilever_deflection", m, n, sim, 0.9, p, s);
+  r.value = -mean_displacement(sim, beam.end_nodes(sim.mesh()), 1);
+  r.reference = beam.deflection(P);
+  r.error = r.value / r.reference - 1;
+  r.unit = "m";
+  return r;
+}
+
+AccuracyRecord cantilever_frequency(MaterialModel m, int n, Precision p, double safety) {
+  // Free vibration from the first Euler-Bernoulli mode shape (the sections turned by w'), undamped; the
+  // frequency from the zero crossings of the tip's deflection over two periods.
+  const Beam beam;
+  Simulation sim(beam.spec(m, n, p, safety));
+  const double bL = 1.8751040687, sigma = (std::cosh(bL) + std::cos(bL)) / (std::sinh(bL) + std::sin(bL));
+  const double k = bL / beam.L;
+  auto w = [&](double x) { return std::cosh(k * x) - std::cos(k * x) - sigma * (std::sinh(k * x) - std::sin(k * x)); };
+  auto dw = [&](double x) { return k * (std::sinh(k * x) + std::sin(k * x) - sigma * (std::cosh(k * x) - std::cos(k * x))); };
+  const double amplitude = 1e-3 * beam.L / w(beam.L);
+  std::vector<double> u(3 * size_t(sim.n_nodes()), 0.0), v(u.size(), 0.0);
+  for (int32_t i = 0; i < sim.n_nodes(); ++i) {
+    const Vec3& X = sim.mesh().X[size_t(i)];
+    u[3 * size_t(i)] = -amplitude * (X.y - beam.h / 2) * dw(X.x);
+    u[3 * size_t(i) + 1] = amplitude * w(X.x);
+  }
+  sim.set_initial_state(u, v);
+  const std::vector<int32_t> end = beam.end_nodes(sim.mesh());
+  std::vector<double> crossings;
+  double t_prev = 0, d_prev = mean_displacement(sim, end, 1);
+  const Stepped s = step_for(sim, 2.3 / beam.f1(), 1.0 / (400 * beam.f1()), [&](const Simulation& at) {
+    const double d = mean_displacement(at, end, 1);
+    if ((d_prev > 0) != (d > 0)) crossings.push_back(t_prev + (at.time() - t_prev) * d_prev / (d_prev - d));
+    t_prev = at.time();
+    d_prev = d;
+  });
+  AccuracyRecord r = make_record("cantilever_frequency", m, n, sim, safety, p, s);
+  r.value = crossings.size() >= 2 ? 0.5 * double(crossings.size() - 1) / (crossings.back() - crossings.front()) : 0;
+  r.reference = beam.f1();
+  r.error = r.value / r.reference - 1;
+  r.unit = "Hz";
+  return r;
+}
+
+AccuracyRecord wave_speed(MaterialModel m, int n, Precision p, double safety) {
+  // A free bar 1 m long, 5 cm square, given a smooth axial velocity pulse (10 cm wide, much longer than the
+  // section: the bar velocity sqrt(E / rho) holds); its speed from when the pulse's peak passes two sections
+  // 0.4 m apart.
+  const double E = 1e6, rho = 1000, h = 0.05;
+  ModelSpec spec;
+  spec.mesh = make_box(Vec3(0.0), Vec3(1.0, h, h), {20 * n, n, n}, BoxSplit::centred24);
+  spec.materials = {MaterialSpec{m, E, 0.3, rho}};
+  spec.integrator.precision = p;
+  spec.integrator.safety = safety;
+  Simulation sim(spec);
+  std::vector<double> u(3 * size_t(sim.n_nodes()), 0.0), v(u.size(), 0.0);
+  for (int32_t i = 0; i < sim.n_nodes(); ++i) {
+    const double x = sim.mesh().X[size_t(i)].x;
+    v[3 * size_t(i)] = 0.01 * std::exp(-std::pow((x - 0.15) / 0.05, 2));
+  }
+  sim.set_initial_state(u, v);
+  const double xa = 0.35, xb = 0.75, c = std::sqrt(E / rho);
+  const std::vector<int32_t> a = nodes_where(sim.mesh(), [&](const Vec3& X) { return std::fabs(X.x - xa) < 1e-9; });
+  const std::vector<int32_t> b = nodes_where(sim.mesh(), [&](const Vec3& X) { return std::fabs(X.x - xb) < 1e-9; });
+  // The mean axial velocity at each section over time (the direct pulse only: the one reflected from the
+  // free end x = 0 reaches the first section after the direct one has passed both).
+  std::vector<double> t, va, vb, vel;
+  auto mean_v = [&](const std::vector<int32_t>& nodes) {
+    double sum = 0;
+    for (int32_t i : nodes) sum += vel[3 * size_t(i)];
+    return sum / double(nodes.size());
+  };
+  const Stepped s = step_for(sim, (xb - 0.15) / c + 0.004, 2e-5, [&](const Simulation& at) {
+    at.copy_velocity(vel);
+    t.push_back(at.time());
+    va.push_back(mean_v(a));
+    vb.push_back(mean_v(b));
+  });
+  // Peak time, refined by a parabola through the largest sample and its neighbours.
+  auto peak = [&](const std::vector<double>& y, double t_max) {
+    size_t best = 0;
+    for (size_t k = 0; k < y.size() && t[k] <= t_max; ++k)
+      if (y[k] > y[best]) best = k;
+    if (best == 0 || best + 1 >= y.size()) return t.empty() ? 0.0 : t[best];
+    const double y0 = y[best - 1], y1 = y[best], y2 = y[best + 1], denom = y0 - 2 * y1 + y2;
+    const double shift = denom != 0 ? 0.5 * (y0 - y2) / denom : 0;
+    return t[best] + shift * (t[best + 1] - t[best]);
+  };
+  AccuracyRecord r = make_record("wave_speed", m, n, sim, safety, p, s);
+  const double ta = peak(va, (xa - 0.15) / c + 0.004), tb = peak(vb, 1e9);
+  r.value = tb > ta ? (xb - xa) / (tb - ta) : 0;
+  r.reference = c;
+  r.error = r.value / r.reference - 1;
+  r.unit = "m/s";
+  return r;
+}
+
+// ---- the paper's figures against converged runs -------------------------------------------------------------
+
+// A shipped scene with its mesh cells and material model replaced (no variants).
+Scene scene_at(const std::string& path, const nlohmann::json& cells, MaterialModel m, Precision p,
+               const std::function<void(nlohmann::json&)>& edit = {}) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("accuracy study: cannot read " + path + " (--scenes names the folder)");
+  nlohmann::json j = nlohmann::json::parse(in);
+  j.erase("variants");
+  j["mesh"]["cells"] = cells;
+  j["material"]["model"] = std::string(to_string(m));
+  j["integrator"]["precision"] = name_of(p);
+  if (edit) edit(j);
+  return parse_scene(j, path).at(0);
+}
+
+struct Fig3Run {
+  AccuracyRecord record;
+  Vec3 tip;  // displacement of the tip's centre [m]
+};
+Fig3Run fig3(const std::string& scenes, MaterialModel m, int n, Precision p) {
+  // The paper's Fig. 3 beam (1 x 0.1 x 0.1 m, E = 3 MPa) sagging under gravity by half its length: settled
+  // by damping critical for its first mode (alpha = 2 w1 = 11 1/s) over 2 s.
+  const Scene sc = scene_at(scenes + "/fig3_cantilever.json", {10 * n, n, n}, m, p,
+                            [](nlohmann::json& j) { j["effects"]["damping"]["alpha"] = 11.1; });
+  Simulation sim(sc.spec);
+  const Stepped s = step_for(sim, 2.0, 0.01);
+  int32_t tip = 0;
+  for (int32_t i = 0; i < sim.n_nodes(); ++i)
+    if (glm::length(sim.mesh().X[size_t(i)] - Vec3(1.0, 0.5, 0)) < glm::length(sim.mesh().X[size_t(tip)] - Vec3(1.0, 0.5, 0)))
+      tip = i;
+  Fig3Run out{make_record("fig3_tip", m, n, sim, sc.spec.integrator.safety, p, s), sim.displacement(tip)};
+  out.record.value = out.tip.y;
+  out.record.unit = "m";
+  return out;
+}
+
+AccuracyRecord fig2(const std::string& scenes, MaterialModel m, int n, Precision p) {
+  // The paper's Fig. 2 column, its lid turned 90 degrees over 1 s and held, as shipped: the mid-height
+  // section's area over its rest area at 2.5 s.
+  const Scene sc = scene_at(scenes + "/fig2_twist.json", {2 * n, 6 * n, 2 * n}, m, p);
+  Simulation sim(sc.spec);
+  const Stepped s = step_for(sim, sc.run.duration, 0.01);
+  const SectionCut cut = make_section_cut(sim.mesh(), sc.run.sections.at(0));
+  std::vector<double> u;
+  sim.copy_displacement(u);
+  AccuracyRecord r = make_record("fig2_area", m, n, sim, sc.spec.integrator.safety, p, s);
+  r.value = compute_section_area(cut, sim.mesh(), u) / compute_section_area(cut, sim.mesh(), {});
+  r.unit = "area / rest area";
+  return r;
+}
+
+// ---- invariance under rigid rotation --------------------------------------------------------------------------
+
+std::pair<AccuracyRecord, AccuracyRecord> rotation(MaterialModel m, int n, Precision p) {
+  // A free 10 cm cube turned rigidly by 90 degrees about z, at rest: no strain, so no elastic energy, no
+  // force, and its volume kept as it is left to move for 50 ms. The energy is shown per unit of E V (the
+  // energy density of a unit strain, order 1), the volume change relative.
+  const double a = 0.1, E = 1e5;
+  ModelSpec spec;
+  spec.mesh = make_box(Vec3(-a / 2), Vec3(a / 2), {3 * n, 3 * n, 3 * n});
+  spec.materials = {MaterialSpec{m, E, 0.3, 1000}};
+  spec.integrator.precision = p;
+  Simulation sim(spec);
+  std::vector<double> u(3 * size_t(sim.n_nodes()), 0.0), v(u.size(), 0.0);
+  for (int32_t i = 0; i < sim.n_nodes(); ++i) {
+    const Vec3& X = sim.mesh().X[size_t(i)];
+    u[3 * size_t(i)] = -X.y - X.x;  // (x, y) -> (-y, x)
+    u[3 * size_t(i) + 1] = X.x - X.y;
+  }
+  sim.set_initial_state(u, v);
+  const double energy = sim.compute_energy().elastic / (E * a * a * a);
+  const Stepped s = step_for(sim, 0.05, 0.001);
+  std::vector<double> x;
+  sim.copy_positions(x);
+  double volume = 0;
+  auto at = [&](int32_t i) { return Vec3(x[3 * size_t(i)], x[3 * size_t(i) + 1], x[3 * size_t(i) + 2]); };
+  for (const Tet& t : sim.mesh().tets) volume += compute_tet_volume(at(t[0]), at(t[1]), at(t[2]), at(t[3]));
+  AccuracyRecord e = make_record("rotation_energy", m, n, sim, sim.n_tets() ? 0.9 : 0, p, s);
+  e.value = e.error = energy;
+  e.unit = "elastic energy / (E V)";
+  AccuracyRecord vol = e;
+  vol.problem = "rotation_volume";
+  vol.value = vol.error = volume / (a * a * a) - 1;
+  vol.unit = "volume change / volume";
+  return {e, vol};
+}
+
+// ---- real time ------------------------------------------------------------------------------------------------
+
+RealtimeRecord realtime(MaterialModel m, Precision p, bool quick) {
+  // The poke scene's block (8 x 4 x 8 cm, 30 kPa, damped, a sphere over it: the contact pass runs) at growing
+  // resolutions, each stepped in 1 ms intervals as the live loop's haptic rate needs; the median wall time
+  // of an interval against 1 ms.
+  RealtimeRecord out;
+  out.material = std::string(to_string(m));
+  out.precision = name_of(p);
+  const int k_max = quick ? 3 : 10;
+  for (int k = 1; k <= k_max; ++k) {
+    ModelSpec spec;
+    spec.mesh = make_box(Vec3(-0.04, 0, -0.04), Vec3(0.04, 0.04, 0.04), {4 * k, 2 * k, 4 * k});
+    spec.materials = {MaterialSpec{m, 30e3, 0.3, 1000}};
+    spec.integrator.precision = p;
+    spec.effects.damping = true;
+    spec.effects.alpha = 5.0;
+    EssentialBc base;
+    base.name = "base";
+    base.where.kind = NodeSelector::Kind::Plane;
+    base.where.point = Vec3(0.0);
+    spec.essential = {base};
+    ProxySpec ball;
+    ball.name = ball.device = "stylus";
+    ball.geometry.radius = 0.01;
+    ball.pose.position = Vec3(0, 0.055, 0);
+    spec.proxies = {ball};
+    Simulation sim(spec);
+    std::vector<double> ms;
+    int32_t substeps = 0;
+    const Clock::time_point start = Clock::now();
+    while ((ms.size() < 20 || std::chrono::duration<double>(Clock::now() - start).count() < (quick ? 0.1 : 0.4)) &&
+           ms.size() < 2000) {
+      const Clock::time_point t0 = Clock::now();
+      const AdvanceReport r = sim.advance(1e-3);
+      ms.push_back(1e3 * std::chrono::duration<double>(Clock::now() - t0).count());
+      substeps = std::max(substeps, r.substeps);
+      if (r.fault) break;
+    }
+    std::nth_element(ms.begin(), ms.begin() + long(ms.size() / 2), ms.end());
+    const double median = ms[ms.size() / 2];
+    out.tets.push_back(sim.n_tets());
+    out.interval_ms.push_back(median);
+    out.substeps.push_back(substeps);
+    if (median < 1.0) out.largest_realtime_tets = sim.n_tets();
+    if (median >= 1.0) break;  // the next sizes only cost more
+  }
+  // Interpolated between the last size under 1 ms and the first over (log-log: cost ~ tets^(4/3)).
+  const size_t n = out.tets.size();
+  if (n >= 2 && out.interval_ms[n - 1] >= 1.0 && out.interval_ms[n - 2] < 1.0) {
+    const double l1 = std::log(double(out.tets[n - 2])), l2 = std::log(double(out.tets[n - 1]));
+    const double c1 = std::log(out.interval_ms[n - 2]), c2 = std::log(out.interval_ms[n - 1]);
+    out.estimated_max_tets = std::exp(l1 + (0 - c1) / (c2 - c1) * (l2 - l1));
+  } else {
+    out.estimated_max_tets = out.largest_realtime_tets;
+  }
+  return out;
+}
+
+}  // namespace
+
+AccuracyResults run_accuracy_study(const AccuracyOptions& o) {
+  AccuracyResults results;
+  std::vector<std::pair<std::string, std::function<void()>>> jobs;
+  auto wants = [&](const char* problem) { return o.only.empty() || o.only == problem; };
+  const bool q = o.quick;
+  const std::vector<int> static_levels = q ? std::vector<int>{1, 2} : std::vector<int>{1, 2, 3, 4};
+  const std::vector<int> dynamic_levels = q ? std::vector<int>{1} : std::vector<int>{1, 2, 3};
+  const std::vector<double> safeties = q ? std::vector<double>{0.9, 0.3} : std::vector<double>{0.9, 0.6, 0.3};
+  const std::vector<int> figure_levels = q ? std::vector<int>{1, 2} : std::vector<int>{1, 2, 3};
+  const int reference_level = q ? 3 : 5;
+  auto label = [](const char* problem, MaterialModel m, int n, Precision p, double safety = 0) {
+    std::string s = std::string(problem) + " " + std::string(to_string(m)) + " level " + std::to_string(n) + " " + name_of(p);
+    if (safety > 0) s += " dt " + std::to_string(safety).substr(0, 3);
+    return s;
+  };
+  auto add = [&](AccuracyRecord r) { results.records.push_back(std::move(r)); };
+
+  for (MaterialModel m : kModels)
+    for (Precision p : kPrecisions) {
+      if (wants("cantilever_deflection"))
+        for (int n : static_levels)
+          jobs.emplace_back(label("cantilever_deflection", m, n, p), [=, &add] { add(cantilever_deflection(m, n, p)); });
+      for (double safety : safeties) {
+        if (wants("cantilever_frequency"))
+          for (int n : dynamic_levels)
+            jobs.emplace_back(label("cantilever_frequency", m, n, p, safety),
+                              [=, &add] { add(cantilever_frequency(m, n, p, safety)); });
+        if (wants("wave_speed"))
+          for (int n : static_levels)
+            jobs.emplace_back(label("wave_speed", m, n, p, safety), [=, &add] { add(wave_speed(m, n, p, safety)); });
+      }
+      if (wants("rotation"))
+        for (int n : static_levels)
+          jobs.emplace_back(label("rotation", m, n, p), [=, &add] {
+            auto [e, v] = rotation(m, n, p);
+            add(e);
+            add(v);
+          });
+    }
+  // The figures: a converged StVK run in double first, then every choice against it.
+  auto fig3_reference = std::make_shared<Vec3>(0.0);
+  auto fig2_reference = std::make_shared<double>(1.0);
+  if (wants("fig3_tip")) {
+    jobs.emplace_back(label("fig3_tip reference", MaterialModel::StVK, reference_level, Precision::Double), [=, &o] {
+      *fig3_reference = fig3(o.scenes, MaterialModel::StVK, reference_level, Precision::Double).tip;
+    });
+    for (MaterialModel m : kModels)
+      for (Precision p : kPrecisions)
+        for (int n : figure_levels)
+          jobs.emplace_back(label("fig3_tip", m, n, p), [=, &o, &add] {
+            Fig3Run run = fig3(o.scenes, m, n, p);
+            run.record.reference = fig3_reference->y;
+            run.record.error = glm::length(run.tip - *fig3_reference) / glm::length(*fig3_reference);
+            add(run.record);
+          });
+  }
+  if (wants("fig2_area")) {
+    jobs.emplace_back(label("fig2_area reference", MaterialModel::StVK, reference_level - 1, Precision::Double),
+                      [=, &o] { *fig2_reference = fig2(o.scenes, MaterialModel::StVK, reference_level - 1, Precision::Double).value; });
+    for (MaterialModel m : kModels)
+      for (Precision p : kPrecisions)
+        for (int n : figure_levels)
+          if (n < reference_level - 1)
+            jobs.emplace_back(label("fig2_area", m, n, p), [=, &o, &add] {
+              AccuracyRecord r = fig2(o.scenes, m, n, p);
+              r.reference = *fig2_reference;
+              r.error = r.value - r.reference;
+              add(r);
+            });
+  }
+  if (wants("realtime"))
+    for (MaterialModel m : kModels)
+      for (Precision p : kPrecisions)
+        jobs.emplace_back(std::string("realtime ") + std::string(to_string(m)) + " " + name_of(p),
+                          [=, &results] { results.realtime.push_back(realtime(m, p, q)); });
+
+  for (size_t k = 0; k < jobs.size(); ++k) {
+    if (o.progress) o.progress(k, jobs.size(), jobs[k].first);
+    jobs[k].second();
+  }
+  if (o.progress) o.progress(jobs.size(), jobs.size(), "");
+  return results;
+}
+
+}  // namespace tactile::study
