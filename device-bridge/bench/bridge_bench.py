@@ -5,10 +5,12 @@
              SCHED_FIFO: the figures that chose the default (--network process, --priority 80).
   modes      the force error of each rendering mode (delay, hold, extrapolate) against a ground truth at 1 kHz
              (the same motion run headless with a 1 ms control interval), and the latency each adds (the lag
-             that best aligns its force with the truth), with the server stepping slower than the tick.
+             that best aligns its force with the truth), with the server stepping slower than the tick; on a
+             soft block (30 kPa, the default) or a stiff one (--object stiff: 300 kPa); --json FILE keeps the
+             figures (server/bench/accuracy_report.py reads them).
 
   .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
-  .venv/bin/python device-bridge/bench/bridge_bench.py modes --seconds 12
+  .venv/bin/python device-bridge/bench/bridge_bench.py modes --seconds 12 [--object stiff] [--json modes.json]
 """
 
 from __future__ import annotations
@@ -46,6 +48,9 @@ SCENE: dict[str, Any] = {
     "proxies": [{"name": "tip", "device": "stylus", "shape": "sphere", "radius": 0.01, "position": [0, 0.045, 0]}],
     "run": {"duration": 1.0},
 }
+
+# Young's modulus of the block per --object: soft as the paper's tissue, and ten times stiffer.
+OBJECTS = {"soft": 30e3, "stiff": 300e3}
 
 # The arm pokes 12 mm (5 mm of it air) every 3 s, yielding to the force as a hand does.
 PROFILE = """
@@ -180,9 +185,16 @@ def lateness(args: argparse.Namespace) -> None:
 
 # ---- modes ------------------------------------------------------------------------------------------------
 
-def truth(tmp: pathlib.Path, t: np.ndarray, pos: np.ndarray, smooth_ms: int = 1) -> np.ndarray:
+def object_scene(name: str) -> dict[str, Any]:
+    scene: dict[str, Any] = json.loads(json.dumps(SCENE))
+    scene["material"]["E"] = OBJECTS[name]
+    return scene
+
+
+def truth(tmp: pathlib.Path, t: np.ndarray, pos: np.ndarray, scene: dict[str, Any],
+          smooth_ms: int = 1) -> np.ndarray:
     """The force on the sphere moved along (t, pos) by a headless run with a 1 ms control interval (N x 3)."""
-    scene = json.loads(json.dumps(SCENE))
+    scene = json.loads(json.dumps(scene))
     scene["name"] = "bridge_bench_truth"
     keep = np.arange(0, len(t), 1)
     keys = [{"t": float(t[i] - t[0]), "position": [float(v) for v in pos[i]]} for i in keep]
@@ -192,8 +204,10 @@ def truth(tmp: pathlib.Path, t: np.ndarray, pos: np.ndarray, smooth_ms: int = 1)
     path = tmp / "truth.json"
     path.write_text(json.dumps(scene))
     out = tmp / "truth_out"
-    subprocess.run([built("tactile-sim"), "run", str(path), "--out", str(out), "--no-vtu", "--quiet"],
-                   check=True, capture_output=True)
+    r = subprocess.run([built("tactile-sim"), "run", str(path), "--out", str(out), "--no-vtu", "--quiet"],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        sys.exit(f"the ground-truth run failed ({r.returncode}): {r.stderr.strip()[-2000:]}")
     rows = list(csv.DictReader(next(out.rglob("forces.csv")).open()))
     tt = np.array([float(r["t_s"]) for r in rows])
     f = np.array([[float(r["fx_N"]), float(r["fy_N"]), float(r["fz_N"])] for r in rows])
@@ -213,8 +227,10 @@ def best_lag(a: np.ndarray, b: np.ndarray, max_lag: int = 30) -> int:
 
 
 def modes(args: argparse.Namespace) -> None:
+    scene = object_scene(args.object)
     print(f"force error of each mode against the force at 1 kHz (headless, same motion; its mean over one server "
-          f"step, centred), server step {args.dt * 1e3:g} ms, arm following its script open-loop (gain 0), {args.seconds:g} s each; in contact only")
+          f"step, centred), {args.object} block (E = {OBJECTS[args.object] / 1e3:g} kPa), server step "
+          f"{args.dt * 1e3:g} ms, arm following its script open-loop (gain 0), {args.seconds:g} s each; in contact only")
     print("  rms/max: |F - truth| in contact; lag: the shift that best aligns F with the truth (the server's own\n"
           "  latency included); steps: rms of the force's change from tick to tick, which the hand feels as buzz\n"
           "  (the truth's own, at 1 kHz, in brackets)")
@@ -222,12 +238,13 @@ def modes(args: argparse.Namespace) -> None:
           f"{'steps mN':>9} {'(truth)':>8}")
     with tempfile.TemporaryDirectory() as d:
         tmp = pathlib.Path(d)
-        with server(tmp, SCENE, "--dt", str(args.dt)) as port:
+        with server(tmp, scene, "--dt", str(args.dt)) as port:
             runs = {}
             for mode in ("delay", "hold", "extrapolate"):
                 s, trace = run_bridge(tmp, port, args.seconds, "--mode", mode, gain=0.0, hand_k=2000.0)
                 tr = np.genfromtxt(trace, delimiter=",", names=True)
                 runs[mode] = (s, tr)
+        rows: list[dict[str, Any]] = []
         for mode, (s, tr) in runs.items():
             live = tr[tr["safety"] >= 1]  # from engagement on
             live = live[2000:]             # after the first press starts
@@ -235,7 +252,7 @@ def modes(args: argparse.Namespace) -> None:
             pos = np.stack([live["x_m"], live["y_m"], live["z_m"]], axis=1)
             f = np.stack([live["fx_N"], live["fy_N"], live["fz_N"]], axis=1)
             (tmp / mode).mkdir()
-            ref = truth(tmp / mode, t, pos, smooth_ms=max(1, round(args.dt * 1e3)))
+            ref = truth(tmp / mode, t, pos, scene, smooth_ms=max(1, round(args.dt * 1e3)))
             contact = np.linalg.norm(ref, axis=1) > 0.05
             err = np.linalg.norm(f - ref, axis=1)[contact]
             rms = float(np.sqrt(np.mean(err ** 2)))
@@ -247,6 +264,13 @@ def modes(args: argparse.Namespace) -> None:
             print(f"{mode:>12} {rms:>8.3f} {err.max():>8.3f} {100 * rms / scale:>7.1f} {lag:>7d} "
                   f"{float(np.sqrt(np.mean(shifted ** 2))):>13.3f} {s['delay_ms']:>9.2f} {1e3 * steps:>9.1f} "
                   f"{1e3 * steps_ref:>8.1f}", flush=True)
+            rows.append({"object": args.object, "E_Pa": OBJECTS[args.object], "mode": mode, "rms_N": rms,
+                         "max_N": float(err.max()), "rms_pct": 100 * rms / scale, "lag_ms": lag,
+                         "rms_at_lag_N": float(np.sqrt(np.mean(shifted ** 2))), "delay_ms": s["delay_ms"],
+                         "steps_mN": 1e3 * steps, "truth_steps_mN": 1e3 * steps_ref, "force_rms_N": scale,
+                         "server_dt_ms": args.dt * 1e3, "seconds": args.seconds})
+    if args.json:
+        pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
 
 
 def main() -> None:
@@ -258,6 +282,8 @@ def main() -> None:
     b = sub.add_parser("modes")
     b.add_argument("--seconds", type=float, default=12.0)
     b.add_argument("--dt", type=float, default=4e-3, help="server step [s] (slower than the 1 ms tick)")
+    b.add_argument("--object", choices=sorted(OBJECTS), default="soft", help="the block: soft (30 kPa) or stiff (300 kPa)")
+    b.add_argument("--json", help="also write the figures to this file")
     args = ap.parse_args()
     {"lateness": lateness, "modes": modes}[args.what](args)
 
