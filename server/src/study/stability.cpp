@@ -636,6 +636,8 @@ Scenario slivers(MaterialModel m, Level l, bool) {
     follow(sim, 0, sim.time(), t1, [&](double t) { return above - Vec3(0, 0.008 * (ease(t, 0, 0.15) - ease(t, 0.2, 0.35)), 0); });
   };
   sc.duration = 0.4;
+  // A sliver squashed by the poke loses its volume first: StVK's may pass its compression limit.
+  sc.expect = stvk_may_fault(m);
   return sc;
 }
 
@@ -721,7 +723,13 @@ std::vector<StabilityCase> stability_cases(const SuiteOptions& o) {
       add("flattened_start", m, l, [=] { return bad_start(m, l, 1.0); });
       add("inverted_start", m, l, [=] { return bad_start(m, l, 1.5); });
       add("nu_0.49", m, l, [=] { return under_gravity(m, block(l), 1e5, 0.49, quick ? 0.1 : 0.3); });
-      add("soft_1kPa", m, l, [=] { return under_gravity(m, cube(l), 1e3, 0.3, quick ? 0.3 : 1.0); });
+      add("soft_1kPa", m, l, [=] {
+        // Let go from rest, undamped, a 1 kPa cube sinks to twice its static strain (0.2) and more where the
+        // fixed base corners concentrate it: past StVK's 42 % limit, which the fine mesh resolves.
+        Scenario sc = under_gravity(m, cube(l), 1e3, 0.3, quick ? 0.3 : 1.0);
+        sc.expect = stvk_may_fault(m);
+        return sc;
+      });
       add("stiff_1MPa", m, l, [=] { return under_gravity(m, cube(l), 1e6, 0.3, quick ? 0.05 : 0.2); });
       add("dt_0.9x", m, l, [=] { return time_step(m, l, 0.9, UnstablePolicy::Subdivide); });
       add("dt_1.5x_subdivide", m, l, [=] { return time_step(m, l, 1.5, UnstablePolicy::Subdivide); });
