@@ -212,7 +212,8 @@ def truth(tmp: pathlib.Path, t: np.ndarray, pos: np.ndarray, scene: dict[str, An
     r = subprocess.run([built("tactile-sim"), "run", str(path), "--out", str(out), "--no-vtu", "--quiet"],
                        capture_output=True, text=True)
     if r.returncode != 0:
-        sys.exit(f"the ground-truth run failed ({r.returncode}): {r.stderr.strip()[-2000:]}")
+        faults = [json.loads(p.read_text()).get("fault") for p in out.rglob("summary.json")]
+        sys.exit(f"the ground-truth run failed ({r.returncode}): {r.stderr.strip()[-2000:]} {faults}")
     rows = list(csv.DictReader(next(out.rglob("forces.csv")).open()))
     tt = np.array([float(r["t_s"]) for r in rows])
     f = np.array([[float(r["fx_N"]), float(r["fy_N"]), float(r["fz_N"])] for r in rows])
