@@ -308,7 +308,7 @@ std::pair<AccuracyRecord, AccuracyRecord> rotation(MaterialModel m, int n, Preci
   double volume = 0;
   auto at = [&](int32_t i) { return Vec3(x[3 * size_t(i)], x[3 * size_t(i) + 1], x[3 * size_t(i) + 2]); };
   for (const Tet& t : sim.mesh().tets) volume += compute_tet_volume(at(t[0]), at(t[1]), at(t[2]), at(t[3]));
-  AccuracyRecord e = make_record("rotation_energy", m, n, sim, sim.n_tets() ? 0.9 : 0, p, s);
+  AccuracyRecord e = make_record("rotation_energy", m, n, sim, spec.integrator.safety, p, s);
   e.value = e.error = energy;
   e.unit = "elastic energy / (E V)";
   AccuracyRecord vol = e;

@@ -11,8 +11,9 @@
 //     diagonal), unless the case's load says otherwise;
 //   - on a conservative run (no damping, contact or moving boundary), the
 //     energy balance drifts by at most 10 % of the energy in play;
-//   - no body node gets deeper into a proxy than the contact lets it (no
-//     tunnelling);
+//   - no surface node tunnels through a proxy (goes deeper than the proxy's
+//     trust depth and comes out on the side opposite its way in); how deep
+//     nodes sit is reported, the contact's accuracy rather than stability;
 //   - what it expects happens: `Runs` ends without a fault; `MayFault` may
 //     stop on a fault, which must name its kind and the elements at fault,
 //     and after which the simulation stays stopped (no step, no force: the
@@ -52,7 +53,7 @@ struct CaseOutcome {
   double size_ratio = 0;       // largest bounding-box diagonal over the rest one
   double size_limit = 2.0;     // what the case allows
   double energy_drift = -1;    // |balance change| / energy in play; -1 when the run is not conservative
-  double penetration_mm = 0;   // deepest body node inside a proxy at a control instant [mm]
+  double penetration_mm = 0;   // deepest surface node inside a proxy at a control instant [mm]
   double peak_force_N = -1;    // largest mean force on a device over a control interval; -1 without proxies
   int32_t substeps_max = 0;    // most sub-steps in one control interval
 };
