@@ -11,21 +11,15 @@ import sys
 from typing import Any
 
 import numpy as np
+import test_bridge_closed_loop as closed_loop
 from serverproc import server_process
 
 TOKEN = "fault-test"
 BRIDGE = pathlib.Path(sys.executable).with_name("tactile-bridge")
-TOP, RADIUS = 0.04, 0.012
-SCENE: dict[str, Any] = {
-    "name": "stvk_block",
-    "mesh": {"primitive": "box", "lo": [-0.04, 0, -0.04], "hi": [0.04, TOP, 0.04], "cells": [10, 5, 10]},
-    "material": {"model": "stvk", "E": 30000, "nu": 0.3, "rho": 1000},
-    "boundary": [{"name": "floor", "select": {"plane": {"point": [0, 0, 0], "normal": [0, 1, 0]}}, "fixed": True}],
-    "effects": {"damping": {"alpha": 20.0}},
-    "proxies": [{"name": "tip", "device": "stylus", "shape": "sphere", "radius": RADIUS,
-                 "position": [0, TOP + RADIUS + 0.005, 0]}],
-    "run": {"duration": 1.0},
-}
+# The closed-loop test's block and sphere, in StVK.
+SCENE: dict[str, Any] = {**closed_loop.SCENE, "name": "stvk_block",
+                         "material": {**closed_loop.SCENE["material"], "model": "stvk"}}
+TOP, RADIUS = closed_loop.TOP, closed_loop.RADIUS
 MAX_N, SLEW = 4.0, 200.0
 # A stiff hand drives the sphere 35 mm down over 4 s: 30 mm into the 40 mm block, whatever the block pushes back
 # (the force to the arm is limited to 4 N: 2 mm of the hand's spring).

@@ -396,6 +396,22 @@ int32_t count_inverted(const Simulation& sim) {
   return n;
 }
 
+// The block on its fixed base, damped by `alpha`; the plate (Young's modulus E) held by its edges, likewise.
+Scenario damped_block(MaterialModel m, Level l, double alpha) {
+  Scenario sc;
+  sc.spec = base_spec(block(l), m);
+  damp(sc.spec, alpha);
+  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  return sc;
+}
+Scenario damped_plate(MaterialModel m, Level l, double E, double alpha) {
+  Scenario sc;
+  sc.spec = base_spec(plate(l), m, E);
+  damp(sc.spec, alpha);
+  sc.spec.essential = plate_edges();
+  return sc;
+}
+
 // ---- the cases -------------------------------------------------------------------------------------------
 
 // Where the physics says a model cannot go on, the case expects a reported fault of it rather than a run.
@@ -433,10 +449,7 @@ Scenario spin(MaterialModel m, Level l, bool quick) {
 
 Scenario compress(MaterialModel m, Level l, bool quick) {
   // A plate pressed down 60 % of the block's height, held, lifted away: the block springs back.
-  Scenario sc;
-  sc.spec = base_spec(block(l), m);
-  damp(sc.spec, 10.0);
-  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  Scenario sc = damped_block(m, l, 10.0);
   ProxySpec p;
   p.name = p.device = "plate";
   p.geometry.shape = ProxyShape::Box;
@@ -470,10 +483,7 @@ Scenario compress(MaterialModel m, Level l, bool quick) {
 Scenario bad_start(MaterialModel m, Level l, double through) {
   // The block's top corner node pushed down `through` cell heights at the start: 1 puts it on the plane of
   // the cell's lower face (tets flattened), 1.5 through it (tets inverted). Damped, it must recover.
-  Scenario sc;
-  sc.spec = base_spec(block(l), m);
-  damp(sc.spec, 20.0);
-  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  Scenario sc = damped_block(m, l, 20.0);
   const double h = kBlockH / (3 * l.k);
   const int32_t corner = nearest_node(sc.spec.mesh, Vec3(kBlockW / 2, kBlockH, kBlockW / 2));
   sc.init = [=](Simulation& sim) {
@@ -514,10 +524,7 @@ Scenario time_step(MaterialModel m, Level l, double factor, UnstablePolicy polic
 
 Scenario impact(MaterialModel m, Level l, bool) {
   // A 5 mm sphere at 10 m/s through where a 2 mm plate (edges fixed) is: it must carry the plate along.
-  Scenario sc;
-  sc.spec = base_spec(plate(l), m, 1e6);
-  damp(sc.spec, 20.0);
-  sc.spec.essential = plate_edges();
+  Scenario sc = damped_plate(m, l, 1e6, 20.0);
   const double r = 0.005, y0 = 0.010, travel = 0.022, speed = 10.0;
   sc.spec.proxies.push_back(sphere_proxy("ball", r, Vec3(0, y0 + r, 0)));
   const double t_end = travel / speed;
@@ -542,10 +549,7 @@ Scenario impact(MaterialModel m, Level l, bool) {
 Scenario inside(MaterialModel m, Level l, bool) {
   // A sphere that starts half inside the block, held, then lifted out: nodes inside stay put, none goes
   // deeper, nothing is thrown out.
-  Scenario sc;
-  sc.spec = base_spec(block(l), m);
-  damp(sc.spec, 10.0);
-  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  Scenario sc = damped_block(m, l, 10.0);
   const double r = 0.008;
   const Vec3 start(0, kBlockH, 0);
   sc.spec.proxies.push_back(sphere_proxy("ball", r, start));
@@ -560,10 +564,7 @@ Scenario inside(MaterialModel m, Level l, bool) {
 Scenario pinch(MaterialModel m, Level l, bool) {
   // Two spheres close on the plate's centre from above and below until they overlap by 1 mm: the nodes
   // between have nowhere to go. Held, then parted.
-  Scenario sc;
-  sc.spec = base_spec(plate(l), m, 1e5);
-  damp(sc.spec, 20.0);
-  sc.spec.essential = plate_edges();
+  Scenario sc = damped_plate(m, l, 1e5, 20.0);
   const double r = 0.005, gap = 0.003;
   const double top0 = r + gap, bottom0 = -kPlateT - r - gap;
   const double close = gap + kPlateT / 2 + 0.0005;  // each travels past the mid-plane by 0.5 mm
@@ -581,10 +582,7 @@ Scenario pinch(MaterialModel m, Level l, bool) {
 
 Scenario drag(MaterialModel m, Level l, bool) {
   // A sphere pressed 5 mm in and dragged 4 cm across the block at 1 m/s with friction mu = 1, then lifted.
-  Scenario sc;
-  sc.spec = base_spec(block(l), m);
-  damp(sc.spec, 10.0);
-  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  Scenario sc = damped_block(m, l, 10.0);
   sc.spec.effects.friction = true;
   const double r = 0.01;
   const Vec3 above(-0.02, kBlockH + r + 0.001, 0);
@@ -667,10 +665,7 @@ Scenario random_velocity(MaterialModel m, Level l, uint64_t seed) {
 Scenario random_input(MaterialModel m, Level l, uint64_t seed, int64_t steps) {
   // A sphere driven by random device input every millisecond (a random walk of the target, up to
   // 0.3 m/s, in and out of the block and across it), with friction: the long live session.
-  Scenario sc;
-  sc.spec = base_spec(block(l), m);
-  damp(sc.spec, 10.0);
-  sc.spec.essential.push_back(fixed_bc("base", plane_y(0)));
+  Scenario sc = damped_block(m, l, 10.0);
   sc.spec.effects.friction = true;
   const double r = 0.008;
   const Vec3 start(0, kBlockH + r + 0.002, 0);
