@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <set>
+#include <utility>
 
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
@@ -19,6 +21,12 @@ constexpr int32_t kClusterNodes = 32;
 constexpr double kFitMemory = 0.9;
 constexpr double kFitMinMotion = 5e-6;  // [m]
 constexpr int32_t kFitMaxSteps = 64;
+
+template <class Real>
+Vec3 position(const State<Real>& s, const Vec3& X, int32_t node) {
+  const size_t j = 3 * size_t(node);
+  return X + Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
+}
 
 bool boxes_meet(const Vec3& alo, const Vec3& ahi, const Vec3& blo, const Vec3& bhi) {
   return alo.x <= bhi.x && blo.x <= ahi.x && alo.y <= bhi.y && blo.y <= ahi.y && alo.z <= bhi.z && blo.z <= ahi.z;
@@ -47,28 +55,82 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   if (n_proxies == 0) return;
 
   // Surface nodes that move freely, clustered in Morton order of rest positions.
-  std::vector<int32_t> nodes = compute_boundary_nodes(model.surface);
-  std::vector<int32_t> free;
+  const std::vector<int32_t> nodes = compute_boundary_nodes(model.surface);
+  std::vector<int32_t> free, held;
   std::set_difference(nodes.begin(), nodes.end(), model.constrained.begin(), model.constrained.end(),
                       std::back_inserter(free));
+  std::set_intersection(nodes.begin(), nodes.end(), model.constrained.begin(), model.constrained.end(),
+                        std::back_inserter(held));
   const Aabb box = compute_aabb(model.mesh.X);
   const Vec3 extent = glm::max(box.size(), Vec3(1e-30));
-  std::vector<uint32_t> key(free.size());
-  for (size_t k = 0; k < free.size(); ++k) key[k] = compute_morton_code((model.mesh.X[size_t(free[k])] - box.lo) / extent);
-  std::vector<size_t> order(free.size());
-  std::iota(order.begin(), order.end(), size_t(0));
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key[a] < key[b]; });
-  surface_.reserve(free.size());
-  for (size_t k : order) surface_.push_back(free[k]);
-  const auto n = static_cast<int32_t>(surface_.size());
+  const auto morton_order = [&](const std::vector<Vec3>& points) {
+    std::vector<uint32_t> key(points.size());
+    for (size_t k = 0; k < points.size(); ++k) key[k] = compute_morton_code((points[k] - box.lo) / extent);
+    std::vector<size_t> order(points.size());
+    std::iota(order.begin(), order.end(), size_t(0));
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key[a] < key[b]; });
+    return order;
+  };
+  std::vector<Vec3> rest(free.size());
+  for (size_t k = 0; k < free.size(); ++k) rest[k] = model.mesh.X[size_t(free[k])];
+  free_nodes_.reserve(free.size());
+  for (size_t k : morton_order(rest)) free_nodes_.push_back(free[k]);
+  slot_node_ = free_nodes_;
+  slot_node_.insert(slot_node_.end(), held.begin(), held.end());
+  const auto n = static_cast<int32_t>(free_nodes_.size());
   for (int32_t b = 0; b < n; b += kClusterNodes) clusters_.push_back({b, std::min(n, b + kClusterNodes), {}, {}});
-  x_prev_.assign(surface_.size(), Vec3(0.0));
-  x_now_.assign(surface_.size(), Vec3(0.0));
-  f_prev_.assign(surface_.size(), Vec3(0.0));
-  f_now_.assign(surface_.size(), Vec3(0.0));
-  touched_prev_.reserve(surface_.size());
-  touched_now_.reserve(surface_.size());
-  memory_.assign(surface_.size(), Memory{});
+
+  // Faces with a free corner, in Morton order of their rest centroids; an
+  // edge's contacts belong to the first face (in that order) that has it.
+  std::vector<int32_t> slot_of(model.mesh.X.size(), -1);
+  for (size_t k = 0; k < slot_node_.size(); ++k) slot_of[size_t(slot_node_[k])] = int32_t(k);
+  std::vector<Tri> tris;
+  std::vector<Vec3> centroids;
+  for (const Tri& t : model.surface) {
+    const std::array<int32_t, 3> sl{slot_of[size_t(t[0])], slot_of[size_t(t[1])], slot_of[size_t(t[2])]};
+    if (sl[0] >= n && sl[1] >= n && sl[2] >= n) continue;  // all its corners held: nothing to push
+    tris.push_back(sl);
+    centroids.push_back((model.mesh.X[size_t(t[0])] + model.mesh.X[size_t(t[1])] + model.mesh.X[size_t(t[2])]) / 3.0);
+  }
+  std::set<std::pair<int32_t, int32_t>> claimed;
+  for (size_t k : morton_order(centroids)) {
+    Face f{tris[k], 0};
+    for (int c = 0; c < 3; ++c) {
+      const int32_t a = f.slot[size_t((c + 1) % 3)], b = f.slot[size_t((c + 2) % 3)];
+      if (claimed.insert({std::min(a, b), std::max(a, b)}).second) f.owns_edge = uint8_t(f.owns_edge | (1u << c));
+    }
+    faces_.push_back(f);
+  }
+  const auto n_faces = static_cast<int32_t>(faces_.size());
+  for (int32_t b = 0; b < n_faces; b += kClusterNodes)
+    face_clusters_.push_back({b, std::min(n_faces, b + kClusterNodes), {}, {}});
+  // Each face cluster's corners, once each: its box is theirs.
+  face_cluster_slot_begin_.push_back(0);
+  for (const Cluster& c : face_clusters_) {
+    std::vector<int32_t> corners;
+    for (int32_t f = c.begin; f < c.end; ++f)
+      corners.insert(corners.end(), faces_[size_t(f)].slot.begin(), faces_[size_t(f)].slot.end());
+    std::sort(corners.begin(), corners.end());
+    corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+    face_cluster_slots_.insert(face_cluster_slots_.end(), corners.begin(), corners.end());
+    face_cluster_slot_begin_.push_back(int32_t(face_cluster_slots_.size()));
+  }
+
+  x_prev_.assign(slot_node_.size(), Vec3(0.0));
+  x_now_.assign(slot_node_.size(), Vec3(0.0));
+  f_prev_.assign(free_nodes_.size(), Vec3(0.0));
+  f_now_.assign(free_nodes_.size(), Vec3(0.0));
+  touched_prev_.reserve(free_nodes_.size());
+  touched_now_.reserve(free_nodes_.size());
+  memory_.assign(free_nodes_.size(), Memory{});
+  dv_.assign(free_nodes_.size(), Vec3(0.0));
+  moved_flag_.assign(free_nodes_.size(), 0);
+  moved_.reserve(free_nodes_.size());
+  points_.reserve((free_nodes_.size() + faces_.size()) * n_proxies);
+  point_order_.reserve(points_.capacity());
+  proxy_begin_.assign(n_proxies + 1, 0);
+  proxy_fill_.assign(n_proxies, 0);
+  face_memory_.assign(faces_.size(), Memory{});
 }
 
 template <class Real>
@@ -93,15 +155,13 @@ void Contact<Real>::clear_impulses() {
 
 template <class Real>
 void Contact<Real>::start(const State<Real>& s) {
-  for (size_t k = 0; k < surface_.size(); ++k) {
-    const size_t i = size_t(surface_[k]);
-    x_prev_[k] = model_.mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
-  }
+  for (size_t k = 0; k < slot_node_.size(); ++k) x_prev_[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
   std::fill(f_prev_.begin(), f_prev_.end(), Vec3(0.0));
   std::fill(f_now_.begin(), f_now_.end(), Vec3(0.0));
   touched_prev_.clear();
   touched_now_.clear();
   std::fill(memory_.begin(), memory_.end(), Memory{});
+  std::fill(face_memory_.begin(), face_memory_.end(), Memory{});
   for (Fit& f : fit_) f = Fit{};
   for (ProxyReport& r : reports_) r = ProxyReport{};
   for (DeviceReport& d : device_reports_) d = DeviceReport{};
@@ -125,17 +185,23 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   }
 
   // Positions at t_{n+1}, and boxes around each cluster's motion over the step.
+  for (size_t k = 0; k < slot_node_.size(); ++k) x_now_[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
+  const auto sweep = [&](Cluster& c, int32_t k) {
+    c.lo = glm::min(c.lo, glm::min(x_now_[size_t(k)], x_prev_[size_t(k)]));
+    c.hi = glm::max(c.hi, glm::max(x_now_[size_t(k)], x_prev_[size_t(k)]));
+  };
+  constexpr double inf = std::numeric_limits<double>::infinity();
   for (Cluster& c : clusters_) {
-    Vec3 clo(std::numeric_limits<double>::infinity()), chi(-std::numeric_limits<double>::infinity());
-    for (int32_t k = c.begin; k < c.end; ++k) {
-      const size_t i = size_t(surface_[size_t(k)]);
-      const Vec3 x = model_.mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
-      x_now_[size_t(k)] = x;
-      clo = glm::min(clo, glm::min(x, x_prev_[size_t(k)]));
-      chi = glm::max(chi, glm::max(x, x_prev_[size_t(k)]));
-    }
-    c.lo = clo;
-    c.hi = chi;
+    c.lo = Vec3(inf);
+    c.hi = Vec3(-inf);
+    for (int32_t k = c.begin; k < c.end; ++k) sweep(c, k);
+  }
+  for (size_t j = 0; j < face_clusters_.size(); ++j) {
+    Cluster& c = face_clusters_[j];
+    c.lo = Vec3(inf);
+    c.hi = Vec3(-inf);
+    for (int32_t m = face_cluster_slot_begin_[j]; m < face_cluster_slot_begin_[j + 1]; ++m)
+      sweep(c, face_cluster_slots_[size_t(m)]);
   }
 
   // Each proxy's poses and the box its bounding sphere sweeps over the step.
@@ -149,6 +215,8 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     lo_[j] = glm::min(b0.lo, b1.lo);
     hi_[j] = glm::max(b0.hi, b1.hi);
   }
+  node_contacts_ = face_contacts_ = 0;
+  points_.clear();
   for (const Cluster& c : clusters_)
     for (size_t j = 0; j < n_proxies; ++j) {
       if (!boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
@@ -161,9 +229,62 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
           if (mem.proxy == int32_t(j)) mem.proxy = -1;
           continue;
         }
-        contact_node(s, k, int32_t(j), pose0_[j], pose1_[j], dt, sums);
+        find_node_contact(k, int32_t(j), pose0_[j], pose1_[j]);
       }
     }
+  // Then the faces. A plane meets a triangle deepest at a corner: its nodes are all it needs.
+  for (const Cluster& c : face_clusters_)
+    for (size_t j = 0; j < n_proxies; ++j) {
+      if (model_.proxies[j].geometry.shape == ProxyShape::Plane || !boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
+      for (int32_t f = c.begin; f < c.end; ++f) {
+        Vec3 lo(inf), hi(-inf);
+        for (int32_t k : faces_[size_t(f)].slot) {
+          lo = glm::min(lo, glm::min(x_now_[size_t(k)], x_prev_[size_t(k)]));
+          hi = glm::max(hi, glm::max(x_now_[size_t(k)], x_prev_[size_t(k)]));
+        }
+        if (!boxes_meet(lo, hi, lo_[j], hi_[j])) {
+          Memory& mem = face_memory_[size_t(f)];
+          if (mem.proxy == int32_t(j)) mem.proxy = -1;
+          continue;
+        }
+        find_face_contact(f, int32_t(j), pose0_[j], pose1_[j], dt);
+      }
+    }
+
+  // The impulses, then the velocity changes they make: by eq. (9),
+  // v_{n+1} = v_half + dt/2 a_{n+1}, so a moves by 2 dv / dt; by eq. (10)
+  // that is the force q 2 dv / dt on a node, q = m (1 + alpha dt / 2).
+  solve(s);
+  const double to_force = (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt;  // from an impulse to its force over the step
+  for (int32_t k : moved_) {
+    const Vec3 dv = dv_[size_t(k)];
+    dv_[size_t(k)] = Vec3(0.0);
+    moved_flag_[size_t(k)] = 0;
+    const size_t i = size_t(free_nodes_[size_t(k)]);
+    const double m = double(model_.m[i]);
+    const Vec3 v(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2]));
+    const Vec3 a(double(s.a[3 * i]), double(s.a[3 * i + 1]), double(s.a[3 * i + 2]));
+    const Vec3 v_new = v + dv, a_new = a + (2.0 / dt) * dv;
+    for (int c = 0; c < 3; ++c) {
+      s.v[3 * i + size_t(c)] = Real(v_new[c]);
+      s.a[3 * i + size_t(c)] = Real(a_new[c]);
+    }
+    sums.mv2_delta += m * (glm::dot(v_new, v_new) - glm::dot(v, v));
+    sums.ma2_delta += m * (glm::dot(a_new, a_new) - glm::dot(a, a));
+    f_now_[size_t(k)] = (m * to_force) * dv;
+    touched_now_.push_back(k);  // (reserved: never allocates)
+  }
+  moved_.clear();
+  for (const Point& c : points_) {
+    ProxyReport& r = reports_[size_t(c.proxy)];
+    ++r.contacts;
+    const Vec3 fc = to_force * (c.jn * c.n + c.jt);  // on the body
+    r.force -= fc;
+    r.torque -= glm::cross(c.x - pose1_[size_t(c.proxy)].position, fc);
+    const double w = glm::dot(fc, c.vp) * dt;
+    r.work += w;
+    sums.proxy_work += std::fabs(w);
+  }
 
   // Work of the contact forces on the body (trapezoid, as for the loads) and
   // by each proxy; then this step's positions and forces become the previous.
@@ -206,24 +327,10 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
 }
 
 template <class Real>
-void Contact<Real>::contact_node(State<Real>& s, int32_t k, int32_t proxy, const Pose& p0, const Pose& p1, double dt,
-                                 ContactSums& sums) {
-  const ProxySpec& spec = model_.proxies[size_t(proxy)];
-  const ProxyGeometry& g = spec.geometry;
-  const size_t i = size_t(surface_[size_t(k)]);
-  Memory& mem = memory_[size_t(k)];
-  const Vec3 x1 = x_now_[size_t(k)];
-  const Vec3 q1 = p1.to_local(x1);
-  const SurfacePoint at1 = locate(g, q1);
-  if (at1.phi > 0) {
-    if (mem.proxy == proxy) mem.proxy = -1;
-    return;
-  }
-  // Inside at t_{n+1}: which way is out?
-  const Vec3 q0 = p0.to_local(x_prev_[size_t(k)]);
-  const SurfacePoint at0 = locate(g, q0);
+Vec3 Contact<Real>::outward(const ProxyGeometry& g, const Vec3& q0, const Vec3& q1, const SurfacePoint& at1,
+                            Memory& mem, int32_t proxy) const {
   Vec3 n_local;
-  if (at0.phi > 0) {
+  if (locate(g, q0).phi > 0) {
     // Crossed the surface during the step: the normal where it crossed.
     double a = 0.0, b = 1.0;
     for (int it = 0; it < 20; ++it) {
@@ -238,42 +345,170 @@ void Contact<Real>::contact_node(State<Real>& s, int32_t k, int32_t proxy, const
   }
   mem.proxy = proxy;
   mem.normal = n_local;
-  ++reports_[size_t(proxy)].contacts;
+  return n_local;
+}
 
-  const Vec3 n = p1.orientation * n_local;
-  const Vec3 vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], x1 - p1.position);
-  const Vec3 v(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2]));
-  const Vec3 rel = v - vp;
-  const double vn = glm::dot(rel, n);
-  if (vn >= 0) return;  // leaving, or sliding along: no impulse
-  Vec3 dv = -vn * n;    // eq. (11): the normal relative velocity drops to zero
-  if (friction_ && spec.friction > 0) {
-    const Vec3 vt = rel - vn * n;
-    const double speed = glm::length(vt);
-    const double limit = spec.friction * -vn;  // mu times the normal impulse, per unit mass
-    if (speed <= limit) dv -= vt;                          // stick
-    else if (speed > 0) dv -= vt * (limit / speed);        // slide
+template <class Real>
+void Contact<Real>::find_node_contact(int32_t k, int32_t proxy, const Pose& p0, const Pose& p1) {
+  const ProxySpec& spec = model_.proxies[size_t(proxy)];
+  const ProxyGeometry& g = spec.geometry;
+  Memory& mem = memory_[size_t(k)];
+  const Vec3 x1 = x_now_[size_t(k)];
+  const Vec3 q1 = p1.to_local(x1);
+  const SurfacePoint at1 = locate(g, q1);
+  if (at1.phi > 0) {
+    if (mem.proxy == proxy) mem.proxy = -1;
+    return;
   }
-  // eq. (9): v_{n+1} = v_half + dt/2 a_{n+1}, so a moves by 2 dv / dt; by
-  // eq. (10) that is the force q 2 dv / dt, q = m (1 + alpha dt / 2).
-  const double m = double(model_.m[i]);
-  const Vec3 fc = (m * (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt) * dv;
-  const Vec3 a(double(s.a[3 * i]), double(s.a[3 * i + 1]), double(s.a[3 * i + 2]));
-  const Vec3 v_new = v + dv, a_new = a + (2.0 / dt) * dv;
-  for (int c = 0; c < 3; ++c) {
-    s.v[3 * i + size_t(c)] = Real(v_new[c]);
-    s.a[3 * i + size_t(c)] = Real(a_new[c]);
+  // Inside at t_{n+1}: which way is out?
+  Point c;
+  c.proxy = proxy;
+  c.slot = {k, -1, -1};
+  c.w = Vec3(1, 0, 0);
+  c.x = x1;
+  c.n = p1.orientation * outward(g, p0.to_local(x_prev_[size_t(k)]), q1, at1, mem, proxy);
+  c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], x1 - p1.position);
+  c.v_held = Vec3(0.0);
+  c.inv_mass = 1.0 / double(model_.m[size_t(free_nodes_[size_t(k)])]);
+  c.mu = friction_ ? spec.friction : 0.0;
+  points_.push_back(c);
+  ++node_contacts_;
+}
+
+template <class Real>
+void Contact<Real>::find_face_contact(int32_t f, int32_t proxy, const Pose& p0, const Pose& p1, double dt) {
+  const ProxySpec& spec = model_.proxies[size_t(proxy)];
+  const ProxyGeometry& g = spec.geometry;
+  const Face& face = faces_[size_t(f)];
+  Memory& mem = face_memory_[size_t(f)];
+  std::array<Vec3, 3> q;
+  for (size_t c = 0; c < 3; ++c) q[c] = p1.to_local(x_now_[size_t(face.slot[c])]);
+  // Cheap ways out first. A face whose corners are all inside lies inside
+  // (the shape is convex): its nodes' contacts hold it. A box whose slab
+  // (with its rounding) leaves all three corners on one side cannot reach it.
+  if (locate(g, q[0]).phi <= 0 && locate(g, q[1]).phi <= 0 && locate(g, q[2]).phi <= 0) return;
+  if (g.shape == ProxyShape::Box)
+    for (int k = 0; k < 3; ++k) {
+      const double reach = g.half_extents[k] + g.radius;
+      if (std::min({q[0][k], q[1][k], q[2][k]}) > reach || std::max({q[0][k], q[1][k], q[2][k]}) < -reach) {
+        if (mem.proxy == proxy) mem.proxy = -1;
+        return;
+      }
+    }
+  const Vec3 w = deepest_on_triangle(g, q[0], q[1], q[2]);
+  const int zeros = int(w.x == 0) + int(w.y == 0) + int(w.z == 0);
+  const Vec3 q1 = w.x * q[0] + w.y * q[1] + w.z * q[2];
+  const SurfacePoint at1 = locate(g, q1);
+  if (at1.phi > 0 || zeros >= 2) {  // outside, or deepest at a corner: the node's own contact
+    if (mem.proxy == proxy) mem.proxy = -1;
+    return;
   }
-  sums.mv2_delta += m * (glm::dot(v_new, v_new) - glm::dot(v, v));
-  sums.ma2_delta += m * (glm::dot(a_new, a_new) - glm::dot(a, a));
-  if (f_now_[size_t(k)] == Vec3(0.0)) touched_now_.push_back(k);  // (reserved: never allocates)
-  f_now_[size_t(k)] += fc;
-  ProxyReport& r = reports_[size_t(proxy)];
-  r.force -= fc;
-  r.torque -= glm::cross(x1 - p1.position, fc);
-  const double w = glm::dot(fc, vp) * dt;
-  r.work += w;
-  sums.proxy_work += std::fabs(w);
+  if (zeros == 1 && !(face.owns_edge & (1u << (w.x == 0 ? 0 : w.y == 0 ? 1 : 2)))) return;  // its edge's other face's
+  Point c;
+  c.proxy = proxy;
+  c.slot = {-1, -1, -1};
+  c.w = Vec3(0.0);
+  c.x = Vec3(0.0);
+  c.v_held = Vec3(0.0);
+  c.inv_mass = 0;
+  Vec3 x0(0.0);
+  int free = 0;
+  for (size_t j = 0; j < 3; ++j) {
+    const auto k = size_t(face.slot[j]);
+    const double wj = w[int(j)];
+    if (wj == 0) continue;
+    x0 += wj * x_prev_[k];
+    c.x += wj * x_now_[k];
+    if (k < free_nodes_.size()) {
+      c.slot[size_t(free)] = int32_t(k);
+      c.w[free++] = wj;
+      c.inv_mass += wj * wj / double(model_.m[size_t(free_nodes_[k])]);
+    } else {
+      c.v_held += wj * (x_now_[k] - x_prev_[k]) / dt;  // held: as prescribed over the step
+    }
+  }
+  if (!(c.inv_mass > 0)) return;
+  c.n = p1.orientation * outward(g, p0.to_local(x0), q1, at1, mem, proxy);
+  c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], c.x - p1.position);
+  c.mu = friction_ ? spec.friction : 0.0;
+  points_.push_back(c);
+  ++face_contacts_;
+}
+
+template <class Real>
+Vec3 Contact<Real>::point_velocity(const State<Real>& s, const Point& c) const {
+  Vec3 v = c.v_held;
+  for (size_t j = 0; j < 3 && c.slot[j] >= 0; ++j) {
+    const auto k = size_t(c.slot[j]);
+    const size_t i = size_t(free_nodes_[k]);
+    v += c.w[int(j)] * (Vec3(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2])) + dv_[k]);
+  }
+  return v;
+}
+
+template <class Real>
+void Contact<Real>::give(Point& c, const Vec3& J) {
+  for (size_t j = 0; j < 3 && c.slot[j] >= 0; ++j) {
+    const auto k = size_t(c.slot[j]);
+    if (!moved_flag_[k]) {
+      moved_flag_[k] = 1;
+      moved_.push_back(int32_t(k));  // (reserved: never allocates)
+    }
+    dv_[k] += (c.w[int(j)] / double(model_.m[size_t(free_nodes_[k])])) * J;
+  }
+}
+
+template <class Real>
+void Contact<Real>::solve(const State<Real>& s) {
+  // Each point in turn takes the impulse that stops its normal motion into
+  // the proxy (eq. (11)), its running sum kept at or above zero; friction's
+  // tangential impulse stops its sliding, its sum held within mu times the
+  // normal one (stick, or slide at the bound). A point alone, or points
+  // sharing no node, settle in the first sweep, as the paper's rule; a
+  // proxy's points that share nodes (a face and its corner) are swept again
+  // until no velocity changes by more than a millionth of the first sweep's
+  // largest change. One proxy's points can always all be met (the nodes
+  // moving with it), so the sweeps converge; two proxies pinching a node
+  // cannot both be, and they are solved one after the other, as before.
+  constexpr int kMaxSweeps = 32;
+  // The points in proxy order (stable: each proxy's in the order found).
+  const size_t n_proxies = motion_.size();
+  std::fill(proxy_begin_.begin(), proxy_begin_.end(), 0);
+  for (const Point& c : points_) ++proxy_begin_[size_t(c.proxy) + 1];
+  for (size_t j = 0; j < n_proxies; ++j) proxy_begin_[j + 1] += proxy_begin_[j];
+  point_order_.resize(points_.size());  // (reserved: never allocates)
+  std::copy(proxy_begin_.begin(), proxy_begin_.end() - 1, proxy_fill_.begin());
+  for (size_t m = 0; m < points_.size(); ++m) point_order_[size_t(proxy_fill_[size_t(points_[m].proxy)]++)] = int32_t(m);
+  for (size_t proxy = 0; proxy < n_proxies; ++proxy) {
+    if (proxy_begin_[proxy] == proxy_begin_[proxy + 1]) continue;
+    double first = 0;
+    for (int sweep = 0; sweep < kMaxSweeps; ++sweep) {
+      double largest = 0;
+      for (int32_t m = proxy_begin_[proxy]; m < proxy_begin_[proxy + 1]; ++m) {
+        Point& c = points_[size_t(point_order_[size_t(m)])];
+        const Vec3 rel = point_velocity(s, c) - c.vp;
+        const double vn = glm::dot(rel, c.n);
+        const double jn = std::max(0.0, c.jn - vn / c.inv_mass);
+        const double djn = jn - c.jn;
+        Vec3 J = djn * c.n;
+        c.jn = jn;
+        double change = std::fabs(djn) * c.inv_mass;
+        if (c.mu > 0) {
+          const Vec3 vt = rel - vn * c.n;  // the normal impulse moves the point along n alone
+          Vec3 jt = c.jt - vt / c.inv_mass;
+          const double bound = c.mu * c.jn, len = glm::length(jt);
+          if (len > bound) jt *= bound / len;
+          J += jt - c.jt;
+          change = std::max(change, glm::length(jt - c.jt) * c.inv_mass);
+          c.jt = jt;
+        }
+        if (J != Vec3(0.0)) give(c, J);
+        largest = std::max(largest, change);
+      }
+      if (sweep == 0) first = largest;
+      if (largest <= 1e-6 * first) break;
+    }
+  }
 }
 
 template <class Real>

@@ -21,12 +21,25 @@
 // node out through its far side. This costs the same at any speed, where
 // sub-stepping would multiply the FEM steps by the speed.
 //
+// Faces: a proxy smaller than the mesh's cells can press between surface
+// nodes with none of them inside it (a thin ball on a coarse plate). Each
+// surface triangle near a proxy is tested at its deepest point in the proxy
+// (deepest_on_triangle); a point inside, not at a vertex (the node's own
+// contact) and on an edge only once (its first triangle's), is an embedded
+// contact point x = sum w_i x_i. The same rule holds for it: its normal
+// relative velocity is set to zero, by the impulse J = dv / sum_i (w_i^2 / m_i)
+// shared out as dv_i = w_i J / m_i over the triangle's free nodes (a node
+// under an essential BC takes none: it moves as prescribed). Its momentum
+// change is J, and the forces and the proxy's reaction follow as for nodes.
+//
 // Broad phase: surface nodes in clusters of 32 (Morton order of rest
 // positions), each with a box around its nodes' motion over the step; only
 // clusters whose box meets a proxy's swept bounding box are examined node by
-// node. A proxy far from the body costs one box test per cluster.
+// node; surface triangles likewise, in clusters of 32 by their rest
+// centroids. A proxy far from the body costs one box test per cluster.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -45,7 +58,7 @@ namespace tactile {
 struct ContactReport {
   Vec3 force{0.0};    // on the proxy or device [N] (the reaction of the contact impulses)
   Vec3 torque{0.0};   // [N m]
-  int32_t contacts = 0;  // surface nodes inside its proxies
+  int32_t contacts = 0;  // contact points inside its proxies: surface nodes, and face points between them
   // Local contact stiffness dF/dx of the force with the position [N/m]: per
   // proxy a secant estimate fitted to the latest steps' changes (zero out of
   // contact, and in directions the proxy has not moved along); per device
@@ -110,7 +123,10 @@ class Contact {
   // Surface nodes the latest apply() pushed (ids into surface_nodes()).
   const std::vector<int32_t>& pushed() const { return touched_prev_; }
   // The free surface nodes contact tests, as node ids.
-  const std::vector<int32_t>& surface_nodes() const { return surface_; }
+  const std::vector<int32_t>& surface_nodes() const { return free_nodes_; }
+  // Contact points inside proxies in the latest apply(): on surface nodes, and on faces between them.
+  int32_t node_contacts() const { return node_contacts_; }
+  int32_t face_contacts() const { return face_contacts_; }
 
  private:
   struct Memory {
@@ -118,11 +134,39 @@ class Contact {
     Vec3 normal{0.0};    // outward normal it is pushed along (proxy frame)
   };
   struct Cluster {
-    int32_t begin, end;  // range in surface_
+    int32_t begin, end;  // range in free_nodes_ (node clusters) or faces_ (face clusters)
     Vec3 lo, hi;         // box around its nodes' motion over the step
   };
-  void contact_node(State<Real>& s, int32_t k, int32_t proxy, const Pose& p0, const Pose& p1, double dt,
-                    ContactSums& sums);
+  struct Face {
+    std::array<int32_t, 3> slot;  // its corners, as slots (below)
+    uint8_t owns_edge = 0;        // bit c: the contacts on the edge opposite corner c are this face's
+  };
+  // A contact point inside a proxy at t_{n+1}: a free surface node, or a
+  // point of a face, x = sum w_c x_c over its corners.
+  struct Point {
+    int32_t proxy;
+    std::array<int32_t, 3> slot;  // its free corners' slots, -1 for none (a node: slot[0] alone, weight 1)
+    Vec3 w;                       // their weights
+    Vec3 x;                       // world position [m]
+    Vec3 n;                       // outward normal (world)
+    Vec3 vp;                      // the proxy's velocity at x [m/s]
+    Vec3 v_held;                  // velocity its held corners give it (sum w_c v_c) [m/s]
+    double inv_mass;              // sum w_c^2 / m_c over its free corners [1/kg]
+    double mu;                    // Coulomb friction coefficient, 0 without
+    double jn = 0;                // normal impulse given so far [N s] (never negative)
+    Vec3 jt{0.0};                 // tangential impulse so far (|jt| <= mu jn)
+  };
+  void find_node_contact(int32_t k, int32_t proxy, const Pose& p0, const Pose& p1);
+  void find_face_contact(int32_t f, int32_t proxy, const Pose& p0, const Pose& p1, double dt);
+  // Which way is out of the proxy, for a point at q1 (proxy frame at t_{n+1}) that was at q0 (at t_n).
+  Vec3 outward(const ProxyGeometry& g, const Vec3& q0, const Vec3& q1, const SurfacePoint& at1, Memory& mem,
+               int32_t proxy) const;
+  // Projected Gauss-Seidel over the points: the impulses that leave no
+  // point moving into its proxy, with friction bounded by mu times the
+  // normal impulse, as velocity changes per free slot (dv_).
+  void solve(const State<Real>& s);
+  Vec3 point_velocity(const State<Real>& s, const Point& c) const;
+  void give(Point& c, const Vec3& J);
   void update_stiffness(int32_t proxy, const Vec3& position, const Vec3& force, double dt);
 
   const Model<Real>& model_;
@@ -130,14 +174,29 @@ class Contact {
   std::vector<ProxyReport> reports_;
   std::vector<DeviceReport> device_reports_;
   std::vector<ProxyMotion> hand_motion_;  // per hand (its position is the torque reference)
-  std::vector<int32_t> surface_;  // surface nodes not under an essential BC, in Morton order
-  std::vector<Cluster> clusters_;
-  std::vector<Vec3> x_prev_;      // world position at t_n per surface node [m]
+  // Slots: the surface nodes, the free ones first (in Morton order; slot k
+  // of a free node is its index in free_nodes_), then those under an
+  // essential BC (faces' corners, never pushed).
+  std::vector<int32_t> slot_node_;  // node id per slot
+  std::vector<int32_t> free_nodes_; // the first free_count slots' nodes
+  std::vector<Cluster> clusters_;   // of free nodes
+  std::vector<Face> faces_;         // surface triangles with a free corner, in Morton order of rest centroids
+  std::vector<Cluster> face_clusters_;
+  std::vector<int32_t> face_cluster_slots_, face_cluster_slot_begin_;  // each face cluster's corners, once each
+  std::vector<Vec3> x_prev_;      // world position at t_n per slot [m]
   std::vector<Vec3> x_now_;       // and at t_{n+1}
-  std::vector<Vec3> f_prev_;      // contact force on the node over the previous step [N]
+  std::vector<Vec3> f_prev_;      // contact force on the free node over the previous step [N]
   std::vector<Vec3> f_now_;       // and over this one
-  std::vector<int32_t> touched_prev_, touched_now_;  // surface indices with a force in those steps
-  std::vector<Memory> memory_;
+  std::vector<int32_t> touched_prev_, touched_now_;  // free slots with a force in those steps
+  std::vector<Point> points_;        // this step's contact points
+  std::vector<int32_t> point_order_; // their indices, by proxy
+  std::vector<int32_t> proxy_begin_, proxy_fill_;  // per proxy: its range in point_order_
+  std::vector<Vec3> dv_;             // velocity change per free slot, this step [m/s]
+  std::vector<int32_t> moved_;       // free slots given a dv_ this step
+  std::vector<uint8_t> moved_flag_;  // per free slot: in moved_
+  std::vector<Memory> memory_;       // per free node
+  std::vector<Memory> face_memory_;  // per face
+  int32_t node_contacts_ = 0, face_contacts_ = 0;
   std::vector<Pose> pose0_, pose1_;  // per proxy at t_n and t_{n+1}
   std::vector<Vec3> velocity_, spin_;  // per proxy over the step: velocity [m/s], angular velocity [rad/s]
   std::vector<Vec3> lo_, hi_;        // per proxy: box its bounding sphere sweeps over the step

@@ -40,6 +40,15 @@ struct SurfacePoint {
 };
 SurfacePoint locate(const ProxyGeometry& g, const Vec3& p);
 
+// The point of the triangle (a, b, c) (proxy frame) deepest in the shape,
+// as barycentric weights (w.x on a, w.y on b, w.z on c; exact zeros on the
+// triangle's edges and vertices). Exact for a sphere and a capsule (their
+// signed distance is the distance to a point or a segment, less the radius);
+// for a box, the point nearest its core box (exact where the triangle stays
+// outside the core; a triangle reaching into the core is deeper than the
+// rounding, and gets a point in it). For a plane, the lowest corner.
+Vec3 deepest_on_triangle(const ProxyGeometry& g, const Vec3& a, const Vec3& b, const Vec3& c);
+
 // How deep a point may sit inside before its nearest-surface normal can no
 // longer be trusted to point back the way it came in (half the thinnest
 // section) [m]; infinite for a plane.

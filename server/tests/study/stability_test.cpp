@@ -29,12 +29,7 @@ std::vector<std::string> case_names() {
 // suite guards against regressions meanwhile; tactile-stability still runs and fails them. Empty this as
 // they are fixed: a fixed case that is still listed fails below.
 const std::map<std::string, std::string>& known_failures() {
-  static const std::map<std::string, std::string> known{
-      {"impact_10m_s/corotational/coarse",
-       "node-only contact: on the coarse plate (5 mm cells, stretched) the 5 mm ball slips between surface nodes "
-       "and passes through; the fine plate holds. Needs proxy-face contact."},
-      {"impact_10m_s/neohookean/coarse", "as impact_10m_s/corotational/coarse"},
-  };
+  static const std::map<std::string, std::string> known{};
   return known;
 }
 
