@@ -196,6 +196,31 @@ def test_extrapolate_mode_out_of_contact_returns_the_newest_force() -> None:
     np.testing.assert_allclose(out, [0.25 + 6e3, -0.5 + 6e3, 1.0 + 6e3], rtol=1e-15)
 
 
+def test_extrapolate_mode_holds_the_stiffness_within_the_devices_limit() -> None:
+    # A stiffness estimate far past what the device renders (a stiff body's noisy fit): the force follows
+    # the motion at most max_stiffness per metre, along the estimate's own direction.
+    rng = np.random.default_rng(5)
+    h = StateHistory(8)
+    r = ForceRender(h, "extrapolate")
+    r.max_stiffness = 1500.0
+    out = [0.0, 0.0, 0.0]
+    for i in range(40):
+        f_n = rng.uniform(-3, 3, size=3)
+        K_n = rng.uniform(-1e7, 1e7, size=(3, 3))
+        x_n = rng.uniform(-0.1, 0.1, size=3)
+        h.push(i + 1, i + 1, i, f_n.tolist(), K_n.ravel().tolist(), x_n.tolist(), 1)
+        dx = rng.normal(0.0, 0.002, size=3)
+        r.render(i + 2, (x_n + dx).tolist(), out)
+        want = f_n + K_n @ dx * (1500.0 / np.linalg.norm(K_n))
+        np.testing.assert_allclose(out, want, rtol=1e-9)
+        assert np.linalg.norm(np.array(out) - f_n) <= 1500.0 * np.linalg.norm(dx) * (1 + 1e-12)
+    # Within the limit the estimate is used as it is.
+    K = [-800.0, 0.0, 0.0, 0.0, -900.0, 0.0, 0.0, 0.0, -700.0]
+    h.push(100, 100, 100, [0.0, 1.0, 0.0], K, [0.0, 0.0, 0.0], 1)
+    r.render(101, [0.001, 0.001, 0.001], out)
+    np.testing.assert_allclose(out, [-0.8, 1.0 - 0.9, -0.7], rtol=1e-12)
+
+
 @pytest.mark.parametrize("mode", MODES)
 def test_empty_history_gives_zero_and_false(mode: str) -> None:
     r = ForceRender(StateHistory(4), mode)

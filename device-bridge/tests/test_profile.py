@@ -108,16 +108,18 @@ def test_a_minimal_profile_gets_the_documented_defaults() -> None:
     assert p.name == "arm" and p.rate_hz == 1000.0 and p.period_ns == 1_000_000
     assert p.workspace == Workspace()
     assert p.force == ForceLimits(max_N=4.0, continuous_N=1.0, slew_N_per_s=100.0, gain=1.0, engage_below_N=0.2,
-                                  engage_ticks=20, ramp_in_s=0.25)
+                                  engage_ticks=20, ramp_in_s=0.25, max_stiffness_N_per_m=2000.0)
 
 
 def test_parsed_values_are_the_table_values() -> None:
-    p = parse_profile(table(**{"force.engage_ticks": 7, "force.gain": 0.5}), "x.toml")
+    p = parse_profile(table(**{"force.engage_ticks": 7, "force.gain": 0.5, "force.max_stiffness_N_per_m": 900.0}),
+                      "x.toml")
     assert p.name == "test" and p.channel == "stylus"
     assert p.workspace.scale == 2.0 and p.workspace.offset_m == (0.1, 0.2, 0.3)
     assert p.workspace.axes == ("x", "-z", "y")
     assert p.workspace.index == (0, 2, 1) and p.workspace.sign == (1.0, -1.0, 1.0)
     assert p.force.max_N == 3.0 and p.force.engage_ticks == 7 and p.force.gain == 0.5
+    assert p.force.max_stiffness_N_per_m == 900.0
 
 
 # ---- refusals ----------------------------------------------------------------------------------------
@@ -132,6 +134,8 @@ def test_parsed_values_are_the_table_values() -> None:
     ({"force.max_N": "3"}, ["force.max_N"]),
     ({"force.engage_below_N": 4.0}, ["force.engage_below_N"]),
     ({"force.engage_ticks": 0}, ["force.engage_ticks"]),
+    ({"force.max_stiffness_N_per_m": 0.0}, ["force.max_stiffness_N_per_m"]),
+    ({"force.max_stiffness_N_per_m": "stiff"}, ["force.max_stiffness_N_per_m"]),
     ({"force.bogus": 1}, ["force", "bogus"]),
     ({"force": None}, ["force", "missing"]),
     ({"workspace.axes": ["x", "x", "z"]}, ["workspace.axes"]),                # duplicate axis

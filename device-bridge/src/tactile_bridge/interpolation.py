@@ -11,12 +11,15 @@ Modes:
            two bracketing forces otherwise.
   hold     zero-order hold: the newest state's force as soon as it arrives (no added delay, a staircase).
   extrapolate  the paper's future work: no delay; the newest force plus the local contact stiffness the
-           server fitted times the device's motion since that state: F = F_n + K_n (x_now - x_n).
+           server fitted times the device's motion since that state: F = F_n + K_n (x_now - x_n), with K_n
+           scaled down to `max_stiffness` (Frobenius norm) where it is stiffer than the device renders.
 
 Every array is a preallocated list; `render` allocates nothing but the floats Python makes.
 """
 
 from __future__ import annotations
+
+import math
 
 from collections.abc import Sequence
 
@@ -90,6 +93,7 @@ class ForceRender:
         self.delay_ns = 0           # display delay of the 'delay' mode [ns]
         self.display_t_ns = 0       # the time the latest render displayed, bridge clock [ns]
         self.past_newest = False    # the latest render wanted a state that had not arrived (held the newest)
+        self.max_stiffness = float("inf")  # extrapolate: the largest |K| used, scene frame [N/m]
 
     def render(self, now_ns: int, device_position: Sequence[float], out: list[float]) -> bool:
         """Writes the force [N] (3) into `out`; False (out zeroed) when there is no state yet."""
@@ -123,7 +127,9 @@ class ForceRender:
             out[0], out[1], out[2] = f[0], f[1], f[2]
             return True
         k, p = h.stiffness[n], h.position[n]
-        dx, dy, dz = device_position[0] - p[0], device_position[1] - p[1], device_position[2] - p[2]
+        norm = math.sqrt(sum(v * v for v in k))
+        c = self.max_stiffness / norm if norm > self.max_stiffness else 1.0
+        dx, dy, dz = c * (device_position[0] - p[0]), c * (device_position[1] - p[1]), c * (device_position[2] - p[2])
         out[0] = f[0] + k[0] * dx + k[1] * dy + k[2] * dz
         out[1] = f[1] + k[3] * dx + k[4] * dy + k[5] * dz
         out[2] = f[2] + k[6] * dx + k[7] * dy + k[8] * dz

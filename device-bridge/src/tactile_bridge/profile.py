@@ -178,6 +178,9 @@ class ForceLimits:
     engage_below_N: float = 0.0  # start-up: the command must stay under this...
     engage_ticks: int = 20       # ...for this many ticks before forces engage
     ramp_in_s: float = 0.25      # then the output ramps from 0 to the full command over this time
+    # The stiffest contact the device renders stably (its Z-width), at the device: the extrapolate mode's
+    # dF/dx, times gain and scale, is held within it [N/m]
+    max_stiffness_N_per_m: float = 2000.0
 
 
 @dataclass(frozen=True)
@@ -229,6 +232,7 @@ def parse_force(f: Fields) -> ForceLimits:
         engage_below_N=f.number("engage_below_N", 0.05 * max_n, low=0.0, high=max_n),
         engage_ticks=f.integer("engage_ticks", 20, low=1, high=100000),
         ramp_in_s=f.number("ramp_in_s", 0.25, low=0.0, high=10.0),
+        max_stiffness_N_per_m=f.number("max_stiffness_N_per_m", 2000.0, low=0.0, low_open=True),
     )
 
 
@@ -244,7 +248,8 @@ def parse_profile(table: dict[str, Any], path: str = "<profile>") -> Profile:
     if "force" not in table:
         raise ProfileError(f"{path}: force: missing (a table with max_N, continuous_N, slew_N_per_s)")
     fo = Fields(top.table_of("force"), f"{path}: force",
-                ("max_N", "continuous_N", "slew_N_per_s", "gain", "engage_below_N", "engage_ticks", "ramp_in_s"))
+                ("max_N", "continuous_N", "slew_N_per_s", "gain", "engage_below_N", "engage_ticks", "ramp_in_s",
+                 "max_stiffness_N_per_m"))
     for other in drivers.SECTIONS:
         if other != driver and other in table:
             raise ProfileError(f"{path}: [{other}] given but driver is {driver!r}")

@@ -48,6 +48,10 @@ class Channel:
         self.sample = DeviceSample()
         self.history = StateHistory(ex.RING)
         self.render = ForceRender(self.history, mode)
+        # The device's stiffness limit in scene terms: a scene metre is 1/scale device metres, and a scene
+        # newton gain device newtons (at gain 0, open loop, as at gain 1: what it would render).
+        gain = profile.force.gain if profile.force.gain > 0 else 1.0
+        self.render.max_stiffness = profile.force.max_stiffness_N_per_m / (gain * profile.workspace.scale)
         self.passivity = PassivityController(1.0 / profile.rate_hz, enabled=passivity)
         self.safety = Safety(profile.force, 1.0 / profile.rate_hz, lambda e: on_event(index, e))
         self.inputs = Inputs()

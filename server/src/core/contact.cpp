@@ -28,6 +28,38 @@ Vec3 position(const State<Real>& s, const Vec3& X, int32_t node) {
   return X + Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
 }
 
+// The nearest symmetric negative semidefinite matrix to K (Frobenius norm):
+// its symmetric part with every positive eigenvalue set to zero. A passive
+// contact's dF/dx on the proxy is one (minus the Hessian of the body's
+// energy in the proxy's position): the body pushes back harder as the proxy
+// presses in, never pulls it further in, and stores what it is given.
+glm::dmat3 nearest_passive(const glm::dmat3& K) {
+  glm::dmat3 A = 0.5 * (K + glm::transpose(K));
+  glm::dmat3 V(1.0);  // columns: eigenvectors (cyclic Jacobi rotations)
+  for (int sweep = 0; sweep < 12; ++sweep) {
+    const double off = A[0][1] * A[0][1] + A[0][2] * A[0][2] + A[1][2] * A[1][2];
+    const double diag = A[0][0] * A[0][0] + A[1][1] * A[1][1] + A[2][2] * A[2][2];
+    if (off <= 1e-30 * diag || off == 0) break;
+    for (int p = 0; p < 2; ++p)
+      for (int q = p + 1; q < 3; ++q) {
+        if (A[p][q] == 0) continue;
+        const double theta = 0.5 * (A[q][q] - A[p][p]) / A[p][q];
+        const double t = (theta >= 0 ? 1.0 : -1.0) / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
+        const double c = 1.0 / std::sqrt(t * t + 1.0), sn = t * c;
+        glm::dmat3 J(1.0);  // rotation in the (p, q) plane: A <- J^T A J
+        J[p][p] = c;
+        J[q][q] = c;
+        J[q][p] = sn;   // column q, row p
+        J[p][q] = -sn;  // column p, row q
+        A = glm::transpose(J) * A * J;
+        V = V * J;
+      }
+  }
+  glm::dmat3 D(0.0);
+  for (int k = 0; k < 3; ++k) D[k][k] = std::min(0.0, A[k][k]);
+  return V * D * glm::transpose(V);
+}
+
 bool boxes_meet(const Vec3& alo, const Vec3& ahi, const Vec3& blo, const Vec3& bhi) {
   return alo.x <= bhi.x && blo.x <= ahi.x && alo.y <= bhi.y && blo.y <= ahi.y && alo.z <= bhi.z && blo.z <= ahi.z;
 }
@@ -537,7 +569,7 @@ void Contact<Real>::update_stiffness(int32_t proxy, const Vec3& position, const 
       // K = S_fx (S_xx + eps I)^-1; eps keeps directions never moved along at
       // zero stiffness instead of dividing by nothing.
       const double eps = 1e-6 * (f.xx[0][0] + f.xx[1][1] + f.xx[2][2]) + 1e-300;
-      r.stiffness = f.fx * glm::inverse(f.xx + glm::dmat3(eps));
+      r.stiffness = nearest_passive(f.fx * glm::inverse(f.xx + glm::dmat3(eps)));
     }
   }
   f.last_position = mean_position;

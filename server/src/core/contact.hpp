@@ -32,6 +32,10 @@
 // under an essential BC takes none: it moves as prescribed). Its momentum
 // change is J, and the forces and the proxy's reaction follow as for nodes.
 //
+// The impulses: per proxy, by projected Gauss-Seidel (Contact::solve), so
+// that points sharing nodes (a face and its corner) push no more than they
+// need; one proxy's contacts can always be met together.
+//
 // Broad phase: surface nodes in clusters of 32 (Morton order of rest
 // positions), each with a box around its nodes' motion over the step; only
 // clusters whose box meets a proxy's swept bounding box are examined node by
@@ -61,8 +65,10 @@ struct ContactReport {
   int32_t contacts = 0;  // contact points inside its proxies: surface nodes, and face points between them
   // Local contact stiffness dF/dx of the force with the position [N/m]: per
   // proxy a secant estimate fitted to the latest steps' changes (zero out of
-  // contact, and in directions the proxy has not moved along); per device
-  // the sum over its proxies (the hand translated as one).
+  // contact, and in directions the proxy has not moved along), made
+  // symmetric and negative semidefinite, as a passive contact's is (the
+  // fit's noise, on a stiff body that rings, is not); per device the sum
+  // over its proxies (the hand translated as one).
   glm::dmat3 stiffness{0.0};
   // Sums over the steps since the last clear_impulses(): the mean force over
   // an interval longer than a step (a device tick, an output frame) is

@@ -847,3 +847,68 @@ TEST(Contact, TorqueIsAboutTheProxyCentre) {
 
 }  // namespace
 }  // namespace tactile
+
+
+namespace tactile {
+namespace {
+
+// A sphere pressed 7 mm into a stiff, lightly damped block (300 kPa; it
+// rings at a few hundred hertz) and lifted, in 4 ms frames: the stiffness
+// the bridge extrapolates with stays symmetric and never positive along any
+// direction (a contact that pulled the hand in would feed the device energy),
+// while it is a real stiffness in the direction pressed.
+TEST(Contact, StiffnessEstimateIsPassiveOnAStiffRingingBlock) {
+  ModelSpec spec;
+  spec.mesh = make_box(Vec3(-0.03, 0, -0.03), Vec3(0.03, 0.03, 0.03), {8, 4, 8});
+  spec.materials = {MaterialSpec{MaterialModel::NeoHookean, 300e3, 0.3, 1000}};
+  EssentialBc base;
+  base.name = "floor";
+  base.where.kind = NodeSelector::Kind::Box;
+  base.where.lo = Vec3(-1.0, -1.0, -1.0);
+  base.where.hi = Vec3(1.0, 0.0, 1.0);
+  spec.essential = {base};
+  spec.effects.damping = true;
+  spec.effects.alpha = 20;
+  spec.proxies = {sphere_proxy("tip", "stylus", Vec3(0, 0.045, 0), 0.01)};
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  Pose pose = model.proxies[0].pose;
+  const double frame = 0.004;
+  int pressed = 0;
+  double most_negative = 0;
+  for (int k = 0; k < 750; ++k) {
+    const double t = k * frame;
+    const double depth = 0.012 * 0.5 * (1 - std::cos(2 * kPi * t / 3.0));  // 12 mm down (7 mm in) and up in 3 s
+    const Vec3 to(0.0005 * std::sin(7 * t), 0.045 - depth, 0.0003 * std::cos(5 * t));
+    ProxyMotion m;
+    m.t0 = s.t;
+    m.t1 = s.t + frame;
+    m.from = pose;
+    m.to = pose;
+    m.to.position = to;
+    stepper.contact().set_motion(0, m);
+    const AdvanceReport r = stepper.advance(s, frame);
+    ASSERT_FALSE(r.fault) << r.fault.message;
+    pose.position = to;
+    const glm::dmat3& K = stepper.contact().reports()[0].stiffness;
+    double scale = 0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) scale = std::max(scale, std::fabs(K[i][j]));
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) ASSERT_NEAR(K[i][j], K[j][i], 1e-9 * scale) << "t = " << t;
+    for (int d = 0; d < 64; ++d) {  // directions over the sphere
+      const double a = 2 * kPi * d / 8, b = kPi * (d / 8 + 0.5) / 8;
+      const Vec3 u(std::sin(b) * std::cos(a), std::cos(b), std::sin(b) * std::sin(a));
+      ASSERT_LE(glm::dot(u, K * u), 1e-9 * scale) << "t = " << t << ": the contact pulls the proxy in along this";
+    }
+    if (stepper.contact().reports()[0].contacts > 0) ++pressed;
+    most_negative = std::min(most_negative, K[1][1]);
+  }
+  std::printf("  %d frames in contact; dFy/dy down to %.3g N/m\n", pressed, most_negative);
+  EXPECT_GT(pressed, 100);
+  EXPECT_LT(most_negative, -1000.0);  // it does resist being pressed
+}
+
+}  // namespace
+}  // namespace tactile
