@@ -300,8 +300,10 @@ TEST(RealtimeLoop, EachChannelsNewestInputAndPoseComeBack) {
   glove_seq.reserve(4000);
   stylus_seq.reserve(4000);
   proto::ProxyPose last_glove, last_stylus;
+  std::atomic<bool> started{false};
   loop.on_haptic([&](std::span<const uint8_t> m) {
     const proto::HapticFrame* h = proto::GetEnvelope(m.data())->message_as_HapticFrame();
+    started = true;
     glove_seq.push_back(h->device_input_sequences()->Get(0));
     stylus_seq.push_back(h->device_input_sequences()->Get(1));
     last_glove = *h->device_poses()->Get(0);
@@ -310,6 +312,8 @@ TEST(RealtimeLoop, EachChannelsNewestInputAndPoseComeBack) {
   const Vec3 glove_at(0.021, 0.07, 0.018), stylus_at(0.03, 0.08, 0.025);
   std::atomic<bool> stop{false};
   std::thread device([&] {
+    // The inputs start after the loop's first step (a loaded host can start its thread late).
+    while (!started) std::this_thread::sleep_for(std::chrono::microseconds(100));
     for (int k = 1; k <= 50; ++k) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
       DeviceSample s;
