@@ -138,6 +138,16 @@ ProxySpec sphere_proxy(const std::string& name, const std::string& device, const
   return p;
 }
 
+// Holds the nodes in the box [lo, hi] still: a base the proxies press against.
+EssentialBc held_box(const std::string& name, const Vec3& lo, const Vec3& hi) {
+  EssentialBc bc;
+  bc.name = name;
+  bc.where.kind = NodeSelector::Kind::Box;
+  bc.where.lo = lo;
+  bc.where.hi = hi;
+  return bc;
+}
+
 // A floor: the half-space y <= `height`.
 ProxySpec floor_proxy(double height, double friction = 0) {
   ProxySpec p;
@@ -319,12 +329,7 @@ TEST(Contact, FrictionSticksBelowMuTimesTheNormalLoadAndSlidesAbove) {
 // The block is held by its x = 0 face.
 TEST(Contact, ForcesAreRoutedPerProxy) {
   ModelSpec spec = block_spec();
-  EssentialBc wall;
-  wall.name = "wall";
-  wall.where.kind = NodeSelector::Kind::Box;
-  wall.where.lo = Vec3(0.0, 0.0, 0.0);
-  wall.where.hi = Vec3(0.0, 0.02, 0.04);
-  spec.essential = {wall};
+  spec.essential = {held_box("wall", Vec3(0.0), Vec3(0.0, 0.02, 0.04))};
   spec.proxies = {sphere_proxy("a", "left", Vec3(0.02, 0.028, 0.02), 0.01),
                   sphere_proxy("b", "right", Vec3(0.02, -0.015, 0.02), 0.01)};  // 5 mm below
   const Model<double> model = build_model<double>(spec);
@@ -408,11 +413,7 @@ TEST(Contact, NeverAddsEnergy) {
 // face moves down with the ball instead of letting it through.
 TEST(Contact, FacesHoldABallThatFitsBetweenNodes) {
   ModelSpec spec = block_spec({4, 2, 4});  // 1 cm cells
-  EssentialBc base;
-  base.name = "base";
-  base.where.kind = NodeSelector::Kind::Box;
-  base.where.hi = Vec3(0.04, 0.0, 0.04);
-  spec.essential = {base};
+  spec.essential = {held_box("base", Vec3(0.0), Vec3(0.04, 0.0, 0.04))};
   const double r = 0.004;
   const Vec3 cell_centre(0.015, 0.02, 0.015);  // the centre of a top-face cell (split into two triangles)
   spec.proxies = {sphere_proxy("tip", "left", cell_centre + Vec3(0.0, r + 0.0005, 0.0), r)};
@@ -563,12 +564,7 @@ double settled_sphere_force(int cells, double R, double delta, double* stiffness
   }
   const double E = 1e5, nu = 0.3;
   spec.materials = {MaterialSpec{MaterialModel::StVK, E, nu, 1000}};
-  EssentialBc base;
-  base.name = "base";
-  base.where.kind = NodeSelector::Kind::Box;
-  base.where.lo = Vec3(-W, -W, -W);
-  base.where.hi = Vec3(W, -W, W);
-  spec.essential = {base};
+  spec.essential = {held_box("base", Vec3(-W, -W, -W), Vec3(W, -W, W))};
   spec.effects.damping = true;
   spec.effects.alpha = 600.0;  // about half the critical damping of the block's lowest modes [1/s]
   spec.proxies = {sphere_proxy("ball", "arm", Vec3(0.0, R, 0.0), R)};
@@ -721,11 +717,7 @@ TEST(ContactHardCases, TwoProxiesPinchOneNode) {
   for (MaterialModel mm : kContactModels) {
     ModelSpec spec = block_spec({4, 2, 4}, 5e4);
     spec.materials[0].model = mm;
-    EssentialBc base;
-    base.name = "base";
-    base.where.kind = NodeSelector::Kind::Box;
-    base.where.hi = Vec3(0.04, 0.0, 0.04);
-    spec.essential = {base};
+    spec.essential = {held_box("base", Vec3(0.0), Vec3(0.04, 0.0, 0.04))};
     const Vec3 corner(0.04, 0.02, 0.04);
     spec.proxies = {sphere_proxy("a", "left", corner + Vec3(-0.0031, 0.0, 0.0) + Vec3(0.0, 0.003, 0.0), 0.003),
                     sphere_proxy("b", "right", corner + Vec3(0.0031, 0.0, 0.0), 0.003)};
@@ -769,12 +761,7 @@ TEST(ContactHardCases, FastPokeShrinksTheStepWithinTheInterval) {
   ModelSpec spec;
   spec.mesh = make_box(Vec3(-0.02, 0.0, -0.02), Vec3(0.02, 0.02, 0.02), {12, 6, 12});
   spec.materials = {MaterialSpec{MaterialModel::NeoHookean, 3e4, 0.3, 1000}};
-  EssentialBc base;
-  base.name = "base";
-  base.where.kind = NodeSelector::Kind::Box;
-  base.where.lo = Vec3(-0.02, 0.0, -0.02);
-  base.where.hi = Vec3(0.02, 0.0, 0.02);
-  spec.essential = {base};
+  spec.essential = {held_box("base", Vec3(-0.02, 0.0, -0.02), Vec3(0.02, 0.0, 0.02))};
   spec.proxies = {sphere_proxy("tip", "stylus", Vec3(0.0, 0.0285, 0.0), 0.008)};
   const Model<double> model = build_model<double>(spec);
   Stepper<double> stepper(model);
@@ -804,11 +791,7 @@ TEST(ContactHardCases, FastPokeShrinksTheStepWithinTheInterval) {
 TEST(Contact, TorqueIsAboutTheProxyCentre) {
   for (bool friction : {false, true}) {
     ModelSpec spec = block_spec();
-    EssentialBc base;
-    base.name = "base";
-    base.where.kind = NodeSelector::Kind::Box;
-    base.where.hi = Vec3(0.04, 0.0, 0.04);
-    spec.essential = {base};
+    spec.essential = {held_box("base", Vec3(0.0), Vec3(0.04, 0.0, 0.04))};
     const double R = 0.01;
     spec.proxies = {sphere_proxy("tip", "arm", Vec3(0.015, 0.02 + R, 0.02), R)};
     spec.proxies[0].friction = 0.8;
@@ -861,12 +844,7 @@ TEST(Contact, StiffnessEstimateIsPassiveOnAStiffRingingBlock) {
   ModelSpec spec;
   spec.mesh = make_box(Vec3(-0.03, 0, -0.03), Vec3(0.03, 0.03, 0.03), {8, 4, 8});
   spec.materials = {MaterialSpec{MaterialModel::NeoHookean, 300e3, 0.3, 1000}};
-  EssentialBc base;
-  base.name = "floor";
-  base.where.kind = NodeSelector::Kind::Box;
-  base.where.lo = Vec3(-1.0, -1.0, -1.0);
-  base.where.hi = Vec3(1.0, 0.0, 1.0);
-  spec.essential = {base};
+  spec.essential = {held_box("floor", Vec3(-1.0, -1.0, -1.0), Vec3(1.0, 0.0, 1.0))};
   spec.effects.damping = true;
   spec.effects.alpha = 20;
   spec.proxies = {sphere_proxy("tip", "stylus", Vec3(0, 0.045, 0), 0.01)};
