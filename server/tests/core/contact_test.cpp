@@ -746,10 +746,6 @@ TEST(ContactHardCases, ProxyStartingInsideTheBody) {
 namespace tactile {
 namespace {
 
-// A frictionless sphere pushes along its radii: the torque about its centre
-// stays near zero. With friction, stroking sideways, the tangential force
-// acts at the contact, a radius below the centre: the torque about the
-// centre is about R times the friction force, about the axis r x F.
 // A sphere driven into a soft Neo-Hookean block at 4 m/s, about the speed
 // of its pressure waves, in the 1 ms intervals a device sends: the elements
 // under it are squashed within the interval, so their critical step falls
@@ -788,6 +784,10 @@ TEST(ContactHardCases, FastPokeShrinksTheStepWithinTheInterval) {
   EXPECT_LT(worst, 0.02 * peak);
 }
 
+// A frictionless sphere pushes along its radii: the torque about its centre
+// stays near zero. With friction, stroking sideways, the tangential force
+// acts at the contact, a radius below the centre: the torque about the
+// centre is about R times the friction force, about the axis r x F.
 TEST(Contact, TorqueIsAboutTheProxyCentre) {
   for (bool friction : {false, true}) {
     ModelSpec spec = block_spec();
@@ -827,13 +827,6 @@ TEST(Contact, TorqueIsAboutTheProxyCentre) {
     }
   }
 }
-
-}  // namespace
-}  // namespace tactile
-
-
-namespace tactile {
-namespace {
 
 // A sphere pressed 7 mm into a stiff, lightly damped block (300 kPa; it
 // rings at a few hundred hertz) and lifted, in 4 ms frames: the stiffness
