@@ -24,6 +24,9 @@
 #pragma GCC diagnostic pop
 
 #include <cmath>
+#include <cstdint>
+#include <limits>
+#include <type_traits>
 #include <utility>
 
 #include "core/kernels/kernels.hpp"
@@ -355,13 +358,51 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const 
 // Node4 (n x 4). The node passes run W nodes at a time as 3 vectors of
 // components (flat, so every entry is one lane) and convert to and from the
 // 4 vectors of Node4 with constant shuffles of whole vectors.
+//
+// The vectors are the hardware's width, not the element blocks' 64 bytes:
+// below AVX-512 GCC lowers a two-input shuffle of 64-byte vectors lane by lane
+// through the stack (the AVX2 corrector took 13 ns a node, fem_bench
+// --only=passes), where one of 32 bytes is two permutes and a blend.
+
+// At least 4 lanes (first4 and first3 below need them): double below AVX2
+// keeps 64 bytes, which measured 4 % faster there than 32.
+#if defined(__AVX512F__)
+inline constexpr int kNodeBytes = 64, kNodeBytesDouble = 64;
+#elif defined(__AVX2__)
+inline constexpr int kNodeBytes = 32, kNodeBytesDouble = 32;
+#else
+inline constexpr int kNodeBytes = 16, kNodeBytesDouble = 64;
+#endif
+
+template <class Real>
+struct NodeLanes;
+template <>
+struct NodeLanes<float> {
+  static constexpr int kBytes = kNodeBytes;
+  typedef float V __attribute__((vector_size(kBytes)));
+  typedef float VU __attribute__((vector_size(kBytes), aligned(4)));
+  typedef int32_t M __attribute__((vector_size(kBytes)));
+  typedef double D __attribute__((vector_size(2 * kBytes)));
+};
+template <>
+struct NodeLanes<double> {
+  static constexpr int kBytes = kNodeBytesDouble;
+  typedef double V __attribute__((vector_size(kBytes)));
+  typedef double VU __attribute__((vector_size(kBytes), aligned(8)));
+  typedef int64_t M __attribute__((vector_size(kBytes)));
+  typedef double D __attribute__((vector_size(kBytes)));
+};
 
 template <class Real>
 struct NodeVectors {
-  static constexpr int W = kLanes<Real>;
-  using V = typename LaneVectors<Real>::RealW;
-  using VU = typename LaneVectors<Real>::RealWU;
-  using M = typename LaneVectors<Real>::MaskW;
+  static constexpr int W = NodeLanes<Real>::kBytes / static_cast<int>(sizeof(Real));
+  // first4 and first3 below assume a component vector spans at most two Node4
+  // vectors and the other way round, which holds from 4 lanes up.
+  static_assert(W >= 4 && W % 4 == 0);
+  using V = typename NodeLanes<Real>::V;
+  using VU = typename NodeLanes<Real>::VU;
+  using M = typename NodeLanes<Real>::M;
+  using D = typename NodeLanes<Real>::D;
 
   // A constant mask vector, lane e = f(e).
   template <class F>
@@ -467,7 +508,7 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
     for (int e = 0; e < W; ++e) gc[r][e] = A.g[(r * W + e) % 3];
   // Sums per lane of a node group, added to per-lane sums in double (so that
   // a million nodes sum as accurately as a hundred), folded at the end.
-  using D = typename LaneVectors<Real>::DoubleW;
+  using D = typename N::D;
   V abs_a, mv2, mgu, ma2;
   D abs_a_d{}, mv2_d{}, mgu_d{}, ma2_d{};
   // One component vector r of the update: f, 1/m and m per lane in; v, a out.
@@ -481,7 +522,8 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
     acc *= q_inv;
     v = v + half_dt * acc;  // second half of eq. (9)
     a = acc;
-    abs_a += acc < V{} ? -acc : acc;
+    // |acc| by clearing the sign bits (the vector form of a ? : is a compare and blend at best)
+    abs_a += (V)((typename N::M)acc & std::numeric_limits<std::conditional_t<sizeof(Real) == 4, int32_t, int64_t>>::max());
     mv2 += m * v * v;
     ma2 += m * acc * acc;
   };
