@@ -265,6 +265,18 @@ TACTILE_INLINE void deformation_gradient(const ElementBlock<Real>& B, int l, con
                      du[2][i] * B.Dinv[6 + j][l];
 }
 
+// Lanes the material math runs at once. With AVX2's 16 registers, one
+// register's worth: GCC otherwise interleaves a block's two halves and spills
+// (fem_bench --only=passes, 20 k tets: elastic float 180 -> 171 us, double
+// 281 -> 248). Below AVX2 the whole block (measured faster there).
+#if defined(__AVX2__) && !defined(__AVX512F__)
+template <class Real>
+inline constexpr int kMathLanes = 32 / int(sizeof(Real));
+#else
+template <class Real>
+inline constexpr int kMathLanes = kLanes<Real>;
+#endif
+
 // How many blocks ahead the element pass prefetches (see forces()).
 constexpr int32_t kPrefetchBlocks = 4;
 
@@ -298,8 +310,10 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
     load_corners(B, u, x);
     // Per-lane outputs and no OpenMP pragma: GCC's `omp simd` would keep F and
     // P in memory as per-lane arrays; its plain vectoriser does far better.
+    #pragma GCC unroll 1
+    for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
-    for (int l = 0; l < W; ++l) {
+    for (int l = h; l < h + kMathLanes<Real>; ++l) {
       Real F[9], P[9];
       deformation_gradient(B, l, x, F);
       if constexpr (!can_invert(M)) J[l] = material::det(F);
