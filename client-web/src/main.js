@@ -111,13 +111,17 @@ function onScene(d) {
   cam.near = r / 10;
   cam.far = 20 * r;
   cam.updateProjectionMatrix();
-  if (ground) { ground.geometry.dispose(); ground.material.dispose(); scene.remove(ground); }
-  view.geometry.computeBoundingBox();
-  ground = new THREE.Mesh(new THREE.PlaneGeometry(12 * r, 12 * r).rotateX(-Math.PI / 2),
-                          new THREE.ShadowMaterial({ opacity: 0.35 }));
-  ground.position.set(c.x, view.geometry.boundingBox.min.y - 1e-4, c.z);
-  ground.receiveShadow = true;
-  scene.add(ground);
+  if (ground) { ground.geometry.dispose(); ground.material.dispose(); scene.remove(ground); ground = null; }
+  // The ground only catches the body's shadow: without shadows it would be a transparent pass over most
+  // of the screen that draws nothing.
+  if (renderer.shadowMap.enabled) {
+    view.geometry.computeBoundingBox();
+    ground = new THREE.Mesh(new THREE.PlaneGeometry(12 * r, 12 * r).rotateX(-Math.PI / 2),
+                            new THREE.ShadowMaterial({ opacity: 0.35 }));
+    ground.position.set(c.x, view.geometry.boundingBox.min.y - 1e-4, c.z);
+    ground.receiveShadow = true;
+    scene.add(ground);
+  }
   resize();
   pointer.setScene(d, view, wsUrl);
   controlPanel.setDescription(d);

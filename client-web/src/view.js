@@ -16,9 +16,47 @@ const VIRIDIS = viridisBytes();
 
 const SHAPES = ['sphere', 'capsule', 'box', 'plane'];
 
+// The surface's shading where the CPU draws (software renderers): a light at the camera and an ambient
+// floor, on each triangle's own normal, in one short shader with two varyings, front faces only. three.js's Lambert, with
+// its light loop, colour management and the attributes it declares, cost half the frame rate in
+// SwiftShader on the same mesh (client-web/bench/render_bench.mjs, 20 k vertices). The colours are the
+// colour map's bytes as they are, so the surface shows the legend's colours exactly.
+function lowQualityMaterial(uniforms) {
+  return new THREE.ShaderMaterial({
+    uniforms,
+    // The surface is wound outward (the server's SceneDescription): the faces turned away are culled,
+    // half of a closed body's triangles, before they cost any pixels.
+    side: THREE.FrontSide,
+    vertexShader: `
+      attribute vec3 posA;
+      attribute vec3 posB;
+      attribute vec3 colA;
+      attribute vec3 colB;
+      uniform float surfaceMix;
+      uniform vec3 surfaceCentre;
+      uniform float surfaceHalf;
+      varying vec3 vView;
+      varying vec3 vColour;
+      void main() {
+        vec4 p = modelViewMatrix * vec4(surfaceCentre + surfaceHalf * mix(posA, posB, surfaceMix), 1.0);
+        vView = p.xyz;
+        vColour = mix(colA, colB, surfaceMix);
+        gl_Position = projectionMatrix * p;
+      }`,
+    fragmentShader: `
+      varying vec3 vView;
+      varying vec3 vColour;
+      void main() {
+        vec3 n = normalize(cross(dFdx(vView), dFdy(vView)));
+        float light = abs(dot(n, normalize(vec3(0.3, 0.6, 0.75))));  // from above the camera, either side lit
+        gl_FragColor = vec4(vColour * (0.35 + 0.65 * light), 1.0);
+      }`,
+  });
+}
+
 export class SceneView {
   // `quality`: 'high' shades physically (MeshStandardMaterial) with shadows; 'low' (software renderers)
-  // with Lambert's diffuse light, a fraction of the cost per pixel.
+  // with a camera light in a shader of its own (lowQualityMaterial), a fraction of the cost.
   constructor(scene, description, quality = 'high') {
     this.root = new THREE.Group();
     scene.add(this.root);
@@ -62,11 +100,14 @@ export class SceneView {
           'vColor = mix(colA, colB, surfaceMix);');
       }
     };
-    const material = quality === 'high'
-      ? new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.55, metalness: 0.0, side: THREE.DoubleSide,
-                                         flatShading: true })
-      : new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide, flatShading: true });
-    material.onBeforeCompile = (shader) => inject(shader, true);
+    let material;
+    if (quality === 'high') {
+      material = new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.55, metalness: 0.0,
+                                                  side: THREE.DoubleSide, flatShading: true });
+      material.onBeforeCompile = (shader) => inject(shader, true);
+    } else {
+      material = lowQualityMaterial(this.uniforms);
+    }
     this.mesh = new THREE.Mesh(geometry, material);
     this.mesh.frustumCulled = false;  // it deforms past its rest bounds; it is the scene's subject anyway
     this.mesh.castShadow = true;
