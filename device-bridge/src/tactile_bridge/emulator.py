@@ -403,6 +403,9 @@ def main(argv: Sequence[str] | None = None) -> None:
                            max_force_N=args.max_force)
     if args.hand is not None and args.hand_after <= 0:
         emu.set_hand_target(args.hand)
+    # Ctrl-C (SIGINT) stops it even when started in the background of a shell without job control, which
+    # starts its children with SIGINT ignored (Python then installs no handler of its own).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))  # unplug cleanly (remove the link) on kill too
     emu.start()
     waiting = args.hand is not None and args.hand_after > 0  # for the hand to take hold
