@@ -417,6 +417,8 @@ struct NodeVectors {
   using VU = typename NodeLanes<Real>::VU;
   using M = typename NodeLanes<Real>::M;
   using D = typename NodeLanes<Real>::D;
+  // Every bit of a lane but its sign bit.
+  static constexpr auto kNoSign = std::numeric_limits<std::conditional_t<sizeof(Real) == 4, int32_t, int64_t>>::max();
 
   // A constant mask vector, lane e = f(e).
   template <class F>
@@ -536,8 +538,8 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
     acc *= q_inv;
     v = v + half_dt * acc;  // second half of eq. (9)
     a = acc;
-    // |acc| by clearing the sign bits (the vector form of a ? : is a compare and blend at best)
-    abs_a += (V)((typename N::M)acc & std::numeric_limits<std::conditional_t<sizeof(Real) == 4, int32_t, int64_t>>::max());
+    // |acc| by clearing the sign bits (a vector ? : is a compare and a blend at best)
+    abs_a += (V)((typename N::M)acc & N::kNoSign);
     mv2 += m * v * v;
     ma2 += m * acc * acc;
   };
