@@ -449,11 +449,14 @@ void table_hand(const Options& opt) {
 template <class Real>
 void pass_rows(const Options& opt, ThreadPool& pool) {
   const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  std::vector<double> sizes = {opt.quick ? 5e3 : 2e4};
+  if (opt.large) sizes.push_back(1e6);
+  for (double size : sizes)
   for (int threads : {1, 2}) {
-    ModelSpec spec = make_spec(make_bench_box(opt.quick ? 5e3 : 2e4, 1, 0.1), MaterialModel::StVK, precision);
+    ModelSpec spec = make_spec(make_bench_box(size, 1, 0.1), MaterialModel::StVK, precision);
     spec.integrator.threads = threads;
     Run<Real> run(spec, threads > 1 ? &pool : nullptr);
-    const int64_t steps = calibrate(run, opt.quick ? 0.02 : 0.2);
+    const int64_t steps = std::max<int64_t>(3, calibrate(run, opt.quick ? 0.02 : 0.2));
     PassClock clock;
     run.stepper.set_probe(&clock);
     run.time_steps(steps, true);  // (clock reads are not the step's)
