@@ -34,7 +34,9 @@ const quality = query.get('quality') ?? (softwareRendering() ? 'low' : 'high');
 // The device and controller roles need the server's token: ?token=... (scripts/run.sh prints the URL with it).
 const token = query.get('token') || '';
 const wsUrl = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/`;
-const renderer = new THREE.WebGLRenderer({ antialias: quality === 'high', preserveDrawingBuffer: true });
+// The drawing buffer is not kept after it is shown (tests screenshot the page, never the canvas): keeping it
+// costs SwiftShader a copy of the whole canvas a frame.
+const renderer = new THREE.WebGLRenderer({ antialias: quality === 'high' });
 renderer.setPixelRatio(window.devicePixelRatio);
 renderer.shadowMap.enabled = quality === 'high';
 $('view').appendChild(renderer.domElement);
