@@ -75,6 +75,8 @@ window.tactile = stats;
 
 let view = null;
 let buffer = null;
+let cameraMoved = false;  // since the last cull
+controls.addEventListener('change', () => { cameraMoved = true; });
 let ground = null;
 
 function resize() {
@@ -143,6 +145,8 @@ function onMessage(data) {
     if (kept) {
       const t1 = performance.now();
       view.pushState(buffer.b, buffer.sb, buffer.a, buffer.sa);
+      stats.drawnTriangles = view.cullFor(camera.position);
+      cameraMoved = false;
       stats.slotMs.push(performance.now() - t1);  // quantized and coloured into the free slot
       if (stats.slotMs.length > 256) stats.slotMs.shift();
       stats.frames += 1;
@@ -219,6 +223,10 @@ function frame() {
     $('legend-hi').textContent = hi.toPrecision(3);
   }
   controls.update();
+  if (cameraMoved && view) {
+    stats.drawnTriangles = view.cullFor(camera.position);
+    cameraMoved = false;
+  }
   renderer.render(scene, camera);
   stats.rendered += 1;
   stats.frameMs.push(performance.now() - now);  // this frame's work: interpolate, normals, colours, draw

@@ -11,6 +11,7 @@
 import * as THREE from 'three';
 
 import { viridisBytes } from './colormap.js';
+import { frontTriangles } from './cull.js';
 
 const VIRIDIS = viridisBytes();
 
@@ -111,6 +112,14 @@ export class SceneView {
     } else {
       material = lowQualityMaterial(this.uniforms);
     }
+    // Where the CPU draws, only the triangles that face the eye are sent (see cull.js), from one of three
+    // index arrays in turn, for the same reason as the slots.
+    this.culls = quality === 'high' ? null : [0, 1, 2].map(() =>
+      new THREE.BufferAttribute(new Uint32Array(index.count), 1).setUsage(THREE.DynamicDrawUsage));
+    this.cullNext = 0;
+    this.olderPositions = new Float32Array(rest);  // the older state's positions, for the cull
+    this.eye = new THREE.Vector3();
+    this.eyeXyz = [0, 0, 0];
     this.mesh = new THREE.Mesh(geometry, material);
     this.mesh.frustumCulled = false;  // it deforms past its rest bounds; it is the scene's subject anyway
     this.mesh.castShadow = true;
@@ -220,6 +229,7 @@ export class SceneView {
     this.newer = free;
     if (widened) this.writeSlot(this.slots[this.older], older, olderScalars);
     this.bindSlots();
+    this.olderPositions.set(older);
     this.positions.set(positions);
     this.scalars.set(scalars);
     this.pickAttr.needsUpdate = true;
@@ -227,6 +237,24 @@ export class SceneView {
   }
 
   // The weight of the newer state on screen now (0..1).
+  // Sends only the triangles that face `eye` (a THREE.Vector3 in world space) in the two states mixed on
+  // screen, where the CPU draws; the count sent, or all of them where it does not cull.
+  cullFor(eye) {
+    const all = this.pick.geometry.index;
+    if (!this.culls) return all.count / 3;
+    this.root.worldToLocal(this.eye.copy(eye));
+    const out = this.culls[this.cullNext];
+    this.cullNext = (this.cullNext + 1) % 3;
+    const k = frontTriangles(all.array, this.olderPositions, this.positions, this.eye.toArray(this.eyeXyz),
+                             out.array);
+    out.clearUpdateRanges();
+    out.addUpdateRange(0, k);
+    out.needsUpdate = true;
+    this.geometry.setIndex(out);
+    this.geometry.setDrawRange(0, k);
+    return k / 3;
+  }
+
   setMix(w) {
     this.uniforms.surfaceMix.value = w;
   }
