@@ -76,6 +76,7 @@ window.tactile = stats;
 let view = null;
 let buffer = null;
 let cameraMoved = false;  // since the last cull
+const legendRange = [NaN, NaN];  // as the legend shows it
 controls.addEventListener('change', () => { cameraMoved = true; });
 let ground = null;
 
@@ -218,9 +219,14 @@ function frame() {
   }
   if (view && buffer && buffer.count > 0) {
     view.setMix(buffer.weight(now / 1000));
+    // Written only when the range widens: new text each frame would lay out and raster the legend again.
     const [lo, hi] = view.scalarRange;
-    $('legend-lo').textContent = lo.toPrecision(3);
-    $('legend-hi').textContent = hi.toPrecision(3);
+    if (lo !== legendRange[0] || hi !== legendRange[1]) {
+      legendRange[0] = lo;
+      legendRange[1] = hi;
+      $('legend-lo').textContent = lo.toPrecision(3);
+      $('legend-hi').textContent = hi.toPrecision(3);
+    }
   }
   controls.update();
   if (cameraMoved && view) {
