@@ -236,7 +236,6 @@ export class SceneView {
     this.pick.geometry.computeBoundingSphere();
   }
 
-  // The weight of the newer state on screen now (0..1).
   // Sends only the triangles that face `eye` (a THREE.Vector3 in world space) in the two states mixed on
   // screen, where the CPU draws; the count sent, or all of them where it does not cull.
   cullFor(eye) {
@@ -255,6 +254,7 @@ export class SceneView {
     return k / 3;
   }
 
+  // The weight of the newer state on screen now (0..1).
   setMix(w) {
     this.uniforms.surfaceMix.value = w;
   }
