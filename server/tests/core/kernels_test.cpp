@@ -16,7 +16,6 @@
 #include <glm/matrix.hpp>
 
 #include "core/model.hpp"
-#include "mesh/primitives.hpp"
 
 namespace tactile {
 namespace {
@@ -240,39 +239,6 @@ void check_padding() {
 
 TEST(Kernels, PaddingLanesContributeNothingFloat) { check_padding<float>(); }
 TEST(Kernels, PaddingLanesContributeNothingDouble) { check_padding<double>(); }
-
-// The node lines fetched ahead change no number: forces and energy with the
-// model's plan equal those without, bit for bit, on a mesh large enough to
-// have one, split in two parts as two threads would run it.
-TEST(Kernels, FetchingNodeLinesAheadChangesNoResult) {
-  ModelSpec spec;
-  spec.mesh = make_box(Vec3(0.0), Vec3(0.2), {20, 20, 20});  // 9261 nodes: 592 KB of u and f in double
-  spec.materials = {MaterialSpec{MaterialModel::StVK, 1e5, 0.3, 1000}};
-  spec.integrator.precision = Precision::Double;
-  spec.integrator.threads = 2;
-  const Model<double> m = build_model<double>(spec);
-  ASSERT_FALSE(m.ahead_node.empty());
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<double> unit(-1e-3, 1e-3);
-  std::vector<Node4<double>> u4(size_t(m.n_nodes));
-  for (Node4<double>& n : u4) n = Node4<double>{{unit(rng), unit(rng), unit(rng), 0}};
-  for (const char* isa : kIsas) {
-    const KernelTable<double>* k = kernels_for<double>(isa);
-    if (!k) continue;
-    std::vector<Node4<double>> plain(u4.size()), ahead(u4.size());
-    double e_plain = 0, e_ahead = 0;
-    for (const ElementGroup& g : m.groups) {
-      e_plain += k->forces[int(g.model)](m.blocks.data(), g.begin, g.end, u4.data(), plain.data(), {}).energy;
-      e_ahead += k->forces[int(g.model)](m.blocks.data(), g.begin, g.end, u4.data(), ahead.data(),
-                                         {m.ahead_begin.data(), m.ahead_node.data()})
-                     .energy;
-    }
-    EXPECT_GT(e_plain, 0.0) << isa;
-    EXPECT_EQ(e_plain, e_ahead) << isa;
-    for (size_t i = 0; i < u4.size(); ++i)
-      for (int c = 0; c < 4; ++c) ASSERT_EQ(plain[i].v[c], ahead[i].v[c]) << isa << " node " << i;
-  }
-}
 
 // The node passes on 37 nodes (a remainder after whole vectors), every ISA.
 template <class Real>
