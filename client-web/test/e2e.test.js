@@ -212,12 +212,15 @@ test('with the token, the control panel pauses, resumes, sets parameters, loads 
     await until('resumed', (t) => !window.tactile.telemetry.paused && window.tactile.telemetry.simTime > t, t0,
                                10000);
 
-    // A parameter: the server sends a new description with the value, and the panel shows it.
+    // A parameter: the server sends a new description with the value, and the panel shows it. (The
+    // input holds 35 as soon as it is typed in, so the wait is on the description: a change sent
+    // before it arrives would be refused as busy.)
     await page.fill('#controls input[data-parameter="damping.alpha"]', '35');
     await page.dispatchEvent('#controls input[data-parameter="damping.alpha"]', 'change');
     await until('damping.alpha = 35 in the new description', () => {
       const i = document.querySelector('#controls input[data-parameter="damping.alpha"]');
-      return i && Number(i.value) === 35;
+      return i && Number(i.value) === 35 && window.tactile.controls.description.parameters
+        .some((p) => p.name === 'damping.alpha' && p.value === 35);
     }, null, 15000);
     // One out of its range is refused, naming it.
     await page.fill('#controls input[data-parameter="material.nu"]', '0.7');
