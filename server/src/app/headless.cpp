@@ -162,7 +162,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
     append_number(csv, report ? report->substeps : 0);
     append_number(csv, report ? report->dt : 0.0);
     for (const TrackedPoint& p : scene.track) {
-      const size_t j = 3 * size_t(p.node);
+      const size_t j = 3 * size_t(sim.model_node(p.node));
       for (size_t d = 0; d < 3; ++d) append_number(csv, u[j + d]);
     }
     for (size_t k = 0; k < cuts.size(); ++k) {
@@ -288,7 +288,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   result.t = sim.time();
   result.wall_s = wall;
   result.energy = sim.energy();
-  for (const TrackedPoint& p : scene.track) result.tracked.push_back({p.name, p.node, p.X, sim.displacement(p.node)});
+  for (const TrackedPoint& p : scene.track) result.tracked.push_back({p.name, p.node, p.X, sim.displacement(sim.model_node(p.node))});
   sim.copy_displacement(u);
   for (size_t k = 0; k < cuts.size(); ++k)
     result.sections.push_back({run.sections[k].name, rest_area[k], compute_section_area(cuts[k], mesh, u)});

@@ -31,6 +31,7 @@ struct Simulation::Engine {
   virtual void set_initial_state(const std::vector<double>& u, const std::vector<double>& v) = 0;
   virtual const TetMesh& mesh() const = 0;
   virtual int32_t n_nodes() const = 0;
+  virtual int32_t model_node(int32_t given) const = 0;
   virtual int32_t n_tets() const = 0;
   virtual double total_mass() const = 0;
   virtual const std::vector<double>& tet_volume() const = 0;
@@ -73,9 +74,16 @@ class EngineOf final : public Simulation::Engine {
         state_(stepper_.make_state()) {}
 
   Carry carry_out() const override {
+    // In the mesh's own node numbering: another model of it may number its
+    // nodes otherwise (build_model orders them by its element blocks).
     Carry c;
-    c.u.assign(state_.u.begin(), state_.u.end());
-    c.v.assign(state_.v.begin(), state_.v.end());
+    c.u.resize(state_.u.size());
+    c.v.resize(state_.v.size());
+    for (size_t i = 0; i < model_->node_given.size(); ++i)
+      for (size_t d = 0; d < 3; ++d) {
+        c.u[3 * size_t(model_->node_given[i]) + d] = double(state_.u[3 * i + d]);
+        c.v[3 * size_t(model_->node_given[i]) + d] = double(state_.v[3 * i + d]);
+      }
     c.t = state_.t;
     c.step = state_.step;
     c.work_loads = state_.work_loads;
@@ -93,10 +101,11 @@ class EngineOf final : public Simulation::Engine {
                                   std::to_string(c.hand.size()) + " hands; this one " +
                                   std::to_string(state_.u.size() / 3) + ", " + std::to_string(model_->proxies.size()) +
                                   " and " + std::to_string(model_->hands.size()));
-    for (size_t k = 0; k < c.u.size(); ++k) {
-      state_.u[k] = Real(c.u[k]);
-      state_.v[k] = Real(c.v[k]);
-    }
+    for (size_t i = 0; i < model_->node_given.size(); ++i)
+      for (size_t d = 0; d < 3; ++d) {
+        state_.u[3 * i + d] = Real(c.u[3 * size_t(model_->node_given[i]) + d]);
+        state_.v[3 * i + d] = Real(c.v[3 * size_t(model_->node_given[i]) + d]);
+      }
     state_.t = c.t;
     state_.step = c.step;
     state_.work_loads = c.work_loads;
@@ -125,6 +134,7 @@ class EngineOf final : public Simulation::Engine {
 
   const TetMesh& mesh() const override { return model_->mesh; }
   int32_t n_nodes() const override { return model_->n_nodes; }
+  int32_t model_node(int32_t given) const override { return model_->node_model.at(size_t(given)); }
   int32_t n_tets() const override { return model_->n_tets; }
   double total_mass() const override { return model_->total_mass; }
   const std::vector<double>& tet_volume() const override { return model_->tet_volume; }
@@ -194,6 +204,7 @@ Simulation& Simulation::operator=(Simulation&&) noexcept = default;
 
 Precision Simulation::precision() const { return precision_; }
 const TetMesh& Simulation::mesh() const { return engine_->mesh(); }
+int32_t Simulation::model_node(int32_t given) const { return engine_->model_node(given); }
 int32_t Simulation::n_nodes() const { return engine_->n_nodes(); }
 int32_t Simulation::n_tets() const { return engine_->n_tets(); }
 double Simulation::total_mass() const { return engine_->total_mass(); }

@@ -28,7 +28,11 @@ class Simulation {
   Simulation& operator=(Simulation&&) noexcept;
 
   Precision precision() const;
+  // The rest mesh with its nodes in the model's numbering (core/model.hpp),
+  // which every node id below uses; model_node translates a node id of the
+  // spec's mesh into it.
   const TetMesh& mesh() const;
+  int32_t model_node(int32_t given) const;
   int32_t n_nodes() const;
   int32_t n_tets() const;
   double total_mass() const;                    // [kg]

@@ -27,10 +27,11 @@ struct ElementGroup {
   int32_t begin, end;
 };
 
-// A share of the step's work for one thread: the nodes [node_begin,
-// node_end) for the node passes, and the lane blocks [block_begin,
-// block_end) of the elements whose lowest node lies among them. The parts
-// tile both ranges in order.
+// A share of the step's work for one thread: the lane blocks [block_begin,
+// block_end) of one slab of the body, and the nodes [node_begin, node_end)
+// for the node passes, those the slab's blocks number first (see
+// build_model). The parts tile both ranges in order; a part's elements also
+// touch a layer of the previous part's nodes.
 struct ModelPart {
   int32_t block_begin, block_end;
   int32_t node_begin, node_end;
@@ -54,7 +55,13 @@ template <class Real>
 struct Model {
   static constexpr int W = kLanes<Real>;
 
-  TetMesh mesh;                    // rest mesh as given (double)
+  // The rest mesh (double), its nodes numbered for the element pass: in the
+  // order the blocks first touch them. Tets keep their ids. Every node id the
+  // model holds or a State indexes is in this numbering; node sets in a spec
+  // name nodes as the spec's mesh gives them, and these two translate.
+  TetMesh mesh;
+  std::vector<int32_t> node_model;  // model id of each given node (n_nodes)
+  std::vector<int32_t> node_given;  // given id of each model node (n_nodes)
   std::vector<Tri> surface;        // boundary triangles, outward (n_faces x 3)
   int32_t n_nodes = 0;
   int32_t n_tets = 0;

@@ -95,8 +95,8 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
   energy_floor_ = 16.0 * double(std::numeric_limits<Real>::epsilon()) * stiffness_volume;
   // A force array per part, each starting on a cache line (16 nodes: 4 lines
   // of float, 8 of double). The corrector reads a part's array only over the
-  // nodes its elements touch: parts of a Morton-ordered mesh touch nearly
-  // disjoint node ranges (see build_model), so two parts cost little more traffic than one.
+  // nodes its elements touch: the parts are slabs of the body, which share
+  // one layer of nodes (see build_model), so two parts cost little more traffic than one.
   const int64_t stride = (int64_t(model_.n_nodes) + 15) / 16 * 16;
   f_.assign(size_t(n_parts_) * size_t(stride), Node4<Real>{});
   for (int32_t p = 0; p < n_parts_; ++p) {
@@ -166,10 +166,13 @@ void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   const Part& part = self->part_[size_t(p)];
   const Model<Real>& m = self->model_;
   // Zero on entry: this part's corrector cleared the entries over its own
-  // nodes after reading them; the few past them, which the next parts'
-  // correctors read, are cleared here (see CorrectArgs).
+  // nodes after reading them; the few outside them (a layer of the previous
+  // part's nodes, and of the next's), which other parts' correctors read,
+  // are cleared here (see CorrectArgs).
   const ForcePart& fp = self->force_parts_[size_t(p)];
   Node4<Real>* f = self->f_.data() + fp.offset;
+  if (fp.begin < part.node_begin)
+    std::fill(f + fp.begin, f + std::min(fp.end, part.node_begin), Node4<Real>{});
   if (fp.end > part.node_end) std::fill(f + std::max(fp.begin, part.node_end), f + fp.end, Node4<Real>{});
   ElasticSums sums;
   for (const ElementGroup& g : m.groups) {

@@ -98,19 +98,25 @@ std::vector<Real> make_affine_displacement(const TetMesh& mesh, const glm::dmat3
 }
 
 // Elastic nodal forces -dU/du of the whole model at displacement u [N]
-// (n_nodes x 3); `energy` receives U [J]. Computed by the stepper itself: the
-// initial acceleration at rest velocity is a = f / m (eq. 1 with lumped M).
-// The model must have no BC, load, gravity or damping.
+// (n_nodes x 3); `energy` receives U [J]. Both u and the forces are in the
+// node numbering of the spec's mesh (the model's own, which the state uses,
+// is translated through Model::node_model). Computed by the stepper itself:
+// the initial acceleration at rest velocity is a = f / m (eq. 1 with lumped
+// M). The model must have no BC, load, gravity or damping.
 template <class Real>
 std::vector<Real> compute_elastic_forces(const Model<Real>& model, const std::vector<Real>& u,
                                          double* energy = nullptr) {
   EXPECT_TRUE(model.essential.empty() && model.loads.empty() && !model.effects.gravity && !model.effects.damping);
   Stepper<Real> stepper(model);
   State<Real> s = stepper.make_state();
-  s.u = u;
+  for (size_t i = 0; i < model.node_model.size(); ++i)
+    for (size_t d = 0; d < 3; ++d) s.u[3 * size_t(model.node_model[i]) + d] = u[3 * i + d];
   stepper.apply_initial_acceleration(s);
   std::vector<Real> f(s.a.size());
-  for (size_t k = 0; k < f.size(); ++k) f[k] = s.a[k] * model.m[k / 3];
+  for (size_t i = 0; i < model.node_model.size(); ++i) {
+    const auto k = size_t(model.node_model[i]);
+    for (size_t d = 0; d < 3; ++d) f[3 * i + d] = s.a[3 * k + d] * model.m[k];
+  }
   if (energy) *energy = stepper.compute_energy(s).elastic;
   return f;
 }

@@ -113,18 +113,21 @@ Forces compute_reference(const ModelSpec& spec, const std::vector<double>& u) {
   return out;
 }
 
-// The kernel of one ISA over all groups of a model.
+// The kernel of one ISA over all groups of a model, with u and f in the
+// mesh's node numbering (the model's own is translated through node_model).
 template <class Real>
 Forces compute_kernel(const KernelTable<Real>& k, const Model<Real>& model, const std::vector<double>& u) {
   std::vector<Node4<Real>> u4(size_t(model.n_nodes)), f4(size_t(model.n_nodes));
-  for (size_t i = 0; i < u4.size(); ++i) u4[i] = Node4<Real>{{Real(u[3 * i]), Real(u[3 * i + 1]), Real(u[3 * i + 2]), 0}};
+  for (size_t i = 0; i < u4.size(); ++i)
+    u4[size_t(model.node_model[i])] = Node4<Real>{{Real(u[3 * i]), Real(u[3 * i + 1]), Real(u[3 * i + 2]), 0}};
   Forces out;
   for (const ElementGroup& g : model.groups)
     out.energy += k.forces[int(g.model)](model.blocks.data(), g.begin, g.end, u4.data(), f4.data(), {}).energy;
   out.f.resize(3 * u4.size());
   for (size_t i = 0; i < f4.size(); ++i) {
-    for (int c = 0; c < 3; ++c) out.f[3 * i + size_t(c)] = double(f4[i].v[c]);
-    EXPECT_EQ(f4[i].v[3], Real(0)) << "node " << i << ": the padding entry was written";
+    const Node4<Real>& fi = f4[size_t(model.node_model[i])];
+    for (int c = 0; c < 3; ++c) out.f[3 * i + size_t(c)] = double(fi.v[c]);
+    EXPECT_EQ(fi.v[3], Real(0)) << "node " << i << ": the padding entry was written";
   }
   return out;
 }

@@ -131,14 +131,15 @@ TEST(BuildModel, LumpedMassesSumToTheTotalMass) {
                                         spec.mesh.X[size_t(t[2])], spec.mesh.X[size_t(t[3])]);
     for (int32_t i : t) m[size_t(i)] += rho * V / 4;
   }
-  for (size_t i = 0; i < m.size(); ++i) {
-    EXPECT_NEAR(model.m[i], m[i], 1e-12 * m[i]);
-    EXPECT_NEAR(model.inv_m[i] * m[i], 1.0, 1e-12);
+  for (size_t i = 0; i < m.size(); ++i) {  // i as the mesh numbers it
+    const auto k = size_t(model.node_model[i]);
+    EXPECT_NEAR(model.m[k], m[i], 1e-12 * m[i]);
+    EXPECT_NEAR(model.inv_m[k] * m[i], 1.0, 1e-12);
   }
   // Float models carry the same masses, rounded.
   const Model<float> mf = build_model<float>(spec);
   EXPECT_NEAR(mf.total_mass, expected, 1e-12 * expected);
-  for (size_t i = 0; i < m.size(); ++i) EXPECT_NEAR(double(mf.m[i]), m[i], 1e-6 * m[i]);
+  for (size_t i = 0; i < m.size(); ++i) EXPECT_NEAR(double(mf.m[size_t(mf.node_model[i])]), m[i], 1e-6 * m[i]);
 }
 
 TEST(BuildModel, EveryTetIsInOneLaneOfItsModelsGroup) {
@@ -157,6 +158,52 @@ TEST(BuildModel, EveryTetIsInOneLaneOfItsModelsGroup) {
       }
   for (int count : seen) EXPECT_EQ(count, 1);
 }
+
+// The model numbers nodes in the order its blocks first touch them (part by
+// part): a permutation of the mesh's, applied to everything it holds, with
+// each part's node-pass range starting where its blocks start numbering
+// (rounded to 16 nodes) and the boundary conditions on the same nodes.
+template <class Real>
+void check_node_numbering() {
+  ModelSpec spec = make_spec(make_box(Vec3(0.0), Vec3(0.3, 0.1, 0.1), {30, 8, 8}), MaterialModel::StVK);
+  spec.integrator.threads = 2;
+  EssentialBc bc;
+  bc.where.kind = NodeSelector::Kind::Nodes;
+  bc.where.nodes = {5, 77, 400};
+  spec.essential = {bc};
+  const Model<Real> m = build_model<Real>(spec);
+  ASSERT_EQ(m.parts.size(), 2u);
+  const auto nn = size_t(m.n_nodes);
+  ASSERT_EQ(m.node_model.size(), nn);
+  ASSERT_EQ(m.node_given.size(), nn);
+  for (size_t i = 0; i < nn; ++i) {
+    ASSERT_EQ(size_t(m.node_given[size_t(m.node_model[i])]), i);
+    EXPECT_EQ(m.mesh.X[size_t(m.node_model[i])], spec.mesh.X[i]);
+  }
+  for (size_t e = 0; e < spec.mesh.tets.size(); ++e)
+    for (size_t c = 0; c < 4; ++c) EXPECT_EQ(m.mesh.tets[e][c], m.node_model[size_t(spec.mesh.tets[e][c])]);
+  std::vector<int32_t> held{m.node_model[5], m.node_model[77], m.node_model[400]};
+  std::sort(held.begin(), held.end());
+  EXPECT_EQ(m.essential.at(0).nodes, held);
+  int32_t next = 0;  // the next number a first touch must give
+  for (size_t p = 0; p < m.parts.size(); ++p) {
+    const ModelPart& part = m.parts[p];
+    EXPECT_EQ(part.node_begin, p == 0 ? 0 : (next + 8) / 16 * 16) << "part " << p;
+    for (int32_t b = part.block_begin; b < part.block_end; ++b)
+      for (int c = 0; c < 4; ++c)
+        for (int l = 0; l < kLanes<Real>; ++l) {
+          const int32_t id = m.blocks[size_t(b)].node[c][l];
+          ASSERT_LE(id, next) << "block " << b;
+          if (id == next) ++next;
+        }
+  }
+  EXPECT_EQ(size_t(next), nn);
+  EXPECT_EQ(m.parts.back().node_end, m.n_nodes);
+  EXPECT_EQ(m.parts[0].node_end, m.parts[1].node_begin);
+}
+
+TEST(BuildModel, NumbersNodesInTheOrderTheBlocksFirstTouchThemFloat) { check_node_numbering<float>(); }
+TEST(BuildModel, NumbersNodesInTheOrderTheBlocksFirstTouchThemDouble) { check_node_numbering<double>(); }
 
 // The plan of node lines the element pass fetches ahead (Model::ahead_*):
 // none while u and f fit in a core's cache; past that, before each block,
