@@ -68,58 +68,6 @@ double max_eigenvalue_symmetric(double* A, int n) {
   return best;
 }
 
-// The node arrays' share of a core's cache (L2 is 1-2 MiB on current x86-64
-// cores) below which the element pass finds its nodes there without help.
-constexpr size_t kNodeCacheBytes = size_t(512) << 10;
-// How many blocks ahead the element pass asks for a node line, and how many
-// blocks back a line counts as still cached. A sweep at 1 M tets (the
-// elastic kernel timed with and without the plan, alternated in one
-// process): 2, 4, 8 and 16 blocks ahead all gained 8-15 %, 8 as much as
-// any; 4 to 32 blocks back alike. fem_bench --large --only=passes, 1 M tets,
-// double, one thread: elastic pass 16.5-20.9 -> 14.4-15.7 ms.
-constexpr int32_t kAheadBlocks = 8;
-constexpr int32_t kRecentBlocks = 8;
-
-// Plans Model::ahead_*: within each part, the lines of the node arrays
-// (Node4, cache-line aligned) that block t touches and none of the
-// kRecentBlocks blocks before it did, fetched while block t - kAheadBlocks
-// runs. Nothing for a model whose two node arrays (u and f) fit in the cache.
-template <class Real>
-void plan_node_lines_ahead(Model<Real>& model) {
-  model.ahead_begin.clear();
-  model.ahead_node.clear();
-  if (2 * size_t(model.n_nodes) * sizeof(Node4<Real>) <= kNodeCacheBytes) return;
-  constexpr int32_t W = kLanes<Real>;
-  constexpr int32_t per_line = int32_t(64 / sizeof(Node4<Real>));
-  const auto n_blocks = int32_t(model.blocks.size());
-  std::vector<int32_t> last_touch(size_t(model.n_nodes / per_line + 1), std::numeric_limits<int32_t>::min() / 2);
-  std::vector<int32_t> count(size_t(n_blocks) + 1, 0);
-  std::vector<std::pair<int32_t, int32_t>> wants;  // (block that fetches, first node of the line)
-  std::vector<int32_t> lines;
-  lines.reserve(size_t(4 * W));
-  for (const ModelPart& part : model.parts) {
-    for (int32_t t = part.block_begin; t < part.block_end; ++t) {
-      lines.clear();
-      for (int c = 0; c < 4; ++c)
-        for (int32_t l = 0; l < W; ++l) lines.push_back(model.blocks[size_t(t)].node[c][l] / per_line);
-      std::sort(lines.begin(), lines.end());
-      lines.erase(std::unique(lines.begin(), lines.end()), lines.end());
-      for (int32_t line : lines) {
-        const int32_t fetcher = t - kAheadBlocks;
-        if (t - last_touch[size_t(line)] > kRecentBlocks && fetcher >= part.block_begin) {
-          wants.emplace_back(fetcher, line * per_line);
-          ++count[size_t(fetcher) + 1];
-        }
-        last_touch[size_t(line)] = t;
-      }
-    }
-  }
-  std::partial_sum(count.begin(), count.end(), count.begin());
-  model.ahead_begin = count;
-  model.ahead_node.resize(wants.size());
-  for (const auto& [block, node] : wants) model.ahead_node[size_t(count[size_t(block)]++)] = node;
-}
-
 }  // namespace
 
 double compute_element_critical_dt(const Vec3& X0, const Vec3& X1, const Vec3& X2, const Vec3& X3, double lambda,
@@ -353,8 +301,11 @@ Model<Real> build_model(const ModelSpec& spec) {
   // Nodes renumbered in the order the blocks first touch them, so that the
   // element pass reads and adds into the node arrays nearly in sequence, a
   // few new cache lines a block (1 M tets: 7.0 ns a tet against 8.2 in the
-  // sweep order with the nodes as given). Everything the model holds uses
-  // these numbers; node_given and node_model translate.
+  // sweep order with the nodes as given). The hardware prefetcher follows
+  // such a stream: fetching each block's new node lines ahead in software,
+  // which gained 8-15 % under the Morton order, now lost 1-5 %, and went.
+  // Everything the model holds uses these numbers; node_given and node_model
+  // translate.
   std::vector<int32_t> cut(size_t(n_parts) + 1, 0);
   model.node_model.assign(nn, -1);
   model.node_given.assign(nn, -1);
@@ -408,8 +359,6 @@ Model<Real> build_model(const ModelSpec& spec) {
     part.node_begin = cut[size_t(p)];
     part.node_end = cut[size_t(p) + 1];
   }
-
-  plan_node_lines_ahead(model);
 
   // Boundary conditions and loads.
   for (size_t k = 0; k < spec.essential.size(); ++k) {

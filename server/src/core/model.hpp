@@ -74,10 +74,6 @@ struct Model {
   std::vector<ElementGroup> groups;        // ranges of blocks of one material model, per part
   std::vector<ModelPart> parts;            // how the step splits over threads (integrator.threads at most)
   std::vector<int32_t> lane_tet;           // tet id of block lane b*W+l, -1 for padding (n_blocks x W)
-  // Node lines the element pass fetches ahead (see NodeLinesAhead), empty
-  // while the node arrays fit in a core's cache.
-  std::vector<int32_t> ahead_begin;        // (n_blocks + 1, or 0)
-  std::vector<int32_t> ahead_node;         // first node of each line
 
   std::vector<MaterialModel> tet_model;    // material model per tet (n_tets)
   std::vector<double> tet_volume;          // rest volume [m^3] (n_tets)

@@ -178,9 +178,7 @@ void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   for (const ElementGroup& g : m.groups) {
     const int32_t b0 = std::max(g.begin, part.block_begin), b1 = std::min(g.end, part.block_end);
     if (b0 >= b1) continue;
-    const NodeLinesAhead ahead = m.ahead_begin.empty() ? NodeLinesAhead{}
-                                                       : NodeLinesAhead{m.ahead_begin.data(), m.ahead_node.data()};
-    const ElasticSums s = self->kernels_.forces[int(g.model)](m.blocks.data(), b0, b1, self->u4_.data(), f, ahead);
+    const ElasticSums s = self->kernels_.forces[int(g.model)](m.blocks.data(), b0, b1, self->u4_.data(), f);
     sums.energy += s.energy;
     sums.inverted += s.inverted;
   }

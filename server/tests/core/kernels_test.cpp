@@ -122,7 +122,7 @@ Forces compute_kernel(const KernelTable<Real>& k, const Model<Real>& model, cons
     u4[size_t(model.node_model[i])] = Node4<Real>{{Real(u[3 * i]), Real(u[3 * i + 1]), Real(u[3 * i + 2]), 0}};
   Forces out;
   for (const ElementGroup& g : model.groups)
-    out.energy += k.forces[int(g.model)](model.blocks.data(), g.begin, g.end, u4.data(), f4.data(), {}).energy;
+    out.energy += k.forces[int(g.model)](model.blocks.data(), g.begin, g.end, u4.data(), f4.data()).energy;
   out.f.resize(3 * u4.size());
   for (size_t i = 0; i < f4.size(); ++i) {
     const Node4<Real>& fi = f4[size_t(model.node_model[i])];
@@ -232,7 +232,7 @@ void check_padding() {
       for (size_t i = 0; i < u4.size(); ++i) u4[i] = Node4<Real>{{u[3 * i], u[3 * i + 1], u[3 * i + 2], 0}};
       double e = 0;
       for (const ElementGroup& g : m.groups)
-        e += k->forces[int(g.model)](only_padding.data(), g.begin, g.end, u4.data(), f4.data(), {}).energy;
+        e += k->forces[int(g.model)](only_padding.data(), g.begin, g.end, u4.data(), f4.data()).energy;
       EXPECT_EQ(e, 0.0);
       for (size_t i = 0; i < f4.size(); ++i)
         for (int c = 0; c < 4; ++c) EXPECT_EQ(f4[i].v[c], Real(0)) << to_string(model) << " " << isa << " node " << i;

@@ -205,64 +205,6 @@ void check_node_numbering() {
 TEST(BuildModel, NumbersNodesInTheOrderTheBlocksFirstTouchThemFloat) { check_node_numbering<float>(); }
 TEST(BuildModel, NumbersNodesInTheOrderTheBlocksFirstTouchThemDouble) { check_node_numbering<double>(); }
 
-// The plan of node lines the element pass fetches ahead (Model::ahead_*):
-// none while u and f fit in a core's cache; past that, before each block,
-// exactly the lines a block 8 later in the same part touches and none of
-// the 8 blocks before it did, each a whole aligned line of a node array.
-template <class Real>
-void check_node_lines_ahead() {
-  ModelSpec small = make_spec(make_box(Vec3(0.0), Vec3(0.1), {4, 4, 4}), MaterialModel::StVK);
-  EXPECT_TRUE(build_model<Real>(small).ahead_begin.empty());
-
-  ModelSpec spec = make_spec(make_box(Vec3(0.0), Vec3(0.3), {26, 26, 26}), MaterialModel::StVK);  // 19683 nodes
-  spec.integrator.threads = 2;
-  const Model<Real> m = build_model<Real>(spec);
-  ASSERT_EQ(m.parts.size(), 2u);
-  const auto n_blocks = int32_t(m.blocks.size());
-  ASSERT_EQ(m.ahead_begin.size(), size_t(n_blocks) + 1);
-  EXPECT_EQ(m.ahead_begin.front(), 0);
-  EXPECT_EQ(size_t(m.ahead_begin.back()), m.ahead_node.size());
-  constexpr int32_t per_line = int32_t(64 / sizeof(Node4<Real>));
-  constexpr int32_t ahead = 8, recent = 8;
-  for (const ModelPart& part : m.parts)
-    for (int32_t b = part.block_begin; b < part.block_end; ++b) {
-      ASSERT_LE(m.ahead_begin[size_t(b)], m.ahead_begin[size_t(b) + 1]);
-      std::vector<int32_t> listed(m.ahead_node.begin() + m.ahead_begin[size_t(b)],
-                                  m.ahead_node.begin() + m.ahead_begin[size_t(b) + 1]);
-      for (int32_t n : listed) {
-        EXPECT_EQ(n % per_line, 0) << "block " << b;
-        EXPECT_TRUE(n >= 0 && n < m.n_nodes) << "block " << b;
-      }
-      // What block t = b + ahead needs first, from its corners and its recent predecessors.
-      std::vector<int32_t> expected;
-      const int32_t t = b + ahead;
-      if (t < part.block_end) {
-        auto lines_of = [&](int32_t k) {
-          std::vector<int32_t> lines;
-          for (int c = 0; c < 4; ++c)
-            for (int l = 0; l < kLanes<Real>; ++l) lines.push_back(m.blocks[size_t(k)].node[c][l] / per_line * per_line);
-          return lines;
-        };
-        std::vector<int32_t> seen;
-        for (int32_t k = std::max(part.block_begin, t - recent); k < t; ++k) {
-          const std::vector<int32_t> lk = lines_of(k);
-          seen.insert(seen.end(), lk.begin(), lk.end());
-        }
-        for (int32_t line : lines_of(t))
-          if (std::find(seen.begin(), seen.end(), line) == seen.end() &&
-              std::find(expected.begin(), expected.end(), line) == expected.end())
-            expected.push_back(line);
-      }
-      std::sort(listed.begin(), listed.end());
-      std::sort(expected.begin(), expected.end());
-      ASSERT_EQ(listed, expected) << "block " << b;
-    }
-  EXPECT_GT(m.ahead_node.size(), size_t(n_blocks));  // a few lines a block: the plan is not empty
-}
-
-TEST(BuildModel, PlansTheNodeLinesToFetchAheadFloat) { check_node_lines_ahead<float>(); }
-TEST(BuildModel, PlansTheNodeLinesToFetchAheadDouble) { check_node_lines_ahead<double>(); }
-
 // ---- critical step -----------------------------------------------------------
 
 // The 12 x 12 linear-elastic stiffness of one tet, written from the weak form

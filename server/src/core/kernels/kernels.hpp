@@ -57,17 +57,9 @@ struct ElasticSums {
   double energy = 0;     // sum V psi(F) [J]
   int32_t inverted = 0;  // lanes with det F <= 0, counted only for models that cannot invert
 };
-// The node cache lines the element pass fetches ahead of need, once the node
-// arrays outgrow a core's cache (build_model plans them): before block b,
-// the lines starting at nodes node[begin[b]] .. node[begin[b + 1]), which a
-// later block touches and no block shortly before it did. Null begin: none.
-struct NodeLinesAhead {
-  const int32_t* begin = nullptr;  // (n_blocks + 1)
-  const int32_t* node = nullptr;   // first node of each line
-};
 template <class Real>
 using ForcesFn = ElasticSums (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Node4<Real>* u,
-                                 Node4<Real>* f, NodeLinesAhead ahead);
+                                 Node4<Real>* f);
 
 // Elastic energy V psi(F) per lane of blocks [begin, end) at displacements u
 // (n_nodes x 3), written to energy[(b - begin) * W + lane]; and det F per lane

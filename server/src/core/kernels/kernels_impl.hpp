@@ -282,7 +282,7 @@ constexpr int32_t kPrefetchBlocks = 4;
 
 template <class Real, MaterialModel M>
 ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Node4<Real>* u,
-                   Node4<Real>* f, NodeLinesAhead ahead) {
+                   Node4<Real>* f) {
   constexpr int W = kLanes<Real>;
   using RealW = typename LaneVectors<Real>::RealW;
   using DoubleW = typename LaneVectors<Real>::DoubleW;
@@ -303,16 +303,6 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       #pragma GCC unroll 16
       for (size_t o = 0; o < sizeof(ElementBlock<Real>); o += 64) __builtin_prefetch(next + o);
     }
-    // The nodes the lanes' corners reach: in a mesh of a million elements,
-    // the node arrays live in L3 and a block's corner loads and force adds
-    // wait on its misses one block at a time (the out-of-order window holds
-    // a third of a block), so the lines a later block needs first are asked
-    // for now (a few a block).
-    if (ahead.begin)
-      for (int32_t k = ahead.begin[b]; k < ahead.begin[b + 1]; ++k) {
-        __builtin_prefetch(u + ahead.node[k]);
-        __builtin_prefetch(f + ahead.node[k], 1);
-      }
     alignas(64) Real x[12][W];   // corner displacements [m]: x[3c + i][lane]
     alignas(64) Real fc[12][W];  // corner forces [N], corners 1-3 negated: fc[3c + i][lane]
     alignas(64) Real psiV[W];    // V psi per lane [J]
