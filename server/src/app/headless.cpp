@@ -149,6 +149,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   csv += ",kinetic_J,elastic_J,gravity_J,work_loads_J,work_essential_J,dissipated_J,balance_drift_J\n";
 
   std::vector<double> u, v, density;
+  std::vector<double> u_given(3 * size_t(scene.spec.mesh.n_nodes())), v_given(u_given.size());  // for the VTU frames
   std::vector<PvdEntry> pvd;
   Range substeps, dt_used, dt_critical, frame_wall, max_u, section_ratio;
   int64_t subdivided_frames = 0;
@@ -180,8 +181,16 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
     sim.copy_velocity(v);
     density = sim.compute_element_energy();
     for (size_t t = 0; t < density.size(); ++t) density[t] /= sim.tet_volume()[t];
+    // Written with the nodes as the scene's mesh numbers them (the model
+    // numbers them for its element pass; tets keep their ids).
+    for (int32_t g = 0; g < scene.spec.mesh.n_nodes(); ++g)
+      for (size_t d = 0; d < 3; ++d) {
+        const size_t k = 3 * size_t(sim.model_node(g)) + d;
+        u_given[3 * size_t(g) + d] = u[k];
+        v_given[3 * size_t(g) + d] = v[k];
+      }
     const std::string name = frame_name(frame);
-    write_vtu((dir / name).string(), VtuFrame{&mesh, &u, &v, &density});
+    write_vtu((dir / name).string(), VtuFrame{&scene.spec.mesh, &u_given, &v_given, &density});
     pvd.push_back({sim.time(), name});
   };
 

@@ -93,10 +93,17 @@ TEST(Headless, VtuFilesAreXmlWithThePointsAndCellsOfTheState) {
   // The same run, stepped here: the last frame must show this state.
   Simulation sim(scene.spec);
   for (int f = 0; f < 5; ++f) ASSERT_FALSE(sim.advance(0.01).fault);
-  std::vector<double> u, v;
-  sim.copy_displacement(u);
-  sim.copy_velocity(v);
-  const TetMesh& mesh = sim.mesh();
+  // The frames number the nodes as the scene's mesh does, not as the model does.
+  const TetMesh& mesh = scene.spec.mesh;
+  std::vector<double> um, vm;
+  sim.copy_displacement(um);
+  sim.copy_velocity(vm);
+  std::vector<double> u(um.size()), v(vm.size());
+  for (int32_t g = 0; g < mesh.n_nodes(); ++g)
+    for (size_t d = 0; d < 3; ++d) {
+      u[3 * size_t(g) + d] = um[3 * size_t(sim.model_node(g)) + d];
+      v[3 * size_t(g) + d] = vm[3 * size_t(sim.model_node(g)) + d];
+    }
 
   const test::XmlElement pvd = test::XmlReader::parse(test::read_file(r.dir + "/series.pvd"));
   const auto& sets = pvd.child("Collection").children;
