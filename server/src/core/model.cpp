@@ -240,13 +240,14 @@ Model<Real> build_model(const ModelSpec& spec) {
   }
   std::vector<int32_t> part_of(nt);
   for (size_t k = 0; k < nt; ++k) part_of[size_t(order[k])] = int32_t(k * size_t(n_parts) / nt);
-  // Within a part, elements grouped by material model, each group in sweep order.
+  // Within a part, elements grouped by material (model and Lame parameters:
+  // a group's kernel takes them once), each group in sweep order.
   std::stable_sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
     if (part_of[size_t(a)] != part_of[size_t(b)]) return part_of[size_t(a)] < part_of[size_t(b)];
-    return model.tet_model[size_t(a)] < model.tet_model[size_t(b)];
+    return mesh.region_of(a) < mesh.region_of(b);
   });
 
-  // Lane blocks, one run per part and material model. Within a chunk of
+  // Lane blocks, one run per part and material. Within a chunk of
   // kStripBlocks blocks, lane l takes the l-th run of the chunk's
   // elements: elements that share nodes sit in one lane of consecutive
   // blocks rather than side by side in one block, so a block's corner-force
@@ -257,11 +258,12 @@ Model<Real> build_model(const ModelSpec& spec) {
   std::vector<int32_t> first_block(size_t(n_parts), -1);
   for (size_t i = 0; i < nt;) {
     const int32_t part = part_of[size_t(order[i])];
-    const MaterialModel mm = model.tet_model[size_t(order[i])];
+    const int32_t region = mesh.region_of(order[i]);
     size_t j = i;
-    while (j < nt && part_of[size_t(order[j])] == part && model.tet_model[size_t(order[j])] == mm) ++j;
+    while (j < nt && part_of[size_t(order[j])] == part && mesh.region_of(order[j]) == region) ++j;
     if (first_block[size_t(part)] < 0) first_block[size_t(part)] = int32_t(model.blocks.size());
-    ElementGroup group{mm, int32_t(model.blocks.size()), 0};
+    const auto e0 = size_t(order[i]);
+    ElementGroup group{model.tet_model[e0], int32_t(model.blocks.size()), 0, model.tet_lambda[e0], model.tet_mu[e0]};
     for (size_t k = i; k < j; k += W * kStripBlocks) {
       const size_t count = std::min(j - k, W * kStripBlocks);  // elements in this chunk
       const size_t n_blocks = (count + W - 1) / W;
@@ -274,7 +276,7 @@ Model<Real> build_model(const ModelSpec& spec) {
             // padding): F = I whatever u, and a node this block touches anyway.
             for (int c = 0; c < 4; ++c) B.node[c][l] = B.node[0][0];
             for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
-            B.lambdaV[l] = B.muV[l] = Real(0);
+            B.V[l] = Real(0);
             model.lane_tet.push_back(-1);
             continue;
           }
@@ -286,8 +288,7 @@ Model<Real> build_model(const ModelSpec& spec) {
           const glm::dmat3 Dinv = glm::inverse(Dm);  // glm is column-major: Dinv[col][row]
           for (int r = 0; r < 3; ++r)
             for (int c = 0; c < 3; ++c) B.Dinv[3 * r + c][l] = Real(Dinv[c][r]);
-          B.lambdaV[l] = Real(model.tet_lambda[e] * model.tet_volume[e]);
-          B.muV[l] = Real(model.tet_mu[e] * model.tet_volume[e]);
+          B.V[l] = Real(model.tet_volume[e]);
           model.lane_tet.push_back(int32_t(e));
         }
         model.blocks.push_back(B);

@@ -25,6 +25,7 @@ struct ModelError : std::runtime_error {
 struct ElementGroup {
   MaterialModel model;
   int32_t begin, end;
+  double lambda, mu;  // Lame parameters [Pa] of every element of the group
 };
 
 // A share of the step's work for one thread: the lane blocks [block_begin,

@@ -178,7 +178,8 @@ void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   for (const ElementGroup& g : m.groups) {
     const int32_t b0 = std::max(g.begin, part.block_begin), b1 = std::min(g.end, part.block_end);
     if (b0 >= b1) continue;
-    const ElasticSums s = self->kernels_.forces[int(g.model)](m.blocks.data(), b0, b1, self->u4_.data(), f);
+    const ElasticSums s = self->kernels_.forces[int(g.model)](m.blocks.data(), b0, b1, Real(g.lambda), Real(g.mu),
+                                                              self->u4_.data(), f);
     sums.energy += s.energy;
     sums.inverted += s.inverted;
   }
@@ -677,7 +678,8 @@ std::vector<double> Stepper<Real>::compute_element_energy(const State<Real>& s) 
   std::vector<double> lane(size_t(kLanes<Real>));
   for (const ElementGroup& g : model_.groups) {
     for (int32_t b = g.begin; b < g.end; ++b) {
-      kernels_.energy[int(g.model)](model_.blocks.data(), b, b + 1, s.u.data(), lane.data(), nullptr);
+      kernels_.energy[int(g.model)](model_.blocks.data(), b, b + 1, Real(g.lambda), Real(g.mu), s.u.data(),
+                                    lane.data(), nullptr);
       for (int l = 0; l < kLanes<Real>; ++l) {
         const int32_t e = model_.lane_tet[size_t(b) * kLanes<Real> + size_t(l)];
         if (e >= 0) out[size_t(e)] = lane[size_t(l)];

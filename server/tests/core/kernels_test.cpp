@@ -122,7 +122,8 @@ Forces compute_kernel(const KernelTable<Real>& k, const Model<Real>& model, cons
     u4[size_t(model.node_model[i])] = Node4<Real>{{Real(u[3 * i]), Real(u[3 * i + 1]), Real(u[3 * i + 2]), 0}};
   Forces out;
   for (const ElementGroup& g : model.groups)
-    out.energy += k.forces[int(g.model)](model.blocks.data(), g.begin, g.end, u4.data(), f4.data()).energy;
+    out.energy += k.forces[int(g.model)](model.blocks.data(), g.begin, g.end, Real(g.lambda), Real(g.mu), u4.data(),
+                                         f4.data()).energy;
   out.f.resize(3 * u4.size());
   for (size_t i = 0; i < f4.size(); ++i) {
     const Node4<Real>& fi = f4[size_t(model.node_model[i])];
@@ -210,7 +211,7 @@ void check_padding() {
       std::vector<double> energy(m.blocks.size() * size_t(kLanes<Real>));
       std::vector<Real> J(energy.size());
       for (const ElementGroup& g : m.groups)
-        k->energy[int(g.model)](m.blocks.data(), g.begin, g.end, u.data(),
+        k->energy[int(g.model)](m.blocks.data(), g.begin, g.end, Real(g.lambda), Real(g.mu), u.data(),
                                 energy.data() + size_t(g.begin) * kLanes<Real>, J.data() + size_t(g.begin) * kLanes<Real>);
       int padding = 0;
       for (size_t lane = 0; lane < energy.size(); ++lane) {
@@ -220,19 +221,17 @@ void check_padding() {
         EXPECT_EQ(J[lane], Real(1)) << to_string(model) << " " << isa << " lane " << lane;
       }
       EXPECT_GT(padding, 0);
-      // Forces of the padding lanes alone: blocks with every real lane's stiffness zeroed.
+      // Forces of the padding lanes alone: blocks with every real lane's volume zeroed.
       std::vector<ElementBlock<Real>> only_padding = m.blocks;
       for (size_t b = 0; b < only_padding.size(); ++b)
         for (int l = 0; l < kLanes<Real>; ++l)
-          if (m.lane_tet[b * kLanes<Real> + size_t(l)] >= 0) {
-            only_padding[b].lambdaV[l] = 0;
-            only_padding[b].muV[l] = 0;
-          }
+          if (m.lane_tet[b * kLanes<Real> + size_t(l)] >= 0) only_padding[b].V[l] = 0;
       std::vector<Node4<Real>> u4(size_t(m.n_nodes)), f4(size_t(m.n_nodes));
       for (size_t i = 0; i < u4.size(); ++i) u4[i] = Node4<Real>{{u[3 * i], u[3 * i + 1], u[3 * i + 2], 0}};
       double e = 0;
       for (const ElementGroup& g : m.groups)
-        e += k->forces[int(g.model)](only_padding.data(), g.begin, g.end, u4.data(), f4.data()).energy;
+        e += k->forces[int(g.model)](only_padding.data(), g.begin, g.end, Real(g.lambda), Real(g.mu), u4.data(),
+                                     f4.data()).energy;
       EXPECT_EQ(e, 0.0);
       for (size_t i = 0; i < f4.size(); ++i)
         for (int c = 0; c < 4; ++c) EXPECT_EQ(f4[i].v[c], Real(0)) << to_string(model) << " " << isa << " node " << i;

@@ -142,21 +142,34 @@ TEST(BuildModel, LumpedMassesSumToTheTotalMass) {
   for (size_t i = 0; i < m.size(); ++i) EXPECT_NEAR(double(mf.m[size_t(mf.node_model[i])]), m[i], 1e-6 * m[i]);
 }
 
-TEST(BuildModel, EveryTetIsInOneLaneOfItsModelsGroup) {
-  ModelSpec spec = make_spec(make_two_region_box(), MaterialModel::StVK);
-  spec.materials.push_back(MaterialSpec{MaterialModel::Corotational, 1e5, 0.3, 1000});
-  const Model<float> model = build_model<float>(spec);
-  std::vector<int> seen(size_t(model.n_tets), 0);
-  for (const ElementGroup& g : model.groups)
-    for (int32_t b = g.begin; b < g.end; ++b)
-      for (int l = 0; l < Model<float>::W; ++l) {
-        const int32_t e = model.lane_tet[size_t(b) * Model<float>::W + size_t(l)];
-        if (e < 0) continue;
-        ++seen[size_t(e)];
-        EXPECT_EQ(model.tet_model[size_t(e)], g.model);
-        EXPECT_EQ(g.model, spec.mesh.region[size_t(e)] == 0 ? MaterialModel::StVK : MaterialModel::Corotational);
-      }
-  for (int count : seen) EXPECT_EQ(count, 1);
+// Groups hold one material each, model and Lame parameters: two models, or
+// one model at two stiffnesses, make two groups.
+TEST(BuildModel, EveryTetIsInOneLaneOfItsMaterialsGroup) {
+  for (const MaterialSpec& second : {MaterialSpec{MaterialModel::Corotational, 1e5, 0.3, 1000},
+                                     MaterialSpec{MaterialModel::StVK, 4e5, 0.45, 1000}}) {
+    ModelSpec spec = make_spec(make_two_region_box(), MaterialModel::StVK);
+    spec.materials.push_back(second);
+    const Model<float> model = build_model<float>(spec);
+    EXPECT_EQ(model.groups.size(), 2u);
+    std::vector<int> seen(size_t(model.n_tets), 0);
+    for (const ElementGroup& g : model.groups)
+      for (int32_t b = g.begin; b < g.end; ++b)
+        for (int l = 0; l < Model<float>::W; ++l) {
+          const int32_t e = model.lane_tet[size_t(b) * Model<float>::W + size_t(l)];
+          if (e < 0) {
+            EXPECT_EQ(model.blocks[size_t(b)].V[l], 0.0f);  // padding: no volume, no force
+            continue;
+          }
+          ++seen[size_t(e)];
+          const MaterialSpec& mat = spec.materials[size_t(spec.mesh.region[size_t(e)])];
+          const Lame lame = compute_lame(mat.E, mat.nu);
+          EXPECT_EQ(g.model, mat.model);
+          EXPECT_EQ(g.lambda, lame.lambda);
+          EXPECT_EQ(g.mu, lame.mu);
+          EXPECT_EQ(model.blocks[size_t(b)].V[l], float(model.tet_volume[size_t(e)]));
+        }
+    for (int count : seen) EXPECT_EQ(count, 1);
+  }
 }
 
 // The model numbers nodes in the order its blocks first touch them (part by

@@ -26,8 +26,7 @@ struct alignas(64) ElementBlock {
   static constexpr int W = kLanes<Real>;
   int32_t node[4][W];  // corner node ids; padding lanes: lane 0's corner 0, all four (n_blocks x 4 x W)
   Real Dinv[9][W];     // inverse rest edge matrix Dm^-1, row-major, Dm = [X1-X0 X2-X0 X3-X0]
-  Real lambdaV[W];     // lambda * rest volume [N m]; 0 in padding lanes
-  Real muV[W];         // mu * rest volume [N m]; 0 in padding lanes
+  Real V[W];           // rest volume [m^3]; 0 in padding lanes (a block's Lame parameters are its group's)
 };
 
 // One node's vector padded to four entries (x, y, z, 0), aligned to its size
@@ -50,7 +49,8 @@ struct CacheAlignedAllocator {
   friend bool operator==(const CacheAlignedAllocator&, const CacheAlignedAllocator&) { return true; }
 };
 
-// Elastic forces of blocks [begin, end) at displacements u (n_nodes): f -= dU/du,
+// Elastic forces of blocks [begin, end), all of one material (Lame
+// parameters lambda, mu [Pa]), at displacements u (n_nodes): f -= dU/du,
 // accumulated into f (n_nodes; the 4th entries stay 0). The elastic energy
 // comes almost free with the stress, so the energy guard can check every step.
 struct ElasticSums {
@@ -58,15 +58,16 @@ struct ElasticSums {
   int32_t inverted = 0;  // lanes with det F <= 0, counted only for models that cannot invert
 };
 template <class Real>
-using ForcesFn = ElasticSums (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Node4<Real>* u,
-                                 Node4<Real>* f);
+using ForcesFn = ElasticSums (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu,
+                                 const Node4<Real>* u, Node4<Real>* f);
 
-// Elastic energy V psi(F) per lane of blocks [begin, end) at displacements u
-// (n_nodes x 3), written to energy[(b - begin) * W + lane]; and det F per lane
-// to J (may be null). Not a hot loop: energy reports and fault diagnosis.
+// Elastic energy V psi(F) per lane of blocks [begin, end), of one material,
+// at displacements u (n_nodes x 3), written to energy[(b - begin) * W + lane];
+// and det F per lane to J (may be null). Not a hot loop: energy reports and
+// fault diagnosis.
 template <class Real>
-using EnergyFn = void (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Real* u, double* energy,
-                          Real* J);
+using EnergyFn = void (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu,
+                          const Real* u, double* energy, Real* J);
 
 // Newmark predictor, eq. (7), over nodes [begin, end):
 //   u += dt v + dt^2/2 a;  v <- v + dt/2 a (the half-step velocity eq. (9) completes);
