@@ -527,7 +527,12 @@ std::vector<double> beam_displacement(MaterialModel model, int steps, double dt)
       std::fprintf(stderr, "beam fault: %s\n", f.message.c_str());
       break;
     }
-  return std::vector<double>(s.u.begin(), s.u.end());
+  // In the mesh's node numbering: float and double models number the nodes
+  // each their own way (a block holds 16 or 8 elements).
+  std::vector<double> u(s.u.size());
+  for (size_t i = 0; i < m.node_model.size(); ++i)
+    for (size_t d = 0; d < 3; ++d) u[3 * i + d] = double(s.u[3 * size_t(m.node_model[i]) + d]);
+  return u;
 }
 
 void table_precision(const Options& opt) {

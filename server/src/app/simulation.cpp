@@ -32,6 +32,7 @@ struct Simulation::Engine {
   virtual const TetMesh& mesh() const = 0;
   virtual int32_t n_nodes() const = 0;
   virtual int32_t model_node(int32_t given) const = 0;
+  virtual int32_t given_node(int32_t model) const = 0;
   virtual int32_t n_tets() const = 0;
   virtual double total_mass() const = 0;
   virtual const std::vector<double>& tet_volume() const = 0;
@@ -135,6 +136,7 @@ class EngineOf final : public Simulation::Engine {
   const TetMesh& mesh() const override { return model_->mesh; }
   int32_t n_nodes() const override { return model_->n_nodes; }
   int32_t model_node(int32_t given) const override { return model_->node_model.at(size_t(given)); }
+  int32_t given_node(int32_t model) const override { return model_->node_given.at(size_t(model)); }
   int32_t n_tets() const override { return model_->n_tets; }
   double total_mass() const override { return model_->total_mass; }
   const std::vector<double>& tet_volume() const override { return model_->tet_volume; }
@@ -205,6 +207,7 @@ Simulation& Simulation::operator=(Simulation&&) noexcept = default;
 Precision Simulation::precision() const { return precision_; }
 const TetMesh& Simulation::mesh() const { return engine_->mesh(); }
 int32_t Simulation::model_node(int32_t given) const { return engine_->model_node(given); }
+int32_t Simulation::given_node(int32_t model) const { return engine_->given_node(model); }
 int32_t Simulation::n_nodes() const { return engine_->n_nodes(); }
 int32_t Simulation::n_tets() const { return engine_->n_tets(); }
 double Simulation::total_mass() const { return engine_->total_mass(); }

@@ -33,6 +33,7 @@ class Simulation {
   // spec's mesh into it.
   const TetMesh& mesh() const;
   int32_t model_node(int32_t given) const;
+  int32_t given_node(int32_t model) const;  // the inverse
   int32_t n_nodes() const;
   int32_t n_tets() const;
   double total_mass() const;                    // [kg]

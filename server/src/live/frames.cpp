@@ -12,9 +12,14 @@ namespace tactile {
 namespace fb = flatbuffers;
 namespace wire = proto;
 
-Surface extract_surface(const TetMesh& mesh) {
+Surface extract_surface(const Simulation& sim) {
+  const TetMesh& mesh = sim.mesh();
   const std::vector<Tri> faces = compute_boundary_faces(mesh);
-  const std::vector<int32_t> nodes = compute_boundary_nodes(faces);
+  std::vector<int32_t> nodes = compute_boundary_nodes(faces);
+  // Vertices in the order of the scene's mesh, not the model's (which
+  // depends on the precision and the materials): two runs of one mesh send
+  // the same vertex in the same place, as a re-simulation compares them.
+  std::sort(nodes.begin(), nodes.end(), [&](int32_t a, int32_t b) { return sim.given_node(a) < sim.given_node(b); });
   Surface s;
   std::vector<int32_t> vertex_of(size_t(mesh.n_nodes()), -1);
   for (size_t k = 0; k < nodes.size(); ++k) {
@@ -63,7 +68,7 @@ std::span<const uint8_t> seal(fb::FlatBufferBuilder& b, wire::Message type, fb::
 
 FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt,
                            double force_window)
-    : sim_(sim), scene_name_(std::move(scene_name)), scene_id_(scene_id), dt_(dt), surface_(extract_surface(sim.mesh())) {
+    : sim_(sim), scene_name_(std::move(scene_name)), scene_id_(scene_id), dt_(dt), surface_(extract_surface(sim)) {
   positions_.resize(3 * surface_.nodes.size());
   scalar_.resize(surface_.nodes.size());
   poses_.resize(sim.proxies().size());

@@ -27,7 +27,7 @@ struct Surface {
   std::vector<uint32_t> nodes;      // simulation node per surface vertex (n_vertices)
   std::vector<uint32_t> triangles;  // outward (n_triangles x 3), surface vertex ids
 };
-Surface extract_surface(const TetMesh& mesh);
+Surface extract_surface(const Simulation& sim);
 
 // The hand a device channel drives (an index into Simulation::hands()), or -1
 // when it drives proxies alone; the live loop moves it, the haptic frames
