@@ -94,7 +94,7 @@ struct ForcePart {
 // corrector sets the entries of its own part's array (`self`) back to 0 as
 // it reads them, so the next element pass adds into zeros without a
 // clearing pass; another part's entries it only reads, and their owner
-// clears them (the few past its own nodes) before its element pass, so that
+// clears them (the few outside its own nodes) before its element pass, so that
 // no thread writes into another's cache lines.
 template <class Real>
 struct CorrectArgs {
