@@ -213,8 +213,11 @@ Model<Real> build_model(const ModelSpec& spec) {
   // A sweep, not a space-filling curve: the elements around a node follow
   // one another within a layer or two, so the node arrays stream through
   // the cache once a step, where a Morton curve came back to a node's
-  // neighbours half the body later (1 M tets, the element pass alone: Morton
-  // 9.3 ns a tet in float, this sweep with the renumbering below 7.0).
+  // neighbours half the body later. 1 M tets, float, one thread: the
+  // elastic kernel timed alone, alternated in one process (a probe outside
+  // the repo), Morton 9.3 ns a tet, this sweep with the renumbering below
+  // 7.0; fem_bench --large --only=passes, elastic pass, three alternated
+  // runs each, 8.8-10.3 ms before, 6.6-9.3 after (a noisy host).
   constexpr size_t kMinPartElements = 4096;
   const auto n_parts = static_cast<int32_t>(std::clamp<size_t>(nt / kMinPartElements, 1,
                                                                 size_t(std::max(1, spec.integrator.threads))));
@@ -300,8 +303,8 @@ Model<Real> build_model(const ModelSpec& spec) {
 
   // Nodes renumbered in the order the blocks first touch them, so that the
   // element pass reads and adds into the node arrays nearly in sequence, a
-  // few new cache lines a block (1 M tets: 7.0 ns a tet against 8.2 in the
-  // sweep order with the nodes as given). The hardware prefetcher follows
+  // few new cache lines a block (the same probe: 7.0 ns a tet against 8.2
+  // in the sweep order with the nodes as given). The hardware prefetcher follows
   // such a stream: fetching each block's new node lines ahead in software,
   // which gained 8-15 % under the Morton order, now lost 1-5 %, and went.
   // Everything the model holds uses these numbers; node_given and node_model
