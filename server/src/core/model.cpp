@@ -276,7 +276,7 @@ Model<Real> build_model(const ModelSpec& spec) {
           if (slot >= count) {  // padding lane: zero stiffness, identity shape
             // All corners at one node (lane 0's first; lane 0 is never
             // padding): F = I whatever u, and a node this block touches anyway.
-            for (int c = 0; c < 4; ++c) B.node[c][l] = B.node[0][0];
+            for (int c = 0; c < 4; ++c) B.node4[c][l] = B.node4[0][0];
             for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
             B.V[l] = Real(0);
             model.lane_tet.push_back(-1);
@@ -284,7 +284,7 @@ Model<Real> build_model(const ModelSpec& spec) {
           }
           const auto e = size_t(order[k + slot]);
           const Tet& t = mesh.tets[e];
-          for (int c = 0; c < 4; ++c) B.node[c][l] = t[size_t(c)];
+          for (int c = 0; c < 4; ++c) B.node4[c][l] = t[size_t(c)];  // the given id until renumbered below
           const Vec3& X0 = mesh.X[size_t(t[0])];
           const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
           const glm::dmat3 Dinv = glm::inverse(Dm);  // glm is column-major: Dinv[col][row]
@@ -324,7 +324,7 @@ Model<Real> build_model(const ModelSpec& spec) {
       for (int32_t b = first_block[size_t(p)]; b < b1; ++b)
         for (int c = 0; c < 4; ++c)
           for (int l = 0; l < W; ++l) {
-            int32_t& id = model.node_model[size_t(model.blocks[size_t(b)].node[c][l])];
+            int32_t& id = model.node_model[size_t(model.blocks[size_t(b)].node4[c][l])];
             if (id < 0) id = next++;
           }
     }
@@ -333,7 +333,7 @@ Model<Real> build_model(const ModelSpec& spec) {
   for (size_t i = 0; i < nn; ++i) model.node_given[size_t(model.node_model[i])] = int32_t(i);
   for (ElementBlock<Real>& B : model.blocks)
     for (int c = 0; c < 4; ++c)
-      for (int l = 0; l < W; ++l) B.node[c][l] = model.node_model[size_t(B.node[c][l])];
+      for (int l = 0; l < W; ++l) B.node4[c][l] = 4 * model.node_model[size_t(B.node4[c][l])];
   for (size_t i = 0; i < nn; ++i) model.mesh.X[size_t(model.node_model[i])] = mesh.X[i];
   for (Tet& t : model.mesh.tets)
     for (int32_t& id : t) id = model.node_model[size_t(id)];

@@ -105,8 +105,8 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
       for (int l = 0; l < kLanes<Real>; ++l) {
         if (model_.lane_tet[size_t(b) * kLanes<Real> + size_t(l)] < 0) continue;  // padding adds only zeros
         for (int c = 0; c < 4; ++c) {
-          lo = std::min(lo, model_.blocks[size_t(b)].node[c][l]);
-          hi = std::max(hi, model_.blocks[size_t(b)].node[c][l] + 1);
+          lo = std::min(lo, model_.blocks[size_t(b)].node4[c][l] / 4);
+          hi = std::max(hi, model_.blocks[size_t(b)].node4[c][l] / 4 + 1);
         }
       }
     if (lo >= hi) lo = hi = 0;

@@ -205,7 +205,8 @@ void check_node_numbering() {
     for (int32_t b = part.block_begin; b < part.block_end; ++b)
       for (int c = 0; c < 4; ++c)
         for (int l = 0; l < kLanes<Real>; ++l) {
-          const int32_t id = m.blocks[size_t(b)].node[c][l];
+          ASSERT_EQ(m.blocks[size_t(b)].node4[c][l] % 4, 0) << "block " << b;  // 4 x the node's id
+          const int32_t id = m.blocks[size_t(b)].node4[c][l] / 4;
           ASSERT_LE(id, next) << "block " << b;
           if (id == next) ++next;
         }

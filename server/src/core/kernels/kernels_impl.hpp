@@ -45,19 +45,21 @@ namespace {
 template <class Real>
 TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>* u, Real (*x)[kLanes<Real>]) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
+  // u0 + id[l]: corner c of lane l (id is 4 x its node, see ElementBlock).
+  const Real* u0 = u[0].v;
   #pragma GCC unroll 4
   for (int c = 0; c < 4; ++c) {
-    const int32_t* id = B.node[c];
+    const int32_t* id = B.node4[c];
 #if defined(__AVX512F__)
     if constexpr (sizeof(Real) == 4) {
       // Chunk k of r[j] is lane 4k + j; a 4x4 transpose per chunk gives x, y, z in lane order.
       __m512 r[4];
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
-        const __m512 v = _mm512_castps128_ps512(_mm_load_ps(u[id[j]].v));
-        const __m512 v1 = _mm512_insertf32x4(v, _mm_load_ps(u[id[4 + j]].v), 1);
-        const __m512 v2 = _mm512_insertf32x4(v1, _mm_load_ps(u[id[8 + j]].v), 2);
-        r[j] = _mm512_insertf32x4(v2, _mm_load_ps(u[id[12 + j]].v), 3);
+        const __m512 v = _mm512_castps128_ps512(_mm_load_ps(u0 + id[j]));
+        const __m512 v1 = _mm512_insertf32x4(v, _mm_load_ps(u0 + id[4 + j]), 1);
+        const __m512 v2 = _mm512_insertf32x4(v1, _mm_load_ps(u0 + id[8 + j]), 2);
+        r[j] = _mm512_insertf32x4(v2, _mm_load_ps(u0 + id[12 + j]), 3);
       }
       const __m512d t0 = _mm512_castps_pd(_mm512_unpacklo_ps(r[0], r[1]));  // x0 x1 y0 y1 per chunk
       const __m512d t1 = _mm512_castps_pd(_mm512_unpackhi_ps(r[0], r[1]));  // z0 z1 0 0
@@ -71,7 +73,7 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
       __m512d r[4];
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j)
-        r[j] = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_load_pd(u[id[j]].v)), _mm256_load_pd(u[id[4 + j]].v),
+        r[j] = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_load_pd(u0 + id[j])), _mm256_load_pd(u0 + id[4 + j]),
                                   1);
       const __m512d t0 = _mm512_unpacklo_pd(r[0], r[1]);  // pairs: x0 x1 | z0 z1 | x4 x5 | z4 z5
       const __m512d t1 = _mm512_unpackhi_pd(r[0], r[1]);  // y0 y1 | 0 0 | y4 y5 | 0 0
@@ -90,7 +92,7 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
         __m256 r[4];  // lane h + j in the low chunk, h + 4 + j in the high one
         #pragma GCC unroll 4
         for (int j = 0; j < 4; ++j)
-          r[j] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u[id[h + j]].v)), _mm_load_ps(u[id[h + 4 + j]].v),
+          r[j] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u0 + id[h + j])), _mm_load_ps(u0 + id[h + 4 + j]),
                                       1);
         const __m256d t0 = _mm256_castps_pd(_mm256_unpacklo_ps(r[0], r[1]));
         const __m256d t1 = _mm256_castps_pd(_mm256_unpackhi_ps(r[0], r[1]));
@@ -103,8 +105,8 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
     } else {
       #pragma GCC unroll 2
       for (int h = 0; h < W; h += 4) {
-        const __m256d r0 = _mm256_load_pd(u[id[h]].v), r1 = _mm256_load_pd(u[id[h + 1]].v);
-        const __m256d r2 = _mm256_load_pd(u[id[h + 2]].v), r3 = _mm256_load_pd(u[id[h + 3]].v);
+        const __m256d r0 = _mm256_load_pd(u0 + id[h]), r1 = _mm256_load_pd(u0 + id[h + 1]);
+        const __m256d r2 = _mm256_load_pd(u0 + id[h + 2]), r3 = _mm256_load_pd(u0 + id[h + 3]);
         const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);  // x0 x1 | z0 z1; y0 y1 | 0 0
         const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
         _mm256_store_pd(x[3 * c] + h, _mm256_permute2f128_pd(t0, t2, 0x20));
@@ -114,7 +116,7 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
     }
 #else
     for (int l = 0; l < W; ++l) {
-      const Real* p = u[id[l]].v;
+      const Real* p = u0 + id[l];
       x[3 * c][l] = p[0];
       x[3 * c + 1][l] = p[1];
       x[3 * c + 2][l] = p[2];
@@ -123,14 +125,15 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
   }
 }
 
-// f[node[c][l]].v[i] += fc[3c + i][l] for corner 0, -= for corners 1-3 (the
-// element pass stores those negated): one 4-wide add per lane and corner.
+// f[node[c][l]].v[i] += fc[3c + i][l]: one 4-wide add per lane and corner,
+// its load folded into the add.
 template <class Real>
 TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*fc)[kLanes<Real>], Node4<Real>* f) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
+  Real* f0 = f[0].v;  // f0 + id[l]: corner c of lane l
   #pragma GCC unroll 4
   for (int c = 0; c < 4; ++c) {
-    const int32_t* id = B.node[c];
+    const int32_t* id = B.node4[c];
 #if defined(__AVX512F__)
     if constexpr (sizeof(Real) == 4) {
       // 4x4 transposes within each 128-bit chunk: chunk k of q[j] is lane 4k + j as (x, y, z, 0).
@@ -143,8 +146,8 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
       const __m512 q[4] = {_mm512_castpd_ps(_mm512_unpacklo_pd(t0, t2)), _mm512_castpd_ps(_mm512_unpackhi_pd(t0, t2)),
                            _mm512_castpd_ps(_mm512_unpacklo_pd(t1, t3)), _mm512_castpd_ps(_mm512_unpackhi_pd(t1, t3))};
       auto add = [&](int l, __m128 v) {
-        float* p = f[id[l]].v;
-        _mm_store_ps(p, c == 0 ? _mm_add_ps(_mm_load_ps(p), v) : _mm_sub_ps(_mm_load_ps(p), v));
+        float* p = f0 + id[l];
+        _mm_store_ps(p, _mm_add_ps(_mm_load_ps(p), v));
       };
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
@@ -165,8 +168,8 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
       const __m512d q[4] = {_mm512_permutex2var_pd(t0, lo, t2), _mm512_permutex2var_pd(t1, lo, t3),
                             _mm512_permutex2var_pd(t0, hi, t2), _mm512_permutex2var_pd(t1, hi, t3)};
       auto add = [&](int l, __m256d v) {
-        double* p = f[id[l]].v;
-        _mm256_store_pd(p, c == 0 ? _mm256_add_pd(_mm256_load_pd(p), v) : _mm256_sub_pd(_mm256_load_pd(p), v));
+        double* p = f0 + id[l];
+        _mm256_store_pd(p, _mm256_add_pd(_mm256_load_pd(p), v));
       };
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
@@ -188,8 +191,8 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
         const __m256 q[4] = {_mm256_castpd_ps(_mm256_unpacklo_pd(t0, t2)), _mm256_castpd_ps(_mm256_unpackhi_pd(t0, t2)),
                              _mm256_castpd_ps(_mm256_unpacklo_pd(t1, t3)), _mm256_castpd_ps(_mm256_unpackhi_pd(t1, t3))};
         auto add = [&](int l, __m128 v) {
-          float* p = f[id[h + l]].v;
-          _mm_store_ps(p, c == 0 ? _mm_add_ps(_mm_load_ps(p), v) : _mm_sub_ps(_mm_load_ps(p), v));
+          float* p = f0 + id[h + l];
+          _mm_store_ps(p, _mm_add_ps(_mm_load_ps(p), v));
         };
         #pragma GCC unroll 4
         for (int j = 0; j < 4; ++j) {
@@ -205,8 +208,8 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
         const __m256d t0 = _mm256_unpacklo_pd(fx, fy), t1 = _mm256_unpackhi_pd(fx, fy);
         const __m256d t2 = _mm256_unpacklo_pd(fz, zero), t3 = _mm256_unpackhi_pd(fz, zero);
         auto add = [&](int l, __m256d v) {
-          double* p = f[id[h + l]].v;
-          _mm256_store_pd(p, c == 0 ? _mm256_add_pd(_mm256_load_pd(p), v) : _mm256_sub_pd(_mm256_load_pd(p), v));
+          double* p = f0 + id[h + l];
+          _mm256_store_pd(p, _mm256_add_pd(_mm256_load_pd(p), v));
         };
         add(0, _mm256_permute2f128_pd(t0, t2, 0x20));
         add(1, _mm256_permute2f128_pd(t1, t3, 0x20));
@@ -216,11 +219,10 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
     }
 #else
     for (int l = 0; l < W; ++l) {
-      Real* p = f[id[l]].v;
-      const Real sign = c == 0 ? Real(1) : Real(-1);  // exact
-      p[0] += sign * fc[3 * c][l];
-      p[1] += sign * fc[3 * c + 1][l];
-      p[2] += sign * fc[3 * c + 2][l];
+      Real* p = f0 + id[l];
+      p[0] += fc[3 * c][l];
+      p[1] += fc[3 * c + 1][l];
+      p[2] += fc[3 * c + 2][l];
     }
 #endif
   }
@@ -309,7 +311,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       for (size_t o = 0; o < sizeof(ElementBlock<Real>); o += 64) __builtin_prefetch(next + o, 0, 0);
     }
     alignas(64) Real x[12][W];   // corner displacements [m]: x[3c + i][lane]
-    alignas(64) Real fc[12][W];  // corner forces [N], corners 1-3 negated: fc[3c + i][lane]
+    alignas(64) Real fc[12][W];  // corner forces [N]: fc[3c + i][lane]
     alignas(64) Real psiV[W];    // V psi per lane [J]
     alignas(64) Real J[W];       // det F per lane
     load_corners(B, u, x);
@@ -327,20 +329,19 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       // group's lambda and mu, rather than lambda V and mu V a lane: 4 bytes
       // a tet less to stream, and a load fewer; fem_bench --only=passes.)
       psiV[l] = material::stress<M>(F, lambda * B.V[l], mu * B.V[l], P);
-      // [f1 f2 f3] = -V P Dm^-T, f0 = -(f1 + f2 + f3). Stored with the
-      // opposite sign (g), which add_corner_forces subtracts: the same
-      // numbers, without a negation per entry.
+      // [f1 f2 f3] = -V P Dm^-T (negated products: fused negating
+      // multiply-adds, no negation of their own), f0 = -(f1 + f2 + f3).
       #pragma GCC unroll 16
       for (int i = 0; i < 3; ++i) {
         Real sum = 0;
         #pragma GCC unroll 16
         for (int c = 0; c < 3; ++c) {
-          const Real g = P[3 * i] * B.Dinv[3 * c][l] + P[3 * i + 1] * B.Dinv[3 * c + 1][l] +
+          const Real fa = -(P[3 * i] * B.Dinv[3 * c][l]) - P[3 * i + 1] * B.Dinv[3 * c + 1][l] -
                          P[3 * i + 2] * B.Dinv[3 * c + 2][l];
-          fc[3 * (c + 1) + i][l] = g;
-          sum = c == 0 ? g : sum + g;
+          fc[3 * (c + 1) + i][l] = fa;
+          sum = c == 0 ? fa : sum + fa;
         }
-        fc[i][l] = sum;
+        fc[i][l] = -sum;
       }
     }
     energy += __builtin_convertvector(*reinterpret_cast<const RealW*>(psiV), DoubleW);
@@ -364,7 +365,7 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real l
     alignas(64) Real x[12][W];
     for (int c = 0; c < 4; ++c)
       for (int l = 0; l < W; ++l)
-        for (int i = 0; i < 3; ++i) x[3 * c + i][l] = u[3 * int64_t(B.node[c][l]) + i];
+        for (int i = 0; i < 3; ++i) x[3 * c + i][l] = u[3 * int64_t(B.node4[c][l] / 4) + i];
     for (int l = 0; l < W; ++l) {
       Real F[9], P[9];
       deformation_gradient(B, l, x, F);
