@@ -283,6 +283,17 @@ template <class Real>
 inline constexpr int kMathLanes = kLanes<Real>;
 #endif
 
+// Where the element pass adds the previous block's corner forces (see
+// forces()): after this block's deformation gradients with AVX-512, after
+// its stresses below it (the kernel alone, alternated in one process, 20 k
+// tets: after F, AVX-512 9-10 % faster in float and 3-10 % in double; AVX2
+// 0-4 % slower, SSE4.2 about 2 % slower).
+#if defined(__AVX512F__)
+inline constexpr bool kAddsAfterF = true;
+#else
+inline constexpr bool kAddsAfterF = false;
+#endif
+
 // How many blocks ahead the element pass prefetches (see forces()).
 constexpr int32_t kPrefetchBlocks = 4;
 
@@ -298,12 +309,13 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
   DoubleW energy = {};
   MaskW inverted = {};
   // Corner forces [N], fc[k][3c + i][lane], of this block (k = b & 1) and
-  // the previous one, whose adds into f wait until this block's stresses
-  // are issued: a block is some 800 instructions, more than the core
-  // reorders at once, so in block order the adds and the stress math ran
-  // one after the other; placed between them, they overlap (the kernel
-  // alone, alternated in one process, 20 k to 1 M tets: 3-8 % faster in
-  // float, 5-19 % in double).
+  // the previous one, whose adds into f wait until this block's math is
+  // under way (kAddsAfterF): a block is some 800 instructions, more than the
+  // core reorders at once, so in block order the adds and the stress math
+  // ran one after the other; placed inside the math, they overlap (the
+  // kernel alone, alternated in one process, 20 k to 1 M tets, after the
+  // stresses: AVX-512 3-8 % faster in float and 5-19 % in double, AVX2
+  // 3-5 %; SSE4.2 1-4 % slower).
   alignas(64) Real fc[2][12][W];
   for (int32_t b = begin; b < end; ++b) {
     const ElementBlock<Real>& B = blocks[b];
@@ -329,22 +341,34 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
     load_corners(B, u, x);
     // Per-lane outputs and no OpenMP pragma: GCC's `omp simd` would keep F and
     // P in memory as per-lane arrays; its plain vectoriser does far better.
+    alignas(64) Real F[9][W];  // deformation gradient per lane: F[3i + j][lane]
     #pragma GCC unroll 1
     for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
     for (int l = h; l < h + kMathLanes<Real>; ++l) {
-      Real F[9], Pl[9];
-      deformation_gradient(B, l, x, F);
-      if constexpr (!can_invert(M)) J[l] = material::det(F);
+      Real Fl[9];
+      deformation_gradient(B, l, x, Fl);
+      if constexpr (!can_invert(M)) J[l] = material::det(Fl);
+      #pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) F[k][l] = Fl[k];
+    }
+    if (kAddsAfterF && b > begin) add_corner_forces(blocks[b - 1], fc[(b - 1) & 1], f);
+    #pragma GCC unroll 1
+    for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+    for (int l = h; l < h + kMathLanes<Real>; ++l) {
+      Real Fl[9], Pl[9];
+      #pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
       // P and psi are linear in (lambda, mu) at a fixed ratio, so passing
       // (lambda V, mu V) gives V P and V psi. (One volume a lane and the
       // group's lambda and mu, rather than lambda V and mu V a lane: 4 bytes
       // a tet less to stream, and a load fewer; fem_bench --only=passes.)
-      psiV[l] = material::stress<M>(F, lambda * B.V[l], mu * B.V[l], Pl);
+      psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
       #pragma GCC unroll 16
       for (int k = 0; k < 9; ++k) P[k][l] = Pl[k];
     }
-    if (b > begin) add_corner_forces(blocks[b - 1], fc[(b - 1) & 1], f);
+    if (!kAddsAfterF && b > begin) add_corner_forces(blocks[b - 1], fc[(b - 1) & 1], f);
     Real(*g)[W] = fc[b & 1];
     #pragma GCC unroll 1
     for (int h = 0; h < W; h += kMathLanes<Real>)
