@@ -15,7 +15,9 @@
 // element and node passes.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -108,6 +110,17 @@ class Stepper {
   struct Part {
     int32_t block_begin, block_end;  // lane blocks
     int32_t node_begin, node_end;    // nodes
+    // Parts 2k and 2k + 1 share their blocks from both ends (see
+    // elastic_part): 1 for the one that takes them from the left, 2 for the
+    // one from the right, 0 for a part without a partner.
+    int32_t side = 0;
+    int32_t pair_begin = 0, pair_end = 0;  // the pair's blocks
+    int32_t share = -1;                    // its index in shares_
+  };
+  // The blocks of a pair not yet claimed: left end (low 32 bits) and right
+  // end (high 32 bits), on a cache line of their own.
+  struct alignas(64) PairShare {
+    std::atomic<uint64_t> ends{0};
   };
 
   int32_t n_constrained() const { return static_cast<int32_t>(model_.constrained.size()); }
@@ -121,6 +134,8 @@ class Stepper {
   std::vector<int32_t> find_inverted_elements(const State<Real>& s) const;
   std::vector<int32_t> find_top_energy_elements(const State<Real>& s, size_t count) const;
   void run_parts(void (*fn)(void*, int32_t), void* ctx);
+  void run_elastic();
+  ElasticSums elastic_blocks(int32_t begin, int32_t end, Node4<Real>* f) const;
   void enter(Pass p) {
     if (probe_) probe_->enter(p);
   }
@@ -145,7 +160,11 @@ class Stepper {
   // Workspace, sized once.
   std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> u4_;  // u for the element pass [m] (n_nodes)
   std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> f_;   // force per part [N] (n_parts x n_nodes, padded)
-  std::vector<ForcePart> force_parts_;    // each part's array in f_ and the nodes it touches
+  std::vector<ForcePart> force_parts_;    // each part's array in f_ and the nodes its latest element pass touched
+  std::unique_ptr<PairShare[]> shares_;    // per pair of parts
+  // Per block, the nodes touched by the blocks from its pair's first up to it
+  // (prefix_*) and from it to its pair's last (suffix_*), rounded out to 16.
+  std::vector<int32_t> prefix_lo_, prefix_hi_, suffix_lo_, suffix_hi_;
   std::vector<ElasticSums> elastic_;     // per part
   std::vector<CorrectSums> correct_sums_;  // per part
   std::vector<Vec3> u_before_;           // constrained and loaded nodes' u at t_n [m]

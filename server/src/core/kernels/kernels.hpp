@@ -86,8 +86,8 @@ template <class Real>
 using PadFn = void (*)(int32_t begin, int32_t end, const Real* u, Node4<Real>* u4);
 
 // One part's force array (n_nodes, from `offset` nodes into the parts'
-// common array) and the nodes its elements touch, [begin, end) rounded out to
-// multiples of 16; the rest of it stays 0.
+// common array) and the nodes its latest element pass touched, [begin, end)
+// rounded out to multiples of 16; the rest of it stays 0.
 struct ForcePart {
   int64_t offset;
   int32_t begin, end;
@@ -96,11 +96,10 @@ struct ForcePart {
 // Corrector, eqs. (8)-(10) with D = alpha M, over nodes [begin, end):
 //   a = (f / m + g - alpha v_half) / (1 + alpha dt / 2);  v = v_half + dt/2 a.
 // f is the sum of the parts' force arrays over the nodes each touches. The
-// corrector sets the entries of its own part's array (`self`) back to 0 as
-// it reads them, so the next element pass adds into zeros without a
-// clearing pass; another part's entries it only reads, and their owner
-// clears them (the few outside its own nodes) before its element pass, so that
-// no thread writes into another's cache lines.
+// corrector sets every entry it reads back to 0, so the next element pass
+// adds into zeros without a clearing pass. (Entries of another part's array
+// lie where the two parts' elements meet: a layer of nodes, written by one
+// thread and cleared by another.)
 template <class Real>
 struct CorrectArgs {
   int32_t begin, end;
@@ -108,7 +107,6 @@ struct CorrectArgs {
   Node4<Real>* f;               // the parts' force arrays [N]
   const ForcePart* parts;
   int32_t n_parts;
-  int32_t self;                 // the part whose array this call clears
   const Real* inv_m;  // 1/m per node [1/kg] (n)
   const Real* m;      // m per node [kg] (n)
   Real g[3];          // [m/s^2]

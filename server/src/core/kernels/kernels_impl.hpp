@@ -606,10 +606,9 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
       if (i >= part.end || i + W <= part.begin) continue;  // whole groups: the bounds are multiples of 16
       VU* fp = reinterpret_cast<VU*>(A.f[part.offset + i].v);
       #pragma GCC unroll 4
-      for (int k = 0; k < 4; ++k) q[k] += fp[k];
-      if (p == A.self) {
-        #pragma GCC unroll 4
-        for (int k = 0; k < 4; ++k) fp[k] = V{};  // cleared for the next element pass
+      for (int k = 0; k < 4; ++k) {
+        q[k] += fp[k];
+        fp[k] = V{};  // cleared for the next element pass
       }
     }
     const V inv_m = *reinterpret_cast<const VU*>(A.inv_m + i), m = *reinterpret_cast<const VU*>(A.m + i);
@@ -652,7 +651,7 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
       if (i >= part.end || i < part.begin) continue;
       Node4<Real>& fp = A.f[part.offset + i];
       for (int k = 0; k < 3; ++k) fi[k] += fp.v[k];
-      if (p == A.self) fp = Node4<Real>{};
+      fp = Node4<Real>{};
     }
     for (int k = 0; k < 3; ++k) {
       const int64_t j = 3 * i + k;
