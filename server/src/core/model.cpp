@@ -249,14 +249,8 @@ Model<Real> build_model(const ModelSpec& spec) {
     return mesh.region_of(a) < mesh.region_of(b);
   });
 
-  // Lane blocks, one run per part and material. Within a chunk of
-  // kStripBlocks blocks, lane l takes the l-th run of the chunk's
-  // elements: elements that share nodes sit in one lane of consecutive
-  // blocks rather than side by side in one block, so a block's corner-force
-  // adds seldom hit the same node back to back (a store-to-load forwarding
-  // chain), while each chunk stays compact in space. Measured: 6-14 % on the
-  // element pass.
-  constexpr size_t kStripBlocks = 64;
+  // Lane blocks, one run per part and material, in strips of kStripBlocks
+  // blocks (see model.hpp).
   std::vector<int32_t> first_block(size_t(n_parts), -1);
   for (size_t i = 0; i < nt;) {
     const int32_t part = part_of[size_t(order[i])];
@@ -266,8 +260,8 @@ Model<Real> build_model(const ModelSpec& spec) {
     if (first_block[size_t(part)] < 0) first_block[size_t(part)] = int32_t(model.blocks.size());
     const auto e0 = size_t(order[i]);
     ElementGroup group{model.tet_model[e0], int32_t(model.blocks.size()), 0, model.tet_lambda[e0], model.tet_mu[e0]};
-    for (size_t k = i; k < j; k += W * kStripBlocks) {
-      const size_t count = std::min(j - k, W * kStripBlocks);  // elements in this chunk
+    for (size_t k = i; k < j; k += W * size_t(kStripBlocks)) {
+      const size_t count = std::min(j - k, W * size_t(kStripBlocks));  // elements in this chunk
       const size_t n_blocks = (count + W - 1) / W;
       for (size_t b = 0; b < n_blocks; ++b) {
         ElementBlock<Real> B{};

@@ -33,6 +33,18 @@ struct ElementGroup {
 // for the node passes, those the slab's blocks number first (see
 // build_model). The parts tile both ranges in order; a part's elements also
 // touch a layer of the previous part's nodes.
+// Blocks per strip. A group's blocks come in strips (the last may be
+// shorter): within a strip of kStripBlocks blocks, lane l takes the l-th run
+// of the strip's elements, so that elements that share nodes sit in one lane
+// of consecutive blocks rather than side by side in one block: a block's
+// corner-force adds seldom hit the same node back to back (a store-to-load
+// forwarding chain), while each strip stays compact in space. Measured: 6-14 %
+// on the element pass. A range of blocks that cuts a strip touches the nodes
+// of the whole strip, so threads share work in whole strips (stepper.cpp).
+// 16 blocks rather than 64, for finer shares: the float kernel alone,
+// alternated runs, 1-4 % slower at 20 k tets, 6-15 % faster at 1 M.
+inline constexpr int32_t kStripBlocks = 16;
+
 struct ModelPart {
   int32_t block_begin, block_end;
   int32_t node_begin, node_end;

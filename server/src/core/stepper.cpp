@@ -64,6 +64,18 @@ Kinematics compute_bc_kinematics(const EssentialBc& bc, const Vec3& X, double t)
   return {x, v, a};
 }
 
+// Share of each part of a pair that its thread always takes (to the nearest
+// strip): the rest, in the middle of the pair, goes in chunks of whole
+// strips to whichever thread gets there first (see elastic_part).
+constexpr int32_t kShareOwnPercent = 75;
+// Chunks per pair, at most. A chunk is what one thread may be left waiting
+// for, and each adds a force array the correctors read: a strip of the sweep
+// reaches the layer of nodes before it, so a chunk's array spans about a
+// layer, and small chunks pile several arrays on each node (a probe timing
+// each pass, 20 k tets: 64 chunks of one strip, corrector 4.7 us; 8 chunks,
+// 3.2-4.2 us, and the faster thread waits 1.2-1.7 us).
+constexpr int32_t kShareMaxChunks = 8;
+
 std::string list_ids(const std::vector<int32_t>& ids) {
   std::ostringstream out;
   for (size_t i = 0; i < ids.size() && i < 10; ++i) out << (i ? ", " : "") << ids[i];
@@ -93,13 +105,6 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
   for (size_t e = 0; e < model_.tet_volume.size(); ++e)
     stiffness_volume += (model_.tet_mu[e] + model_.tet_lambda[e]) * model_.tet_volume[e];
   energy_floor_ = 16.0 * double(std::numeric_limits<Real>::epsilon()) * stiffness_volume;
-  // A force array per part, each starting on a cache line (16 nodes: 4 lines
-  // of float, 8 of double). Each element pass records the nodes its blocks
-  // touched, and the correctors read a part's array only over those: the
-  // parts are slabs of the body, which share a layer of nodes (see
-  // build_model), so two parts cost little more traffic than one.
-  const int64_t stride = (int64_t(model_.n_nodes) + 15) / 16 * 16;
-  f_.assign(size_t(n_parts_) * size_t(stride), Node4<Real>{});
   // The nodes each block touches, rounded out to 16.
   const auto n_blocks = static_cast<int32_t>(model_.blocks.size());
   std::vector<int32_t> lo(size_t(n_blocks), model_.n_nodes), hi(size_t(n_blocks), 0);
@@ -112,43 +117,87 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
       }
     }
   }
-  // Parts 2k and 2k + 1 share their blocks (see elastic_part); the extents of
-  // a share are prefix and suffix extremes over the pair's blocks.
-  prefix_lo_ = prefix_hi_ = suffix_lo_ = suffix_hi_ = std::vector<int32_t>(size_t(n_blocks), 0);
+  // Force arrays ("regions"): one per part for the blocks it always takes,
+  // then one per middle chunk of each pair (see elastic_part). Each holds
+  // only the nodes its blocks touch, at an offset into f_ of at least its
+  // first node (so that f_.data() + offset stays inside f_); the parts are
+  // slabs of the body, so regions overlap only where their elements meet.
+  int64_t next = 0;
+  auto add_region = [&](int32_t b0, int32_t b1) {
+    int32_t rlo = model_.n_nodes, rhi = 0;
+    for (int32_t b = b0; b < b1; ++b) {
+      rlo = std::min(rlo, lo[size_t(b)]);
+      rhi = std::max(rhi, hi[size_t(b)]);
+    }
+    if (rlo >= rhi) rlo = rhi = 0;
+    const int64_t base = std::max(next, int64_t(rlo));  // both multiples of 16
+    regions_.push_back({base - rlo, rlo, rhi});
+    next = base + (rhi - rlo);
+    return static_cast<int32_t>(regions_.size() - 1);
+  };
+  // Where strips start (model.hpp): a range of blocks that cut a strip would
+  // touch the nodes of the whole strip, so shares and chunks end there.
+  std::vector<int32_t> cuts;
+  for (const ElementGroup& g : model_.groups) {
+    for (int32_t b = g.begin; b < g.end; b += kStripBlocks) cuts.push_back(b);
+    cuts.push_back(g.end);
+  }
+  std::sort(cuts.begin(), cuts.end());
+  cuts.erase(std::unique(cuts.begin(), cuts.end()), cuts.end());
+  auto snap = [&cuts](int32_t b) {  // the strip start nearest b
+    const auto it = std::lower_bound(cuts.begin(), cuts.end(), b);
+    if (it == cuts.end()) return cuts.back();
+    if (it == cuts.begin() || *it - b <= b - *(it - 1)) return *it;
+    return *(it - 1);
+  };
   const int32_t n_pairs = n_parts_ / 2;
-  shares_ = std::make_unique<PairShare[]>(size_t(std::max(n_pairs, 1)));
+  for (int32_t p = 0; p < n_parts_; ++p) {
+    Part& part = part_[size_t(p)];
+    part.own_begin = part.block_begin;
+    part.own_end = part.block_end;
+    if (p < 2 * n_pairs) {
+      part.side = p % 2 == 0 ? 1 : 2;
+      part.share = p / 2;
+      const int32_t own = (part.block_end - part.block_begin) * kShareOwnPercent / 100;
+      if (part.side == 1) part.own_end = std::clamp(snap(part.block_begin + own), part.block_begin, part.block_end);
+      else part.own_begin = std::clamp(snap(part.block_end - own), part.block_begin, part.block_end);
+    }
+    part.own_region = add_region(part.own_begin, part.own_end);
+  }
   for (int32_t k = 0; k < n_pairs; ++k) {
     Part& left = part_[size_t(2 * k)];
     Part& right = part_[size_t(2 * k + 1)];
-    for (Part* q : {&left, &right}) {
-      q->pair_begin = left.block_begin;
-      q->pair_end = right.block_end;
-      q->share = k;
+    const int32_t m0 = left.own_end, m1 = right.own_begin;  // the middle, whole strips
+    std::vector<int32_t> strips;  // its strip starts, and its end
+    for (int32_t c : cuts)
+      if (c >= m0 && c <= m1) strips.push_back(c);
+    const auto n_strips = static_cast<int32_t>(strips.size()) - 1;
+    const int32_t n_chunks = std::min(n_strips, kShareMaxChunks);
+    left.chunk_begin = right.chunk_begin = static_cast<int32_t>(chunks_.size());
+    for (int32_t j = 0; j < n_chunks; ++j) {  // whole strips, as even as they go
+      const int32_t b0 = strips[size_t(int64_t(n_strips) * j / n_chunks)];
+      const int32_t b1 = strips[size_t(int64_t(n_strips) * (j + 1) / n_chunks)];
+      chunks_.push_back({b0, b1, add_region(b0, b1)});
     }
-    left.side = 1;
-    right.side = 2;
-    for (int32_t b = left.block_begin; b < right.block_end; ++b) {
-      const bool first = b == left.block_begin;
-      prefix_lo_[size_t(b)] = first ? lo[size_t(b)] : std::min(prefix_lo_[size_t(b) - 1], lo[size_t(b)]);
-      prefix_hi_[size_t(b)] = first ? hi[size_t(b)] : std::max(prefix_hi_[size_t(b) - 1], hi[size_t(b)]);
-    }
-    for (int32_t b = right.block_end - 1; b >= left.block_begin; --b) {
-      const bool last = b == right.block_end - 1;
-      suffix_lo_[size_t(b)] = last ? lo[size_t(b)] : std::min(suffix_lo_[size_t(b) + 1], lo[size_t(b)]);
-      suffix_hi_[size_t(b)] = last ? hi[size_t(b)] : std::max(suffix_hi_[size_t(b) + 1], hi[size_t(b)]);
-    }
+    left.chunk_end = right.chunk_end = static_cast<int32_t>(chunks_.size());
   }
-  for (int32_t p = 0; p < n_parts_; ++p) {
-    int32_t plo = model_.n_nodes, phi = 0;
-    for (int32_t b = part_[size_t(p)].block_begin; b < part_[size_t(p)].block_end; ++b) {
-      plo = std::min(plo, lo[size_t(b)]);
-      phi = std::max(phi, hi[size_t(b)]);
-    }
-    if (plo >= phi) plo = phi = 0;
-    force_parts_.push_back({int64_t(p) * stride, plo, phi});
+  shares_ = std::make_unique<PairShare[]>(size_t(std::max(n_pairs, 1)));
+  f_.assign(size_t(next), Node4<Real>{});
+  // Which regions hold each 16 nodes, in regions_ order: the correctors sum
+  // them in that order whichever thread filled them.
+  const int32_t n_groups = (model_.n_nodes + 15) / 16;
+  group_begin_.assign(size_t(n_groups) + 1, 0);
+  for (const Region& r : regions_)
+    for (int32_t g = r.begin / 16; g < r.end / 16; ++g) ++group_begin_[size_t(g) + 1];
+  for (int32_t g = 0; g < n_groups; ++g) group_begin_[size_t(g) + 1] += group_begin_[size_t(g)];
+  group_offset_.assign(size_t(group_begin_.back()), 0);
+  {
+    std::vector<int32_t> fill(group_begin_.begin(), group_begin_.end() - 1);
+    for (const Region& r : regions_)
+      for (int32_t g = r.begin / 16; g < r.end / 16; ++g) group_offset_[size_t(fill[size_t(g)]++)] = r.offset;
   }
   u4_.assign(size_t(model_.n_nodes), Node4<Real>{});
-  elastic_.assign(size_t(n_parts_), ElasticSums{});
+  elastic_.assign(regions_.size(), ElasticSums{});
   correct_sums_.assign(size_t(n_parts_), CorrectSums{});
   for (const LoadSet& load : model_.loads) loaded_.insert(loaded_.end(), load.nodes.begin(), load.nodes.end());
   u_before_.assign(model_.constrained.size() + loaded_.size(), Vec3(0.0));
@@ -196,7 +245,8 @@ void Stepper<Real>::pad_part(void* ctx, int32_t p) {
 }
 
 template <class Real>
-ElasticSums Stepper<Real>::elastic_blocks(int32_t begin, int32_t end, Node4<Real>* f) const {
+void Stepper<Real>::elastic_blocks(int32_t begin, int32_t end, int32_t r) {
+  Node4<Real>* f = f_.data() + regions_[size_t(r)].offset;
   ElasticSums sums;
   for (const ElementGroup& g : model_.groups) {
     const int32_t b0 = std::max(g.begin, begin), b1 = std::min(g.end, end);
@@ -206,25 +256,15 @@ ElasticSums Stepper<Real>::elastic_blocks(int32_t begin, int32_t end, Node4<Real
     sums.energy += s.energy;
     sums.inverted += s.inverted;
   }
-  return sums;
+  elastic_[size_t(r)] = sums;
 }
-
-// Share of each part of a pair that its thread takes without asking: the
-// rest, in the middle of the pair, goes to whichever thread gets there first.
-constexpr int32_t kShareOwnPercent = 75;
-// Fewest blocks a thread claims at a time from the middle of a pair.
-constexpr int32_t kShareMinBlocks = 8;
 
 template <class Real>
 void Stepper<Real>::run_elastic() {
-  // The middle of each pair, between the two parts' own shares, is claimed
-  // from both ends.
-  for (const Part& part : part_) {
-    if (part.side != 1) continue;
-    const Part& right = part_[size_t(&part - part_.data()) + 1];
-    const int32_t l = part.block_begin + (part.block_end - part.block_begin) * kShareOwnPercent / 100;
-    const int32_t r = right.block_end - (right.block_end - right.block_begin) * kShareOwnPercent / 100;
-    shares_[size_t(part.share)].ends.store(uint64_t(uint32_t(r)) << 32 | uint32_t(l), std::memory_order_relaxed);
+  for (int32_t p = 0; p + 1 < n_parts_; p += 2) {
+    const Part& left = part_[size_t(p)];
+    shares_[size_t(left.share)].ends.store(uint64_t(uint32_t(left.chunk_end)) << 32 | uint32_t(left.chunk_begin),
+                                           std::memory_order_relaxed);
   }
   run_parts(&Stepper::elastic_part, this);  // the pool's hand-off publishes the stores above
 }
@@ -233,55 +273,29 @@ template <class Real>
 void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   auto* self = static_cast<Stepper*>(ctx);
   const Part& part = self->part_[size_t(p)];
-  // Zero on entry: the correctors cleared every entry they read.
-  ForcePart& fp = self->force_parts_[size_t(p)];
-  Node4<Real>* f = self->f_.data() + fp.offset;
-  if (part.side == 0) {
-    self->elastic_[size_t(p)] = self->elastic_blocks(part.block_begin, part.block_end, f);
-    return;
-  }
-  // Two parts of a pair share their blocks from both ends: each takes its own
-  // share first (left: from the pair's start; right: up to its end), then
-  // claims blocks from the middle, from its side, until the two meet. A
-  // thread that runs slower (a busier core, a later start) then leaves more
-  // of the middle to its partner instead of holding up the step: with a
-  // fixed split, the faster of this machine's two cores waited 6-16 us of a
-  // 70 us step at 20 k tets. The two threads' forces meet at a point that
-  // varies from step to step, so with threads the order in which a node's
-  // forces are summed, and the last bits of the result, vary from run to run.
+  // Every region is zero on entry: the correctors cleared every entry they read.
+  self->elastic_blocks(part.own_begin, part.own_end, part.own_region);
+  if (part.side == 0) return;
+  // Two parts of a pair share the middle of their blocks, in chunks: each
+  // takes its own share first (three quarters of its part, at the pair's
+  // ends), then claims middle chunks (whole strips) from its side until the
+  // two meet. A thread that runs slower (a busier core, a later start) then
+  // leaves more of the middle to its partner instead of holding up the step:
+  // with a fixed split, the faster of this machine's two cores waited 6-16 us
+  // of a 70 us step at 20 k tets. Each chunk has its own force array, which
+  // the correctors add in a fixed order: the result is the same bit for bit
+  // wherever the two threads meet (resim relies on it).
   std::atomic<uint64_t>& ends = self->shares_[size_t(part.share)].ends;
-  const Part& left = part.side == 1 ? part : self->part_[size_t(p) - 1];
-  const Part& right = part.side == 2 ? part : self->part_[size_t(p) + 1];
   uint64_t e = ends.load(std::memory_order_relaxed);
-  // The own share, fixed by run_elastic: [pair start, initial left end) or [initial right end, pair end).
-  int32_t done = part.side == 1 ? int32_t(uint32_t(e)) : int32_t(e >> 32);
-  ElasticSums sums = part.side == 1 ? self->elastic_blocks(left.block_begin, done, f)
-                                    : self->elastic_blocks(done, right.block_end, f);
   for (;;) {
     const auto l = int32_t(uint32_t(e)), r = int32_t(e >> 32);
-    if (l >= r) break;
-    const int32_t k = std::min(r - l, std::max(kShareMinBlocks, (r - l) / 4));
-    const uint64_t next = part.side == 1 ? (uint64_t(uint32_t(r)) << 32 | uint32_t(l + k))
-                                         : (uint64_t(uint32_t(r - k)) << 32 | uint32_t(l));
+    if (l >= r) return;
+    const uint64_t next = part.side == 1 ? (uint64_t(uint32_t(r)) << 32 | uint32_t(l + 1))
+                                         : (uint64_t(uint32_t(r - 1)) << 32 | uint32_t(l));
     if (!ends.compare_exchange_weak(e, next, std::memory_order_relaxed)) continue;
-    const int32_t b0 = part.side == 1 ? l : r - k;
-    const ElasticSums s = self->elastic_blocks(b0, b0 + k, f);
-    sums.energy += s.energy;
-    sums.inverted += s.inverted;
-    done = part.side == 1 ? l + k : r - k;
+    const Chunk& c = self->chunks_[size_t(part.side == 1 ? l : r - 1)];
+    self->elastic_blocks(c.block_begin, c.block_end, c.region);
     e = next;
-  }
-  self->elastic_[size_t(p)] = sums;
-  // The nodes this part's blocks touched: [pair start, done) or [done, pair end).
-  const bool any = part.side == 1 ? done > left.block_begin : done < right.block_end;
-  if (!any) {
-    fp.begin = fp.end = 0;
-  } else if (part.side == 1) {
-    fp.begin = self->prefix_lo_[size_t(done) - 1];
-    fp.end = self->prefix_hi_[size_t(done) - 1];
-  } else {
-    fp.begin = self->suffix_lo_[size_t(done)];
-    fp.end = self->suffix_hi_[size_t(done)];
   }
 }
 
@@ -296,8 +310,8 @@ void Stepper<Real>::correct_part(void* ctx, int32_t p) {
   args.end = part.node_end;
   args.dt = self->cur_dt_;
   args.f = self->f_.data();
-  args.parts = self->force_parts_.data();
-  args.n_parts = self->n_parts_;
+  args.group_begin = self->group_begin_.data();
+  args.group_offset = self->group_offset_.data();
   args.inv_m = m.inv_m.data();
   args.m = m.m.data();
   for (int k = 0; k < 3; ++k) args.g[k] = Real(m.effects.g[k]);
@@ -363,10 +377,10 @@ void Stepper<Real>::apply_essential_rates(State<Real>& s, double t, double dt) {
 
 template <class Real>
 void Stepper<Real>::add_load_force(int32_t node, const Vec3& force) {
-  // Into the first part whose elements touch the node: the corrector reads it there.
-  for (const ForcePart& part : force_parts_) {
-    if (node < part.begin || node >= part.end) continue;
-    Real* f = f_[size_t(part.offset + node)].v;
+  // Into the first region that holds the node: the corrector reads it there.
+  for (const Region& r : regions_) {
+    if (node < r.begin || node >= r.end) continue;
+    Real* f = f_[size_t(r.offset + node)].v;
     for (int d = 0; d < 3; ++d) f[d] += Real(force[d]);
     return;
   }
@@ -524,9 +538,11 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   enter(Pass::Guard);
   ElasticSums el;
   CorrectSums co;
+  for (const ElasticSums& e : elastic_) {  // in region order, whichever thread filled each
+    el.energy += e.energy;
+    el.inverted += e.inverted;
+  }
   for (int32_t p = 0; p < n_parts_; ++p) {
-    el.energy += elastic_[size_t(p)].energy;
-    el.inverted += elastic_[size_t(p)].inverted;
     co.abs_a += correct_sums_[size_t(p)].abs_a;
     co.mv2 += correct_sums_[size_t(p)].mv2;
     co.mgu += correct_sums_[size_t(p)].mgu;

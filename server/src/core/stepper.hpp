@@ -110,15 +110,27 @@ class Stepper {
   struct Part {
     int32_t block_begin, block_end;  // lane blocks
     int32_t node_begin, node_end;    // nodes
-    // Parts 2k and 2k + 1 share their blocks from both ends (see
-    // elastic_part): 1 for the one that takes them from the left, 2 for the
-    // one from the right, 0 for a part without a partner.
+    // Parts 2k and 2k + 1 share the middle of their blocks (see
+    // elastic_part): 1 for the one whose own share is on the left, 2 for
+    // the one on the right, 0 for a part without a partner.
     int32_t side = 0;
-    int32_t pair_begin = 0, pair_end = 0;  // the pair's blocks
-    int32_t share = -1;                    // its index in shares_
+    int32_t share = -1;           // its pair's index in shares_
+    int32_t own_begin = 0, own_end = 0;  // the blocks it always takes
+    int32_t own_region = 0;       // where their forces go, in regions_
+    int32_t chunk_begin = 0, chunk_end = 0;  // its pair's middle chunks, in chunks_
   };
-  // The blocks of a pair not yet claimed: left end (low 32 bits) and right
-  // end (high 32 bits), on a cache line of their own.
+  // A force array: the nodes [begin, end) (multiples of 16) one part's own
+  // blocks or one middle chunk touch, stored at f_[offset + begin, offset + end).
+  struct Region {
+    int64_t offset;
+    int32_t begin, end;
+  };
+  // A middle chunk: blocks [block_begin, block_end), forces into `region`.
+  struct Chunk {
+    int32_t block_begin, block_end, region;
+  };
+  // The chunks of a pair's middle not yet claimed, [left, right) as indices
+  // into chunks_ (left in the low 32 bits), on a cache line of their own.
   struct alignas(64) PairShare {
     std::atomic<uint64_t> ends{0};
   };
@@ -135,7 +147,8 @@ class Stepper {
   std::vector<int32_t> find_top_energy_elements(const State<Real>& s, size_t count) const;
   void run_parts(void (*fn)(void*, int32_t), void* ctx);
   void run_elastic();
-  ElasticSums elastic_blocks(int32_t begin, int32_t end, Node4<Real>* f) const;
+  // Forces of blocks [begin, end) into region r; its sums into elastic_[r].
+  void elastic_blocks(int32_t begin, int32_t end, int32_t r);
   void enter(Pass p) {
     if (probe_) probe_->enter(p);
   }
@@ -159,13 +172,15 @@ class Stepper {
 
   // Workspace, sized once.
   std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> u4_;  // u for the element pass [m] (n_nodes)
-  std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> f_;   // force per part [N] (n_parts x n_nodes, padded)
-  std::vector<ForcePart> force_parts_;    // each part's array in f_ and the nodes its latest element pass touched
-  std::unique_ptr<PairShare[]> shares_;    // per pair of parts
-  // Per block, the nodes touched by the blocks from its pair's first up to it
-  // (prefix_*) and from it to its pair's last (suffix_*), rounded out to 16.
-  std::vector<int32_t> prefix_lo_, prefix_hi_, suffix_lo_, suffix_hi_;
-  std::vector<ElasticSums> elastic_;     // per part
+  std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> f_;   // the regions' force arrays [N]
+  std::vector<Region> regions_;          // parts' own shares, then middle chunks
+  std::vector<Chunk> chunks_;
+  std::unique_ptr<PairShare[]> shares_;  // per pair of parts
+  // Per 16 nodes g, the offsets of the regions that hold them, in regions_
+  // order: group_offset_[group_begin_[g] .. group_begin_[g + 1]).
+  std::vector<int32_t> group_begin_;
+  std::vector<int64_t> group_offset_;
+  std::vector<ElasticSums> elastic_;     // per region, whichever thread filled it
   std::vector<CorrectSums> correct_sums_;  // per part
   std::vector<Vec3> u_before_;           // constrained and loaded nodes' u at t_n [m]
   std::vector<Vec3> load_force_;         // load force at t_n per loaded node [N]

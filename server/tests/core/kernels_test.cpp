@@ -289,11 +289,12 @@ void check_node_passes() {
         args.begin = 0;
         args.end = n;
         args.dt = dt;
-        // Part 1 touches nodes [16, 48) only: its entries below 16 are not its forces.
-        const ForcePart parts[2] = {{0, 0, 48}, {stride, 16, 48}};
+        // Array 1 holds nodes [16, 48) only: its entries below 16 are not forces.
+        const int32_t group_begin[4] = {0, 1, 3, 5};  // per 16 nodes
+        const int64_t group_offset[5] = {0, 0, stride, 0, stride};
         args.f = f.data();
-        args.parts = parts;
-        args.n_parts = 2;
+        args.group_begin = group_begin;
+        args.group_offset = group_offset;
         args.inv_m = inv_m.data();
         args.m = m.data();
         args.g[0] = Real(0.5);

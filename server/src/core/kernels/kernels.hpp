@@ -85,28 +85,20 @@ using PredictFn = void (*)(int32_t begin, int32_t end, Real dt, Real* u, Real* v
 template <class Real>
 using PadFn = void (*)(int32_t begin, int32_t end, const Real* u, Node4<Real>* u4);
 
-// One part's force array (n_nodes, from `offset` nodes into the parts'
-// common array) and the nodes its latest element pass touched, [begin, end)
-// rounded out to multiples of 16; the rest of it stays 0.
-struct ForcePart {
-  int64_t offset;
-  int32_t begin, end;
-};
-
 // Corrector, eqs. (8)-(10) with D = alpha M, over nodes [begin, end):
 //   a = (f / m + g - alpha v_half) / (1 + alpha dt / 2);  v = v_half + dt/2 a.
-// f is the sum of the parts' force arrays over the nodes each touches. The
-// corrector sets every entry it reads back to 0, so the next element pass
-// adds into zeros without a clearing pass. (Entries of another part's array
-// lie where the two parts' elements meet: a layer of nodes, written by one
-// thread and cleared by another.)
+// f is the sum of the force arrays that hold a node, in the order listed for
+// its 16 nodes: f[group_offset[k] + i] for k in [group_begin[i / 16],
+// group_begin[i / 16 + 1]). The corrector sets every entry it reads back to
+// 0, so the next element pass adds into zeros without a clearing pass.
+// begin and end are multiples of 16, or end is the last node.
 template <class Real>
 struct CorrectArgs {
   int32_t begin, end;
   Real dt;
-  Node4<Real>* f;               // the parts' force arrays [N]
-  const ForcePart* parts;
-  int32_t n_parts;
+  Node4<Real>* f;                // the force arrays [N]
+  const int32_t* group_begin;    // per 16 nodes, into group_offset
+  const int64_t* group_offset;   // offsets into f of the arrays that hold them
   const Real* inv_m;  // 1/m per node [1/kg] (n)
   const Real* m;      // m per node [kg] (n)
   Real g[3];          // [m/s^2]

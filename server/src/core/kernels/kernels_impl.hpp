@@ -601,10 +601,9 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
   for (; i + W <= A.end; i += W) {
     abs_a = mv2 = mgu = ma2 = V{};
     V q[4] = {};
-    for (int32_t p = 0; p < A.n_parts; ++p) {
-      const ForcePart& part = A.parts[p];
-      if (i >= part.end || i + W <= part.begin) continue;  // whole groups: the bounds are multiples of 16
-      VU* fp = reinterpret_cast<VU*>(A.f[part.offset + i].v);
+    const int64_t g = i / 16;  // W divides 16
+    for (int32_t r = A.group_begin[g]; r < A.group_begin[g + 1]; ++r) {
+      VU* fp = reinterpret_cast<VU*>(A.f[A.group_offset[r] + i].v);
       #pragma GCC unroll 4
       for (int k = 0; k < 4; ++k) {
         q[k] += fp[k];
@@ -646,10 +645,8 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
   // The last nodes (fewer than W) one by one.
   for (; i < A.end; ++i) {
     Real fi[3] = {0, 0, 0};
-    for (int32_t p = 0; p < A.n_parts; ++p) {
-      const ForcePart& part = A.parts[p];
-      if (i >= part.end || i < part.begin) continue;
-      Node4<Real>& fp = A.f[part.offset + i];
+    for (int32_t r = A.group_begin[i / 16]; r < A.group_begin[i / 16 + 1]; ++r) {
+      Node4<Real>& fp = A.f[A.group_offset[r] + i];
       for (int k = 0; k < 3; ++k) fi[k] += fp.v[k];
       fp = Node4<Real>{};
     }
