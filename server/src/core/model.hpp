@@ -28,11 +28,6 @@ struct ElementGroup {
   double lambda, mu;  // Lame parameters [Pa] of every element of the group
 };
 
-// A share of the step's work for one thread: the lane blocks [block_begin,
-// block_end) of one slab of the body, and the nodes [node_begin, node_end)
-// for the node passes, those the slab's blocks number first (see
-// build_model). The parts tile both ranges in order; a part's elements also
-// touch a layer of the previous part's nodes.
 // Blocks per strip. A group's blocks come in strips (the last may be
 // shorter): within a strip of kStripBlocks blocks, lane l takes the l-th run
 // of the strip's elements, so that elements that share nodes sit in one lane
@@ -45,6 +40,11 @@ struct ElementGroup {
 // alternated runs, 1-4 % slower at 20 k tets, 6-15 % faster at 1 M.
 inline constexpr int32_t kStripBlocks = 16;
 
+// A share of the step's work for one thread: the lane blocks [block_begin,
+// block_end) of one slab of the body, and the nodes [node_begin, node_end)
+// for the node passes, those the slab's blocks number first (see
+// build_model). The parts tile both ranges in order; a part's elements also
+// touch a layer of the previous part's nodes.
 struct ModelPart {
   int32_t block_begin, block_end;
   int32_t node_begin, node_end;

@@ -145,6 +145,7 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
   std::sort(cuts.begin(), cuts.end());
   cuts.erase(std::unique(cuts.begin(), cuts.end()), cuts.end());
   auto snap = [&cuts](int32_t b) {  // the strip start nearest b
+    if (cuts.empty()) return b;
     const auto it = std::lower_bound(cuts.begin(), cuts.end(), b);
     if (it == cuts.end()) return cuts.back();
     if (it == cuts.begin() || *it - b <= b - *(it - 1)) return *it;
