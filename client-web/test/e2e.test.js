@@ -32,7 +32,10 @@ test('the page draws the live body from the server\'s frames', { timeout: 120000
   const live = await openLive(SCENE, { query: process.env.TACTILE_QUALITY ? `?quality=${process.env.TACTILE_QUALITY}` : '' });
   const { page, problems } = live;
   try {
-    await page.waitForFunction(() => window.tactile && window.tactile.frames >= 5, null, { timeout: 30000 });
+    // (Once in a clean-clone CI run the first frames did not come within 30 s; the message now says what
+    // the page and the server showed.)
+    await page.waitForFunction(() => window.tactile && window.tactile.frames >= 5, null, { timeout: 30000 })
+      .catch(async (e) => { throw new Error(`${e.message}\n${await live.describe()}`); });
     const scene = await page.evaluate(() => ({ name: window.tactile.sceneName, vertices: window.tactile.vertices }));
     assert.equal(scene.name, 'e2e_twist');
     assert.ok(scene.vertices > 50, `${scene.vertices} surface vertices`);

@@ -65,6 +65,16 @@ export async function openLive(scene, { args = [], query = '', viewport = { widt
   const { browser, page, problems } = await openPage(port, { query, viewport });
   return {
     port, page, problems,
+    // What the page and the server show, for a test's failure message: the page's frame count and
+    // status line, its console errors, and the end of the server's output.
+    describe: async () => {
+      const state = await page.evaluate(() => ({
+        frames: window.tactile ? window.tactile.frames : null,
+        status: document.querySelector('#status') ? document.querySelector('#status').textContent : null,
+      })).catch((e) => ({ error: e.message }));
+      return `page: ${JSON.stringify(state)}\nproblems: ${problems.join('; ') || 'none'}\n` +
+        `server output (end):\n${proc.output().slice(-2000)}`;
+    },
     close: async () => {
       await browser.close();
       proc.kill('SIGINT');

@@ -27,8 +27,8 @@ struct alignas(64) ElementBlock {
   // Where each corner's node starts in a Node4 array, in Reals: 4 x node id.
   // (So that a corner's address is one scaled index, base + node4 x
   // sizeof(Real), with no shift of its own: a block has 128 corner loads and
-  // adds. 4 x 2^31 ids are far more nodes than memory holds.) Padding lanes:
-  // lane 0's corner 0, all four. (n_blocks x 4 x W)
+  // adds. An int32 holds 4 x id for up to 2^29 nodes, far more than memory
+  // holds.) Padding lanes: lane 0's corner 0, all four. (n_blocks x 4 x W)
   int32_t node4[4][W];
   Real Dinv[9][W];     // inverse rest edge matrix Dm^-1, row-major, Dm = [X1-X0 X2-X0 X3-X0]
   Real V[W];           // rest volume [m^3]; 0 in padding lanes (a block's Lame parameters are its group's)
