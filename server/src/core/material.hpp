@@ -115,9 +115,9 @@ TACTILE_INLINE T stress_linear(const T* F, T lambda, T mu, T* P) {
 // ---- St. Venant-Kirchhoff ----------------------------------------------------
 // E = (F^T F - I)/2 (eqs. 5-6), S = lambda tr(E) I + 2 mu E, P = F S.
 // Written on the six entries of the symmetric C = F^T F, with the halves
-// folded into the constants: fewer multiplies for the element pass
-// (the double kernel alone, alternated in one process: 2-4 % faster; float
-// unchanged).
+// folded into the constants: fewer multiplies for the element pass (the
+// double kernel alone, alternated in one process, see kernels_impl.hpp: 2-4 %
+// faster; float unchanged).
 template <class T>
 TACTILE_INLINE T stress_stvk(const T* F, T lambda, T mu, T* P) {
   auto c = [F](int i, int j) { return F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j]; };

@@ -37,7 +37,8 @@ struct ElementGroup {
 // on the element pass. A range of blocks that cuts a strip touches the nodes
 // of the whole strip, so threads share work in whole strips (stepper.cpp).
 // 16 blocks rather than 64, for finer shares: the float kernel alone,
-// alternated runs, 1-4 % slower at 20 k tets, 6-15 % faster at 1 M.
+// alternated runs (see kernels_impl.hpp), 1-4 % slower at 20 k tets, 6-15 %
+// faster at 1 M.
 inline constexpr int32_t kStripBlocks = 16;
 
 // A share of the step's work for one thread: the lane blocks [block_begin,

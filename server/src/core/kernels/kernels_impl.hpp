@@ -13,6 +13,12 @@
 // generic tuning emulates gathers with scalar extracts, and no compiler
 // vectorises a scatter whose lanes may share a node. Lanes that share a node
 // simply add in turn.
+//
+// Figures quoted below as "the kernel alone, alternated in one process" come
+// from a probe outside the repo that times two versions of forces() in turns
+// on one model: changes of a few per cent that this host's noise hides in
+// fem_bench, whose --only=isas and --only=passes time the whole step and
+// each pass.
 #pragma once
 
 // GCC 12's intrinsics headers trip -Wmaybe-uninitialized in their own
