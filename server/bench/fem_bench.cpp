@@ -1,5 +1,6 @@
 // FEM step benchmark: rate of the explicit step per material, precision and
-// mesh size; one thread against two; the cost of each effect a scene may ask
+// mesh size; one thread against two (and against one thread kept on each
+// CPU in turn); the cost of each effect a scene may ask
 // for; the ISA levels; the float-vs-double difference of a loaded beam; and
 // the allocations inside steps. Prints figures, passes and fails nothing.
 //
@@ -21,6 +22,8 @@
 #include <fstream>
 #include <functional>
 #include <malloc.h>
+#include <pthread.h>
+#include <sched.h>
 #include <memory>
 #include <string>
 #include <thread>
@@ -98,6 +101,40 @@ void set_swing(const Model<Real>& model, State<Real>& s, double amplitude) {
   }
 }
 
+// Keeps the calling thread on one CPU while it lives (cpu < 0: leaves it
+// alone), then lets it run anywhere it could before.
+class PinThread {
+ public:
+  explicit PinThread(int cpu) {
+    if (cpu < 0 || pthread_getaffinity_np(pthread_self(), sizeof before_, &before_) != 0) return;
+    cpu_set_t one;
+    CPU_ZERO(&one);
+    CPU_SET(cpu, &one);
+    pinned_ = pthread_setaffinity_np(pthread_self(), sizeof one, &one) == 0;
+  }
+  ~PinThread() {
+    if (pinned_) pthread_setaffinity_np(pthread_self(), sizeof before_, &before_);
+  }
+  PinThread(const PinThread&) = delete;
+  PinThread& operator=(const PinThread&) = delete;
+
+ private:
+  cpu_set_t before_{};
+  bool pinned_ = false;
+};
+
+// The first two CPUs this process may run on, or none if it may run on fewer.
+std::vector<int> two_cpus() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  std::vector<int> out;
+  if (sched_getaffinity(0, sizeof set, &set) != 0) return out;
+  for (int c = 0; c < CPU_SETSIZE && out.size() < 2; ++c)
+    if (CPU_ISSET(c, &set)) out.push_back(c);
+  if (out.size() < 2) out.clear();
+  return out;
+}
+
 // One model with its stepper and state, stepped in timed runs.
 template <class Real>
 struct Run {
@@ -107,6 +144,7 @@ struct Run {
   State<Real> start;
   double dt;
   int64_t faults = 0;
+  int cpu = -1;  // >= 0: timed runs keep the calling thread on this CPU
 
   // `swing` scales the starting velocity field (1: up to about 0.5 m/s).
   Run(const ModelSpec& spec, ParallelFor* pool, double swing = 1.0)
@@ -119,6 +157,7 @@ struct Run {
   // Allocations are counted unless `warm_up` (the first step from a state
   // sets up its energy accounting, with a full energy pass).
   double time_steps(int64_t steps, bool warm_up = false) {
+    const PinThread pin(cpu);
     alloc_count::all = !warm_up;
     const Clock::time_point t0 = Clock::now();
     for (int64_t k = 0; k < steps; ++k) {
@@ -202,16 +241,32 @@ void table_rates(const Options& opt) {
 }
 
 template <class Real>
-void thread_rows(const Options& opt, ThreadPool& pool) {
+void thread_rows(const Options& opt, ThreadPool& pool, const std::vector<int>& cpus) {
   const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
   for (double size : bench_sizes(opt)) {
     ModelSpec spec = make_spec(make_bench_box(size, 1, 0.1), MaterialModel::StVK, precision);
     Run<Real> one(spec, nullptr);
+    std::vector<std::unique_ptr<Run<Real>>> on_cpu;  // one thread kept on each CPU in turn
+    for (int c : cpus) {
+      on_cpu.push_back(std::make_unique<Run<Real>>(spec, nullptr));
+      on_cpu.back()->cpu = c;
+    }
     spec.integrator.threads = 2;
     Run<Real> two(spec, &pool);
-    const std::vector<double> t = time_alternating<Real>({&one, &two}, opt);
-    std::printf("| %-6s | %9d | %10.1f | %10.1f | %5d | %7.2fx |\n", name_of(precision), one.model.n_tets,
-                one.model.n_tets / t[0] * 1e-6, two.model.n_tets / t[1] * 1e-6, two.stepper.parts(), t[0] / t[1]);
+    std::vector<Run<Real>*> runs = {&one, &two};
+    for (auto& r : on_cpu) runs.push_back(r.get());
+    const std::vector<double> t = time_alternating<Real>(runs, opt);
+    const double tets = one.model.n_tets;
+    std::printf("| %-6s | %9d | %10.1f | %10.1f | %5d | %7.2fx |", name_of(precision), one.model.n_tets, tets / t[0] * 1e-6,
+                tets / t[1] * 1e-6, two.stepper.parts(), t[0] / t[1]);
+    if (cpus.size() == 2) {
+      // Two threads against the mean of the two CPUs' one-thread rates: the
+      // speedup the split gives on the cores this run had, whatever their
+      // difference in speed at the time.
+      const double r0 = tets / t[2] * 1e-6, r1 = tets / t[3] * 1e-6;
+      std::printf(" %10.1f | %10.1f | %7.2fx |", r0, r1, (tets / t[1] * 1e-6) / (0.5 * (r0 + r1)));
+    }
+    std::printf("\n");
   }
 }
 
@@ -233,12 +288,23 @@ double pool_handoff_seconds(ThreadPool& pool) {
 
 void table_threads(const Options& opt) {
   ThreadPool pool(2);
+  const std::vector<int> cpus = two_cpus();
   std::printf("\n## StVK, one thread against two (M tets/s)\n\n");
-  std::printf("(parts: how many ways the stepper split the passes; small meshes stay on one)\n\n");
-  std::printf("| real   |      tets |  1 thread  | 2 threads  | parts | speedup  |\n");
-  std::printf("|--------|-----------|------------|------------|-------|----------|\n");
-  thread_rows<float>(opt, pool);
-  thread_rows<double>(opt, pool);
+  std::printf("(parts: how many ways the stepper split the passes; small meshes stay on one)\n");
+  if (cpus.size() == 2) {
+    std::printf("(cpu %d, cpu %d: one thread kept on that CPU. On a shared or virtual machine two CPUs can run at\n"
+                " different speeds, and each at a speed that drifts; \"vs both\" is the two-thread rate against the\n"
+                " mean of the two one-thread rates, timed in turn with the others)\n\n",
+                cpus[0], cpus[1]);
+    std::printf("| real   |      tets |  1 thread  | 2 threads  | parts | speedup  |   cpu %-4d |   cpu %-4d | vs both  |\n",
+                cpus[0], cpus[1]);
+    std::printf("|--------|-----------|------------|------------|-------|----------|------------|------------|----------|\n");
+  } else {
+    std::printf("\n| real   |      tets |  1 thread  | 2 threads  | parts | speedup  |\n");
+    std::printf("|--------|-----------|------------|------------|-------|----------|\n");
+  }
+  thread_rows<float>(opt, pool, cpus);
+  thread_rows<double>(opt, pool, cpus);
   std::printf("\nHand-off: %.2f us per pass split over the two threads (an empty job's round trip)\n",
               pool_handoff_seconds(pool) * 1e6);
   if (std::thread::hardware_concurrency() < 2) std::printf("\n(this machine has one core: two threads share it)\n");
