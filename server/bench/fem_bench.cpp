@@ -7,7 +7,7 @@
 //   fem_bench            all tables, meshes up to 100 k tets (a minute or two)
 //   fem_bench --large    also 1 M and 2 M tets
 //   fem_bench --quick    small meshes and few repeats, for CI (seconds)
-//   fem_bench --only=T   one table: rates, threads, passes, effects, hand, isas, precision
+//   fem_bench --only=T   one table: rates, threads, passes, effects, hand, refresh, isas, precision
 //
 // Times are wall-clock medians of repeated runs of many steps, so that other
 // processes on the machine shift them less than a mean would; rates are
@@ -145,6 +145,7 @@ struct Run {
   double dt;
   int64_t faults = 0;
   int cpu = -1;  // >= 0: timed runs keep the calling thread on this CPU
+  bool frames = false;  // timed runs call advance(dt), as the live loop does, rather than step(dt)
 
   // `swing` scales the starting velocity field (1: up to about 0.5 m/s).
   Run(const ModelSpec& spec, ParallelFor* pool, double swing = 1.0)
@@ -161,7 +162,7 @@ struct Run {
     alloc_count::all = !warm_up;
     const Clock::time_point t0 = Clock::now();
     for (int64_t k = 0; k < steps; ++k) {
-      if (stepper.step(state, dt)) {
+      if (frames ? bool(stepper.advance(state, dt).fault) : bool(stepper.step(state, dt))) {
         alloc_count::all = false;
         ++faults;
         std::fprintf(stderr, "fault (restarting): %s\n", stepper.fault().message.c_str());
@@ -547,6 +548,40 @@ void table_passes(const Options& opt) {
 }
 
 template <class Real>
+void refresh_rows(const Options& opt) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  for (double size : bench_sizes(opt)) {
+    if (size < 1e4) continue;
+    const ModelSpec spec = make_spec(make_bench_box(size, 1, 0.1), MaterialModel::StVK, precision);
+    Run<Real> step(spec, nullptr), frame(spec, nullptr);
+    frame.frames = true;
+    const std::vector<double> t = time_alternating<Real>({&step, &frame}, opt);
+    std::vector<double> sweep;
+    for (int k = 0; k < (opt.quick ? 3 : 9); ++k) {
+      const Clock::time_point t0 = Clock::now();
+      const double dt = frame.stepper.compute_critical_dt(frame.state);
+      sweep.push_back(seconds_since(t0));
+      if (!(dt > 0)) std::printf("(the estimate came out %g s)\n", dt);
+    }
+    const AdvanceReport r = frame.stepper.advance(frame.state, frame.dt);
+    std::printf("| %-6s | %9d | %9.1f | %12.1f | %8d | %+17.1f %% | %21.1f |\n", name_of(precision), step.model.n_tets,
+                t[0] * 1e6, t[1] * 1e6, r.substeps, 100.0 * (t[1] - t[0]) / t[0], median(sweep) * 1e9 / step.model.n_tets);
+  }
+}
+
+// advance() refreshes the critical step as the body deforms, a sixteenth of
+// the elements each call (Stepper::advance): what that costs a frame of one
+// sub-step, the live loop's case, against step() alone.
+void table_refresh(const Options& opt) {
+  std::printf("\n## The critical step's refresh: advance() of a frame of one sub-step against step() alone\n\n");
+  std::printf("(whole estimate: every element examined once, ns a tet; advance() examines a sixteenth a call)\n\n");
+  std::printf("| real   |      tets | step() us | advance() us | substeps | advance() vs step() | whole estimate ns/tet |\n");
+  std::printf("|--------|-----------|-----------|--------------|----------|---------------------|-----------------------|\n");
+  refresh_rows<float>(opt);
+  refresh_rows<double>(opt);
+}
+
+template <class Real>
 void isa_rows(const Options& opt) {
   const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
   Run<Real> run(make_spec(make_bench_box(opt.quick ? 5e3 : 2e4, 1, 0.1), MaterialModel::StVK, precision), nullptr);
@@ -641,7 +676,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--large")) opt.large = true;
     else if (!std::strncmp(argv[i], "--only=", 7)) opt.only = argv[i] + 7;
     else {
-      std::fprintf(stderr, "usage: %s [--quick] [--large] [--only=rates|threads|passes|effects|hand|isas|precision]\n",
+      std::fprintf(stderr, "usage: %s [--quick] [--large] [--only=rates|threads|passes|effects|hand|refresh|isas|precision]\n",
                    argv[0]);
       return 2;
     }
@@ -655,7 +690,8 @@ int main(int argc, char** argv) {
 
   const std::pair<const char*, void (*)(const Options&)> tables[] = {
       {"rates", table_rates}, {"threads", table_threads}, {"passes", table_passes}, {"effects", table_effects},
-      {"hand", table_hand},   {"isas", table_isas},       {"precision", table_precision}};
+      {"hand", table_hand},   {"refresh", table_refresh}, {"isas", table_isas},
+      {"precision", table_precision}};
   bool any = false;
   for (const auto& [name, table] : tables) {
     if (!opt.wants(name)) continue;

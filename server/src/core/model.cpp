@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <sstream>
 
@@ -274,6 +275,7 @@ Model<Real> build_model(const ModelSpec& spec) {
             for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
             B.V[l] = Real(0);
             model.lane_tet.push_back(-1);
+            model.lane_dt.push_back(std::numeric_limits<double>::infinity());
             continue;
           }
           const auto e = size_t(order[k + slot]);
@@ -286,6 +288,7 @@ Model<Real> build_model(const ModelSpec& spec) {
             for (int c = 0; c < 3; ++c) B.Dinv[3 * r + c][l] = Real(Dinv[c][r]);
           B.V[l] = Real(model.tet_volume[e]);
           model.lane_tet.push_back(int32_t(e));
+          model.lane_dt.push_back(model.tet_dt[e]);
         }
         model.blocks.push_back(B);
       }

@@ -82,7 +82,7 @@ class Stepper {
   // Critical step of the current configuration [s]: each element's exact rest
   // value scaled by how much it has been squashed and stiffened.
   double compute_critical_dt(const State<Real>& s) const;
-  // The same over the elements [begin, end) only (tet ids).
+  // The same over the lane blocks [begin, end) only.
   double compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const;
   // The same over the elements around the surface nodes the latest step's
   // contact pushed (the model's rest step when it pushed none).
@@ -211,7 +211,7 @@ class Stepper {
   int64_t dt_refreshed_at_ = -1;  // step of the last complete sweep, -1 before the first
   double sweep_last_ = 0;         // estimate of the last complete sweep [s]
   double sweep_min_ = 0;          // of the sweep under way, so far [s]
-  int32_t sweep_next_ = 0;        // first element the next call examines
+  int32_t sweep_next_ = 0;        // first lane block the next call examines
   // A proxy squashes the elements under it faster than the sweep comes
   // round: those around the nodes it pushed are examined after every step.
   std::vector<int32_t> contact_tet_begin_;  // per contact surface node: range in contact_tets_ (+1)

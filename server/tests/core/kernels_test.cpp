@@ -1,17 +1,20 @@
 // The per-ISA kernels against straightforward scalar code in double: element
 // forces and energies of every material (from the core/material.hpp
 // functions, one tet at a time), the predictor and its padded copy, and the
-// corrector; padding lanes add nothing; the ISA copies agree with each other.
+// corrector, and the critical-step estimate; padding lanes add nothing; the
+// ISA copies agree with each other.
 #include "core/kernels/kernels.hpp"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
 
+#include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
 
@@ -238,6 +241,103 @@ void check_padding() {
     }
   }
 }
+
+// The critical-step kernel against the scalar estimate in double, from
+// positions: the smallest altitude by cross products (not the kernel's
+// cofactors), over the rest one, clamped to [0.05, 1], over the square root
+// of material::stiffening; the rest step as is for linear elements. Block by
+// block, each against the least of its lanes: at small strains, at strains
+// that squash and turn some elements inside out, and with a NaN.
+double reference_critical_dt(const ModelSpec& spec, const std::vector<double>& tet_dt, double dt_rest,
+                             const std::vector<double>& u, int32_t e) {
+  const MaterialModel model = spec.materials[size_t(spec.mesh.region_of(e))].model;
+  if (model == MaterialModel::Linear) return dt_rest;
+  const Tet& t = spec.mesh.tets[size_t(e)];
+  Vec3 X[4], x[4];
+  for (int c = 0; c < 4; ++c) {
+    const size_t i = size_t(t[size_t(c)]);
+    X[c] = spec.mesh.X[i];
+    x[c] = X[c] + Vec3(u[3 * i], u[3 * i + 1], u[3 * i + 2]);
+  }
+  auto altitude = [](const Vec3* p) {
+    const double V6 = std::fabs(glm::determinant(glm::dmat3(p[1] - p[0], p[2] - p[0], p[3] - p[0])));
+    const double amax = std::max({glm::length(glm::cross(p[2] - p[1], p[3] - p[1])),
+                                  glm::length(glm::cross(p[2] - p[0], p[3] - p[0])),
+                                  glm::length(glm::cross(p[1] - p[0], p[3] - p[0])),
+                                  glm::length(glm::cross(p[1] - p[0], p[2] - p[0]))});
+    return V6 / amax;
+  };
+  const double ratio = std::clamp(altitude(x) / altitude(X), 0.05, 1.0);
+  const glm::dmat3 Fg = glm::dmat3(x[1] - x[0], x[2] - x[0], x[3] - x[0]) *
+                        glm::inverse(glm::dmat3(X[1] - X[0], X[2] - X[0], X[3] - X[0]));
+  double F[9];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) F[3 * i + j] = Fg[j][i];
+  return tet_dt[size_t(e)] * ratio / std::sqrt(material::stiffening(model, F));
+}
+
+template <class Real>
+void check_critical_dt() {
+  for (MaterialModel model : kModels) {
+    const ModelSpec spec = make_random_spec(model, 17);
+    const Model<Real> m = build_model<Real>(spec);
+    const Model<double> ref = build_model<double>(spec);  // the rest steps in double (tets keep their ids)
+    int squashed = 0, inverted = 0;
+    for (double amplitude : {0.002, 0.05}) {
+      const std::vector<double> u = make_random_u(m.n_nodes, amplitude, 23);  // the mesh's numbering
+      std::vector<Real> u_real(u.size());                                       // the model's
+      for (size_t i = 0; i < size_t(m.n_nodes); ++i)
+        for (size_t c = 0; c < 3; ++c) u_real[3 * size_t(m.node_model[i]) + c] = Real(u[3 * i + c]);
+      for (const char* isa : kIsas) {
+        const KernelTable<Real>* k = kernels_for<Real>(isa);
+        if (!k) continue;
+        for (const ElementGroup& g : m.groups)
+          for (int32_t b = g.begin; b < g.end; ++b) {
+            double want = std::numeric_limits<double>::infinity();
+            for (int l = 0; l < kLanes<Real>; ++l) {
+              const int32_t e = m.lane_tet[size_t(b) * kLanes<Real> + size_t(l)];
+              if (e < 0) continue;
+              want = std::min(want, reference_critical_dt(spec, ref.tet_dt, ref.dt_rest, u, e));
+            }
+            double got = k->critical[int(g.model)](m.blocks.data(), b, b + 1, u_real.data(), m.lane_dt.data());
+            if (model == MaterialModel::Linear) {
+              EXPECT_EQ(got, std::numeric_limits<double>::infinity()) << isa << " block " << b;
+              continue;
+            }
+            EXPECT_NEAR(got, want, (sizeof(Real) == 4 ? 2e-6 : 1e-12) * want)
+                << to_string(model) << " " << isa << " block " << b << " amplitude " << amplitude;
+            if (std::string(isa) == "baseline") squashed += want < 0.9 * m.dt_rest;
+          }
+      }
+      if (amplitude > 0.01) {
+        std::vector<Real> J(m.blocks.size() * kLanes<Real>);
+        std::vector<double> energy(J.size());
+        for (const ElementGroup& g : m.groups)
+          kernels<Real>().energy[int(g.model)](m.blocks.data(), g.begin, g.end, Real(g.lambda), Real(g.mu),
+                                                u_real.data(), energy.data() + size_t(g.begin) * kLanes<Real>,
+                                                J.data() + size_t(g.begin) * kLanes<Real>);
+        for (size_t l = 0; l < J.size(); ++l) inverted += m.lane_tet[l] >= 0 && J[l] <= 0;
+      }
+    }
+    if (model != MaterialModel::Linear) {
+      EXPECT_GT(squashed, 0) << to_string(model) << ": no block's step fell below 0.9 of the rest one";
+      EXPECT_GT(inverted, 0) << to_string(model) << ": the large strains turned no element inside out";
+    }
+    // A NaN displacement is the guards' to report: its lanes drop out of the least.
+    std::vector<Real> u_nan(3 * size_t(m.n_nodes), Real(0));
+    u_nan[0] = std::numeric_limits<Real>::quiet_NaN();
+    for (const ElementGroup& g : m.groups) {
+      const double got = kernels<Real>().critical[int(g.model)](m.blocks.data(), g.begin, g.end, u_nan.data(),
+                                                                m.lane_dt.data());
+      EXPECT_FALSE(std::isnan(got)) << to_string(model);
+      if (model != MaterialModel::Linear) {
+        EXPECT_GT(got, 0.0) << to_string(model);
+      }
+    }
+  }
+}
+TEST(Kernels, CriticalStepEqualsScalarReferenceFloat) { check_critical_dt<float>(); }
+TEST(Kernels, CriticalStepEqualsScalarReferenceDouble) { check_critical_dt<double>(); }
 
 TEST(Kernels, PaddingLanesContributeNothingFloat) { check_padding<float>(); }
 TEST(Kernels, PaddingLanesContributeNothingDouble) { check_padding<double>(); }

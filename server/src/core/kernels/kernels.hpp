@@ -74,6 +74,18 @@ template <class Real>
 using EnergyFn = void (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu,
                           const Real* u, double* energy, Real* J);
 
+// The critical step of blocks [begin, end), all of one material model, at
+// displacements u (n_nodes x 3): the least over their lanes of
+//   dt_rest x max(min(h / h_rest, 1), 0.05) / sqrt(k),
+// with dt_rest the lane's exact rest value (lane_dt, n_blocks x W; +inf in
+// padding lanes), h / h_rest its smallest altitude over the rest one, and k
+// how much its material has stiffened (material::stiffening); +inf if no lane
+// counts, and for linear elements (small strain has one stiffness: the rest
+// step holds). Stepper::advance refreshes its estimate with it as the body deforms.
+template <class Real>
+using CriticalFn = double (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Real* u,
+                              const double* lane_dt);
+
 // Newmark predictor, eq. (7), over nodes [begin, end):
 //   u += dt v + dt^2/2 a;  v <- v + dt/2 a (the half-step velocity eq. (9) completes);
 // and the new u padded into u4 for the element pass.
@@ -120,6 +132,7 @@ template <class Real>
 struct KernelTable {
   ForcesFn<Real> forces[kMaterialModelCount];
   EnergyFn<Real> energy[kMaterialModelCount];
+  CriticalFn<Real> critical[kMaterialModelCount];
   PredictFn<Real> predict;
   PadFn<Real> pad;
   CorrectFn<Real> correct[2][2];  // [gravity][damping]: a scene pays only for what it has

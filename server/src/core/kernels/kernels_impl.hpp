@@ -426,6 +426,71 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real l
   }
 }
 
+// How far an element's critical step falls at deformation F (see CriticalFn):
+// its smallest altitude over the rest one, clamped to [0.05, 1], over the
+// square root of its material's stiffening. g[f] are the rest gradients of
+// its shape functions (the rows of Dm^-1, and minus their sum for corner 0):
+// the altitude over face f is 1 / |grad N_f|, and a deformation turns
+// grad N into F^-T grad N = cof(F) grad N / J. So the ratio comes from F and
+// Dm^-1 alone, with one square root: |J| max|g| / max|cof(F) g|.
+template <MaterialModel M, class T>
+TACTILE_INLINE T critical_factor(const T* F, const T (*g)[3]) {
+  T C[9];
+  material::cofactor(F, C);
+  const T J = F[0] * C[0] + F[1] * C[1] + F[2] * C[2];
+  T cg[4][3];
+  #pragma GCC unroll 4
+  for (int f = 1; f < 4; ++f)
+    #pragma GCC unroll 3
+    for (int i = 0; i < 3; ++i) cg[f][i] = C[3 * i] * g[f][0] + C[3 * i + 1] * g[f][1] + C[3 * i + 2] * g[f][2];
+  #pragma GCC unroll 3
+  for (int i = 0; i < 3; ++i) cg[0][i] = -(cg[1][i] + cg[2][i] + cg[3][i]);
+  T rest2 = 0, now2 = 0;  // max |g|^2, max |cof(F) g|^2
+  #pragma GCC unroll 4
+  for (int f = 0; f < 4; ++f) {
+    const T r = g[f][0] * g[f][0] + g[f][1] * g[f][1] + g[f][2] * g[f][2];
+    const T n = cg[f][0] * cg[f][0] + cg[f][1] * cg[f][1] + cg[f][2] * cg[f][2];
+    rest2 = r > rest2 ? r : rest2;
+    now2 = n > now2 ? n : now2;
+  }
+  const T absJ = J < T(0) ? -J : J;
+  // now2 = 0 only with F of rank one or less: no altitude left.
+  T ratio = now2 > T(0) ? absJ * std::sqrt(rest2 / now2) : T(0);
+  ratio = ratio < T(1) ? ratio : T(1);
+  ratio = ratio > T(0.05) ? ratio : T(0.05);  // a flat element is the guards' job, not a zero step's
+  return ratio / std::sqrt(material::stiffening(M, F));
+}
+
+template <class Real, MaterialModel M>
+double critical(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, const Real* u, const double* lane_dt) {
+  constexpr int W = kLanes<Real>;
+  double best = std::numeric_limits<double>::infinity();
+  // Small strain (eqs. 2-3) has one stiffness K for every configuration: the rest step holds.
+  if constexpr (M == MaterialModel::Linear) return best;
+  for (int32_t b = begin; b < end; ++b) {
+    const ElementBlock<Real>& B = blocks[b];
+    alignas(64) Real x[12][W];
+    for (int c = 0; c < 4; ++c)
+      for (int l = 0; l < W; ++l)
+        for (int i = 0; i < 3; ++i) x[3 * c + i][l] = u[3 * int64_t(B.node4[c][l] / 4) + i];
+    alignas(64) Real factor[W];
+    for (int l = 0; l < W; ++l) {
+      Real F[9], g[4][3];
+      deformation_gradient(B, l, x, F);
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) g[r + 1][c] = B.Dinv[3 * r + c][l];
+      for (int c = 0; c < 3; ++c) g[0][c] = -(g[1][c] + g[2][c] + g[3][c]);
+      factor[l] = critical_factor<M>(F, g);
+    }
+    const double* dt = lane_dt + int64_t(b) * W;
+    for (int l = 0; l < W; ++l) {
+      const double d = dt[l] * double(factor[l]);
+      best = d < best ? d : best;  // a NaN lane (non-finite u) is the guards' to report
+    }
+  }
+  return best;
+}
+
 // ---- node passes -------------------------------------------------------------
 //
 // Node arrays come in two layouts: the state's (n x 3) and the element pass's
@@ -686,6 +751,10 @@ constexpr KernelTable<Real> make_table() {
   t.energy[int(MaterialModel::StVK)] = &energy<Real, MaterialModel::StVK>;
   t.energy[int(MaterialModel::Corotational)] = &energy<Real, MaterialModel::Corotational>;
   t.energy[int(MaterialModel::NeoHookean)] = &energy<Real, MaterialModel::NeoHookean>;
+  t.critical[int(MaterialModel::Linear)] = &critical<Real, MaterialModel::Linear>;
+  t.critical[int(MaterialModel::StVK)] = &critical<Real, MaterialModel::StVK>;
+  t.critical[int(MaterialModel::Corotational)] = &critical<Real, MaterialModel::Corotational>;
+  t.critical[int(MaterialModel::NeoHookean)] = &critical<Real, MaterialModel::NeoHookean>;
   t.predict = &predict<Real>;
   t.pad = &pad<Real>;
   t.correct[0][0] = &correct<Real, false, false>;
