@@ -735,10 +735,11 @@ double Stepper<Real>::compute_critical_dt(const State<Real>& s) const {
 
 template <class Real>
 double Stepper<Real>::compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const {
-  // Lane blocks, SIMD (kernels.hpp): the scalar element_critical_dt took
-  // 53-65 ns a tet, so advance()'s sixteenth of the body cost each frame as
-  // much as a step (20 k tets: advance of one sub-step 173 us, the step alone
-  // 102 us).
+  // Lane blocks, SIMD (kernels.hpp), 9-12 ns a tet. Per element from
+  // positions (element_critical_dt, now only for the few elements contact
+  // squashes) it took 53-65, and advance()'s sixteenth of the body made a
+  // frame of one sub-step cost 44-92 % more than the step alone; now 8-14 %
+  // (fem_bench --only=refresh).
   double dt = model_.dt_rest;
   for (const ElementGroup& g : model_.groups) {
     const int32_t b0 = std::max(g.begin, begin), b1 = std::min(g.end, end);
