@@ -1,6 +1,6 @@
 // FEM step benchmark: rate of the explicit step per material, precision and
-// mesh size; one thread against two (and against one thread kept on each
-// CPU in turn); the cost of each effect a scene may ask
+// mesh size; one thread against two (and two threads against two one-thread
+// runs at once); the cost of each effect a scene may ask
 // for; the ISA levels; the float-vs-double difference of a loaded beam; and
 // the allocations inside steps. Prints figures, passes and fails nothing.
 //
@@ -146,6 +146,7 @@ struct Run {
   int64_t faults = 0;
   int cpu = -1;  // >= 0: timed runs keep the calling thread on this CPU
   bool frames = false;  // timed runs call advance(dt), as the live loop does, rather than step(dt)
+  Run* twin = nullptr;  // timed runs step this one at the same time, on another thread (see time_steps)
 
   // `swing` scales the starting velocity field (1: up to about 0.5 m/s).
   Run(const ModelSpec& spec, ParallelFor* pool, double swing = 1.0)
@@ -156,24 +157,56 @@ struct Run {
   }
   // Seconds per step over `steps` steps; a fault restarts from the start state.
   // Allocations are counted unless `warm_up` (the first step from a state
-  // sets up its energy accounting, with a full energy pass).
+  // sets up its energy accounting, with a full energy pass). With a twin, the
+  // two step at once, one thread each (on `cpu` and the twin's), and the
+  // result is the step time of their rates added up.
   double time_steps(int64_t steps, bool warm_up = false) {
-    const PinThread pin(cpu);
+    if (twin) {
+      std::atomic<int> finished{0};
+      std::atomic<bool> go{false};
+      double other = 0;
+      std::thread thread([&] {
+        while (!go.load(std::memory_order_acquire)) {
+        }
+        other = twin->loop(steps, warm_up, &finished);
+      });
+      alloc_count::all = !warm_up;
+      go.store(true, std::memory_order_release);
+      const double mine = loop(steps, warm_up, &finished);
+      thread.join();
+      alloc_count::all = false;
+      return 1.0 / (1.0 / mine + 1.0 / other);
+    }
     alloc_count::all = !warm_up;
+    const double s = loop(steps, warm_up, nullptr);
+    alloc_count::all = false;
+    return s;
+  }
+
+  // Seconds per step of at least `steps` steps. With `finished` (shared with
+  // a twin), it goes on stepping until the twin has done its steps too, so
+  // that both are timed only while both run.
+  double loop(int64_t steps, bool warm_up, std::atomic<int>* finished) {
+    const PinThread pin(cpu);
     const Clock::time_point t0 = Clock::now();
-    for (int64_t k = 0; k < steps; ++k) {
+    int64_t k = 0;
+    for (;; ++k) {
+      if (k >= steps) {
+        if (!finished) break;
+        if (k == steps) finished->fetch_add(1, std::memory_order_acq_rel);
+        if (finished->load(std::memory_order_acquire) >= 2) break;
+      }
       if (frames ? bool(stepper.advance(state, dt).fault) : bool(stepper.step(state, dt))) {
+        const bool counting = alloc_count::all;
         alloc_count::all = false;
         ++faults;
         std::fprintf(stderr, "fault (restarting): %s\n", stepper.fault().message.c_str());
         stepper.clear_fault();
         state = start;
-        alloc_count::all = !warm_up;
+        alloc_count::all = counting && !warm_up;
       }
     }
-    const double s = seconds_since(t0) / double(steps);
-    alloc_count::all = false;
-    return s;
+    return seconds_since(t0) / double(k);
   }
 };
 
@@ -247,26 +280,23 @@ void thread_rows(const Options& opt, ThreadPool& pool, const std::vector<int>& c
   for (double size : bench_sizes(opt)) {
     ModelSpec spec = make_spec(make_bench_box(size, 1, 0.1), MaterialModel::StVK, precision);
     Run<Real> one(spec, nullptr);
-    std::vector<std::unique_ptr<Run<Real>>> on_cpu;  // one thread kept on each CPU in turn
-    for (int c : cpus) {
-      on_cpu.push_back(std::make_unique<Run<Real>>(spec, nullptr));
-      on_cpu.back()->cpu = c;
+    // Two one-thread runs at once, one on each CPU.
+    Run<Real> pair_a(spec, nullptr), pair_b(spec, nullptr);
+    std::vector<Run<Real>*> runs = {&one};
+    if (cpus.size() == 2) {
+      pair_a.cpu = cpus[0];
+      pair_b.cpu = cpus[1];
+      pair_a.twin = &pair_b;
+      runs.push_back(&pair_a);
     }
     spec.integrator.threads = 2;
     Run<Real> two(spec, &pool);
-    std::vector<Run<Real>*> runs = {&one, &two};
-    for (auto& r : on_cpu) runs.push_back(r.get());
+    runs.insert(runs.begin() + 1, &two);
     const std::vector<double> t = time_alternating<Real>(runs, opt);
     const double tets = one.model.n_tets;
     std::printf("| %-6s | %9d | %10.1f | %10.1f | %5d | %7.2fx |", name_of(precision), one.model.n_tets, tets / t[0] * 1e-6,
                 tets / t[1] * 1e-6, two.stepper.parts(), t[0] / t[1]);
-    if (cpus.size() == 2) {
-      // Two threads against the mean of the two CPUs' one-thread rates: the
-      // speedup the split gives on the cores this run had, whatever their
-      // difference in speed at the time.
-      const double r0 = tets / t[2] * 1e-6, r1 = tets / t[3] * 1e-6;
-      std::printf(" %10.1f | %10.1f | %7.2fx |", r0, r1, (tets / t[1] * 1e-6) / (0.5 * (r0 + r1)));
-    }
+    if (cpus.size() == 2) std::printf(" %12.1f | %10.0f %% |", tets / t[2] * 1e-6, 100.0 * t[2] / t[1]);
     std::printf("\n");
   }
 }
@@ -293,13 +323,12 @@ void table_threads(const Options& opt) {
   std::printf("\n## StVK, one thread against two (M tets/s)\n\n");
   std::printf("(parts: how many ways the stepper split the passes; small meshes stay on one)\n");
   if (cpus.size() == 2) {
-    std::printf("(cpu %d, cpu %d: one thread kept on that CPU. On a shared or virtual machine two CPUs can run at\n"
-                " different speeds, and each at a speed that drifts; \"vs both\" is the two-thread rate against the\n"
-                " mean of the two one-thread rates, timed in turn with the others)\n\n",
+    std::printf("(2 at once: two one-thread runs stepping at the same time, one on cpu %d and one on cpu %d,\n"
+                " their rates added up: what these two CPUs give when both are busy, which on a shared or\n"
+                " virtual machine can fall well short of twice one; of 2 at once: two threads' rate against it)\n\n",
                 cpus[0], cpus[1]);
-    std::printf("| real   |      tets |  1 thread  | 2 threads  | parts | speedup  |   cpu %-4d |   cpu %-4d | vs both  |\n",
-                cpus[0], cpus[1]);
-    std::printf("|--------|-----------|------------|------------|-------|----------|------------|------------|----------|\n");
+    std::printf("| real   |      tets |  1 thread  | 2 threads  | parts | speedup  |   2 at once  | of 2 at once |\n");
+    std::printf("|--------|-----------|------------|------------|-------|----------|--------------|--------------|\n");
   } else {
     std::printf("\n| real   |      tets |  1 thread  | 2 threads  | parts | speedup  |\n");
     std::printf("|--------|-----------|------------|------------|-------|----------|\n");
