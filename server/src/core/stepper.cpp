@@ -77,6 +77,13 @@ constexpr int32_t kShareOwnPercent = 75;
 // 1.2-1.7 us).
 constexpr int32_t kShareMaxChunks = 8;
 
+// Between polls of a spinning wait.
+inline void cpu_relax() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#endif
+}
+
 std::string list_ids(const std::vector<int32_t>& ids) {
   std::ostringstream out;
   for (size_t i = 0; i < ids.size() && i < 10; ++i) out << (i ? ", " : "") << ids[i];
@@ -179,7 +186,7 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
     for (int32_t j = 0; j < n_chunks; ++j) {  // whole strips, as even as they go
       const int32_t b0 = strips[size_t(int64_t(n_strips) * j / n_chunks)];
       const int32_t b1 = strips[size_t(int64_t(n_strips) * (j + 1) / n_chunks)];
-      chunks_.push_back({b0, b1, add_region(b0, b1)});
+      chunks_.push_back({b0, b1, add_region(b0, b1), 0, -1});
     }
     left.chunk_end = right.chunk_end = static_cast<int32_t>(chunks_.size());
   }
@@ -198,6 +205,44 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
     for (const Region& r : regions_)
       for (int32_t g = r.begin / 16; g < r.end / 16; ++g) group_offset_[size_t(fill[size_t(g)]++)] = r.offset;
   }
+  // The parts whose nodes a range of blocks reads (parts tile the nodes in order).
+  auto waits = [&](int32_t b0, int32_t b1, int32_t& wait_lo, int32_t& wait_hi) {
+    int32_t nlo = model_.n_nodes, nhi = 0;
+    for (int32_t b = b0; b < b1; ++b) {
+      nlo = std::min(nlo, lo[size_t(b)]);
+      nhi = std::max(nhi, hi[size_t(b)]);
+    }
+    wait_lo = 0;
+    wait_hi = -1;
+    for (int32_t q = 0; q < n_parts_; ++q) {
+      const Part& part = part_[size_t(q)];
+      if (part.node_begin >= nhi || part.node_end <= nlo || part.node_begin >= part.node_end) continue;
+      if (wait_hi < wait_lo) wait_lo = q;
+      wait_hi = q;
+    }
+  };
+  for (Part& part : part_) waits(part.own_begin, part.own_end, part.wait_lo, part.wait_hi);
+  for (Chunk& c : chunks_) waits(c.block_begin, c.block_end, c.wait_lo, c.wait_hi);
+  {
+    int32_t c = 0;
+    for (size_t k = 0; k < model_.essential.size(); ++k)
+      for (int32_t i : model_.essential[k].nodes) essential_entries_.push_back({int32_t(k), i, c++});
+    // By part (a node's entries stay in set order: a node in two sets takes the later one's motion).
+    auto part_of = [&](int32_t node) {
+      int32_t q = 0;
+      while (q + 1 < n_parts_ && node >= part_[size_t(q)].node_end) ++q;
+      return q;
+    };
+    std::stable_sort(essential_entries_.begin(), essential_entries_.end(),
+                     [&](const EssentialEntry& a, const EssentialEntry& b) { return part_of(a.node) < part_of(b.node); });
+    size_t k = 0;
+    for (int32_t q = 0; q < n_parts_; ++q) {
+      part_[size_t(q)].essential_begin = k;
+      while (k < essential_entries_.size() && part_of(essential_entries_[k].node) == q) ++k;
+      part_[size_t(q)].essential_end = k;
+    }
+  }
+  predicted_ = std::make_unique<PredictClaim[]>(size_t(n_parts_));
   u4_.assign(size_t(model_.n_nodes), Node4<Real>{});
   elastic_.assign(regions_.size(), ElasticSums{});
   correct_sums_.assign(size_t(n_parts_), CorrectSums{});
@@ -275,6 +320,14 @@ template <class Real>
 void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   auto* self = static_cast<Stepper*>(ctx);
   const Part& part = self->part_[size_t(p)];
+  if (self->fused_) {
+    // This step's positions first: this part's own, then those of the parts
+    // whose nodes its blocks read. A part no thread has reached yet is
+    // predicted here (a pool may run the parts in any order, even one after
+    // the other on one thread): waiting only ever waits for a thread at work.
+    self->ensure_predicted(p);
+    for (int32_t q = part.wait_lo; q <= part.wait_hi; ++q) self->ensure_predicted(q);
+  }
   // Every region is zero on entry: the correctors cleared every entry they read.
   self->elastic_blocks(part.own_begin, part.own_end, part.own_region);
   if (part.side == 0) return;
@@ -296,6 +349,8 @@ void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
                                          : (uint64_t(uint32_t(r - 1)) << 32 | uint32_t(l));
     if (!ends.compare_exchange_weak(e, next, std::memory_order_relaxed)) continue;
     const Chunk& c = self->chunks_[size_t(part.side == 1 ? l : r - 1)];
+    if (self->fused_)
+      for (int32_t q = c.wait_lo; q <= c.wait_hi; ++q) self->ensure_predicted(q);
     self->elastic_blocks(c.block_begin, c.block_end, c.region);
     e = next;
   }
@@ -325,22 +380,43 @@ void Stepper<Real>::correct_part(void* ctx, int32_t p) {
 }
 
 template <class Real>
-void Stepper<Real>::apply_essential_positions(State<Real>& s, double t) {
+void Stepper<Real>::apply_essential_positions(State<Real>& s, double t, size_t begin, size_t end) {
   // Essential BCs set displacement and velocity directly, section 4.1.
-  size_t c = 0;
-  for (const EssentialSet& set : model_.essential) {
-    for (int32_t i : set.nodes) {
-      const Vec3& X = model_.mesh.X[size_t(i)];
-      const Kinematics k = set.moving ? compute_bc_kinematics(set.spec, X, t) : Kinematics{X, Vec3(0.0), Vec3(0.0)};
-      const Vec3 u = k.x - X;
-      for (int d = 0; d < 3; ++d) {
-        s.u[3 * size_t(i) + size_t(d)] = Real(u[d]);
-        u4_[size_t(i)].v[d] = Real(u[d]);  // the element pass's copy
-        v_prescribed_[3 * c + size_t(d)] = Real(k.v[d]);
-        a_prescribed_[3 * c + size_t(d)] = Real(k.a[d]);
-      }
-      ++c;
+  for (size_t k = begin; k < end; ++k) {
+    const EssentialEntry& entry = essential_entries_[k];
+    const EssentialSet& set = model_.essential[size_t(entry.set)];
+    const auto i = size_t(entry.node), c = size_t(entry.c);
+    const Vec3& X = model_.mesh.X[i];
+    const Kinematics kin = set.moving ? compute_bc_kinematics(set.spec, X, t) : Kinematics{X, Vec3(0.0), Vec3(0.0)};
+    const Vec3 u = kin.x - X;
+    for (int d = 0; d < 3; ++d) {
+      s.u[3 * i + size_t(d)] = Real(u[d]);
+      u4_[i].v[d] = Real(u[d]);  // the element pass's copy
+      v_prescribed_[3 * c + size_t(d)] = Real(kin.v[d]);
+      a_prescribed_[3 * c + size_t(d)] = Real(kin.a[d]);
     }
+  }
+}
+
+template <class Real>
+void Stepper<Real>::ensure_predicted(int32_t q) {
+  std::atomic<uint64_t>& state = predicted_[size_t(q)].state;
+  const uint64_t claimed = uint64_t(epoch_) << 2 | 1, done = uint64_t(epoch_) << 2 | 2;
+  uint64_t v = state.load(std::memory_order_acquire);
+  for (;;) {
+    if (v == done) return;
+    if (v == claimed) {  // another thread is at it
+      cpu_relax();
+      v = state.load(std::memory_order_acquire);
+      continue;
+    }
+    if (!state.compare_exchange_weak(v, claimed, std::memory_order_acq_rel, std::memory_order_acquire)) continue;
+    const Part& part = part_[size_t(q)];
+    State<Real>& s = *cur_;
+    kernels_.predict(part.node_begin, part.node_end, cur_dt_, s.u.data(), s.v.data(), s.a.data(), u4_.data());
+    apply_essential_positions(s, cur_t1_, part.essential_begin, part.essential_end);
+    state.store(done, std::memory_order_release);
+    return;
   }
 }
 
@@ -414,7 +490,7 @@ void Stepper<Real>::apply_initial_acceleration(State<Real>& s) {
   // that and leaves v alone.
   cur_ = &s;
   cur_dt_ = Real(0);
-  if (!model_.essential.empty()) apply_essential_positions(s, s.t);
+  if (!model_.essential.empty()) apply_essential_positions(s, s.t, 0, essential_entries_.size());
   run_parts(&Stepper::pad_part, this);  // no predictor has written u4_
   run_elastic();
   if (!model_.loads.empty()) {
@@ -495,19 +571,31 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     u_before_[nc + c] = Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
   }
 
-  enter(Pass::Predict);
-  run_parts(&Stepper::predict_part, this);  // eq. (7)
-  leave(Pass::Predict);
-
-  if (!model_.essential.empty()) {
-    enter(Pass::Essential);
-    apply_essential_positions(s, t1);
-    leave(Pass::Essential);
+  cur_t1_ = t1;
+  if (n_parts_ == 1) {
+    enter(Pass::Predict);
+    run_parts(&Stepper::predict_part, this);  // eq. (7)
+    leave(Pass::Predict);
+    if (!model_.essential.empty()) {
+      enter(Pass::Essential);
+      apply_essential_positions(s, t1, 0, essential_entries_.size());
+      leave(Pass::Essential);
+    }
+    enter(Pass::Elastic);
+    run_elastic();  // R(u_{n+1})
+    leave(Pass::Elastic);
+  } else {
+    // Split over threads, each part predicts its nodes (eq. 7) and sets its
+    // essential positions inside the element pass, which then waits only for
+    // the parts whose nodes its blocks read (see elastic_part): one hand-off
+    // fewer.
+    ++epoch_;
+    fused_ = true;
+    enter(Pass::Elastic);
+    run_elastic();
+    leave(Pass::Elastic);
+    fused_ = false;
   }
-
-  enter(Pass::Elastic);
-  run_elastic();  // R(u_{n+1})
-  leave(Pass::Elastic);
 
   if (!model_.loads.empty()) {
     enter(Pass::Loads);

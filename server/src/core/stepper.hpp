@@ -118,6 +118,10 @@ class Stepper {
     int32_t own_begin = 0, own_end = 0;  // the blocks it always takes
     int32_t own_region = 0;       // where their forces go, in regions_
     int32_t chunk_begin = 0, chunk_end = 0;  // its pair's middle chunks, in chunks_
+    // The parts whose nodes its own blocks read: [wait_lo, wait_hi].
+    int32_t wait_lo = 0, wait_hi = -1;
+    // Its constrained nodes' entries, [essential_begin, essential_end) in essential_entries_.
+    size_t essential_begin = 0, essential_end = 0;
   };
   // A force array: the nodes [begin, end) (multiples of 16) one part's own
   // blocks or one middle chunk touch, stored at f_[offset + begin, offset + end).
@@ -128,6 +132,17 @@ class Stepper {
   // A middle chunk: blocks [block_begin, block_end), forces into `region`.
   struct Chunk {
     int32_t block_begin, block_end, region;
+    int32_t wait_lo, wait_hi;  // the parts whose nodes its blocks read
+  };
+  // One node of one essential set: c counts the sets' nodes in order (the
+  // index into v_prescribed_ and a_prescribed_).
+  struct EssentialEntry {
+    int32_t set, node, c;
+  };
+  // Whether a part's nodes are predicted this step: (epoch << 2) | 1 while a
+  // thread predicts them, | 2 once done.
+  struct alignas(64) PredictClaim {
+    std::atomic<uint64_t> state{0};
   };
   // The chunks of a pair's middle not yet claimed, [left, right) as indices
   // into chunks_ (left in the low 32 bits), on a cache line of their own.
@@ -136,7 +151,11 @@ class Stepper {
   };
 
   int32_t n_constrained() const { return static_cast<int32_t>(model_.constrained.size()); }
-  void apply_essential_positions(State<Real>& s, double t);
+  // The entries [begin, end) of essential_entries_.
+  void apply_essential_positions(State<Real>& s, double t, size_t begin, size_t end);
+  // Part q's predictor and essential positions of this step, run by this
+  // thread unless another has claimed them; returns once they are done.
+  void ensure_predicted(int32_t q);
   void apply_essential_rates(State<Real>& s, double t, double dt);
   void apply_loads(const State<Real>& s, double t);
   void add_load_force(int32_t node, const Vec3& force);
@@ -187,10 +206,15 @@ class Stepper {
   std::vector<Real> a_prescribed_;       // prescribed accelerations (n_constrained x 3)
   std::vector<Real> v_prescribed_;       // prescribed velocities (n_constrained x 3)
   std::vector<int32_t> loaded_;          // loaded node ids, flattened over loads
+  std::vector<EssentialEntry> essential_entries_;  // grouped by part, each part's in set order
+  std::unique_ptr<PredictClaim[]> predicted_;      // per part
+  uint32_t epoch_ = 0;                   // steps that predicted inside the element pass
+  bool fused_ = false;                   // the element pass predicts first (see elastic_part)
 
   // Per-step context for the part functions.
   State<Real>* cur_ = nullptr;
   Real cur_dt_ = 0;
+  double cur_t1_ = 0;  // the time the step reaches [s]
 
   double essential_mv2_delta_ = 0;  // constrained nodes' change of m |v|^2 in this step
   double essential_ma2_delta_ = 0;  // and of m |a|^2
