@@ -570,7 +570,8 @@ void pass_rows(const Options& opt, ThreadPool& pool) {
 void table_passes(const Options& opt) {
   ThreadPool pool(2);
   std::printf("\n## Where the bare StVK step goes (us per step; threads: parts the passes were split in)\n\n");
-  std::printf("(split over threads, each part predicts its nodes inside the elastic pass: its column has both)\n\n");
+  std::printf("(split over threads, each part predicts and, with no loads, corrects its nodes inside the elastic\n"
+              " pass: its column has all three)\n\n");
   std::printf("| real   |      tets | threads | all       | predict | elastic | correct | guard  |\n");
   std::printf("|--------|-----------|---------|-----------|---------|---------|---------|--------|\n");
   pass_rows<float>(opt, pool);

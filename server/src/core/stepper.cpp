@@ -200,10 +200,14 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
     for (int32_t g = r.begin / 16; g < r.end / 16; ++g) ++group_begin_[size_t(g) + 1];
   for (int32_t g = 0; g < n_groups; ++g) group_begin_[size_t(g) + 1] += group_begin_[size_t(g)];
   group_offset_.assign(size_t(group_begin_.back()), 0);
+  std::vector<int32_t> group_region(group_offset_.size(), 0);  // the same lists, as region indices
   {
     std::vector<int32_t> fill(group_begin_.begin(), group_begin_.end() - 1);
-    for (const Region& r : regions_)
-      for (int32_t g = r.begin / 16; g < r.end / 16; ++g) group_offset_[size_t(fill[size_t(g)]++)] = r.offset;
+    for (size_t r = 0; r < regions_.size(); ++r)
+      for (int32_t g = regions_[r].begin / 16; g < regions_[r].end / 16; ++g) {
+        group_region[size_t(fill[size_t(g)])] = int32_t(r);
+        group_offset_[size_t(fill[size_t(g)]++)] = regions_[r].offset;
+      }
   }
   // The parts whose nodes a range of blocks reads (parts tile the nodes in order).
   auto waits = [&](int32_t b0, int32_t b1, int32_t& wait_lo, int32_t& wait_hi) {
@@ -242,7 +246,43 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
       part_[size_t(q)].essential_end = k;
     }
   }
+  // Who fills each region, and each part's nodes in A (only its own blocks'
+  // region holds them: the longer run of such 16-node groups at either end of
+  // its range) and B (the rest, with the regions they wait for).
+  region_part_.assign(regions_.size(), -1);
+  region_pair_.assign(regions_.size(), -1);
+  for (int32_t q = 0; q < n_parts_; ++q) region_part_[size_t(part_[size_t(q)].own_region)] = q;
+  for (int32_t k = 0; k < n_pairs; ++k)
+    for (int32_t j = part_[size_t(2 * k)].chunk_begin; j < part_[size_t(2 * k)].chunk_end; ++j)
+      region_pair_[size_t(chunks_[size_t(j)].region)] = k;
+  for (Part& part : part_) {
+    const int32_t g0 = part.node_begin / 16, g1 = (part.node_end + 15) / 16;
+    auto own_only = [&](int32_t g) {
+      for (int32_t k = group_begin_[size_t(g)]; k < group_begin_[size_t(g) + 1]; ++k)
+        if (group_region[size_t(k)] != part.own_region) return false;
+      return true;
+    };
+    int32_t head = g0, tail = g1;
+    while (head < g1 && own_only(head)) ++head;
+    while (tail > head && own_only(tail - 1)) --tail;
+    auto node = [&](int32_t g) { return std::min(g * 16, part.node_end); };
+    if (head - g0 >= g1 - tail) {
+      part.a_begin = part.node_begin, part.a_end = node(head), part.b_begin = node(head), part.b_end = part.node_end;
+    } else {
+      part.a_begin = node(tail), part.a_end = part.node_end, part.b_begin = part.node_begin, part.b_end = node(tail);
+    }
+    std::vector<int32_t> wait;
+    for (int32_t g = part.b_begin / 16; g < (part.b_end + 15) / 16 && part.b_begin < part.b_end; ++g)
+      for (int32_t k = group_begin_[size_t(g)]; k < group_begin_[size_t(g) + 1]; ++k) wait.push_back(group_region[size_t(k)]);
+    std::sort(wait.begin(), wait.end());
+    wait.erase(std::unique(wait.begin(), wait.end()), wait.end());
+    part.wait_region_begin = wait_regions_.size();
+    wait_regions_.insert(wait_regions_.end(), wait.begin(), wait.end());
+    part.wait_region_end = wait_regions_.size();
+  }
   predicted_ = std::make_unique<PredictClaim[]>(size_t(n_parts_));
+  own_claim_ = std::make_unique<PredictClaim[]>(size_t(n_parts_));
+  region_done_ = std::make_unique<RegionDone[]>(regions_.size());
   u4_.assign(size_t(model_.n_nodes), Node4<Real>{});
   elastic_.assign(regions_.size(), ElasticSums{});
   correct_sums_.assign(size_t(n_parts_), CorrectSums{});
@@ -320,17 +360,36 @@ template <class Real>
 void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   auto* self = static_cast<Stepper*>(ctx);
   const Part& part = self->part_[size_t(p)];
-  if (self->fused_) {
-    // This step's positions first: this part's own, then those of the parts
-    // whose nodes its blocks read. A part no thread has reached yet is
-    // predicted here (a pool may run the parts in any order, even one after
-    // the other on one thread): waiting only ever waits for a thread at work.
-    self->ensure_predicted(p);
-    for (int32_t q = part.wait_lo; q <= part.wait_hi; ++q) self->ensure_predicted(q);
+  if (!self->fused_) {
+    // Every region is zero on entry: the correctors cleared every entry they read.
+    self->elastic_blocks(part.own_begin, part.own_end, part.own_region);
+    if (part.side != 0) self->claim_chunks(part.share, part.side);
+    return;
   }
-  // Every region is zero on entry: the correctors cleared every entry they read.
-  self->elastic_blocks(part.own_begin, part.own_end, part.own_region);
-  if (part.side == 0) return;
+  // Split over threads, one job per part does the whole step's node and
+  // element work: this step's positions first, this part's own, then those
+  // of the parts whose nodes its blocks read; its own blocks; its share of
+  // its pair's middle; then the corrector, first on the nodes only its own
+  // blocks touch, then on the rest once the regions that hold them are done.
+  // Whatever it needs that no thread has claimed yet it does itself (a pool
+  // may run the parts in any order, even one after the other on one thread),
+  // so a wait only ever waits for a thread at work. The corrector's two
+  // ranges are fixed and summed in order: the result does not depend on
+  // which thread did what.
+  self->ensure_predicted(p);
+  for (int32_t q = part.wait_lo; q <= part.wait_hi; ++q) self->ensure_predicted(q);
+  self->ensure_own(p);
+  if (part.side != 0) self->claim_chunks(part.share, part.side);
+  if (!self->fused_correct_) return;
+  self->ensure_region(part.own_region);
+  const CorrectSums a = self->correct_range(part.a_begin, part.a_end);
+  for (size_t k = part.wait_region_begin; k < part.wait_region_end; ++k) self->ensure_region(self->wait_regions_[k]);
+  const CorrectSums b = self->correct_range(part.b_begin, part.b_end);
+  self->correct_sums_[size_t(p)] = {a.abs_a + b.abs_a, a.mv2 + b.mv2, a.mgu + b.mgu, a.ma2 + b.ma2};
+}
+
+template <class Real>
+void Stepper<Real>::claim_chunks(int32_t k, int side) {
   // Two parts of a pair share the middle of their blocks, in chunks: each
   // takes its own share first (three quarters of its part, at the pair's
   // ends), then claims middle chunks (whole strips) from its side until the
@@ -340,35 +399,68 @@ void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   // of a 70 us step at 20 k tets. Each chunk has its own force array, which
   // the correctors add in a fixed order: the result is the same bit for bit
   // wherever the two threads meet (resim relies on it).
-  std::atomic<uint64_t>& ends = self->shares_[size_t(part.share)].ends;
+  std::atomic<uint64_t>& ends = shares_[size_t(k)].ends;
   uint64_t e = ends.load(std::memory_order_relaxed);
   for (;;) {
     const auto l = int32_t(uint32_t(e)), r = int32_t(e >> 32);
     if (l >= r) return;
-    const uint64_t next = part.side == 1 ? (uint64_t(uint32_t(r)) << 32 | uint32_t(l + 1))
-                                         : (uint64_t(uint32_t(r - 1)) << 32 | uint32_t(l));
+    const uint64_t next =
+        side == 1 ? (uint64_t(uint32_t(r)) << 32 | uint32_t(l + 1)) : (uint64_t(uint32_t(r - 1)) << 32 | uint32_t(l));
     if (!ends.compare_exchange_weak(e, next, std::memory_order_relaxed)) continue;
-    const Chunk& c = self->chunks_[size_t(part.side == 1 ? l : r - 1)];
-    if (self->fused_)
-      for (int32_t q = c.wait_lo; q <= c.wait_hi; ++q) self->ensure_predicted(q);
-    self->elastic_blocks(c.block_begin, c.block_end, c.region);
+    const Chunk& c = chunks_[size_t(side == 1 ? l : r - 1)];
+    if (fused_) {
+      for (int32_t q = c.wait_lo; q <= c.wait_hi; ++q) ensure_predicted(q);
+    }
+    elastic_blocks(c.block_begin, c.block_end, c.region);
+    if (fused_) region_done_[size_t(c.region)].epoch.store(epoch_, std::memory_order_release);
     e = next;
   }
 }
 
 template <class Real>
-void Stepper<Real>::correct_part(void* ctx, int32_t p) {
-  auto* self = static_cast<Stepper*>(ctx);
-  const Part& part = self->part_[size_t(p)];
-  const Model<Real>& m = self->model_;
-  State<Real>& s = *self->cur_;
+void Stepper<Real>::ensure_own(int32_t q) {
+  std::atomic<uint64_t>& state = own_claim_[size_t(q)].state;
+  const uint64_t claimed = uint64_t(epoch_) << 2 | 1, done = uint64_t(epoch_) << 2 | 2;
+  uint64_t v = state.load(std::memory_order_acquire);
+  for (;;) {
+    if (v == done) return;
+    if (v == claimed) {  // another thread is at it
+      cpu_relax();
+      v = state.load(std::memory_order_acquire);
+      continue;
+    }
+    if (!state.compare_exchange_weak(v, claimed, std::memory_order_acq_rel, std::memory_order_acquire)) continue;
+    const Part& part = part_[size_t(q)];
+    for (int32_t w = part.wait_lo; w <= part.wait_hi; ++w) ensure_predicted(w);
+    // Every region is zero on entry: the correctors cleared every entry they read.
+    elastic_blocks(part.own_begin, part.own_end, part.own_region);
+    region_done_[size_t(part.own_region)].epoch.store(epoch_, std::memory_order_release);
+    state.store(done, std::memory_order_release);
+    return;
+  }
+}
+
+template <class Real>
+void Stepper<Real>::ensure_region(int32_t r) {
+  std::atomic<uint32_t>& done = region_done_[size_t(r)].epoch;
+  if (done.load(std::memory_order_acquire) == epoch_) return;
+  if (region_part_[size_t(r)] >= 0) ensure_own(region_part_[size_t(r)]);
+  else if (region_pair_[size_t(r)] >= 0) claim_chunks(region_pair_[size_t(r)], 1);
+  while (done.load(std::memory_order_acquire) != epoch_) cpu_relax();  // claimed: a thread is at it
+}
+
+template <class Real>
+CorrectSums Stepper<Real>::correct_range(int32_t begin, int32_t end) {
+  if (begin >= end) return CorrectSums{};
+  const Model<Real>& m = model_;
+  State<Real>& s = *cur_;
   CorrectArgs<Real> args{};
-  args.begin = part.node_begin;
-  args.end = part.node_end;
-  args.dt = self->cur_dt_;
-  args.f = self->f_.data();
-  args.group_begin = self->group_begin_.data();
-  args.group_offset = self->group_offset_.data();
+  args.begin = begin;
+  args.end = end;
+  args.dt = cur_dt_;
+  args.f = f_.data();
+  args.group_begin = group_begin_.data();
+  args.group_offset = group_offset_.data();
   args.inv_m = m.inv_m.data();
   args.m = m.m.data();
   for (int k = 0; k < 3; ++k) args.g[k] = Real(m.effects.g[k]);
@@ -376,7 +468,14 @@ void Stepper<Real>::correct_part(void* ctx, int32_t p) {
   args.u = s.u.data();
   args.v = s.v.data();
   args.a = s.a.data();
-  self->correct_sums_[size_t(p)] = self->correct_(args);
+  return correct_(args);
+}
+
+template <class Real>
+void Stepper<Real>::correct_part(void* ctx, int32_t p) {
+  auto* self = static_cast<Stepper*>(ctx);
+  const Part& part = self->part_[size_t(p)];
+  self->correct_sums_[size_t(p)] = self->correct_range(part.node_begin, part.node_end);
 }
 
 template <class Real>
@@ -585,27 +684,30 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     run_elastic();  // R(u_{n+1})
     leave(Pass::Elastic);
   } else {
-    // Split over threads, each part predicts its nodes (eq. 7) and sets its
-    // essential positions inside the element pass, which then waits only for
-    // the parts whose nodes its blocks read (see elastic_part): one hand-off
-    // fewer.
+    // Split over threads, one job per part predicts its nodes (eq. 7), sets
+    // its essential positions, adds its elements' forces and, without loads,
+    // corrects its nodes (eqs. 8-10), waiting only for what each of those
+    // reads (see elastic_part): one hand-off where there were three.
     ++epoch_;
     fused_ = true;
+    fused_correct_ = model_.loads.empty();  // loads go into the force arrays between the two
     enter(Pass::Elastic);
     run_elastic();
     leave(Pass::Elastic);
     fused_ = false;
   }
 
-  if (!model_.loads.empty()) {
-    enter(Pass::Loads);
-    apply_loads(s, t1);  // F_{n+1}
-    leave(Pass::Loads);
+  if (!fused_correct_) {
+    if (!model_.loads.empty()) {
+      enter(Pass::Loads);
+      apply_loads(s, t1);  // F_{n+1}
+      leave(Pass::Loads);
+    }
+    enter(Pass::Correct);
+    run_parts(&Stepper::correct_part, this);  // eqs. (8)-(10), then (9)
+    leave(Pass::Correct);
   }
-
-  enter(Pass::Correct);
-  run_parts(&Stepper::correct_part, this);  // eqs. (8)-(10), then (9)
-  leave(Pass::Correct);
+  fused_correct_ = false;
 
   double contact_mv2_delta = 0, contact_ma2_delta = 0;
   if (!model_.proxies.empty()) {

@@ -122,6 +122,12 @@ class Stepper {
     int32_t wait_lo = 0, wait_hi = -1;
     // Its constrained nodes' entries, [essential_begin, essential_end) in essential_entries_.
     size_t essential_begin = 0, essential_end = 0;
+    // Its nodes in two ranges for the corrector inside the element pass: A,
+    // held by its own blocks' force array alone (corrected as soon as those
+    // are done), then B, after the regions [wait_region_begin,
+    // wait_region_end) of wait_regions_ are done.
+    int32_t a_begin = 0, a_end = 0, b_begin = 0, b_end = 0;
+    size_t wait_region_begin = 0, wait_region_end = 0;
   };
   // A force array: the nodes [begin, end) (multiples of 16) one part's own
   // blocks or one middle chunk touch, stored at f_[offset + begin, offset + end).
@@ -139,10 +145,14 @@ class Stepper {
   struct EssentialEntry {
     int32_t set, node, c;
   };
-  // Whether a part's nodes are predicted this step: (epoch << 2) | 1 while a
-  // thread predicts them, | 2 once done.
+  // Whether a part's nodes are predicted (or its own blocks done) this step:
+  // (epoch << 2) | 1 while a thread is at it, | 2 once done.
   struct alignas(64) PredictClaim {
     std::atomic<uint64_t> state{0};
+  };
+  // The step (epoch) whose forces a region holds in full.
+  struct alignas(64) RegionDone {
+    std::atomic<uint32_t> epoch{0};
   };
   // The chunks of a pair's middle not yet claimed, [left, right) as indices
   // into chunks_ (left in the low 32 bits), on a cache line of their own.
@@ -156,6 +166,14 @@ class Stepper {
   // Part q's predictor and essential positions of this step, run by this
   // thread unless another has claimed them; returns once they are done.
   void ensure_predicted(int32_t q);
+  // Part q's own blocks, the same way.
+  void ensure_own(int32_t q);
+  // Claims and runs pair k's middle chunks from one side until none is left.
+  void claim_chunks(int32_t k, int side);
+  // Returns once region r holds this step's forces in full, doing what no
+  // thread has claimed yet.
+  void ensure_region(int32_t r);
+  CorrectSums correct_range(int32_t begin, int32_t end);
   void apply_essential_rates(State<Real>& s, double t, double dt);
   void apply_loads(const State<Real>& s, double t);
   void add_load_force(int32_t node, const Vec3& force);
@@ -208,8 +226,14 @@ class Stepper {
   std::vector<int32_t> loaded_;          // loaded node ids, flattened over loads
   std::vector<EssentialEntry> essential_entries_;  // grouped by part, each part's in set order
   std::unique_ptr<PredictClaim[]> predicted_;      // per part
+  std::unique_ptr<PredictClaim[]> own_claim_;      // per part: its own blocks
+  std::unique_ptr<RegionDone[]> region_done_;      // per region
+  std::vector<int32_t> region_part_;     // per region: the part whose own blocks fill it, or -1
+  std::vector<int32_t> region_pair_;     // per region: the pair whose middle chunk fills it, or -1
+  std::vector<int32_t> wait_regions_;    // per part, the regions its B nodes wait for
   uint32_t epoch_ = 0;                   // steps that predicted inside the element pass
   bool fused_ = false;                   // the element pass predicts first (see elastic_part)
+  bool fused_correct_ = false;           // and corrects last
 
   // Per-step context for the part functions.
   State<Real>* cur_ = nullptr;

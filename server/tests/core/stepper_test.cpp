@@ -745,5 +745,60 @@ TEST(Stepper, PartsSetTheirEssentialPositionsWhicheverRunsFirst) {
   EXPECT_EQ(b.reaction, c.reaction);
 }
 
+// Without loads the parts correct their nodes inside the element pass, each
+// once the force arrays that hold them are done, doing any still unclaimed
+// itself; with loads, in a pass of their own after the loads are added. With
+// 2, 3 and 4 parts (a part's nodes then also take forces from the next pair's
+// blocks) run one after the other each way: one result whichever part runs
+// first, and the same motion as one part.
+TEST(Stepper, PartsCorrectAfterTheLoadsWhicheverRunsFirst) {
+  for (int threads : {2, 3, 4})
+  for (bool loaded : {false, true}) {
+    ModelSpec spec = make_spec(make_box(Vec3(0.0), Vec3(0.4, 0.1, 0.1), {48, 8, 8}), MaterialModel::StVK);
+    spec.integrator.threads = threads;
+    EssentialBc held;
+    held.where.kind = NodeSelector::Kind::Plane;
+    held.where.normal = Vec3(1.0, 0.0, 0.0);
+    spec.essential = {held};
+    if (loaded) {
+      NaturalLoad tip;
+      tip.where.kind = NodeSelector::Kind::Plane;
+      tip.where.point = Vec3(0.4, 0.0, 0.0);
+      tip.where.normal = Vec3(1.0, 0.0, 0.0);
+      tip.force = Vec3(0.0, -2.0, 1.0);  // [N]
+      spec.loads = {tip};
+    }
+    const Model<double> model = build_model<double>(spec);
+    ASSERT_EQ(model.parts.size(), size_t(threads));
+    using Order = OneAfterTheOther::Order;
+    OneAfterTheOther forward(Order::Forward), backward(Order::Backward);
+    Stepper<double> one(model), left(model, &forward), right(model, &backward);
+    State<double> a = one.make_state();
+    set_random_velocities(a, 0.2, 3);
+    State<double> b = a, c = a;
+    const double dt = 0.5 * model.dt_rest;
+    for (int k = 0; k < 60; ++k) {
+      ASSERT_FALSE(one.step(a, dt));
+      ASSERT_FALSE(left.step(b, dt));
+      ASSERT_FALSE(right.step(c, dt));
+    }
+    double worst = 0, scale = 0;
+    for (size_t j = 0; j < a.u.size(); ++j) {
+      worst = std::max(worst, std::fabs(a.u[j] - b.u[j]));
+      scale = std::max(scale, std::fabs(a.u[j]));
+    }
+    EXPECT_GT(scale, 1e-4) << threads << " parts, loaded " << loaded;
+    EXPECT_LE(worst, 1e-9 * scale) << threads << " parts, loaded " << loaded;
+    EXPECT_EQ(b.u, c.u) << threads << " parts, loaded " << loaded;
+    EXPECT_EQ(b.v, c.v) << threads << " parts, loaded " << loaded;
+    EXPECT_EQ(b.a, c.a) << threads << " parts, loaded " << loaded;
+    EXPECT_NEAR(left.energy().kinetic, one.energy().kinetic, 1e-9 * one.energy().kinetic) << threads << " parts, loaded " << loaded;
+    EXPECT_NEAR(b.work_loads, a.work_loads, 1e-9 * std::fabs(a.work_loads) + 1e-15) << threads << " parts, loaded " << loaded;
+    if (loaded) {
+      EXPECT_GT(std::fabs(a.work_loads), 1e-6);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace tactile
