@@ -12,7 +12,10 @@
 //
 // The stepper owns a preallocated workspace: a step allocates nothing. It
 // starts no threads: a ParallelFor from the application layer splits the
-// element and node passes.
+// element and node passes. Split, a step is one job per part (predictor,
+// essential positions, elastic forces and, without loads, the corrector),
+// whose parts wait on each other only for the nodes and force arrays they
+// share (stepper.cpp, elastic_part).
 #pragma once
 
 #include <atomic>
