@@ -377,8 +377,7 @@ void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   // ranges are fixed and summed in order: the result does not depend on
   // which thread did what.
   self->ensure_predicted(p);
-  for (int32_t q = part.wait_lo; q <= part.wait_hi; ++q) self->ensure_predicted(q);
-  self->ensure_own(p);
+  self->ensure_own(p);  // (which sees to the other parts' positions its blocks read)
   if (part.side != 0) self->claim_chunks(part.share, part.side);
   if (!self->fused_correct_) return;
   self->ensure_region(part.own_region);
