@@ -84,6 +84,27 @@ inline void cpu_relax() {
 #endif
 }
 
+// Runs `work` once in step `epoch`, whichever threads ask: the first claims
+// it (state (epoch << 2) | 1) and runs it; the others wait while it is at it
+// and return once it is done ((epoch << 2) | 2).
+template <class Fn>
+void run_once(std::atomic<uint64_t>& state, uint32_t epoch, Fn&& work) {
+  const uint64_t claimed = uint64_t(epoch) << 2 | 1, done = uint64_t(epoch) << 2 | 2;
+  uint64_t v = state.load(std::memory_order_acquire);
+  for (;;) {
+    if (v == done) return;
+    if (v == claimed) {  // another thread is at it
+      cpu_relax();
+      v = state.load(std::memory_order_acquire);
+      continue;
+    }
+    if (!state.compare_exchange_weak(v, claimed, std::memory_order_acq_rel, std::memory_order_acquire)) continue;
+    work();
+    state.store(done, std::memory_order_release);
+    return;
+  }
+}
+
 std::string list_ids(const std::vector<int32_t>& ids) {
   std::ostringstream out;
   for (size_t i = 0; i < ids.size() && i < 10; ++i) out << (i ? ", " : "") << ids[i];
@@ -418,25 +439,13 @@ void Stepper<Real>::claim_chunks(int32_t k, int side) {
 
 template <class Real>
 void Stepper<Real>::ensure_own(int32_t q) {
-  std::atomic<uint64_t>& state = own_claim_[size_t(q)].state;
-  const uint64_t claimed = uint64_t(epoch_) << 2 | 1, done = uint64_t(epoch_) << 2 | 2;
-  uint64_t v = state.load(std::memory_order_acquire);
-  for (;;) {
-    if (v == done) return;
-    if (v == claimed) {  // another thread is at it
-      cpu_relax();
-      v = state.load(std::memory_order_acquire);
-      continue;
-    }
-    if (!state.compare_exchange_weak(v, claimed, std::memory_order_acq_rel, std::memory_order_acquire)) continue;
+  run_once(own_claim_[size_t(q)].state, epoch_, [&] {
     const Part& part = part_[size_t(q)];
     for (int32_t w = part.wait_lo; w <= part.wait_hi; ++w) ensure_predicted(w);
     // Every region is zero on entry: the correctors cleared every entry they read.
     elastic_blocks(part.own_begin, part.own_end, part.own_region);
     region_done_[size_t(part.own_region)].epoch.store(epoch_, std::memory_order_release);
-    state.store(done, std::memory_order_release);
-    return;
-  }
+  });
 }
 
 template <class Real>
@@ -498,24 +507,12 @@ void Stepper<Real>::apply_essential_positions(State<Real>& s, double t, size_t b
 
 template <class Real>
 void Stepper<Real>::ensure_predicted(int32_t q) {
-  std::atomic<uint64_t>& state = predicted_[size_t(q)].state;
-  const uint64_t claimed = uint64_t(epoch_) << 2 | 1, done = uint64_t(epoch_) << 2 | 2;
-  uint64_t v = state.load(std::memory_order_acquire);
-  for (;;) {
-    if (v == done) return;
-    if (v == claimed) {  // another thread is at it
-      cpu_relax();
-      v = state.load(std::memory_order_acquire);
-      continue;
-    }
-    if (!state.compare_exchange_weak(v, claimed, std::memory_order_acq_rel, std::memory_order_acquire)) continue;
+  run_once(predicted_[size_t(q)].state, epoch_, [&] {
     const Part& part = part_[size_t(q)];
     State<Real>& s = *cur_;
     kernels_.predict(part.node_begin, part.node_end, cur_dt_, s.u.data(), s.v.data(), s.a.data(), u4_.data());
     apply_essential_positions(s, cur_t1_, part.essential_begin, part.essential_end);
-    state.store(done, std::memory_order_release);
-    return;
-  }
+  });
 }
 
 template <class Real>

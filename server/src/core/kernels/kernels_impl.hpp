@@ -407,6 +407,15 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
   return sums;
 }
 
+// x[3c + i][l] = u[3 node + i] for displacements u in the state's layout
+// (n x 3): for the passes that are not hot (energies, the critical step).
+template <class Real>
+TACTILE_INLINE void gather_corners(const ElementBlock<Real>& B, const Real* u, Real (*x)[kLanes<Real>]) {
+  for (int c = 0; c < 4; ++c)
+    for (int l = 0; l < kLanes<Real>; ++l)
+      for (int i = 0; i < 3; ++i) x[3 * c + i][l] = u[3 * int64_t(B.node4[c][l] / 4) + i];
+}
+
 template <class Real, MaterialModel M>
 void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu, const Real* u,
             double* out, Real* J) {
@@ -414,9 +423,7 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real l
   for (int32_t b = begin; b < end; ++b) {
     const ElementBlock<Real>& B = blocks[b];
     alignas(64) Real x[12][W];
-    for (int c = 0; c < 4; ++c)
-      for (int l = 0; l < W; ++l)
-        for (int i = 0; i < 3; ++i) x[3 * c + i][l] = u[3 * int64_t(B.node4[c][l] / 4) + i];
+    gather_corners(B, u, x);
     for (int l = 0; l < W; ++l) {
       Real F[9], P[9];
       deformation_gradient(B, l, x, F);
@@ -470,9 +477,7 @@ double critical(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, co
   for (int32_t b = begin; b < end; ++b) {
     const ElementBlock<Real>& B = blocks[b];
     alignas(64) Real x[12][W];
-    for (int c = 0; c < 4; ++c)
-      for (int l = 0; l < W; ++l)
-        for (int i = 0; i < 3; ++i) x[3 * c + i][l] = u[3 * int64_t(B.node4[c][l] / 4) + i];
+    gather_corners(B, u, x);
     alignas(64) Real factor[W];
     for (int l = 0; l < W; ++l) {
       Real F[9], g[4][3];
