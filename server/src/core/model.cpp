@@ -298,6 +298,10 @@ Model<Real> build_model(const ModelSpec& spec) {
     i = j;
   }
 
+  model.tet_lane.assign(nt, -1);
+  for (size_t k = 0; k < model.lane_tet.size(); ++k)
+    if (model.lane_tet[k] >= 0) model.tet_lane[size_t(model.lane_tet[k])] = int32_t(k);
+
   // Nodes renumbered in the order the blocks first touch them, so that the
   // element pass reads and adds into the node arrays nearly in sequence, a
   // few new cache lines a block (the same probe: 7.0 ns a tet against 8.2

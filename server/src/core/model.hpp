@@ -89,6 +89,7 @@ struct Model {
   std::vector<ModelPart> parts;            // how the step splits over threads (integrator.threads at most)
   std::vector<int32_t> lane_tet;           // tet id of block lane b*W+l, -1 for padding (n_blocks x W)
   std::vector<double> lane_dt;             // tet_dt of block lane b*W+l [s], +inf for padding (n_blocks x W)
+  std::vector<int32_t> tet_lane;           // block lane b*W+l of each tet (n_tets)
 
   std::vector<MaterialModel> tet_model;    // material model per tet (n_tets)
   std::vector<double> tet_volume;          // rest volume [m^3] (n_tets)

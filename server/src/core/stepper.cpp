@@ -327,6 +327,7 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
       for (int32_t i : model_.mesh.tets[e])
         if (index[size_t(i)] >= 0) contact_tets_[size_t(fill[size_t(index[size_t(i)])]++)] = int32_t(e);
     tet_mark_.assign(size_t(model_.n_tets), 0);
+    contact_examined_.reserve(contact_tets_.size());
   }
 }
 
@@ -922,8 +923,7 @@ double Stepper<Real>::compute_critical_dt(const State<Real>& s) const {
 template <class Real>
 double Stepper<Real>::compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const {
   // Lane blocks, SIMD (kernels.hpp), 9-12 ns a tet. Per element from
-  // positions (element_critical_dt, now only for the few elements contact
-  // squashes) it took 53-65, and advance()'s sixteenth of the body made a
+  // positions it took 53-65, and advance()'s sixteenth of the body made a
   // frame of one sub-step cost 44-92 % more than the step alone; now 8-14 %
   // (fem_bench --only=refresh).
   double dt = model_.dt_rest;
@@ -937,51 +937,46 @@ double Stepper<Real>::compute_critical_dt(const State<Real>& s, int32_t begin, i
 
 template <class Real>
 double Stepper<Real>::compute_contact_critical_dt(const State<Real>& s) {
-  double dt = model_.dt_rest;
   if (++mark_ == 0) {  // wrapped: no tet may keep a mark of this pass
     std::fill(tet_mark_.begin(), tet_mark_.end(), 0u);
     mark_ = 1;
   }
+  contact_examined_.clear();  // (its capacity holds every contact tet: no allocation)
   for (int32_t k : contact_.pushed())
     for (int32_t j = contact_tet_begin_[size_t(k)]; j < contact_tet_begin_[size_t(k) + 1]; ++j) {
-      const size_t e = size_t(contact_tets_[size_t(j)]);
-      if (tet_mark_[e] == mark_) continue;
-      tet_mark_[e] = mark_;
-      dt = std::min(dt, element_critical_dt(s, e));
+      const int32_t e = contact_tets_[size_t(j)];
+      if (tet_mark_[size_t(e)] == mark_) continue;
+      tet_mark_[size_t(e)] = mark_;
+      contact_examined_.push_back(e);
     }
-  return dt;
-}
-
-template <class Real>
-double Stepper<Real>::element_critical_dt(const State<Real>& s, size_t e) const {
-  // Small strain (eqs. 2-3) has one stiffness K for every configuration: its rest step holds throughout.
-  if (model_.tet_model[e] == MaterialModel::Linear) return model_.dt_rest;
-  const TetMesh& mesh = model_.mesh;
-  const Tet& t = mesh.tets[e];
-  Vec3 x[4];
-  for (int c = 0; c < 4; ++c) {
-    const size_t i = size_t(t[size_t(c)]);
-    x[c] = mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
+  // Their lanes, gathered W at a time into one block per material model, run
+  // through the same kernel as the sweep (compute_critical_dt).
+  constexpr int W = kLanes<Real>;
+  double dt = model_.dt_rest;
+  for (int m = 0; m < kMaterialModelCount; ++m) {
+    int n = 0;
+    auto flush = [&] {
+      for (int l = n; l < W; ++l) {  // padding: F = I at any u, no step of its own
+        for (int c = 0; c < 4; ++c) gathered_.node4[c][l] = gathered_.node4[0][0];
+        for (int q = 0; q < 9; ++q) gathered_.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
+        gathered_dt_[l] = std::numeric_limits<double>::infinity();
+      }
+      dt = std::min(dt, kernels_.critical[m](&gathered_, 0, 1, s.u.data(), gathered_dt_));
+      n = 0;
+    };
+    for (int32_t e : contact_examined_) {
+      if (int(model_.tet_model[size_t(e)]) != m) continue;
+      const auto lane = size_t(model_.tet_lane[size_t(e)]);
+      const ElementBlock<Real>& B = model_.blocks[lane / W];
+      const size_t l = lane % W;
+      for (int c = 0; c < 4; ++c) gathered_.node4[c][n] = B.node4[c][l];
+      for (int q = 0; q < 9; ++q) gathered_.Dinv[q][n] = B.Dinv[q][l];
+      gathered_dt_[n] = model_.lane_dt[lane];
+      if (++n == W) flush();
+    }
+    if (n > 0) flush();
   }
-  // Current altitude over rest altitude: a squashed element has a shorter crossing time.
-  const double V = std::fabs(compute_tet_volume(x[0], x[1], x[2], x[3]));
-  double amax = 0;
-  amax = std::max(amax, glm::length(glm::cross(x[2] - x[1], x[3] - x[1])));
-  amax = std::max(amax, glm::length(glm::cross(x[2] - x[0], x[3] - x[0])));
-  amax = std::max(amax, glm::length(glm::cross(x[1] - x[0], x[3] - x[0])));
-  amax = std::max(amax, glm::length(glm::cross(x[1] - x[0], x[2] - x[0])));
-  const double h = amax > 0 ? 6.0 * V / amax : 0.0;
-  const double ratio = std::min(1.0, h / model_.tet_altitude[e]);
-  const glm::dmat3 Ds(x[1] - x[0], x[2] - x[0], x[3] - x[0]);
-  const Vec3& X0 = mesh.X[size_t(t[0])];
-  const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
-  const glm::dmat3 Fg = Ds * glm::inverse(Dm);
-  double F[9];
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) F[3 * r + c] = Fg[c][r];
-  const double k = material::stiffening(model_.tet_model[e], F);
-  // An element squashed flat has h = 0; it is the guards' job, not a zero step's.
-  return model_.tet_dt[e] * std::max(ratio, 0.05) / std::sqrt(k);
+  return dt;
 }
 
 template <class Real>

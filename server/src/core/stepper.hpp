@@ -269,7 +269,11 @@ class Stepper {
   std::vector<int32_t> contact_tets_;       // the tets around each contact surface node
   std::vector<uint32_t> tet_mark_;          // per tet: the pass that last examined it (n_tets)
   uint32_t mark_ = 0;
-  double element_critical_dt(const State<Real>& s, size_t e) const;
+  std::vector<int32_t> contact_examined_;   // the tets a pass examines (capacity: contact_tets_)
+  // The lanes of those tets gathered into one block for the critical-step
+  // kernel, with their rest steps.
+  ElementBlock<Real> gathered_{};
+  double gathered_dt_[kLanes<Real>] = {};
 };
 
 }  // namespace tactile
