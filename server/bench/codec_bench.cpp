@@ -81,7 +81,7 @@ ModelSpec slab_spec(int surface_vertices, int n_proxies) {
   spec.mesh = make_box(Vec3(0.0), Vec3(n * h, h, n * h), {n, 1, n});
   spec.materials = {MaterialSpec{MaterialModel::StVK, 3e4, 0.3, 1000}};
   // One proxy on a stylus, or a hand of several finger tips on one glove.
-  if (n_proxies > 1) spec.hands = {HandSpec{"right", "glove", Pose{}}};
+  if (n_proxies > 1) spec.hands = {HandSpec{"right", "glove", Pose{}, {}}};
   for (int j = 0; j < n_proxies; ++j) {
     ProxySpec p;
     p.name = "tip" + std::to_string(j);

@@ -22,6 +22,7 @@ struct Carry {
   int64_t step = 0;
   double work_loads = 0, work_essential = 0, work_contact = 0, dissipated = 0;
   std::vector<ProxyMotion> proxy, hand;
+  std::vector<Contact<double>::CoupledBody> bodies;  // (the same type in float: plain doubles)
 };
 
 struct Simulation::Engine {
@@ -57,6 +58,9 @@ struct Simulation::Engine {
   virtual void set_hand_motion(int32_t hand, const ProxyMotion& m) = 0;
   virtual Pose proxy_pose(int32_t proxy) const = 0;
   virtual Pose hand_pose(int32_t hand) const = 0;
+  virtual void couple_device(int32_t device, const DeviceLimits* limits) = 0;
+  virtual void release_device(int32_t device) = 0;
+  virtual bool device_coupled(int32_t device) const = 0;
   virtual const std::vector<ProxyReport>& proxy_reports() const = 0;
   virtual const std::vector<DeviceReport>& device_reports() const = 0;
   virtual void clear_impulses() = 0;
@@ -93,6 +97,8 @@ class EngineOf final : public Simulation::Engine {
     c.dissipated = state_.dissipated;
     for (int32_t j = 0; j < int32_t(model_->proxies.size()); ++j) c.proxy.push_back(stepper_.contact().motion(j));
     for (int32_t h = 0; h < int32_t(model_->hands.size()); ++h) c.hand.push_back(stepper_.contact().hand_motion(h));
+    for (const auto& b : stepper_.contact().coupled_bodies())
+      c.bodies.push_back({b.device, b.hand, b.proxy, b.has_limits, b.limits, b.state});
     return c;
   }
   void carry_in(const Carry& c) override {
@@ -115,6 +121,9 @@ class EngineOf final : public Simulation::Engine {
     state_.dissipated = c.dissipated;
     for (size_t h = 0; h < c.hand.size(); ++h) stepper_.contact().set_hand_motion(int32_t(h), c.hand[h]);
     for (size_t j = 0; j < c.proxy.size(); ++j) stepper_.contact().set_motion(int32_t(j), c.proxy[j]);
+    std::vector<typename Contact<Real>::CoupledBody> bodies;
+    for (const auto& b : c.bodies) bodies.push_back({b.device, b.hand, b.proxy, b.has_limits, b.limits, b.state});
+    stepper_.contact().take_bodies(bodies, state_.t);
   }
 
   void set_initial_state(const std::vector<double>& u, const std::vector<double>& v) override {
@@ -173,8 +182,13 @@ class EngineOf final : public Simulation::Engine {
   const std::vector<int32_t>& proxy_device() const override { return model_->proxy_device; }
   void set_proxy_motion(int32_t proxy, const ProxyMotion& m) override { stepper_.contact().set_motion(proxy, m); }
   void set_hand_motion(int32_t hand, const ProxyMotion& m) override { stepper_.contact().set_hand_motion(hand, m); }
-  Pose proxy_pose(int32_t proxy) const override { return stepper_.contact().motion(proxy).at(state_.t); }
-  Pose hand_pose(int32_t hand) const override { return stepper_.contact().hand_motion(hand).at(state_.t); }
+  Pose proxy_pose(int32_t proxy) const override { return stepper_.contact().proxy_pose(proxy, state_.t); }
+  Pose hand_pose(int32_t hand) const override { return stepper_.contact().hand_pose(hand, state_.t); }
+  void couple_device(int32_t device, const DeviceLimits* limits) override {
+    stepper_.contact().couple(device, limits, state_.t);
+  }
+  void release_device(int32_t device) override { stepper_.contact().release(device); }
+  bool device_coupled(int32_t device) const override { return stepper_.contact().coupled(device); }
   const std::vector<ProxyReport>& proxy_reports() const override { return stepper_.contact().reports(); }
   const std::vector<DeviceReport>& device_reports() const override { return stepper_.contact().device_reports(); }
   void clear_impulses() override { stepper_.contact().clear_impulses(); }
@@ -241,6 +255,9 @@ void Simulation::set_proxy_motion(int32_t proxy, const ProxyMotion& m) { engine_
 void Simulation::set_hand_motion(int32_t hand, const ProxyMotion& m) { engine_->set_hand_motion(hand, m); }
 Pose Simulation::proxy_pose(int32_t proxy) const { return engine_->proxy_pose(proxy); }
 Pose Simulation::hand_pose(int32_t hand) const { return engine_->hand_pose(hand); }
+void Simulation::couple_device(int32_t device, const DeviceLimits* limits) { engine_->couple_device(device, limits); }
+void Simulation::release_device(int32_t device) { engine_->release_device(device); }
+bool Simulation::device_coupled(int32_t device) const { return engine_->device_coupled(device); }
 const std::vector<ProxyReport>& Simulation::proxy_reports() const { return engine_->proxy_reports(); }
 const std::vector<DeviceReport>& Simulation::device_reports() const { return engine_->device_reports(); }
 void Simulation::clear_impulses() { engine_->clear_impulses(); }

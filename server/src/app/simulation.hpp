@@ -71,6 +71,14 @@ class Simulation {
   void set_hand_motion(int32_t hand, const ProxyMotion& m);
   Pose proxy_pose(int32_t proxy) const;  // at time(), world
   Pose hand_pose(int32_t hand) const;    // at time(), world
+  // Virtual coupling (core/coupling.hpp): the proxies or hand `device` drives
+  // become rigid bodies that the motion set for them (the device's pose)
+  // pulls through a spring-damper saturated at the device's limits (nullptr:
+  // the scene's, or soft defaults). Coupling again changes the coupling;
+  // release_device makes them kinematic again.
+  void couple_device(int32_t device, const DeviceLimits* limits);
+  void release_device(int32_t device);
+  bool device_coupled(int32_t device) const;
   // What each proxy and each device channel felt in the latest step, with
   // impulse sums since clear_impulses() (mean force = impulse / elapsed).
   const std::vector<ProxyReport>& proxy_reports() const;    // (n_proxies)

@@ -76,6 +76,7 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   hand_motion_.resize(model.hands.size());
   for (size_t h = 0; h < model.hands.size(); ++h) hand_motion_[h] = hold(model.hands[h].pose);
   fit_.resize(n_proxies);
+  proxy_body_.assign(n_proxies, -1);
   pose0_.resize(n_proxies);
   pose1_.resize(n_proxies);
   velocity_.resize(n_proxies);
@@ -160,8 +161,9 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   moved_.reserve(free_nodes_.size());
   points_.reserve((free_nodes_.size() + faces_.size()) * n_proxies);
   point_order_.reserve(points_.capacity());
-  proxy_begin_.assign(n_proxies + 1, 0);
-  proxy_fill_.assign(n_proxies, 0);
+  // Solve groups: one per proxy, then one per coupled body (at most one per proxy and hand).
+  proxy_begin_.assign(2 * n_proxies + model.hands.size() + 1, 0);
+  proxy_fill_.assign(proxy_begin_.size() - 1, 0);
   face_memory_.assign(faces_.size(), Memory{});
 }
 
@@ -197,6 +199,126 @@ void Contact<Real>::start(const State<Real>& s) {
   for (Fit& f : fit_) f = Fit{};
   for (ProxyReport& r : reports_) r = ProxyReport{};
   for (DeviceReport& d : device_reports_) d = DeviceReport{};
+  // (Coupled bodies keep their motion: couple() placed them.)
+}
+
+template <class Real>
+Pose Contact<Real>::body_proxy_pose(const Body& b, const Pose& body_pose, int32_t proxy) const {
+  if (b.hand < 0) return body_pose;
+  const Pose& offset = model_.proxy_offset[size_t(proxy)];
+  return {body_pose.to_world(offset.position), body_pose.orientation * offset.orientation};
+}
+
+template <class Real>
+void Contact<Real>::couple(int32_t device, const DeviceLimits* limits, double t) {
+  const auto bounding = [&](int32_t j) {
+    const double r = bounding_radius(model_.proxies[size_t(j)].geometry);
+    return std::isfinite(r) ? r : 0.1;  // a plane: a body of a tenth of a metre
+  };
+  const auto add = [&](int32_t hand, int32_t proxy, const CouplingSpec& spec, double radius) {
+    Body* b = nullptr;
+    for (Body& existing : bodies_)
+      if (existing.hand == hand && existing.proxy == proxy) b = &existing;
+    const Coupling c = fit_to_step(resolve_coupling(spec, limits, radius), model_.dt_rest);
+    if (b) {  // coupled already: the new coupling only
+      b->c = c;
+      b->has_limits = limits != nullptr;
+      b->limits = limits ? *limits : DeviceLimits{};
+      return;
+    }
+    Body nb;
+    nb.has_limits = limits != nullptr;
+    nb.limits = limits ? *limits : DeviceLimits{};
+    nb.device = device;
+    nb.hand = hand;
+    nb.proxy = proxy;
+    nb.c = c;
+    const ProxyMotion& m = hand >= 0 ? hand_motion_[size_t(hand)] : motion_[size_t(proxy)];
+    nb.now.pose = m.at(t);
+    if (t >= m.t0 && t < m.t1) {
+      nb.now.v = m.velocity();
+      nb.now.w = m.angular_velocity();
+    }
+    nb.target = nb.now.pose;
+    bodies_.push_back(nb);
+  };
+  for (size_t h = 0; h < model_.hands.size(); ++h) {
+    if (model_.devices[size_t(device)] != model_.hands[h].device) continue;
+    double radius = 0;
+    for (size_t j = 0; j < model_.proxies.size(); ++j)
+      if (model_.proxy_hand[j] == int32_t(h))
+        radius = std::max(radius, glm::length(model_.proxy_offset[j].position) + bounding(int32_t(j)));
+    add(int32_t(h), -1, model_.hands[h].coupling, radius);
+  }
+  for (size_t j = 0; j < model_.proxies.size(); ++j)
+    if (model_.proxy_device[j] == device && model_.proxy_hand[j] < 0)
+      add(-1, int32_t(j), model_.proxies[j].coupling, bounding(int32_t(j)));
+  std::fill(proxy_body_.begin(), proxy_body_.end(), -1);
+  for (size_t b = 0; b < bodies_.size(); ++b)
+    for (size_t j = 0; j < model_.proxies.size(); ++j)
+      if (bodies_[b].hand >= 0 ? model_.proxy_hand[j] == bodies_[b].hand : int32_t(j) == bodies_[b].proxy)
+        proxy_body_[j] = int32_t(b);
+}
+
+template <class Real>
+void Contact<Real>::release(int32_t device) {
+  bodies_.erase(std::remove_if(bodies_.begin(), bodies_.end(), [&](const Body& b) { return b.device == device; }),
+                bodies_.end());
+  std::fill(proxy_body_.begin(), proxy_body_.end(), -1);
+  for (size_t b = 0; b < bodies_.size(); ++b)
+    for (size_t j = 0; j < model_.proxies.size(); ++j)
+      if (bodies_[b].hand >= 0 ? model_.proxy_hand[j] == bodies_[b].hand : int32_t(j) == bodies_[b].proxy)
+        proxy_body_[j] = int32_t(b);
+  device_reports_[size_t(device)].coupled = false;
+}
+
+template <class Real>
+bool Contact<Real>::coupled(int32_t device) const {
+  return coupling(device) != nullptr;
+}
+
+template <class Real>
+const Coupling* Contact<Real>::coupling(int32_t device) const {
+  for (const Body& b : bodies_)
+    if (b.device == device) return &b.c;
+  return nullptr;
+}
+
+template <class Real>
+Pose Contact<Real>::proxy_pose(int32_t proxy, double t) const {
+  const int32_t b = proxy_body_[size_t(proxy)];
+  if (b < 0) return motion_[size_t(proxy)].at(t);
+  return body_proxy_pose(bodies_[size_t(b)], bodies_[size_t(b)].now.pose, proxy);
+}
+
+template <class Real>
+Pose Contact<Real>::hand_pose(int32_t hand, double t) const {
+  for (const Body& b : bodies_)
+    if (b.hand == hand) return b.now.pose;
+  return hand_motion_[size_t(hand)].at(t);
+}
+
+template <class Real>
+std::vector<typename Contact<Real>::CoupledBody> Contact<Real>::coupled_bodies() const {
+  std::vector<CoupledBody> out;
+  for (const Body& b : bodies_) out.push_back({b.device, b.hand, b.proxy, b.has_limits, b.limits, b.now});
+  return out;
+}
+
+template <class Real>
+void Contact<Real>::take_bodies(const std::vector<CoupledBody>& bodies, double t) {
+  for (const CoupledBody& cb : bodies) {
+    couple(cb.device, cb.has_limits ? &cb.limits : nullptr, t);
+    for (Body& b : bodies_)
+      if (b.hand == cb.hand && b.proxy == cb.proxy) b.now = cb.state;
+  }
+}
+
+template <class Real>
+Vec3 Contact<Real>::body_momentum() const {
+  Vec3 p(0.0);
+  for (const Body& b : bodies_) p += b.c.mass * b.now.v;
+  return p;
 }
 
 template <class Real>
@@ -236,12 +358,31 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
       sweep(c, face_cluster_slots_[size_t(m)]);
   }
 
+  // The coupled bodies' prediction and coupling (core/coupling.hpp): their
+  // motion is the device's.
+  for (Body& b : bodies_) {
+    const ProxyMotion& m = b.hand >= 0 ? hand_motion_[size_t(b.hand)] : motion_[size_t(b.proxy)];
+    b.target = m.at(t1);
+    const bool moving = t1 > m.t0 && t0 < m.t1;
+    b.wrench = step_coupled_body(b.c, b.now, b.target, moving ? m.velocity() : Vec3(0.0),
+                                 moving ? m.angular_velocity() : Vec3(0.0), dt, b.next);
+    b.v_free = b.next.v;
+    b.w_free = b.next.w;
+  }
   // Each proxy's poses and the box its bounding sphere sweeps over the step.
   for (size_t j = 0; j < n_proxies; ++j) {
-    pose0_[j] = motion_[j].at(t0);
-    pose1_[j] = motion_[j].at(t1);
-    velocity_[j] = motion_[j].velocity();
-    spin_[j] = motion_[j].angular_velocity();
+    if (const int32_t bi = proxy_body_[j]; bi >= 0) {
+      const Body& b = bodies_[size_t(bi)];
+      pose0_[j] = body_proxy_pose(b, b.now.pose, int32_t(j));
+      pose1_[j] = body_proxy_pose(b, b.next.pose, int32_t(j));
+      spin_[j] = b.next.w;
+      velocity_[j] = b.next.v + glm::cross(b.next.w, pose1_[j].position - b.next.pose.position);
+    } else {
+      pose0_[j] = motion_[j].at(t0);
+      pose1_[j] = motion_[j].at(t1);
+      velocity_[j] = motion_[j].velocity();
+      spin_[j] = motion_[j].angular_velocity();
+    }
     const Aabb b0 = world_bounds(model_.proxies[j].geometry, pose0_[j]);
     const Aabb b1 = world_bounds(model_.proxies[j].geometry, pose1_[j]);
     lo_[j] = glm::min(b0.lo, b1.lo);
@@ -287,6 +428,15 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   // v_{n+1} = v_half + dt/2 a_{n+1}, so a moves by 2 dv / dt; by eq. (10)
   // that is the force q 2 dv / dt on a node, q = m (1 + alpha dt / 2).
   solve(s);
+  // The bodies: the contact's velocity change raises their acceleration as a
+  // node's (eq. 9), and the step's end becomes their present.
+  for (Body& b : bodies_) {
+    b.next.a += (2.0 / dt) * (b.next.v - b.v_free);
+    b.next.alpha += (2.0 / dt) * (b.next.w - b.w_free);
+    b.now = b.next;
+  }
+  for (Point& c : points_)
+    if (c.body >= 0) c.vp = proxy_velocity(c);
   const double to_force = (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt;  // from an impulse to its force over the step
   for (int32_t k : moved_) {
     const Vec3 dv = dv_[size_t(k)];
@@ -347,12 +497,31 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     ProxyReport& r = reports_[j];
     r.add_step(dt);
     DeviceReport& d = device_reports_[size_t(model_.proxy_device[j])];
+    d.contacts += r.contacts;
+    d.stiffness += r.stiffness;
+    if (proxy_body_[j] >= 0) continue;  // the coupling's force below
     const int32_t hand = model_.proxy_hand[j];
     const Vec3 reference = hand >= 0 ? hand_motion_[size_t(hand)].at(t1).position : pose1_[j].position;
     d.force += r.force;
     d.torque += r.torque + glm::cross(pose1_[j].position - reference, r.force);
-    d.contacts += r.contacts;
-    d.stiffness += r.stiffness;
+  }
+  // A coupled device displays its coupling: the opposite of the coupling's
+  // force on its bodies (torques about its first body's origin), and feels
+  // the contact's stiffness in series with the coupling's.
+  for (const Body& b : bodies_) {
+    DeviceReport& d = device_reports_[size_t(b.device)];
+    if (!d.coupled) {
+      d.coupled = true;
+      d.target = b.target;
+      d.body = b.now.pose;
+      d.coupling_stiffness = b.c.stiffness;
+      d.max_force = b.c.max_force;
+      d.max_torque = b.c.max_torque;
+      d.stiffness = compute_series_stiffness(b.c.stiffness, d.stiffness);
+    }
+    d.saturated = d.saturated || b.wrench.saturated;
+    d.force -= b.wrench.force;
+    d.torque -= b.wrench.torque + glm::cross(b.now.pose.position - d.body.position, b.wrench.force);
   }
   for (DeviceReport& d : device_reports_) d.add_step(dt);
   return sums;
@@ -395,11 +564,13 @@ void Contact<Real>::find_node_contact(int32_t k, int32_t proxy, const Pose& p0, 
   // Inside at t_{n+1}: which way is out?
   Point c;
   c.proxy = proxy;
+  c.body = proxy_body_[size_t(proxy)];
   c.slot = {k, -1, -1};
   c.w = Vec3(1, 0, 0);
   c.x = x1;
   c.n = p1.orientation * outward(g, p0.to_local(x_prev_[size_t(k)]), q1, at1, mem, proxy);
   c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], x1 - p1.position);
+  c.r = c.body >= 0 ? x1 - bodies_[size_t(c.body)].next.pose.position : Vec3(0.0);
   c.v_held = Vec3(0.0);
   c.inv_mass = 1.0 / double(model_.m[size_t(free_nodes_[size_t(k)])]);
   c.mu = friction_ ? spec.friction : 0.0;
@@ -438,6 +609,7 @@ void Contact<Real>::find_face_contact(int32_t f, int32_t proxy, const Pose& p0, 
   if (zeros == 1 && !(face.owns_edge & (1u << (w.x == 0 ? 0 : w.y == 0 ? 1 : 2)))) return;  // its edge's other face's
   Point c;
   c.proxy = proxy;
+  c.body = proxy_body_[size_t(proxy)];
   c.slot = {-1, -1, -1};
   c.w = Vec3(0.0);
   c.x = Vec3(0.0);
@@ -462,6 +634,7 @@ void Contact<Real>::find_face_contact(int32_t f, int32_t proxy, const Pose& p0, 
   if (!(c.inv_mass > 0)) return;
   c.n = p1.orientation * outward(g, p0.to_local(x0), q1, at1, mem, proxy);
   c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], c.x - p1.position);
+  c.r = c.body >= 0 ? c.x - bodies_[size_t(c.body)].next.pose.position : Vec3(0.0);
   c.mu = friction_ ? spec.friction : 0.0;
   points_.push_back(c);
   ++face_contacts_;
@@ -488,6 +661,18 @@ void Contact<Real>::give(Point& c, const Vec3& J) {
     }
     dv_[k] += (c.w[int(j)] / double(model_.m[size_t(free_nodes_[k])])) * J;
   }
+  if (c.body >= 0) {  // and the opposite to the proxy's body
+    Body& b = bodies_[size_t(c.body)];
+    b.next.v -= J / b.c.mass;
+    b.next.w -= glm::cross(c.r, J) / b.c.inertia;
+  }
+}
+
+template <class Real>
+Vec3 Contact<Real>::proxy_velocity(const Point& c) const {
+  if (c.body < 0) return c.vp;
+  const Body& b = bodies_[size_t(c.body)];
+  return b.next.v + glm::cross(b.next.w, c.r);
 }
 
 template <class Real>
@@ -502,36 +687,54 @@ void Contact<Real>::solve(const State<Real>& s) {
   // largest change. One proxy's points can always all be met (the nodes
   // moving with it), so the sweeps converge; two proxies pinching a node
   // cannot both be, and they are solved one after the other, as before.
-  constexpr int kMaxSweeps = 32;
-  // The points in proxy order (stable: each proxy's in the order found).
+  //
+  // A coupled body's points are one group: each impulse changes the body's
+  // velocity, which all of them see, so they are swept together, each with
+  // the body's mass and inertia in series with its nodes' (the effective
+  // inverse mass along a direction e: sum w^2/m + 1/M + |r x e|^2 / I).
+  // They take more sweeps to settle than a kinematic proxy's.
+  constexpr int kMaxSweeps = 32, kMaxBodySweeps = 128;
+  // The points in group order (stable: each group's in the order found).
   const size_t n_proxies = motion_.size();
-  std::fill(proxy_begin_.begin(), proxy_begin_.end(), 0);
-  for (const Point& c : points_) ++proxy_begin_[size_t(c.proxy) + 1];
-  for (size_t j = 0; j < n_proxies; ++j) proxy_begin_[j + 1] += proxy_begin_[j];
+  const auto group = [&](const Point& c) { return c.body >= 0 ? n_proxies + size_t(c.body) : size_t(c.proxy); };
+  const size_t n_groups = n_proxies + bodies_.size();
+  std::fill(proxy_begin_.begin(), proxy_begin_.begin() + ptrdiff_t(n_groups + 1), 0);
+  for (const Point& c : points_) ++proxy_begin_[group(c) + 1];
+  for (size_t g = 0; g < n_groups; ++g) proxy_begin_[g + 1] += proxy_begin_[g];
   point_order_.resize(points_.size());  // (reserved: never allocates)
-  std::copy(proxy_begin_.begin(), proxy_begin_.end() - 1, proxy_fill_.begin());
-  for (size_t m = 0; m < points_.size(); ++m) point_order_[size_t(proxy_fill_[size_t(points_[m].proxy)]++)] = int32_t(m);
-  for (size_t proxy = 0; proxy < n_proxies; ++proxy) {
-    if (proxy_begin_[proxy] == proxy_begin_[proxy + 1]) continue;
+  std::copy(proxy_begin_.begin(), proxy_begin_.begin() + ptrdiff_t(n_groups), proxy_fill_.begin());
+  for (size_t m = 0; m < points_.size(); ++m) point_order_[size_t(proxy_fill_[group(points_[m])]++)] = int32_t(m);
+  for (size_t g = 0; g < n_groups; ++g) {
+    if (proxy_begin_[g] == proxy_begin_[g + 1]) continue;
+    const Body* body = g >= n_proxies ? &bodies_[g - n_proxies] : nullptr;
+    // The inverse mass the point sees along unit e: its nodes', and its body's.
+    const auto inv_mass = [&](const Point& c, const Vec3& e) {
+      if (!body) return c.inv_mass;
+      const Vec3 re = glm::cross(c.r, e);
+      return c.inv_mass + 1.0 / body->c.mass + glm::dot(re, re) / body->c.inertia;
+    };
     double first = 0;
-    for (int sweep = 0; sweep < kMaxSweeps; ++sweep) {
+    for (int sweep = 0; sweep < (body ? kMaxBodySweeps : kMaxSweeps); ++sweep) {
       double largest = 0;
-      for (int32_t m = proxy_begin_[proxy]; m < proxy_begin_[proxy + 1]; ++m) {
+      for (int32_t m = proxy_begin_[g]; m < proxy_begin_[g + 1]; ++m) {
         Point& c = points_[size_t(point_order_[size_t(m)])];
-        const Vec3 rel = point_velocity(s, c) - c.vp;
+        const Vec3 rel = point_velocity(s, c) - proxy_velocity(c);
         const double vn = glm::dot(rel, c.n);
-        const double jn = std::max(0.0, c.jn - vn / c.inv_mass);
+        const double kn = inv_mass(c, c.n);
+        const double jn = std::max(0.0, c.jn - vn / kn);
         const double djn = jn - c.jn;
         Vec3 J = djn * c.n;
         c.jn = jn;
-        double change = std::fabs(djn) * c.inv_mass;
+        double change = std::fabs(djn) * kn;
         if (c.mu > 0) {
           const Vec3 vt = rel - vn * c.n;  // the normal impulse moves the point along n alone
-          Vec3 jt = c.jt - vt / c.inv_mass;
+          const double vt_len = glm::length(vt);
+          const double kt = vt_len > 0 ? inv_mass(c, vt / vt_len) : c.inv_mass;
+          Vec3 jt = c.jt - vt / kt;
           const double bound = c.mu * c.jn, len = glm::length(jt);
           if (len > bound) jt *= bound / len;
           J += jt - c.jt;
-          change = std::max(change, glm::length(jt - c.jt) * c.inv_mass);
+          change = std::max(change, glm::length(jt - c.jt) * kt);
           c.jt = jt;
         }
         if (J != Vec3(0.0)) give(c, J);

@@ -41,6 +41,13 @@
 // clusters whose box meets a proxy's swept bounding box are examined node by
 // node; surface triangles likewise, in clusters of 32 by their rest
 // centroids. A proxy far from the body costs one box test per cluster.
+//
+// Coupled proxies (core/coupling.hpp): a device's proxy, or its hand, may be
+// a rigid body of its own that the device's pose pulls through a spring. Its
+// points then take the impulse with the body's mass and inertia in series
+// with the nodes' (J = dv / (sum w^2/m + 1/M + |r x n|^2 / I)), the body
+// gets -J at the point, and all the points of one body are solved together,
+// since each changes the body's velocity that the others see.
 #pragma once
 
 #include <array>
@@ -49,6 +56,7 @@
 
 #include <glm/mat3x3.hpp>
 
+#include "core/coupling.hpp"
 #include "core/model.hpp"
 #include "core/proxy.hpp"
 #include "core/state.hpp"
@@ -91,7 +99,19 @@ struct ContactReport {
 struct ProxyReport : ContactReport {
   double work = 0;  // work the proxy has done on the body since the start [J]
 };
-using DeviceReport = ContactReport;
+
+// A device channel's report. For a coupled device, force and torque are the
+// coupling's on the device (what it should display), and stiffness is what
+// the device feels through the coupling (compute_series_stiffness).
+struct DeviceReport : ContactReport {
+  bool coupled = false;
+  bool saturated = false;  // the coupling was at its force or torque limit
+  Pose target;             // the device's pose the coupling pulled toward at t_{n+1}
+  Pose body;               // where its body (hand, or first proxy) was at t_{n+1}
+  double coupling_stiffness = 0;  // [N/m]
+  double max_force = 0;           // the coupling's saturation [N]
+  double max_torque = 0;          // [N m]
+};
 
 // What the contact pass changed, for the stepper's energy accounting.
 struct ContactSums {
@@ -118,6 +138,37 @@ class Contact {
   const ProxyMotion& motion(int32_t proxy) const { return motion_[size_t(proxy)]; }
   const ProxyMotion& hand_motion(int32_t hand) const { return hand_motion_[size_t(hand)]; }
   const std::vector<ProxyReport>& reports() const { return reports_; }
+
+  // Virtual coupling (core/coupling.hpp). From now on the motion set for the
+  // bodies device `device` drives (its hand, or each of its proxies alone) is
+  // the device's pose, which pulls each through the coupling resolved from
+  // the scene's spec and `limits` (nullptr: the device gives none). A body
+  // newly coupled starts where its motion has it at time t, moving with it;
+  // coupling a coupled device again changes its coupling only.
+  void couple(int32_t device, const DeviceLimits* limits, double t);
+  // Back to kinematic: its bodies follow their motion again.
+  void release(int32_t device);
+  bool coupled(int32_t device) const;
+  // The coupling a coupled device's first body runs (nullptr when kinematic).
+  const Coupling* coupling(int32_t device) const;
+  // Where a proxy or hand is at time t (the latest step's end, for a coupled
+  // one, whatever t): its body's pose when coupled, else its motion's.
+  Pose proxy_pose(int32_t proxy, double t) const;
+  Pose hand_pose(int32_t hand, double t) const;
+  // Total momentum of the coupled bodies [N s].
+  Vec3 body_momentum() const;
+  // A coupled body as another Contact of the same scene can take it over
+  // (a model rebuilt with other parameters): its device, the limits it was
+  // coupled with, and its motion.
+  struct CoupledBody {
+    int32_t device, hand, proxy;
+    bool has_limits;
+    DeviceLimits limits;
+    BodyState state;
+  };
+  std::vector<CoupledBody> coupled_bodies() const;
+  // Couples each as it was, at time t, and takes over its motion.
+  void take_bodies(const std::vector<CoupledBody>& bodies, double t);
 
   // Forgets the previous positions and contacts (a new or reset state).
   void start(const State<Real>& s);
@@ -151,6 +202,8 @@ class Contact {
   // point of a face, x = sum w_c x_c over its corners.
   struct Point {
     int32_t proxy;
+    int32_t body;                 // its proxy's coupled body, -1 for a kinematic proxy
+    Vec3 r;                       // from the body's origin to x (coupled) [m]
     std::array<int32_t, 3> slot;  // its free corners' slots, -1 for none (a node: slot[0] alone, weight 1)
     Vec3 w;                       // their weights
     Vec3 x;                       // world position [m]
@@ -174,6 +227,21 @@ class Contact {
   Vec3 point_velocity(const State<Real>& s, const Point& c) const;
   void give(Point& c, const Vec3& J);
   void update_stiffness(int32_t proxy, const Vec3& position, const Vec3& force, double dt);
+  // A coupled body: a hand (hand >= 0) or one proxy.
+  struct Body {
+    int32_t device = -1, hand = -1, proxy = -1;
+    bool has_limits = false;
+    DeviceLimits limits;         // what its device said (when has_limits)
+    Coupling c;
+    BodyState now, next;         // at t_n, and over the step under way
+    Vec3 v_free{0.0}, w_free{0.0};  // next's velocities before contact
+    CouplingWrench wrench;       // the coupling on the body at t_{n+1}
+    Pose target;                 // the device's pose at t_{n+1}
+  };
+  // The proxy's velocity at c.x: its body's, as the solve has it so far, or its motion's.
+  Vec3 proxy_velocity(const Point& c) const;
+  // A hand's or a proxy's pose composed with a proxy's offset in it.
+  Pose body_proxy_pose(const Body& b, const Pose& body_pose, int32_t proxy) const;
 
   const Model<Real>& model_;
   std::vector<ProxyMotion> motion_;
@@ -222,6 +290,8 @@ class Contact {
     int32_t seg_steps = 0;
   };
   std::vector<Fit> fit_;
+  std::vector<Body> bodies_;
+  std::vector<int32_t> proxy_body_;  // per proxy: its body in bodies_, -1 when kinematic (n_proxies)
   double alpha_ = 0;  // Rayleigh mass damping [1/s], for q = m (1 + alpha dt / 2)
   bool friction_ = false;
 };

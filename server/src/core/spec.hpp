@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "core/coupling.hpp"
 #include "core/material.hpp"
 #include "core/mesh.hpp"
 #include "core/proxy.hpp"
@@ -84,12 +85,14 @@ struct ProxySpec {
   ProxyGeometry geometry;
   Pose pose;            // at t = 0 (world)
   double friction = 0;  // Coulomb coefficient mu (used when effects.friction)
+  CouplingSpec coupling;  // when a device drives it alone through a coupling (core/coupling.hpp)
 };
 
 struct HandSpec {
   std::string name;
   std::string device;  // device channel that drives the hand
   Pose pose;           // at t = 0 (world): its proxies keep their offsets from it
+  CouplingSpec coupling;  // when its device drives it through a coupling (core/coupling.hpp)
 };
 
 struct Effects {

@@ -265,7 +265,7 @@ TEST(RealtimeLoop, HapticRateSendsEveryFewSteps) {
 // moves: the hand, or its first proxy.
 ModelSpec two_channel_spec() {
   ModelSpec spec = poke_spec({2, 1, 2});
-  spec.hands = {HandSpec{"right", "glove", Pose{}}};
+  spec.hands = {HandSpec{"right", "glove", Pose{}, {}}};
   spec.hands[0].pose.position = Vec3(0.02, 0.06, 0.02);
   ProxySpec tip = spec.proxies[0];
   spec.proxies.clear();
