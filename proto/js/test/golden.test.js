@@ -77,6 +77,8 @@ test('typed reads of the vectors see the written values', () => {
   assert.equal(hello.role, proto.Role.Device);
   assert.equal(hello.token, 's3cret-token');
   assert.equal(hello.devices[1], 'right');
+  assert.equal(hello.deviceLimits[0].maxForceN, 6);
+  assert.equal(hello.deviceLimits[1].direct, true);
   const state = byName.state_frame;
   assert.equal(state.step, 123456n);
   assert.equal(state.serverTimeNs, 987654321012n);
@@ -86,6 +88,9 @@ test('typed reads of the vectors see the written values', () => {
   assert.equal(byName.haptic_frame.devices[0].contacts, 12);
   assert.equal(byName.haptic_frame.devicePoses[1].position.y, Math.fround(0.4));
   assert.deepEqual(byName.haptic_frame.deviceInputSequences, [4242n, 977n]);
+  assert.equal(byName.haptic_frame.deviceCouplings[0].coupled, true);
+  assert.equal(byName.haptic_frame.deviceCouplings[0].body.position.y, Math.fround(0.4875));
+  assert.equal(byName.haptic_frame.deviceCouplings[1].maxForceN, 0);
   const safety = byName.safety_event;
   assert.ok(safety instanceof proto.SafetyEventT);
   assert.equal(safety.device, 'stylus');

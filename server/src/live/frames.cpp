@@ -76,6 +76,7 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   proxy_haptics_.resize(sim.proxies().size());
   device_haptics_.resize(sim.devices().size());
   device_poses_.resize(sim.devices().size());
+  device_couplings_.resize(sim.devices().size());
   input_sequences_.resize(sim.devices().size());
   device_hand_.resize(sim.devices().size());
   device_proxy_.assign(sim.devices().size(), -1);
@@ -201,6 +202,22 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
                                            to_wire(pr[j].stiffness), uint32_t(pr[j].contacts));
   }
   for (size_t d = 0; d < dr.size(); ++d) {
+    input_sequences_[d] = d < input_sequences.size() ? input_sequences[d] : 0;
+    if (dr[d].coupled) {
+      // The coupling's force at the step, not a window's mean: a spring's
+      // force does not flicker with the contact's bounce, and the device
+      // adds its own motion since the step to it (stiffness times the
+      // motion from device_poses), which a mean over a window would blur.
+      const DeviceReport& r = dr[d];
+      device_haptics_[d] = wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque), to_wire(r.stiffness),
+                                               uint32_t(r.contacts));
+      device_poses_[d] = wire::ProxyPose(to_wire(r.target.position), to_wire(r.target.orientation));
+      device_couplings_[d] = wire::DeviceCoupling(wire::ProxyPose(to_wire(r.body.position), to_wire(r.body.orientation)),
+                                                  float(r.coupling_stiffness), float(r.max_force), float(r.max_torque),
+                                                  true, r.saturated);
+      continue;
+    }
+    device_couplings_[d] = wire::DeviceCoupling();
     device_haptics_[d] = wire::DeviceHaptics(to_wire(inv * sum_device_[d].force), to_wire(inv * sum_device_[d].torque),
                                              to_wire(dr[d].stiffness), uint32_t(dr[d].contacts));
     // A lone proxy's pose is the one just staged for it; a hand's is its own.
@@ -210,12 +227,12 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
     } else {
       device_poses_[d] = proxy_haptics_[size_t(device_proxy_[d])].pose();
     }
-    input_sequences_[d] = d < input_sequences.size() ? input_sequences[d] : 0;
   }
   const auto proxies = b.CreateVectorOfStructs(proxy_haptics_.data(), pr.size());
   const auto devices = b.CreateVectorOfStructs(device_haptics_.data(), dr.size());
   const auto device_poses = b.CreateVectorOfStructs(device_poses_.data(), dr.size());
   const auto sequences = b.CreateVector(input_sequences_.data(), dr.size());
+  const auto couplings = b.CreateVectorOfStructs(device_couplings_.data(), dr.size());
   wire::HapticFrameBuilder f(b);
   f.add_scene_id(scene_id_);
   f.add_step(uint64_t(sim_.steps()));
@@ -226,6 +243,7 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
   f.add_devices(devices);
   f.add_device_poses(device_poses);
   f.add_device_input_sequences(sequences);
+  f.add_device_couplings(couplings);
   return seal(b, wire::Message::HapticFrame, f.Finish());
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <thread>
 
 #include <immintrin.h>
@@ -28,7 +29,7 @@ int64_t nanoseconds(RealtimeLoop::Clock::time_point t) {
 
 }  // namespace
 
-DeviceSample device_sample(const proto::DeviceInput& in, int32_t device) {
+DeviceSample device_sample(const proto::DeviceInput& in, int32_t device, const DeviceDrive& drive) {
   const proto::Vec3d& p = *in.position();
   const proto::Quatd& q = *in.orientation();
   DeviceSample s;
@@ -39,7 +40,19 @@ DeviceSample device_sample(const proto::DeviceInput& in, int32_t device) {
   const double qn = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
   s.pose.orientation = Quat(q.w() / qn, q.x() / qn, q.y() / qn, q.z() / qn);
   s.buttons = in.buttons();
+  s.drive = drive;
   return s;
+}
+
+int format_applied(const AppliedInput& a, char* buf, size_t size) {
+  int n = std::snprintf(buf, size, R"({"loop_step":%lld,"device":%d,"sequence":%llu)",
+                        static_cast<long long>(a.loop_step), int(a.device), static_cast<unsigned long long>(a.sequence));
+  if (a.drive.direct) n += std::snprintf(buf + n, size - size_t(n), R"(,"direct":true)");
+  else if (a.drive.has_limits)  // %.17g: the limits read back to the same bits
+    n += std::snprintf(buf + n, size - size_t(n), R"(,"limits":[%.17g,%.17g,%.17g])", a.drive.limits.max_force,
+                       a.drive.limits.max_torque, a.drive.limits.stiffness);
+  n += std::snprintf(buf + n, size - size_t(n), "}");
+  return n;
 }
 
 RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const RealtimeOptions& options)
@@ -60,6 +73,9 @@ RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const Realtime
     drv.hand = compute_device_hand(sim, int32_t(d));
     for (size_t j = 0; j < sim.proxies().size(); ++j)
       if (sim.proxy_device()[j] == int32_t(d) && sim.proxies()[j].hand.empty()) drv.proxies.push_back(int32_t(j));
+    // Coupled from the start, with the scene's coupling (a body carried over
+    // from a rebuilt model keeps the coupling it had).
+    if (!sim.device_coupled(int32_t(d))) sim.couple_device(int32_t(d), nullptr);
   }
   sync_drivers();
 }
@@ -97,6 +113,11 @@ void RealtimeLoop::apply_inputs() {
     }
     drv.has_sample = true;
     drv.last_device_ns = s.device_time_ns;
+    if (!(s.drive == drv.drive)) {  // a device with its own limits, or one that drives directly
+      if (s.drive.direct) sim_.release_device(s.device);
+      else sim_.couple_device(s.device, s.drive.has_limits ? &s.drive.limits : nullptr);
+      drv.drive = s.drive;
+    }
     // From where it is now to the new pose over one input interval.
     ProxyMotion m;
     m.t0 = t;
@@ -108,7 +129,7 @@ void RealtimeLoop::apply_inputs() {
     for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);
     last_sequence_ = std::max(last_sequence_, s.sequence);
     device_sequences_[size_t(s.device)] = s.sequence;  // the latest, even when a restarted bridge counts from 1 again
-    if (applied_sink_) applied_sink_({loop_steps_, s.device, s.sequence});
+    if (applied_sink_) applied_sink_({loop_steps_, s.device, s.sequence, s.drive});
     ++applied;
   }
   if (applied) {

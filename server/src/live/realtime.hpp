@@ -11,10 +11,13 @@
 // stall of more than kMaxBacklog the loop re-anchors instead of racing to
 // catch up. The real-time factor is simulated over wall time per second.
 //
-// Device inputs: a sample gives the pose of its device's proxy (or hand).
-// The proxy moves from where it is to that pose over one input interval
-// (estimated from the samples' device clocks), so it glides between inputs
-// instead of jumping at 1 kHz inside a 10 kHz simulation.
+// Device inputs: a sample gives the pose of its device. That pose moves from
+// where it is to the new one over one input interval (estimated from the
+// samples' device clocks), so it glides between inputs instead of jumping
+// at 1 kHz inside a 10 kHz simulation. Every channel's proxy (or hand) is
+// coupled to it (core/coupling.hpp), with the scene's coupling until a
+// sample brings its device's limits; a device that asks to drive directly
+// moves its proxy kinematically along that path instead.
 #pragma once
 
 #include <array>
@@ -34,18 +37,32 @@
 
 namespace tactile {
 
+// How a device drives its channel, from its Hello: through the virtual
+// coupling (core/coupling.hpp) within the limits it renders, or directly
+// (the proxy kinematic, where the device is).
+struct DeviceDrive {
+  bool direct = false;
+  bool has_limits = false;
+  DeviceLimits limits;       // when has_limits
+  bool operator==(const DeviceDrive& o) const {
+    return direct == o.direct && has_limits == o.has_limits && limits.max_force == o.limits.max_force &&
+           limits.max_torque == o.limits.max_torque && limits.stiffness == o.limits.stiffness;
+  }
+};
+
 struct DeviceSample {
   int32_t device = -1;       // index into Simulation::devices()
   uint64_t sequence = 0;     // increasing per device
   int64_t device_time_ns = 0;  // the bridge's clock
   Pose pose;                 // scene frame
   uint32_t buttons = 0;
+  DeviceDrive drive;         // its device's, from its Hello
 };
 
 // The sample a checked DeviceInput (net/inbound.cpp) becomes: the one
 // conversion the live server and a re-simulation share, so that both move
 // the proxy by the same bits.
-DeviceSample device_sample(const proto::DeviceInput& in, int32_t device);
+DeviceSample device_sample(const proto::DeviceInput& in, int32_t device, const DeviceDrive& drive = {});
 
 // An input the loop applied: which one, and before which of its steps (a
 // recording keeps these, so that a re-simulation applies the same inputs at
@@ -54,7 +71,13 @@ struct AppliedInput {
   int64_t loop_step;       // steps this loop had taken when it applied the input
   int32_t device;
   uint64_t sequence;
+  DeviceDrive drive;       // how its device drove the channel
 };
+
+// The recording's /applied message for an input (proto/RECORDING.md), JSON,
+// written into buf (256 bytes are enough); returns its length. The drive is
+// written only when it is not the default (coupled, the scene's coupling).
+int format_applied(const AppliedInput& a, char* buf, size_t size);
 
 struct RealtimeOptions {
   // Step [s]; 0 picks 0.7 x the critical step at rest: under the stepper's
@@ -146,6 +169,7 @@ class RealtimeLoop {
     bool has_sample = false;
     int64_t last_device_ns = 0;
     double interval = 0;      // estimated time between its inputs [s]
+    DeviceDrive drive;        // as the simulation has it
   };
   void sync_drivers();
   void apply_inputs();

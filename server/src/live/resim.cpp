@@ -142,6 +142,7 @@ ResimReport resimulate(const ResimOptions& o) {
     int64_t loop_step;
     int32_t device;
     uint64_t sequence;
+    DeviceDrive drive;
   };
   std::vector<Applied> applied;
   for (const mcap::Message& m : rec.messages)
@@ -149,7 +150,15 @@ ResimReport resimulate(const ResimOptions& o) {
       const auto j = nlohmann::json::parse(m.data.begin(), m.data.end(), nullptr, false);
       if (j.is_discarded() || !j.contains("loop_step") || !j.contains("device") || !j.contains("sequence"))
         throw ResimError("recording '" + o.recording + "': an /applied message is not {loop_step, device, sequence}");
-      applied.push_back({j["loop_step"].get<int64_t>(), j["device"].get<int32_t>(), j["sequence"].get<uint64_t>()});
+      Applied a{j["loop_step"].get<int64_t>(), j["device"].get<int32_t>(), j["sequence"].get<uint64_t>(), {}};
+      a.drive.direct = j.value("direct", false);
+      if (const auto l = j.find("limits"); l != j.end()) {
+        if (!l->is_array() || l->size() != 3 || !(*l)[0].is_number() || !(*l)[1].is_number() || !(*l)[2].is_number())
+          throw ResimError("recording '" + o.recording + "': an /applied message's limits are not 3 numbers");
+        a.drive.has_limits = true;
+        a.drive.limits = {(*l)[0].get<double>(), (*l)[1].get<double>(), (*l)[2].get<double>()};
+      }
+      applied.push_back(a);
     }
   std::map<std::pair<std::string, uint64_t>, std::deque<const mcap::Message*>> inputs;
   for (const mcap::Message& m : rec.messages)
@@ -269,14 +278,12 @@ ResimReport resimulate(const ResimOptions& o) {
       found->second.pop_front();
       if (device_index[size_t(a.device)] < 0) continue;  // another scene without this channel: noted below
       const wire::DeviceInput* in = wire::GetEnvelope(m->data.data())->message_as_DeviceInput();
-      loop.post_input(device_sample(*in, device_index[size_t(a.device)]));
+      loop.post_input(device_sample(*in, device_index[size_t(a.device)], a.drive));
       ++report.inputs;
       if (out) {
         out->post(Topic::Input, int64_t(std::llround(sim.time() * 1e9)), 0, m->data);
-        char json[128];
-        const int n = std::snprintf(json, sizeof json, R"({"loop_step":%lld,"device":%d,"sequence":%llu})",
-                                    static_cast<long long>(k), int(device_index[size_t(a.device)]),
-                                    static_cast<unsigned long long>(a.sequence));
+        char json[256];
+        const int n = format_applied({k, device_index[size_t(a.device)], a.sequence, a.drive}, json, sizeof json);
         out->post(Topic::Applied, int64_t(std::llround(sim.time() * 1e9)), 0,
                   {reinterpret_cast<const uint8_t*>(json), size_t(n)});
       }

@@ -33,6 +33,25 @@ std::string check_device_input(const proto::DeviceInput& in) {
   return "";
 }
 
+std::string check_device_limits(const proto::Hello& h) {
+  if (!h.device_limits()) return "";
+  const uint32_t devices = h.devices() ? h.devices()->size() : 0;
+  if (h.device_limits()->size() > devices)
+    return "Hello.device_limits has " + std::to_string(h.device_limits()->size()) + " entries for " +
+           std::to_string(devices) + " device channel(s)";
+  for (uint32_t i = 0; i < h.device_limits()->size(); ++i) {
+    const proto::DeviceLimits* l = h.device_limits()->Get(i);
+    if (!l) return "Hello.device_limits[" + std::to_string(i) + "] is missing";
+    const std::pair<const char*, float> fields[] = {
+        {"max_force_N", l->max_force_N()}, {"max_torque_Nm", l->max_torque_Nm()}, {"stiffness_N_per_m", l->stiffness_N_per_m()}};
+    for (const auto& [name, value] : fields)
+      if (!std::isfinite(value) || value < 0)
+        return "Hello.device_limits[" + std::to_string(i) + "]." + name + " must be a finite number >= 0, got " +
+               std::to_string(value);
+  }
+  return "";
+}
+
 namespace {
 
 bool is_utf8(const flatbuffers::String& s) {

@@ -26,6 +26,9 @@ Inbound read_inbound(const uint8_t* data, size_t size);
 // "" when a device input is usable: a finite position and an orientation
 // that normalizes (|q| within [0.5, 2]); else what is wrong.
 std::string check_device_input(const proto::DeviceInput& in);
+// What a device Hello's device_limits say, or why they cannot be taken: one
+// entry per named channel at most, each bound finite and >= 0.
+std::string check_device_limits(const proto::Hello& h);
 
 // What a SafetyEvent's strings may hold [bytes]: a channel name, a cause.
 constexpr size_t kMaxSafetyDeviceBytes = 128;

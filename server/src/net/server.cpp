@@ -457,6 +457,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       server_->controller = this;
     }
     if (h.role() == wire::Role::Device) {
+      if (const std::string bad = check_device_limits(h); !bad.empty()) return refuse(wire::ErrorCode::BadRequest, bad);
       const std::vector<std::string>& names = server_->feed->devices;
       if (h.devices())
         for (const fb::String* d : *h.devices()) {
@@ -468,6 +469,14 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
               return refuse(wire::ErrorCode::Busy, "device channel '" + d->str() + "' is driven by another device "
                                                    "(connection " + std::to_string(other->id_) + ")");
           device_names_.push_back(d->str());
+          DeviceDrive drive;
+          if (h.device_limits() && h.device_limits()->size() > drives_.size()) {
+            const wire::DeviceLimits& l = *h.device_limits()->Get(uint32_t(drives_.size()));
+            drive.direct = l.direct();
+            drive.has_limits = true;
+            drive.limits = {double(l.max_force_N()), double(l.max_torque_Nm()), double(l.stiffness_N_per_m())};
+          }
+          drives_.push_back(drive);
         }
       bind_devices();
     }
@@ -531,7 +540,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     if (index < 0) return;  // not in this scene (said at the switch)
     if (const std::string bad = check_device_input(in); !bad.empty())
       return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
-    const DeviceSample s = device_sample(in, index);
+    const DeviceSample s = device_sample(in, index, drives_[size_t(named - device_names_.begin())]);
     // Recorded first: stamped before the simulation can apply it.
     server_->record(Topic::Input, raw_.data(), raw_.size(), now_ns());
     // (A replay simulates nothing: its inputs move nothing.)
@@ -691,6 +700,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   wire::Role role_ = wire::Role::Viewer;
   uint16_t protocol_minor_ = 0;            // the client's, from its Hello
   std::vector<std::string> device_names_;  // channels named in Hello
+  std::vector<DeviceDrive> drives_;        // how each drives its channel (Hello.device_limits)
   std::vector<int32_t> devices_;           // their index in the current scene, -1 if absent
   std::span<const uint8_t> raw_;           // the message being dispatched
   std::deque<Bytes> queue_;          // null entries stand for pending_state_
@@ -1024,10 +1034,8 @@ void Server::Impl::drain_tap(Feed& f) {
   f.tap->applied.drain([&](const uint8_t* data, size_t) {
     AppliedInput a;
     std::memcpy(&a, data, sizeof a);
-    char json[128];
-    const int n = std::snprintf(json, sizeof json, R"({"loop_step":%lld,"device":%d,"sequence":%llu})",
-                                static_cast<long long>(a.loop_step), int(a.device),
-                                static_cast<unsigned long long>(a.sequence));
+    char json[256];
+    const int n = format_applied(a, json, sizeof json);
     record(Topic::Applied, reinterpret_cast<const uint8_t*>(json), size_t(n), now);
   });
   const int64_t lost_h = f.tap->haptics.dropped() - f.tap->haptics_dropped;

@@ -42,7 +42,10 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
       R"({"title":"tactile.AppliedInput","type":"object","properties":{)"
       R"("loop_step":{"type":"integer","description":"steps the loop had taken when it applied the input"},)"
       R"("device":{"type":"integer","description":"channel index, SceneDescription.devices order"},)"
-      R"("sequence":{"type":"integer","description":"the DeviceInput's sequence"}}})";
+      R"("sequence":{"type":"integer","description":"the DeviceInput's sequence"},)"
+      R"("direct":{"type":"boolean","description":"its device drove the proxy directly (kinematic); absent: coupled"},)"
+      R"("limits":{"type":"array","items":{"type":"number"},"minItems":3,"maxItems":3,)"
+      R"("description":"the coupling limits its device gave: max force [N], max torque [N m], stiffness [N/m]; absent: none"}}})";
   const std::string_view applied_schema(kAppliedSchema);
   const uint16_t applied = writer_.add_schema(
       "tactile.AppliedInput", "jsonschema",

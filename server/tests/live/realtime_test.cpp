@@ -97,7 +97,8 @@ TEST(RealtimeLoop, NeverAheadOfTheClockAndPublishesEveryStep) {
   EXPECT_TRUE(s.fault.empty()) << s.fault;
 }
 
-// A device thread sends the stylus down into the block at 1 kHz; the haptic
+// A device that drives its proxy directly (the kinematic proxy, as before
+// the coupling) sends the stylus down into the block at 1 kHz; the haptic
 // frames come back with the block pushing the sphere up, and they name the
 // newest input they had seen.
 TEST(RealtimeLoop, DeviceInputsMoveTheProxyAndTheForceComesBack) {
@@ -129,6 +130,7 @@ TEST(RealtimeLoop, DeviceInputsMoveTheProxyAndTheForceComesBack) {
       s.sequence = uint64_t(k);
       s.device_time_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t0).count();
       s.pose.position = Vec3(0.02, 0.029 - 0.004 * std::min(1.0, k / 200.0), 0.02);
+      s.drive.direct = true;
       if (loop.post_input(s)) sent = s.sequence;
     }
     device_done = true;
@@ -379,11 +381,73 @@ TEST(RealtimeLoop, EachChannelsNewestInputAndPoseComeBack) {
   EXPECT_EQ(stylus_seq.back(), 20u);  // its own, not the glove's
   EXPECT_TRUE(std::is_sorted(glove_seq.begin(), glove_seq.end()));
   EXPECT_TRUE(std::is_sorted(stylus_seq.begin(), stylus_seq.end()));
-  expect_pose(last_glove, sim.hand_pose(0));
-  expect_pose(last_stylus, sim.proxy_pose(1));
+  // Each channel's pose is its device's (the coupling pulls toward it), and
+  // the bodies, in free space, came to rest on them.
   EXPECT_NEAR(last_glove.position().y(), 0.07f, 1e-6f);
   EXPECT_NEAR(last_stylus.position().x(), 0.03f, 1e-6f);
   EXPECT_NEAR(last_stylus.position().y(), 0.08f, 1e-6f);
+  EXPECT_LT(glm::distance(sim.hand_pose(0).position, glove_at), 1e-4);
+  EXPECT_LT(glm::distance(sim.proxy_pose(1).position, stylus_at), 1e-4);
+}
+
+// The default: a device with its limits (its Hello) goes 5 mm into the
+// block, 13 mm past where its sphere would touch. The proxy stops at the surface, sunk only as far as the
+// device's 1 N presses it; each frame's device force is the coupling's,
+// never above 1 N; the frames carry the device's pose, the body's, and a
+// stiffness that pulls the device back toward the body (negative along y).
+TEST(RealtimeLoop, ACoupledDeviceFeelsItsLimitAndItsProxyStaysOnTheSurface) {
+  Simulation sim(poke_spec());
+  FrameEncoder frames(sim, "poke", 1, 2e-4);
+  RealtimeOptions options;
+  options.dt = 2e-4;
+  RealtimeLoop loop(sim, frames, options);
+  std::atomic<bool> stop{false}, holding{false};
+  float peak = 0, held_force = 0, device_y = 0, body_y = 0, k_yy = 0;
+  bool coupled = false, saturated = false;
+  loop.on_haptic([&](std::span<const uint8_t> m) {
+    const proto::HapticFrame* h = proto::GetEnvelope(m.data())->message_as_HapticFrame();
+    const proto::DeviceHaptics& d = *h->devices()->Get(0);
+    const float f = std::hypot(d.force().x(), d.force().y(), d.force().z());
+    peak = std::max(peak, f);
+    const proto::DeviceCoupling& c = *h->device_couplings()->Get(0);
+    coupled = c.coupled();
+    if (!holding) return;
+    held_force = d.force().y();
+    saturated = c.saturated();
+    device_y = h->device_poses()->Get(0)->position().y();
+    body_y = c.body().position().y();
+    k_yy = d.stiffness().m11();
+  });
+  std::thread device([&] {
+    const Clock::time_point t0 = Clock::now();
+    for (int k = 1; k <= 300; ++k) {  // down 14 mm over 0.2 s (from 1 mm above touching), then hold
+      std::this_thread::sleep_until(t0 + std::chrono::milliseconds(k));
+      DeviceSample s;
+      s.device = 0;
+      s.sequence = uint64_t(k);
+      s.device_time_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t0).count();
+      s.pose.position = Vec3(0.02, 0.029 - 0.014 * std::min(1.0, k / 200.0), 0.02);
+      s.drive.has_limits = true;
+      s.drive.limits = {1.0, 0.0, 2000.0};
+      loop.post_input(s);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    holding = true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    stop = true;
+  });
+  loop.run(stop);
+  device.join();
+  EXPECT_TRUE(loop.stats().fault.empty()) << loop.stats().fault;
+  EXPECT_TRUE(coupled);
+  EXPECT_LE(peak, 1.0f + 1e-5f);
+  EXPECT_TRUE(saturated);
+  EXPECT_NEAR(held_force, 1.0f, 1e-3f) << "the device, 13 mm past touching, should feel its whole limit, upward";
+  EXPECT_NEAR(device_y, 0.015f, 1e-6f);
+  // The sphere (radius 8 mm) rests on the top (y = 0.02), pressed in a few millimetres by 1 N.
+  EXPECT_GT(body_y, 0.028f - 0.006f);
+  EXPECT_LT(body_y, 0.028f);
+  EXPECT_LT(k_yy, 0.0f);
 }
 
 // Steps far costlier than their dt: the loop falls behind, says so, and does

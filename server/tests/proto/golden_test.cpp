@@ -116,6 +116,11 @@ TEST(ProtoGolden, GeneratedAccessorsReadTheWrittenValues) {
   EXPECT_EQ(h->role(), Role::Device);
   EXPECT_STREQ(h->token()->c_str(), "s3cret-token");
   EXPECT_STREQ(h->devices()->Get(1)->c_str(), "right");
+  ASSERT_EQ(h->device_limits()->size(), 2u);
+  EXPECT_FLOAT_EQ(h->device_limits()->Get(0)->max_force_N(), 6.0f);
+  EXPECT_FLOAT_EQ(h->device_limits()->Get(1)->stiffness_N_per_m(), 1200.0f);
+  EXPECT_TRUE(h->device_limits()->Get(1)->direct());
+  EXPECT_FALSE(h->device_limits()->Get(0)->direct());
 
   const std::string state = load("state_frame.tctl");
   const StateFrame* s = GetEnvelope(state.data())->message_as_StateFrame();
@@ -135,6 +140,11 @@ TEST(ProtoGolden, GeneratedAccessorsReadTheWrittenValues) {
   EXPECT_FLOAT_EQ(hf->device_poses()->Get(1)->orientation().z(), 0.5f);
   ASSERT_EQ(hf->device_input_sequences()->size(), 2u);
   EXPECT_EQ(hf->device_input_sequences()->Get(1), 977u);
+  ASSERT_EQ(hf->device_couplings()->size(), 2u);
+  EXPECT_TRUE(hf->device_couplings()->Get(0)->coupled());
+  EXPECT_FALSE(hf->device_couplings()->Get(1)->coupled());
+  EXPECT_FLOAT_EQ(hf->device_couplings()->Get(0)->body().position().y(), 0.4875f);
+  EXPECT_FLOAT_EQ(hf->device_couplings()->Get(0)->max_torque_Nm(), 0.125f);
 
   const std::string safety = load("safety_event.tctl");
   const SafetyEvent* se = GetEnvelope(safety.data())->message_as_SafetyEvent();

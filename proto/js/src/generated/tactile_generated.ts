@@ -2,8 +2,10 @@
 
 export { Control, ControlT } from './tactile/proto/control';
 export { ControlCommand, unionToControlCommand, unionListToControlCommand } from './tactile/proto/control-command';
+export { DeviceCoupling, DeviceCouplingT } from './tactile/proto/device-coupling';
 export { DeviceHaptics, DeviceHapticsT } from './tactile/proto/device-haptics';
 export { DeviceInput, DeviceInputT } from './tactile/proto/device-input';
+export { DeviceLimits, DeviceLimitsT } from './tactile/proto/device-limits';
 export { DeviceStatus, DeviceStatusT } from './tactile/proto/device-status';
 export { EffectCost, EffectCostT } from './tactile/proto/effect-cost';
 export { Energies, EnergiesT } from './tactile/proto/energies';

@@ -162,7 +162,31 @@ class HapticFrame(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(20))
         return o == 0
 
-def HapticFrameStart(builder): builder.StartObject(9)
+    # HapticFrame
+    def DeviceCouplings(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
+        if o != 0:
+            x = self._tab.Vector(o)
+            x += flatbuffers.number_types.UOffsetTFlags.py_type(j) * 44
+            from tactile_proto.generated.DeviceCoupling import DeviceCoupling
+            obj = DeviceCoupling()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+    # HapticFrame
+    def DeviceCouplingsLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # HapticFrame
+    def DeviceCouplingsIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
+        return o == 0
+
+def HapticFrameStart(builder): builder.StartObject(10)
 def Start(builder):
     return HapticFrameStart(builder)
 def HapticFrameAddSceneId(builder, sceneId): builder.PrependUint32Slot(0, sceneId, 0)
@@ -204,9 +228,16 @@ def AddDeviceInputSequences(builder, deviceInputSequences):
 def HapticFrameStartDeviceInputSequencesVector(builder, numElems): return builder.StartVector(8, numElems, 8)
 def StartDeviceInputSequencesVector(builder, numElems):
     return HapticFrameStartDeviceInputSequencesVector(builder, numElems)
+def HapticFrameAddDeviceCouplings(builder, deviceCouplings): builder.PrependUOffsetTRelativeSlot(9, flatbuffers.number_types.UOffsetTFlags.py_type(deviceCouplings), 0)
+def AddDeviceCouplings(builder, deviceCouplings):
+    return HapticFrameAddDeviceCouplings(builder, deviceCouplings)
+def HapticFrameStartDeviceCouplingsVector(builder, numElems): return builder.StartVector(44, numElems, 4)
+def StartDeviceCouplingsVector(builder, numElems):
+    return HapticFrameStartDeviceCouplingsVector(builder, numElems)
 def HapticFrameEnd(builder): return builder.EndObject()
 def End(builder):
     return HapticFrameEnd(builder)
+import tactile_proto.generated.DeviceCoupling
 import tactile_proto.generated.DeviceHaptics
 import tactile_proto.generated.ProxyHaptics
 import tactile_proto.generated.ProxyPose
@@ -228,6 +259,7 @@ class HapticFrameT(object):
         self.devices = None  # type: List[tactile_proto.generated.DeviceHaptics.DeviceHapticsT]
         self.devicePoses = None  # type: List[tactile_proto.generated.ProxyPose.ProxyPoseT]
         self.deviceInputSequences = None  # type: List[int]
+        self.deviceCouplings = None  # type: List[tactile_proto.generated.DeviceCoupling.DeviceCouplingT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -281,6 +313,14 @@ class HapticFrameT(object):
                     self.deviceInputSequences.append(hapticFrame.DeviceInputSequences(i))
             else:
                 self.deviceInputSequences = hapticFrame.DeviceInputSequencesAsNumpy()
+        if not hapticFrame.DeviceCouplingsIsNone():
+            self.deviceCouplings = []
+            for i in range(hapticFrame.DeviceCouplingsLength()):
+                if hapticFrame.DeviceCouplings(i) is None:
+                    self.deviceCouplings.append(None)
+                else:
+                    deviceCoupling_ = tactile_proto.generated.DeviceCoupling.DeviceCouplingT.InitFromObj(hapticFrame.DeviceCouplings(i))
+                    self.deviceCouplings.append(deviceCoupling_)
 
     # HapticFrameT
     def Pack(self, builder):
@@ -307,6 +347,11 @@ class HapticFrameT(object):
                 for i in reversed(range(len(self.deviceInputSequences))):
                     builder.PrependUint64(self.deviceInputSequences[i])
                 deviceInputSequences = builder.EndVector()
+        if self.deviceCouplings is not None:
+            HapticFrameStartDeviceCouplingsVector(builder, len(self.deviceCouplings))
+            for i in reversed(range(len(self.deviceCouplings))):
+                self.deviceCouplings[i].Pack(builder)
+            deviceCouplings = builder.EndVector()
         HapticFrameStart(builder)
         HapticFrameAddSceneId(builder, self.sceneId)
         HapticFrameAddStep(builder, self.step)
@@ -321,5 +366,7 @@ class HapticFrameT(object):
             HapticFrameAddDevicePoses(builder, devicePoses)
         if self.deviceInputSequences is not None:
             HapticFrameAddDeviceInputSequences(builder, deviceInputSequences)
+        if self.deviceCouplings is not None:
+            HapticFrameAddDeviceCouplings(builder, deviceCouplings)
         hapticFrame = HapticFrameEnd(builder)
         return hapticFrame

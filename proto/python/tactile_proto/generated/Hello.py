@@ -83,7 +83,32 @@ class Hello(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(14))
         return o == 0
 
-def HelloStart(builder): builder.StartObject(6)
+    # Hello
+    def DeviceLimits(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(16))
+        if o != 0:
+            x = self._tab.Vector(o)
+            x += flatbuffers.number_types.UOffsetTFlags.py_type(j) * 4
+            x = self._tab.Indirect(x)
+            from tactile_proto.generated.DeviceLimits import DeviceLimits
+            obj = DeviceLimits()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+    # Hello
+    def DeviceLimitsLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(16))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # Hello
+    def DeviceLimitsIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(16))
+        return o == 0
+
+def HelloStart(builder): builder.StartObject(7)
 def Start(builder):
     return HelloStart(builder)
 def HelloAddProtocolMajor(builder, protocolMajor): builder.PrependUint16Slot(0, protocolMajor, 0)
@@ -107,9 +132,16 @@ def AddDevices(builder, devices):
 def HelloStartDevicesVector(builder, numElems): return builder.StartVector(4, numElems, 4)
 def StartDevicesVector(builder, numElems):
     return HelloStartDevicesVector(builder, numElems)
+def HelloAddDeviceLimits(builder, deviceLimits): builder.PrependUOffsetTRelativeSlot(6, flatbuffers.number_types.UOffsetTFlags.py_type(deviceLimits), 0)
+def AddDeviceLimits(builder, deviceLimits):
+    return HelloAddDeviceLimits(builder, deviceLimits)
+def HelloStartDeviceLimitsVector(builder, numElems): return builder.StartVector(4, numElems, 4)
+def StartDeviceLimitsVector(builder, numElems):
+    return HelloStartDeviceLimitsVector(builder, numElems)
 def HelloEnd(builder): return builder.EndObject()
 def End(builder):
     return HelloEnd(builder)
+import tactile_proto.generated.DeviceLimits
 try:
     from typing import List
 except:
@@ -125,6 +157,7 @@ class HelloT(object):
         self.token = None  # type: str
         self.clientName = None  # type: str
         self.devices = None  # type: List[str]
+        self.deviceLimits = None  # type: List[tactile_proto.generated.DeviceLimits.DeviceLimitsT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -151,6 +184,14 @@ class HelloT(object):
             self.devices = []
             for i in range(hello.DevicesLength()):
                 self.devices.append(hello.Devices(i))
+        if not hello.DeviceLimitsIsNone():
+            self.deviceLimits = []
+            for i in range(hello.DeviceLimitsLength()):
+                if hello.DeviceLimits(i) is None:
+                    self.deviceLimits.append(None)
+                else:
+                    deviceLimits_ = tactile_proto.generated.DeviceLimits.DeviceLimitsT.InitFromObj(hello.DeviceLimits(i))
+                    self.deviceLimits.append(deviceLimits_)
 
     # HelloT
     def Pack(self, builder):
@@ -166,6 +207,14 @@ class HelloT(object):
             for i in reversed(range(len(self.devices))):
                 builder.PrependUOffsetTRelative(deviceslist[i])
             devices = builder.EndVector()
+        if self.deviceLimits is not None:
+            deviceLimitslist = []
+            for i in range(len(self.deviceLimits)):
+                deviceLimitslist.append(self.deviceLimits[i].Pack(builder))
+            HelloStartDeviceLimitsVector(builder, len(self.deviceLimits))
+            for i in reversed(range(len(self.deviceLimits))):
+                builder.PrependUOffsetTRelative(deviceLimitslist[i])
+            deviceLimits = builder.EndVector()
         HelloStart(builder)
         HelloAddProtocolMajor(builder, self.protocolMajor)
         HelloAddProtocolMinor(builder, self.protocolMinor)
@@ -176,5 +225,7 @@ class HelloT(object):
             HelloAddClientName(builder, clientName)
         if self.devices is not None:
             HelloAddDevices(builder, devices)
+        if self.deviceLimits is not None:
+            HelloAddDeviceLimits(builder, deviceLimits)
         hello = HelloEnd(builder)
         return hello

@@ -2,6 +2,7 @@
 
 import * as flatbuffers from 'flatbuffers';
 
+import { DeviceCoupling, DeviceCouplingT } from '../../tactile/proto/device-coupling';
 import { DeviceHaptics, DeviceHapticsT } from '../../tactile/proto/device-haptics';
 import { ProxyHaptics, ProxyHapticsT } from '../../tactile/proto/proxy-haptics';
 import { ProxyPose, ProxyPoseT } from '../../tactile/proto/proxy-pose';
@@ -90,8 +91,18 @@ deviceInputSequencesLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+deviceCouplings(index: number, obj?:DeviceCoupling):DeviceCoupling|null {
+  const offset = this.bb!.__offset(this.bb_pos, 22);
+  return offset ? (obj || new DeviceCoupling()).__init(this.bb!.__vector(this.bb_pos + offset) + index * 44, this.bb!) : null;
+}
+
+deviceCouplingsLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 22);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startHapticFrame(builder:flatbuffers.Builder) {
-  builder.startObject(9);
+  builder.startObject(10);
 }
 
 static addSceneId(builder:flatbuffers.Builder, sceneId:number) {
@@ -154,12 +165,20 @@ static startDeviceInputSequencesVector(builder:flatbuffers.Builder, numElems:num
   builder.startVector(8, numElems, 8);
 }
 
+static addDeviceCouplings(builder:flatbuffers.Builder, deviceCouplingsOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(9, deviceCouplingsOffset, 0);
+}
+
+static startDeviceCouplingsVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(44, numElems, 4);
+}
+
 static endHapticFrame(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createHapticFrame(builder:flatbuffers.Builder, sceneId:number, step:bigint, simTime:number, serverTimeNs:bigint, lastInputSequence:bigint, proxiesOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, devicePosesOffset:flatbuffers.Offset, deviceInputSequencesOffset:flatbuffers.Offset):flatbuffers.Offset {
+static createHapticFrame(builder:flatbuffers.Builder, sceneId:number, step:bigint, simTime:number, serverTimeNs:bigint, lastInputSequence:bigint, proxiesOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, devicePosesOffset:flatbuffers.Offset, deviceInputSequencesOffset:flatbuffers.Offset, deviceCouplingsOffset:flatbuffers.Offset):flatbuffers.Offset {
   HapticFrame.startHapticFrame(builder);
   HapticFrame.addSceneId(builder, sceneId);
   HapticFrame.addStep(builder, step);
@@ -170,6 +189,7 @@ static createHapticFrame(builder:flatbuffers.Builder, sceneId:number, step:bigin
   HapticFrame.addDevices(builder, devicesOffset);
   HapticFrame.addDevicePoses(builder, devicePosesOffset);
   HapticFrame.addDeviceInputSequences(builder, deviceInputSequencesOffset);
+  HapticFrame.addDeviceCouplings(builder, deviceCouplingsOffset);
   return HapticFrame.endHapticFrame(builder);
 }
 
@@ -183,7 +203,8 @@ unpack(): HapticFrameT {
     this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength()),
     this.bb!.createObjList(this.devices.bind(this), this.devicesLength()),
     this.bb!.createObjList(this.devicePoses.bind(this), this.devicePosesLength()),
-    this.bb!.createScalarList(this.deviceInputSequences.bind(this), this.deviceInputSequencesLength())
+    this.bb!.createScalarList(this.deviceInputSequences.bind(this), this.deviceInputSequencesLength()),
+    this.bb!.createObjList(this.deviceCouplings.bind(this), this.deviceCouplingsLength())
   );
 }
 
@@ -198,6 +219,7 @@ unpackTo(_o: HapticFrameT): void {
   _o.devices = this.bb!.createObjList(this.devices.bind(this), this.devicesLength());
   _o.devicePoses = this.bb!.createObjList(this.devicePoses.bind(this), this.devicePosesLength());
   _o.deviceInputSequences = this.bb!.createScalarList(this.deviceInputSequences.bind(this), this.deviceInputSequencesLength());
+  _o.deviceCouplings = this.bb!.createObjList(this.deviceCouplings.bind(this), this.deviceCouplingsLength());
 }
 }
 
@@ -211,7 +233,8 @@ constructor(
   public proxies: (ProxyHapticsT)[] = [],
   public devices: (DeviceHapticsT)[] = [],
   public devicePoses: (ProxyPoseT)[] = [],
-  public deviceInputSequences: (bigint)[] = []
+  public deviceInputSequences: (bigint)[] = [],
+  public deviceCouplings: (DeviceCouplingT)[] = []
 ){}
 
 
@@ -220,6 +243,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const devices = builder.createStructOffsetList(this.devices, HapticFrame.startDevicesVector);
   const devicePoses = builder.createStructOffsetList(this.devicePoses, HapticFrame.startDevicePosesVector);
   const deviceInputSequences = HapticFrame.createDeviceInputSequencesVector(builder, this.deviceInputSequences);
+  const deviceCouplings = builder.createStructOffsetList(this.deviceCouplings, HapticFrame.startDeviceCouplingsVector);
 
   return HapticFrame.createHapticFrame(builder,
     this.sceneId,
@@ -230,7 +254,8 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     proxies,
     devices,
     devicePoses,
-    deviceInputSequences
+    deviceInputSequences,
+    deviceCouplings
   );
 }
 }

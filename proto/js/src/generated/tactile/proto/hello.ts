@@ -2,6 +2,7 @@
 
 import * as flatbuffers from 'flatbuffers';
 
+import { DeviceLimits, DeviceLimitsT } from '../../tactile/proto/device-limits';
 import { Role } from '../../tactile/proto/role';
 
 
@@ -64,8 +65,18 @@ devicesLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+deviceLimits(index: number, obj?:DeviceLimits):DeviceLimits|null {
+  const offset = this.bb!.__offset(this.bb_pos, 16);
+  return offset ? (obj || new DeviceLimits()).__init(this.bb!.__indirect(this.bb!.__vector(this.bb_pos + offset) + index * 4), this.bb!) : null;
+}
+
+deviceLimitsLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 16);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startHello(builder:flatbuffers.Builder) {
-  builder.startObject(6);
+  builder.startObject(7);
 }
 
 static addProtocolMajor(builder:flatbuffers.Builder, protocolMajor:number) {
@@ -104,12 +115,28 @@ static startDevicesVector(builder:flatbuffers.Builder, numElems:number) {
   builder.startVector(4, numElems, 4);
 }
 
+static addDeviceLimits(builder:flatbuffers.Builder, deviceLimitsOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(6, deviceLimitsOffset, 0);
+}
+
+static createDeviceLimitsVector(builder:flatbuffers.Builder, data:flatbuffers.Offset[]):flatbuffers.Offset {
+  builder.startVector(4, data.length, 4);
+  for (let i = data.length - 1; i >= 0; i--) {
+    builder.addOffset(data[i]!);
+  }
+  return builder.endVector();
+}
+
+static startDeviceLimitsVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(4, numElems, 4);
+}
+
 static endHello(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createHello(builder:flatbuffers.Builder, protocolMajor:number, protocolMinor:number, role:Role, tokenOffset:flatbuffers.Offset, clientNameOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset):flatbuffers.Offset {
+static createHello(builder:flatbuffers.Builder, protocolMajor:number, protocolMinor:number, role:Role, tokenOffset:flatbuffers.Offset, clientNameOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, deviceLimitsOffset:flatbuffers.Offset):flatbuffers.Offset {
   Hello.startHello(builder);
   Hello.addProtocolMajor(builder, protocolMajor);
   Hello.addProtocolMinor(builder, protocolMinor);
@@ -117,6 +144,7 @@ static createHello(builder:flatbuffers.Builder, protocolMajor:number, protocolMi
   Hello.addToken(builder, tokenOffset);
   Hello.addClientName(builder, clientNameOffset);
   Hello.addDevices(builder, devicesOffset);
+  Hello.addDeviceLimits(builder, deviceLimitsOffset);
   return Hello.endHello(builder);
 }
 
@@ -127,7 +155,8 @@ unpack(): HelloT {
     this.role(),
     this.token(),
     this.clientName(),
-    this.bb!.createScalarList(this.devices.bind(this), this.devicesLength())
+    this.bb!.createScalarList(this.devices.bind(this), this.devicesLength()),
+    this.bb!.createObjList(this.deviceLimits.bind(this), this.deviceLimitsLength())
   );
 }
 
@@ -139,6 +168,7 @@ unpackTo(_o: HelloT): void {
   _o.token = this.token();
   _o.clientName = this.clientName();
   _o.devices = this.bb!.createScalarList(this.devices.bind(this), this.devicesLength());
+  _o.deviceLimits = this.bb!.createObjList(this.deviceLimits.bind(this), this.deviceLimitsLength());
 }
 }
 
@@ -149,7 +179,8 @@ constructor(
   public role: Role = Role.Viewer,
   public token: string|Uint8Array|null = null,
   public clientName: string|Uint8Array|null = null,
-  public devices: (string)[] = []
+  public devices: (string)[] = [],
+  public deviceLimits: (DeviceLimitsT)[] = []
 ){}
 
 
@@ -157,6 +188,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const token = (this.token !== null ? builder.createString(this.token!) : 0);
   const clientName = (this.clientName !== null ? builder.createString(this.clientName!) : 0);
   const devices = Hello.createDevicesVector(builder, builder.createObjectOffsetList(this.devices));
+  const deviceLimits = Hello.createDeviceLimitsVector(builder, builder.createObjectOffsetList(this.deviceLimits));
 
   return Hello.createHello(builder,
     this.protocolMajor,
@@ -164,7 +196,8 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     this.role,
     token,
     clientName,
-    devices
+    devices,
+    deviceLimits
   );
 }
 }
