@@ -242,3 +242,70 @@ def test_invalid_mode_is_refused_naming_the_modes() -> None:
     assert "cubic" in msg
     for m in MODES:
         assert m in msg
+
+
+# ---- coupled: the coupling's force, the device's own motion answered at the tick --------------------------
+
+def push_coupled(h: StateHistory, t_ns: int, force: tuple[float, float, float], k: float,
+                 x: tuple[float, float, float], max_force: float = 6.0) -> None:
+    """A coupled state: coupling force `force` on the device, stiffness -k I felt through the coupling,
+    device pose `x` the server pulled toward."""
+    K = (-k, 0.0, 0.0, 0.0, -k, 0.0, 0.0, 0.0, -k)
+    h.push(t_ns, t_ns, 0, force, K, x, 1, True, max_force)
+
+
+def test_coupled_a_device_moving_against_a_still_proxy_feels_the_coupling_at_the_next_tick() -> None:
+    # Against a rigid body the device feels the coupling's own spring (k = 2000 N/m): the states say so, and
+    # a device that has moved 1 mm into the body since the displayed state feels 2 N more at once, without
+    # waiting for a state that saw the motion.
+    h = StateHistory()
+    r = ForceRender(h, "coupled")
+    r.delay_ns = 1_000_000
+    push_coupled(h, 0, (0.0, 1.0, 0.0), 2000.0, (0.0, 0.0, 0.0))
+    push_coupled(h, 500_000, (0.0, 1.0, 0.0), 2000.0, (0.0, 0.0, 0.0))
+    out = [0.0, 0.0, 0.0]
+    r.render(1_250_000, (0.0, 0.0, 0.0), out)
+    assert out == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
+    r.render(1_251_000, (0.0, -0.001, 0.0), out)  # the next tick, 1 mm further down
+    assert out == pytest.approx([0.0, 3.0, 0.0], abs=1e-12)
+
+
+def test_coupled_in_free_space_the_device_feels_nothing_whatever_it_does() -> None:
+    h = StateHistory()
+    r = ForceRender(h, "coupled")
+    r.delay_ns = 1_000_000
+    for i in range(4):
+        push_coupled(h, 500_000 * i, (0.0, 0.0, 0.0), 0.0, (0.001 * i, 0.0, 0.0))
+    out = [1.0, 1.0, 1.0]
+    for x in (-0.05, 0.0, 0.3):
+        r.render(1_700_000, (x, 0.2, -0.1), out)
+        assert out == [0.0, 0.0, 0.0]
+
+
+def test_coupled_interpolates_the_states_and_stays_within_the_couplings_saturation() -> None:
+    h = StateHistory()
+    r = ForceRender(h, "coupled")
+    r.delay_ns = 0
+    push_coupled(h, 0, (0.0, 2.0, 0.0), 1000.0, (0.0, 0.0, 0.0), max_force=4.0)
+    push_coupled(h, 1000, (0.0, 3.0, 0.0), 1000.0, (0.0, -0.001, 0.0), max_force=4.0)
+    out = [0.0, 0.0, 0.0]
+    r.render(500, (0.0, -0.0005, 0.0), out)  # halfway, where the device was: the interpolated force
+    assert out == pytest.approx([0.0, 2.5, 0.0], abs=1e-12)
+    r.render(500, (0.0, -0.0105, 0.0), out)  # 10 mm further: 12.5 N by the spring, held at 4 N
+    assert out == pytest.approx([0.0, 4.0, 0.0], abs=1e-12)
+
+
+def test_coupled_shows_a_state_from_a_server_that_does_not_couple_as_delay_does() -> None:
+    rng = np.random.default_rng(7)
+    t = uneven_times(rng, 20)
+    f = rng.normal(size=(20, 3))
+    a, b = StateHistory(), StateHistory()
+    push_forces(a, t, f)
+    push_forces(b, t, f)
+    ra, rb = ForceRender(a, "coupled"), ForceRender(b, "delay")
+    ra.delay_ns = rb.delay_ns = 2_000_000
+    oa, ob = [0.0] * 3, [0.0] * 3
+    for now in np.linspace(t[0], t[-1] + 3_000_000, 50):
+        ra.render(int(now), (0.1, 0.2, 0.3), oa)
+        rb.render(int(now), (0.1, 0.2, 0.3), ob)
+        assert oa == ob

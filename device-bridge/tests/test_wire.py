@@ -87,6 +87,11 @@ def test_reader_reads_the_golden_vector() -> None:
     r.read(table, list(range(len(ref.devices))))
     assert r.step == ref.step
     assert r.force[0] == [ref.devices[0].force.x, ref.devices[0].force.y, ref.devices[0].force.z]
+    # Protocol 1.5: each channel's coupling.
+    c = ref.deviceCouplings
+    assert r.coupled == [c[0].coupled, c[1].coupled] == [True, False]
+    assert r.body[0] == [c[0].body.position.x, c[0].body.position.y, c[0].body.position.z]
+    assert r.max_force[0] == c[0].maxForceN == 6.0
 
 
 def test_damaged_frames_are_refused_not_misread() -> None:

@@ -34,7 +34,7 @@ log = logging.getLogger("tactile_bridge")
 class Options:
     url: str = "ws://127.0.0.1:8765/"
     token: str = ""
-    mode: str = "delay"            # interpolation.MODES
+    mode: str = "coupled"          # interpolation.MODES
     network: str = "process"       # thread | process
     passivity: bool = True
     priority: int = 0              # SCHED_FIFO priority of the tick (0: normal scheduling)

@@ -118,9 +118,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--server", default="ws://127.0.0.1:8765/", help="the server's WebSocket URL")
     ap.add_argument("--token", default=os.environ.get("TACTILE_TOKEN", ""),
                     help="the server's token (default: $TACTILE_TOKEN)")
-    ap.add_argument("--mode", choices=MODES, default="delay",
-                    help="delay: the paper's one-step delay, interpolated (default); hold: zero-order hold; "
-                         "extrapolate: no delay, from the local stiffness")
+    ap.add_argument("--mode", choices=MODES, default="coupled",
+                    help="coupled (default): the server couples the proxy to the device through a spring within "
+                         "the profile's limits, and the device displays that spring, its own motion answered at "
+                         "the tick; the others drive the proxy directly (kinematic) and display the body's force: "
+                         "delay, the paper's one-step delay, interpolated; hold, zero-order hold; extrapolate, no "
+                         "delay, from the local stiffness")
     ap.add_argument("--network", choices=("process", "thread"), default="process",
                     help="run the tick in its own process (default) or in a thread beside the network")
     ap.add_argument("--no-passivity", action="store_true", help="turn the passivity observer/controller off")

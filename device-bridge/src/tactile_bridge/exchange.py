@@ -46,8 +46,9 @@ H_INTS = 16
 # the lateness histogram follows the header ints: HIST_US + 1 words
 
 # ---- per device ints, doubles ---------------------------------------------------------------------------
-# states ring: ints [seq, t_ns, arrival_ns, step, contacts], doubles [force 3, stiffness 9, position 3]
-S_INTS, S_DBLS = 5, 15
+# states ring: ints [seq, t_ns, arrival_ns, step, contacts, coupled], doubles [force 3, stiffness 9, position 3,
+# coupling's max force]
+S_INTS, S_DBLS = 6, 16
 # pose slot: ints [seq, time_ns, sequence, buttons, connected], doubles [position 3, orientation 4]
 P_INTS, P_DBLS = 5, 7
 # status: ints [safety mode, engaged ticks, passivity ticks, states used], doubles [command 3, out 3,
@@ -109,18 +110,20 @@ class Exchange:
         return self.i[self._dev_i[dev]]
 
     def write_state(self, dev: int, t_ns: int, arrival_ns: int, step: int, contacts: int,
-                    force: Sequence[float], stiffness: Sequence[float], position: Sequence[float]) -> None:
+                    force: Sequence[float], stiffness: Sequence[float], position: Sequence[float],
+                    coupled: bool = False, max_force: float = 0.0) -> None:
         i, d = self.i, self.d
         count = i[self._dev_i[dev]]
         slot = count % RING
         bi = self._dev_i[dev] + 1 + slot * S_INTS
         bd = self._dev_d[dev] + slot * S_DBLS
         i[bi] = 2 * count + 1
-        i[bi + 1], i[bi + 2], i[bi + 3], i[bi + 4] = t_ns, arrival_ns, step, contacts
+        i[bi + 1], i[bi + 2], i[bi + 3], i[bi + 4], i[bi + 5] = t_ns, arrival_ns, step, contacts, int(coupled)
         d[bd], d[bd + 1], d[bd + 2] = force[0], force[1], force[2]
         for k in range(9):
             d[bd + 3 + k] = stiffness[k]
         d[bd + 12], d[bd + 13], d[bd + 14] = position[0], position[1], position[2]
+        d[bd + 15] = max_force
         i[bi] = 2 * count + 2
         i[self._dev_i[dev]] = count + 1
 
@@ -135,7 +138,7 @@ class Exchange:
             if seq != 2 * count + 2:
                 return False  # overwritten by a newer state (the tick fell RING states behind), or being written
             history.push(i[bi + 1], i[bi + 2], i[bi + 3], d[bd: bd + 3], d[bd + 3: bd + 12], d[bd + 12: bd + 15],
-                         i[bi + 4])
+                         i[bi + 4], bool(i[bi + 5]), d[bd + 15])
             if i[bi] == seq:
                 return True
         return False

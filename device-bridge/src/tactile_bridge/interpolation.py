@@ -5,6 +5,15 @@ produced; the network side of the bridge converts that stamp into the bridge's c
 the state into a `StateHistory`. At every tick the tick asks a `ForceRender` for the force to display now.
 
 Modes:
+  coupled  the default, with a server that couples the device's proxy (protocol 1.5; DESIGN.md item 8): the
+           device displays the coupling's force. What comes from the body is displayed the paper's way, one
+           step late and interpolated (as `delay`: the coupling's force F, the stiffness K the device feels
+           through the coupling, and the device's pose x_s the server pulled toward, at the display time);
+           the device's own motion since then is answered at this tick, F + K (x_now - x_s). In free space
+           K = 0: the proxy follows the hand and the hand feels nothing of the coupling; against a rigid body
+           K is the coupling's own spring. The force is held within the coupling's saturation, which the
+           server holds within the device's limit. A state from a server that does not couple is shown as
+           `delay` shows it.
   delay    the paper's: display the world `delay` late (one simulation step plus what the measured network
            lateness needs), so that the two states that bracket the display time have both arrived, and
            interpolate linearly between them. Exact on a force that is linear in time; never outside the
@@ -23,7 +32,7 @@ import math
 
 from collections.abc import Sequence
 
-MODES = ("delay", "hold", "extrapolate")
+MODES = ("coupled", "delay", "hold", "extrapolate")
 
 
 class StateHistory:
@@ -39,12 +48,14 @@ class StateHistory:
         self.stiffness = [[0.0] * 9 for _ in range(capacity)]         # dF/dx, row-major [N/m]
         self.position = [[0.0, 0.0, 0.0] for _ in range(capacity)]    # device at that step, scene [m]
         self.contacts = [0] * capacity
+        self.coupled = [False] * capacity                              # the server coupled this channel
+        self.max_force = [0.0] * capacity                              # the coupling's saturation [N]
 
     def clear(self) -> None:
         self.count = 0
 
     def push(self, t_ns: int, arrival_ns: int, step: int, force: Sequence[float], stiffness: Sequence[float],
-             position: Sequence[float], contacts: int) -> None:
+             position: Sequence[float], contacts: int, coupled: bool = False, max_force: float = 0.0) -> None:
         i = self.count % self.capacity
         self.t_ns[i] = t_ns
         self.arrival_ns[i] = arrival_ns
@@ -55,6 +66,8 @@ class StateHistory:
             k[j] = stiffness[j]
         p[0], p[1], p[2] = position[0], position[1], position[2]
         self.contacts[i] = contacts
+        self.coupled[i] = coupled
+        self.max_force[i] = max_force
         self.count += 1
 
     def newest(self) -> int:
@@ -85,7 +98,7 @@ class StateHistory:
 class ForceRender:
     """The force to display at a tick, in one of MODES, from a StateHistory (scene frame)."""
 
-    def __init__(self, history: StateHistory, mode: str = "delay") -> None:
+    def __init__(self, history: StateHistory, mode: str = "coupled") -> None:
         if mode not in MODES:
             raise ValueError(f"interpolation mode must be one of {', '.join(MODES)} (got {mode!r})")
         self.history = history
@@ -94,6 +107,7 @@ class ForceRender:
         self.display_t_ns = 0       # the time the latest render displayed, bridge clock [ns]
         self.past_newest = False    # the latest render wanted a state that had not arrived (held the newest)
         self.max_stiffness = float("inf")  # extrapolate: the largest |K| used, scene frame [N/m]
+        self._k = [0.0] * 9                # coupled: the interpolated stiffness (no allocation per tick)
 
     def render(self, now_ns: int, device_position: Sequence[float], out: list[float]) -> bool:
         """Writes the force [N] (3) into `out`; False (out zeroed) when there is no state yet."""
@@ -102,6 +116,8 @@ class ForceRender:
             out[0] = out[1] = out[2] = 0.0
             self.past_newest = True
             return False
+        if self.mode == "coupled":
+            return self._coupled(now_ns, device_position, out)
         if self.mode == "delay":
             t = now_ns - self.delay_ns
             self.display_t_ns = t
@@ -133,4 +149,38 @@ class ForceRender:
         out[0] = f[0] + k[0] * dx + k[1] * dy + k[2] * dz
         out[1] = f[1] + k[3] * dx + k[4] * dy + k[5] * dz
         out[2] = f[2] + k[6] * dx + k[7] * dy + k[8] * dz
+        return True
+
+    def _coupled(self, now_ns: int, device_position: Sequence[float], out: list[float]) -> bool:
+        h = self.history
+        t = now_ns - self.delay_ns
+        self.display_t_ns = t
+        a, b = h.bracket(t)
+        tb = h.t_ns[b]
+        self.past_newest = a == b and t > tb
+        fa, fb = h.force[a], h.force[b]
+        ka, kb = h.stiffness[a], h.stiffness[b]
+        xa, xb = h.position[a], h.position[b]
+        s = (t - h.t_ns[a]) / (tb - h.t_ns[a]) if a != b and tb > h.t_ns[a] else 1.0
+        r = 1.0 - s
+        fx, fy, fz = r * fa[0] + s * fb[0], r * fa[1] + s * fb[1], r * fa[2] + s * fb[2]
+        if not h.coupled[b]:  # a server that does not couple: the paper's delay alone
+            out[0], out[1], out[2] = fx, fy, fz
+            return True
+        # The device's motion since the displayed state, through the stiffness it feels.
+        dx = device_position[0] - (r * xa[0] + s * xb[0])
+        dy = device_position[1] - (r * xa[1] + s * xb[1])
+        dz = device_position[2] - (r * xa[2] + s * xb[2])
+        k = self._k
+        for j in range(9):
+            k[j] = r * ka[j] + s * kb[j]
+        fx += k[0] * dx + k[1] * dy + k[2] * dz
+        fy += k[3] * dx + k[4] * dy + k[5] * dz
+        fz += k[6] * dx + k[7] * dy + k[8] * dz
+        limit = h.max_force[b]
+        mag = math.sqrt(fx * fx + fy * fy + fz * fz)
+        if limit > 0.0 and mag > limit:
+            c = limit / mag
+            fx, fy, fz = fx * c, fy * c, fz * c
+        out[0], out[1], out[2] = fx, fy, fz
         return True

@@ -27,6 +27,7 @@ from typing import Any
 
 import websockets
 from tactile_proto import PROTOCOL_MAJOR, PROTOCOL_MINOR, ProtocolError, check_version, decode, encode, make_hello
+from tactile_proto.generated.DeviceLimits import DeviceLimitsT
 from tactile_proto.generated.Ping import PingT
 from tactile_proto.generated.Pong import PongT
 from tactile_proto.generated.Role import Role
@@ -58,7 +59,7 @@ class LinkError(RuntimeError):
 
 class Network:
     def __init__(self, url: str, token: str, profiles: Sequence[Profile], exchange: ex.Exchange, wake_fd: int,
-                 *, client_name: str = "tactile-bridge", lateness_window: int = 2000, mode: str = "delay",
+                 *, client_name: str = "tactile-bridge", lateness_window: int = 2000, mode: str = "coupled",
                  status_s: float = 1.0,
                  reconnect_s: float = 0.5, ping_s: float = 0.2,
                  clock: Callable[[], int] = time.monotonic_ns) -> None:
@@ -136,6 +137,7 @@ class Network:
         async with websockets.connect(self.url, max_size=64 << 20, compression=None, open_timeout=3,
                                       ping_interval=None) as ws:
             hello = make_hello(Role.Device, self.token, self.client_name, [p.channel for p in self.profiles])
+            hello.deviceLimits = [self._limits(p) for p in self.profiles]
             await ws.send(encode(hello))
             welcome = await self._expect(ws, WelcomeT)
             check_version(welcome)
@@ -162,6 +164,13 @@ class Network:
                 pinger.cancel()
                 stopper.cancel()
                 await asyncio.gather(pinger, stopper, return_exceptions=True)
+
+    def _limits(self, profile: Profile) -> Any:
+        """What the device renders, for the server's coupling; or, in the other modes, that it drives directly."""
+        limits = DeviceLimitsT()
+        limits.maxForceN, limits.maxTorqueNm, limits.stiffnessNPerM = profile.scene_limits()
+        limits.direct = self.mode != "coupled"
+        return limits
 
     async def _expect(self, ws: Any, kind: type, timeout: float = 5.0) -> Any:
         """The next message of type `kind`, skipping others; LinkError on an Error message."""
@@ -229,7 +238,8 @@ class Network:
                 pose = self.ex.read_pose(k)
                 if pose is not None:
                     pos[0], pos[1], pos[2] = pose[4]
-            self.ex.write_state(k, t, arrival, r.step, r.contacts[k], r.force[k], r.stiffness[k], pos)
+            self.ex.write_state(k, t, arrival, r.step, r.contacts[k], r.force[k], r.stiffness[k], pos,
+                                r.coupled[k], r.max_force[k])
 
     def _on_message(self, m: Any, arrival: int) -> None:
         if isinstance(m, PongT):

@@ -181,6 +181,7 @@ class ForceLimits:
     # The stiffest contact the device renders stably (its Z-width), at the device: the extrapolate mode's
     # dF/dx, times gain and scale, is held within it [N/m]
     max_stiffness_N_per_m: float = 2000.0
+    max_torque_Nm: float = 0.0   # the largest torque it renders [N m]; 0: it renders none (a 3-DoF arm)
 
 
 @dataclass(frozen=True)
@@ -197,6 +198,14 @@ class Profile:
     @property
     def period_ns(self) -> int:
         return round(1e9 / self.rate_hz)
+
+    def scene_limits(self) -> tuple[float, float, float]:
+        """What the device renders in scene terms, for the server's coupling (Hello.device_limits): the largest
+        force [N] and torque [N m] and the stiffest spring [N/m]. A scene newton is `gain` device newtons and a
+        scene metre 1/scale device metres (at gain 0, open loop, as at gain 1: what it would render)."""
+        f, ws = self.force, self.workspace
+        gain = f.gain if f.gain > 0 else 1.0
+        return f.max_N / gain, f.max_torque_Nm / gain * ws.scale, f.max_stiffness_N_per_m / (gain * ws.scale)
 
 
 # The time within which the safety layer must bring any force to zero (DESIGN.md, issue 5: states that stop
@@ -233,6 +242,7 @@ def parse_force(f: Fields) -> ForceLimits:
         engage_ticks=f.integer("engage_ticks", 20, low=1, high=100000),
         ramp_in_s=f.number("ramp_in_s", 0.25, low=0.0, high=10.0),
         max_stiffness_N_per_m=f.number("max_stiffness_N_per_m", 2000.0, low=0.0, low_open=True),
+        max_torque_Nm=f.number("max_torque_Nm", 0.0, low=0.0),
     )
 
 
@@ -249,7 +259,7 @@ def parse_profile(table: dict[str, Any], path: str = "<profile>") -> Profile:
         raise ProfileError(f"{path}: force: missing (a table with max_N, continuous_N, slew_N_per_s)")
     fo = Fields(top.table_of("force"), f"{path}: force",
                 ("max_N", "continuous_N", "slew_N_per_s", "gain", "engage_below_N", "engage_ticks", "ramp_in_s",
-                 "max_stiffness_N_per_m"))
+                 "max_stiffness_N_per_m", "max_torque_Nm"))
     for other in drivers.SECTIONS:
         if other != driver and other in table:
             raise ProfileError(f"{path}: [{other}] given but driver is {driver!r}")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import gc
+import math
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -50,8 +51,12 @@ class Channel:
         self.render = ForceRender(self.history, mode)
         # The device's stiffness limit in scene terms: a scene metre is 1/scale device metres, and a scene
         # newton gain device newtons (at gain 0, open loop, as at gain 1: what it would render).
-        gain = profile.force.gain if profile.force.gain > 0 else 1.0
-        self.render.max_stiffness = profile.force.max_stiffness_N_per_m / (gain * profile.workspace.scale)
+        self.render.max_stiffness = profile.scene_limits()[2]
+        # Coupled, the command stays within the device's limit by construction (the server saturates the
+        # coupling at it, the renderer at the coupling's saturation); passivity's damping is held to it too,
+        # so the safety layer's clip is a guard that never acts.
+        # (A hair under max_N: the safety layer's own magnitude, summed otherwise, must not read it as over.)
+        self.command_limit = profile.force.max_N * (1.0 - 1e-9) if mode == "coupled" else math.inf
         self.passivity = PassivityController(1.0 / profile.rate_hz, enabled=passivity)
         self.safety = Safety(profile.force, 1.0 / profile.rate_hz, lambda e: on_event(index, e))
         self.inputs = Inputs()
@@ -67,7 +72,7 @@ class Channel:
 
 class Tick:
     def __init__(self, profiles: Sequence[Profile], devices: Sequence[Device], exchange: ex.Exchange, *,
-                 mode: str = "delay", passivity: bool = True, wake_fd: int = -1, spin_ns: int = 200_000,
+                 mode: str = "coupled", passivity: bool = True, wake_fd: int = -1, spin_ns: int = 200_000,
                  max_backlog: int = 20, clock: Callable[[], int] = time.monotonic_ns) -> None:
         rates = {p.rate_hz for p in profiles}
         if len(rates) != 1:
@@ -171,7 +176,12 @@ class Tick:
             pc = ch.passivity
             if ok:
                 pc.observe_position(s.position)
-            out = ch.safety.apply(now_ns, pc.correct(fd), inp)
+            cmd = pc.correct(fd)
+            mag = math.sqrt(cmd[0] * cmd[0] + cmd[1] * cmd[1] + cmd[2] * cmd[2])
+            if mag > ch.command_limit:
+                c = ch.command_limit / mag
+                cmd[0], cmd[1], cmd[2] = cmd[0] * c, cmd[1] * c, cmd[2] * c
+            out = ch.safety.apply(now_ns, cmd, inp)
             pc.commit(out)
             if ch.safety.mode == Mode.WAITING or (fd[0] == 0.0 and fd[1] == 0.0 and fd[2] == 0.0):
                 pc.reset()  # out of contact nothing is stored: the next contact starts passive

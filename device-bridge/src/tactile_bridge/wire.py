@@ -27,9 +27,12 @@ _I64 = struct.Struct("<q")
 _F64 = struct.Struct("<d")
 _DEVICE = struct.Struct("<3f3f9fI")      # DeviceHaptics: force, torque, stiffness (row-major), contacts; 64 bytes
 _POSE = struct.Struct("<3f4f")           # ProxyPose: position, orientation (w, x, y, z); 28 bytes
+_COUPLING = struct.Struct("<3f4f3f??2x")  # DeviceCoupling: body pose, stiffness, max force, max torque, coupled,
+                                          # saturated; 44 bytes
 
 # HapticFrame field slots (declaration order in the schema).
-F_SCENE_ID, F_STEP, F_SIM_TIME, F_SERVER_TIME, F_LAST_INPUT, F_PROXIES, F_DEVICES, F_DEVICE_POSES, F_DEVICE_SEQS = range(9)
+(F_SCENE_ID, F_STEP, F_SIM_TIME, F_SERVER_TIME, F_LAST_INPUT, F_PROXIES, F_DEVICES, F_DEVICE_POSES, F_DEVICE_SEQS,
+ F_DEVICE_COUPLINGS) = range(10)
 
 
 class Table:
@@ -94,7 +97,7 @@ def message_type(buf: Any) -> tuple[int, Table | None]:
 
 class HapticReader:
     """Reads the parts of a HapticFrame one bridge needs: for each of its devices (by index into
-    SceneDescription.devices) force, stiffness, contacts and pose, into preallocated lists."""
+    SceneDescription.devices) force, stiffness, contacts, pose and coupling, into preallocated lists."""
 
     def __init__(self, n_devices: int) -> None:
         self.scene_id = 0
@@ -106,6 +109,9 @@ class HapticReader:
         self.position = [[0.0, 0.0, 0.0] for _ in range(n_devices)]    # device pose at the step [m]
         self.has_pose = [False] * n_devices
         self.input_sequence = [0] * n_devices
+        self.coupled = [False] * n_devices                              # protocol 1.5: a coupled channel
+        self.body = [[0.0, 0.0, 0.0] for _ in range(n_devices)]        # its proxy's body [m]
+        self.max_force = [0.0] * n_devices                              # its coupling's saturation [N]
 
     def read(self, t: Table, channels: list[int]) -> None:
         """Fills the lists for channels[k] (the wire index of bridge device k, -1 if the scene lacks it)."""
@@ -115,6 +121,7 @@ class HapticReader:
         start, n = t.vector(F_DEVICES, _DEVICE.size)
         pstart, pn = t.vector(F_DEVICE_POSES, _POSE.size)
         sstart, sn = t.vector(F_DEVICE_SEQS, 8)
+        cstart, cn = t.vector(F_DEVICE_COUPLINGS, _COUPLING.size)
         buf = t.buf
         for k, w in enumerate(channels):
             if w < 0 or w >= n:
@@ -132,6 +139,14 @@ class HapticReader:
                 q[0], q[1], q[2] = p[0], p[1], p[2]
                 self.has_pose[k] = True
             self.input_sequence[k] = _U64.unpack_from(buf, sstart + 8 * w)[0] if w < sn else 0
+            if w < cn:
+                c = _COUPLING.unpack_from(buf, cstart + w * _COUPLING.size)
+                b = self.body[k]
+                b[0], b[1], b[2] = c[0], c[1], c[2]
+                self.max_force[k] = c[8]
+                self.coupled[k] = c[10]
+            else:
+                self.coupled[k] = False
 
 
 def device_input(device: str, sequence: int, device_time_ns: int, position: Any, orientation: Any,
