@@ -258,11 +258,32 @@ Pose read_start_pose(const Fields& f, const Origin& o, std::optional<PoseScript>
   return start;
 }
 
+// {"stiffness", "damping", "max_force", "angular_stiffness", "angular_damping",
+// "max_torque", "mass", "inertia"}: each optional, each > 0 (core/coupling.hpp).
+CouplingSpec read_coupling(const Json& j, const std::string& path, const Origin& o) {
+  const Fields f(j, path, o,
+                 {"stiffness", "damping", "max_force", "angular_stiffness", "angular_damping", "max_torque", "mass",
+                  "inertia"});
+  CouplingSpec c;
+  const auto get = [&](const char* key, double& out) {
+    if (f.has(key)) out = f.positive(key);
+  };
+  get("stiffness", c.stiffness);
+  get("damping", c.damping);
+  get("max_force", c.max_force);
+  get("angular_stiffness", c.angular_stiffness);
+  get("angular_damping", c.angular_damping);
+  get("max_torque", c.max_torque);
+  get("mass", c.mass);
+  get("inertia", c.inertia);
+  return c;
+}
+
 void read_hands(const Json& j, const Origin& o, Scene& scene) {
   const Json& arr = scene_json::read_array(j, "hands", o, 0);
   for (size_t i = 0; i < arr.size(); ++i) {
     const std::string path = join("hands", i);
-    const Fields f(arr[i], path, o, {"name", "device", "position", "orientation", "script"});
+    const Fields f(arr[i], path, o, {"name", "device", "position", "orientation", "script", "coupling"});
     HandSpec hand;
     hand.name = read_label(f.at("name"), f.path("name"), o);
     for (const HandSpec& h : scene.spec.hands)
@@ -270,6 +291,7 @@ void read_hands(const Json& j, const Origin& o, Scene& scene) {
     hand.device = read_label(f.at("device"), f.path("device"), o);
     std::optional<PoseScript> script;
     hand.pose = read_start_pose(f, o, script);
+    if (f.has("coupling")) hand.coupling = read_coupling(f.at("coupling"), f.path("coupling"), o);
     scene.spec.hands.push_back(hand);
     scene.hand_script.push_back(std::move(script));
   }
@@ -314,7 +336,7 @@ void read_proxies(const Json& j, const Origin& o, Scene& scene) {
     const std::string path = join("proxies", i);
     const Fields f(arr[i], path, o,
                    {"name", "device", "hand", "shape", "radius", "half_length", "half_extents", "position",
-                    "orientation", "friction", "script"});
+                    "orientation", "friction", "script", "coupling"});
     ProxySpec proxy;
     proxy.name = read_label(f.at("name"), f.path("name"), o);
     for (const ProxySpec& p : scene.spec.proxies)
@@ -339,6 +361,8 @@ void read_proxies(const Json& j, const Origin& o, Scene& scene) {
       }
       if (f.has("script"))
         o.fail(f.path("script"), "a proxy in a hand moves with it; give the script to hand '" + hand->name + "'");
+      if (f.has("coupling"))
+        o.fail(f.path("coupling"), "a proxy in a hand moves with it; give the coupling to hand '" + hand->name + "'");
       // The core fills the device in from the hand; the spec keeps it empty.
     } else {
       if (!f.has("device"))
@@ -347,6 +371,7 @@ void read_proxies(const Json& j, const Origin& o, Scene& scene) {
     }
     std::optional<PoseScript> script;
     proxy.pose = read_start_pose(f, o, script);
+    if (f.has("coupling")) proxy.coupling = read_coupling(f.at("coupling"), f.path("coupling"), o);
     scene.spec.proxies.push_back(proxy);
     scene.proxy_script.push_back(std::move(script));
   }

@@ -259,6 +259,37 @@ TEST(SceneMapping, ProxiesHandsAndScriptsBecomeTheCoreSpec) {
   EXPECT_EQ(s.hand_script[0]->easing, PoseScript::Easing::Smooth);  // the default
 }
 
+// A proxy's or a hand's "coupling" bounds what a device asks of it live;
+// what it leaves out stays 0 (the device's, or the defaults).
+TEST(SceneMapping, CouplingsBecomeTheCoreSpec) {
+  SceneDir dir;
+  json j = make_proxy_scene();
+  j["proxies"][1]["coupling"] = json{{"stiffness", 800.0}, {"max_force", 3.0}, {"mass", 0.05}};
+  j["hands"][0]["coupling"] = json{{"max_torque", 0.2}, {"angular_stiffness", 4.0}};
+  const Scene s = load_scene(dir.write_json("p.json", j)).at(0);
+  const CouplingSpec& c = s.spec.proxies[1].coupling;
+  EXPECT_EQ(c.stiffness, 800.0);
+  EXPECT_EQ(c.max_force, 3.0);
+  EXPECT_EQ(c.mass, 0.05);
+  EXPECT_EQ(c.damping, 0.0);
+  EXPECT_EQ(s.spec.hands[0].coupling.max_torque, 0.2);
+  EXPECT_EQ(s.spec.hands[0].coupling.angular_stiffness, 4.0);
+  EXPECT_EQ(s.spec.proxies[0].coupling.stiffness, 0.0);  // none given
+}
+
+TEST(SceneErrors, BadCouplingsAreRefusedByField) {
+  SceneDir dir;
+  json j = make_proxy_scene();
+  j["proxies"][1]["coupling"] = json{{"max_force", -1.0}};
+  expect_scene_error(dir, "s.json", j, {"proxies[1].coupling.max_force: must be a number > 0, got -1"});
+  j = make_proxy_scene();
+  j["proxies"][1]["coupling"] = json{{"stifness", 800.0}};
+  expect_scene_error(dir, "s.json", j, {"proxies[1].coupling", "stifness"});
+  j = make_proxy_scene();
+  j["proxies"][3]["coupling"] = json{{"max_force", 2.0}};
+  expect_scene_error(dir, "s.json", j, {"proxies[3].coupling: a proxy in a hand moves with it; give the coupling to hand 'right'"});
+}
+
 TEST(SceneMapping, VariantsCanTurnFrictionOnAndOff) {
   SceneDir dir;
   json j = make_proxy_scene();
