@@ -255,6 +255,8 @@ def test_decoded_values_are_the_written_ones():
     hello = tp.decode(golden("hello")[1]).message
     assert (hello.protocolMajor, hello.role, hello.token) == (1, Role.Device, "s3cret-token")
     assert hello.devices == ["left", "right"]
+    assert [(d.maxForceN, d.stiffnessNPerM, d.direct) for d in hello.deviceLimits] == [(6.0, 2000.0, False),
+                                                                                       (3.5, 1200.0, True)]
     state = tp.decode(golden("state_frame")[1]).message
     assert state.step == 123456 and state.serverTimeNs == 987654321012
     assert state.positions[4] == np.float32(-0.001) and state.proxies[1].orientation.x == 0.5
@@ -269,6 +271,9 @@ def test_decoded_values_are_the_written_ones():
     haptic = tp.decode(golden("haptic_frame")[1]).message
     assert haptic.devicePoses[1].position.y == np.float32(0.4) and haptic.devicePoses[1].orientation.z == 0.5
     assert haptic.deviceInputSequences.dtype == np.uint64 and list(haptic.deviceInputSequences) == [4242, 977]
+    coupling = haptic.deviceCouplings[0]
+    assert coupling.coupled and not haptic.deviceCouplings[1].coupled
+    assert (coupling.body.position.y, coupling.maxForceN, coupling.maxTorqueNm) == (np.float32(0.4875), 6.0, 0.125)
     safety = tp.decode(golden("safety_event")[1]).message
     assert (safety.device, safety.kind, safety.forceN) == ("stylus", SafetyKind.Clipped, 5.0)
     assert (safety.deviceTimeNs, safety.serverTimeNs) == (5000250123, 987654521012)

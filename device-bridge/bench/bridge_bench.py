@@ -10,7 +10,16 @@
              figures (server/bench/accuracy_report.py reads them).
 
   .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
+  loop       the closed haptic loop per case (the default scene, a soft and a stiff block poked and held, a stroke
+             with friction, the hand twisting the Fig. 1 beam, strokes in free space), coupled against direct, with
+             haptic states 0.25, 1 and 4 ms apart (and --loaded: beside two busy processes): the peak force sent and
+             commanded against the device's limit, clip events, ripple in holds, contact continuity, the work done on
+             the hand per cycle and passivity's share, the stiffness felt against what it should be, drag in free
+             space, the latency from the hand's motion to force, faults.
+
+  .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
   .venv/bin/python device-bridge/bench/bridge_bench.py modes --seconds 12 [--object stiff] [--json modes.json]
+  .venv/bin/python device-bridge/bench/bridge_bench.py loop [--cases soft,stiff] [--rates 1000] [--loaded] [--json loop.json]
 """
 
 from __future__ import annotations
@@ -279,6 +288,252 @@ def modes(args: argparse.Namespace) -> None:
         pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
 
 
+# ---- loop: the closed haptic loop, coupled against direct ---------------------------------------------------
+
+# The arm for the closed-loop cases: the shipped sim profile's device (6 N peak, 3 N continuous, 2000 N/m) and
+# hand; the case sets where it starts, its script and the channel.
+LOOP_PROFILE = """
+name = "loop"
+driver = "sim"
+channel = "{channel}"
+[workspace]
+offset_m = [{ox}, {oy}, {oz}]
+[force]
+max_N = 6.0
+continuous_N = 3.0
+slew_N_per_s = 500.0
+max_stiffness_N_per_m = 2000.0
+[sim]
+script = "{script}"
+direction = [0.0, -1.0, 0.0]
+depth_m = {depth}
+period_s = {period}
+stroke_m = {stroke}
+twist_deg = {twist}
+"""
+LOOP_LIMIT_N = 6.0
+LOOP_STIFFNESS = 2000.0
+
+
+def block_scene(E: float, friction: bool = False) -> dict[str, Any]:
+    scene: dict[str, Any] = json.loads(json.dumps(SCENE))
+    scene["name"] = f"loop_block_{E / 1e3:g}kPa"
+    scene["material"]["E"] = E
+    if friction:
+        scene["effects"]["friction"] = True
+        scene["proxies"][0]["friction"] = 0.5
+    return scene
+
+
+def shipped(name: str) -> dict[str, Any]:
+    scene = json.loads((ROOT / "server" / "scenes" / f"{name}.json").read_text())
+    scene.pop("$schema", None)
+    scene["mesh"].pop("file", None) if "primitive" in scene["mesh"] else None
+    return scene
+
+
+# Each case: its scene, the channel the arm drives, the arm's profile fields, and whether its holds are pokes
+# (for the stiffness the hand should feel: the body's, from a headless probe, in series with the coupling).
+# The block's sphere (radius 1 cm) touches its top (y = 0.03) with the device at y = 0.04.
+LOOP_CASES: dict[str, dict[str, Any]] = {
+    "default": {"scene": lambda: shipped("default"), "channel": "stylus", "poke": True,
+                "arm": dict(ox=0.6, oy=0.45, oz=0.0, script="poke", depth=0.08, period=4.0, stroke=0.0, twist=0.0)},
+    "soft": {"scene": lambda: block_scene(30e3), "channel": "stylus", "poke": True,
+             "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="poke", depth=0.02, period=3.0, stroke=0.0, twist=0.0)},
+    "stiff": {"scene": lambda: block_scene(1e6), "channel": "stylus", "poke": True,
+              "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="poke", depth=0.02, period=3.0, stroke=0.0, twist=0.0)},
+    "stroke": {"scene": lambda: block_scene(30e3, friction=True), "channel": "stylus", "poke": False,
+               "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="stroke", depth=0.02, period=3.0, stroke=0.02, twist=0.0)},
+    "twist": {"scene": lambda: shipped("hand_twist"), "channel": "glove", "poke": False,
+              "arm": dict(ox=0.8, oy=0.564, oz=0.0, script="twist", depth=0.025, period=4.0, stroke=0.0, twist=-25.0)},
+    # Free space: strokes of 10 cm at 0.5 m/s at their fastest, 20 cm above the block.
+    "free": {"scene": lambda: block_scene(30e3), "channel": "stylus", "poke": False,
+             "arm": dict(ox=-0.05, oy=0.25, oz=0.0, script="stroke", depth=0.0, period=1.2, stroke=0.1, twist=0.0)},
+}
+
+
+@contextlib.contextmanager
+def busy(n: int) -> Iterator[None]:
+    """n processes spinning beside the run (a loaded machine)."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+
+def server_peak(recording: pathlib.Path, channel: str) -> tuple[float, int]:
+    """The largest force the server sent the channel [N], and the faults its telemetry named."""
+    from tactile_bridge.wire import HAPTIC_FRAME, HapticReader, message_type
+    from tactile_proto import decode
+    from tactile_proto.recording import open_recording
+
+    rec = open_recording(recording)
+    index, peak, faults = -1, 0.0, 0
+    reader = HapticReader(1)
+    for m in rec.messages(["/scene", "/haptic", "/telemetry"]):
+        if m.topic == "/scene":
+            index = list(decode(m.data).message.devices).index(channel)
+        elif m.topic == "/haptic" and index >= 0:
+            kind, table = message_type(m.data)
+            if kind == HAPTIC_FRAME and table is not None:
+                reader.read(table, [index])
+                peak = max(peak, float(np.linalg.norm(reader.force[0])))
+        elif m.topic == "/telemetry":
+            faults += len(decode(m.data).message.faults or [])
+    return peak, faults
+
+
+def probe_body_stiffness(tmp: pathlib.Path, scene: dict[str, Any], channel: str, x: list[float],
+                         touch_y: float, force: float) -> float:
+    """The body's contact stiffness [N/m] at `force`, from a headless static probe: the channel's proxy, alone
+    and kinematic, let down slowly at x from 5 mm above `touch_y` (the device height where it touches) to 4 cm
+    past it, once the body has settled; dF/dy where the mean force crosses `force`."""
+    scene = json.loads(json.dumps(scene))
+    scene["name"] = "loop_probe"
+    proxy = next(p for p in scene["proxies"] if p.get("device") == channel)
+    scene["proxies"] = [proxy]
+    scene.pop("hands", None)
+    start = [x[0], touch_y + 0.005, x[2]]
+    end = [x[0], touch_y - 0.04, x[2]]
+    proxy.pop("position", None)
+    proxy["script"] = {"easing": "linear", "keyframes": [{"t": 0.0, "position": start}, {"t": 2.0, "position": start},
+                                                         {"t": 10.0, "position": end}]}
+    scene["run"] = {"duration": 10.0, "frame_rate": 50, "vtu_every": 1000}
+    path = tmp / "probe.json"
+    path.write_text(json.dumps(scene))
+    out = tmp / "probe_out"
+    subprocess.run([built("tactile-sim"), "run", str(path), "--out", str(out), "--no-vtu", "--quiet"],
+                   capture_output=True, text=True, check=False)
+    rows = list(csv.DictReader(next(out.rglob("forces.csv")).open()))
+    t = np.array([float(r["t_s"]) for r in rows])
+    fy = np.array([float(r["fy_N"]) for r in rows])
+    w = 50  # a 50 ms mean: the beam's ringing out
+    fy = np.convolve(fy, np.ones(w) / w, mode="same")
+    y = np.interp(t, [0.0, 2.0, 10.0], [start[1], start[1], end[1]])
+    i = int(np.argmax(fy >= force))
+    if fy[i] < force or i < w or i + w >= len(fy):
+        return float("nan")
+    return float((fy[i + w // 2] - fy[i - w // 2]) / (y[i - w // 2] - y[i + w // 2]))
+
+
+def analyse(trace: pathlib.Path, case: dict[str, Any], period: float) -> dict[str, float]:
+    tr = np.genfromtxt(trace, delimiter=",", names=True)
+    tr = tr[tr["device"] == 0]
+    t = tr["t_s"] - tr["t_s"][0]
+    u = (t % period) / period
+    pos = np.stack([tr["x_m"], tr["y_m"], tr["z_m"]], axis=1)
+    f = np.stack([tr["fx_N"], tr["fy_N"], tr["fz_N"]], axis=1)
+    out = np.stack([tr["out_x_N"], tr["out_y_N"], tr["out_z_N"]], axis=1)  # the sim arm: device frame = scene frame
+    mag = np.linalg.norm(out, axis=1)
+    live = (t > period) & (tr["safety"] >= 2)  # after the first cycle (the body settling from its start), engaged
+    hold = live & (u > 0.35) & (u < 0.65)
+    r: dict[str, float] = {"peak_cmd": float(mag.max())}
+    # Ripple: rms about the 20 ms moving mean, over the mean, in the steady holds.
+    mean20 = np.convolve(mag, np.ones(20) / 20, mode="same")
+    r["ripple_pct"] = float(100 * np.sqrt(np.mean((mag - mean20)[hold] ** 2)) / max(1e-9, mag[hold].mean())) \
+        if hold.any() else float("nan")
+    r["hold_N"] = float(mag[hold].mean()) if hold.any() else float("nan")
+    r["contact_pct"] = float(100 * np.mean(tr["contacts"][hold] > 0)) if hold.any() else float("nan")
+    # The work the device's force did on the hand over each whole cycle (passive: <= 0), and passivity's part.
+    dx = np.diff(pos, axis=0)
+    work = np.einsum("ij,ij->i", out[:-1], dx)
+    cycle = (t[:-1] // period).astype(int)
+    per_cycle = [work[(cycle == c) & live[:-1]].sum() for c in range(1, int(t[-1] // period))]
+    r["cycle_work_mJ"] = 1e3 * float(max(per_cycle)) if per_cycle else float("nan")
+    v2 = np.sum((dx / np.maximum(np.diff(t), 1e-6)[:, None]) ** 2, axis=1)
+    r["pc_ticks"] = float(np.sum(tr["pc_alpha"] > 0))
+    r["pc_mJ"] = 1e3 * float(np.sum(tr["pc_alpha"][1:] * v2 * np.diff(t)))
+    # The stiffness felt: dF/dy of the rendered force against the device's height while pressing in, between
+    # a third and nine tenths of the hold force.
+    press = live & (u > 0.05) & (u < 0.25) & (tr["contacts"] > 0)
+    band = press & (f[:, 1] > 0.33 * r["hold_N"]) & (f[:, 1] < 0.9 * r["hold_N"])
+    r["k_felt"] = float(-np.polyfit(pos[band, 1], f[band, 1], 1)[0]) if band.sum() > 20 else float("nan")
+    # Drag in free space at 0.5 m/s (the free case): the force while the device moves at 0.45-0.55 m/s.
+    speed = np.linalg.norm(np.gradient(pos, t, axis=0), axis=1)
+    fast = live & (speed > 0.45) & (speed < 0.55)
+    r["drag_N"] = float(np.linalg.norm(f[fast], axis=1).max()) if fast.any() else float("nan")
+    # Latency from the hand's own motion to force: the lag (ticks) at which the force's tick-to-tick change
+    # follows the device's best, in contact (0: the same tick's motion, answered at the tick).
+    con = live[1:] & (tr["contacts"][1:] > 0)
+    dfy, dy = np.diff(f[:, 1]), np.diff(pos[:, 1])
+    best, lag = 0.0, -1
+    for k in range(0, 40):
+        a, b = dfy[k:][con[k:]], dy[: len(dy) - k][con[k:]]
+        if len(a) > 100 and np.std(a) > 0 and np.std(b) > 0:
+            c = abs(float(np.corrcoef(a, b)[0, 1]))
+            if c > best:
+                best, lag = c, k
+    r["lag_ticks"] = float(lag)
+    return r
+
+
+def loop(args: argparse.Namespace) -> None:
+    cases = args.cases.split(",") if args.cases else list(LOOP_CASES)
+    rates = [float(x) for x in args.rates.split(",")]
+    print(f"the closed haptic loop: the real server, the bridge's tick, the simulated arm (device: {LOOP_LIMIT_N:g} N "
+          f"peak, 3 N continuous, {LOOP_STIFFNESS:g} N/m), {args.seconds:g} s per run; coupled (the default) against "
+          f"direct (a kinematic proxy, the paper's delay); haptic states at each rate; 'loaded': two busy processes "
+          f"beside it")
+    print("  server/cmd: the peak force the server sent / the bridge commanded [N] (limit 6); clips: safety clip events;\n"
+          "  ripple: rms about the 20 ms moving mean over the mean in steady holds [%]; hold: its mean [N]; contact: ticks\n"
+          "  in contact during holds [%]; work/cycle: the most work the device did on the hand over one cycle (passive\n"
+          "  <= 0) [mJ]; pc: passivity controller's active ticks and what it dissipated [mJ]; K felt / K due: dF/dx while\n"
+          "  pressing in, and the body's (headless static probe) in series with the coupling's [N/m]; drag: force at\n"
+          "  0.45-0.55 m/s in free space [N]; lag: ticks from the hand's motion to force; delay: display delay [ms]")
+    print(f"{'case':>8} {'mode':>8} {'states':>7} {'server':>7} {'cmd':>6} {'clips':>5} {'ripple':>7} {'hold':>6} "
+          f"{'contact':>8} {'work/cyc':>9} {'pc':>6} {'pc mJ':>7} {'K felt':>7} {'K due':>7} {'drag':>6} {'lag':>4} "
+          f"{'delay':>6} {'faults':>6}")
+    rows = []
+    runs = [(c, m, r, False) for c in cases for m in ("coupled", "delay") for r in rates]
+    if args.loaded:
+        runs += [(c, m, rates[min(1, len(rates) - 1)], True) for c in cases for m in ("coupled", "delay")]
+    body_k: dict[str, float] = {}
+    for case_name, mode, rate, loaded in runs:
+        case = LOOP_CASES[case_name]
+        arm = case["arm"]
+        scene = case["scene"]()
+        with tempfile.TemporaryDirectory() as d, busy(2 if loaded else 0):
+            tmp = pathlib.Path(d)
+            rec = tmp / "run.mcap"
+            with server(tmp, scene, "--haptic-rate", str(rate), "--record", str(rec)) as port:
+                profile = tmp / "loop.toml"
+                profile.write_text(LOOP_PROFILE.format(channel=case["channel"], **arm))
+                summary, trace = tmp / "summary.json", tmp / "trace.csv"
+                r = subprocess.run([str(BRIDGE), "--profile", str(profile), "--server", f"ws://127.0.0.1:{port}/",
+                                    "--token", TOKEN, "--seconds", str(args.seconds), "--status", "0", "--mode", mode,
+                                    "--summary", str(summary), "--trace", str(trace),
+                                    "--trace-seconds", str(args.seconds + 2)],
+                                   capture_output=True, text=True, timeout=args.seconds + 60)
+                if r.returncode != 0:
+                    sys.exit(f"the bridge failed ({r.returncode}):\n{r.stderr[-3000:]}")
+            clips = r.stderr.count(" clipped: ")
+            s = json.loads(summary.read_text())
+            a = analyse(trace, case, arm["period"])
+            peak, faults = server_peak(rec, case["channel"])
+            k_due = float("nan")
+            if case["poke"] and np.isfinite(a["hold_N"]):
+                key = f"{case_name}@{a['hold_N']:.1f}"
+                if key not in body_k:
+                    touch = arm["oy"] - 0.01 if case_name != "default" else 0.39
+                    body_k[key] = probe_body_stiffness(tmp, scene, case["channel"], [arm["ox"], 0.0, arm["oz"]], touch,
+                                                       a["hold_N"])
+                kb = body_k[key]
+                k_due = kb * LOOP_STIFFNESS / (kb + LOOP_STIFFNESS) if mode == "coupled" else kb
+        label = mode + ("+load" if loaded else "")
+        row = {"case": case_name, "mode": mode, "loaded": loaded, "rate_hz": rate, "server_peak_N": peak,
+               "clips": clips, "faults": faults, "delay_ms": s["delay_ms"], "k_due": k_due, **a}
+        rows.append(row)
+        print(f"{case_name:>8} {label:>8} {1e3 / rate:>5.2f}ms {peak:>7.2f} {a['peak_cmd']:>6.2f} {clips:>5d} "
+              f"{a['ripple_pct']:>6.2f}% {a['hold_N']:>6.2f} {a['contact_pct']:>7.2f}% {a['cycle_work_mJ']:>9.2f} "
+              f"{a['pc_ticks']:>6.0f} {a['pc_mJ']:>7.2f} {a['k_felt']:>7.0f} {k_due:>7.0f} {a['drag_N']:>6.3f} "
+              f"{a['lag_ticks']:>4.0f} {s['delay_ms']:>6.2f} {faults:>6d}", flush=True)
+    if args.json:
+        pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="what", required=True)
@@ -290,8 +545,14 @@ def main() -> None:
     b.add_argument("--dt", type=float, default=4e-3, help="server step [s] (slower than the 1 ms tick)")
     b.add_argument("--object", choices=sorted(OBJECTS), default="soft", help="the block: soft (30 kPa) or stiff (300 kPa)")
     b.add_argument("--json", help="also write the figures to this file")
+    c = sub.add_parser("loop")
+    c.add_argument("--seconds", type=float, default=12.0, help="per run")
+    c.add_argument("--cases", default="", help=f"comma-separated, of {', '.join(LOOP_CASES)} (default: all)")
+    c.add_argument("--rates", default="4000,1000,250", help="haptic states per second, comma-separated")
+    c.add_argument("--loaded", action="store_true", help="also each case at 1 kHz beside two busy processes")
+    c.add_argument("--json", help="also write the figures to this file")
     args = ap.parse_args()
-    {"lateness": lateness, "modes": modes}[args.what](args)
+    {"lateness": lateness, "modes": modes, "loop": loop}[args.what](args)
 
 
 if __name__ == "__main__":

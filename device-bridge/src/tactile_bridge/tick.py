@@ -33,9 +33,10 @@ from .safety import Inputs, Kind, Mode, Safety, SafetyEvent
 
 
 # One row per tick and device: bridge time [s], device, safety mode, device position (scene) [m] (3),
-# rendered force (scene) [N] (3), output force (device frame) [N] (3), passivity damping [N s/m], newest step.
+# rendered force (scene) [N] (3), output force (device frame) [N] (3), passivity damping [N s/m], newest step,
+# and the newest state's contact points (-1 before any).
 TRACE_COLUMNS = ("t_s", "device", "safety", "x_m", "y_m", "z_m", "fx_N", "fy_N", "fz_N",
-                 "out_x_N", "out_y_N", "out_z_N", "pc_alpha", "step")
+                 "out_x_N", "out_y_N", "out_z_N", "pc_alpha", "step", "contacts")
 
 
 class Channel:
@@ -196,6 +197,7 @@ class Tick:
                 row[9:12] = out
                 row[12] = pc.alpha
                 row[13] = h.step[h.newest()] if h.count else -1
+                row[14] = h.contacts[h.newest()] if h.count else -1
                 self.trace_rows += 1
 
             # Status for the status line (single words).

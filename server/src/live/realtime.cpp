@@ -20,6 +20,10 @@ constexpr double kMaxBacklog = 0.05;  // [s]
 // deadline is spun. Spinning is paid for by whatever else the machine runs
 // (a bridge beside the server on the same cores), so it is kept short.
 constexpr double kSpinWindow = 60e-6;  // [s]
+// A device's input after this long without one starts it again: its proxy
+// glides from where it waits at kApproachSpeed.
+constexpr double kInputPause = 0.1;       // [s]
+constexpr double kApproachSpeed = 0.25;   // [m/s]
 
 double seconds(RealtimeLoop::Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
@@ -106,11 +110,15 @@ void RealtimeLoop::apply_inputs() {
   const double t = sim_.time();
   while (inputs_.pop(s)) {
     Driver& drv = drivers_[size_t(s.device)];
+    const bool first = !drv.has_sample || s.device_time_ns - drv.last_device_ns > int64_t(kInputPause * 1e9);
+    double device_speed = 0;  // [m/s], between its latest two inputs
     if (drv.has_sample && s.device_time_ns > drv.last_device_ns) {
       // The device's input interval, smoothed, within sane bounds.
       const double gap = 1e-9 * double(s.device_time_ns - drv.last_device_ns);
       drv.interval = std::clamp(0.8 * drv.interval + 0.2 * gap, dt_, 0.02);
+      device_speed = glm::distance(s.pose.position, drv.last_position) / gap;
     }
+    drv.last_position = s.pose.position;
     drv.has_sample = true;
     drv.last_device_ns = s.device_time_ns;
     if (!(s.drive == drv.drive)) {  // a device with its own limits, or one that drives directly
@@ -118,12 +126,23 @@ void RealtimeLoop::apply_inputs() {
       else sim_.couple_device(s.device, s.drive.has_limits ? &s.drive.limits : nullptr);
       drv.drive = s.drive;
     }
-    // From where it is now to the new pose over one input interval.
+    // From where it is now to the new pose over one input interval. A
+    // device's first input (or one after a pause) may be far from where its
+    // proxy waits: until it has caught up, its pose glides toward the device
+    // at kApproachSpeed faster than the device moves (a coupled proxy would
+    // be pulled there at the coupling's limit).
     ProxyMotion m;
     m.t0 = t;
-    m.t1 = t + drv.interval;
     m.from = drv.motion.at(t);
     m.to = s.pose;
+    double glide = drv.interval;
+    drv.approaching = drv.approaching || first;
+    if (drv.approaching) {
+      const double approach = glm::distance(m.from.position, m.to.position) / (kApproachSpeed + device_speed);
+      drv.approaching = approach > glide;
+      glide = std::max(glide, approach);
+    }
+    m.t1 = t + glide;
     drv.motion = m;
     if (drv.hand >= 0) sim_.set_hand_motion(drv.hand, m);
     for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);

@@ -170,6 +170,8 @@ class RealtimeLoop {
     int64_t last_device_ns = 0;
     double interval = 0;      // estimated time between its inputs [s]
     DeviceDrive drive;        // as the simulation has it
+    bool approaching = false; // its pose still glides toward its device's at the approach speed
+    Vec3 last_position{0.0};  // its latest input's [m]
   };
   void sync_drivers();
   void apply_inputs();

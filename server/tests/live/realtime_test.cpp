@@ -370,7 +370,8 @@ TEST(RealtimeLoop, EachChannelsNewestInputAndPoseComeBack) {
         loop.post_input(s);
       }
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));  // the last inputs glide in
+    // The last inputs glide in: 2.3 cm from where the stylus waited, at the approach speed (0.25 m/s).
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
     stop = true;
   });
   loop.run(stop);
