@@ -336,18 +336,18 @@ def shipped(name: str) -> dict[str, Any]:
 # (for the stiffness the hand should feel: the body's, from a headless probe, in series with the coupling).
 # The block's sphere (radius 1 cm) touches its top (y = 0.03) with the device at y = 0.04.
 LOOP_CASES: dict[str, dict[str, Any]] = {
-    "default": {"scene": lambda: shipped("default"), "channel": "stylus", "poke": True,
+    "default": {"holds": True, "scene": lambda: shipped("default"), "channel": "stylus", "poke": True,
                 "arm": dict(ox=0.6, oy=0.45, oz=0.0, script="poke", depth=0.08, period=4.0, stroke=0.0, twist=0.0)},
-    "soft": {"scene": lambda: block_scene(30e3), "channel": "stylus", "poke": True,
+    "soft": {"holds": True, "scene": lambda: block_scene(30e3), "channel": "stylus", "poke": True,
              "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="poke", depth=0.02, period=3.0, stroke=0.0, twist=0.0)},
-    "stiff": {"scene": lambda: block_scene(1e6), "channel": "stylus", "poke": True,
+    "stiff": {"holds": True, "scene": lambda: block_scene(1e6), "channel": "stylus", "poke": True,
               "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="poke", depth=0.02, period=3.0, stroke=0.0, twist=0.0)},
-    "stroke": {"scene": lambda: block_scene(30e3, friction=True), "channel": "stylus", "poke": False,
+    "stroke": {"holds": True, "scene": lambda: block_scene(30e3, friction=True), "channel": "stylus", "poke": False,
                "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="stroke", depth=0.02, period=3.0, stroke=0.02, twist=0.0)},
-    "twist": {"scene": lambda: shipped("hand_twist"), "channel": "glove", "poke": False,
+    "twist": {"holds": True, "scene": lambda: shipped("hand_twist"), "channel": "glove", "poke": False,
               "arm": dict(ox=0.8, oy=0.564, oz=0.0, script="twist", depth=0.025, period=4.0, stroke=0.0, twist=-25.0)},
     # Free space: strokes of 10 cm at 0.5 m/s at their fastest, 20 cm above the block.
-    "free": {"scene": lambda: block_scene(30e3), "channel": "stylus", "poke": False,
+    "free": {"scene": lambda: block_scene(30e3), "channel": "stylus", "poke": False, "holds": False,
              "arm": dict(ox=-0.05, oy=0.25, oz=0.0, script="stroke", depth=0.0, period=1.2, stroke=0.1, twist=0.0)},
 }
 
@@ -429,7 +429,7 @@ def analyse(trace: pathlib.Path, case: dict[str, Any], period: float) -> dict[st
     out = np.stack([tr["out_x_N"], tr["out_y_N"], tr["out_z_N"]], axis=1)  # the sim arm: device frame = scene frame
     mag = np.linalg.norm(out, axis=1)
     live = (t > period) & (tr["safety"] >= 2)  # after the first cycle (the body settling from its start), engaged
-    hold = live & (u > 0.35) & (u < 0.65)
+    hold = live & (u > 0.35) & (u < 0.65) & bool(case["holds"])
     r: dict[str, float] = {"peak_cmd": float(mag.max())}
     # Ripple: rms about the 20 ms moving mean, over the mean, in the steady holds.
     mean20 = np.convolve(mag, np.ones(20) / 20, mode="same")
@@ -450,23 +450,15 @@ def analyse(trace: pathlib.Path, case: dict[str, Any], period: float) -> dict[st
     # a third and nine tenths of the hold force.
     press = live & (u > 0.05) & (u < 0.25) & (tr["contacts"] > 0)
     band = press & (f[:, 1] > 0.33 * r["hold_N"]) & (f[:, 1] < 0.9 * r["hold_N"])
-    r["k_felt"] = float(-np.polyfit(pos[band, 1], f[band, 1], 1)[0]) if band.sum() > 20 else float("nan")
+    r["k_felt"] = float(-np.polyfit(pos[band, 1], f[band, 1], 1)[0]) if case["poke"] and band.sum() > 20 \
+        else float("nan")
     # Drag in free space at 0.5 m/s (the free case): the force while the device moves at 0.45-0.55 m/s.
     speed = np.linalg.norm(np.gradient(pos, t, axis=0), axis=1)
     fast = live & (speed > 0.45) & (speed < 0.55)
-    r["drag_N"] = float(np.linalg.norm(f[fast], axis=1).max()) if fast.any() else float("nan")
+    r["drag_N"] = float(np.median(np.linalg.norm(f[fast], axis=1))) if fast.any() else float("nan")
+    r["drag_max_N"] = float(np.linalg.norm(f[fast], axis=1).max()) if fast.any() else float("nan")
     # Latency from the hand's own motion to force: the lag (ticks) at which the force's tick-to-tick change
     # follows the device's best, in contact (0: the same tick's motion, answered at the tick).
-    con = live[1:] & (tr["contacts"][1:] > 0)
-    dfy, dy = np.diff(f[:, 1]), np.diff(pos[:, 1])
-    best, lag = 0.0, -1
-    for k in range(0, 40):
-        a, b = dfy[k:][con[k:]], dy[: len(dy) - k][con[k:]]
-        if len(a) > 100 and np.std(a) > 0 and np.std(b) > 0:
-            c = abs(float(np.corrcoef(a, b)[0, 1]))
-            if c > best:
-                best, lag = c, k
-    r["lag_ticks"] = float(lag)
     return r
 
 
@@ -482,9 +474,11 @@ def loop(args: argparse.Namespace) -> None:
           "  in contact during holds [%]; work/cycle: the most work the device did on the hand over one cycle (passive\n"
           "  <= 0) [mJ]; pc: passivity controller's active ticks and what it dissipated [mJ]; K felt / K due: dF/dx while\n"
           "  pressing in, and the body's (headless static probe) in series with the coupling's [N/m]; drag: force at\n"
-          "  0.45-0.55 m/s in free space [N]; lag: ticks from the hand's motion to force; delay: display delay [ms]")
+          "  0.45-0.55 m/s in free space, median and max [N]; delay: display delay, what a change of the body takes to\n"
+          "  reach the hand [ms] (the hand's own motion is answered at the tick it is read, coupled; a display delay\n"
+          "  later, direct)")
     print(f"{'case':>8} {'mode':>8} {'states':>7} {'server':>7} {'cmd':>6} {'clips':>5} {'ripple':>7} {'hold':>6} "
-          f"{'contact':>8} {'work/cyc':>9} {'pc':>6} {'pc mJ':>7} {'K felt':>7} {'K due':>7} {'drag':>6} {'lag':>4} "
+          f"{'contact':>8} {'work/cyc':>9} {'pc':>6} {'pc mJ':>7} {'K felt':>7} {'K due':>7} {'drag':>6} {'max':>6} "
           f"{'delay':>6} {'faults':>6}")
     rows = []
     runs = [(c, m, r, False) for c in cases for m in ("coupled", "delay") for r in rates]
@@ -528,8 +522,8 @@ def loop(args: argparse.Namespace) -> None:
         rows.append(row)
         print(f"{case_name:>8} {label:>8} {1e3 / rate:>5.2f}ms {peak:>7.2f} {a['peak_cmd']:>6.2f} {clips:>5d} "
               f"{a['ripple_pct']:>6.2f}% {a['hold_N']:>6.2f} {a['contact_pct']:>7.2f}% {a['cycle_work_mJ']:>9.2f} "
-              f"{a['pc_ticks']:>6.0f} {a['pc_mJ']:>7.2f} {a['k_felt']:>7.0f} {k_due:>7.0f} {a['drag_N']:>6.3f} "
-              f"{a['lag_ticks']:>4.0f} {s['delay_ms']:>6.2f} {faults:>6d}", flush=True)
+              f"{a['pc_ticks']:>6.0f} {a['pc_mJ']:>7.2f} {a['k_felt']:>7.0f} {k_due:>7.0f} {a['drag_N']:>6.3f} {a['drag_max_N']:>6.3f} "
+              f"{s['delay_ms']:>6.2f} {faults:>6d}", flush=True)
     if args.json:
         pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
 

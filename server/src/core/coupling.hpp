@@ -76,7 +76,7 @@ struct Coupling {
 // damping at 0.7 of critical for the body on its spring.
 inline constexpr double kDefaultCouplingStiffness = 300;  // [N/m]
 inline constexpr double kDefaultCouplingForce = 5;        // [N]
-inline constexpr double kDefaultProxyMass = 0.02;         // [kg]
+inline constexpr double kDefaultProxyMass = 0.01;         // [kg]
 inline constexpr double kCouplingDampingRatio = 0.7;
 
 // The coupling of a body of bounding radius `radius` [m] (about its origin)

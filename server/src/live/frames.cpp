@@ -77,6 +77,8 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   device_haptics_.resize(sim.devices().size());
   device_poses_.resize(sim.devices().size());
   device_couplings_.resize(sim.devices().size());
+  contacts_proxy_.assign(sim.proxies().size(), 0);
+  contacts_device_.assign(sim.devices().size(), 0);
   input_sequences_.resize(sim.devices().size());
   device_hand_.resize(sim.devices().size());
   device_proxy_.assign(sim.devices().size(), -1);
@@ -173,6 +175,7 @@ void FrameEncoder::add_step_forces() {
   window_next_ = (window_next_ + 1) % window_steps_;
   window_filled_ = std::min(window_filled_ + 1, window_steps_);
   for (size_t j = 0; j < pr.size(); ++j) {
+    contacts_proxy_[j] = std::max(contacts_proxy_[j], pr[j].contacts);
     Wrench& old = window_proxy_[slot * pr.size() + j];
     const Wrench now = mean(pr[j]);
     sum_proxy_[j].force += now.force - old.force;
@@ -180,6 +183,9 @@ void FrameEncoder::add_step_forces() {
     old = now;
   }
   for (size_t d = 0; d < dr.size(); ++d) {
+    // A node resting on a proxy is pushed every other step or so (eq. 13):
+    // a frame counts the contacts of its busiest step since the previous one.
+    contacts_device_[d] = std::max(contacts_device_[d], dr[d].contacts);
     Wrench& old = window_device_[slot * dr.size() + d];
     const Wrench now = mean(dr[d]);
     sum_device_[d].force += now.force - old.force;
@@ -199,7 +205,7 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
     const Pose p = sim_.proxy_pose(int32_t(j));
     proxy_haptics_[j] = wire::ProxyHaptics(to_wire(inv * sum_proxy_[j].force), to_wire(inv * sum_proxy_[j].torque),
                                            wire::ProxyPose(to_wire(p.position), to_wire(p.orientation)),
-                                           to_wire(pr[j].stiffness), uint32_t(pr[j].contacts));
+                                           to_wire(pr[j].stiffness), uint32_t(contacts_proxy_[j]));
   }
   for (size_t d = 0; d < dr.size(); ++d) {
     input_sequences_[d] = d < input_sequences.size() ? input_sequences[d] : 0;
@@ -210,7 +216,7 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
       // motion from device_poses), which a mean over a window would blur.
       const DeviceReport& r = dr[d];
       device_haptics_[d] = wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque), to_wire(r.stiffness),
-                                               uint32_t(r.contacts));
+                                               uint32_t(contacts_device_[d]));
       device_poses_[d] = wire::ProxyPose(to_wire(r.target.position), to_wire(r.target.orientation));
       device_couplings_[d] = wire::DeviceCoupling(wire::ProxyPose(to_wire(r.body.position), to_wire(r.body.orientation)),
                                                   float(r.coupling_stiffness), float(r.max_force), float(r.max_torque),
@@ -219,7 +225,7 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
     }
     device_couplings_[d] = wire::DeviceCoupling();
     device_haptics_[d] = wire::DeviceHaptics(to_wire(inv * sum_device_[d].force), to_wire(inv * sum_device_[d].torque),
-                                             to_wire(dr[d].stiffness), uint32_t(dr[d].contacts));
+                                             to_wire(dr[d].stiffness), uint32_t(contacts_device_[d]));
     // A lone proxy's pose is the one just staged for it; a hand's is its own.
     if (device_hand_[d] >= 0) {
       const Pose p = sim_.hand_pose(device_hand_[d]);
@@ -233,6 +239,8 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
   const auto device_poses = b.CreateVectorOfStructs(device_poses_.data(), dr.size());
   const auto sequences = b.CreateVector(input_sequences_.data(), dr.size());
   const auto couplings = b.CreateVectorOfStructs(device_couplings_.data(), dr.size());
+  std::fill(contacts_proxy_.begin(), contacts_proxy_.end(), 0);
+  std::fill(contacts_device_.begin(), contacts_device_.end(), 0);
   wire::HapticFrameBuilder f(b);
   f.add_scene_id(scene_id_);
   f.add_step(uint64_t(sim_.steps()));

@@ -20,9 +20,8 @@ constexpr double kMaxBacklog = 0.05;  // [s]
 // deadline is spun. Spinning is paid for by whatever else the machine runs
 // (a bridge beside the server on the same cores), so it is kept short.
 constexpr double kSpinWindow = 60e-6;  // [s]
-// A device's input after this long without one starts it again: its proxy
-// glides from where it waits at kApproachSpeed.
-constexpr double kInputPause = 0.1;       // [s]
+// How fast a proxy's pose glides onto its device's path when the path
+// starts away from it (DevicePath::add).
 constexpr double kApproachSpeed = 0.25;   // [m/s]
 
 double seconds(RealtimeLoop::Clock::duration d) { return std::chrono::duration<double>(d).count(); }
@@ -73,7 +72,6 @@ RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const Realtime
   device_sequences_.resize(devices.size());
   for (size_t d = 0; d < devices.size(); ++d) {
     Driver& drv = drivers_[d];
-    drv.interval = options.input_interval;
     drv.hand = compute_device_hand(sim, int32_t(d));
     for (size_t j = 0; j < sim.proxies().size(); ++j)
       if (sim.proxy_device()[j] == int32_t(d) && sim.proxies()[j].hand.empty()) drv.proxies.push_back(int32_t(j));
@@ -110,42 +108,15 @@ void RealtimeLoop::apply_inputs() {
   const double t = sim_.time();
   while (inputs_.pop(s)) {
     Driver& drv = drivers_[size_t(s.device)];
-    const bool first = !drv.has_sample || s.device_time_ns - drv.last_device_ns > int64_t(kInputPause * 1e9);
-    double device_speed = 0;  // [m/s], between its latest two inputs
-    if (drv.has_sample && s.device_time_ns > drv.last_device_ns) {
-      // The device's input interval, smoothed, within sane bounds.
-      const double gap = 1e-9 * double(s.device_time_ns - drv.last_device_ns);
-      drv.interval = std::clamp(0.8 * drv.interval + 0.2 * gap, dt_, 0.02);
-      device_speed = glm::distance(s.pose.position, drv.last_position) / gap;
-    }
-    drv.last_position = s.pose.position;
-    drv.has_sample = true;
-    drv.last_device_ns = s.device_time_ns;
     if (!(s.drive == drv.drive)) {  // a device with its own limits, or one that drives directly
       if (s.drive.direct) sim_.release_device(s.device);
       else sim_.couple_device(s.device, s.drive.has_limits ? &s.drive.limits : nullptr);
       drv.drive = s.drive;
     }
-    // From where it is now to the new pose over one input interval. A
-    // device's first input (or one after a pause) may be far from where its
-    // proxy waits: until it has caught up, its pose glides toward the device
-    // at kApproachSpeed faster than the device moves (a coupled proxy would
-    // be pulled there at the coupling's limit).
-    ProxyMotion m;
-    m.t0 = t;
-    m.from = drv.motion.at(t);
-    m.to = s.pose;
-    double glide = drv.interval;
-    drv.approaching = drv.approaching || first;
-    if (drv.approaching) {
-      const double approach = glm::distance(m.from.position, m.to.position) / (kApproachSpeed + device_speed);
-      drv.approaching = approach > glide;
-      glide = std::max(glide, approach);
-    }
-    m.t1 = t + glide;
-    drv.motion = m;
-    if (drv.hand >= 0) sim_.set_hand_motion(drv.hand, m);
-    for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);
+    // A new path (the device's first input, or one after a pause) may start
+    // far from where its proxy waits: the proxy's pose glides onto it.
+    if (drv.path.add(1e-9 * double(s.device_time_ns), s.pose, t))
+      drv.approach = drv.motion.at(t).position - drv.path.at(t).position;
     last_sequence_ = std::max(last_sequence_, s.sequence);
     device_sequences_[size_t(s.device)] = s.sequence;  // the latest, even when a restarted bridge counts from 1 again
     if (applied_sink_) applied_sink_({loop_steps_, s.device, s.sequence, s.drive});
@@ -154,6 +125,26 @@ void RealtimeLoop::apply_inputs() {
   if (applied) {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     stats_.inputs_applied += applied;
+  }
+  // Every step, each driven channel's motion over the step: its device's
+  // path (device_path.hpp), plus what remains of the approach, which shrinks
+  // at kApproachSpeed (a coupled proxy pulled onto a far path in one step
+  // would be pulled at the coupling's limit).
+  const double t1 = t + dt_;
+  for (Driver& drv : drivers_) {
+    if (drv.path.empty()) continue;
+    ProxyMotion m;
+    m.t0 = t;
+    m.t1 = t1;
+    m.from = drv.path.at(t);
+    m.to = drv.path.at(t1);
+    m.from.position += drv.approach;
+    const double left = glm::length(drv.approach);
+    if (left > 0) drv.approach *= std::max(0.0, left - kApproachSpeed * dt_) / left;
+    m.to.position += drv.approach;
+    drv.motion = m;
+    if (drv.hand >= 0) sim_.set_hand_motion(drv.hand, m);
+    for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);
   }
 }
 

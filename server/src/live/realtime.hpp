@@ -11,10 +11,10 @@
 // stall of more than kMaxBacklog the loop re-anchors instead of racing to
 // catch up. The real-time factor is simulated over wall time per second.
 //
-// Device inputs: a sample gives the pose of its device. That pose moves from
-// where it is to the new one over one input interval (estimated from the
-// samples' device clocks), so it glides between inputs instead of jumping
-// at 1 kHz inside a 10 kHz simulation. Every channel's proxy (or hand) is
+// Device inputs: a sample gives the pose of its device at its device's
+// clock. The samples make a path, played out a little late and interpolated
+// (a jitter buffer, live/device_path.hpp), so the pose moves smoothly at
+// every step between 1 kHz inputs, however the network bunches them. Every channel's proxy (or hand) is
 // coupled to it (core/coupling.hpp), with the scene's coupling until a
 // sample brings its device's limits; a device that asks to drive directly
 // moves its proxy kinematically along that path instead.
@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "app/simulation.hpp"
+#include "live/device_path.hpp"
 #include "live/frames.hpp"
 #include "live/spsc_ring.hpp"
 
@@ -89,7 +90,6 @@ struct RealtimeOptions {
   // dt)) steps; 0: after every step. Every step's force still counts: the
   // encoder's force window spans at least the interval between frames.
   double haptic_rate_hz = 0;
-  double input_interval = 1e-3;  // expected time between a device's inputs until measured [s]
   size_t input_capacity = 4096;  // queued device samples before new ones are dropped
 };
 
@@ -165,13 +165,10 @@ class RealtimeLoop {
   struct Driver {             // what one device channel moves
     int32_t hand = -1;        // the hand it drives, or -1
     std::vector<int32_t> proxies;  // else the proxies it drives alone
-    ProxyMotion motion;       // its current motion
-    bool has_sample = false;
-    int64_t last_device_ns = 0;
-    double interval = 0;      // estimated time between its inputs [s]
+    ProxyMotion motion;       // its motion over the latest step
+    DevicePath path;          // its device's pose, from its inputs
+    Vec3 approach{0.0};       // how far the motion still stands off the path [m]
     DeviceDrive drive;        // as the simulation has it
-    bool approaching = false; // its pose still glides toward its device's at the approach speed
-    Vec3 last_position{0.0};  // its latest input's [m]
   };
   void sync_drivers();
   void apply_inputs();

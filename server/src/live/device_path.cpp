@@ -1,0 +1,79 @@
+#include "live/device_path.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <glm/geometric.hpp>
+#include <glm/gtc/quaternion.hpp>
+
+#include "core/coupling.hpp"
+
+namespace tactile {
+
+namespace {
+
+// The offset may rise by this much per second of device time (clock drift
+// is parts per million; a loop that fell behind re-anchors by more, and the
+// minimum filter takes the new offset at its first faster input).
+constexpr double kDrift = 1e-3;
+// The jitter's memory [s]: a burst of lateness sets the delay for about this long.
+constexpr double kJitterMemory = 1.0;
+
+}  // namespace
+
+bool DevicePath::add(double device_s, const Pose& pose, double t) {
+  const double lag = t - device_s;
+  bool first = false;
+  if (count_ == 0 || std::fabs(device_s - sample(0).device_s) > kPause) {
+    count_ = 0;  // a new path: the first input, or one after a pause (or a device that restarted its clock)
+    offset_ = lag;
+    jitter_ = 0;
+    first = true;
+  } else {
+    const double gap = device_s - sample(0).device_s;
+    if (!(gap > 0)) return false;  // no later than the newest: nothing new on the path
+    offset_ += kDrift * gap;
+    jitter_ *= std::exp(-gap / kJitterMemory);
+    if (lag < offset_) {  // the fastest input yet: the others came later than thought
+      jitter_ += offset_ - lag;
+      offset_ = lag;
+    }
+    jitter_ = std::min(kMaxDelay, std::max(jitter_, lag - offset_));
+  }
+  ring_[count_ % ring_.size()] = {device_s, pose};
+  ++count_;
+  return first;
+}
+
+Pose DevicePath::at(double t) const {
+  const double tau = t - offset_ - jitter_;  // device time played out at t
+  const Sample& newest = sample(0);
+  const size_t kept = std::min(count_, ring_.size());
+  if (tau >= newest.device_s) {
+    if (kept < 2) return newest.pose;
+    // Past the newest: on at its latest velocity, for a while.
+    const Sample& before = sample(1);
+    const double gap = newest.device_s - before.device_s;
+    const double e = std::min(tau - newest.device_s, kMaxExtrapolation) / gap;
+    Pose p = newest.pose;
+    p.position += e * (newest.pose.position - before.pose.position);
+    const Vec3 turn = compute_rotation_vector(before.pose.orientation, newest.pose.orientation);
+    const double angle = glm::length(turn);
+    if (angle > 0) p.orientation = glm::normalize(glm::angleAxis(e * angle, turn / angle) * newest.pose.orientation);
+    return p;
+  }
+  for (size_t back = 1; back < kept; ++back) {
+    const Sample& a = sample(back);
+    if (a.device_s > tau) continue;
+    const Sample& b = sample(back - 1);
+    ProxyMotion m;  // linear between the two around tau, the shortest arc
+    m.t0 = a.device_s;
+    m.t1 = b.device_s;
+    m.from = a.pose;
+    m.to = b.pose;
+    return m.at(tau);
+  }
+  return sample(kept - 1).pose;  // before the oldest kept
+}
+
+}  // namespace tactile

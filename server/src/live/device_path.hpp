@@ -1,0 +1,53 @@
+// A device's pose as a path in the loop's time, from its inputs: a jitter
+// buffer. Each input carries the device's clock; the path plays them out a
+// little late, interpolated between the two around the playout time, so an
+// input that comes late or bunched with others neither stalls the path nor
+// makes it jump. A coupled proxy follows this path through a stiff spring
+// (core/coupling.hpp): a path that stalled for 2 ms behind a device moving
+// at 0.5 m/s would pull on the hand with 2 N.
+//
+// Clocks: the loop's time minus the device's is the input's lag; the
+// smallest lag seen lately is the clocks' offset (a minimum filter, as NTP
+// keeps, let rise slowly so that drift cannot leave it stale), and how much
+// later than that inputs come (their jitter, a peak that decays over about a
+// second) is the playout delay. Past the newest input the path goes on at the
+// device's latest velocity for at most kMaxExtrapolation, then holds.
+//
+// Pure: the loop gives it its time; a re-simulation that applies the same
+// inputs at the same steps gets the same path, bit for bit.
+#pragma once
+
+#include <array>
+#include <cstddef>
+
+#include "core/proxy.hpp"
+
+namespace tactile {
+
+class DevicePath {
+ public:
+  static constexpr double kMaxDelay = 0.005;          // the playout delay at most [s]
+  static constexpr double kMaxExtrapolation = 0.005;  // past the newest input [s]
+  static constexpr double kPause = 0.1;               // inputs this far apart start a new path [s]
+
+  // An input taken at device time `device_s` [s], applied at loop time `t` [s].
+  // Returns true when it starts a new path (the first, or after a pause).
+  bool add(double device_s, const Pose& pose, double t);
+  bool empty() const { return count_ == 0; }
+  // The device's pose on the path at loop time t.
+  Pose at(double t) const;
+  double delay() const { return jitter_; }  // [s]
+
+ private:
+  struct Sample {
+    double device_s;
+    Pose pose;
+  };
+  const Sample& sample(size_t back) const { return ring_[(count_ - 1 - back) % ring_.size()]; }
+  std::array<Sample, 16> ring_{};
+  size_t count_ = 0;
+  double offset_ = 0;  // loop time minus device time, the smallest lately [s]
+  double jitter_ = 0;  // how much later than that inputs come [s]
+};
+
+}  // namespace tactile
