@@ -1,5 +1,7 @@
-"""The device bridge in closed loop with the real server: the `tactile-bridge` command, its tick in a process
-of its own, the simulated arm as the device, and a viewer that watches the scene over WebSocket.
+"""The device bridge in closed loop with the real server, in the paper's delay mode (a kinematic proxy where the
+device is, its force displayed one step late; tests/test_coupled_loop.py has the default, coupled mode): the
+`tactile-bridge` command, its tick in a process of its own, the simulated arm as the device, and a viewer that
+watches the scene over WebSocket.
 
 The arm's hand presses a sphere into a soft block and holds; the force rises, settles without oscillating,
 and the body under the sphere is deformed as the force says: a static headless run (tactile-sim) with the
@@ -80,7 +82,7 @@ def test_bridge_presses_the_block_and_the_force_settles(tmp_path: pathlib.Path) 
     with server_process(tmp_path, SCENE, TOKEN, "--haptic-rate", "2000") as (port, server):
         bridge = subprocess.Popen(
             [str(BRIDGE), "--profile", str(profile), "--server", f"ws://127.0.0.1:{port}/", "--token", TOKEN,
-             "--seconds", "10", "--status", "1", "--trace", str(tmp_path / "trace.csv")],
+             "--seconds", "10", "--status", "1", "--mode", "delay", "--trace", str(tmp_path / "trace.csv")],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
         async def watch() -> None:

@@ -310,6 +310,7 @@ depth_m = {depth}
 period_s = {period}
 stroke_m = {stroke}
 twist_deg = {twist}
+start_s = {start}
 """
 LOOP_LIMIT_N = 6.0
 LOOP_STIFFNESS = 2000.0
@@ -337,7 +338,8 @@ def shipped(name: str) -> dict[str, Any]:
 # The block's sphere (radius 1 cm) touches its top (y = 0.03) with the device at y = 0.04.
 LOOP_CASES: dict[str, dict[str, Any]] = {
     "default": {"holds": True, "scene": lambda: shipped("default"), "channel": "stylus", "poke": True,
-                "arm": dict(ox=0.6, oy=0.45, oz=0.0, script="poke", depth=0.08, period=4.0, stroke=0.0, twist=0.0)},
+                "arm": dict(ox=0.6, oy=0.45, oz=0.0, script="poke", depth=0.08, period=4.0, stroke=0.0, twist=0.0,
+                         start=2.0)},
     "soft": {"holds": True, "scene": lambda: block_scene(30e3), "channel": "stylus", "poke": True,
              "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="poke", depth=0.02, period=3.0, stroke=0.0, twist=0.0)},
     "stiff": {"holds": True, "scene": lambda: block_scene(1e6), "channel": "stylus", "poke": True,
@@ -419,10 +421,10 @@ def probe_body_stiffness(tmp: pathlib.Path, scene: dict[str, Any], channel: str,
     return float((fy[i + w // 2] - fy[i - w // 2]) / (y[i - w // 2] - y[i + w // 2]))
 
 
-def analyse(trace: pathlib.Path, case: dict[str, Any], period: float) -> dict[str, float]:
+def analyse(trace: pathlib.Path, case: dict[str, Any], period: float, start: float) -> dict[str, float]:
     tr = np.genfromtxt(trace, delimiter=",", names=True)
     tr = tr[tr["device"] == 0]
-    t = tr["t_s"] - tr["t_s"][0]
+    t = tr["t_s"] - tr["t_s"][0] - start  # from the arm's script's start
     u = (t % period) / period
     pos = np.stack([tr["x_m"], tr["y_m"], tr["z_m"]], axis=1)
     f = np.stack([tr["fx_N"], tr["fy_N"], tr["fz_N"]], axis=1)
@@ -494,7 +496,7 @@ def loop(args: argparse.Namespace) -> None:
             rec = tmp / "run.mcap"
             with server(tmp, scene, "--haptic-rate", str(rate), "--record", str(rec)) as port:
                 profile = tmp / "loop.toml"
-                profile.write_text(LOOP_PROFILE.format(channel=case["channel"], **arm))
+                profile.write_text(LOOP_PROFILE.format(channel=case["channel"], **{"start": 0.0, **arm}))
                 summary, trace = tmp / "summary.json", tmp / "trace.csv"
                 r = subprocess.run([str(BRIDGE), "--profile", str(profile), "--server", f"ws://127.0.0.1:{port}/",
                                     "--token", TOKEN, "--seconds", str(args.seconds), "--status", "0", "--mode", mode,
@@ -505,7 +507,7 @@ def loop(args: argparse.Namespace) -> None:
                     sys.exit(f"the bridge failed ({r.returncode}):\n{r.stderr[-3000:]}")
             clips = r.stderr.count(" clipped: ")
             s = json.loads(summary.read_text())
-            a = analyse(trace, case, arm["period"])
+            a = analyse(trace, case, arm["period"], arm.get("start", 0.0))
             peak, faults = server_peak(rec, case["channel"])
             k_due = float("nan")
             if case["poke"] and np.isfinite(a["hold_N"]):

@@ -336,6 +336,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     d.impulse = kept.impulse;
     d.angular_impulse = kept.angular_impulse;
     d.elapsed = kept.elapsed;
+    d.contacts_peak = kept.contacts_peak;
   }
 
   // Positions at t_{n+1}, and boxes around each cluster's motion over the step.

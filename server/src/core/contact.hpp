@@ -50,6 +50,7 @@
 // since each changes the body's velocity that the others see.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <vector>
@@ -84,15 +85,21 @@ struct ContactReport {
   Vec3 impulse{0.0};          // [N s]
   Vec3 angular_impulse{0.0};  // [N m s]
   double elapsed = 0;         // [s]
+  // The most contact points of one step since then: a node resting on a
+  // proxy is pushed every other step or so (eq. 13), so the latest step
+  // alone may have none.
+  int32_t contacts_peak = 0;
 
   void add_step(double dt) {
     impulse += force * dt;
     angular_impulse += torque * dt;
     elapsed += dt;
+    contacts_peak = std::max(contacts_peak, contacts);
   }
   void clear_impulses() {
     impulse = angular_impulse = Vec3(0.0);
     elapsed = 0;
+    contacts_peak = 0;
   }
 };
 

@@ -175,7 +175,7 @@ void FrameEncoder::add_step_forces() {
   window_next_ = (window_next_ + 1) % window_steps_;
   window_filled_ = std::min(window_filled_ + 1, window_steps_);
   for (size_t j = 0; j < pr.size(); ++j) {
-    contacts_proxy_[j] = std::max(contacts_proxy_[j], pr[j].contacts);
+    contacts_proxy_[j] = std::max(contacts_proxy_[j], pr[j].contacts_peak);
     Wrench& old = window_proxy_[slot * pr.size() + j];
     const Wrench now = mean(pr[j]);
     sum_proxy_[j].force += now.force - old.force;
@@ -184,8 +184,9 @@ void FrameEncoder::add_step_forces() {
   }
   for (size_t d = 0; d < dr.size(); ++d) {
     // A node resting on a proxy is pushed every other step or so (eq. 13):
-    // a frame counts the contacts of its busiest step since the previous one.
-    contacts_device_[d] = std::max(contacts_device_[d], dr[d].contacts);
+    // a frame counts the contacts of its busiest step (sub-steps of an
+    // advance included) since the previous one.
+    contacts_device_[d] = std::max(contacts_device_[d], dr[d].contacts_peak);
     Wrench& old = window_device_[slot * dr.size() + d];
     const Wrench now = mean(dr[d]);
     sum_device_[d].force += now.force - old.force;

@@ -10,7 +10,7 @@ so a hand that presses into something stiff stops short of its scripted point, b
 person's does. The arm integrates this on every `read` up to the time asked, with the latest commanded
 force held between writes (as a device's amplifier holds it), in sub-steps of at most `substep_s`.
 
-Scripts (device frame, from `home_m`, pressing along `direction`):
+Scripts (device frame, from `home_m`, pressing along `direction`; after `start_s` at home):
   poke    approach, press `depth_m` in, hold, withdraw; every `period_s`
   stroke  press, then slide `stroke_m` along `stroke_direction` and back, then withdraw
   pinch   poke, meant for two arms pressing toward each other (two profiles, opposite directions)
@@ -41,6 +41,7 @@ class SimConfig:
     stroke_direction: tuple[float, float, float] = (1.0, 0.0, 0.0)
     twist_deg: float = 30.0                                    # twist: turn angle [deg]
     repeat: bool = True                                        # cycle the script; else hold its end
+    start_s: float = 0.0                                       # the hand waits at home this long first [s]
     mass_kg: float = 0.3                                       # end effector plus the hand's mass
     damping_Ns_per_m: float = 2.0                              # the arm's own friction
     hand_stiffness_N_per_m: float = 400.0
@@ -72,6 +73,7 @@ def parse_config(table: dict[str, Any], where: str, fields: Any) -> SimConfig:
                                ProfileError),
         twist_deg=f.number("twist_deg", d.twist_deg, low=-180.0, high=180.0),
         repeat=bool(table.get("repeat", d.repeat)),
+        start_s=f.number("start_s", d.start_s, low=0.0, high=3600.0),
         mass_kg=f.number("mass_kg", d.mass_kg, low=0.0, low_open=True),
         damping_Ns_per_m=f.number("damping_Ns_per_m", d.damping_Ns_per_m, low=0.0),
         hand_stiffness_N_per_m=f.number("hand_stiffness_N_per_m", d.hand_stiffness_N_per_m, low=0.0),
@@ -110,6 +112,7 @@ class SimArm(Device):
     def script_pose(self, t: float, pos: list[float], quat: list[float]) -> None:
         """Where the script puts the hand at time t [s] since the start (device frame)."""
         c = self.config
+        t = max(0.0, t - c.start_s)
         u = (t % c.period_s) / c.period_s if c.repeat else min(t / c.period_s, 1.0 - 1e-12)
         press = 0.0   # fraction of depth
         slide = 0.0   # stroke: fraction of stroke_m
