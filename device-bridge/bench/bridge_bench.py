@@ -333,11 +333,13 @@ def shipped(name: str) -> dict[str, Any]:
     return scene
 
 
-# Each case: its scene, the channel the arm drives, the arm's profile fields, and whether its holds are pokes
-# (for the stiffness the hand should feel: the body's, from a headless probe, in series with the coupling).
+# Each case: its scene, the channel the arm drives, the arm's profile fields, whether it holds still in the
+# middle of each cycle (for ripple and contact continuity), and whether it pokes a body that is still when
+# touched (for the stiffness the hand should feel: the body's, from a headless probe, in series with the
+# coupling; the default scene's beam still swings and answers the press with its motion, not its stiffness).
 # The block's sphere (radius 1 cm) touches its top (y = 0.03) with the device at y = 0.04.
 LOOP_CASES: dict[str, dict[str, Any]] = {
-    "default": {"holds": True, "scene": lambda: shipped("default"), "channel": "stylus", "poke": True,
+    "default": {"holds": True, "scene": lambda: shipped("default"), "channel": "stylus", "poke": False,
                 "arm": dict(ox=0.6, oy=0.45, oz=0.0, script="poke", depth=0.08, period=4.0, stroke=0.0, twist=0.0,
                          start=2.0)},
     "soft": {"holds": True, "scene": lambda: block_scene(30e3), "channel": "stylus", "poke": True,
@@ -391,19 +393,21 @@ def server_peak(recording: pathlib.Path, channel: str) -> tuple[float, int]:
 def probe_body_stiffness(tmp: pathlib.Path, scene: dict[str, Any], channel: str, x: list[float],
                          touch_y: float, force: float) -> float:
     """The body's contact stiffness [N/m] at `force`, from a headless static probe: the channel's proxy, alone
-    and kinematic, let down slowly at x from 5 mm above `touch_y` (the device height where it touches) to 4 cm
-    past it, once the body has settled; dF/dy where the mean force crosses `force`."""
+    and kinematic, held 20 cm above `touch_y` (the device height where it touches) while the body settles (a
+    beam sags under gravity), then let down slowly at x to 4 cm past it; dF/dy where the mean force crosses
+    `force`."""
     scene = json.loads(json.dumps(scene))
     scene["name"] = "loop_probe"
     proxy = next(p for p in scene["proxies"] if p.get("device") == channel)
     scene["proxies"] = [proxy]
     scene.pop("hands", None)
-    start = [x[0], touch_y + 0.005, x[2]]
+    start = [x[0], touch_y + 0.2, x[2]]
     end = [x[0], touch_y - 0.04, x[2]]
     proxy.pop("position", None)
-    proxy["script"] = {"easing": "linear", "keyframes": [{"t": 0.0, "position": start}, {"t": 2.0, "position": start},
-                                                         {"t": 10.0, "position": end}]}
-    scene["run"] = {"duration": 10.0, "frame_rate": 50, "vtu_every": 1000}
+    # (3 s to settle; then 1 mm in 40 ms, slow beside the body's own motion.)
+    keys = [(0.0, start), (3.0, start), (12.6, end)]
+    proxy["script"] = {"easing": "linear", "keyframes": [{"t": t, "position": p} for t, p in keys]}
+    scene["run"] = {"duration": keys[-1][0], "frame_rate": 50, "vtu_every": 1000}
     path = tmp / "probe.json"
     path.write_text(json.dumps(scene))
     out = tmp / "probe_out"
@@ -414,7 +418,7 @@ def probe_body_stiffness(tmp: pathlib.Path, scene: dict[str, Any], channel: str,
     fy = np.array([float(r["fy_N"]) for r in rows])
     w = 50  # a 50 ms mean: the beam's ringing out
     fy = np.convolve(fy, np.ones(w) / w, mode="same")
-    y = np.interp(t, [0.0, 2.0, 10.0], [start[1], start[1], end[1]])
+    y = np.interp(t, [k[0] for k in keys], [k[1][1] for k in keys])
     i = int(np.argmax(fy >= force))
     if fy[i] < force or i < w or i + w >= len(fy):
         return float("nan")
@@ -513,7 +517,7 @@ def loop(args: argparse.Namespace) -> None:
             if case["poke"] and np.isfinite(a["hold_N"]):
                 key = f"{case_name}@{a['hold_N']:.1f}"
                 if key not in body_k:
-                    touch = arm["oy"] - 0.01 if case_name != "default" else 0.39
+                    touch = arm["oy"] - 0.01  # the block's sphere touches 1 cm below the arm's home
                     body_k[key] = probe_body_stiffness(tmp, scene, case["channel"], [arm["ox"], 0.0, arm["oz"]], touch,
                                                        a["hold_N"])
                 kb = body_k[key]
