@@ -32,6 +32,7 @@ from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, nex
 from tactile_proto import codec
 from tactile_proto.recording import open_recording
 from tactile_proto.generated.ControlCommand import ControlCommand
+from tactile_proto.generated.DeviceLimits import DeviceLimitsT
 from tactile_proto.generated.ErrorCode import ErrorCode
 from tactile_proto.generated.Pause import PauseT
 from tactile_proto.generated.Resume import ResumeT
@@ -263,13 +264,20 @@ def test_a_server_killed_mid_recording_leaves_a_file_that_reads_back_to_its_last
 # ---- replay -------------------------------------------------------------------------------------
 
 
-def record_a_press(tmp_path: pathlib.Path, name: str = "press.mcap") -> pathlib.Path:
-    """A closed recording of a second or more: a device presses the block and holds."""
+def record_a_press(tmp_path: pathlib.Path, name: str = "press.mcap", limits: DeviceLimitsT | None = None) -> pathlib.Path:
+    """A closed recording of a second or more: a device presses the block and holds (with `limits` in its Hello:
+    coupled within them; without, the scene's coupling)."""
     path = tmp_path / name
 
     async def press(port: int) -> None:
         async with websockets.connect(url(port), **READ_ON) as dev:
-            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            if limits is None:
+                await hello(dev, Role.Device, TOKEN, ("stylus",))
+            else:
+                h = codec.make_hello(Role.Device, TOKEN, "pytest", ["stylus"])
+                h.deviceLimits = [limits]
+                await dev.send(codec.encode(h))
+                await next_of(dev, "SceneDescriptionT")
             for k in range(1, 1000):
                 await dev.send(codec.encode(device_input(k, 0.029 - 0.003 * min(k, 300) / 300)))
                 await asyncio.sleep(0.001)
@@ -467,6 +475,21 @@ def test_a_resimulation_of_the_recorded_inputs_is_bit_identical_and_another_mate
     assert r.returncode == 0, r.stdout + r.stderr
     m = re.search(r"largest differences: position ([0-9.e+-]+) m, force ([0-9.e+-]+) N", r.stdout)
     assert m and float(m.group(1)) > 1e-5 and float(m.group(2)) > 0.01, r.stdout
+
+
+def test_a_device_with_its_limits_resimulates_bit_for_bit(tmp_path: pathlib.Path) -> None:
+    # Its Hello's limits change the coupling at its first input: /applied says so, and resim couples the same.
+    limits = DeviceLimitsT()
+    limits.maxForceN, limits.stiffnessNPerM = 0.5, 1500.0
+    recording = record_a_press(tmp_path, limits=limits)
+    got = read_closed(recording)
+    assert got["/applied"] and all(a["limits"] == [0.5, 0.0, 1500.0] for _, a in got["/applied"])
+    forces = [abs(h.devices[0].force.y) for _, h in got["/haptic"]]
+    assert max(forces) > 0.4 and max(forces) <= 0.5, f"the device's force reached {max(forces)} N of its 0.5 N"
+    r = resim(str(recording))
+    assert r.returncode == 0, r.stdout + r.stderr
+    m = re.search(r"states: (\d+) of (\d+) identical bit for bit; haptic frames: (\d+) of (\d+)", r.stdout)
+    assert m and m.group(1) == m.group(2) and m.group(3) == m.group(4), r.stdout
 
 
 def test_a_resimulation_refuses_what_it_cannot_replay_by_name(tmp_path: pathlib.Path) -> None:

@@ -249,6 +249,26 @@ def test_device_inputs_press_the_proxy_and_haptic_frames_report_the_force(tmp_pa
         assert not [line for line in proc.lines if "fault" in line], proc.lines
 
 
+def test_a_device_hello_with_bad_limits_is_refused_naming_the_field(tmp_path: pathlib.Path) -> None:
+    from tactile_proto.generated.DeviceLimits import DeviceLimitsT
+
+    async def refused(limits: list[Any]) -> str:
+        async with websockets.connect(url(port)) as ws:
+            h = codec.make_hello(Role.Device, TOKEN, "pytest", ["stylus"])
+            h.deviceLimits = limits
+            await ws.send(codec.encode(h))
+            return str(codec.decode(await asyncio.wait_for(ws.recv(), 5)).message.message)
+
+    bad = DeviceLimitsT()
+    bad.maxForceN = -1.0
+    good = DeviceLimitsT()
+    with running_server(tmp_path) as (port, _):
+        msg = asyncio.run(refused([bad]))
+        assert "Hello.device_limits[0].max_force_N must be a finite number >= 0" in msg, msg
+        msg = asyncio.run(refused([good, good]))
+        assert "2 entries for 1 device channel" in msg, msg
+
+
 def test_haptic_frames_carry_the_device_pose_and_its_newest_input(tmp_path: pathlib.Path) -> None:
     """Per device channel, each haptic frame says where the channel's proxy was at its step and which of the
     channel's inputs it had seen: the pose follows the inputs, the sequence is the newest one sent."""
@@ -278,7 +298,7 @@ def test_haptic_frames_carry_the_device_pose_and_its_newest_input(tmp_path: path
                 await ws.send(codec.encode(device_input(500 + k, 0.029 + a * (target[1] - 0.029), a * target[0],
                                                         a * target[2], turn)))
                 await asyncio.sleep(0.001)
-            await asyncio.sleep(0.2)  # the last input glides in over one input interval
+            await asyncio.sleep(0.2)  # the last input is played out (a few milliseconds late) and the proxy follows
             reader.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await reader
@@ -293,11 +313,17 @@ def test_haptic_frames_carry_the_device_pose_and_its_newest_input(tmp_path: path
             assert (pose.position.x, pose.position.y, pose.position.z) == pytest.approx(target, abs=1e-6)
             assert (pose.orientation.w, pose.orientation.x, pose.orientation.y, pose.orientation.z) == \
                 pytest.approx(turn, abs=1e-6)
-            # A channel that drives one proxy alone: the device pose is that proxy's, in every frame.
+            # The channel is coupled (the default): its proxy is a body the device's pose pulls, and the frames
+            # carry that body's pose as the coupling's and as the proxy's, in every frame; in free space it
+            # came to rest on the device's pose.
             for f in frames[:: max(1, len(frames) // 50)]:
-                d, q = f.devicePoses[0], f.proxies[0].pose
-                assert (d.position.x, d.position.y, d.position.z) == (q.position.x, q.position.y, q.position.z)
-                assert (d.orientation.w, d.orientation.y) == (q.orientation.w, q.orientation.y)
+                c, q = f.deviceCouplings[0], f.proxies[0].pose
+                assert c.coupled
+                assert (c.body.position.x, c.body.position.y, c.body.position.z) == \
+                    (q.position.x, q.position.y, q.position.z)
+                assert (c.body.orientation.w, c.body.orientation.y) == (q.orientation.w, q.orientation.y)
+            b = last.deviceCouplings[0].body
+            assert (b.position.x, b.position.y, b.position.z) == pytest.approx(target, abs=1e-4)
 
     with running_server(tmp_path) as (port, _):
         asyncio.run(run(port))

@@ -106,6 +106,8 @@ class ForceRender:
         self.delay_ns = 0           # display delay of the 'delay' mode [ns]
         self.display_t_ns = 0       # the time the latest render displayed, bridge clock [ns]
         self.past_newest = False    # the latest render wanted a state that had not arrived (held the newest)
+        self.coupled = False        # the latest render displayed a coupled channel's state...
+        self.max_force = 0.0        # ...whose coupling saturates at this [N] (scene)
         self.max_stiffness = float("inf")  # extrapolate: the largest |K| used, scene frame [N/m]
         self._k = [0.0] * 9                # coupled: the interpolated stiffness (no allocation per tick)
 
@@ -164,7 +166,8 @@ class ForceRender:
         s = (t - h.t_ns[a]) / (tb - h.t_ns[a]) if a != b and tb > h.t_ns[a] else 1.0
         r = 1.0 - s
         fx, fy, fz = r * fa[0] + s * fb[0], r * fa[1] + s * fb[1], r * fa[2] + s * fb[2]
-        if not h.coupled[b]:  # a server that does not couple: the paper's delay alone
+        self.coupled = h.coupled[b]
+        if not self.coupled:  # a server that does not couple: the paper's delay alone
             out[0], out[1], out[2] = fx, fy, fz
             return True
         # The device's motion since the displayed state, through the stiffness it feels.
@@ -178,6 +181,7 @@ class ForceRender:
         fy += k[3] * dx + k[4] * dy + k[5] * dz
         fz += k[6] * dx + k[7] * dy + k[8] * dz
         limit = h.max_force[b]
+        self.max_force = limit
         mag = math.sqrt(fx * fx + fy * fy + fz * fz)
         if limit > 0.0 and mag > limit:
             c = limit / mag

@@ -55,9 +55,12 @@ class Channel:
         self.render.max_stiffness = profile.scene_limits()[2]
         # Coupled, the command stays within the device's limit by construction (the server saturates the
         # coupling at it, the renderer at the coupling's saturation); passivity's damping is held to it too,
-        # so the safety layer's clip is a guard that never acts.
+        # so the safety layer's clip is a guard that never acts. (A state that is not coupled within this
+        # device's limits, from a server that does not couple or a recording of another session, goes to the
+        # safety layer as it is: there a force over the limit is clipped, and said.)
         # (A hair under max_N: the safety layer's own magnitude, summed otherwise, must not read it as over.)
         self.command_limit = profile.force.max_N * (1.0 - 1e-9) if mode == "coupled" else math.inf
+        self.scene_max_N = profile.scene_limits()[0] * (1.0 + 1e-6)  # what the coupling may saturate at
         self.passivity = PassivityController(1.0 / profile.rate_hz, enabled=passivity)
         self.safety = Safety(profile.force, 1.0 / profile.rate_hz, lambda e: on_event(index, e))
         self.inputs = Inputs()
@@ -179,7 +182,8 @@ class Tick:
                 pc.observe_position(s.position)
             cmd = pc.correct(fd)
             mag = math.sqrt(cmd[0] * cmd[0] + cmd[1] * cmd[1] + cmd[2] * cmd[2])
-            if mag > ch.command_limit:
+            r = ch.render
+            if mag > ch.command_limit and r.coupled and r.max_force <= ch.scene_max_N:
                 c = ch.command_limit / mag
                 cmd[0], cmd[1], cmd[2] = cmd[0] * c, cmd[1] * c, cmd[2] * c
             out = ch.safety.apply(now_ns, cmd, inp)

@@ -51,10 +51,13 @@ Pose DevicePath::at(double t) const {
   const size_t kept = std::min(count_, ring_.size());
   if (tau >= newest.device_s) {
     if (kept < 2) return newest.pose;
-    // Past the newest: on at its latest velocity, for a while.
+    // Past the newest: on at its latest velocity for kMaxExtrapolation (a
+    // late input), then back to the newest over as long (a device that
+    // stopped sending stands where it said it was).
     const Sample& before = sample(1);
     const double gap = newest.device_s - before.device_s;
-    const double e = std::min(tau - newest.device_s, kMaxExtrapolation) / gap;
+    const double past = tau - newest.device_s;
+    const double e = std::max(0.0, std::min(past, 2 * kMaxExtrapolation - past)) / gap;
     Pose p = newest.pose;
     p.position += e * (newest.pose.position - before.pose.position);
     const Vec3 turn = compute_rotation_vector(before.pose.orientation, newest.pose.orientation);

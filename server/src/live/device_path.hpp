@@ -11,7 +11,8 @@
 // keeps, let rise slowly so that drift cannot leave it stale), and how much
 // later than that inputs come (their jitter, a peak that decays over about a
 // second) is the playout delay. Past the newest input the path goes on at the
-// device's latest velocity for at most kMaxExtrapolation, then holds.
+// device's latest velocity for at most kMaxExtrapolation, then comes back to
+// the newest input's pose over as long, and holds there.
 //
 // Pure: the loop gives it its time; a re-simulation that applies the same
 // inputs at the same steps gets the same path, bit for bit.
