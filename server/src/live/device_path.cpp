@@ -16,8 +16,11 @@ namespace {
 // is parts per million; a loop that fell behind re-anchors by more, and the
 // minimum filter takes the new offset at its first faster input).
 constexpr double kDrift = 1e-3;
-// The jitter's memory [s]: a burst of lateness sets the delay for about this long.
-constexpr double kJitterMemory = 1.0;
+// The jitter's memory [s]: a burst of lateness sets the delay for about this
+// long. Short: a host stall of tens of milliseconds saturates the delay, and
+// a delay held long after it makes a direct (kinematic) loop ring
+// (tests/test_bridge_closed_loop.py).
+constexpr double kJitterMemory = 0.25;
 
 }  // namespace
 

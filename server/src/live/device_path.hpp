@@ -9,8 +9,8 @@
 // Clocks: the loop's time minus the device's is the input's lag; the
 // smallest lag seen lately is the clocks' offset (a minimum filter, as NTP
 // keeps, let rise slowly so that drift cannot leave it stale), and how much
-// later than that inputs come (their jitter, a peak that decays over about a
-// second) is the playout delay. Past the newest input the path goes on at the
+// later than that inputs come (their jitter, a peak that decays over a
+// quarter of a second, at most kMaxDelay) is the playout delay. Past the newest input the path goes on at the
 // device's latest velocity for at most kMaxExtrapolation, then comes back to
 // the newest input's pose over as long, and holds there.
 //
@@ -27,7 +27,7 @@ namespace tactile {
 
 class DevicePath {
  public:
-  static constexpr double kMaxDelay = 0.005;          // the playout delay at most [s]
+  static constexpr double kMaxDelay = 0.003;          // the playout delay at most [s]
   static constexpr double kMaxExtrapolation = 0.005;  // past the newest input [s]
   static constexpr double kPause = 0.1;               // inputs this far apart start a new path [s]
 
