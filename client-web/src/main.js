@@ -5,7 +5,7 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
 import {
-  Message, Role, decode, encode, makeHello, messageTypeOf, readStateFrame, checkVersion,
+  ControlCommand, Message, ResetT, Role, decode, encode, makeHello, messageTypeOf, readStateFrame, checkVersion,
 } from '../../proto/js/src/index.ts';
 import { cssGradient } from './colormap.js';
 import { ControlPanel } from './controls.js';
@@ -73,6 +73,22 @@ stats.project = (x, y, z) => {
 };
 window.tactile = stats;
 
+// A fault that stopped the simulation (the telemetry names it until the scene is reset or another loaded):
+// said in the middle of the page, with a reset, which takes control (with the token) and resets.
+stats.fault = '';
+$('fault-reset').disabled = !token;
+$('fault-reset').title = token ? '' : 'resetting needs the token: open the URL with ?token=...';
+$('fault-reset').addEventListener('click', () => {
+  controlPanel.sendWhenGranted(ControlCommand.Reset, new ResetT(), 'reset');
+});
+function showFault(faults) {
+  const text = faults.length ? `the simulation stopped: ${faults.join('; ')}` : '';
+  if (text === stats.fault) return;
+  stats.fault = text;
+  $('fault-text').textContent = text;
+  $('fault').hidden = !text;
+}
+
 let view = null;
 let buffer = null;
 let cameraMoved = false;  // since the last cull
@@ -96,6 +112,7 @@ function onScene(d) {
   buffer = new FrameBuffer(view.positions.length, view.scalars.length);
   stats.sceneId = d.sceneId;
   stats.sceneName = d.sceneName || '';
+  showFault([]);
   stats.vertices = view.positions.length / 3;
   $('scene').textContent = `${stats.sceneName}: ${stats.vertices} surface vertices, step ${(d.dt * 1e3).toFixed(3)} ms`;
   $('legend-name').textContent = d.scalarName || 'scalar';
@@ -172,6 +189,7 @@ function onMessage(data) {
     case Message.Telemetry:
       telemetry.update(m.message, pointer.latencies);
       controlPanel.setPaused(m.message.paused);
+      showFault(m.message.faults || []);
       stats.telemetry = m.message;
       break;
     case Message.SafetyEvent: telemetry.safety(m.message); break;

@@ -283,3 +283,30 @@ test('with the token, the control panel pauses, resumes, sets parameters, loads 
     await live.close();
   }
 });
+
+// A scene whose fixed step is far above its critical one, refused rather than split: it faults at its first
+// step. The page says so in the middle, and its reset button (with the token) resets the scene.
+test('a fault shows on the page with a reset that resets the scene', { timeout: 120000 }, async () => {
+  const faulty = { ...POKE, name: 'e2e_fault', integrator: { dt: 0.01, unstable: 'refuse' } };
+  const live = await openLive(faulty, { args: ['--token', 'e2e-secret'], query: '?token=e2e-secret' });
+  const { page } = live;
+  try {
+    await page.waitForFunction(() => window.tactile && window.tactile.fault !== '', null, { timeout: 30000 })
+      .catch(async (e) => { throw new Error(`${e.message}\n${await live.describe()}`); });
+    const shown = await page.evaluate(() => ({
+      text: document.getElementById('fault-text').textContent,
+      visible: !document.getElementById('fault').hidden,
+      scene: window.tactile.sceneId,
+    }));
+    assert.ok(shown.visible, 'the fault banner is shown');
+    assert.match(shown.text, /the simulation stopped: .*critical/, shown.text);
+    fs.mkdirSync(ARTEFACTS, { recursive: true });
+    await page.screenshot({ path: path.join(ARTEFACTS, 'e2e_fault.png') });
+    await page.click('#fault-reset');
+    // The reset comes back as a new scene (a new id); this one faults again at its first step.
+    await page.waitForFunction((id) => window.tactile.sceneId !== id, shown.scene, { timeout: 30000 });
+    await page.waitForFunction(() => window.tactile.fault !== '', null, { timeout: 30000 });
+  } finally {
+    await live.close();
+  }
+});

@@ -372,6 +372,7 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
               "(buzz several times the truth's); extrapolating adds the least latency and amplifies the contact's "
               "chatter. On the stiff block the truth itself chatters (its tick-to-tick change, in brackets, is "
               "large), which dominates every mode's error there.", "",
+              "The modes below drive a kinematic proxy, open-loop. The closed loop the hand feels, with the proxy coupled to the device (the default) against these direct modes, per case and at each haptic rate: [haptic_loop.md](haptic_loop.md) (`bridge_bench.py loop`).", "",
               "![haptic](haptic.png)", "",
               "| object | mode | rms N | rms % | max N | lag ms | display delay ms | buzz mN (truth) |",
               "|---|---|---|---|---|---|---|---|"]
