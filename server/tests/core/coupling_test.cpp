@@ -62,6 +62,13 @@ void move_device(Stepper<Real>& stepper, const Pose& from, const Pose& to, doubl
   stepper.contact().set_motion(0, m);
 }
 
+// Couples the stylus (device 0) at t = 0 as a device of 2000 N/m that renders max_force [N] and max_torque [N m].
+template <class Real>
+void couple_stylus(Stepper<Real>& stepper, double max_force, double max_torque = 0) {
+  const DeviceLimits limits{max_force, max_torque, 2000.0};
+  stepper.contact().couple(0, &limits, 0.0);
+}
+
 template <class Real>
 Vec3 node_momentum(const Model<Real>& model, const State<Real>& s) {
   Vec3 p(0.0);
@@ -126,10 +133,7 @@ TEST(Coupling, MomentumPassesBetweenProxyAndBodyAndNoneIsMade) {
   Stepper<double> stepper(model);
   State<double> s = stepper.make_state();
   const double dt = 0.5 * model.dt_rest;
-  DeviceLimits limits;
-  limits.max_force = 3.0;
-  limits.stiffness = 2000.0;
-  stepper.contact().couple(0, &limits, 0.0);
+  couple_stylus(stepper, 3.0);
   ASSERT_TRUE(stepper.contact().coupled(0));
   Pose device = model.proxies[0].pose;
   const Vec3 velocity(0.0, -0.3, 0.05);
@@ -166,10 +170,7 @@ TEST(Coupling, ADevicePushedThroughTheBodyLeavesItsProxyAtTheSurface) {
     const Model<double> model = build_model<double>(spec);
     Stepper<double> stepper(model);
     State<double> s = stepper.make_state();
-    DeviceLimits limits;
-    limits.max_force = 2.0;
-    limits.stiffness = 2000.0;
-    stepper.contact().couple(0, &limits, 0.0);
+    couple_stylus(stepper, 2.0);
     const double interval = 1e-3, radius = 0.008;
     Pose device = model.proxies[0].pose;
     double peak = 0, lowest = 1;
@@ -220,10 +221,7 @@ TEST(Coupling, AFastStrikeDoesNotFaultAnyMaterial) {
           const Model<Real> model = build_model<Real>(spec);
           Stepper<Real> stepper(model);
           State<Real> s = stepper.make_state();
-          DeviceLimits limits;
-          limits.max_force = 6.0;
-          limits.stiffness = 2000.0;
-          stepper.contact().couple(0, &limits, 0.0);
+          couple_stylus(stepper, 6.0);
           Pose device = model.proxies[0].pose;
           double peak = 0;
           for (int k = 0; k < 60; ++k) {  // 2 m/s for 25 ms (5 cm: 3.2 cm into the block), then held
@@ -251,10 +249,7 @@ TEST(Coupling, InFreeSpaceTheDeviceFeelsAlmostNothing) {
   const Model<double> model = build_model<double>(spec);
   Stepper<double> stepper(model);
   State<double> s = stepper.make_state();
-  DeviceLimits limits;
-  limits.max_force = 6.0;
-  limits.stiffness = 2000.0;
-  stepper.contact().couple(0, &limits, 0.0);
+  couple_stylus(stepper, 6.0);
   Pose device = model.proxies[0].pose;
   double drag = 0;
   for (int k = 0; k < 300; ++k) {  // up and away from the block at 0.5 m/s for 0.2 s, then held
@@ -278,11 +273,7 @@ TEST(Coupling, TheBodyTurnsWithTheDeviceWithinTheTorqueLimit) {
   const Model<double> model = build_model<double>(spec);
   Stepper<double> stepper(model);
   State<double> s = stepper.make_state();
-  DeviceLimits limits;
-  limits.max_force = 6.0;
-  limits.max_torque = 0.01;
-  limits.stiffness = 2000.0;
-  stepper.contact().couple(0, &limits, 0.0);
+  couple_stylus(stepper, 6.0, 0.01);
   const Pose start = model.proxies[0].pose;
   Pose turned = start;
   turned.orientation = glm::angleAxis(kPi / 2, Vec3(0.0, 1.0, 0.0));
