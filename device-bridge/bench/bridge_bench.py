@@ -487,9 +487,10 @@ def loop(args: argparse.Namespace) -> None:
           f"{'contact':>8} {'work/cyc':>9} {'pc':>6} {'pc mJ':>7} {'K felt':>7} {'K due':>7} {'drag':>6} {'max':>6} "
           f"{'delay':>6} {'faults':>6}")
     rows = []
-    runs = [(c, m, r, False) for c in cases for m in ("coupled", "delay") for r in rates]
+    modes = args.modes.split(",")
+    runs = [(c, m, r, False) for c in cases for m in modes for r in rates]
     if args.loaded:
-        runs += [(c, m, rates[min(1, len(rates) - 1)], True) for c in cases for m in ("coupled", "delay")]
+        runs += [(c, m, rates[min(1, len(rates) - 1)], True) for c in cases for m in modes]
     body_k: dict[str, float] = {}
     for case_name, mode, rate, loaded in runs:
         case = LOOP_CASES[case_name]
@@ -550,6 +551,7 @@ def main() -> None:
     c.add_argument("--cases", default="", help=f"comma-separated, of {', '.join(LOOP_CASES)} (default: all)")
     c.add_argument("--rates", default="4000,1000,250", help="haptic states per second, comma-separated")
     c.add_argument("--loaded", action="store_true", help="also each case at 1 kHz beside two busy processes")
+    c.add_argument("--modes", default="coupled,delay", help="the bridge's modes, comma-separated")
     c.add_argument("--json", help="also write the figures to this file")
     args = ap.parse_args()
     {"lateness": lateness, "modes": modes, "loop": loop}[args.what](args)
