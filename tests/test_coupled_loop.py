@@ -100,12 +100,13 @@ def test_repeated_presses_are_passive_continuous_and_steady(tmp_path: pathlib.Pa
     engaged = tr["safety"] == ENGAGED
     cycles = range(1, int(t[-1] // PERIOD))  # whole presses after the first (the forces engage in it)
     # Passive: over each press, out and back, the device's force does no net work on the hand (what a delayed
-    # spring would give back shows as positive work). A millijoule would be a press's whole stored energy.
+    # spring would give back shows as positive work). A press stores about F^2 / 2K = 2.1^2 / (2 x 520) = 4 mJ;
+    # 0.1 mJ allows the trace's rounding and the arm's jitter, not a loop that gives back a fortieth of it.
     work = []
     for k in cycles:
         m = (t[:-1] >= k * PERIOD) & (t[:-1] < (k + 1) * PERIOD)
         work.append(float(np.einsum("ij,ij->i", f[:-1][m], np.diff(x, axis=0)[m]).sum()))
-    assert max(work) <= 2e-5, f"work on the hand per press [J]: {work}"
+    assert max(work) <= 1e-4, f"work on the hand per press [J]: {work}"
     assert len(work) >= 4
     # In contact through every hold (the frames' contact count, the busiest step since the previous frame).
     u = (t % PERIOD) / PERIOD
