@@ -363,6 +363,8 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   // motion is the device's.
   for (Body& b : bodies_) {
     const ProxyMotion& m = b.hand >= 0 ? hand_motion_[size_t(b.hand)] : motion_[size_t(b.proxy)];
+    b.previous = b.wrench;
+    b.previous_target = b.target.position;
     b.target = m.at(t1);
     const bool moving = t1 > m.t0 && t0 < m.t1;
     b.wrench = step_coupled_body(b.c, b.now, b.target, moving ? m.velocity() : Vec3(0.0),
@@ -508,21 +510,29 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   }
   // A coupled device displays its coupling: the opposite of the coupling's
   // force on its bodies (torques about its first body's origin), and feels
-  // the contact's stiffness in series with the coupling's.
+  // the contact's stiffness in series with the coupling's. The force is the
+  // mean of the latest two steps', about the mean of the two device poses: a
+  // proxy resting on the body is pushed every other step, as a node is (eq.
+  // 13), and its coupling's damper answers each push, so the force of one
+  // step alternates (15 % on the mouse's soft coupling) while the pair's mean
+  // is steady.
   for (const Body& b : bodies_) {
     DeviceReport& d = device_reports_[size_t(b.device)];
+    const CouplingWrench w{0.5 * (b.wrench.force + b.previous.force), 0.5 * (b.wrench.torque + b.previous.torque),
+                           b.wrench.saturated};
     if (!d.coupled) {
       d.coupled = true;
       d.target = b.target;
+      d.target.position = 0.5 * (b.target.position + b.previous_target);
       d.body = b.now.pose;
       d.coupling_stiffness = b.c.stiffness;
       d.max_force = b.c.max_force;
       d.max_torque = b.c.max_torque;
       d.stiffness = compute_series_stiffness(b.c.stiffness, d.stiffness);
     }
-    d.saturated = d.saturated || b.wrench.saturated;
-    d.force -= b.wrench.force;
-    d.torque -= b.wrench.torque + glm::cross(b.now.pose.position - d.body.position, b.wrench.force);
+    d.saturated = d.saturated || w.saturated;
+    d.force -= w.force;
+    d.torque -= w.torque + glm::cross(b.now.pose.position - d.body.position, w.force);
   }
   for (DeviceReport& d : device_reports_) d.add_step(dt);
   return sums;

@@ -243,7 +243,9 @@ class Contact {
     BodyState now, next;         // at t_n, and over the step under way
     Vec3 v_free{0.0}, w_free{0.0};  // next's velocities before contact
     CouplingWrench wrench;       // the coupling on the body at t_{n+1}
+    CouplingWrench previous;     // and at t_n
     Pose target;                 // the device's pose at t_{n+1}
+    Vec3 previous_target{0.0};   // its position at t_n [m]
   };
   // The proxy's velocity at c.x: its body's, as the solve has it so far, or its motion's.
   Vec3 proxy_velocity(const Point& c) const;
