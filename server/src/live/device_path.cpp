@@ -16,6 +16,8 @@ namespace {
 // is parts per million; a loop that fell behind re-anchors by more, and the
 // minimum filter takes the new offset at its first faster input).
 constexpr double kDrift = 1e-3;
+// A lag this much below the offset is a stall of the loop's time [s].
+constexpr double kStall = 0.01;
 // The jitter's memory [s]: a burst of lateness sets the delay for about this
 // long. Short: a host stall of tens of milliseconds saturates the delay, and
 // a delay held long after it makes a direct (kinematic) loop ring
@@ -37,7 +39,14 @@ bool DevicePath::add(double device_s, const Pose& pose, double t) {
     if (!(gap > 0)) return false;  // no later than the newest: nothing new on the path
     offset_ += kDrift * gap;
     jitter_ *= std::exp(-gap / kJitterMemory);
-    if (lag < offset_) {  // the fastest input yet: the others came later than thought
+    if (lag < offset_ - kStall) {
+      // The loop's time stood still while the device's ran on (a stall it
+      // re-anchored after, or a pause): the path jumps ahead by as much. A
+      // new path from here, which the loop glides onto.
+      offset_ = lag;
+      jitter_ = 0;
+      first = true;
+    } else if (lag < offset_) {  // the fastest input yet: the others came later than thought
       jitter_ += offset_ - lag;
       offset_ = lag;
     }

@@ -32,7 +32,8 @@ class DevicePath {
   static constexpr double kPause = 0.1;               // inputs this far apart start a new path [s]
 
   // An input taken at device time `device_s` [s], applied at loop time `t` [s].
-  // Returns true when it starts a new path (the first, or after a pause).
+  // Returns true when it starts a new path (the first, after a pause, or
+  // after the loop's time stood still for a while: its path jumped ahead).
   bool add(double device_s, const Pose& pose, double t);
   bool empty() const { return count_ == 0; }
   // The device's pose on the path at loop time t.

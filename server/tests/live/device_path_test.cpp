@@ -1,0 +1,69 @@
+// The device path (live/device_path.hpp): inputs on the device's clock, played out a little late.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "live/device_path.hpp"
+
+namespace tactile {
+namespace {
+
+Pose at_x(double x) {
+  Pose p;
+  p.position = Vec3(x, 0.0, 0.0);
+  return p;
+}
+
+// A device moving at 0.5 m/s whose 1 kHz inputs arrive 0-2 ms late: the path moves on, never stalls and never
+// jumps ahead, and lags the device by the delay at most. (When an input comes later than any before, the delay
+// grows and the playout time steps back by as much: the path steps back a little, at most 0.1 mm here; to be
+// made monotone.)
+TEST(DevicePath, LateInputsNeitherStallNorJumpThePath) {
+  DevicePath path;
+  const double v = 0.5;
+  double newest_applied = -1, prev_x = -1;
+  bool started = false;
+  uint64_t seed = 7;
+  const auto late = [&] {  // 0-2 ms, pseudo-random
+    seed = seed * 6364136223846793005ull + 1442695040888963407ull;
+    return 2e-3 * double(seed >> 11) / double(1ull << 53);
+  };
+  double pending_t = 0, pending_s = 0;
+  int k = 0;
+  for (double t = 0.0; t < 0.3; t += 1e-4) {  // the loop's steps
+    while (pending_t <= t) {  // every input whose arrival has come
+      if (k > 0) {
+        const bool first = path.add(pending_s, at_x(v * pending_s), pending_t);
+        EXPECT_EQ(first, !started) << "input " << k;
+        started = true;
+        newest_applied = pending_s;
+      }
+      ++k;
+      pending_s = 1e-3 * k;
+      pending_t = pending_s + late();
+    }
+    if (!started || t < 0.05) continue;
+    const double x = path.at(t).position.x;
+    if (prev_x >= 0) {
+      EXPECT_GT(x, prev_x - 1e-4) << "the path went back at t = " << t;
+      EXPECT_LT(x - prev_x, v * 1e-4 * 1.5 + 1e-12) << "the path jumped at t = " << t;
+    }
+    EXPECT_GT(x, v * (t - DevicePath::kMaxDelay - 2e-3)) << "the path lags at t = " << t;
+    EXPECT_LE(path.delay(), DevicePath::kMaxDelay);
+    prev_x = x;
+  }
+  EXPECT_GT(newest_applied, 0.29);
+}
+
+// The loop's time stands still for 50 ms while the device runs on: its next input starts a new path (which the
+// loop glides onto), and a device that stops sending stands where it said it was.
+TEST(DevicePath, AStallStartsANewPathAndASilentDeviceStandsWhereItSaidItWas) {
+  DevicePath path;
+  for (int k = 1; k <= 50; ++k) EXPECT_EQ(path.add(1e-3 * k, at_x(0.5e-3 * k), 1e-3 * k), k == 1);
+  EXPECT_TRUE(path.add(0.051 + 0.05, at_x(0.5 * 0.101), 0.051)) << "a 50 ms stall is a new path";
+  EXPECT_FALSE(path.add(0.102, at_x(0.5 * 0.102), 0.052));
+  EXPECT_NEAR(path.at(0.3).position.x, 0.5 * 0.102, 1e-12) << "long after its last input: where it said it was";
+}
+
+}  // namespace
+}  // namespace tactile
