@@ -514,8 +514,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   // mean of the latest two steps', about the mean of the two device poses: a
   // proxy resting on the body is pushed every other step, as a node is (eq.
   // 13), and its coupling's damper answers each push, so the force of one
-  // step alternates (15 % on the mouse's soft coupling) while the pair's mean
-  // is steady.
+  // step alternates while the pair's mean is steady.
   for (const Body& b : bodies_) {
     DeviceReport& d = device_reports_[size_t(b.device)];
     const CouplingWrench w{0.5 * (b.wrench.force + b.previous.force), 0.5 * (b.wrench.torque + b.previous.torque),
