@@ -463,8 +463,6 @@ def analyse(trace: pathlib.Path, case: dict[str, Any], period: float, start: flo
     fast = live & (speed > 0.45) & (speed < 0.55)
     r["drag_N"] = float(np.median(np.linalg.norm(f[fast], axis=1))) if fast.any() else float("nan")
     r["drag_max_N"] = float(np.linalg.norm(f[fast], axis=1).max()) if fast.any() else float("nan")
-    # Latency from the hand's own motion to force: the lag (ticks) at which the force's tick-to-tick change
-    # follows the device's best, in contact (0: the same tick's motion, answered at the tick).
     return r
 
 
@@ -498,6 +496,10 @@ def loop(args: argparse.Namespace) -> None:
         scene = case["scene"]()
         with tempfile.TemporaryDirectory() as d, busy(2 if loaded else 0):
             tmp = pathlib.Path(d)
+            if args.keep:  # the run's trace, recording and profile, for a closer look
+                tmp = pathlib.Path(args.keep) / f"{case_name}-{mode}{'-load' if loaded else ''}-{rate:g}"
+                shutil.rmtree(tmp, ignore_errors=True)
+                tmp.mkdir(parents=True)
             rec = tmp / "run.mcap"
             with server(tmp, scene, "--haptic-rate", str(rate), "--record", str(rec)) as port:
                 profile = tmp / "loop.toml"
@@ -553,6 +555,7 @@ def main() -> None:
     c.add_argument("--loaded", action="store_true", help="also each case at 1 kHz beside two busy processes")
     c.add_argument("--modes", default="coupled,delay", help="the bridge's modes, comma-separated")
     c.add_argument("--json", help="also write the figures to this file")
+    c.add_argument("--keep", help="keep each run's trace, recording and profile under this folder")
     args = ap.parse_args()
     {"lateness": lateness, "modes": modes, "loop": loop}[args.what](args)
 

@@ -8,7 +8,8 @@ Modes:
   coupled  the default, with a server that couples the device's proxy (protocol 1.5; DESIGN.md item 8): the
            device displays the coupling's force. What comes from the body is displayed the paper's way, one
            step late and interpolated (as `delay`: the coupling's force F, the stiffness K the device feels
-           through the coupling, and the device's pose x_s the server pulled toward, at the display time);
+           through the coupling, fitted by the server from F and the device's pose, and the device's pose
+           x_s the server pulled toward, at the display time);
            the device's own motion since then is answered at this tick, F + K (x_now - x_s). In free space
            K = 0: the proxy follows the hand and the hand feels nothing of the coupling; against a rigid body
            K is the coupling's own spring. The force is held within the coupling's saturation, which the

@@ -21,6 +21,15 @@ constexpr int32_t kClusterNodes = 32;
 constexpr double kFitMemory = 0.9;
 constexpr double kFitMinMotion = 5e-6;  // [m]
 constexpr int32_t kFitMaxSteps = 64;
+// A coupled device's fit: segments of at least 2 ms and 20 um (or 50 ms),
+// so that it gives the stiffness felt over the milliseconds a bridge
+// renders between states (the hand's motion), not the coupling's spring
+// alone that a device's encoder noise meets before the proxy can follow
+// (free space would then read as the coupling's 2000 N/m).
+constexpr double kDeviceFitMinTime = 2e-3, kDeviceFitMaxTime = 50e-3;  // [s]
+constexpr double kDeviceFitMinMotion = 20e-6;  // [m]
+constexpr double kDeviceFitGain = 0.3;         // of each segment's secant, along its motion
+constexpr int32_t kFitIdleSteps = 16;  // a proxy's fit ends after this many steps without contact
 
 template <class Real>
 Vec3 position(const State<Real>& s, const Vec3& X, int32_t node) {
@@ -76,6 +85,8 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   hand_motion_.resize(model.hands.size());
   for (size_t h = 0; h < model.hands.size(); ++h) hand_motion_[h] = hold(model.hands[h].pose);
   fit_.resize(n_proxies);
+  device_fit_.resize(model.devices.size());
+  device_felt_.assign(model.devices.size(), glm::dmat3(0.0));
   proxy_body_.assign(n_proxies, -1);
   pose0_.resize(n_proxies);
   pose1_.resize(n_proxies);
@@ -197,6 +208,8 @@ void Contact<Real>::start(const State<Real>& s) {
   std::fill(memory_.begin(), memory_.end(), Memory{});
   std::fill(face_memory_.begin(), face_memory_.end(), Memory{});
   for (Fit& f : fit_) f = Fit{};
+  for (Fit& f : device_fit_) f = Fit{};
+  std::fill(device_felt_.begin(), device_felt_.end(), glm::dmat3(0.0));
   for (ProxyReport& r : reports_) r = ProxyReport{};
   for (DeviceReport& d : device_reports_) d = DeviceReport{};
   // (Coupled bodies keep their motion: couple() placed them.)
@@ -242,6 +255,8 @@ void Contact<Real>::couple(int32_t device, const DeviceLimits* limits, double t)
     nb.target = nb.now.pose;
     bodies_.push_back(nb);
   };
+  device_fit_[size_t(device)] = Fit{};
+  device_felt_[size_t(device)] = glm::dmat3(0.0);
   for (size_t h = 0; h < model_.hands.size(); ++h) {
     if (model_.devices[size_t(device)] != model_.hands[h].device) continue;
     double radius = 0;
@@ -270,6 +285,8 @@ void Contact<Real>::release(int32_t device) {
       if (bodies_[b].hand >= 0 ? model_.proxy_hand[j] == bodies_[b].hand : int32_t(j) == bodies_[b].proxy)
         proxy_body_[j] = int32_t(b);
   device_reports_[size_t(device)].coupled = false;
+  device_fit_[size_t(device)] = Fit{};
+  device_felt_[size_t(device)] = glm::dmat3(0.0);
 }
 
 template <class Real>
@@ -488,11 +505,18 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   touched_prev_.swap(touched_now_);
   touched_now_.clear();
   x_prev_.swap(x_now_);
+  // A proxy resting on the body is pushed every other step or so (eq. 13):
+  // its fit goes on through steps without contact, their force zero, and
+  // ends only when it has not touched for kFitIdleSteps.
   for (size_t j = 0; j < n_proxies; ++j) {
-    if (reports_[j].contacts > 0) update_stiffness(int32_t(j), pose1_[j].position, reports_[j].force, dt);
-    else {
-      fit_[j] = Fit{};
+    Fit& f = fit_[j];
+    f.idle = reports_[j].contacts > 0 ? 0 : f.idle + 1;
+    if (f.idle > kFitIdleSteps) {
+      f = Fit{};
+      f.idle = kFitIdleSteps + 1;
       reports_[j].stiffness = glm::dmat3(0.0);
+    } else {
+      fit_stiffness(f, FitWindow::Proxy, pose1_[j].position, reports_[j].force, dt, reports_[j].stiffness);
     }
   }
   // Per device: its proxies' sums, torques moved to the device's reference point.
@@ -509,8 +533,8 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     d.torque += r.torque + glm::cross(pose1_[j].position - reference, r.force);
   }
   // A coupled device displays its coupling: the opposite of the coupling's
-  // force on its bodies (torques about its first body's origin), and feels
-  // the contact's stiffness in series with the coupling's. The force is the
+  // force on its bodies (torques about its first body's origin), and the
+  // stiffness it feels (fitted below, from that force and its pose). The force is the
   // mean of the latest two steps', about the mean of the two device poses: a
   // proxy resting on the body is pushed every other step, as a node is (eq.
   // 13), and its coupling's damper answers each push, so the force of one
@@ -527,11 +551,16 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
       d.coupling_stiffness = b.c.stiffness;
       d.max_force = b.c.max_force;
       d.max_torque = b.c.max_torque;
-      d.stiffness = compute_series_stiffness(b.c.stiffness, d.stiffness);
     }
     d.saturated = d.saturated || w.saturated;
     d.force -= w.force;
     d.torque -= w.torque + glm::cross(b.now.pose.position - d.body.position, w.force);
+  }
+  for (size_t i = 0; i < device_reports_.size(); ++i) {
+    DeviceReport& d = device_reports_[i];
+    if (!d.coupled) continue;
+    fit_stiffness(device_fit_[i], FitWindow::Device, d.target.position, d.force, dt, device_felt_[i]);
+    d.stiffness = device_felt_[i];
   }
   for (DeviceReport& d : device_reports_) d.add_step(dt);
   return sums;
@@ -757,16 +786,20 @@ void Contact<Real>::solve(const State<Real>& s) {
 }
 
 template <class Real>
-void Contact<Real>::update_stiffness(int32_t proxy, const Vec3& position, const Vec3& force, double dt) {
-  Fit& f = fit_[size_t(proxy)];
-  ProxyReport& r = reports_[size_t(proxy)];
+void Contact<Real>::fit_stiffness(Fit& f, FitWindow window, const Vec3& position, const Vec3& force, double dt,
+                                  glm::dmat3& stiffness) {
   if (f.seg_steps == 0) f.seg_start = position;
   f.seg_impulse += force * dt;
   f.seg_moment += position * dt;
   f.seg_time += dt;
   ++f.seg_steps;
+  if (f.seg_steps % 2 != 0) return;
   const Vec3 moved = position - f.seg_start;
-  if (f.seg_steps % 2 != 0 || (glm::dot(moved, moved) < kFitMinMotion * kFitMinMotion && f.seg_steps < kFitMaxSteps))
+  const double moved2 = glm::dot(moved, moved);
+  const bool device = window == FitWindow::Device;
+  if (device ? f.seg_time < kDeviceFitMaxTime &&
+                   (f.seg_time < kDeviceFitMinTime || moved2 < kDeviceFitMinMotion * kDeviceFitMinMotion)
+             : moved2 < kFitMinMotion * kFitMinMotion && f.seg_steps < kFitMaxSteps)
     return;
   const Vec3 mean_force = f.seg_impulse / f.seg_time;
   const Vec3 mean_position = f.seg_moment / f.seg_time;
@@ -775,14 +808,23 @@ void Contact<Real>::update_stiffness(int32_t proxy, const Vec3& position, const 
   f.seg_steps = 0;
   if (f.has_last) {
     const Vec3 dx = mean_position - f.last_position;
-    if (glm::dot(dx, dx) > 0) {
-      const Vec3 dF = mean_force - f.last_force;
+    const Vec3 dF = mean_force - f.last_force;
+    const double dx2 = glm::dot(dx, dx);
+    if (device) {
+      // Along the motion alone (a damped Broyden update): a device moves
+      // along a line for milliseconds, and across it only by its encoder's
+      // noise, whose dF/dx is the coupling's spring before the proxy follows.
+      if (dx2 >= kDeviceFitMinMotion * kDeviceFitMinMotion) {
+        f.fx += kDeviceFitGain * glm::outerProduct(dF - f.fx * dx, dx) / dx2;
+        stiffness = nearest_passive(f.fx);
+      }
+    } else if (dx2 > 0) {
       f.fx = kFitMemory * f.fx + glm::outerProduct(dF, dx);
       f.xx = kFitMemory * f.xx + glm::outerProduct(dx, dx);
       // K = S_fx (S_xx + eps I)^-1; eps keeps directions never moved along at
       // zero stiffness instead of dividing by nothing.
       const double eps = 1e-6 * (f.xx[0][0] + f.xx[1][1] + f.xx[2][2]) + 1e-300;
-      r.stiffness = nearest_passive(f.fx * glm::inverse(f.xx + glm::dmat3(eps)));
+      stiffness = nearest_passive(f.fx * glm::inverse(f.xx + glm::dmat3(eps)));
     }
   }
   f.last_position = mean_position;

@@ -109,7 +109,10 @@ struct ProxyReport : ContactReport {
 
 // A device channel's report. For a coupled device, force and torque are the
 // coupling's on the device (what it should display), and stiffness is what
-// the device feels through the coupling (compute_series_stiffness).
+// the device feels through the coupling: dF/dx of that force against the
+// device's own position, fitted as a proxy's is (over a few milliseconds:
+// between the coupling's alone while the proxy has not yet moved, and the
+// coupling in series with the contact once it has).
 struct DeviceReport : ContactReport {
   bool coupled = false;
   bool saturated = false;  // the coupling was at its force or torque limit
@@ -233,7 +236,6 @@ class Contact {
   void solve(const State<Real>& s);
   Vec3 point_velocity(const State<Real>& s, const Point& c) const;
   void give(Point& c, const Vec3& J);
-  void update_stiffness(int32_t proxy, const Vec3& position, const Vec3& force, double dt);
   // A coupled body: a hand (hand >= 0) or one proxy.
   struct Body {
     int32_t device = -1, hand = -1, proxy = -1;
@@ -297,8 +299,19 @@ class Contact {
     Vec3 seg_impulse{0.0}, seg_moment{0.0}, seg_start{0.0};  // the open segment: sum F dt, sum x dt, x at its start
     double seg_time = 0;
     int32_t seg_steps = 0;
+    int32_t idle = 0;  // steps since the proxy last touched
   };
+  // Adds one step (the proxy or device at `position`, under `force`) to the
+  // fit; where a segment closes with motion, sets `stiffness` to the fit.
+  enum class FitWindow { Proxy, Device };  // segments of kFitMinMotion; of kDeviceFitMinTime and kDeviceFitMinMotion
+  static void fit_stiffness(Fit& f, FitWindow window, const Vec3& position, const Vec3& force, double dt,
+                            glm::dmat3& stiffness);
   std::vector<Fit> fit_;
+  // Per device: the fit of a coupled device's force against its own pose,
+  // and the stiffness it gives (kept between steps: the device feels it
+  // whether or not its proxy touches at this step).
+  std::vector<Fit> device_fit_;
+  std::vector<glm::dmat3> device_felt_;
   std::vector<Body> bodies_;
   std::vector<int32_t> proxy_body_;  // per proxy: its body in bodies_, -1 when kinematic (n_proxies)
   double alpha_ = 0;  // Rayleigh mass damping [1/s], for q = m (1 + alpha dt / 2)

@@ -105,8 +105,4 @@ CouplingWrench step_coupled_body(const Coupling& c, const BodyState& now, const 
   return out;
 }
 
-glm::dmat3 compute_series_stiffness(double k, const glm::dmat3& K_contact) {
-  return k * glm::inverse(glm::dmat3(k) - K_contact) * K_contact;
-}
-
 }  // namespace tactile

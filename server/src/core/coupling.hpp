@@ -109,13 +109,6 @@ struct CouplingWrench {
 CouplingWrench step_coupled_body(const Coupling& c, const BodyState& now, const Pose& target, const Vec3& target_v,
                                  const Vec3& target_w, double dt, BodyState& next);
 
-// The stiffness a device feels through its coupling of stiffness k [N/m]
-// when the body behind it answers the proxy's motion with K_contact = dF/dx
-// (negative semidefinite): dF_device / dx_device = k (k I - K)^-1 K, the
-// coupling and the contact in series (-k I against a rigid body, 0 in free
-// space). Pure.
-glm::dmat3 compute_series_stiffness(double k, const glm::dmat3& K_contact);
-
 // The rotation vector (axis times angle, the shortest way) that turns a into b, world frame.
 Vec3 compute_rotation_vector(const Quat& a, const Quat& b);
 
