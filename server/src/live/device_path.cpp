@@ -26,8 +26,17 @@ constexpr double kJitterMemory = 0.25;
 
 }  // namespace
 
+double DevicePath::lead(double t) const {
+  const double most = kLeadSlew * std::max(0.0, t - anchor_t_);
+  return anchor_lead_ + std::clamp(offset_ + jitter_ - anchor_lead_, -most, most);
+}
+
 bool DevicePath::add(double device_s, const Pose& pose, double t) {
   const double lag = t - device_s;
+  // (The anchor never moves back: an input applied at an earlier time than
+  // the one before would let the lead jump by the slew over the difference.)
+  const double anchor_t = count_ > 0 ? std::max(t, anchor_t_) : t;
+  const double lead_now = count_ > 0 ? lead(anchor_t) : 0.0;
   bool first = false;
   if (count_ == 0 || std::fabs(device_s - sample(0).device_s) > kPause) {
     count_ = 0;  // a new path: the first input, or one after a pause (or a device that restarted its clock)
@@ -52,13 +61,15 @@ bool DevicePath::add(double device_s, const Pose& pose, double t) {
     }
     jitter_ = std::min(kMaxDelay, std::max(jitter_, lag - offset_));
   }
+  anchor_t_ = first ? t : anchor_t;
+  anchor_lead_ = first ? offset_ + jitter_ : lead_now;
   ring_[count_ % ring_.size()] = {device_s, pose};
   ++count_;
   return first;
 }
 
 Pose DevicePath::at(double t) const {
-  const double tau = t - offset_ - jitter_;  // device time played out at t
+  const double tau = t - lead(t);  // device time played out at t
   const Sample& newest = sample(0);
   const size_t kept = std::min(count_, ring_.size());
   if (tau >= newest.device_s) {

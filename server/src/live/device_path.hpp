@@ -10,9 +10,14 @@
 // smallest lag seen lately is the clocks' offset (a minimum filter, as NTP
 // keeps, let rise slowly so that drift cannot leave it stale), and how much
 // later than that inputs come (their jitter, a peak that decays over a
-// quarter of a second, at most kMaxDelay) is the playout delay. Past the newest input the path goes on at the
-// device's latest velocity for at most kMaxExtrapolation, then comes back to
-// the newest input's pose over as long, and holds there.
+// quarter of a second, at most kMaxDelay) is the playout delay. The path
+// moves toward a new offset plus delay at kLeadSlew seconds per second at
+// most, so that its playout time never steps back and runs within 1 % of
+// the loop's: a late input that raised the delay by 1 ms at once would step
+// a device moving at 0.5 m/s back by 0.5 mm, a 1 N jolt through a
+// 2000 N/m coupling. Past the newest input the path goes on at the device's
+// latest velocity for at most kMaxExtrapolation, then comes back to the
+// newest input's pose over as long, and holds there.
 //
 // Pure: the loop gives it its time; a re-simulation that applies the same
 // inputs at the same steps gets the same path, bit for bit.
@@ -30,6 +35,7 @@ class DevicePath {
   static constexpr double kMaxDelay = 0.003;          // the playout delay at most [s]
   static constexpr double kMaxExtrapolation = 0.005;  // past the newest input [s]
   static constexpr double kPause = 0.1;               // inputs this far apart start a new path [s]
+  static constexpr double kLeadSlew = 0.01;           // how fast the playout's lead may change [s/s]
 
   // An input taken at device time `device_s` [s], applied at loop time `t` [s].
   // Returns true when it starts a new path (the first, after a pause, or
@@ -48,8 +54,12 @@ class DevicePath {
   const Sample& sample(size_t back) const { return ring_[(count_ - 1 - back) % ring_.size()]; }
   std::array<Sample, 16> ring_{};
   size_t count_ = 0;
+  // The playout's lead (loop time minus the device time played out) at loop
+  // time t: from the anchor toward offset_ + jitter_ at kLeadSlew at most.
+  double lead(double t) const;
   double offset_ = 0;  // loop time minus device time, the smallest lately [s]
   double jitter_ = 0;  // how much later than that inputs come [s]
+  double anchor_t_ = 0, anchor_lead_ = 0;  // the lead at the latest input [s]
 };
 
 }  // namespace tactile
