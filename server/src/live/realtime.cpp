@@ -3,7 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <thread>
+
+#include <glm/common.hpp>
 
 #include <immintrin.h>
 #include <sys/prctl.h>
@@ -23,6 +26,15 @@ constexpr double kSpinWindow = 60e-6;  // [s]
 // How fast a proxy's pose glides onto its device's path when the path
 // starts away from it (DevicePath::add).
 constexpr double kApproachSpeed = 0.25;   // [m/s]
+// A device's motion as the simulation takes it is no faster than this
+// (a hand's fastest strike): an input that jumps (a glitch, a device
+// re-homed, a stranger's input) is taken up by the approach, as a new path
+// is, instead of sweeping a kinematic proxy through the body in one step or
+// flinging a coupled one across the workspace at its coupling's limit.
+constexpr double kMaxDeviceSpeed = 3.0;   // [m/s]
+// The workspace: the body's rest bounds, widened on every side by its
+// largest extent and at least this much.
+constexpr double kWorkspaceMargin = 0.5;  // [m]
 
 double seconds(RealtimeLoop::Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
@@ -67,6 +79,15 @@ RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const Realtime
   if (options.haptic_rate_hz > 0)
     haptic_every_ = std::max<int64_t>(1, int64_t(std::ceil(1.0 / (options.haptic_rate_hz * dt_) - 1e-9)));
   sim.set_probe(&pass_timer_);
+  Vec3 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+  for (const Vec3& X : sim.mesh().X) {
+    lo = glm::min(lo, X);
+    hi = glm::max(hi, X);
+  }
+  const Vec3 size = hi - lo;
+  const double margin = std::max({kWorkspaceMargin, size.x, size.y, size.z});
+  workspace_lo_ = lo - Vec3(margin);
+  workspace_hi_ = hi + Vec3(margin);
   const std::vector<std::string>& devices = sim.devices();
   drivers_.resize(devices.size());
   device_sequences_.resize(devices.size());
@@ -113,10 +134,12 @@ void RealtimeLoop::apply_inputs() {
       else sim_.couple_device(s.device, s.drive.has_limits ? &s.drive.limits : nullptr);
       drv.drive = s.drive;
     }
+    // An input outside the workspace is held at its edge (the server says so
+    // to the device: net/server.cpp); the path is never farther than that.
+    s.pose.position = glm::clamp(s.pose.position, workspace_lo_, workspace_hi_);
     // A new path (the device's first input, or one after a pause) may start
-    // far from where its proxy waits: the proxy's pose glides onto it.
-    if (drv.path.add(1e-9 * double(s.device_time_ns), s.pose, t))
-      drv.approach = drv.motion.at(t).position - drv.path.at(t).position;
+    // far from where its proxy waits: the proxy's pose glides onto it (below).
+    drv.path.add(1e-9 * double(s.device_time_ns), s.pose, t);
     last_sequence_ = std::max(last_sequence_, s.sequence);
     device_sequences_[size_t(s.device)] = s.sequence;  // the latest, even when a restarted bridge counts from 1 again
     if (applied_sink_) applied_sink_({loop_steps_, s.device, s.sequence, s.drive});
@@ -126,22 +149,30 @@ void RealtimeLoop::apply_inputs() {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     stats_.inputs_applied += applied;
   }
-  // Every step, each driven channel's motion over the step: its device's
-  // path (device_path.hpp), plus what remains of the approach, which shrinks
-  // at kApproachSpeed (a coupled proxy pulled onto a far path in one step
-  // would be pulled at the coupling's limit).
+  // Every step, each driven channel's motion over the step: from where the
+  // last step left it, toward its device's path (device_path.hpp) plus what
+  // remains of the approach, which shrinks at kApproachSpeed (a coupled
+  // proxy pulled onto a far path in one step would be pulled at the
+  // coupling's limit), and no faster than kMaxDeviceSpeed. The approach
+  // takes up whatever the path did that a hand could not: a new path far
+  // away, a jump, a correction of its past by a late input.
   const double t1 = t + dt_;
   for (Driver& drv : drivers_) {
     if (drv.path.empty()) continue;
+    const Pose path_t = drv.path.at(t), path_t1 = drv.path.at(t1);
     ProxyMotion m;
     m.t0 = t;
     m.t1 = t1;
-    m.from = drv.path.at(t);
-    m.to = drv.path.at(t1);
-    m.from.position += drv.approach;
-    const double left = glm::length(drv.approach);
-    if (left > 0) drv.approach *= std::max(0.0, left - kApproachSpeed * dt_) / left;
-    m.to.position += drv.approach;
+    m.from = path_t;
+    m.from.position = drv.motion.at(t).position;
+    Vec3 approach = m.from.position - path_t.position;
+    const double left = glm::length(approach);
+    if (left > 0) approach *= std::max(0.0, left - kApproachSpeed * dt_) / left;
+    m.to = path_t1;
+    m.to.position += approach;
+    const Vec3 step = m.to.position - m.from.position;
+    const double most = kMaxDeviceSpeed * dt_, length = glm::length(step);
+    if (length > most) m.to.position = m.from.position + step * (most / length);  // faster than a hand
     drv.motion = m;
     if (drv.hand >= 0) sim_.set_hand_motion(drv.hand, m);
     for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);

@@ -151,6 +151,10 @@ class RealtimeLoop {
     step_once(stamp_ns);
   }
   int64_t loop_steps() const { return loop_steps_; }
+  // Where a device may drive its proxy: the body's rest bounds widened by
+  // its largest extent (0.5 m at least); inputs outside are held at the edge.
+  Vec3 workspace_lo() const { return workspace_lo_; }
+  Vec3 workspace_hi() const { return workspace_hi_; }
 
   // A snapshot, from any thread (updated every step; the per-second figures
   // once a second).
@@ -167,9 +171,9 @@ class RealtimeLoop {
     std::vector<int32_t> proxies;  // else the proxies it drives alone
     ProxyMotion motion;       // its motion over the latest step
     DevicePath path;          // its device's pose, from its inputs
-    Vec3 approach{0.0};       // how far the motion still stands off the path [m]
     DeviceDrive drive;        // as the simulation has it
   };
+  Vec3 workspace_lo_{0.0}, workspace_hi_{0.0};
   void sync_drivers();
   void apply_inputs();
   // One step after the inputs are applied; its frames stamped `now_ns`.
