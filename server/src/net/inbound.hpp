@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <string_view>
 
 #include "tactile_generated.h"
 
@@ -29,6 +30,12 @@ std::string check_device_input(const proto::DeviceInput& in);
 // What a device Hello's device_limits say, or why they cannot be taken: one
 // entry per named channel at most, each bound finite and >= 0.
 std::string check_device_limits(const proto::Hello& h);
+
+// Text as valid UTF-8 without control characters, for what leaves the
+// server quoting a client (an Error naming a channel, a path, a parameter):
+// each byte that is not part of a valid sequence (RFC 3629), and each
+// control character but newline and tab, becomes \xNN. Valid text passes.
+std::string utf8_text(std::string_view in);
 
 // What a SafetyEvent's strings may hold [bytes]: a channel name, a cause.
 constexpr size_t kMaxSafetyDeviceBytes = 128;

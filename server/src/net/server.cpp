@@ -15,6 +15,8 @@
 #include <thread>
 #include <unordered_set>
 
+#include <glm/vector_relational.hpp>
+
 #include <boost/asio.hpp>
 #include <boost/asio/posix/stream_descriptor.hpp>
 #include <boost/beast/core.hpp>
@@ -56,7 +58,9 @@ Bytes seal(fb::FlatBufferBuilder& b, wire::Message type, fb::Offset<T> body) {
 
 Bytes make_error(wire::ErrorCode code, const std::string& message, uint32_t request_id = 0) {
   fb::FlatBufferBuilder b;
-  return seal(b, wire::Message::Error, wire::CreateErrorDirect(b, code, message.c_str(), request_id));
+  const std::string text = utf8_text(message);
+  const auto body = wire::CreateError(b, code, b.CreateString(text), request_id);
+  return seal(b, wire::Message::Error, body);
 }
 
 // A string for a one-line log: control characters shown as '?'.
@@ -251,6 +255,15 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   void tick_telemetry();
   Bytes telemetry_message(const std::string& extra_fault);
   bool origin_allowed(const std::string& origin) const;
+  bool host_allowed(std::string_view host) const;
+  // Room for one more WebSocket from `address`: false when the greeted
+  // sessions fill max_connections. Connections that have not said Hello
+  // hold waiting slots, max_waiting_per_address per address and
+  // max_waiting in all; a new one takes the slot of the oldest waiting one
+  // from its own address when that address has its fill, else of the
+  // oldest of all when all are taken. So no flood of upgrades that never
+  // say Hello keeps a client out who says it at once.
+  bool make_room(const std::string& address);
   void close_all();
 };
 
@@ -258,8 +271,12 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
 
 class WsSession : public std::enable_shared_from_this<WsSession> {
  public:
-  WsSession(std::shared_ptr<Server::Impl> server, tcp::socket socket, bool loopback)
-      : server_(std::move(server)), ws_(std::move(socket)), hello_timer_(server_->ioc), loopback_(loopback) {}
+  WsSession(std::shared_ptr<Server::Impl> server, tcp::socket socket, bool loopback, std::string address)
+      : server_(std::move(server)),
+        ws_(std::move(socket)),
+        hello_timer_(server_->ioc),
+        loopback_(loopback),
+        address_(std::move(address)) {}
 
   ~WsSession() {
     server_->sessions.erase(this);
@@ -294,6 +311,18 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
 
   wire::Role role() const { return role_; }
   bool greeted() const { return greeted_; }
+  // Upgraded and not yet greeted: it holds a waiting slot (Impl::make_room).
+  bool waiting() const { return !greeted_ && !closing_; }
+  const std::string& address() const { return address_; }
+  uint64_t id() const { return id_; }
+  // Closes the socket at once (a waiting slot given to a newer connection):
+  // its pending operations end, and with them the session.
+  void drop() {
+    if (closing_) return;
+    closing_ = true;
+    hello_timer_.cancel();
+    beast::get_lowest_layer(ws_).close();
+  }
   // SafetyEvent came in 1.2: a 1.1 codec refuses a message type it does not know.
   bool reads_safety_events() const { return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 2; }
   // DeviceStatus came in 1.3.
@@ -308,7 +337,9 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   // Queues a message; `kind` decides what a slow reader loses: a State is
   // replaced by the next, a Haptic frame, an Event (SafetyEvent) or a Status
   // (DeviceStatus) beyond its bound drops the oldest of its kind waiting
-  // (counted), a Control message is never dropped.
+  // (counted), a Control message (replies: Pong, Error, Welcome; Telemetry,
+  // ReplayStatus) is never dropped: a reader that lets control_queue of
+  // them wait is not reading, and is disconnected.
   enum class Kind { Control, State, Haptic, Event, Status };
   void send(const Bytes& message, Kind kind) {
     if (kind == Kind::Control && role_ == wire::Role::Controller && greeted_ &&
@@ -348,6 +379,12 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       ++queued;
       queue_.push_back(message);
     } else {
+      if (controls_queued_ >= server_->options.control_queue) {
+        std::fprintf(stderr, "connection %llu (%s, %s) let %zu control messages wait unread: disconnected\n",
+                     (unsigned long long)id_, wire::EnumNameRole(role_), address_.c_str(), controls_queued_);
+        return drop();
+      }
+      ++controls_queued_;
       queue_.push_back(message);
     }
     kinds_.push_back(kind);
@@ -445,6 +482,9 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
                     "client speaks protocol " + std::to_string(h.protocol_major()) + "." +
                         std::to_string(h.protocol_minor()) + ", this server " + std::to_string(major) + "." +
                         std::to_string(minor));
+    if (h.role() > wire::Role::MAX)
+      return refuse(wire::ErrorCode::BadRequest, "Hello.role " + std::to_string(int(h.role())) +
+                                                     " is not a role (0 viewer, 1 device, 2 controller)");
     const std::string token = h.token() ? h.token()->str() : "";
     const bool needs_token = h.role() != wire::Role::Viewer || !loopback_;
     if (needs_token && (server_->options.token.empty() || token != server_->options.token))
@@ -477,6 +517,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
             drive.limits = {double(l.max_force_N()), double(l.max_torque_Nm()), double(l.stiffness_N_per_m())};
           }
           drives_.push_back(drive);
+          outside_.push_back(false);
         }
       bind_devices();
     }
@@ -540,7 +581,24 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     if (index < 0) return;  // not in this scene (said at the switch)
     if (const std::string bad = check_device_input(in); !bad.empty())
       return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
-    const DeviceSample s = device_sample(in, index, drives_[size_t(named - device_names_.begin())]);
+    const size_t k = size_t(named - device_names_.begin());
+    if (server_->feed->live) {  // outside the workspace: the loop holds it at the edge; said once per excursion
+      const RealtimeLoop& loop = server_->feed->live->loop();
+      const Vec3 x(in.position()->x(), in.position()->y(), in.position()->z());
+      const bool outside = glm::any(glm::lessThan(x, loop.workspace_lo())) ||
+                           glm::any(glm::greaterThan(x, loop.workspace_hi()));
+      if (outside && !outside_[k]) {
+        char text[320];
+        const Vec3 lo = loop.workspace_lo(), hi = loop.workspace_hi();
+        std::snprintf(text, sizeof text,
+                      "DeviceInput.position (%.4g, %.4g, %.4g) m for channel '%s' is outside the scene's workspace "
+                      "[%.3g, %.3g] x [%.3g, %.3g] x [%.3g, %.3g] m: its proxy is held at the edge",
+                      x.x, x.y, x.z, utf8_text(name).c_str(), lo.x, hi.x, lo.y, hi.y, lo.z, hi.z);
+        send(make_error(wire::ErrorCode::BadRequest, text), Kind::Control);
+      }
+      outside_[k] = outside;
+    }
+    const DeviceSample s = device_sample(in, index, drives_[k]);
     // Recorded first: stamped before the simulation can apply it.
     server_->record(Topic::Input, raw_.data(), raw_.size(), now_ns());
     // (A replay simulates nothing: its inputs move nothing.)
@@ -680,6 +738,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       if (self->kinds_.front() == Kind::Haptic) --self->haptics_queued_;
       if (self->kinds_.front() == Kind::Event) --self->events_queued_;
       if (self->kinds_.front() == Kind::Status) --self->statuses_queued_;
+      if (self->kinds_.front() == Kind::Control) --self->controls_queued_;
       self->queue_.pop_front();
       self->kinds_.pop_front();
       self->current_.reset();
@@ -696,17 +755,19 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   beast::flat_buffer in_;
   asio::steady_timer hello_timer_;
   bool loopback_;
+  std::string address_;  // the peer's IP address
   bool greeted_ = false, closing_ = false, writing_ = false, close_after_write_ = false;
   wire::Role role_ = wire::Role::Viewer;
   uint16_t protocol_minor_ = 0;            // the client's, from its Hello
   std::vector<std::string> device_names_;  // channels named in Hello
   std::vector<DeviceDrive> drives_;        // how each drives its channel (Hello.device_limits)
   std::vector<int32_t> devices_;           // their index in the current scene, -1 if absent
+  std::vector<bool> outside_;              // each one's latest input was outside the workspace
   std::span<const uint8_t> raw_;           // the message being dispatched
   std::deque<Bytes> queue_;          // null entries stand for pending_state_
   std::deque<Kind> kinds_;          // per queue entry
   Bytes pending_state_, current_;
-  size_t haptics_queued_ = 0, events_queued_ = 0, statuses_queued_ = 0;
+  size_t haptics_queued_ = 0, events_queued_ = 0, statuses_queued_ = 0, controls_queued_ = 0;
   int64_t haptics_dropped_ = 0, events_dropped_ = 0;  // (events: safety events relayed to this reader)
   std::chrono::steady_clock::time_point next_state_due_{}, last_message_ = std::chrono::steady_clock::now();
   double tokens_ = 1e18;  // clamped to the burst at the first message
@@ -747,14 +808,23 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       const std::string origin(req[http::field::origin]);
       if (!origin.empty() && !server_->origin_allowed(origin))
         return respond(req, http::status::forbidden, "Origin '" + origin + "' is not allowed to connect\n");
-      if (server_->sessions.size() >= server_->options.max_connections)
-        return respond(req, http::status::service_unavailable, "too many connections\n");
       beast::error_code ec;
-      const bool loopback = stream_.socket().remote_endpoint(ec).address().is_loopback();
-      auto session = std::make_shared<WsSession>(server_, stream_.release_socket(), loopback && !ec);
+      const asio::ip::address peer = stream_.socket().remote_endpoint(ec).address();
+      if (ec) return;  // gone already
+      if (!server_->make_room(peer.to_string()))
+        return respond(req, http::status::service_unavailable, "too many connections\n");
+      auto session = std::make_shared<WsSession>(server_, stream_.release_socket(), peer.is_loopback(), peer.to_string());
       session->start(std::move(req));
       return;
     }
+    // Files and recordings only to pages that name this server: a page of
+    // another site whose name was made to resolve here (DNS rebinding) sends
+    // its own name as Host. (An upgrade is guarded by its Origin and token.)
+    const std::string host(req[http::field::host]);
+    if (!server_->host_allowed(host))
+      return respond(req, http::status::misdirected_request,
+                     "Host '" + utf8_text(host) + "' is not a name of this server: loopback names, the bound "
+                     "address, or a host of --allow-origin\n");
     if (req.method() != http::verb::get && req.method() != http::verb::head)
       return respond(req, http::status::method_not_allowed, "only GET and HEAD\n");
     const std::string full(req.target());
@@ -831,6 +901,47 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 };
 
 // ---- the server ------------------------------------------------------------------------------
+
+bool Server::Impl::make_room(const std::string& address) {
+  size_t greeted = 0, waiting = 0, waiting_here = 0;
+  WsSession *oldest = nullptr, *oldest_here = nullptr;
+  for (WsSession* s : sessions) {
+    if (s->greeted() && !s->closing_) ++greeted;
+    if (!s->waiting()) continue;
+    ++waiting;
+    if (!oldest || s->id() < oldest->id()) oldest = s;
+    if (s->address() != address) continue;
+    ++waiting_here;
+    if (!oldest_here || s->id() < oldest_here->id()) oldest_here = s;
+  }
+  if (greeted >= options.max_connections) return false;
+  if (waiting_here >= options.max_waiting_per_address) oldest_here->drop();
+  else if (waiting >= options.max_waiting) oldest->drop();
+  return true;
+}
+
+bool Server::Impl::host_allowed(std::string_view host) const {
+  // The name without its port ("[::1]:8765", "localhost:8765", "example.org").
+  std::string_view name = host;
+  if (name.starts_with('[')) name = name.substr(0, name.find(']') + 1);
+  else if (const size_t colon = name.rfind(':'); colon != std::string_view::npos) name = name.substr(0, colon);
+  std::string lower(name);
+  for (char& c : lower) c = char(std::tolower(uint8_t(c)));
+  if (lower.empty()) return false;
+  for (const char* loopback : {"127.0.0.1", "localhost", "[::1]"})
+    if (lower == loopback) return true;
+  if (lower == options.bind) return true;
+  for (const std::string& origin : options.allowed_origins) {  // "scheme://name[:port]"
+    std::string_view o = origin;
+    if (const size_t scheme = o.find("://"); scheme != std::string_view::npos) o = o.substr(scheme + 3);
+    if (o.starts_with('[')) o = o.substr(0, o.find(']') + 1);
+    else o = o.substr(0, o.find(':'));
+    std::string allowed(o);
+    for (char& c : allowed) c = char(std::tolower(uint8_t(c)));
+    if (allowed == lower) return true;
+  }
+  return false;
+}
 
 bool Server::Impl::origin_allowed(const std::string& origin) const {
   const uint16_t port = acceptor.local_endpoint().port();
