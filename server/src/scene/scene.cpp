@@ -683,20 +683,109 @@ std::vector<Scene> parse_scene(const Json& j, const std::string& path) {
   return out;
 }
 
+namespace {
+
+// Builds the document as nlohmann's own parser does, keeping the path to
+// each value ("material.E", "proxies[0].radius"), so that what the parser
+// refuses (a number past a double's range, a stray token) is named by its
+// field as the schema's errors are.
+class NamedDom {
+ public:
+  explicit NamedDom(Json& root) : dom_(root, false) {}
+  bool null() { return enter() && dom_.null(); }
+  bool boolean(bool v) { return enter() && dom_.boolean(v); }
+  bool number_integer(Json::number_integer_t v) { return enter() && dom_.number_integer(v); }
+  bool number_unsigned(Json::number_unsigned_t v) { return enter() && dom_.number_unsigned(v); }
+  bool number_float(Json::number_float_t v, const Json::string_t& s) { return enter() && dom_.number_float(v, s); }
+  bool string(Json::string_t& v) { return enter() && dom_.string(v); }
+  bool binary(Json::binary_t& v) { return enter() && dom_.binary(v); }
+  bool start_object(std::size_t n) {
+    enter();
+    levels_.push_back({false, -1, ""});
+    return dom_.start_object(n);
+  }
+  bool key(Json::string_t& k) {
+    levels_.back().key = k;
+    return dom_.key(k);
+  }
+  bool end_object() {
+    levels_.pop_back();
+    return dom_.end_object();
+  }
+  bool start_array(std::size_t n) {
+    enter();
+    levels_.push_back({true, -1, ""});
+    return dom_.start_array(n);
+  }
+  bool end_array() {
+    levels_.pop_back();
+    return dom_.end_array();
+  }
+  bool parse_error(std::size_t position, const std::string& token, const nlohmann::detail::exception& e) {
+    enter();  // (in a list, the element that failed is the next one)
+    position_ = position;
+    token_ = token;
+    error_ = e.what();
+    error_id_ = e.id;
+    return dom_.parse_error(position, token, e);
+  }
+
+  // The field being read ("" at the top).
+  std::string field() const {
+    std::string out;
+    for (const Level& l : levels_) {
+      if (l.array) {
+        out += '[';
+        out += std::to_string(std::max(0, l.index));
+        out += ']';
+      } else if (!l.key.empty()) {
+        if (!out.empty()) out += '.';
+        out += l.key;
+      }
+    }
+    return out;
+  }
+  std::size_t position_ = 0;
+  std::string token_, error_;
+  int error_id_ = 0;
+
+ private:
+  struct Level {
+    bool array;
+    int index;        // arrays: the element being read
+    std::string key;  // objects: the key being read
+  };
+  bool enter() {
+    if (!levels_.empty() && levels_.back().array) ++levels_.back().index;
+    return true;
+  }
+  nlohmann::detail::json_sax_dom_parser<Json> dom_;
+  std::vector<Level> levels_;
+};
+
+}  // namespace
+
 std::vector<Scene> load_scene(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw SceneError(path + ": cannot open scene file");
-  std::ostringstream text;
-  text << in.rdbuf();
+  std::ostringstream buffer;
+  buffer << in.rdbuf();
+  const std::string text = buffer.str();
   Json j;
-  try {
-    j = Json::parse(text.str());
-  } catch (const Json::parse_error& e) {
-    std::string what = e.what();
-    // "[json.exception.parse_error.101] parse error at line 3, column 5: ..." -> from "parse error".
-    const size_t at = what.find("] ");
-    if (at != std::string::npos) what = what.substr(at + 2);
-    throw SceneError(path + ": not valid JSON: " + what);
+  NamedDom dom(j);
+  if (!Json::sax_parse(text, &dom)) {
+    // Where: line and column of the byte the parser stopped at (1-based).
+    const std::size_t at = std::min(dom.position_, text.size());
+    const std::size_t line = 1 + size_t(std::count(text.begin(), text.begin() + long(at), '\n'));
+    const std::size_t line_start = text.rfind('\n', at == 0 ? 0 : at - 1);
+    const std::size_t column = at - (line_start == std::string::npos || at == 0 ? 0 : line_start + 1);
+    const std::string field = dom.field();
+    std::string what = dom.error_;
+    if (const size_t cut = what.find("] "); cut != std::string::npos) what = what.substr(cut + 2);
+    if (dom.error_id_ == 406)  // a number past a double's range (nlohmann's out_of_range.406)
+      what = dom.token_ + " is out of range for a number (a double holds magnitudes up to 1.8e308)";
+    throw SceneError(path + ":" + std::to_string(line) + ":" + std::to_string(column) + ": not valid JSON" +
+                     (field.empty() ? "" : " at " + field) + ": " + what);
   }
   return parse_scene(j, path);
 }
