@@ -255,3 +255,43 @@ def test_random_finite_device_inputs_fault_nothing(tmp_path: pathlib.Path) -> No
     assert outside, "no input outside the workspace was reported"
     assert len(outside) < 10_000 / 2  # once per excursion, not once per input
     assert farthest < 1.0  # the block is 4 cm; its workspace reaches 0.5 m past it
+
+
+# ---- 7. a parameter the live loop cannot run --------------------------------------------------------------------
+
+
+def test_a_parameter_the_loop_cannot_run_in_real_time_is_refused_and_the_scene_runs_on(tmp_path: pathlib.Path) -> None:
+    """A controller sets material.E = 1e12 (a step of some 1e-7 s): refused with the step and the rate it
+    would need, naming the headless runner, and the scene it would have replaced keeps sending states.
+    Before: taken, and the loop then sent one state every few seconds."""
+    from test_server import control, set_parameter
+
+    from tactile_proto.generated.ControlCommand import ControlCommand
+
+    with running_server(tmp_path) as (port, _):
+
+        async def run() -> tuple[Any, int]:
+            async with websockets.connect(url(port), max_queue=None) as ctl, \
+                    websockets.connect(url(port), max_queue=None) as view:
+                await hello(ctl, Role.Controller, TOKEN)
+                await hello(view, Role.Viewer)
+                await ctl.send(codec.encode(control(ControlCommand.SetParameter, set_parameter("material.E", 1e12), 9)))
+                error = None
+                end = time.monotonic() + 20
+                while error is None and time.monotonic() < end:
+                    m = codec.decode(await asyncio.wait_for(ctl.recv(), 20)).message
+                    if type(m).__name__ == "ErrorT":
+                        error = m
+                states = 0
+                end = time.monotonic() + 1.0
+                while time.monotonic() < end:
+                    m = codec.decode(await asyncio.wait_for(view.recv(), 2)).message
+                    states += type(m).__name__ == "StateFrameT"
+                return error, states
+
+        error, states = asyncio.run(run())
+    text = error.message.decode() if isinstance(error.message, bytes) else error.message
+    print(text)
+    assert error.requestId == 9
+    assert "tet-steps per second" in text and "tactile-sim run" in text
+    assert states >= 20  # the scene runs on at its 30 states a second

@@ -34,6 +34,13 @@ double window_for(double dt, const LiveOptions& options) {
   return w;
 }
 
+// The most element-steps per second a live scene may ask for: five times
+// what one core steps of plain StVK (fem_bench: 140-200 M tet-steps/s). A
+// scene past it (a material a million times stiffer than its mesh was made
+// for: E = 1e12 on the default beam asks for 2e10) falls behind real time on
+// any machine this runs on, and sends a state every few seconds.
+constexpr double kMaxLiveTetStepsPerSecond = 1e9;
+
 }  // namespace
 
 LiveScene::LiveScene(Scene scene, uint32_t id, const LiveOptions& options)
@@ -41,7 +48,18 @@ LiveScene::LiveScene(Scene scene, uint32_t id, const LiveOptions& options)
       id_(id),
       sim_(scene_.spec),
       frames_(sim_, scene_.name, id_, step_for(scene_, sim_, options), window_for(step_for(scene_, sim_, options), options)),
-      loop_(sim_, frames_, loop_options(step_for(scene_, sim_, options), options)) {}
+      loop_(sim_, frames_, loop_options(step_for(scene_, sim_, options), options)) {
+  const double dt = loop_.dt(), rate = double(sim_.n_tets()) / dt;
+  if (rate > kMaxLiveTetStepsPerSecond) {
+    char text[400];
+    std::snprintf(text, sizeof text,
+                  "scene '%s' would step every %.3g s (critical step at rest %.3g s): %d tets at %.3g steps per "
+                  "second is %.3g tet-steps per second, more than a live loop keeps up with (%.0e); run it "
+                  "headless instead (tactile-sim run), where it takes the time it needs",
+                  scene_.name.c_str(), dt, sim_.dt_rest(), sim_.n_tets(), 1.0 / dt, rate, kMaxLiveTetStepsPerSecond);
+    throw ModelError(text);
+  }
+}
 
 std::vector<uint8_t> LiveScene::describe(std::span<const std::string> scenes) {
   const std::vector<Parameter> parameters = list_parameters(scene_.spec);
