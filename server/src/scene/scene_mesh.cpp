@@ -2,9 +2,15 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <limits>
+#include <new>
+#include <string>
 
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
 #include "mesh/mesh_error.hpp"
@@ -36,6 +42,60 @@ std::string list_ids(const std::vector<int32_t>& ids) {
 
 // The largest mesh a scene may ask for; beyond it a typo, not a wish.
 constexpr int64_t kMaxTets = 20'000'000;
+// What one tet takes to mesh and simulate, all told (mesh, model, state,
+// TetGen's own peak): 370-380 B measured (/usr/bin/time -v tactile-sim check
+// on a 1.3 M-tet box and a 1.7 M-tet sphere), rounded up.
+constexpr double kBytesPerTet = 400;
+// TetGen with a volume bound (-a) makes 2.6-3.2 times as many tets as the
+// volume over the bound (spheres of resolution 4 and 5); rounded up.
+constexpr double kTetgenTetsPerBound = 3.5;
+
+// The memory this machine has free [bytes] (MemAvailable), or infinity where it cannot be read.
+double available_bytes() {
+  std::ifstream in("/proc/meminfo");
+  std::string key;
+  double kb = 0;
+  std::string unit;
+  while (in >> key >> kb >> unit)
+    if (key == "MemAvailable:") return kb * 1024.0;
+  return std::numeric_limits<double>::infinity();
+}
+
+std::string format_count(double n) {
+  char text[32];
+  if (n >= 1e6) std::snprintf(text, sizeof text, "%.1f M", n / 1e6);
+  else if (n >= 1e3) std::snprintf(text, sizeof text, "%.0f k", n / 1e3);
+  else std::snprintf(text, sizeof text, "%.0f", n);
+  return text;
+}
+
+// Refuses, before anything is built, a mesh of about `tets` (exact or
+// estimated) that passes kMaxTets or would not fit in the memory free now,
+// naming the field that asks for it.
+void check_size(const Origin& origin, const std::string& field, double tets, bool estimated) {
+  const std::string count = (estimated ? "about " : "") + format_count(tets) + " tets";
+  if (tets > double(kMaxTets))
+    origin.fail(field, "makes " + count + "; the limit is " + format_count(double(kMaxTets)));
+  const double bytes = tets * kBytesPerTet, free = available_bytes();
+  if (bytes > free) {
+    char text[200];
+    std::snprintf(text, sizeof text, "makes %s, which need about %.1f GB to mesh and simulate; this machine has "
+                  "%.1f GB free", count.c_str(), bytes / 1e9, free / 1e9);
+    origin.fail(field, text);
+  }
+}
+
+// The volume of a surface's bounding box [m^3]: at least what it encloses,
+// however its triangles are wound (an estimate that errs toward refusing).
+double bounding_volume(const SurfaceMesh& s) {
+  if (s.vertices.empty()) return 0;
+  Vec3 lo = s.vertices.front(), hi = lo;
+  for (const Vec3& v : s.vertices) {
+    lo = glm::min(lo, v);
+    hi = glm::max(hi, v);
+  }
+  return (hi.x - lo.x) * (hi.y - lo.y) * (hi.z - lo.z);
+}
 
 TetMesh build_box(const Fields& f) {
   const Vec3 lo = f.vec3("lo"), hi = f.vec3("hi");
@@ -56,8 +116,7 @@ TetMesh build_box(const Fields& f) {
                                            : "kuhn6";
   const BoxSplit how = split == "kuhn6" ? BoxSplit::kuhn6 : BoxSplit::centred24;
   count *= how == BoxSplit::kuhn6 ? 6 : 24;
-  if (count > kMaxTets)
-    f.origin().fail(cells_path, "makes " + std::to_string(count) + " tets; the limit is " + std::to_string(kMaxTets));
+  check_size(f.origin(), cells_path, double(count), false);
   return make_box(lo, hi, n, how);
 }
 
@@ -66,6 +125,17 @@ TetMesh build_cylinder(const Fields& f) {
   const auto around = int(f.integer("around", 3, 4096));
   const auto layers = int(f.integer("layers", 1, 100000));
   const auto rings = int(f.integer("rings", 1, 4096));
+  // Its cross-section's triangles (ring k has max(3, ceil(around k / rings))
+  // nodes; between rings k-1 and k, as many triangles as both together), three
+  // tets per triangle per layer (make_cylinder).
+  double triangles = 0;
+  int previous = 1;  // the centre
+  for (int k = 1; k <= rings; ++k) {
+    const int m = std::max(3, (around * k + rings - 1) / rings);
+    triangles += k == 1 ? m : previous + m;
+    previous = m;
+  }
+  check_size(f.origin(), f.path("layers"), 3.0 * triangles * layers, false);
   return make_cylinder(radius, height, around, layers, rings);
 }
 
@@ -73,6 +143,8 @@ TetMesh build_sphere(const Fields& f) {
   const Vec3 centre = f.vec3("centre");
   const double radius = f.positive("radius");
   const auto resolution = int(f.integer("resolution", 0, 6));
+  // TetGen makes 8 times as many tets per level: 267 k at 4, 1.7 M at 5.
+  check_size(f.origin(), f.path("resolution"), 65.0 * std::pow(8.0, resolution), true);
   return make_sphere(centre, radius, resolution);
 }
 
@@ -109,6 +181,9 @@ TetMesh build_from_file(const Fields& f, const std::string& scene_dir) {
   try {
     if (tetgen) return read_tetgen(p.string());
     const SurfaceMesh s = read_surface(p.string());
+    if (options.max_volume > 0)
+      check_size(f.origin(), f.path("tetgen") + ".max_volume", kTetgenTetsPerBound * bounding_volume(s) / options.max_volume,
+                 true);
     // TetGen may leave input vertices out of every tet (duplicates); they would get no mass.
     return compute_compacted(tetrahedralize(s, options));
   } catch (const MeshError& e) {
@@ -165,6 +240,9 @@ SceneMesh build_scene_mesh(const Json& j, const std::string& path, const Origin&
     }
   } catch (const MeshError& e) {
     origin.fail(path, e.what());
+  } catch (const std::bad_alloc&) {
+    origin.fail(path, "ran out of memory while meshing (" + format_count(double(out.mesh.tets.size())) +
+                          " tets built); ask for a coarser mesh");
   }
 
   // The quality gate: inverted (also folded) and degenerate tets are refused by id.

@@ -2,6 +2,8 @@
 // bad scenes are refused with the file and JSON path of the field at fault.
 #include <gtest/gtest.h>
 
+#include <chrono>
+
 #include <cmath>
 #include <filesystem>
 #include <functional>
@@ -457,6 +459,30 @@ TEST(SceneErrors, SurfaceThatIsNotClosed) {
   j["boundary"] = json::array();
   j["run"].erase("track");
   expect_scene_error(dir, "s.json", j, {"mesh.file: ", "not closed"});
+}
+
+// A mesh too large to build is refused before any of it is built, naming
+// the field that asks for it and how many tets it would make (before: a
+// cylinder ran out of memory with a bare std::bad_alloc, TetGen under a tiny
+// volume bound ran for minutes until the machine ran out of memory).
+TEST(SceneErrors, MeshesTooLargeAreRefusedBeforeTheyAreBuilt) {
+  SceneDir dir;
+  json j = make_beam_scene();
+  j["mesh"] = json::parse(R"({ "primitive": "cylinder", "radius": 0.05, "height": 0.2, "around": 4096,
+                                "layers": 100000, "rings": 64 })");
+  j["boundary"] = json::array();
+  j["run"].erase("track");
+  const auto t0 = std::chrono::steady_clock::now();
+  expect_scene_error(dir, "s.json", j, {"mesh.layers: makes 78643.2 M tets; the limit is 20.0 M"});
+  // The unit cube's surface, meshed by TetGen with a bound of a cubic micrometre per tet.
+  dir.write("cube.obj",
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+            "f 1 4 3\nf 1 3 2\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n"
+            "f 5 6 7\nf 5 7 8\n");
+  j["mesh"] = json::parse(R"({ "file": "cube.obj", "tetgen": { "max_volume": 1e-18 } })");
+  expect_scene_error(dir, "s.json", j, {"mesh.tetgen.max_volume: makes about ", "tets; the limit is 20.0 M"});
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(seconds, 5.0);  // (refused up front: building either would take minutes or all memory)
 }
 
 TEST(SceneErrors, MisplacedAndConflictingFields) {
