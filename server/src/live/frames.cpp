@@ -196,7 +196,8 @@ void FrameEncoder::add_step_forces() {
 }
 
 std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence,
-                                                    std::span<const uint64_t> input_sequences) {
+                                                    std::span<const uint64_t> input_sequences,
+                                                    std::span<const Vec3> device_offsets) {
   fb::FlatBufferBuilder& b = haptic_builder_;
   b.Clear();
   const std::vector<ProxyReport>& pr = sim_.proxy_reports();
@@ -218,7 +219,8 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
       const DeviceReport& r = dr[d];
       device_haptics_[d] = wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque), to_wire(r.stiffness),
                                                uint32_t(contacts_device_[d]));
-      device_poses_[d] = wire::ProxyPose(to_wire(r.target.position), to_wire(r.target.orientation));
+      const Vec3 device = r.target.position - (d < device_offsets.size() ? device_offsets[d] : Vec3(0.0));
+      device_poses_[d] = wire::ProxyPose(to_wire(device), to_wire(r.target.orientation));
       device_couplings_[d] = wire::DeviceCoupling(wire::ProxyPose(to_wire(r.body.position), to_wire(r.body.orientation)),
                                                   float(r.coupling_stiffness), float(r.max_force), float(r.max_torque),
                                                   true, r.saturated);

@@ -58,9 +58,13 @@ class FrameEncoder {
   // After a step, every step or every few: its forces are the means over the
   // force window (see frames.cpp). last_input_sequence: the newest DeviceInput sequence
   // across all channels; input_sequences: the newest per channel (n_devices;
-  // channels past its end read 0).
+  // channels past its end read 0). device_offsets: per channel, how far
+  // its coupled body's target stands off its device's path (the loop's
+  // approach, [m]; channels past its end: none): a coupled channel's pose
+  // is its device's own, which the device's motion is measured from.
   std::span<const uint8_t> haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence,
-                                        std::span<const uint64_t> input_sequences = {});
+                                        std::span<const uint64_t> input_sequences = {},
+                                        std::span<const Vec3> device_offsets = {});
 
  private:
   const Simulation& sim_;

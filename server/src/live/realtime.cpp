@@ -91,6 +91,7 @@ RealtimeLoop::RealtimeLoop(Simulation& sim, FrameEncoder& frames, const Realtime
   const std::vector<std::string>& devices = sim.devices();
   drivers_.resize(devices.size());
   device_sequences_.resize(devices.size());
+  device_offsets_.assign(devices.size(), Vec3(0.0));
   for (size_t d = 0; d < devices.size(); ++d) {
     Driver& drv = drivers_[d];
     drv.hand = compute_device_hand(sim, int32_t(d));
@@ -173,6 +174,7 @@ void RealtimeLoop::apply_inputs() {
     const Vec3 step = m.to.position - m.from.position;
     const double most = kMaxDeviceSpeed * dt_, length = glm::length(step);
     if (length > most) m.to.position = m.from.position + step * (most / length);  // faster than a hand
+    device_offsets_[size_t(&drv - drivers_.data())] = m.to.position - path_t1.position;
     drv.motion = m;
     if (drv.hand >= 0) sim_.set_hand_motion(drv.hand, m);
     for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);
@@ -192,7 +194,7 @@ void RealtimeLoop::step_once(int64_t now_ns) {
   const bool haptic = ++since_haptic_ >= haptic_every_;
   if (haptic) {
     since_haptic_ = 0;
-    if (haptic_sink_) haptic_sink_(frames_.haptic_frame(now_ns, last_sequence_, device_sequences_));
+    if (haptic_sink_) haptic_sink_(frames_.haptic_frame(now_ns, last_sequence_, device_sequences_, device_offsets_));
   }
   bool state = false;
   if (sim_.time() + 1e-12 >= next_state_) {

@@ -174,6 +174,9 @@ class RealtimeLoop {
     DeviceDrive drive;        // as the simulation has it
   };
   Vec3 workspace_lo_{0.0}, workspace_hi_{0.0};
+  // Per device: how far its motion stands off its device's path (the
+  // approach still to glide), taken off the pose its haptic frames report.
+  std::vector<Vec3> device_offsets_;
   void sync_drivers();
   void apply_inputs();
   // One step after the inputs are applied; its frames stamped `now_ns`.
