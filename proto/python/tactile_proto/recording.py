@@ -463,6 +463,48 @@ class Recording:
             yield DecodedMessage(channel.topic, message.log_time, envelope)
 
 
+class Recovered(NamedTuple):
+    messages: int           # written to the new file
+    topics: dict[str, int]  # of them, per topic
+    problems: list[str]     # what the source could not give (its cut, damaged chunks)
+
+
+def recover(recording: Recording, out: str | os.PathLike[str]) -> Recovered:
+    """Writes what `recording` holds (all of it, or for a file cut short everything whole before the cut)
+    into `out` as a complete MCAP file: the same header profile, `tactile` metadata, schemas, channels and
+    messages in the same order, chunked (zstd) and closed with its summary and indexes, so that the `mcap`
+    package's default readers (make_reader, iter_messages) and other tools open it."""
+    from mcap.writer import CompressionType, Writer
+
+    if os.path.abspath(os.fspath(out)) == os.path.abspath(recording.path):
+        raise RecordingError(f"{out}: recover writes a new file; it would overwrite the recording it reads")
+    schema_ids: dict[int, int] = {}
+    channel_ids: dict[int, int] = {}
+    topics: dict[str, int] = {}
+    with open(out, "wb") as f:
+        writer = Writer(f, compression=CompressionType.ZSTD)
+        header = recording.header
+        writer.start(profile=header.profile if header else "", library=(header.library if header else "") +
+                     " (recovered by tactile-recording)")
+        if recording.metadata:
+            writer.add_metadata("tactile", recording.metadata)
+        count = 0
+        for channel, message in recording._records(None):
+            if channel.id not in channel_ids:
+                schema = recording._schemas.get(channel.schema_id)
+                if schema is not None and schema.id not in schema_ids:
+                    schema_ids[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+                channel_ids[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schema_ids.get(channel.schema_id, 0),
+                    dict(channel.metadata))
+            writer.add_message(channel_ids[channel.id], message.log_time, message.data, message.publish_time,
+                               message.sequence)
+            topics[channel.topic] = topics.get(channel.topic, 0) + 1
+            count += 1
+        writer.finish()
+    return Recovered(count, topics, recording.problems)
+
+
 def open_recording(path: str | os.PathLike[str]) -> Recording:
     """The recording at `path`, after a first pass over its framing (quick: it steps over chunks). Raises
     RecordingError when the file is no MCAP recording, OSError when it cannot be opened."""

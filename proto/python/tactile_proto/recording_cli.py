@@ -16,6 +16,9 @@
                                                            compare.png, prints whether they are identical bit
                                                            for bit or their largest differences;
                                                            tactile_proto/compare.py says what each holds
+    tactile-recording recover FILE OUT                     a recording cut short (a killed server) rewritten
+                                                           as a complete, indexed MCAP file that the mcap
+                                                           package's default readers and other tools open
 
 Exit status: 0 when the file was read (a truncated or damaged one included: the problems are printed), 2 when
 it is no recording or cannot be opened; for compare, 0 when the two could be compared, 2 when not (no common
@@ -33,7 +36,7 @@ from collections import Counter
 from .codec import ProtocolError, decode
 from .compare import CompareError, compare, plot, plot_available, summarize, write_csv
 from .export import export
-from .recording import TOPICS, Recording, RecordingError, open_recording
+from .recording import TOPICS, Recording, RecordingError, open_recording, recover
 
 
 def describe(recording: Recording) -> str:
@@ -108,6 +111,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     out.add_argument("--vtu", action="store_true", help="surface-<scene_id>.pvd and its .vtu files (needs meshio)")
     out.add_argument("--every", type=_count, default=1, metavar="N",
                      help="VTU of every Nth state frame of each scene (default 1: all of them)")
+    fix = commands.add_parser(
+        "recover", help="rewrite a recording cut short (a killed server) into a complete, indexed MCAP file",
+        description="Reads everything whole in FILE (up to its cut, past damaged chunks) and writes it to OUT "
+                    "as a closed MCAP file with its summary and indexes, which the mcap package's default "
+                    "readers, the mcap CLI and Foxglove open. FILE is left as it is. Exit status 0 when OUT was "
+                    "written, 2 when not.")
+    fix.add_argument("file")
+    fix.add_argument("out", metavar="OUT", help="the new file")
     both = commands.add_parser(
         "compare", help="two recordings of one session side by side: compare.csv, compare.png and a summary",
         description="Pairs the frames of the first scene of A and B by sim time (B's nearest to each of A's, "
@@ -160,6 +171,19 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     if args.command == "compare":
         return run_compare(args)
+    if args.command == "recover":
+        try:
+            recording = open_recording(args.file)
+            result = recover(recording, args.out)
+        except (RecordingError, OSError) as e:
+            print(f"tactile-recording: cannot recover: {e}", file=sys.stderr)
+            return 2
+        state = "complete already" if recording.complete else "cut short"
+        print(f"{args.out}: {result.messages} messages ({', '.join(f'{t} {n}' for t, n in sorted(result.topics.items()))}) "
+              f"from {args.file} ({state}), closed and indexed")
+        for problem in result.problems:
+            print(f"problem: {problem}", file=sys.stderr)
+        return 0
     try:
         recording = open_recording(args.file)
         if args.command == "info":
