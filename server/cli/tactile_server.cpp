@@ -22,6 +22,7 @@
 #include <boost/asio/post.hpp>
 #include <boost/asio/signal_set.hpp>
 
+#include "app/progress.hpp"
 #include "app/simulation.hpp"
 #include "core/model.hpp"
 #include "live/director.hpp"
@@ -162,7 +163,10 @@ int main(int argc, char** argv) {
   try {
     const Options o = parse_args(argc, argv);
     if (!o.replay.empty()) return replay(o);
+    tactile::MeshingProgress meshing(stderr, true);
+    tactile::set_meshing_watch(&meshing);
     const std::vector<Scene> scenes = load_scene(o.scene);
+    tactile::set_meshing_watch(nullptr);
     const Scene* scene = &scenes.front();
     if (o.variant) {
       scene = nullptr;

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "app/headless.hpp"
+#include "app/progress.hpp"
 #include "app/simulation.hpp"
 #include "live/resim.hpp"
 #include "record/mcap.hpp"
@@ -124,7 +125,10 @@ void print_quality(const Scene& s) {
 }
 
 int check(const Options& o) {
+  tactile::MeshingProgress meshing(stderr, true);
+  tactile::set_meshing_watch(&meshing);
   const std::vector<Scene> scenes = load_scene(o.scene);
+  tactile::set_meshing_watch(nullptr);
   std::cout << o.scene << ": " << scenes.size() << " run(s)\n";
   for (const Scene& s : scenes) {
     print_quality(s);
@@ -185,7 +189,10 @@ int resim(const Options& o) {
 }
 
 int run(const Options& o) {
+  tactile::MeshingProgress meshing(stderr, !o.quiet);
+  tactile::set_meshing_watch(&meshing);
   std::vector<Scene> scenes = load_scene(o.scene);
+  tactile::set_meshing_watch(nullptr);
   if (o.variant) {
     std::vector<Scene> picked;
     std::string names;

@@ -38,4 +38,30 @@ void ProgressBar::finish() {
   drawn_ = false;
 }
 
+void MeshingProgress::begin(const std::string& field, double expected_tets, double expected_s) {
+  end();
+  done_ = false;
+  char note[96];
+  std::snprintf(note, sizeof note, "about %.1f M tets (%s)", expected_tets / 1e6, field.c_str());
+  drawer_ = std::thread([this, note = std::string(note), expected_s] {
+    ProgressBar bar(out_, enabled_, "meshing");
+    const auto start = std::chrono::steady_clock::now();
+    std::unique_lock<std::mutex> lock(mutex_);
+    while (!wake_.wait_for(lock, std::chrono::milliseconds(100), [this] { return done_; })) {
+      const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      bar.update(std::min(0.99, elapsed / expected_s), note);
+    }
+  });
+}
+
+void MeshingProgress::end() {
+  if (!drawer_.joinable()) return;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    done_ = true;
+  }
+  wake_.notify_all();
+  drawer_.join();
+}
+
 }  // namespace tactile

@@ -7,6 +7,11 @@
 #include <chrono>
 #include <cstdio>
 #include <string>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
+#include "scene/scene_mesh.hpp"
 
 namespace tactile {
 
@@ -28,6 +33,25 @@ class ProgressBar {
   bool drawn_ = false;
   std::string label_;
   Clock::time_point start_, last_;
+};
+
+// A progress bar for long meshing (scene/scene_mesh.hpp): TetGen says
+// nothing while it works, so the bar runs on the time expected, from its
+// own thread, and stops at 99 % until the meshing ends.
+class MeshingProgress final : public MeshingWatch {
+ public:
+  MeshingProgress(std::FILE* out, bool enabled) : out_(out), enabled_(enabled) {}
+  ~MeshingProgress() override { end(); }
+  void begin(const std::string& field, double expected_tets, double expected_s) override;
+  void end() override;
+
+ private:
+  std::FILE* out_;
+  bool enabled_;
+  std::thread drawer_;
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  bool done_ = false;
 };
 
 }  // namespace tactile

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -42,6 +43,30 @@ std::string list_ids(const std::vector<int32_t>& ids) {
 
 // The largest mesh a scene may ask for; beyond it a typo, not a wish.
 constexpr int64_t kMaxTets = 20'000'000;
+// TetGen's pace, with a volume bound and without: 110-130 k tets/s (spheres
+// of resolution 4 and 5, tactile-sim check), rounded down.
+constexpr double kTetgenTetsPerSecond = 100e3;
+std::atomic<MeshingWatch*> meshing_watch{nullptr};
+
+// Announces a TetGen meshing of about `tets` to the watch, when one is set
+// and it should take a second or more, and says when it ends.
+class Watched {
+ public:
+  Watched(const std::string& field, double tets) {
+    if (tets / kTetgenTetsPerSecond < 1.0) return;
+    watch_ = meshing_watch.load();
+    if (watch_) watch_->begin(field, tets, tets / kTetgenTetsPerSecond);
+  }
+  ~Watched() {
+    if (watch_) watch_->end();
+  }
+  Watched(const Watched&) = delete;
+  Watched& operator=(const Watched&) = delete;
+
+ private:
+  MeshingWatch* watch_ = nullptr;
+};
+
 // What one tet takes to mesh and simulate, all told (mesh, model, state,
 // TetGen's own peak): 370-380 B measured (/usr/bin/time -v tactile-sim check
 // on a 1.3 M-tet box and a 1.7 M-tet sphere), rounded up.
@@ -143,8 +168,10 @@ TetMesh build_sphere(const Fields& f) {
   const Vec3 centre = f.vec3("centre");
   const double radius = f.positive("radius");
   const auto resolution = int(f.integer("resolution", 0, 6));
-  // TetGen makes 8 times as many tets per level: 267 k at 4, 1.7 M at 5.
-  check_size(f.origin(), f.path("resolution"), 65.0 * std::pow(8.0, resolution), true);
+  // TetGen makes about 8 times as many tets per level: 267 k at 4, 1.7 M at 5, 11.7 M at 6.
+  const double tets = 66.0 * std::pow(8.0, resolution);
+  check_size(f.origin(), f.path("resolution"), tets, true);
+  const Watched watched(f.path("resolution"), tets);
   return make_sphere(centre, radius, resolution);
 }
 
@@ -181,9 +208,11 @@ TetMesh build_from_file(const Fields& f, const std::string& scene_dir) {
   try {
     if (tetgen) return read_tetgen(p.string());
     const SurfaceMesh s = read_surface(p.string());
-    if (options.max_volume > 0)
-      check_size(f.origin(), f.path("tetgen") + ".max_volume", kTetgenTetsPerBound * bounding_volume(s) / options.max_volume,
-                 true);
+    // (Without a volume bound TetGen makes a few tets per surface vertex.)
+    const double tets = options.max_volume > 0 ? kTetgenTetsPerBound * bounding_volume(s) / options.max_volume
+                                               : 6.0 * double(s.vertices.size());
+    if (options.max_volume > 0) check_size(f.origin(), f.path("tetgen") + ".max_volume", tets, true);
+    const Watched watched(where, tets);
     // TetGen may leave input vertices out of every tet (duplicates); they would get no mass.
     return compute_compacted(tetrahedralize(s, options));
   } catch (const MeshError& e) {
@@ -208,6 +237,8 @@ void apply_transform(const Fields& f, TetMesh& mesh) {
 }
 
 }  // namespace
+
+void set_meshing_watch(MeshingWatch* watch) { meshing_watch.store(watch); }
 
 SceneMesh build_scene_mesh(const Json& j, const std::string& path, const Origin& origin, const std::string& scene_dir) {
   if (!j.is_object()) origin.fail(path, "must be an object, got " + scene_json::describe(j));

@@ -22,6 +22,22 @@ struct SceneMesh {
 SceneMesh build_scene_mesh(const scene_json::Json& j, const std::string& path, const scene_json::Origin& origin,
                            const std::string& scene_dir);
 
+// What watches long meshing: TetGen reports no progress of its own, so a
+// meshing expected to take a while is announced with the tets the size
+// check expects (an estimate) and the time that takes at TetGen's pace
+// (100 k tets/s measured); the command-line tools draw a progress bar on it
+// (app/progress.hpp, MeshingProgress).
+class MeshingWatch {
+ public:
+  virtual ~MeshingWatch() = default;
+  // field: the scene's field that asks for the mesh ("mesh.resolution").
+  virtual void begin(const std::string& field, double expected_tets, double expected_s) = 0;
+  virtual void end() = 0;
+};
+// The watch of every meshing from now on (nullptr: none). Set it before any
+// scene is loaded; the watch must outlive the meshings it sees.
+void set_meshing_watch(MeshingWatch* watch);
+
 // Tets that overlap a neighbour: two tets sharing a face with their fourth
 // nodes on the same side of it. Readers orient every tet positively on its
 // own (mesh/mesh_io.hpp), so a tet inverted in a file comes back positive but

@@ -12,6 +12,7 @@
 #include <glm/geometric.hpp>
 
 #include "scene/scene.hpp"
+#include "scene/scene_mesh.hpp"
 #include "scene_fixtures.hpp"
 
 namespace tactile {
@@ -483,6 +484,37 @@ TEST(SceneErrors, MeshesTooLargeAreRefusedBeforeTheyAreBuilt) {
   expect_scene_error(dir, "s.json", j, {"mesh.tetgen.max_volume: makes about ", "tets; the limit is 20.0 M"});
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_LT(seconds, 5.0);  // (refused up front: building either would take minutes or all memory)
+}
+
+// Meshing expected to take a second or more is announced to the watch (the
+// CLIs draw a progress bar on it) with the field, the tets expected and the
+// time they take, and its end said; a quick one is not.
+TEST(SceneMesh, LongMeshingIsAnnouncedToTheWatch) {
+  struct Watch final : MeshingWatch {
+    std::vector<std::string> seen;
+    double tets = 0, seconds = 0;
+    void begin(const std::string& field, double expected_tets, double expected_s) override {
+      seen.push_back("begin " + field);
+      tets = expected_tets;
+      seconds = expected_s;
+    }
+    void end() override { seen.push_back("end"); }
+  } watch;
+  SceneDir dir;
+  set_meshing_watch(&watch);
+  json j = make_beam_scene();
+  j["mesh"] = json::parse(R"({ "primitive": "sphere", "centre": [0, 0, 0], "radius": 0.1, "resolution": 4 })");
+  j["boundary"] = json::array();
+  j["run"].erase("track");
+  const std::vector<Scene> long_one = load_scene(dir.write("sphere4.json", j.dump()));
+  j["mesh"]["resolution"] = 2;
+  const std::vector<Scene> quick_one = load_scene(dir.write("sphere2.json", j.dump()));
+  set_meshing_watch(nullptr);
+  EXPECT_EQ(watch.seen, (std::vector<std::string>{"begin mesh.resolution", "end"}));
+  const double made = double(long_one.front().spec.mesh.tets.size());
+  EXPECT_GT(watch.tets, made);        // the estimate errs high (it sizes what to refuse)
+  EXPECT_LT(watch.tets, 1.5 * made);  // but not by much
+  EXPECT_NEAR(watch.seconds, watch.tets / 1e5, 1e-9);
 }
 
 TEST(SceneErrors, MisplacedAndConflictingFields) {
