@@ -33,7 +33,7 @@ trap stop EXIT
 trap 'exit 130' INT TERM
 
 "$build/tactile-server" "$scene" --static client-web --token "$token" --haptic-rate 2000 --recordings recordings \
-  "$@" > >(tee "$log") 2>&1 &
+  "$@" > >(trap '' INT TERM; tee "$log") 2>&1 &
 server=$!
 url=""
 for _ in $(seq 1 600); do

@@ -160,6 +160,12 @@ int replay(const Options& o) {
 }
 
 int main(int argc, char** argv) {
+  // Whoever reads our output may be gone before we are: Ctrl-C in a terminal
+  // stops `scripts/run.sh`'s tee with the server, whose last lines ("recording:
+  // stopped") would then raise SIGPIPE and kill it before its recording is
+  // closed. A write to a closed pipe fails instead (EPIPE), and the shutdown
+  // goes on.
+  std::signal(SIGPIPE, SIG_IGN);
   try {
     const Options o = parse_args(argc, argv);
     if (!o.replay.empty()) return replay(o);
