@@ -75,12 +75,18 @@ Pose DevicePath::at(double t) const {
   if (tau >= newest.device_s) {
     if (kept < 2) return newest.pose;
     // Past the newest: on at its latest velocity for kMaxExtrapolation (a
-    // late input), then back to the newest over as long (a device that
-    // stopped sending stands where it said it was).
+    // late input, a host that stalled the device's link), then slowing to
+    // a stop with a time constant of as long (a device that stopped
+    // sending), its velocity never changing at once: a coupled proxy
+    // follows this path through a damper, which answers a step of 0.5 m/s
+    // with some 3 N.
     const Sample& before = sample(1);
     const double gap = newest.device_s - before.device_s;
     const double past = tau - newest.device_s;
-    const double e = std::max(0.0, std::min(past, 2 * kMaxExtrapolation - past)) / gap;
+    const double after = past - kMaxExtrapolation;
+    const double e =
+        (after <= 0 ? past : kMaxExtrapolation + kMaxExtrapolation * (1.0 - std::exp(-after / kMaxExtrapolation))) /
+        gap;
     Pose p = newest.pose;
     p.position += e * (newest.pose.position - before.pose.position);
     const Vec3 turn = compute_rotation_vector(before.pose.orientation, newest.pose.orientation);

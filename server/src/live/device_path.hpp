@@ -16,8 +16,9 @@
 // the loop's: a late input that raised the delay by 1 ms at once would step
 // a device moving at 0.5 m/s back by 0.5 mm, a 1 N jolt through a
 // 2000 N/m coupling. Past the newest input the path goes on at the device's
-// latest velocity for at most kMaxExtrapolation, then comes back to the
-// newest input's pose over as long, and holds there.
+// latest velocity for kMaxExtrapolation, then slows to a stop with that
+// time constant: a silent device's path stands at most its speed times
+// twice kMaxExtrapolation past where it said it was.
 //
 // Pure: the loop gives it its time; a re-simulation that applies the same
 // inputs at the same steps gets the same path, bit for bit.
@@ -33,7 +34,7 @@ namespace tactile {
 class DevicePath {
  public:
   static constexpr double kMaxDelay = 0.003;          // the playout delay at most [s]
-  static constexpr double kMaxExtrapolation = 0.005;  // past the newest input [s]
+  static constexpr double kMaxExtrapolation = 0.01;   // past the newest input, at its velocity [s]
   static constexpr double kPause = 0.1;               // inputs this far apart start a new path [s]
   static constexpr double kLeadSlew = 0.01;           // how fast the playout's lead may change [s/s]
 

@@ -56,13 +56,48 @@ TEST(DevicePath, LateInputsNeitherStallNorJumpThePath) {
 }
 
 // The loop's time stands still for 50 ms while the device runs on: its next input starts a new path (which the
-// loop glides onto), and a device that stops sending stands where it said it was.
-TEST(DevicePath, AStallStartsANewPathAndASilentDeviceStandsWhereItSaidItWas) {
+// loop glides onto), and a device that stops sending comes to rest a little past where it said it was (at most
+// its speed times twice kMaxExtrapolation), slowing down without a jump in its velocity.
+TEST(DevicePath, AStallStartsANewPathAndASilentDeviceComesToRestNearWhereItSaidItWas) {
   DevicePath path;
   for (int k = 1; k <= 50; ++k) EXPECT_EQ(path.add(1e-3 * k, at_x(0.5e-3 * k), 1e-3 * k), k == 1);
   EXPECT_TRUE(path.add(0.051 + 0.05, at_x(0.5 * 0.101), 0.051)) << "a 50 ms stall is a new path";
   EXPECT_FALSE(path.add(0.102, at_x(0.5 * 0.102), 0.052));
-  EXPECT_NEAR(path.at(0.3).position.x, 0.5 * 0.102, 1e-12) << "long after its last input: where it said it was";
+  const double said = 0.5 * 0.102, rest = path.at(0.3).position.x;
+  EXPECT_GE(rest, said);
+  EXPECT_LE(rest, said + 0.5 * 2 * DevicePath::kMaxExtrapolation + 1e-12) << "long after its last input";
+  EXPECT_NEAR(path.at(0.31).position.x, rest, 1e-9) << "at rest";
+  double v_before = 0.5;
+  for (double t = 0.052; t < 0.15; t += 1e-4) {  // its speed never changes by more than a 0.1 ms step's worth
+    const double v = (path.at(t + 1e-4).position.x - path.at(t).position.x) / 1e-4;
+    EXPECT_LT(std::fabs(v - v_before), 0.5 * 1e-4 / DevicePath::kMaxExtrapolation * 1.01 + 1e-6) << "at t = " << t;
+    v_before = v;
+  }
+}
+
+// A device moving at 0.5 m/s whose inputs stop for 8 ms (a loaded host) and then come all at once: its path
+// goes on at its speed through the gap and after, within 1 % (a coupled proxy's damper answers a change of
+// the path's velocity, 0.5 m/s in one step, with some 3 N).
+TEST(DevicePath, AGapInTheInputsLeavesTheSpeedAsItWas) {
+  DevicePath path;
+  const double v = 0.5;
+  double prev = -1;
+  int k = 1;
+  for (double t = 0.0; t < 0.2; t += 1e-4) {
+    // Input k (device time k ms) arrives at k ms, except those of 100..108 ms, which arrive at 108.5 ms.
+    while (1e-3 * k <= t && !(k >= 100 && k <= 108 && t < 0.1085)) {
+      path.add(1e-3 * k, at_x(v * 1e-3 * k), t);
+      ++k;
+    }
+    if (t < 0.05) continue;
+    const double x = path.at(t).position.x;
+    if (prev >= 0) {
+      const double slew = DevicePath::kLeadSlew * 1.0001;  // (the lead makes room for the lateness seen)
+      EXPECT_GE(x - prev, v * 1e-4 * (1 - slew)) << "slowed at t = " << t;
+      EXPECT_LE(x - prev, v * 1e-4 * (1 + slew)) << "sped up at t = " << t;
+    }
+    prev = x;
+  }
 }
 
 }  // namespace
