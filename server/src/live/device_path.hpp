@@ -12,7 +12,7 @@
 // later than that inputs come (their jitter, a peak that decays over a
 // quarter of a second, at most kMaxDelay) is the playout delay. The path
 // moves toward a new offset plus delay at kLeadSlew seconds per second at
-// most, so that its playout time never steps back and runs within 1 % of
+// most, so that its playout time never steps back and runs within 5 % of
 // the loop's: a late input that raised the delay by 1 ms at once would step
 // a device moving at 0.5 m/s back by 0.5 mm, a 1 N jolt through a
 // 2000 N/m coupling. Past the newest input the path goes on at the device's
@@ -36,7 +36,12 @@ class DevicePath {
   static constexpr double kMaxDelay = 0.003;          // the playout delay at most [s]
   static constexpr double kMaxExtrapolation = 0.01;   // past the newest input, at its velocity [s]
   static constexpr double kPause = 0.1;               // inputs this far apart start a new path [s]
-  static constexpr double kLeadSlew = 0.01;           // how fast the playout's lead may change [s/s]
+  // How fast the playout's lead may change [s/s]: 3 ms of new lateness in
+  // 60 ms (at 1 % a loaded host's lateness outran it and the path played
+  // past its inputs), at a cost of 5 % of the device's speed, which a
+  // coupled proxy's damper answers at 0.5 m/s with some 0.16 N
+  // (bridge_bench.py loop --cases default,free --loaded).
+  static constexpr double kLeadSlew = 0.05;
 
   // An input taken at device time `device_s` [s], applied at loop time `t` [s].
   // Returns true when it starts a new path (the first, after a pause, or

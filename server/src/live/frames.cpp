@@ -216,11 +216,19 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
       // force does not flicker with the contact's bounce, and the device
       // adds its own motion since the step to it (stiffness times the
       // motion from device_poses), which a mean over a window would blur.
+      // The pose is the coupling's target, which the force is about. While
+      // the target still glides onto the device's path (the loop's
+      // approach, after a jump or a stall) the device's motion since the
+      // step says nothing of the force's: no stiffness then, so that the
+      // device shows the force alone (K times a gap of centimetres would
+      // pull the hand with newtons in free space).
       const DeviceReport& r = dr[d];
-      device_haptics_[d] = wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque), to_wire(r.stiffness),
+      const bool gliding =
+          d < device_offsets.size() && glm::dot(device_offsets[d], device_offsets[d]) > kMaxOffsetForStiffness * kMaxOffsetForStiffness;
+      device_haptics_[d] = wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque),
+                                               to_wire(gliding ? glm::dmat3(0.0) : r.stiffness),
                                                uint32_t(contacts_device_[d]));
-      const Vec3 device = r.target.position - (d < device_offsets.size() ? device_offsets[d] : Vec3(0.0));
-      device_poses_[d] = wire::ProxyPose(to_wire(device), to_wire(r.target.orientation));
+      device_poses_[d] = wire::ProxyPose(to_wire(r.target.position), to_wire(r.target.orientation));
       device_couplings_[d] = wire::DeviceCoupling(wire::ProxyPose(to_wire(r.body.position), to_wire(r.body.orientation)),
                                                   float(r.coupling_stiffness), float(r.max_force), float(r.max_torque),
                                                   true, r.saturated);

@@ -32,6 +32,7 @@ constexpr double kApproachSpeed = 0.25;   // [m/s]
 // is, instead of sweeping a kinematic proxy through the body in one step or
 // flinging a coupled one across the workspace at its coupling's limit.
 constexpr double kMaxDeviceSpeed = 3.0;   // [m/s]
+constexpr double kMaxJump = 0.5e-3;       // [m]
 // The workspace: the body's rest bounds, widened on every side by its
 // largest extent and at least this much.
 constexpr double kWorkspaceMargin = 0.5;  // [m]
@@ -139,8 +140,9 @@ void RealtimeLoop::apply_inputs() {
     // to the device: net/server.cpp); the path is never farther than that.
     s.pose.position = glm::clamp(s.pose.position, workspace_lo_, workspace_hi_);
     // A new path (the device's first input, or one after a pause) may start
-    // far from where its proxy waits: the proxy's pose glides onto it (below).
-    drv.path.add(1e-9 * double(s.device_time_ns), s.pose, t);
+    // far from where its proxy waits: the proxy's pose glides onto it.
+    if (drv.path.add(1e-9 * double(s.device_time_ns), s.pose, t))
+      drv.approach = drv.motion.at(t).position - drv.path.at(t).position;
     last_sequence_ = std::max(last_sequence_, s.sequence);
     device_sequences_[size_t(s.device)] = s.sequence;  // the latest, even when a restarted bridge counts from 1 again
     if (applied_sink_) applied_sink_({loop_steps_, s.device, s.sequence, s.drive});
@@ -150,13 +152,13 @@ void RealtimeLoop::apply_inputs() {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     stats_.inputs_applied += applied;
   }
-  // Every step, each driven channel's motion over the step: from where the
-  // last step left it, toward its device's path (device_path.hpp) plus what
-  // remains of the approach, which shrinks at kApproachSpeed (a coupled
-  // proxy pulled onto a far path in one step would be pulled at the
-  // coupling's limit), and no faster than kMaxDeviceSpeed. The approach
-  // takes up whatever the path did that a hand could not: a new path far
-  // away, a jump, a correction of its past by a late input.
+  // Every step, each driven channel's motion over the step: its device's
+  // path (device_path.hpp) plus what remains of the approach, which shrinks
+  // at kApproachSpeed (a coupled proxy pulled onto a far path in one step
+  // would be pulled at the coupling's limit). What a hand could not do joins
+  // the approach: a jump of the path between steps past kMaxJump (a far new
+  // path, a stranger's input; a late input's small correction of the past
+  // is taken as it is), and motion within a step faster than kMaxDeviceSpeed.
   const double t1 = t + dt_;
   for (Driver& drv : drivers_) {
     if (drv.path.empty()) continue;
@@ -165,16 +167,23 @@ void RealtimeLoop::apply_inputs() {
     m.t0 = t;
     m.t1 = t1;
     m.from = path_t;
-    m.from.position = drv.motion.at(t).position;
-    Vec3 approach = m.from.position - path_t.position;
-    const double left = glm::length(approach);
-    if (left > 0) approach *= std::max(0.0, left - kApproachSpeed * dt_) / left;
+    m.from.position += drv.approach;
+    const Vec3 left_at = drv.motion.at(t).position;  // where the last step left it
+    if (glm::distance(m.from.position, left_at) > kMaxJump) {
+      drv.approach += left_at - m.from.position;
+      m.from.position = left_at;
+    }
+    const double left = glm::length(drv.approach);
+    if (left > 0) drv.approach *= std::max(0.0, left - kApproachSpeed * dt_) / left;
     m.to = path_t1;
-    m.to.position += approach;
+    m.to.position += drv.approach;
     const Vec3 step = m.to.position - m.from.position;
     const double most = kMaxDeviceSpeed * dt_, length = glm::length(step);
-    if (length > most) m.to.position = m.from.position + step * (most / length);  // faster than a hand
-    device_offsets_[size_t(&drv - drivers_.data())] = m.to.position - path_t1.position;
+    if (length > most) {  // faster than a hand
+      m.to.position = m.from.position + step * (most / length);
+      drv.approach = m.to.position - path_t1.position;
+    }
+    device_offsets_[size_t(&drv - drivers_.data())] = drv.approach;
     drv.motion = m;
     if (drv.hand >= 0) sim_.set_hand_motion(drv.hand, m);
     for (int32_t j : drv.proxies) sim_.set_proxy_motion(j, m);

@@ -171,6 +171,7 @@ class RealtimeLoop {
     std::vector<int32_t> proxies;  // else the proxies it drives alone
     ProxyMotion motion;       // its motion over the latest step
     DevicePath path;          // its device's pose, from its inputs
+    Vec3 approach{0.0};       // how far the motion still stands off the path [m]
     DeviceDrive drive;        // as the simulation has it
   };
   Vec3 workspace_lo_{0.0}, workspace_hi_{0.0};

@@ -15,7 +15,7 @@ Pose at_x(double x) {
 }
 
 // A device moving at 0.5 m/s whose 1 kHz inputs arrive 0-2 ms late: the path moves on at the device's speed
-// within 1 % (it never stalls, steps back or jumps ahead, also when an input comes later than any before), and
+// within the lead's slew, 5 % (it never stalls, steps back or jumps ahead, also when an input comes later than any before), and
 // lags the device by the delay at most.
 TEST(DevicePath, LateInputsNeitherStallNorJumpThePath) {
   DevicePath path;
@@ -76,7 +76,7 @@ TEST(DevicePath, AStallStartsANewPathAndASilentDeviceComesToRestNearWhereItSaidI
 }
 
 // A device moving at 0.5 m/s whose inputs stop for 8 ms (a loaded host) and then come all at once: its path
-// goes on at its speed through the gap and after, within 1 % (a coupled proxy's damper answers a change of
+// goes on at its speed through the gap and after, within the lead's slew (a coupled proxy's damper answers a change of
 // the path's velocity, 0.5 m/s in one step, with some 3 N).
 TEST(DevicePath, AGapInTheInputsLeavesTheSpeedAsItWas) {
   DevicePath path;
