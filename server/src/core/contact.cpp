@@ -42,7 +42,8 @@ Vec3 position(const State<Real>& s, const Vec3& X, int32_t node) {
 // contact's dF/dx on the proxy is one (minus the Hessian of the body's
 // energy in the proxy's position): the body pushes back harder as the proxy
 // presses in, never pulls it further in, and stores what it is given.
-glm::dmat3 nearest_passive(const glm::dmat3& K) {
+// With `stiffest`, every eigenvalue is also held at or above -stiffest.
+glm::dmat3 nearest_passive(const glm::dmat3& K, double stiffest = std::numeric_limits<double>::infinity()) {
   glm::dmat3 A = 0.5 * (K + glm::transpose(K));
   glm::dmat3 V(1.0);  // columns: eigenvectors (cyclic Jacobi rotations)
   for (int sweep = 0; sweep < 12; ++sweep) {
@@ -65,7 +66,7 @@ glm::dmat3 nearest_passive(const glm::dmat3& K) {
       }
   }
   glm::dmat3 D(0.0);
-  for (int k = 0; k < 3; ++k) D[k][k] = std::min(0.0, A[k][k]);
+  for (int k = 0; k < 3; ++k) D[k][k] = std::clamp(A[k][k], -stiffest, 0.0);
   return V * D * glm::transpose(V);
 }
 
@@ -560,7 +561,10 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     DeviceReport& d = device_reports_[i];
     if (!d.coupled) continue;
     fit_stiffness(device_fit_[i], FitWindow::Device, d.target.position, d.force, dt, device_felt_[i]);
-    d.stiffness = device_felt_[i];
+    // A device feels at most its coupling's own spring (the contact in
+    // series with it can only soften it); a fit across a contact's onset
+    // can read stiffer, and the bridge would render that.
+    d.stiffness = nearest_passive(device_felt_[i], d.coupling_stiffness);
   }
   for (DeviceReport& d : device_reports_) d.add_step(dt);
   return sums;

@@ -229,7 +229,8 @@ TEST(Coupling, AFastStrikeDoesNotFaultAnyMaterial) {
 // pushed every other step or so (eq. 13), and at every interval the device
 // is told the stiffness it feels, dF/dx of its own force against its own
 // position (within 15 % of the slope over the press), less than the
-// coupling's and the block's alone (the two in series).
+// coupling's and the block's alone (the two in series), and never, not
+// even as the contact begins, more than the coupling's own spring.
 TEST(Coupling, APressingDeviceIsToldTheStiffnessItFeelsAtEveryStep) {
   for (double E : {3e4, 1e6}) {
     const ModelSpec spec = poked_block(MaterialModel::NeoHookean, E, false);
@@ -254,8 +255,9 @@ TEST(Coupling, APressingDeviceIsToldTheStiffnessItFeelsAtEveryStep) {
     Stepper<double> stepper(model);
     couple_stylus(stepper, 6.0);
     int told = 0, intervals = 0;
-    double sy = 0, sf = 0, syy = 0, syf = 0, told_sum = 0;
+    double sy = 0, sf = 0, syy = 0, syf = 0, told_sum = 0, stiffest = 0;
     press(stepper, [&](int k, double y, const DeviceReport& d) {
+      for (int i = 0; i < 3; ++i) stiffest = std::max(stiffest, glm::length(d.stiffness[i]));
       if (k < 300) return;  // the second half of the press: in contact since 100 intervals
       ++intervals;
       const double kyy = -d.stiffness[1][1];
@@ -272,6 +274,7 @@ TEST(Coupling, APressingDeviceIsToldTheStiffnessItFeelsAtEveryStep) {
     EXPECT_EQ(told, intervals) << "E " << E;
     EXPECT_NEAR(mean_told, slope, 0.15 * slope) << "E " << E;
     EXPECT_LT(slope, std::min(kc, k_body)) << "E " << E;
+    EXPECT_LE(stiffest, kc * (1 + 1e-9)) << "E " << E << ": told more than the coupling's own spring";
   }
 }
 
