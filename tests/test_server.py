@@ -290,10 +290,11 @@ def test_haptic_frames_carry_the_device_pose_and_its_newest_input(tmp_path: path
                     received.append(await ws.recv())
 
             reader = asyncio.create_task(read())
-            # 50 inputs at 1 kHz from where it rests to the target, turning, sequences 501..550.
+            # 50 inputs at 1 kHz from where it rests to the target, turning, sequences 501..550; the last ten at
+            # the target (a device that stopped moving, still sending).
             sent = []
             for k in range(1, 51):
-                a = k / 50
+                a = min(1.0, k / 40)
                 sent.append(500 + k)
                 await ws.send(codec.encode(device_input(500 + k, 0.029 + a * (target[1] - 0.029), a * target[0],
                                                         a * target[2], turn)))

@@ -162,7 +162,9 @@ void RealtimeLoop::apply_inputs() {
   const double t1 = t + dt_;
   for (Driver& drv : drivers_) {
     if (drv.path.empty()) continue;
-    const Pose path_t = drv.path.at(t), path_t1 = drv.path.at(t1);
+    Pose path_t = drv.path.at(t), path_t1 = drv.path.at(t1);  // (extrapolated past an input: kept in the workspace)
+    path_t.position = glm::clamp(path_t.position, workspace_lo_, workspace_hi_);
+    path_t1.position = glm::clamp(path_t1.position, workspace_lo_, workspace_hi_);
     ProxyMotion m;
     m.t0 = t;
     m.t1 = t1;
