@@ -36,11 +36,10 @@ class DevicePath {
   static constexpr double kMaxDelay = 0.003;          // the playout delay at most [s]
   static constexpr double kMaxExtrapolation = 0.01;   // past the newest input, at its velocity [s]
   static constexpr double kPause = 0.1;               // inputs this far apart start a new path [s]
-  // How fast the playout's lead may change [s/s]: 3 ms of new lateness in
-  // 60 ms (at 1 % a loaded host's lateness outran it and the path played
-  // past its inputs), at a cost of 5 % of the device's speed, which a
-  // coupled proxy's damper answers at 0.5 m/s with some 0.16 N
-  // (bridge_bench.py loop --cases default,free --loaded).
+  // How fast the playout's lead may change [s/s]: fast enough to follow a
+  // loaded host's lateness, slow enough that a coupled proxy's damper barely
+  // feels the playout's change of speed (bridge_bench.py loop --loaded;
+  // docs/perf.md).
   static constexpr double kLeadSlew = 0.05;
 
   // An input taken at device time `device_s` [s], applied at loop time `t` [s].

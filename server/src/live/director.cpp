@@ -35,10 +35,9 @@ double window_for(double dt, const LiveOptions& options) {
 }
 
 // The most element-steps per second a live scene may ask for: five times
-// what one core steps of plain StVK (fem_bench: 140-200 M tet-steps/s). A
-// scene past it (a material a million times stiffer than its mesh was made
-// for: E = 1e12 on the default beam asks for 2e10) falls behind real time on
-// any machine this runs on, and sends a state every few seconds.
+// what one core steps of plain StVK (fem_bench; docs/perf.md). A scene past
+// it (a material far stiffer than its mesh was made for) falls behind real
+// time on any machine this runs on, and sends a state every few seconds.
 constexpr double kMaxLiveTetStepsPerSecond = 1e9;
 
 }  // namespace

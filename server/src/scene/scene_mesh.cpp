@@ -43,8 +43,7 @@ std::string list_ids(const std::vector<int32_t>& ids) {
 
 // The largest mesh a scene may ask for; beyond it a typo, not a wish.
 constexpr int64_t kMaxTets = 20'000'000;
-// TetGen's pace, with a volume bound and without: 110-130 k tets/s (spheres
-// of resolution 4 and 5, tactile-sim check), rounded down.
+// TetGen's pace, rounded down from what docs/perf.md (Meshing) measured.
 constexpr double kTetgenTetsPerSecond = 100e3;
 std::atomic<MeshingWatch*> meshing_watch{nullptr};
 
@@ -68,11 +67,10 @@ class Watched {
 };
 
 // What one tet takes to mesh and simulate, all told (mesh, model, state,
-// TetGen's own peak): 370-380 B measured (/usr/bin/time -v tactile-sim check
-// on a 1.3 M-tet box and a 1.7 M-tet sphere), rounded up.
+// TetGen's own peak), rounded up from docs/perf.md (Meshing).
 constexpr double kBytesPerTet = 400;
-// TetGen with a volume bound (-a) makes 2.6-3.2 times as many tets as the
-// volume over the bound (spheres of resolution 4 and 5); rounded up.
+// How many tets TetGen makes with a volume bound (-a), per volume over the
+// bound: rounded up from docs/perf.md (Meshing).
 constexpr double kTetgenTetsPerBound = 3.5;
 
 // The memory this machine has free [bytes] (MemAvailable), or infinity where it cannot be read.
@@ -168,7 +166,7 @@ TetMesh build_sphere(const Fields& f) {
   const Vec3 centre = f.vec3("centre");
   const double radius = f.positive("radius");
   const auto resolution = int(f.integer("resolution", 0, 6));
-  // TetGen makes about 8 times as many tets per level: 267 k at 4, 1.7 M at 5, 11.7 M at 6.
+  // About 8 times as many tets per level, at or above what TetGen makes (docs/perf.md, Meshing).
   const double tets = 66.0 * std::pow(8.0, resolution);
   check_size(f.origin(), f.path("resolution"), tets, true);
   const Watched watched(f.path("resolution"), tets);
