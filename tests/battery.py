@@ -21,9 +21,7 @@ import argparse
 import asyncio
 import pathlib
 import random
-import signal
 import socket
-import subprocess
 import sys
 import tempfile
 import time
@@ -32,10 +30,9 @@ HERE = pathlib.Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import websockets  # noqa: E402
-from mcap.reader import make_reader  # noqa: E402
 from serverproc import server_process  # noqa: E402
-from test_hardening import frame, rss_kb, upgrade  # noqa: E402
-from test_recording import read_cut  # noqa: E402
+from test_hardening import frame, rss_kb, still_open, upgrade, welcome_time  # noqa: E402
+from test_recording import read_cut, record_and_kill, recover_and_read  # noqa: E402
 from test_server import SCENE, TOKEN, device_input, hello, url  # noqa: E402
 
 from tactile_proto import codec  # noqa: E402
@@ -49,33 +46,20 @@ def slots(tmp: pathlib.Path) -> None:
         flood: list[socket.socket] = []
         waits, refused = [], 0
 
-        def renew() -> None:
-            for s in list(flood):  # drop the ones the server closed, open new ones in their place
-                s.setblocking(False)
-                try:
-                    if s.recv(1) == b"":
-                        flood.remove(s)
-                        s.close()
-                except BlockingIOError:
-                    pass
-                except OSError:
-                    flood.remove(s)
+        def renew() -> None:  # the ones the server closed are replaced by new ones
+            for s in [s for s in flood if not still_open(s)]:
+                flood.remove(s)
+                s.close()
             while len(flood) < 300:
                 try:
                     flood.append(upgrade(port))
                 except (ConnectionRefusedError, ConnectionError):
                     break
 
-        async def device() -> float:
-            t0 = time.monotonic()
-            async with websockets.connect(url(port), max_queue=None) as ws:
-                await hello(ws, Role.Device, TOKEN, ("stylus",))
-            return time.monotonic() - t0
-
         for _ in range(20):
             renew()
             try:
-                waits.append(asyncio.run(device()))
+                waits.append(welcome_time(port))
             except Exception:  # noqa: BLE001 - any refusal counts
                 refused += 1
         for s in flood:
@@ -146,31 +130,14 @@ def inputs(tmp: pathlib.Path) -> None:
 
 
 def kills(tmp: pathlib.Path, n: int) -> None:
-    tool = pathlib.Path(sys.executable).with_name("tactile-recording")
     readable, kept = 0, []
     for kill in range(n):
         path = tmp / f"killed{kill}.mcap"
-
-        async def press(port: int) -> None:
-            async with websockets.connect(url(port), max_queue=None) as dev:
-                await hello(dev, Role.Device, TOKEN, ("stylus",))
-                for k in range(1, 300 + 37 * kill):
-                    await dev.send(codec.encode(device_input(k, 0.029 - 0.003 * min(k, 300) / 300)))
-                    await asyncio.sleep(0.001)
-
-        with server_process(tmp, SCENE, TOKEN, "--record", str(path), file_name="scene.json") as (port, proc):
-            asyncio.run(press(port))
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=10)
-            proc.send_signal = lambda _sig: None  # (gone: the context's SIGINT has nothing to stop)
+        record_and_kill(tmp, path, 300 + 37 * kill)
         messages, _ = read_cut(path)
-        out = tmp / f"killed{kill}.recovered.mcap"
-        r = subprocess.run([str(tool), "recover", str(path), str(out)], capture_output=True, text=True)
-        if r.returncode == 0:
-            with open(out, "rb") as f:
-                again = [(c.topic, m.log_time, m.data) for _, c, m in make_reader(f).iter_messages(log_time_order=False)]
-            readable += again == messages
-            kept.append(len(again))
+        again, _ = recover_and_read(path, tmp / f"killed{kill}.recovered.mcap")
+        readable += again == messages
+        kept.append(len(again))
     print(f"kills: {n} recordings killed mid-press; after recover, {readable} of {n} read by mcap's make_reader "
           f"message for message ({min(kept)}-{max(kept)} messages each)")
 

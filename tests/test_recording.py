@@ -226,6 +226,40 @@ def test_recording_requests_are_refused_by_name(tmp_path: pathlib.Path) -> None:
         asyncio.run(run(port, False))
 
 
+def record_and_kill(tmp_path: pathlib.Path, path: pathlib.Path, inputs: int) -> int:
+    """Records a device pressing the block (`inputs` inputs at 1 kHz) into `path`, then kills the server with
+    SIGKILL; returns when it was killed [ns since the epoch]."""
+
+    async def press(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as dev:
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            for k in range(1, inputs):
+                await dev.send(codec.encode(device_input(k, 0.029 - 0.003 * min(k, 300) / 300)))
+                await asyncio.sleep(0.001)
+
+    with server_process(tmp_path, SCENE, TOKEN, "--record", str(path), file_name="scene.json") as (port, proc):
+        asyncio.run(press(port))
+        killed_ns = time.time_ns()
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+        proc.send_signal = lambda _sig: None  # (the context's SIGINT: it is gone)
+    return killed_ns
+
+
+def recover_and_read(path: pathlib.Path, out: pathlib.Path) -> tuple[list[tuple[str, int, bytes]], int]:
+    """`tactile-recording recover PATH OUT`, then OUT read by the mcap package's default reader: its messages in
+    file order [(topic, log_time, data)] and the message count its summary states."""
+    r = subprocess.run([str(pathlib.Path(sys.executable).with_name("tactile-recording")), "recover", str(path),
+                        str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    with open(out, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None
+        messages = [(c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages(log_time_order=False)]
+    return messages, summary.statistics.message_count
+
+
 def test_a_server_killed_mid_recording_leaves_a_file_that_reads_back_to_its_last_moments(
         tmp_path: pathlib.Path) -> None:
     """SIGKILL while a device presses: the file (no summary, maybe a record cut short) reads back in order,
@@ -233,20 +267,7 @@ def test_a_server_killed_mid_recording_leaves_a_file_that_reads_back_to_its_last
     losses, recovered = [], []
     for kill in range(3):
         path = tmp_path / f"killed{kill}.mcap"
-
-        async def press(port: int) -> None:
-            async with websockets.connect(url(port), **READ_ON) as dev:
-                await hello(dev, Role.Device, TOKEN, ("stylus",))
-                for k in range(1, 800 + 300 * kill):
-                    await dev.send(codec.encode(device_input(k, 0.029 - 0.003 * min(k, 300) / 300)))
-                    await asyncio.sleep(0.001)
-
-        with server_process(tmp_path, SCENE, TOKEN, "--record", str(path), file_name="scene.json") as (port, proc):
-            asyncio.run(press(port))
-            killed_ns = time.time_ns()
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=10)
-            proc.send_signal = lambda _sig: None  # (the context's SIGINT: it is gone)
+        killed_ns = record_and_kill(tmp_path, path, 800 + 300 * kill)
         messages, complete = read_cut(path)
         assert not complete, "a killed server wrote no footer"
         topics = {t for t, _, _ in messages}
@@ -257,17 +278,9 @@ def test_a_server_killed_mid_recording_leaves_a_file_that_reads_back_to_its_last
         losses.append((killed_ns - newest) / 1e9)
         # The mcap package's default reader refuses the cut file; `recover` rewrites it into one it opens,
         # with every message the robust reader found, in the same order.
-        out = tmp_path / f"killed{kill}.recovered.mcap"
-        r = subprocess.run([str(pathlib.Path(sys.executable).with_name("tactile-recording")), "recover", str(path),
-                            str(out)], capture_output=True, text=True)
-        assert r.returncode == 0, r.stderr
-        with open(out, "rb") as f:
-            reader = make_reader(f)
-            summary = reader.get_summary()
-            assert summary is not None and summary.statistics is not None
-            again = [(c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages(log_time_order=False)]
+        again, counted = recover_and_read(path, tmp_path / f"killed{kill}.recovered.mcap")
         assert again == messages
-        assert summary.statistics.message_count == len(messages)
+        assert counted == len(messages)
         recovered.append(len(again))
     # What a kill loses: from the newest message kept to the kill (chunks close every quarter second).
     assert max(losses) < 1.0, f"lost up to {max(losses):.3f} s of the session"
