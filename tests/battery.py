@@ -31,12 +31,11 @@ sys.path.insert(0, str(HERE))
 
 import websockets  # noqa: E402
 from serverproc import server_process  # noqa: E402
-from test_hardening import frame, rss_kb, still_open, upgrade, welcome_time  # noqa: E402
+from test_hardening import frame, ping_burst, rss_kb, still_open, upgrade, welcome_time  # noqa: E402
 from test_recording import read_cut, record_and_kill, recover_and_read  # noqa: E402
 from test_server import SCENE, TOKEN, device_input, hello, url  # noqa: E402
 
 from tactile_proto import codec  # noqa: E402
-from tactile_proto.generated.Ping import PingT  # noqa: E402
 from tactile_proto.generated.Role import Role  # noqa: E402
 from tactile_proto.generated.Telemetry import TelemetryT  # noqa: E402
 
@@ -79,12 +78,7 @@ def pings(tmp: pathlib.Path, seconds: float) -> None:
             try:
                 n = 0
                 while time.monotonic() - t0 < seconds:
-                    for _ in range(20):
-                        p = PingT()
-                        p.id, p.clientTimeNs = n, time.monotonic_ns()
-                        s.sendall(frame(codec.encode(p)))
-                        n += 1
-                    time.sleep(0.01)
+                    n = ping_burst(s, n)
                     if time.monotonic() >= next_sample:
                         samples.append(rss_kb(proc.pid))
                         next_sample += 5.0

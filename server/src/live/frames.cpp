@@ -41,6 +41,10 @@ int32_t compute_device_hand(const Simulation& sim, int32_t device) {
 
 namespace {
 
+// A coupled channel whose target stands farther than this off its device's
+// path is sent no stiffness (haptic_frame) [m].
+constexpr double kMaxOffsetForStiffness = 1e-3;
+
 wire::Vec3f to_wire(const Vec3& v) { return {float(v.x), float(v.y), float(v.z)}; }
 wire::Quatf to_wire(const Quat& q) { return {float(q.w), float(q.x), float(q.y), float(q.z)}; }
 wire::Mat3f to_wire(const glm::dmat3& m) {  // glm is column-major: m[col][row]

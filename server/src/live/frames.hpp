@@ -34,10 +34,6 @@ Surface extract_surface(const Simulation& sim);
 // report its pose.
 int32_t compute_device_hand(const Simulation& sim, int32_t device);
 
-// A coupled channel whose target stands farther than this off its device's
-// path is sent no stiffness (frames.cpp) [m].
-constexpr double kMaxOffsetForStiffness = 1e-3;
-
 class FrameEncoder {
  public:
   // dt: the simulation step the frames come at [s] (0: 0.7 x the critical
@@ -64,8 +60,8 @@ class FrameEncoder {
   // across all channels; input_sequences: the newest per channel (n_devices;
   // channels past its end read 0). device_offsets: per channel, how far
   // its coupled body's target stands off its device's path (the loop's
-  // approach, [m]; channels past its end: none): past kMaxOffsetForStiffness
-  // a coupled channel is sent no stiffness.
+  // approach, [m]; channels past its end: none): a coupled channel that stands
+  // off it by more than a millimetre is sent no stiffness (frames.cpp).
   std::span<const uint8_t> haptic_frame(int64_t server_time_ns, uint64_t last_input_sequence,
                                         std::span<const uint64_t> input_sequences = {},
                                         std::span<const Vec3> device_offsets = {});

@@ -105,43 +105,30 @@ std::string check_device_status(const proto::DeviceStatus& st) {
 }
 
 std::string utf8_text(std::string_view in) {
+  // flatbuffers::FromUTF8 reads one sequence up to a NUL, refusing overlong
+  // forms, surrogates and code points past U+10FFFF; a sequence cut short at
+  // the end of the copy meets its terminating NUL.
+  const std::string text(in);
   std::string out;
-  out.reserve(in.size());
-  const auto escape = [&](uint8_t c) {
+  out.reserve(text.size());
+  const char* p = text.c_str();
+  const char* const end = p + text.size();
+  while (p < end) {
+    const uint8_t c = uint8_t(*p);
+    const char* next = p;
+    const bool control = (c < 0x20 && c != '\n' && c != '\t') || c == 0x7f;
+    if (!control && flatbuffers::FromUTF8(&next) >= 0 && next <= end) {
+      out.append(p, next);
+      p = next;
+      continue;
+    }
     static const char* hex = "0123456789abcdef";
     out += "\\x";
     out += hex[c >> 4];
     out += hex[c & 15];
-  };
-  for (size_t i = 0; i < in.size();) {
-    const uint8_t c = uint8_t(in[i]);
-    if (c < 0x80) {
-      if ((c < 0x20 && c != '\n' && c != '\t') || c == 0x7f) escape(c);
-      else out += char(c);
-      ++i;
-      continue;
-    }
-    // The length of the sequence c starts, and the range its second byte must fall in (RFC 3629).
-    size_t n = 0;
-    uint8_t lo = 0x80, hi = 0xbf;
-    if (c >= 0xc2 && c <= 0xdf) n = 2;
-    else if (c >= 0xe0 && c <= 0xef) n = 3, lo = c == 0xe0 ? 0xa0 : 0x80, hi = c == 0xed ? 0x9f : 0xbf;
-    else if (c >= 0xf0 && c <= 0xf4) n = 4, lo = c == 0xf0 ? 0x90 : 0x80, hi = c == 0xf4 ? 0x8f : 0xbf;
-    bool ok = n > 0 && i + n <= in.size();
-    for (size_t k = 1; ok && k < n; ++k) {
-      const uint8_t d = uint8_t(in[i + k]);
-      ok = k == 1 ? d >= lo && d <= hi : d >= 0x80 && d <= 0xbf;
-    }
-    if (!ok) {
-      escape(c);
-      ++i;
-      continue;
-    }
-    out.append(in.substr(i, n));
-    i += n;
+    ++p;
   }
   return out;
 }
-
 
 }  // namespace tactile
