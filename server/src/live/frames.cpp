@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <glm/geometric.hpp>
 
@@ -44,6 +45,9 @@ namespace {
 // A coupled channel whose target stands farther than this off its device's
 // path is sent no stiffness (haptic_frame) [m].
 constexpr double kMaxOffsetForStiffness = 1e-3;
+// A coupled channel whose proxy has touched nothing for this long is free
+// and sent no stiffness (haptic_frame) [s].
+constexpr double kFreeAfter = 2e-3;
 
 wire::Vec3f to_wire(const Vec3& v) { return {float(v.x), float(v.y), float(v.z)}; }
 wire::Quatf to_wire(const Quat& q) { return {float(q.w), float(q.x), float(q.y), float(q.z)}; }
@@ -83,6 +87,7 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   device_couplings_.resize(sim.devices().size());
   contacts_proxy_.assign(sim.proxies().size(), 0);
   contacts_device_.assign(sim.devices().size(), 0);
+  touched_.assign(sim.devices().size(), -std::numeric_limits<double>::infinity());
   input_sequences_.resize(sim.devices().size());
   device_hand_.resize(sim.devices().size());
   device_proxy_.assign(sim.devices().size(), -1);
@@ -191,6 +196,7 @@ void FrameEncoder::add_step_forces() {
     // a frame counts the contacts of its busiest step (sub-steps of an
     // advance included) since the previous one.
     contacts_device_[d] = std::max(contacts_device_[d], dr[d].contacts_peak);
+    if (dr[d].contacts_peak > 0) touched_[d] = sim_.time();
     Wrench& old = window_device_[slot * dr.size() + d];
     const Wrench now = mean(dr[d]);
     sum_device_[d].force += now.force - old.force;
@@ -225,12 +231,18 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
       // approach, after a jump or a stall) the device's motion since the
       // step says nothing of the force's: no stiffness then, so that the
       // device shows the force alone (K times a gap of centimetres would
-      // pull the hand with newtons in free space).
+      // pull the hand with newtons in free space). Nor while the proxy
+      // touches nothing: a free proxy follows the hand within the display's
+      // few milliseconds, and the fit of the device's force to its motion,
+      // still that of the press it left, would pull a lifting hand back.
+      // (Free: untouched for kFreeAfter, as a resting proxy is pushed only
+      // every other step or so.)
       const DeviceReport& r = dr[d];
       const bool gliding =
           d < device_offsets.size() && glm::dot(device_offsets[d], device_offsets[d]) > kMaxOffsetForStiffness * kMaxOffsetForStiffness;
+      const bool free = sim_.time() - touched_[d] > kFreeAfter;
       device_haptics_[d] = wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque),
-                                               to_wire(gliding ? glm::dmat3(0.0) : r.stiffness),
+                                               to_wire(gliding || free ? glm::dmat3(0.0) : r.stiffness),
                                                uint32_t(contacts_device_[d]));
       device_poses_[d] = wire::ProxyPose(to_wire(r.target.position), to_wire(r.target.orientation));
       device_couplings_[d] = wire::DeviceCoupling(wire::ProxyPose(to_wire(r.body.position), to_wire(r.body.orientation)),

@@ -81,6 +81,7 @@ class FrameEncoder {
   std::vector<uint64_t> input_sequences_;       // per device channel
   std::vector<proto::DeviceCoupling> device_couplings_;  // per device channel
   std::vector<int32_t> contacts_proxy_, contacts_device_;  // the most contacts of a step since the last haptic frame
+  std::vector<double> touched_;  // per device channel, the time its proxy last touched the body [s]
   // What each device channel's pose is: its hand (>= 0), else its first proxy.
   std::vector<int32_t> device_hand_, device_proxy_;  // (n_devices)
   struct Wrench {

@@ -408,6 +408,51 @@ TEST(RealtimeLoop, EachChannelsNewestInputAndPoseComeBack) {
   EXPECT_LT(glm::distance(sim.proxy_pose(1).position, stylus_at), 1e-4);
 }
 
+// A device that presses its coupled proxy into the block and lifts it off:
+// while the proxy touches, the frames tell the device the stiffness it
+// feels; once the proxy has touched nothing for 2 ms, none, whatever the
+// fit of the device's force to its motion still holds from the press (K
+// times the hand's motion since a state ms old would pull a lifting hand
+// back toward the body).
+TEST(FrameEncoder, AFreeCoupledProxyTellsItsDeviceNoStiffness) {
+  Simulation sim(poke_spec());
+  const double dt = 2e-4;
+  FrameEncoder frames(sim, "poke", 1, dt);
+  const DeviceLimits limits{4.0, 0.0, 2000.0};
+  sim.couple_device(0, &limits);
+  Pose device = sim.proxy_pose(0);
+  int pressed = 0, told_pressing = 0, free_frames = 0, told_free = 0, untouched = 0;
+  for (int k = 0; k < 1500; ++k) {  // 6 mm down over 0.1 s, held 0.1 s, up 12 mm over 0.1 s at 0.12 m/s
+    ProxyMotion m;
+    m.t0 = sim.time();
+    m.t1 = m.t0 + dt;
+    m.from = device;
+    if (k < 500) device.position.y -= 0.006 / 500;
+    else if (k >= 1000) device.position.y += 0.012 / 500;
+    m.to = device;
+    sim.set_proxy_motion(0, m);
+    ASSERT_FALSE(sim.advance(dt).fault) << "step " << k;
+    frames.add_step_forces();
+    sim.clear_impulses();
+    const proto::HapticFrame* h = envelope(frames.haptic_frame(0, 0))->message_as_HapticFrame();
+    const proto::DeviceHaptics& d = *h->devices()->Get(0);
+    const float kyy = d.stiffness().m11();
+    if (k >= 500 && k < 1000 && d.contacts() > 0) {
+      ++pressed;
+      told_pressing += kyy < 0;
+    }
+    untouched = d.contacts() > 0 ? 0 : untouched + 1;
+    if (k >= 1000 && untouched * dt > 2e-3 + 1e-9) {
+      ++free_frames;
+      told_free += kyy != 0 || d.stiffness().m00() != 0 || d.stiffness().m22() != 0;
+    }
+  }
+  EXPECT_GT(pressed, 400) << "the proxy should rest on the block while the device holds it in";
+  EXPECT_EQ(told_pressing, pressed);
+  EXPECT_GT(free_frames, 100) << "the proxy should leave the block";
+  EXPECT_EQ(told_free, 0) << "of " << free_frames << " frames of a free proxy";
+}
+
 // The default: a device with its limits (its Hello) goes 5 mm into the
 // block, 13 mm past where its sphere would touch. The proxy stops at the surface, sunk only as far as the
 // device's 1 N presses it; each frame's device force is the coupling's,
