@@ -23,12 +23,54 @@ constexpr double kStall = 0.01;
 // a delay held long after it makes a direct (kinematic) loop ring
 // (tests/test_bridge_closed_loop.py).
 constexpr double kJitterMemory = 0.25;
+// The memory of the target's drift [s]: long beside the jitter's bumps, short
+// beside a loaded host's changes of pace.
+constexpr double kDriftMemory = 0.1;
+
+// The travel x and rate v at s [s] of a move of d from rate v0 that ends at
+// rest, time-optimal under a rate limit r and a limit a on the rate's change
+// (accelerate, cruise, brake), worked in the direction of travel.
+void brake_to(double d, double v0, double s, double r, double a, double& x, double& v) {
+  const double braking = v0 * std::fabs(v0) / (2 * a);  // travel to stop now
+  const double sign = d > braking ? 1.0 : d < braking ? -1.0 : v0 > 0 ? 1.0 : v0 < 0 ? -1.0 : 0.0;
+  x = v = 0;
+  if (sign == 0) return;
+  const double dist = sign * d, w0 = sign * v0;
+  const double vp = std::min(r, std::sqrt(std::max(0.0, a * dist + 0.5 * w0 * w0)));  // the peak rate
+  const double a1 = vp >= w0 ? a : -a;
+  const double t1 = std::fabs(vp - w0) / a, d1 = (vp * vp - w0 * w0) / (2 * a1);
+  const double t3 = vp / a, d3 = vp * vp / (2 * a);
+  const double d2 = std::max(0.0, dist - d1 - d3), t2 = vp > 0 ? d2 / vp : 0.0;
+  if (s < t1) {
+    x = w0 * s + 0.5 * a1 * s * s;
+    v = w0 + a1 * s;
+  } else if (s < t1 + t2) {
+    x = d1 + vp * (s - t1);
+    v = vp;
+  } else if (s < t1 + t2 + t3) {
+    const double u = s - t1 - t2;
+    x = d1 + d2 + vp * u - 0.5 * a * u * u;
+    v = vp - a * u;
+  } else {
+    x = d1 + d2 + d3;
+  }
+  x *= sign;
+  v *= sign;
+}
 
 }  // namespace
 
-double DevicePath::lead(double t) const {
-  const double most = kLeadSlew * std::max(0.0, t - anchor_t_);
-  return anchor_lead_ + std::clamp(offset_ + jitter_ - anchor_lead_, -most, most);
+// The target moves on at its drift (a loop that runs behind the device's
+// clock lowers it steadily); the lead closes on it from the anchor, in the
+// target's frame, within the limits on its rate and the rate's change, so
+// that it follows a steady drift without lagging and the path's speed is
+// continuous.
+DevicePath::Lead DevicePath::lead(double t) const {
+  const double s = std::max(0.0, t - anchor_t_);
+  const double drift = target_rate_, target = offset_ + jitter_;
+  double x, v;
+  brake_to(target - anchor_lead_, anchor_rate_ - drift, s, kLeadSlew - std::fabs(drift), kLeadAccel, x, v);
+  return {anchor_lead_ + drift * s + x, drift + v};
 }
 
 bool DevicePath::add(double device_s, const Pose& pose, double t) {
@@ -36,7 +78,7 @@ bool DevicePath::add(double device_s, const Pose& pose, double t) {
   // (The anchor never moves back: an input applied at an earlier time than
   // the one before would let the lead jump by the slew over the difference.)
   const double anchor_t = count_ > 0 ? std::max(t, anchor_t_) : t;
-  const double lead_now = count_ > 0 ? lead(anchor_t) : 0.0;
+  const Lead now = count_ > 0 ? lead(anchor_t) : Lead{0.0, 0.0};
   bool first = false;
   if (count_ == 0 || std::fabs(device_s - sample(0).device_s) > kPause) {
     count_ = 0;  // a new path: the first input, or one after a pause (or a device that restarted its clock)
@@ -61,15 +103,30 @@ bool DevicePath::add(double device_s, const Pose& pose, double t) {
     }
     jitter_ = std::min(kMaxDelay, std::max(jitter_, lag - offset_));
   }
+  // The target's drift: its change per second of the loop's time, smoothed
+  // (inputs applied at one step add their changes up to the next).
+  const double target = offset_ + jitter_;
+  if (first) {
+    target_rate_ = 0;
+    drift_t_ = t;
+    drift_target_ = target;
+  } else if (t > drift_t_) {
+    const double w = 1.0 - std::exp(-(t - drift_t_) / kDriftMemory);
+    const double most = 0.5 * kLeadSlew;  // (leaving the lead room to close on it)
+    target_rate_ = std::clamp(target_rate_ + w * ((target - drift_target_) / (t - drift_t_) - target_rate_), -most, most);
+    drift_t_ = t;
+    drift_target_ = target;
+  }
   anchor_t_ = first ? t : anchor_t;
-  anchor_lead_ = first ? offset_ + jitter_ : lead_now;
+  anchor_lead_ = first ? target : now.lead;
+  anchor_rate_ = first ? 0.0 : now.rate;
   ring_[count_ % ring_.size()] = {device_s, pose};
   ++count_;
   return first;
 }
 
 Pose DevicePath::at(double t) const {
-  const double tau = t - lead(t);  // device time played out at t
+  const double tau = t - lead(t).lead;  // device time played out at t
   const Sample& newest = sample(0);
   const size_t kept = std::min(count_, ring_.size());
   if (tau >= newest.device_s) {

@@ -10,12 +10,18 @@
 // smallest lag seen lately is the clocks' offset (a minimum filter, as NTP
 // keeps, let rise slowly so that drift cannot leave it stale), and how much
 // later than that inputs come (their jitter, a peak that decays over a
-// quarter of a second, at most kMaxDelay) is the playout delay. The path
-// moves toward a new offset plus delay at kLeadSlew seconds per second at
-// most, so that its playout time never steps back and runs within 5 % of
-// the loop's: a late input that raised the delay by 1 ms at once would step
-// a device moving at 0.5 m/s back by 0.5 mm, a 1 N jolt through a
-// 2000 N/m coupling. Past the newest input the path goes on at the device's
+// quarter of a second, at most kMaxDelay) is the playout delay. Their sum
+// is the lead the path aims for: it drifts while a loaded loop runs behind
+// the device's clock (at 0.75 of real time, by a quarter of a second each
+// second), and the lead follows that drift, closing on the rest, its rate
+// held to kLeadSlew and the rate's change to kLeadAccel. So the playout
+// never steps back and its pace changes smoothly: a late input that raised
+// the delay by 1 ms at once would step a device moving at 0.5 m/s back by
+// 0.5 mm, a 1 N jolt through a 2000 N/m coupling; a pace that changed by
+// 5 % at once would change the path's velocity by 25 mm/s in a step, which
+// the coupling's damper passes to the hand as a 0.2 N tick; and a lead that
+// trailed a drifting target would leave the proxy tens of milliseconds
+// behind the hand. Past the newest input the path goes on at the device's
 // latest velocity for kMaxExtrapolation, then slows to a stop with that
 // time constant: a silent device's path stands at most its speed times
 // twice kMaxExtrapolation past where it said it was.
@@ -36,11 +42,13 @@ class DevicePath {
   static constexpr double kMaxDelay = 0.003;          // the playout delay at most [s]
   static constexpr double kMaxExtrapolation = 0.01;   // past the newest input, at its velocity [s]
   static constexpr double kPause = 0.1;               // inputs this far apart start a new path [s]
-  // How fast the playout's lead may change [s/s]: fast enough to follow a
-  // loaded host's lateness, slow enough that a coupled proxy's damper barely
-  // feels the playout's change of speed (bridge_bench.py loop --loaded;
-  // docs/perf.md).
-  static constexpr double kLeadSlew = 0.05;
+  // How fast the playout's lead may change [s/s]: a loop at half the
+  // device's pace at the most (the playout then runs at 1.5 times the loop's).
+  static constexpr double kLeadSlew = 0.5;
+  // How fast that rate may change [1/s]: a path at 0.5 m/s then accelerates
+  // by 1 m/s^2 at most, which a 10 g proxy follows with 0.01 N. Guarded by
+  // bridge_bench.py loop --cases free,default --loaded (docs/perf.md).
+  static constexpr double kLeadAccel = 2.0;
 
   // An input taken at device time `device_s` [s], applied at loop time `t` [s].
   // Returns true when it starts a new path (the first, after a pause, or
@@ -57,14 +65,20 @@ class DevicePath {
     Pose pose;
   };
   const Sample& sample(size_t back) const { return ring_[(count_ - 1 - back) % ring_.size()]; }
-  std::array<Sample, 16> ring_{};
+  std::array<Sample, 32> ring_{};
   size_t count_ = 0;
-  // The playout's lead (loop time minus the device time played out) at loop
-  // time t: from the anchor toward offset_ + jitter_ at kLeadSlew at most.
-  double lead(double t) const;
+  // The playout's lead (loop time minus the device time played out) [s] and
+  // its rate [s/s] at loop time t: from the anchor toward offset_ + jitter_,
+  // arriving at rest, at the fastest the limits kLeadSlew and kLeadAccel allow.
+  struct Lead {
+    double lead, rate;
+  };
+  Lead lead(double t) const;
   double offset_ = 0;  // loop time minus device time, the smallest lately [s]
   double jitter_ = 0;  // how much later than that inputs come [s]
-  double anchor_t_ = 0, anchor_lead_ = 0;  // the lead at the latest input [s]
+  double anchor_t_ = 0, anchor_lead_ = 0, anchor_rate_ = 0;  // the lead at the latest input [s], [s/s]
+  double target_rate_ = 0;                 // the target's drift, smoothed [s/s]
+  double drift_t_ = 0, drift_target_ = 0;  // the target when the drift was last taken [s]
 };
 
 }  // namespace tactile

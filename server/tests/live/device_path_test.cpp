@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "live/device_path.hpp"
 
@@ -15,12 +16,13 @@ Pose at_x(double x) {
 }
 
 // A device moving at 0.5 m/s whose 1 kHz inputs arrive 0-2 ms late: the path moves on at the device's speed
-// within the lead's slew, 5 % (it never stalls, steps back or jumps ahead, also when an input comes later than any before), and
-// lags the device by the delay at most.
+// within the lead's slew (it never stalls, steps back or jumps ahead, also when an input comes later than any
+// before), its speed changing by the lead's acceleration at most (never at once: a coupled proxy's damper would pass
+// the step to the hand), and lags the device by the delay at most.
 TEST(DevicePath, LateInputsNeitherStallNorJumpThePath) {
   DevicePath path;
   const double v = 0.5;
-  double newest_applied = -1, prev_x = -1;
+  double newest_applied = -1, prev_x = -1, prev_step = -1, fastest_change = 0;
   bool started = false;
   uint64_t seed = 7;
   const auto late = [&] {  // 0-2 ms, pseudo-random
@@ -47,12 +49,48 @@ TEST(DevicePath, LateInputsNeitherStallNorJumpThePath) {
       const double slew = DevicePath::kLeadSlew * 1.0001;
       EXPECT_GE(x - prev_x, v * 1e-4 * (1 - slew)) << "the path slowed or went back at t = " << t;
       EXPECT_LE(x - prev_x, v * 1e-4 * (1 + slew)) << "the path jumped at t = " << t;
+      if (prev_step >= 0) {
+        fastest_change = std::max(fastest_change, std::fabs((x - prev_x) - prev_step));
+        EXPECT_LE(std::fabs((x - prev_x) - prev_step), v * DevicePath::kLeadAccel * 1e-8 * 1.01 + 1e-15)
+            << "the path's speed changed at once at t = " << t;
+      }
+      prev_step = x - prev_x;
     }
     EXPECT_GT(x, v * (t - DevicePath::kMaxDelay - 2e-3)) << "the path lags at t = " << t;
     EXPECT_LE(path.delay(), DevicePath::kMaxDelay);
     prev_x = x;
   }
   EXPECT_GT(newest_applied, 0.29);
+  EXPECT_GT(fastest_change, 0.0) << "the lead never moved: the test shows nothing";
+}
+
+// A loaded host: the loop runs at 0.75 of the device's pace (its 1 kHz inputs applied every 0.75 ms of the
+// loop's time) for 2 s. The path follows the device's own motion, played at 1/0.75 of the loop's pace, and once the
+// lead has found the drift it stays within the playout delay (and 2.5 ms) of the newest input, its speed
+// changing smoothly: a lead that trailed its drifting target would leave the proxy tens of milliseconds behind the
+// hand, stepping along the oldest inputs it kept.
+TEST(DevicePath, ALoopRunningBehindTheDevicesClockPlaysItsPathAtTheDevicesPace) {
+  DevicePath path;
+  const double v = 0.1, pace = 0.75;
+  double worst_behind = 0, prev_x = -1, prev_step = -1;
+  int k = 1;
+  for (double t = 0.0; t < 2.0; t += 1e-4) {
+    while (pace * 1e-3 * k <= t) {
+      path.add(1e-3 * k, at_x(v * 1e-3 * k), t);
+      ++k;
+    }
+    const double x = path.at(t).position.x, newest = v * 1e-3 * (k - 1);
+    if (t > 0.5) {
+      worst_behind = std::max(worst_behind, (newest - x) / v);
+      EXPECT_LE(std::fabs((x - prev_x) - prev_step), v / pace * DevicePath::kLeadAccel * 1e-8 * 1.01 + 1e-15)
+          << "the path's speed changed at once at t = " << t;
+    }
+    if (prev_x >= 0) prev_step = x - prev_x;
+    prev_x = x;
+  }
+  std::printf("  the path trails the newest input by %.2f ms at most\n", 1e3 * worst_behind);
+  EXPECT_LT(worst_behind, DevicePath::kMaxDelay + 2.5e-3);
+  EXPECT_GT(k, 2600) << "the device's inputs should have run on";
 }
 
 // The loop's time stands still for 50 ms while the device runs on: its next input starts a new path (which the
@@ -76,12 +114,13 @@ TEST(DevicePath, AStallStartsANewPathAndASilentDeviceComesToRestNearWhereItSaidI
 }
 
 // A device moving at 0.5 m/s whose inputs stop for 8 ms (a loaded host) and then come all at once: its path
-// goes on at its speed through the gap and after, within the lead's slew (a coupled proxy's damper answers a change of
-// the path's velocity, 0.5 m/s in one step, with some 3 N).
+// goes on at its speed through the gap and after, within the lead's slew, its speed changing smoothly as the lead makes
+// room for the lateness seen (a coupled proxy's damper answers a change of the path's velocity, 0.5 m/s in one step,
+// with some 3 N).
 TEST(DevicePath, AGapInTheInputsLeavesTheSpeedAsItWas) {
   DevicePath path;
   const double v = 0.5;
-  double prev = -1;
+  double prev = -1, prev_step = -1;
   int k = 1;
   for (double t = 0.0; t < 0.2; t += 1e-4) {
     // Input k (device time k ms) arrives at k ms, except those of 100..108 ms, which arrive at 108.5 ms.
@@ -95,6 +134,11 @@ TEST(DevicePath, AGapInTheInputsLeavesTheSpeedAsItWas) {
       const double slew = DevicePath::kLeadSlew * 1.0001;  // (the lead makes room for the lateness seen)
       EXPECT_GE(x - prev, v * 1e-4 * (1 - slew)) << "slowed at t = " << t;
       EXPECT_LE(x - prev, v * 1e-4 * (1 + slew)) << "sped up at t = " << t;
+      if (prev_step >= 0) {
+        EXPECT_LE(std::fabs((x - prev) - prev_step), v * (1 + slew) * DevicePath::kLeadAccel * 1e-8 * 1.01 + 1e-15)
+            << "the path's speed changed at once at t = " << t;
+      }
+      prev_step = x - prev;
     }
     prev = x;
   }
