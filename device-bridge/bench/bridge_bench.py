@@ -311,6 +311,7 @@ period_s = {period}
 stroke_m = {stroke}
 twist_deg = {twist}
 start_s = {start}
+tap_m = {tap}
 """
 LOOP_LIMIT_N = 6.0
 LOOP_STIFFNESS = 2000.0
@@ -350,6 +351,11 @@ LOOP_CASES: dict[str, dict[str, Any]] = {
                "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="stroke", depth=0.02, period=3.0, stroke=0.02, twist=0.0)},
     "twist": {"holds": True, "scene": lambda: shipped("hand_twist"), "channel": "glove", "poke": False,
               "arm": dict(ox=0.8, oy=0.564, oz=0.0, script="twist", depth=0.025, period=4.0, stroke=0.0, twist=-25.0)},
+    # The stiff block held pressed while the hand steps 2 mm further in and back (the sim arm's "tap"): the
+    # latency from the hand's own motion to force.
+    "tap": {"holds": False, "scene": lambda: block_scene(1e6), "channel": "stylus", "poke": False, "tap": True,
+            "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="tap", depth=0.02, period=3.0, stroke=0.0, twist=0.0,
+                        tap=0.002)},
     # Free space: strokes of 10 cm at 0.5 m/s at their fastest, 20 cm above the block.
     "free": {"scene": lambda: block_scene(30e3), "channel": "stylus", "poke": False, "holds": False,
              "arm": dict(ox=-0.05, oy=0.25, oz=0.0, script="stroke", depth=0.0, period=1.2, stroke=0.1, twist=0.0)},
@@ -463,7 +469,29 @@ def analyse(trace: pathlib.Path, case: dict[str, Any], period: float, start: flo
     fast = live & (speed > 0.45) & (speed < 0.55)
     r["drag_N"] = float(np.median(np.linalg.norm(f[fast], axis=1))) if fast.any() else float("nan")
     r["drag_max_N"] = float(np.linalg.norm(f[fast], axis=1).max()) if fast.any() else float("nan")
+    r["motion_lag_ms"] = motion_lag(t, pos[:, 1], f[:, 1], period, live) if case.get("tap") else float("nan")
     return r
+
+
+def motion_lag(t: np.ndarray, y: np.ndarray, fy: np.ndarray, period: float, live: np.ndarray) -> float:
+    """The latency from the hand's own motion to force [ms]: at each step in of the tap script (0.4 of a cycle,
+    from a steady hold; the step out at 0.6 starts from wherever the step in left a direct loop ringing), the
+    ticks from the device's first motion (20 um from where it stood) to the force's first answer (a change of
+    0.1 N, or three times the force's own tick-to-tick noise over the 20 ms before, where that is more); the
+    median over the steps, times the tick."""
+    tick = float(np.median(np.diff(t)))
+    lags = []
+    for c in range(1, int(t[-1] // period) + 1):
+        n0 = int(np.searchsorted(t, (c + 0.4) * period))
+        before, after = n0 - round(0.020 / tick), n0 + round(0.030 / tick)
+        if before < 1 or after >= len(t) or not live[before:after].all():
+            continue
+        moved = np.nonzero(np.abs(y[n0 - 1:after] - y[n0 - 1]) >= 20e-6)[0]
+        noise = 3 * float(np.std(np.diff(fy[before:n0])))
+        answered = np.nonzero(np.abs(fy[n0 - 1:after] - fy[n0 - 1]) >= max(0.1, noise))[0]
+        if len(moved) and len(answered):
+            lags.append(max(0, int(answered[0]) - int(moved[0])))
+    return float(np.median(lags) * tick * 1e3) if lags else float("nan")
 
 
 def loop(args: argparse.Namespace) -> None:
@@ -478,12 +506,12 @@ def loop(args: argparse.Namespace) -> None:
           "  in contact during holds [%]; work/cycle: the most work the device did on the hand over one cycle (passive\n"
           "  <= 0) [mJ]; pc: passivity controller's active ticks and what it dissipated [mJ]; K felt / K due: dF/dx while\n"
           "  pressing in, and the body's (headless static probe) in series with the coupling's [N/m]; drag: force at\n"
-          "  0.45-0.55 m/s in free space, median and max [N]; delay: display delay, what a change of the body takes to\n"
-          "  reach the hand [ms] (the hand's own motion is answered at the tick it is read, coupled; a display delay\n"
-          "  later, direct)")
+          "  0.45-0.55 m/s in free space, median and max [N]; motion: the latency from the hand's own motion to force,\n"
+          "  from the device's first motion at each of the tap's steps to the force's first answer [ms]; delay:\n"
+          "  display delay, what a change of the body takes to reach the hand [ms]")
     print(f"{'case':>8} {'mode':>8} {'states':>7} {'server':>7} {'cmd':>6} {'clips':>5} {'ripple':>7} {'hold':>6} "
           f"{'contact':>8} {'work/cyc':>9} {'pc':>6} {'pc mJ':>7} {'K felt':>7} {'K due':>7} {'drag':>6} {'max':>6} "
-          f"{'delay':>6} {'faults':>6}")
+          f"{'motion':>6} {'delay':>6} {'faults':>6}")
     rows = []
     modes = args.modes.split(",")
     runs = [(c, m, r, False) for c in cases for m in modes for r in rates]
@@ -503,7 +531,7 @@ def loop(args: argparse.Namespace) -> None:
             rec = tmp / "run.mcap"
             with server(tmp, scene, "--haptic-rate", str(rate), "--record", str(rec)) as port:
                 profile = tmp / "loop.toml"
-                profile.write_text(LOOP_PROFILE.format(channel=case["channel"], **{"start": 0.0, **arm}))
+                profile.write_text(LOOP_PROFILE.format(channel=case["channel"], **{"start": 0.0, "tap": 0.0, **arm}))
                 summary, trace = tmp / "summary.json", tmp / "trace.csv"
                 r = subprocess.run([str(BRIDGE), "--profile", str(profile), "--server", f"ws://127.0.0.1:{port}/",
                                     "--token", TOKEN, "--seconds", str(args.seconds), "--status", "0", "--mode", mode,
@@ -532,7 +560,7 @@ def loop(args: argparse.Namespace) -> None:
         print(f"{case_name:>8} {label:>8} {1e3 / rate:>5.2f}ms {peak:>7.2f} {a['peak_cmd']:>6.2f} {clips:>5d} "
               f"{a['ripple_pct']:>6.2f}% {a['hold_N']:>6.2f} {a['contact_pct']:>7.2f}% {a['cycle_work_mJ']:>9.2f} "
               f"{a['pc_ticks']:>6.0f} {a['pc_mJ']:>7.2f} {a['k_felt']:>7.0f} {k_due:>7.0f} {a['drag_N']:>6.3f} {a['drag_max_N']:>6.3f} "
-              f"{s['delay_ms']:>6.2f} {faults:>6d}", flush=True)
+              f"{a['motion_lag_ms']:>6.1f} {s['delay_ms']:>6.2f} {faults:>6d}", flush=True)
     if args.json:
         pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
 

@@ -27,7 +27,7 @@ from typing import Any
 
 from . import Device, DeviceSample
 
-SCRIPTS = ("poke", "stroke", "pinch", "twist", "hold")
+SCRIPTS = ("poke", "stroke", "pinch", "twist", "tap", "hold")
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,7 @@ class SimConfig:
     stroke_m: float = 0.03                                     # stroke: slide length [m]
     stroke_direction: tuple[float, float, float] = (1.0, 0.0, 0.0)
     twist_deg: float = 30.0                                    # twist: turn angle [deg]
+    tap_m: float = 0.0005                                      # tap: the step pressed in mid-hold [m]
     repeat: bool = True                                        # cycle the script; else hold its end
     start_s: float = 0.0                                       # the hand waits at home this long first [s]
     mass_kg: float = 0.3                                       # end effector plus the hand's mass
@@ -72,6 +73,7 @@ def parse_config(table: dict[str, Any], where: str, fields: Any) -> SimConfig:
         stroke_direction=_unit(f.vector("stroke_direction", d.stroke_direction, 3), "stroke_direction", where,
                                ProfileError),
         twist_deg=f.number("twist_deg", d.twist_deg, low=-180.0, high=180.0),
+        tap_m=f.number("tap_m", d.tap_m, low=0.0, high=0.1),
         repeat=bool(table.get("repeat", d.repeat)),
         start_s=f.number("start_s", d.start_s, low=0.0, high=3600.0),
         mass_kg=f.number("mass_kg", d.mass_kg, low=0.0, low_open=True),
@@ -117,7 +119,9 @@ class SimArm(Device):
         press = 0.0   # fraction of depth
         slide = 0.0   # stroke: fraction of stroke_m
         turn = 0.0    # twist: fraction of twist_deg
-        # Phases: 0-0.25 press in, 0.25-0.75 hold (stroke / twist act here), 0.75-1 withdraw.
+        tap = 0.0     # tap: further in [m]
+        # Phases: 0-0.25 press in, 0.25-0.75 hold (stroke / twist act here; tap steps tap_m further in at
+        # once from 0.4 to 0.6, a sharp motion whose answer in force shows the loop's latency), 0.75-1 withdraw.
         if u < 0.25:
             press = _ease(u / 0.25)
         elif u < 0.75:
@@ -128,10 +132,13 @@ class SimArm(Device):
                 slide = phase
             elif c.script == "twist":
                 turn = phase
+            elif c.script == "tap" and 0.4 <= u < 0.6:
+                tap = c.tap_m
         else:
             press = _ease((1.0 - u) / 0.25)
         for i in range(3):
-            pos[i] = c.home_m[i] + c.direction[i] * c.depth_m * press + c.stroke_direction[i] * c.stroke_m * slide
+            pos[i] = (c.home_m[i] + c.direction[i] * (c.depth_m * press + tap)
+                      + c.stroke_direction[i] * c.stroke_m * slide)
         half = math.radians(c.twist_deg) * turn / 2.0
         s = math.sin(half)
         quat[0], quat[1], quat[2], quat[3] = math.cos(half), c.direction[0] * s, c.direction[1] * s, c.direction[2] * s
