@@ -465,7 +465,8 @@ def analyse(trace: pathlib.Path, case: dict[str, Any], period: float, start: flo
     r["k_felt"] = float(-np.polyfit(pos[band, 1], f[band, 1], 1)[0]) if case["poke"] and band.sum() > 20 \
         else float("nan")
     # Drag in free space at 0.5 m/s (the free case): the force while the device moves at 0.45-0.55 m/s.
-    speed = np.linalg.norm(np.gradient(pos, t, axis=0), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):  # (two ticks stamped alike give a NaN, not counted)
+        speed = np.linalg.norm(np.gradient(pos, t, axis=0), axis=1)
     fast = live & (speed > 0.45) & (speed < 0.55)
     r["drag_N"] = float(np.median(np.linalg.norm(f[fast], axis=1))) if fast.any() else float("nan")
     r["drag_max_N"] = float(np.linalg.norm(f[fast], axis=1).max()) if fast.any() else float("nan")
