@@ -8,6 +8,7 @@ std::string_view to_string(MaterialModel m) {
     case MaterialModel::StVK: return "stvk";
     case MaterialModel::Corotational: return "corotational";
     case MaterialModel::NeoHookean: return "neohookean";
+    case MaterialModel::InvertibleStVK: return "invertible_stvk";
   }
   return "?";
 }

@@ -22,19 +22,26 @@
 namespace tactile {
 
 enum class MaterialModel : uint8_t {
-  Linear,        // small strain, eqs. (2)-(3): the paper's baseline; distorts under rotation
-  StVK,          // St. Venant-Kirchhoff on Green strain, eqs. (5)-(6): the paper's model
-  Corotational,  // linear stress in the rotated frame of the polar decomposition
-  NeoHookean,    // stable Neo-Hookean, Smith, de Goes and Kim 2018
+  Linear,          // small strain, eqs. (2)-(3): the paper's baseline; distorts under rotation
+  StVK,            // St. Venant-Kirchhoff on Green strain, eqs. (5)-(6): the paper's model
+  Corotational,    // linear stress in the rotated frame of the polar decomposition
+  NeoHookean,      // stable Neo-Hookean, Smith, de Goes and Kim 2018
+  InvertibleStVK,  // StVK with its singular values held at a floor (Irving, Teran and Fedkiw 2004)
 };
-inline constexpr int kMaterialModelCount = 4;
+inline constexpr int kMaterialModelCount = 5;
 
+// "linear", "stvk", "corotational", "neohookean", "invertible_stvk".
 std::string_view to_string(MaterialModel m);
-// Parses "linear", "stvk", "corotational", "neohookean"; false if unknown.
+// Parses the names of to_string; false if unknown.
 bool parse_material_model(std::string_view s, MaterialModel* out);
+// The model a scene's {"model": m, "invertible": true} asks for: StVK's
+// invertible variant; the other models already take inversion.
+constexpr MaterialModel make_invertible(MaterialModel m) {
+  return m == MaterialModel::StVK ? MaterialModel::InvertibleStVK : m;
+}
 
 // Whether an element of this model may pass through an inverted state
-// (det F <= 0) and recover. StVK cannot: past ~42 % compression its
+// (det F <= 0) and recover. Plain StVK cannot: past ~42 % compression its
 // resistance falls to zero and inverted elements stay inverted.
 constexpr bool can_invert(MaterialModel m) { return m != MaterialModel::StVK; }
 
@@ -246,13 +253,17 @@ TACTILE_INLINE void apply_givens_qr(T (&B)[3][3], T (&U)[3][3]) {
   }
 }
 
+// The signed SVD F = U diag(sigma) V^T: U and V proper rotations, sigma_0 >=
+// sigma_1 >= |sigma_2|, and sigma_2 with the sign of det F (Irving et al.'s
+// flip). U[i][j], V[i][j] are row i, column j.
 template <class T>
-TACTILE_INLINE void rotation_of(const T* F, T* R) {
-  // A = F / |F|: R does not change, and every threshold below is relative.
+TACTILE_INLINE void svd_of(const T* F, T (&U)[3][3], T* sigma, T (&V)[3][3]) {
+  // A = F / |F|: U and V do not change, and every threshold below is relative.
   T f2 = 0;
   #pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) f2 += F[k] * F[k];
-  const T scale = T(1) / std::sqrt(f2 > kRotationTiny<T> ? f2 : kRotationTiny<T>);
+  const T norm2 = f2 > kRotationTiny<T> ? f2 : kRotationTiny<T>;
+  const T scale = T(1) / std::sqrt(norm2);
   T A[3][3];
   #pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
@@ -264,7 +275,10 @@ TACTILE_INLINE void rotation_of(const T* F, T* R) {
   for (int i = 0; i < 3; ++i)
     #pragma GCC unroll 16
     for (int j = 0; j < 3; ++j) S[i][j] = A[0][i] * A[0][j] + A[1][i] * A[1][j] + A[2][i] * A[2][j];
-  T V[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  #pragma GCC unroll 16
+  for (int i = 0; i < 3; ++i)
+    #pragma GCC unroll 16
+    for (int j = 0; j < 3; ++j) V[i][j] = i == j ? T(1) : T(0);
   #pragma GCC unroll 16
   for (int sweep = 0; sweep < kJacobiSweeps<T>; ++sweep) {
     apply_jacobi_rotation<0, 1, 2>(S, V);
@@ -285,10 +299,22 @@ TACTILE_INLINE void rotation_of(const T* F, T* R) {
   sort_singular_pair<1, 2>(B, V, rho);
   // B = U Sigma' by Givens QR: Sigma'_00, Sigma'_11 >= 0 and Sigma'_22 has the
   // sign of det F, which is the Irving et al. flip.
-  T U[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  #pragma GCC unroll 16
+  for (int i = 0; i < 3; ++i)
+    #pragma GCC unroll 16
+    for (int j = 0; j < 3; ++j) U[i][j] = i == j ? T(1) : T(0);
   apply_givens_qr<0, 1, 0>(B, U);
   apply_givens_qr<0, 2, 0>(B, U);
   apply_givens_qr<1, 2, 1>(B, U);
+  const T norm = norm2 * scale;  // |F|
+  #pragma GCC unroll 3
+  for (int j = 0; j < 3; ++j) sigma[j] = B[j][j] * norm;
+}
+
+template <class T>
+TACTILE_INLINE void rotation_of(const T* F, T* R) {
+  T U[3][3], V[3][3], sigma[3];
+  svd_of(F, U, sigma, V);
   #pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
     #pragma GCC unroll 16
@@ -312,6 +338,66 @@ TACTILE_INLINE T stress_corotational(const T* F, T lambda, T mu, T* P) {
   #pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) P[k] = T(2) * mu * (F[k] - R[k]) + lambda * tr * R[k];
   return mu * dd + T(0.5) * lambda * tr * tr;
+}
+
+// ---- invertible St. Venant-Kirchhoff ------------------------------------------
+// StVK on the signed singular values sigma of F (Irving, Teran and Fedkiw
+// 2004), each held at a floor c, with the energy extended past it so that the
+// stress stays the energy's derivative (as Stomakhin et al. 2012 ask) and
+// restores an element through inversion:
+//   psi~(sigma) = psi(sigma^) + sum_i [g_i(sigma^) d_i + k/2 d_i^2],
+// sigma^ = max(sigma, c), d = sigma - sigma^ (<= 0), g_i = d psi / d sigma_i,
+// k = lambda + 2 mu (StVK's stiffness at rest along one axis). Where no
+// sigma_i is under c this is StVK itself. Past the floor the resistance to
+// compression grows at the rest stiffness instead of falling to zero, and an
+// inverted element (sigma_2 < 0) is pushed back. c = 1/sqrt(3): where StVK's
+// resistance to uniaxial compression peaks, so the extension never weakens.
+// With E_i = (sigma^_i^2 - 1)/2, psi(sigma^) = mu sum E_i^2 + lambda/2 (sum E_i)^2
+// and g_i = sigma^_i (2 mu E_i + lambda sum E_j). The principal stress is
+// d psi~ / d sigma_i: g_i + k d_i for a held sigma_i (sigma^_i stands at c);
+// for a free one, g_i plus what the held ones' g_j d_j give it through
+// d g_j / d sigma_i = lambda sigma^_j sigma_i. P = U diag(those) V^T.
+inline constexpr double kInversionFloor = 0.5773502691896257645091487805019574557;
+
+// Whether F may have a singular value under the floor: sigma_min >= 2 det F /
+// |F|^2 (as sigma_0 sigma_1 <= |F|^2 / 2), so false guarantees none is; the
+// kernels take the SVD only where this says true.
+template <class T>
+TACTILE_INLINE bool may_reach_floor(const T* F) {
+  T f2 = 0;
+  #pragma GCC unroll 16
+  for (int k = 0; k < 9; ++k) f2 += F[k] * F[k];
+  return T(2) * det(F) < T(kInversionFloor) * f2;
+}
+
+template <class T>
+TACTILE_INLINE T stress_invertible_stvk(const T* F, T lambda, T mu, T* P) {
+  T U[3][3], V[3][3], s[3];
+  svd_of(F, U, s, V);
+  const T c = T(kInversionFloor), k = lambda + T(2) * mu;
+  T sh[3], d[3], E[3];
+  #pragma GCC unroll 3
+  for (int i = 0; i < 3; ++i) {
+    sh[i] = s[i] > c ? s[i] : c;
+    d[i] = s[i] - sh[i];
+    E[i] = T(0.5) * (sh[i] * sh[i] - T(1));
+  }
+  const T tr = E[0] + E[1] + E[2];
+  const T q = sh[0] * d[0] + sh[1] * d[1] + sh[2] * d[2];  // sum_j sigma^_j d_j, over the held ones
+  T Ph[3], psi = mu * (E[0] * E[0] + E[1] * E[1] + E[2] * E[2]) + T(0.5) * lambda * tr * tr;
+  #pragma GCC unroll 3
+  for (int i = 0; i < 3; ++i) {
+    const T g = sh[i] * (T(2) * mu * E[i] + lambda * tr);
+    const bool held = d[i] < T(0);
+    Ph[i] = held ? g + k * d[i] : g + lambda * sh[i] * q;
+    psi += g * d[i] + T(0.5) * k * d[i] * d[i];
+  }
+  #pragma GCC unroll 16
+  for (int i = 0; i < 3; ++i)
+    #pragma GCC unroll 16
+    for (int j = 0; j < 3; ++j)
+      P[3 * i + j] = U[i][0] * Ph[0] * V[j][0] + U[i][1] * Ph[1] * V[j][1] + U[i][2] * Ph[2] * V[j][2];
+  return psi;
 }
 
 // ---- natural log, branch-free -------------------------------------------------
@@ -413,6 +499,7 @@ TACTILE_INLINE T stress(const T* F, T lambda, T mu, T* P) {
   if constexpr (M == MaterialModel::StVK) return stress_stvk(F, lambda, mu, P);
   if constexpr (M == MaterialModel::Corotational) return stress_corotational(F, lambda, mu, P);
   if constexpr (M == MaterialModel::NeoHookean) return stress_neohookean(F, lambda, mu, P);
+  if constexpr (M == MaterialModel::InvertibleStVK) return stress_invertible_stvk(F, lambda, mu, P);
 }
 
 // Run-time dispatch for tests and tools (not for hot loops).
@@ -423,6 +510,7 @@ TACTILE_INLINE T stress(MaterialModel m, const T* F, T lambda, T mu, T* P) {
     case MaterialModel::StVK: return stress<MaterialModel::StVK>(F, lambda, mu, P);
     case MaterialModel::Corotational: return stress<MaterialModel::Corotational>(F, lambda, mu, P);
     case MaterialModel::NeoHookean: return stress<MaterialModel::NeoHookean>(F, lambda, mu, P);
+    case MaterialModel::InvertibleStVK: return stress<MaterialModel::InvertibleStVK>(F, lambda, mu, P);
   }
   return T(0);
 }
@@ -442,7 +530,9 @@ TACTILE_INLINE T stiffening(MaterialModel m, const T* F) {
     const T row = std::fabs(C[3 * i]) + std::fabs(C[3 * i + 1]) + std::fabs(C[3 * i + 2]);
     s2 = row > s2 ? row : s2;
   }
-  const T k = m == MaterialModel::StVK ? (T(3) * s2 - T(1)) / T(2) : s2;
+  // (Invertible StVK stiffens as StVK along a stretch; past its floor it
+  // resists compression at the rest stiffness.)
+  const T k = m == MaterialModel::StVK || m == MaterialModel::InvertibleStVK ? (T(3) * s2 - T(1)) / T(2) : s2;
   return k > T(1) ? k : T(1);
 }
 

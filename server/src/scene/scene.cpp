@@ -44,11 +44,16 @@ struct Context {
 };
 
 MaterialSpec read_material(const Json& j, const std::string& path, const Origin& o) {
-  const Fields f(j, path, o, {"model", "E", "nu", "rho"});
+  const Fields f(j, path, o, {"model", "invertible", "E", "nu", "rho"});
   MaterialSpec m;
   const std::string model =
       scene_json::read_choice(f.at("model"), f.path("model"), o, {"linear", "stvk", "corotational", "neohookean"});
   parse_material_model(model, &m.model);
+  if (const Json* inv = f.find("invertible")) {
+    if (!inv->is_boolean()) o.fail(f.path("invertible"), "must be true or false, got " + scene_json::describe(*inv));
+    // (Linear, corotational and Neo-Hookean take inversion as they are.)
+    if (inv->get<bool>()) m.model = make_invertible(m.model);
+  }
   m.E = f.positive("E");
   m.nu = f.number("nu");
   if (!(m.nu > -1.0 && m.nu < 0.5))

@@ -24,7 +24,7 @@ namespace tactile {
 namespace {
 
 constexpr MaterialModel kModels[] = {MaterialModel::Linear, MaterialModel::StVK, MaterialModel::Corotational,
-                                     MaterialModel::NeoHookean};
+                                     MaterialModel::NeoHookean, MaterialModel::InvertibleStVK};
 constexpr const char* kIsas[] = {"baseline", "v3", "v4"};
 
 // A 3 x 2 x 1 grid of jittered cells, 6 tets each: 36 tets, so that blocks of
@@ -175,6 +175,52 @@ void check_forces_against_reference() {
 
 TEST(Kernels, ForcesAndEnergyEqualScalarReferenceFloat) { check_forces_against_reference<float>(); }
 TEST(Kernels, ForcesAndEnergyEqualScalarReferenceDouble) { check_forces_against_reference<double>(); }
+
+// Invertible StVK's kernel takes the SVD only in blocks with a lane near the
+// floor, and only for those lanes: crushed and inverted elements among
+// mildly strained ones (blocks of both kinds, and blocks that mix them) give
+// the forces and energy of the scalar function on every element.
+template <class Real>
+void check_invertible_mixed_blocks() {
+  const ModelSpec spec = make_random_spec(MaterialModel::InvertibleStVK, 11);
+  const Model<Real> m = build_model<Real>(spec);
+  for (double amplitude : {0.02, 0.03, 0.05}) {
+    const std::vector<double> u = make_random_u(m.n_nodes, amplitude, 7);
+    int near = 0, inverted = 0;
+    for (const Tet& t : spec.mesh.tets) {  // how many elements the SVD path serves
+      Vec3 X[4], x[4];
+      for (int c = 0; c < 4; ++c) {
+        const size_t n = size_t(t[size_t(c)]);
+        X[c] = spec.mesh.X[n];
+        x[c] = X[c] + Vec3(u[3 * n], u[3 * n + 1], u[3 * n + 2]);
+      }
+      const glm::dmat3 Fg = glm::dmat3(x[1] - x[0], x[2] - x[0], x[3] - x[0]) *
+                            glm::inverse(glm::dmat3(X[1] - X[0], X[2] - X[0], X[3] - X[0]));
+      double F[9];
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) F[3 * i + j] = Fg[j][i];
+      near += material::may_reach_floor(F);
+      inverted += material::det(F) <= 0;
+    }
+    const Forces ref = compute_reference(spec, u);
+    for (const char* isa : kIsas) {
+      const KernelTable<Real>* k = kernels_for<Real>(isa);
+      if (!k) continue;
+      const Forces got = compute_kernel(*k, m, u);
+      EXPECT_LE(max_abs_diff(got.f, ref.f), kRoundOff<Real> * max_abs(ref.f))
+          << "amplitude " << amplitude << " " << isa << ": " << near << " of " << spec.mesh.tets.size()
+          << " elements near the floor, " << inverted << " inverted";
+      EXPECT_NEAR(got.energy, ref.energy, kRoundOff<Real> * std::fabs(ref.energy)) << "amplitude " << amplitude;
+    }
+    if (amplitude == 0.05) {
+      EXPECT_GT(inverted, 0) << "the test should invert some elements";
+      EXPECT_LT(near, int(spec.mesh.tets.size())) << "the test should leave some elements far from the floor";
+    }
+  }
+}
+
+TEST(Kernels, InvertibleStvkTakesTheSvdWhereItIsNeededFloat) { check_invertible_mixed_blocks<float>(); }
+TEST(Kernels, InvertibleStvkTakesTheSvdWhereItIsNeededDouble) { check_invertible_mixed_blocks<double>(); }
 
 template <class Real>
 void check_isas_agree() {

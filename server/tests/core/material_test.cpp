@@ -181,6 +181,63 @@ TEST(Material, StressIsTheDerivativeOfEnergy) {
   }
 }
 
+// Invertible StVK is StVK wherever no singular value is under its floor: the same
+// stress and energy to round-off, at random F with large rotations.
+TEST(Material, InvertibleStvkIsStvkAboveItsFloor) {
+  std::mt19937 rng(29);
+  int reaching = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const Mat F = make_random_F(rng, material::kInversionFloor + 0.01, 1.6, false);
+    reaching += material::may_reach_floor(F.data());
+    Mat P, P_inv;
+    const double psi = psi_of(MaterialModel::StVK, F, &P);
+    const double psi_inv = psi_of(MaterialModel::InvertibleStVK, F, &P_inv);
+    EXPECT_NEAR(psi_inv, psi, 1e-12 * kE) << "trial " << trial;
+    for (size_t k = 0; k < 9; ++k) EXPECT_NEAR(P_inv[k], P[k], 1e-10 * kE) << "trial " << trial << " k=" << k;
+  }
+  EXPECT_GT(reaching, 20) << "the kernels' test should send some of these to the SVD, for this test to cover it";
+}
+
+// Below the floor and through inversion its stress is still the derivative of its
+// energy, and the kernels' cheap test never misses an F that reaches the floor.
+TEST(Material, InvertibleStvkStressIsTheDerivativeOfItsEnergyPastTheFloor) {
+  std::mt19937 rng(31);
+  for (bool flip : {false, true}) {
+    for (int trial = 0; trial < 50; ++trial) {
+      const Mat F = make_random_F(rng, 0.1, 1.4, flip);
+      Mat P;
+      psi_of(MaterialModel::InvertibleStVK, F, &P);
+      const Mat P_fd = compute_stress_by_differences(MaterialModel::InvertibleStVK, F, 1e-6);
+      for (size_t k = 0; k < 9; ++k)
+        EXPECT_NEAR(P[k], P_fd[k], 1e-7 * kE) << (flip ? "inverted" : "") << " trial " << trial << " k=" << k;
+      if (flip) {
+        EXPECT_TRUE(material::may_reach_floor(F.data()));
+      }
+    }
+  }
+}
+
+// Past the floor, compressed along one axis, invertible StVK resists at least
+// as much as at the floor, and more the further it goes, where plain StVK's
+// resistance falls to zero at full compression and vanishes inverted.
+TEST(Material, InvertibleStvkResistsCompressionPastTheFloor) {
+  double at_floor = 0;
+  for (double s : {material::kInversionFloor, 0.4, 0.2, 0.0, -0.3}) {
+    Mat P, P_plain;
+    psi_of(MaterialModel::InvertibleStVK, diag(1, 1, s), &P);
+    psi_of(MaterialModel::StVK, diag(1, 1, s), &P_plain);
+    if (s == material::kInversionFloor) at_floor = P[8];
+    EXPECT_LT(P[8], 0.0) << s;
+    EXPECT_LE(P[8], at_floor * (1 - 1e-12)) << s;
+    if (s < material::kInversionFloor) {
+      EXPECT_LT(P[8], P_plain[8]) << s;
+    }
+  }
+  Mat P0;
+  psi_of(MaterialModel::StVK, diag(1, 1, 0.0), &P0);
+  EXPECT_EQ(P0[8], 0.0) << "plain StVK offers nothing at full compression";
+}
+
 // A check of the check: a stress that is not the derivative fails it.
 TEST(Material, DifferenceCheckDetectsAWrongStress) {
   std::mt19937 rng(5);
@@ -229,10 +286,10 @@ TEST(Material, NonlinearModelsLineariseToTheLameParameters) {
   }
 }
 
-// Corotational and Neo-Hookean push an inverted element back: at F = diag(1, 1, -s)
+// Corotational, Neo-Hookean and invertible StVK push an inverted element back: at F = diag(1, 1, -s)
 // the stress along the flipped axis opposes further flattening.
 TEST(Material, InvertibleModelsPushAnInvertedElementBack) {
-  for (MaterialModel m : {MaterialModel::Corotational, MaterialModel::NeoHookean}) {
+  for (MaterialModel m : {MaterialModel::Corotational, MaterialModel::NeoHookean, MaterialModel::InvertibleStVK}) {
     for (double s : {0.1, 0.5, 0.9}) {
       const Mat F = diag(1, 1, -s);
       Mat P;

@@ -359,7 +359,7 @@ TEST(SceneErrors, UnknownField) {
   expect_scene_error(dir, "s.json", j, {"materal: unknown field"});
   j = make_beam_scene();
   j["material"]["young"] = 1;
-  expect_scene_error(dir, "s.json", j, {"material.young: unknown field", "allowed here: model, E, nu, rho"});
+  expect_scene_error(dir, "s.json", j, {"material.young: unknown field", "allowed here: model, invertible, E, nu, rho"});
   j = make_beam_scene();
   j["boundary"][0]["select"]["box"]["size"] = 1;
   expect_scene_error(dir, "s.json", j, {"boundary[0].select.box.size: unknown field"});

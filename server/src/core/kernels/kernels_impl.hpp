@@ -344,6 +344,11 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
     alignas(64) Real P[9][W];   // V P per lane [N/m^2 m^3]: P[3i + j][lane]
     alignas(64) Real psiV[W];   // V psi per lane [J]
     alignas(64) Real J[W];      // det F per lane
+    // Invertible StVK: lanes whose F may have a singular value under the
+    // floor (1 or 0). Only a block with one takes the SVD, and only those
+    // lanes take its result: the others keep plain StVK's, which is the same
+    // function there (material.hpp).
+    [[maybe_unused]] alignas(64) Real near[W];
     load_corners(B, u, x);
     // Per-lane outputs and no OpenMP pragma: GCC's `omp simd` would keep F and
     // P in memory as per-lane arrays; its plain vectoriser does far better.
@@ -355,6 +360,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       Real Fl[9];
       deformation_gradient(B, l, x, Fl);
       if constexpr (!can_invert(M)) J[l] = material::det(Fl);
+      if constexpr (M == MaterialModel::InvertibleStVK) near[l] = material::may_reach_floor(Fl) ? Real(1) : Real(0);
       #pragma GCC unroll 16
       for (int k = 0; k < 9; ++k) F[k][l] = Fl[k];
     }
@@ -370,9 +376,30 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       // (lambda V, mu V) gives V P and V psi. (One volume a lane and the
       // group's lambda and mu, rather than lambda V and mu V a lane: 4 bytes
       // a tet less to stream, and a load fewer; fem_bench --only=passes.)
-      psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+      constexpr MaterialModel kFast = M == MaterialModel::InvertibleStVK ? MaterialModel::StVK : M;
+      psiV[l] = material::stress<kFast>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
       #pragma GCC unroll 16
       for (int k = 0; k < 9; ++k) P[k][l] = Pl[k];
+    }
+    if constexpr (M == MaterialModel::InvertibleStVK) {
+      Real any = 0;
+      #pragma GCC unroll 16
+      for (int l = 0; l < W; ++l) any += near[l];
+      if (any > Real(0)) {
+        #pragma GCC unroll 1
+        for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+        for (int l = h; l < h + kMathLanes<Real>; ++l) {
+          Real Fl[9], Pl[9];
+          #pragma GCC unroll 16
+          for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
+          const Real psi = material::stress_invertible_stvk(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+          const bool take = near[l] != Real(0);
+          psiV[l] = take ? psi : psiV[l];
+          #pragma GCC unroll 16
+          for (int k = 0; k < 9; ++k) P[k][l] = take ? Pl[k] : P[k][l];
+        }
+      }
     }
     if (!kAddsAfterF && b > begin) add_corner_forces(blocks[b - 1], fc[(b - 1) & 1], f);
     Real(*g)[W] = fc[b & 1];
@@ -752,14 +779,17 @@ constexpr KernelTable<Real> make_table() {
   t.forces[int(MaterialModel::StVK)] = &forces<Real, MaterialModel::StVK>;
   t.forces[int(MaterialModel::Corotational)] = &forces<Real, MaterialModel::Corotational>;
   t.forces[int(MaterialModel::NeoHookean)] = &forces<Real, MaterialModel::NeoHookean>;
+  t.forces[int(MaterialModel::InvertibleStVK)] = &forces<Real, MaterialModel::InvertibleStVK>;
   t.energy[int(MaterialModel::Linear)] = &energy<Real, MaterialModel::Linear>;
   t.energy[int(MaterialModel::StVK)] = &energy<Real, MaterialModel::StVK>;
   t.energy[int(MaterialModel::Corotational)] = &energy<Real, MaterialModel::Corotational>;
   t.energy[int(MaterialModel::NeoHookean)] = &energy<Real, MaterialModel::NeoHookean>;
+  t.energy[int(MaterialModel::InvertibleStVK)] = &energy<Real, MaterialModel::InvertibleStVK>;
   t.critical[int(MaterialModel::Linear)] = &critical<Real, MaterialModel::Linear>;
   t.critical[int(MaterialModel::StVK)] = &critical<Real, MaterialModel::StVK>;
   t.critical[int(MaterialModel::Corotational)] = &critical<Real, MaterialModel::Corotational>;
   t.critical[int(MaterialModel::NeoHookean)] = &critical<Real, MaterialModel::NeoHookean>;
+  t.critical[int(MaterialModel::InvertibleStVK)] = &critical<Real, MaterialModel::InvertibleStVK>;
   t.predict = &predict<Real>;
   t.pad = &pad<Real>;
   t.correct[0][0] = &correct<Real, false, false>;
