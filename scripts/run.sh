@@ -32,7 +32,7 @@ stop() {
 trap stop EXIT
 trap 'exit 130' INT TERM
 
-"$build/tactile-server" "$scene" --static client-web --token "$token" --haptic-rate 2000 --recordings recordings \
+"$build/tactile-server" "$scene" --static client-web --token "$token" --haptic-rate 2000 --recordings recordings --on-fault reset \
   "$@" > >(trap '' INT TERM; tee "$log") 2>&1 &
 server=$!
 url=""

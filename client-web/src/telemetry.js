@@ -52,6 +52,7 @@ export class TelemetryPanel {
       `step ${t.stepTimeMeanUs.toFixed(1)} us (max ${t.stepTimeMaxUs.toFixed(0)}), real-time factor ` +
       `${t.realTimeFactor.toFixed(3)}, missed ${t.missedDeadlines}${t.paused ? ', paused' : ''}\n` +
       `clients: ${t.viewers} viewers, ${t.devices} devices, ${t.controllers} controllers\n` +
+      (t.faultResets ? `reset after a fault: ${t.faultResets} time${t.faultResets === 1 ? '' : 's'}\n` : '') +
       (costs ? `cost per step (us): ${costs}\n` : '') +
       bridges +
       (fresh.length ? `input to force: median ${pick(0.5).toFixed(1)} ms, p95 ${pick(0.95).toFixed(1)} ms\n` : '') +

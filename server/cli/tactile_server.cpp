@@ -58,6 +58,8 @@ constexpr const char* kUsage =
     "  --recordings DIR     where a controller's StartRecording writes (MCAP; default: none, refused)\n"
     "  --record FILE        record the session from the start into FILE (MCAP), until stopped\n"
     "  --replay FILE        serve the recording FILE (MCAP) instead of a scene; it plays from the first client\n"
+    "  --on-fault WHAT      stop: a fault stops the simulation until a controller resets it (default);\n"
+    "                       reset: the server resets the scene itself, once its telemetry has named the fault\n"
     "\n"
     "exit status: 0 stopped, 1 a fault stopped the simulation, 2 bad input\n";
 
@@ -123,6 +125,11 @@ Options parse_args(int argc, char** argv) {
     else if (a == "--recordings") o.server.recordings_dir = value();
     else if (a == "--record") o.server.record = value();
     else if (a == "--replay") o.replay = value();
+    else if (a == "--on-fault") {
+      const std::string& w = value();
+      if (w != "stop" && w != "reset") throw BadInput{"--on-fault: stop or reset, not " + w};
+      o.server.reset_on_fault = w == "reset";
+    }
     else if (!a.empty() && a[0] == '-') throw BadInput{"unknown option " + a};
     else if (o.scene.empty()) o.scene = a;
     else throw BadInput{"one scene only (got " + o.scene + " and " + a + ")"};

@@ -168,6 +168,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   std::shared_ptr<Feed> incoming;  // handed to the director, not yet running
   std::vector<std::string> scene_names;
   bool changing = false;           // a load, reset or parameter change under way
+  uint32_t fault_resets = 0;       // resets the server made after a fault (reset_on_fault)
   uint32_t next_scene_id;
   std::thread builder;             // builds the scene a change asks for
 
@@ -243,7 +244,9 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   std::string check_recorder();  // a fault that stopped the recording, once
 
   enum class Change { Reset, Load, Parameter };
-  void change(Change kind, const wire::Control& c);
+  // A change a controller asked for (c), or the server itself (nullptr: a
+  // reset after a fault, ServerOptions::reset_on_fault).
+  void change(Change kind, const wire::Control* c);
   void built(std::shared_ptr<LiveScene> live, bool carry);
   void installed(const std::shared_ptr<LiveScene>& live);
   void send_to_controller(const Bytes& message);
@@ -698,9 +701,9 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       // A pause sent while a change is under way is carried over to the new scene.
       case wire::ControlCommand::Pause: return server_->director->current()->loop().set_paused(true);
       case wire::ControlCommand::Resume: return server_->director->current()->loop().set_paused(false);
-      case wire::ControlCommand::Reset: return server_->change(Server::Impl::Change::Reset, c);
-      case wire::ControlCommand::LoadScene: return server_->change(Server::Impl::Change::Load, c);
-      case wire::ControlCommand::SetParameter: return server_->change(Server::Impl::Change::Parameter, c);
+      case wire::ControlCommand::Reset: return server_->change(Server::Impl::Change::Reset, &c);
+      case wire::ControlCommand::LoadScene: return server_->change(Server::Impl::Change::Load, &c);
+      case wire::ControlCommand::SetParameter: return server_->change(Server::Impl::Change::Parameter, &c);
       case wire::ControlCommand::StartRecording: {
         const wire::StartRecording* r = c.command_as_StartRecording();
         if (const std::string bad = server_->start_recording(r && r->path() ? r->path()->str() : ""); !bad.empty())
@@ -1282,7 +1285,7 @@ Bytes Server::Impl::telemetry_message(const std::string& extra_fault) {
                                           uint64_t(st.missed_deadlines), &costs, viewers, devices, controllers,
                                           &faults, loop.paused(),
                                           std::filesystem::path(rec.path).filename().string().c_str(), rec.messages,
-                                          rec.bytes));
+                                          rec.bytes, fault_resets));
 }
 
 void Server::Impl::tick_telemetry() {
@@ -1293,6 +1296,15 @@ void Server::Impl::tick_telemetry() {
     for (WsSession* s : self->sessions)
       if (s->greeted()) s->send(t, WsSession::Kind::Control);
     self->record(Topic::Telemetry, t);
+    // Once a telemetry has told every client (and the recording) the
+    // fault's cause, the scene starts again from rest, as a controller's
+    // Reset would start it; the bridges re-engage through their soft start.
+    if (self->options.reset_on_fault && self->director && !self->changing && !self->director->fault().empty()) {
+      ++self->fault_resets;
+      std::fprintf(stderr, "tactile-server: resetting the scene after the fault (--on-fault reset; %u so far)\n",
+                   self->fault_resets);
+      self->change(Change::Reset, nullptr);
+    }
     self->tick_telemetry();
   });
 }
@@ -1308,8 +1320,8 @@ void Server::Impl::send_to_controller(const Bytes& message) {
   if (controller) controller->send(message, WsSession::Kind::Control);
 }
 
-void Server::Impl::change(Change kind, const wire::Control& c) {
-  const uint32_t request = c.request_id();
+void Server::Impl::change(Change kind, const wire::Control* c) {
+  const uint32_t request = c ? c->request_id() : 0;
   if (changing)
     return send_to_controller(make_error(wire::ErrorCode::Busy,
                                          "a scene change is under way: wait for its SceneDescription", request));
@@ -1318,7 +1330,7 @@ void Server::Impl::change(Change kind, const wire::Control& c) {
   bool carry = false;
   uint32_t id = next_scene_id;
   if (kind == Change::Load) {
-    const wire::LoadScene* l = c.command_as_LoadScene();
+    const wire::LoadScene* l = c ? c->command_as_LoadScene() : nullptr;
     const std::string name = l && l->path() ? l->path()->str() : "";
     if (std::find(scene_names.begin(), scene_names.end(), name) == scene_names.end()) {
       std::string known;
@@ -1330,7 +1342,7 @@ void Server::Impl::change(Change kind, const wire::Control& c) {
     }
     load_path = (std::filesystem::path(options.scenes_dir) / name).string();
   } else if (kind == Change::Parameter) {
-    const wire::SetParameter* p = c.command_as_SetParameter();
+    const wire::SetParameter* p = c ? c->command_as_SetParameter() : nullptr;
     const std::string name = p && p->name() ? p->name()->str() : "";
     try {
       apply_parameter(scene.spec, name, p ? p->value() : 0.0);

@@ -62,6 +62,7 @@ struct ServerOptions {
   std::string recordings_dir;                 // where StartRecording writes ("" refuses it)
   std::string record;                         // a recording to start with the server (any path), "" for none
   LiveOptions live;                           // how loaded and reset scenes run
+  bool reset_on_fault = false;                // a fault resets the scene (once a telemetry has named it)
 };
 
 // What the server refuses to start with (a bind off loopback without a

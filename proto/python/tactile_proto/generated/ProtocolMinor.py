@@ -3,4 +3,4 @@
 # namespace: proto
 
 class ProtocolMinor(object):
-    Current = 5
+    Current = 6

@@ -171,7 +171,14 @@ class Telemetry(object):
             return self._tab.Get(flatbuffers.number_types.Uint64Flags, o + self._tab.Pos)
         return 0
 
-def TelemetryStart(builder): builder.StartObject(16)
+    # Telemetry
+    def FaultResets(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(36))
+        if o != 0:
+            return self._tab.Get(flatbuffers.number_types.Uint32Flags, o + self._tab.Pos)
+        return 0
+
+def TelemetryStart(builder): builder.StartObject(17)
 def Start(builder):
     return TelemetryStart(builder)
 def TelemetryAddServerTimeNs(builder, serverTimeNs): builder.PrependInt64Slot(0, serverTimeNs, 0)
@@ -228,6 +235,9 @@ def AddRecordedMessages(builder, recordedMessages):
 def TelemetryAddRecordedBytes(builder, recordedBytes): builder.PrependUint64Slot(15, recordedBytes, 0)
 def AddRecordedBytes(builder, recordedBytes):
     return TelemetryAddRecordedBytes(builder, recordedBytes)
+def TelemetryAddFaultResets(builder, faultResets): builder.PrependUint32Slot(16, faultResets, 0)
+def AddFaultResets(builder, faultResets):
+    return TelemetryAddFaultResets(builder, faultResets)
 def TelemetryEnd(builder): return builder.EndObject()
 def End(builder):
     return TelemetryEnd(builder)
@@ -257,6 +267,7 @@ class TelemetryT(object):
         self.recording = None  # type: str
         self.recordedMessages = 0  # type: int
         self.recordedBytes = 0  # type: int
+        self.faultResets = 0  # type: int
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -300,6 +311,7 @@ class TelemetryT(object):
         self.recording = telemetry.Recording()
         self.recordedMessages = telemetry.RecordedMessages()
         self.recordedBytes = telemetry.RecordedBytes()
+        self.faultResets = telemetry.FaultResets()
 
     # TelemetryT
     def Pack(self, builder):
@@ -341,5 +353,6 @@ class TelemetryT(object):
             TelemetryAddRecording(builder, recording)
         TelemetryAddRecordedMessages(builder, self.recordedMessages)
         TelemetryAddRecordedBytes(builder, self.recordedBytes)
+        TelemetryAddFaultResets(builder, self.faultResets)
         telemetry = TelemetryEnd(builder)
         return telemetry

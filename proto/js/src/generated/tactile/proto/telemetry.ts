@@ -117,8 +117,13 @@ recordedBytes():bigint {
   return offset ? this.bb!.readUint64(this.bb_pos + offset) : BigInt('0');
 }
 
+faultResets():number {
+  const offset = this.bb!.__offset(this.bb_pos, 36);
+  return offset ? this.bb!.readUint32(this.bb_pos + offset) : 0;
+}
+
 static startTelemetry(builder:flatbuffers.Builder) {
-  builder.startObject(16);
+  builder.startObject(17);
 }
 
 static addServerTimeNs(builder:flatbuffers.Builder, serverTimeNs:bigint) {
@@ -209,12 +214,16 @@ static addRecordedBytes(builder:flatbuffers.Builder, recordedBytes:bigint) {
   builder.addFieldInt64(15, recordedBytes, BigInt('0'));
 }
 
+static addFaultResets(builder:flatbuffers.Builder, faultResets:number) {
+  builder.addFieldInt32(16, faultResets, 0);
+}
+
 static endTelemetry(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createTelemetry(builder:flatbuffers.Builder, serverTimeNs:bigint, step:bigint, simTime:number, stepTimeMeanUs:number, stepTimeMaxUs:number, realTimeFactor:number, missedDeadlines:bigint, effectCostsOffset:flatbuffers.Offset, viewers:number, devices:number, controllers:number, faultsOffset:flatbuffers.Offset, paused:boolean, recordingOffset:flatbuffers.Offset, recordedMessages:bigint, recordedBytes:bigint):flatbuffers.Offset {
+static createTelemetry(builder:flatbuffers.Builder, serverTimeNs:bigint, step:bigint, simTime:number, stepTimeMeanUs:number, stepTimeMaxUs:number, realTimeFactor:number, missedDeadlines:bigint, effectCostsOffset:flatbuffers.Offset, viewers:number, devices:number, controllers:number, faultsOffset:flatbuffers.Offset, paused:boolean, recordingOffset:flatbuffers.Offset, recordedMessages:bigint, recordedBytes:bigint, faultResets:number):flatbuffers.Offset {
   Telemetry.startTelemetry(builder);
   Telemetry.addServerTimeNs(builder, serverTimeNs);
   Telemetry.addStep(builder, step);
@@ -232,6 +241,7 @@ static createTelemetry(builder:flatbuffers.Builder, serverTimeNs:bigint, step:bi
   Telemetry.addRecording(builder, recordingOffset);
   Telemetry.addRecordedMessages(builder, recordedMessages);
   Telemetry.addRecordedBytes(builder, recordedBytes);
+  Telemetry.addFaultResets(builder, faultResets);
   return Telemetry.endTelemetry(builder);
 }
 
@@ -252,7 +262,8 @@ unpack(): TelemetryT {
     this.paused(),
     this.recording(),
     this.recordedMessages(),
-    this.recordedBytes()
+    this.recordedBytes(),
+    this.faultResets()
   );
 }
 
@@ -274,6 +285,7 @@ unpackTo(_o: TelemetryT): void {
   _o.recording = this.recording();
   _o.recordedMessages = this.recordedMessages();
   _o.recordedBytes = this.recordedBytes();
+  _o.faultResets = this.faultResets();
 }
 }
 
@@ -294,7 +306,8 @@ constructor(
   public paused: boolean = false,
   public recording: string|Uint8Array|null = null,
   public recordedMessages: bigint = BigInt('0'),
-  public recordedBytes: bigint = BigInt('0')
+  public recordedBytes: bigint = BigInt('0'),
+  public faultResets: number = 0
 ){}
 
 
@@ -319,7 +332,8 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     this.paused,
     recording,
     this.recordedMessages,
-    this.recordedBytes
+    this.recordedBytes,
+    this.faultResets
   );
 }
 }
