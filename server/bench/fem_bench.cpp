@@ -7,7 +7,7 @@
 //   fem_bench            all tables, meshes up to 100 k tets (a minute or two)
 //   fem_bench --large    also 1 M and 2 M tets
 //   fem_bench --quick    small meshes and few repeats, for CI (seconds)
-//   fem_bench --only=T   one table: rates, threads, passes, effects, hand, refresh, isas, precision
+//   fem_bench --only=T   one table: rates, threads, passes, effects, hand, refresh, isas, precision, invertible
 //
 // Times are wall-clock medians of repeated runs of many steps, so that other
 // processes on the machine shift them less than a mean would; rates are
@@ -30,6 +30,8 @@
 #include <vector>
 
 #include "app/thread_pool.hpp"
+#include "core/kernels/kernels.hpp"
+#include "core/material.hpp"
 #include "core/model.hpp"
 #include "core/stepper.hpp"
 #include "mesh/primitives.hpp"
@@ -696,6 +698,105 @@ std::string cpu_name() {
   return "unknown CPU";
 }
 
+// ---- invertible StVK: what its SVD costs -----------------------------------------
+
+// The step of plain and invertible StVK side by side, nothing near the floor.
+template <class Real>
+void invertible_step_rows(const Options& opt) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  for (double size : opt.quick ? std::vector<double>{2e4} : std::vector<double>{2e4, 1e5}) {
+    const TetMesh mesh = make_bench_box(size, 1, 0.1);
+    Run<Real> plain(make_spec(mesh, MaterialModel::StVK, precision), nullptr);
+    Run<Real> inv(make_spec(mesh, MaterialModel::InvertibleStVK, precision), nullptr);
+    const std::vector<double> t = time_alternating<Real>({&plain, &inv}, opt);
+    const double n = plain.model.n_tets;
+    std::printf("| %-6s | %9d | %10.1f | %10.1f | %6.2fx |\n", name_of(precision), plain.model.n_tets, n / t[0] * 1e-6,
+                n / t[1] * 1e-6, t[0] / t[1]);
+  }
+}
+
+// The element pass alone on a fixed deformation: the box's elements left of
+// a plane squashed to half their height (past the floor), the rest at rest.
+template <class Real>
+void invertible_pass_rows(const Options& opt) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  constexpr int W = kLanes<Real>;
+  const ModelSpec spec = make_spec(make_bench_box(opt.quick ? 2e4 : 1e5, 1, 0.1), MaterialModel::InvertibleStVK,
+                                   precision);
+  const Model<Real> model = build_model<Real>(spec);
+  const KernelTable<Real>& k = kernels<Real>();
+  for (double share : {0.0, 0.01, 0.1, 1.0}) {
+    const double cut = share * 0.1 * (1 + 1e-9);
+    std::vector<Node4<Real>> u(size_t(model.n_nodes)), f(size_t(model.n_nodes));
+    for (size_t i = 0; i < spec.mesh.X.size(); ++i) {
+      const Vec3& X = spec.mesh.X[i];
+      u[size_t(model.node_model[i])] = Node4<Real>{{0, Real(X.x < cut ? -0.5 * X.y : 0.0), 0, 0}};
+    }
+    // Elements and blocks the SVD serves.
+    std::vector<char> near(spec.mesh.tets.size(), 0);
+    int64_t n_near = 0, blocks_near = 0;
+    for (size_t e = 0; e < spec.mesh.tets.size(); ++e) {
+      const Tet& t = spec.mesh.tets[e];
+      Vec3 X[4], x[4];
+      for (int c = 0; c < 4; ++c) {
+        const size_t n = size_t(t[size_t(c)]);
+        X[c] = spec.mesh.X[n];
+        const Node4<Real>& d = u[size_t(model.node_model[n])];
+        x[c] = X[c] + Vec3(double(d.v[0]), double(d.v[1]), double(d.v[2]));
+      }
+      const glm::dmat3 G = glm::dmat3(x[1] - x[0], x[2] - x[0], x[3] - x[0]) *
+                           glm::inverse(glm::dmat3(X[1] - X[0], X[2] - X[0], X[3] - X[0]));
+      double F[9];
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) F[3 * a + b] = G[b][a];
+      near[e] = material::may_reach_floor(F);
+      n_near += near[e];
+    }
+    for (size_t b = 0; b * W < model.lane_tet.size(); ++b) {
+      bool any = false;
+      for (int l = 0; l < W; ++l) {
+        const int32_t e = model.lane_tet[b * W + size_t(l)];
+        any = any || (e >= 0 && near[size_t(e)]);
+      }
+      blocks_near += any;
+    }
+    const int64_t n_blocks = int64_t(model.lane_tet.size() / W);
+    auto pass = [&](MaterialModel m) {
+      for (const ElementGroup& g : model.groups)
+        k.forces[int(m)](model.blocks.data(), g.begin, g.end, Real(g.lambda), Real(g.mu), u.data(), f.data());
+    };
+    // Alternated medians, as time_alternating does for steps.
+    const int reps = opt.quick ? 5 : 11, calls = opt.quick ? 3 : 20;
+    std::vector<double> tp, ti;
+    for (int r = 0; r < reps; ++r) {
+      for (MaterialModel m : {MaterialModel::StVK, MaterialModel::InvertibleStVK}) {
+        const Clock::time_point t0 = Clock::now();
+        for (int c = 0; c < calls; ++c) pass(m);
+        (m == MaterialModel::StVK ? tp : ti).push_back(seconds_since(t0) / calls);
+      }
+    }
+    const double n = model.n_tets, sp = median(tp), si = median(ti);
+    std::printf("| %-6s | %9d | %9.1f %% | %9.1f %% | %10.1f | %10.1f | %6.2fx |\n", name_of(precision), model.n_tets,
+                100.0 * double(n_near) / n, 100.0 * double(blocks_near) / double(n_blocks), n / sp * 1e-6, n / si * 1e-6,
+                sp / si);
+  }
+}
+
+void table_invertible(const Options& opt) {
+  std::printf("\n## Invertible StVK against plain StVK, one thread (M tets/s)\n\n");
+  std::printf("The step, nothing near the floor (the swinging box):\n\n");
+  std::printf("| real   |      tets |      stvk  | invertible | ratio   |\n");
+  std::printf("|--------|-----------|------------|------------|---------|\n");
+  invertible_step_rows<float>(opt);
+  invertible_step_rows<double>(opt);
+  std::printf("\nThe element pass alone, a share of the box squashed to half its height (past the floor); near: elements\n"
+              "whose F may reach the floor, blocks: element blocks with one (the SVD runs for the whole block):\n\n");
+  std::printf("| real   |      tets |     near    |   blocks    |  stvk pass | invertible | ratio   |\n");
+  std::printf("|--------|-----------|-------------|-------------|------------|------------|---------|\n");
+  invertible_pass_rows<float>(opt);
+  invertible_pass_rows<double>(opt);
+}
+
 }  // namespace
 }  // namespace tactile
 
@@ -707,7 +808,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--large")) opt.large = true;
     else if (!std::strncmp(argv[i], "--only=", 7)) opt.only = argv[i] + 7;
     else {
-      std::fprintf(stderr, "usage: %s [--quick] [--large] [--only=rates|threads|passes|effects|hand|refresh|isas|precision]\n",
+      std::fprintf(stderr, "usage: %s [--quick] [--large] [--only=rates|threads|passes|effects|hand|refresh|isas|precision|invertible]\n",
                    argv[0]);
       return 2;
     }
@@ -722,7 +823,7 @@ int main(int argc, char** argv) {
   const std::pair<const char*, void (*)(const Options&)> tables[] = {
       {"rates", table_rates}, {"threads", table_threads}, {"passes", table_passes}, {"effects", table_effects},
       {"hand", table_hand},   {"refresh", table_refresh}, {"isas", table_isas},
-      {"precision", table_precision}};
+      {"precision", table_precision}, {"invertible", table_invertible}};
   bool any = false;
   for (const auto& [name, table] : tables) {
     if (!opt.wants(name)) continue;
