@@ -24,7 +24,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr double kPi = std::numbers::pi;
 constexpr MaterialModel kModels[] = {MaterialModel::Linear, MaterialModel::StVK, MaterialModel::Corotational,
-                                     MaterialModel::NeoHookean};
+                                     MaterialModel::NeoHookean, MaterialModel::InvertibleStVK};
 constexpr Precision kPrecisions[] = {Precision::Float, Precision::Double};
 
 const char* name_of(Precision p) { return p == Precision::Float ? "float" : "double"; }
@@ -240,7 +240,9 @@ Scene scene_at(const std::string& path, const nlohmann::json& cells, MaterialMod
   nlohmann::json j = nlohmann::json::parse(in);
   j.erase("variants");
   j["mesh"]["cells"] = cells;
-  j["material"]["model"] = std::string(to_string(m));
+  // (A scene names invertible StVK as StVK with "invertible": true.)
+  j["material"]["model"] = std::string(to_string(m == MaterialModel::InvertibleStVK ? MaterialModel::StVK : m));
+  j["material"]["invertible"] = m == MaterialModel::InvertibleStVK;
   j["integrator"]["precision"] = name_of(p);
   if (edit) edit(j);
   return parse_scene(j, path).at(0);
