@@ -359,15 +359,51 @@ TACTILE_INLINE T stress_corotational(const T* F, T lambda, T mu, T* P) {
 // d g_j / d sigma_i = lambda sigma^_j sigma_i. P = U diag(those) V^T.
 inline constexpr double kInversionFloor = 0.5773502691896257645091487805019574557;
 
-// Whether F may have a singular value under the floor: sigma_min >= 2 det F /
-// |F|^2 (as sigma_0 sigma_1 <= |F|^2 / 2), so false guarantees none is; the
-// kernels take the SVD only where this says true.
+// Whether F has a singular value under the floor, or is inverted: the
+// kernels take the SVD only where this says true. Exact, without the SVD,
+// from the invariants of C = F^T F (I1 = tr C, I2 = its principal 2 x 2
+// minors, I3 = det C = J^2): its eigenvalues lambda_1 >= lambda_2 >= lambda_3
+// are the roots of p(x) = x^3 - I1 x^2 + I2 x - I3, p < 0 below lambda_3,
+// and lambda_3 lies below the smaller root of p'. So lambda_3 > c^2 exactly
+// when p(c^2) < 0 and c^2 is below that root of p', which needs no square
+// root: 3 c^2 < I1 and I1^2 - 3 I2 < (I1 - 3 c^2)^2. C's entries are those
+// StVK's stress computes.
+template <class T>
+TACTILE_INLINE bool reaches_floor(T c00, T c11, T c22, T c01, T c02, T c12, T J) {
+  const T i1 = c00 + c11 + c22;
+  const T i2 = c00 * c11 + c00 * c22 + c11 * c22 - c01 * c01 - c02 * c02 - c12 * c12;
+  const T c2 = T(kInversionFloor * kInversionFloor);
+  const T p = ((c2 - i1) * c2 + i2) * c2 - J * J;
+  const T gap = i1 - T(3) * c2;
+  return !(J > T(0) && p < T(0) && gap > T(0) && i1 * i1 - T(3) * i2 < gap * gap);
+}
 template <class T>
 TACTILE_INLINE bool may_reach_floor(const T* F) {
-  T f2 = 0;
-  #pragma GCC unroll 16
-  for (int k = 0; k < 9; ++k) f2 += F[k] * F[k];
-  return T(2) * det(F) < T(kInversionFloor) * f2;
+  auto c = [F](int i, int j) { return F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j]; };
+  return reaches_floor(c(0, 0), c(1, 1), c(2, 2), c(0, 1), c(0, 2), c(1, 2), det(F));
+}
+
+// StVK's stress and energy (as stress_stvk), and from the same entries of C
+// whether F may reach invertible StVK's floor: near = 1 unless J > 0 and,
+// by Gershgorin (every eigenvalue of C lies within a row's off-diagonal sum
+// of its diagonal entry), each c_ii - sum |c_ij| is above c^2, so that no
+// singular value is under the floor. A dozen operations more than StVK's;
+// may_reach_floor, exact, settles the lanes this leaves in doubt.
+template <class T>
+TACTILE_INLINE T stress_stvk_near(const T* F, T lambda, T mu, T* P, T& near) {
+  auto c = [F](int i, int j) { return F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j]; };
+  const T c00 = c(0, 0), c11 = c(1, 1), c22 = c(2, 2), c01 = c(0, 1), c02 = c(0, 2), c12 = c(1, 2);
+  const T a01 = std::fabs(c01), a02 = std::fabs(c02), a12 = std::fabs(c12);
+  const T g0 = c00 - a01 - a02, g1 = c11 - a01 - a12, g2 = c22 - a02 - a12;
+  const T lo = g0 < g1 ? (g0 < g2 ? g0 : g2) : (g1 < g2 ? g1 : g2);
+  near = (lo > T(kInversionFloor * kInversionFloor)) & (det(F) > T(0)) ? T(0) : T(1);
+  const T d0 = c00 - T(1), d1 = c11 - T(1), d2 = c22 - T(1);
+  const T tr = T(0.5) * (d0 + d1 + d2);
+  const T lt = lambda * tr;
+  const T S[9] = {mu * d0 + lt, mu * c01, mu * c02, mu * c01, mu * d1 + lt, mu * c12, mu * c02, mu * c12, mu * d2 + lt};
+  mul_nn(F, S, P);
+  const T ee4 = d0 * d0 + d1 * d1 + d2 * d2 + T(2) * (c01 * c01 + c02 * c02 + c12 * c12);
+  return T(0.25) * mu * ee4 + T(0.5) * lambda * tr * tr;
 }
 
 template <class T>

@@ -185,17 +185,38 @@ TEST(Material, StressIsTheDerivativeOfEnergy) {
 // stress and energy to round-off, at random F with large rotations.
 TEST(Material, InvertibleStvkIsStvkAboveItsFloor) {
   std::mt19937 rng(29);
-  int reaching = 0;
   for (int trial = 0; trial < 200; ++trial) {
     const Mat F = make_random_F(rng, material::kInversionFloor + 0.01, 1.6, false);
-    reaching += material::may_reach_floor(F.data());
+    EXPECT_FALSE(material::may_reach_floor(F.data())) << "trial " << trial;
     Mat P, P_inv;
     const double psi = psi_of(MaterialModel::StVK, F, &P);
     const double psi_inv = psi_of(MaterialModel::InvertibleStVK, F, &P_inv);
     EXPECT_NEAR(psi_inv, psi, 1e-12 * kE) << "trial " << trial;
     for (size_t k = 0; k < 9; ++k) EXPECT_NEAR(P_inv[k], P[k], 1e-10 * kE) << "trial " << trial << " k=" << k;
   }
-  EXPECT_GT(reaching, 20) << "the kernels' test should send some of these to the SVD, for this test to cover it";
+}
+
+// The kernels' test of whether F reaches the floor, without the SVD, agrees
+// with the SVD's smallest singular value (inverted F always reach it).
+TEST(Material, TheFloorTestAgreesWithTheSingularValues) {
+  std::mt19937 rng(37);
+  int reaching = 0, trials = 0;
+  for (bool flip : {false, true}) {
+    for (int trial = 0; trial < 2000; ++trial) {
+      const Mat F = make_random_F(rng, 0.2, 1.6, flip);
+      double U[3][3], V[3][3], s[3];
+      material::svd_of(F.data(), U, s, V);
+      const double smallest = s[2];  // signed: negative when inverted
+      if (std::fabs(smallest - material::kInversionFloor) < 1e-9) continue;
+      ++trials;
+      const bool reaches = smallest < material::kInversionFloor;
+      reaching += reaches;
+      EXPECT_EQ(material::may_reach_floor(F.data()), reaches)
+          << "sigma_min " << smallest << (flip ? " (inverted)" : "") << " trial " << trial;
+    }
+  }
+  EXPECT_GT(reaching, trials / 5);
+  EXPECT_LT(reaching, trials);
 }
 
 // Below the floor and through inversion its stress is still the derivative of its

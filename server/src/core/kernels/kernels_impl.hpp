@@ -300,8 +300,51 @@ inline constexpr bool kAddsAfterF = true;
 inline constexpr bool kAddsAfterF = false;
 #endif
 
+// Invertible StVK: a block with at most this many lanes near the floor
+// takes the SVD lane by lane, scalar; one with more, across all its lanes
+// at once (fem_bench --only=invertible; docs/perf.md).
+inline constexpr int kScalarNearLanes = 2;
+
 // How many blocks ahead the element pass prefetches (see forces()).
 constexpr int32_t kPrefetchBlocks = 4;
+
+// Invertible StVK's lanes that may be near the floor (near[l] = 1, n_near of
+// them; material::stress_stvk_near): those that are (material::may_reach_floor)
+// get their stress and energy from the SVD (stress_invertible_stvk) in place
+// of plain StVK's. Out of line: inlined, its code made the element pass slower
+// on every block, also with no lane near the floor (the default scene, 5 k
+// tets in double: 1.6 -> 2.0 s headless; docs/perf.md).
+template <class Real>
+__attribute__((noinline)) void invertible_lanes(const ElementBlock<Real>& B, const Real (*F)[kLanes<Real>],
+                                                const Real* near, Real n_near, Real lambda, Real mu,
+                                                Real (*P)[kLanes<Real>], Real* psiV) {
+  constexpr int W = kLanes<Real>;
+  if (n_near <= Real(kScalarNearLanes)) {
+    // A lane or two (a crushed spot in a body at ease): those alone, one at a time.
+    for (int l = 0; l < W; ++l) {
+      if (near[l] == Real(0)) continue;
+      Real Fl[9], Pl[9];
+      for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
+      if (!material::may_reach_floor(Fl)) continue;
+      psiV[l] = material::stress_invertible_stvk(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+      for (int k = 0; k < 9; ++k) P[k][l] = Pl[k];
+    }
+    return;
+  }
+  #pragma GCC unroll 1
+  for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+  for (int l = h; l < h + kMathLanes<Real>; ++l) {
+    Real Fl[9], Pl[9];
+    #pragma GCC unroll 16
+    for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
+    const Real psi = material::stress_invertible_stvk(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+    const bool take = near[l] != Real(0) && material::may_reach_floor(Fl);
+    psiV[l] = take ? psi : psiV[l];
+    #pragma GCC unroll 16
+    for (int k = 0; k < 9; ++k) P[k][l] = take ? Pl[k] : P[k][l];
+  }
+}
 
 template <class Real, MaterialModel M>
 ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu,
@@ -344,9 +387,9 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
     alignas(64) Real P[9][W];   // V P per lane [N/m^2 m^3]: P[3i + j][lane]
     alignas(64) Real psiV[W];   // V psi per lane [J]
     alignas(64) Real J[W];      // det F per lane
-    // Invertible StVK: lanes whose F may have a singular value under the
-    // floor (1 or 0). Only a block with one takes the SVD, and only those
-    // lanes take its result: the others keep plain StVK's, which is the same
+    // Invertible StVK: lanes whose F has a singular value under the floor
+    // (1 or 0). Only a block with one takes the SVD, and only those lanes
+    // take its result: the others keep plain StVK's, which is the same
     // function there (material.hpp).
     [[maybe_unused]] alignas(64) Real near[W];
     load_corners(B, u, x);
@@ -360,19 +403,10 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       Real Fl[9];
       deformation_gradient(B, l, x, Fl);
       if constexpr (!can_invert(M)) J[l] = material::det(Fl);
-      if constexpr (M == MaterialModel::InvertibleStVK) near[l] = material::may_reach_floor(Fl) ? Real(1) : Real(0);
       #pragma GCC unroll 16
       for (int k = 0; k < 9; ++k) F[k][l] = Fl[k];
     }
     if (kAddsAfterF && b > begin) add_corner_forces(blocks[b - 1], fc[(b - 1) & 1], f);
-    // Invertible StVK: how many lanes take the SVD (a block where all do
-    // skips plain StVK's pass: fem_bench --only=invertible).
-    [[maybe_unused]] Real n_near = 0;
-    if constexpr (M == MaterialModel::InvertibleStVK) {
-      #pragma GCC unroll 16
-      for (int l = 0; l < W; ++l) n_near += near[l];
-    }
-    if (M != MaterialModel::InvertibleStVK || n_near < Real(W))
     #pragma GCC unroll 1
     for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
@@ -384,27 +418,19 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       // (lambda V, mu V) gives V P and V psi. (One volume a lane and the
       // group's lambda and mu, rather than lambda V and mu V a lane: 4 bytes
       // a tet less to stream, and a load fewer; fem_bench --only=passes.)
-      constexpr MaterialModel kFast = M == MaterialModel::InvertibleStVK ? MaterialModel::StVK : M;
-      psiV[l] = material::stress<kFast>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+      if constexpr (M == MaterialModel::InvertibleStVK) {
+        psiV[l] = material::stress_stvk_near(Fl, lambda * B.V[l], mu * B.V[l], Pl, near[l]);
+      } else {
+        psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+      }
       #pragma GCC unroll 16
       for (int k = 0; k < 9; ++k) P[k][l] = Pl[k];
     }
     if constexpr (M == MaterialModel::InvertibleStVK) {
-      if (n_near > Real(0)) {
-        #pragma GCC unroll 1
-        for (int h = 0; h < W; h += kMathLanes<Real>)
-#pragma GCC ivdep
-        for (int l = h; l < h + kMathLanes<Real>; ++l) {
-          Real Fl[9], Pl[9];
-          #pragma GCC unroll 16
-          for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
-          const Real psi = material::stress_invertible_stvk(Fl, lambda * B.V[l], mu * B.V[l], Pl);
-          const bool take = near[l] != Real(0);
-          psiV[l] = take ? psi : psiV[l];
-          #pragma GCC unroll 16
-          for (int k = 0; k < 9; ++k) P[k][l] = take ? Pl[k] : P[k][l];
-        }
-      }
+      Real n_near = 0;
+      #pragma GCC unroll 16
+      for (int l = 0; l < W; ++l) n_near += near[l];
+      if (n_near > Real(0)) invertible_lanes(B, F, near, n_near, lambda, mu, P, psiV);
     }
     if (!kAddsAfterF && b > begin) add_corner_forces(blocks[b - 1], fc[(b - 1) & 1], f);
     Real(*g)[W] = fc[b & 1];
@@ -459,7 +485,12 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real l
     for (int l = 0; l < W; ++l) {
       Real F[9], P[9];
       deformation_gradient(B, l, x, F);
-      out[static_cast<int64_t>(b - begin) * W + l] = material::stress<M>(F, lambda * B.V[l], mu * B.V[l], P);
+      // (Invertible StVK: the SVD only where F reaches the floor, as in forces().)
+      constexpr MaterialModel kFast = M == MaterialModel::InvertibleStVK ? MaterialModel::StVK : M;
+      out[static_cast<int64_t>(b - begin) * W + l] =
+          M == MaterialModel::InvertibleStVK && material::may_reach_floor(F)
+              ? material::stress<M>(F, lambda * B.V[l], mu * B.V[l], P)
+              : material::stress<kFast>(F, lambda * B.V[l], mu * B.V[l], P);
       if (J) J[static_cast<int64_t>(b - begin) * W + l] = material::det(F);
     }
   }
