@@ -125,19 +125,23 @@ TACTILE_INLINE T stress_linear(const T* F, T lambda, T mu, T* P) {
 // folded into the constants: fewer multiplies for the element pass (the
 // double kernel alone, alternated in one process, see kernels_impl.hpp: 2-4 %
 // faster; float unchanged).
+// StVK from C's six entries, c_ij = (F^T F)_ij.
+template <class T>
+TACTILE_INLINE T stress_stvk_of_c(const T* F, T c00, T c11, T c22, T c01, T c02, T c12, T lambda, T mu, T* P) {
+  const T d0 = c00 - T(1), d1 = c11 - T(1), d2 = c22 - T(1);  // 2 E_ii; c01, c02, c12 are 2 E_ij
+  const T tr = T(0.5) * (d0 + d1 + d2);                        // tr E
+  const T lt = lambda * tr;
+  // S = 2 mu E + lambda tr(E) I
+  const T S[9] = {mu * d0 + lt, mu * c01, mu * c02, mu * c01, mu * d1 + lt, mu * c12, mu * c02, mu * c12, mu * d2 + lt};
+  mul_nn(F, S, P);
+  // E : E = (sum (2 E_ii)^2 + 2 sum (2 E_ij)^2) / 4
+  const T ee4 = d0 * d0 + d1 * d1 + d2 * d2 + T(2) * (c01 * c01 + c02 * c02 + c12 * c12);
+  return T(0.25) * mu * ee4 + T(0.5) * lambda * tr * tr;
+}
 template <class T>
 TACTILE_INLINE T stress_stvk(const T* F, T lambda, T mu, T* P) {
   auto c = [F](int i, int j) { return F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j]; };
-  const T d0 = c(0, 0) - T(1), d1 = c(1, 1) - T(1), d2 = c(2, 2) - T(1);  // 2 E_ii
-  const T o01 = c(0, 1), o02 = c(0, 2), o12 = c(1, 2);                     // 2 E_ij
-  const T tr = T(0.5) * (d0 + d1 + d2);                                     // tr E
-  const T lt = lambda * tr;
-  // S = 2 mu E + lambda tr(E) I
-  const T S[9] = {mu * d0 + lt, mu * o01, mu * o02, mu * o01, mu * d1 + lt, mu * o12, mu * o02, mu * o12, mu * d2 + lt};
-  mul_nn(F, S, P);
-  // E : E = (sum (2 E_ii)^2 + 2 sum (2 E_ij)^2) / 4
-  const T ee4 = d0 * d0 + d1 * d1 + d2 * d2 + T(2) * (o01 * o01 + o02 * o02 + o12 * o12);
-  return T(0.25) * mu * ee4 + T(0.5) * lambda * tr * tr;
+  return stress_stvk_of_c(F, c(0, 0), c(1, 1), c(2, 2), c(0, 1), c(0, 2), c(1, 2), lambda, mu, P);
 }
 
 // ---- rotation of the polar decomposition, inversion-aware --------------------
@@ -397,13 +401,7 @@ TACTILE_INLINE T stress_stvk_near(const T* F, T lambda, T mu, T* P, T& near) {
   const T g0 = c00 - a01 - a02, g1 = c11 - a01 - a12, g2 = c22 - a02 - a12;
   const T lo = g0 < g1 ? (g0 < g2 ? g0 : g2) : (g1 < g2 ? g1 : g2);
   near = (lo > T(kInversionFloor * kInversionFloor)) & (det(F) > T(0)) ? T(0) : T(1);
-  const T d0 = c00 - T(1), d1 = c11 - T(1), d2 = c22 - T(1);
-  const T tr = T(0.5) * (d0 + d1 + d2);
-  const T lt = lambda * tr;
-  const T S[9] = {mu * d0 + lt, mu * c01, mu * c02, mu * c01, mu * d1 + lt, mu * c12, mu * c02, mu * c12, mu * d2 + lt};
-  mul_nn(F, S, P);
-  const T ee4 = d0 * d0 + d1 * d1 + d2 * d2 + T(2) * (c01 * c01 + c02 * c02 + c12 * c12);
-  return T(0.25) * mu * ee4 + T(0.5) * lambda * tr * tr;
+  return stress_stvk_of_c(F, c00, c11, c22, c01, c02, c12, lambda, mu, P);
 }
 
 template <class T>
