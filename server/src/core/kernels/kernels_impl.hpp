@@ -308,18 +308,49 @@ inline constexpr int kScalarNearLanes = 2;
 // How many blocks ahead the element pass prefetches (see forces()).
 constexpr int32_t kPrefetchBlocks = 4;
 
-// Invertible StVK's lanes that may be near the floor (near[l] = 1, n_near of
-// them; material::stress_stvk_near): those that are (material::may_reach_floor)
+// Whether any of a block's W flags (1 or 0) is set: one compare and mask
+// test per vector, where a sum over the lanes took a chain of scalar adds
+// on every block (fem_bench --only=invertible; docs/perf.md).
+template <class Real>
+TACTILE_INLINE bool any_set(const Real* flags) {
+  [[maybe_unused]] constexpr int W = kLanes<Real>;
+#if defined(__AVX512F__)
+  if constexpr (sizeof(Real) == 4) {
+    return _mm512_cmp_ps_mask(_mm512_load_ps(flags), _mm512_setzero_ps(), _CMP_NEQ_OQ) != 0;
+  } else {
+    return _mm512_cmp_pd_mask(_mm512_load_pd(flags), _mm512_setzero_pd(), _CMP_NEQ_OQ) != 0;
+  }
+#elif defined(__AVX2__)
+  if constexpr (sizeof(Real) == 4) {
+    const __m256 z = _mm256_setzero_ps();
+    return (_mm256_movemask_ps(_mm256_cmp_ps(_mm256_load_ps(flags), z, _CMP_NEQ_OQ)) |
+            _mm256_movemask_ps(_mm256_cmp_ps(_mm256_load_ps(flags + 8), z, _CMP_NEQ_OQ))) != 0;
+  } else {
+    const __m256d z = _mm256_setzero_pd();
+    return (_mm256_movemask_pd(_mm256_cmp_pd(_mm256_load_pd(flags), z, _CMP_NEQ_OQ)) |
+            _mm256_movemask_pd(_mm256_cmp_pd(_mm256_load_pd(flags + 4), z, _CMP_NEQ_OQ))) != 0;
+  }
+#else
+  bool any = false;
+  for (int l = 0; l < W; ++l) any = any || flags[l] != Real(0);
+  return any;
+#endif
+}
+
+// Invertible StVK's lanes that may be near the floor (near[l] = 1;
+// material::stress_stvk_near): those that are (material::may_reach_floor)
 // get their stress and energy from the SVD (stress_invertible_stvk) in place
 // of plain StVK's. Out of line: inlined, its code made the element pass slower
 // on every block, also with no lane near the floor (the default scene, 5 k
 // tets in double: 1.6 -> 2.0 s headless; docs/perf.md).
 template <class Real>
 __attribute__((noinline)) void invertible_lanes(const ElementBlock<Real>& B, const Real (*F)[kLanes<Real>],
-                                                const Real* near, Real n_near, Real lambda, Real mu,
-                                                Real (*P)[kLanes<Real>], Real* psiV) {
+                                                const Real* near, Real lambda, Real mu, Real (*P)[kLanes<Real>],
+                                                Real* psiV) {
   constexpr int W = kLanes<Real>;
-  if (n_near <= Real(kScalarNearLanes)) {
+  int n_near = 0;
+  for (int l = 0; l < W; ++l) n_near += near[l] != Real(0);
+  if (n_near <= kScalarNearLanes) {
     // A lane or two (a crushed spot in a body at ease): those alone, one at a time.
     for (int l = 0; l < W; ++l) {
       if (near[l] == Real(0)) continue;
@@ -426,12 +457,8 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       #pragma GCC unroll 16
       for (int k = 0; k < 9; ++k) P[k][l] = Pl[k];
     }
-    if constexpr (M == MaterialModel::InvertibleStVK) {
-      Real n_near = 0;
-      #pragma GCC unroll 16
-      for (int l = 0; l < W; ++l) n_near += near[l];
-      if (n_near > Real(0)) invertible_lanes(B, F, near, n_near, lambda, mu, P, psiV);
-    }
+    if constexpr (M == MaterialModel::InvertibleStVK)
+      if (any_set(near)) invertible_lanes(B, F, near, lambda, mu, P, psiV);
     if (!kAddsAfterF && b > begin) add_corner_forces(blocks[b - 1], fc[(b - 1) & 1], f);
     Real(*g)[W] = fc[b & 1];
     #pragma GCC unroll 1
