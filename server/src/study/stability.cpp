@@ -412,6 +412,19 @@ int32_t count_inverted(const Simulation& sim) {
   return n;
 }
 
+// "" when no element is left inverted and every node is back within `share`
+// of `size` [m] of its rest place; else what is not.
+std::string check_back_at_rest(const Simulation& sim, double size, double share, const char* what) {
+  if (const int32_t n = count_inverted(sim); n > 0) return std::to_string(n) + " tets still inverted";
+  std::vector<double> u;
+  sim.copy_displacement(u);
+  double worst = 0;
+  for (size_t i = 0; i < u.size(); i += 3) worst = std::max(worst, std::hypot(u[i], u[i + 1], u[i + 2]));
+  if (worst > share * size)
+    return std::string(what) + " did not come back to its rest shape (a node " + fmt("%.2f %% of its size away)", 100 * worst / size);
+  return "";
+}
+
 // The block on its fixed base, damped by `alpha`; the plate (Young's modulus E) held by its edges, likewise.
 Scenario damped_block(MaterialModel m, Level l, double alpha) {
   Scenario sc;
@@ -478,17 +491,8 @@ Scenario compress(MaterialModel m, Level l, bool quick, double fraction) {
     });
   };
   sc.duration = 1.0 * s + 1.0;
-  sc.final_check = [](const Simulation& sim) -> std::string {
-    // Released: no element left inverted, every node back within 1 % of the block's height of its rest place.
-    if (const int32_t n = count_inverted(sim); n > 0) return std::to_string(n) + " tets still inverted after release";
-    std::vector<double> u;
-    sim.copy_displacement(u);
-    double worst = 0;
-    for (size_t i = 0; i < u.size(); i += 3) worst = std::max(worst, std::hypot(u[i], u[i + 1], u[i + 2]));
-    if (worst > 0.01 * kBlockH)
-      return "the block did not come back to its rest shape after release (a node " + fmt("%.2f %% of its height away)", 100 * worst / kBlockH);
-    return "";
-  };
+  // Released: no element left inverted, every node back within 1 % of the block's height of its rest place.
+  sc.final_check = [](const Simulation& sim) { return check_back_at_rest(sim, kBlockH, 0.01, "the block"); };
   return sc;
 }
 
@@ -740,18 +744,10 @@ std::vector<StabilityCase> stability_cases(const SuiteOptions& o) {
         sc.change_to = sc.spec;
         sc.change_to->effects.gravity = false;
         damp(*sc.change_to, 20.0);
-        sc.final_check = [](const Simulation& sim) -> std::string {
-          if (const int32_t n = count_inverted(sim); n > 0) return std::to_string(n) + " tets still inverted";
-          std::vector<double> u;
-          sim.copy_displacement(u);
-          double worst = 0;
-          for (size_t i = 0; i < u.size(); i += 3) worst = std::max(worst, std::hypot(u[i], u[i + 1], u[i + 2]));
+        sc.final_check = [](const Simulation& sim) {
           std::vector<double> x;
           sim.copy_positions(x);
-          const double size = diagonal(x) / std::sqrt(3.0);
-          if (worst > 0.01 * size)
-            return "the cube did not come back to its rest shape (a node " + fmt("%.2f %% of its size away)", 100 * worst / size);
-          return "";
+          return check_back_at_rest(sim, diagonal(x) / std::sqrt(3.0), 0.01, "the cube");
         };
         return sc;
       });
