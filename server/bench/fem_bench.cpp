@@ -749,7 +749,7 @@ void invertible_pass_rows(const Options& opt) {
       double F[9];
       for (int a = 0; a < 3; ++a)
         for (int b = 0; b < 3; ++b) F[3 * a + b] = G[b][a];
-      near[e] = material::may_reach_floor(F);
+      near[e] = material::reaches_floor(F);
       n_near += near[e];
     }
     for (size_t b = 0; b * W < model.lane_tet.size(); ++b) {

@@ -382,7 +382,7 @@ TACTILE_INLINE bool reaches_floor(T c00, T c11, T c22, T c01, T c02, T c12, T J)
   return !(J > T(0) && p < T(0) && gap > T(0) && i1 * i1 - T(3) * i2 < gap * gap);
 }
 template <class T>
-TACTILE_INLINE bool may_reach_floor(const T* F) {
+TACTILE_INLINE bool reaches_floor(const T* F) {
   auto c = [F](int i, int j) { return F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j]; };
   return reaches_floor(c(0, 0), c(1, 1), c(2, 2), c(0, 1), c(0, 2), c(1, 2), det(F));
 }
@@ -392,7 +392,7 @@ TACTILE_INLINE bool may_reach_floor(const T* F) {
 // by Gershgorin (every eigenvalue of C lies within a row's off-diagonal sum
 // of its diagonal entry), each c_ii - sum |c_ij| is above c^2, so that no
 // singular value is under the floor. A dozen operations more than StVK's;
-// may_reach_floor, exact, settles the lanes this leaves in doubt.
+// reaches_floor(F), exact, settles the lanes this leaves in doubt.
 template <class T>
 TACTILE_INLINE T stress_stvk_near(const T* F, T lambda, T mu, T* P, T& near) {
   auto c = [F](int i, int j) { return F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j]; };

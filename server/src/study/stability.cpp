@@ -28,7 +28,6 @@ namespace tactile::study {
 const char* to_string(Expect e) {
   switch (e) {
     case Expect::Runs: return "runs";
-    case Expect::MayFault: return "may fault";
     case Expect::Caught: return "caught";
   }
   return "?";
@@ -256,7 +255,6 @@ CaseOutcome run_scenario(Scenario sc, CaseOutcome out) {
     if (!again.fault || sim.steps() != steps) fail("the simulation went on after its fault");
     switch (sc.expect) {
       case Expect::Runs: fail("faulted: " + fault.message); break;
-      case Expect::MayFault: break;
       case Expect::Caught:
         if (fault.kind != Fault::Kind::StepTooLarge) fail("faulted other than by refusing the step: " + fault.message);
         break;

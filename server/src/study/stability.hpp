@@ -14,12 +14,11 @@
 //   - no surface node tunnels through a proxy (goes deeper than the proxy's
 //     trust depth and comes out on the side opposite its way in); how deep
 //     nodes sit is reported, the contact's accuracy rather than stability;
-//   - what it expects happens: `Runs` ends without a fault; `MayFault` may
-//     stop on a fault, which must name its kind and the elements at fault,
-//     and after which the simulation stays stopped (no step, no force: the
-//     server then stops publishing, and the bridge takes the force to zero);
-//     `Caught` has a step above the critical one subdivided or refused,
-//     never run.
+//   - what it expects happens: `Runs` ends without a fault; `Caught` has a
+//     step above the critical one subdivided or refused, never run. A fault
+//     must name its kind and the elements at fault, and the simulation stays
+//     stopped after it (no step, no force: the server then stops
+//     publishing, and the bridge takes the force to zero).
 //
 // The suite is plain C++ over the core (Simulation); `tactile-stability`
 // (cli/) prints it as a table, and the short version runs in ctest.
@@ -33,9 +32,8 @@
 namespace tactile::study {
 
 enum class Expect : uint8_t {
-  Runs,      // no fault
-  MayFault,  // a fault is allowed (the model cannot take the case) if it is reported
-  Caught,    // a step above the critical one: subdivided or refused
+  Runs,    // no fault
+  Caught,  // a step above the critical one: subdivided or refused
 };
 const char* to_string(Expect e);
 

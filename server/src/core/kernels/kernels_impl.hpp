@@ -309,8 +309,8 @@ inline constexpr int kScalarNearLanes = 2;
 constexpr int32_t kPrefetchBlocks = 4;
 
 // Whether any of a block's W flags (1 or 0) is set: one compare and mask
-// test per vector, where a sum over the lanes took a chain of scalar adds
-// on every block (fem_bench --only=invertible; docs/perf.md).
+// test per vector, not a chain of scalar adds on every block
+// (fem_bench --only=invertible; docs/perf.md).
 template <class Real>
 TACTILE_INLINE bool any_set(const Real* flags) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
@@ -338,11 +338,11 @@ TACTILE_INLINE bool any_set(const Real* flags) {
 }
 
 // Invertible StVK's lanes that may be near the floor (near[l] = 1;
-// material::stress_stvk_near): those that are (material::may_reach_floor)
+// material::stress_stvk_near): those that are (material::reaches_floor)
 // get their stress and energy from the SVD (stress_invertible_stvk) in place
-// of plain StVK's. Out of line: inlined, its code made the element pass slower
-// on every block, also with no lane near the floor (the default scene, 5 k
-// tets in double: 1.6 -> 2.0 s headless; docs/perf.md).
+// of plain StVK's. Out of line: inlined, its code slows the element pass on
+// every block, also where no lane is near the floor (fem_bench
+// --only=invertible; docs/perf.md).
 template <class Real>
 __attribute__((noinline)) void invertible_lanes(const ElementBlock<Real>& B, const Real (*F)[kLanes<Real>],
                                                 const Real* near, Real lambda, Real mu, Real (*P)[kLanes<Real>],
@@ -356,7 +356,7 @@ __attribute__((noinline)) void invertible_lanes(const ElementBlock<Real>& B, con
       if (near[l] == Real(0)) continue;
       Real Fl[9], Pl[9];
       for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
-      if (!material::may_reach_floor(Fl)) continue;
+      if (!material::reaches_floor(Fl)) continue;
       psiV[l] = material::stress_invertible_stvk(Fl, lambda * B.V[l], mu * B.V[l], Pl);
       for (int k = 0; k < 9; ++k) P[k][l] = Pl[k];
     }
@@ -370,7 +370,7 @@ __attribute__((noinline)) void invertible_lanes(const ElementBlock<Real>& B, con
     #pragma GCC unroll 16
     for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
     const Real psi = material::stress_invertible_stvk(Fl, lambda * B.V[l], mu * B.V[l], Pl);
-    const bool take = near[l] != Real(0) && material::may_reach_floor(Fl);
+    const bool take = near[l] != Real(0) && material::reaches_floor(Fl);
     psiV[l] = take ? psi : psiV[l];
     #pragma GCC unroll 16
     for (int k = 0; k < 9; ++k) P[k][l] = take ? Pl[k] : P[k][l];
@@ -515,7 +515,7 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real l
       // (Invertible StVK: the SVD only where F reaches the floor, as in forces().)
       constexpr MaterialModel kFast = M == MaterialModel::InvertibleStVK ? MaterialModel::StVK : M;
       out[static_cast<int64_t>(b - begin) * W + l] =
-          M == MaterialModel::InvertibleStVK && material::may_reach_floor(F)
+          M == MaterialModel::InvertibleStVK && material::reaches_floor(F)
               ? material::stress<M>(F, lambda * B.V[l], mu * B.V[l], P)
               : material::stress<kFast>(F, lambda * B.V[l], mu * B.V[l], P);
       if (J) J[static_cast<int64_t>(b - begin) * W + l] = material::det(F);
