@@ -144,68 +144,162 @@ TACTILE_INLINE T stress_stvk(const T* F, T lambda, T mu, T* P) {
   return stress_stvk_of_c(F, c(0, 0), c(1, 1), c(2, 2), c(0, 1), c(0, 2), c(1, 2), lambda, mu, P);
 }
 
+// ---- two lanes at once -------------------------------------------------------
+// Pair<T> carries two independent values through the same scalar code, so
+// that the SVD below can run two elements (two kernel blocks' lanes) in one
+// pass over its instructions: the Jacobi sweeps are a chain of dependent
+// operations, and with one element per vector lane the core waits on that
+// chain; two chains in one instruction stream keep its units busy
+// (fem_bench --only=invertible; docs/perf.md). pick(), abs_of() and sqrt_of()
+// are the select, |x| and sqrt that take either a T or a Pair<T>.
+template <class T>
+struct Pair {
+  T a, b;
+  Pair() = default;
+  constexpr Pair(T x) : a(x), b(x) {}  // NOLINT(google-explicit-constructor): constants broadcast
+  constexpr Pair(T x, T y) : a(x), b(y) {}
+};
+struct PairMask {
+  bool a, b;
+};
+template <class T>
+struct ScalarOf {
+  using type = T;
+};
+template <class T>
+struct ScalarOf<Pair<T>> {
+  using type = T;
+};
+template <class T>
+using Scalar = typename ScalarOf<T>::type;
+
+#define TACTILE_PAIR_ARITHMETIC(op)                                                 \
+  template <class T>                                                                \
+  TACTILE_INLINE Pair<T> operator op(Pair<T> x, Pair<T> y) {                        \
+    return {x.a op y.a, x.b op y.b};                                                \
+  }                                                                                 \
+  template <class T>                                                                \
+  TACTILE_INLINE Pair<T>& operator op##=(Pair<T>& x, Pair<T> y) {                   \
+    x.a op##= y.a;                                                                 \
+    x.b op##= y.b;                                                                 \
+    return x;                                                                       \
+  }
+TACTILE_PAIR_ARITHMETIC(+)
+TACTILE_PAIR_ARITHMETIC(-)
+TACTILE_PAIR_ARITHMETIC(*)
+TACTILE_PAIR_ARITHMETIC(/)
+#undef TACTILE_PAIR_ARITHMETIC
+#define TACTILE_PAIR_COMPARISON(op)                                                 \
+  template <class T>                                                                \
+  TACTILE_INLINE PairMask operator op(Pair<T> x, Pair<T> y) {                       \
+    return {x.a op y.a, x.b op y.b};                                                \
+  }
+TACTILE_PAIR_COMPARISON(<)
+TACTILE_PAIR_COMPARISON(>)
+#undef TACTILE_PAIR_COMPARISON
+template <class T>
+TACTILE_INLINE Pair<T> operator-(Pair<T> x) {
+  return {-x.a, -x.b};
+}
+template <class T>
+TACTILE_INLINE T pick(bool c, T x, T y) {
+  return c ? x : y;
+}
+template <class T>
+TACTILE_INLINE Pair<T> pick(PairMask c, Pair<T> x, Pair<T> y) {
+  return {c.a ? x.a : y.a, c.b ? x.b : y.b};
+}
+template <class T>
+TACTILE_INLINE T abs_of(T x) {
+  return std::fabs(x);
+}
+template <class T>
+TACTILE_INLINE Pair<T> abs_of(Pair<T> x) {
+  return {std::fabs(x.a), std::fabs(x.b)};
+}
+template <class T>
+TACTILE_INLINE T sqrt_of(T x) {
+  return std::sqrt(x);
+}
+template <class T>
+TACTILE_INLINE Pair<T> sqrt_of(Pair<T> x) {
+  return {std::sqrt(x.a), std::sqrt(x.b)};
+}
+
 // ---- rotation of the polar decomposition, inversion-aware --------------------
 // R = U V^T from the SVD F = U Sigma V^T, with the sign of the smallest
 // singular value flipped when det F < 0 (Irving, Teran and Fedkiw 2004), so R
 // is always a proper rotation and an inverted element is pushed back.
 //
-// Method: McAdams, Selle, Tamstorf, Teran and Sifakis 2011, "Computing the
-// SVD of 3x3 matrices with minimal branching and elementary floating point
-// operations": Jacobi sweeps on F^T F with approximate Givens angles, sorting
-// of the singular vectors by conditional swaps, and a Givens QR of F V. Every
-// step is a fixed sequence of arithmetic and value selects, with compile-time
-// indices, so the kernels' lane loop vectorises through it (the former
-// exact-Jacobi version picked the smallest eigenvalue by index and branched
-// on norms, and ran scalar). It was chosen over a polar Newton iteration
-// because that needs F^-1 (singular for a flat element) and finds only the
-// det F < 0 polar factor, not which axis to flip; here the QR puts the sign
-// of det F on the last, smallest, singular value by construction, and every
-// rotation it applies is guarded so that R stays a rotation for any F.
+// Method: after McAdams, Selle, Tamstorf, Teran and Sifakis 2011, "Computing
+// the SVD of 3x3 matrices with minimal branching and elementary floating
+// point operations": Jacobi sweeps on F^T F with Givens angles from a
+// rational formula (no square root), sorting of the singular vectors by
+// conditional swaps, and U from F V by Gram-Schmidt. Every step is a fixed
+// sequence of arithmetic and value selects, with compile-time indices, so
+// the kernels' lane loop vectorises through it. The SVD serves where F may
+// be near singular or inverted: Newton's polar iteration (polar_newton_step)
+// needs F^-1 and finds only the det F < 0 polar factor, not which axis to
+// flip; here U's last column puts the sign of det F on the last, smallest,
+// singular value by construction, and R stays a rotation for any F.
+//
+// Speed: the sweeps drive off-diagonal entries towards zero, into the
+// subnormal range, where every operation on them costs a microcode assist
+// (float: about 5 times slower). The kernels run these functions with
+// subnormals flushed to zero (kernels_impl.hpp, FlushSubnormals); elsewhere
+// they are as accurate, only slower.
 
 // Below this a squared length counts as zero: far enough above the smallest
 // normal number that its square root and reciprocal keep full precision.
 template <class T>
-inline constexpr T kRotationTiny = std::numeric_limits<T>::min() / std::numeric_limits<T>::epsilon();
-// Off-diagonal entries of F^T F below this times the diagonal pair are taken
-// as zero: far below what changes R, and it stops the cubic convergence from
-// driving them into the subnormal range, where each operation costs a
-// microcode assist (it made the kernel several times slower).
+inline constexpr Scalar<T> kRotationTiny =
+    std::numeric_limits<Scalar<T>>::min() / std::numeric_limits<Scalar<T>>::epsilon();
+// Added to the angle's denominator ch (below), which is of degree two in the
+// entries of S (trace 1): a pair already diagonal with equal entries turns by
+// nothing rather than by 0/0, and ch^2 stays far enough above the smallest
+// normal number that cos^2 + sin^2 = 1 holds with subnormals flushed (where
+// sh^2 would vanish and ch sh would not). It slows the last rotations only
+// for entries under ~3e-8 in float, below what changes its result.
 template <class T>
-inline constexpr T kJacobiFloor = std::numeric_limits<T>::epsilon() * std::numeric_limits<T>::epsilon();
+inline constexpr Scalar<T> kAngleTiny = sizeof(Scalar<T>) == 4 ? Scalar<T>(0x1p-50) : Scalar<T>(0x1p-480);
 
-// Jacobi sweeps: the approximate angles converge slowly while F^T F is far
-// from diagonal and cubically once near; over random F the worst off-diagonal
-// left is ~1e-6 after 5 sweeps and ~1e-15 after 6 (relative to |F|^2), and
-// ~1e-31 after 7.
+// Jacobi sweeps. Over random F (also nearly flat and nearly rank-2 ones) the
+// worst off-diagonal entry of F^T F left, relative to |F|^2, is ~2e-4 after
+// 3 sweeps, ~2e-8 after 4 and ~1e-22 after 5: 4 for float, 5 for double.
+// (McAdams et al.'s first-order angle needs 6 and 7 for the same.)
 template <class T>
-inline constexpr int kJacobiSweeps = sizeof(T) == 4 ? 6 : 7;
+inline constexpr int kJacobiSweeps = sizeof(Scalar<T>) == 4 ? 4 : 5;
 
 // One Jacobi rotation of the symmetric S in the (p, q) plane, (p, q, k) cyclic:
-// S <- J^T S J, V <- V J, with J's angle theta approximating the one that
-// zeroes S_pq (tan 2 theta = 2 S_pq / (S_pp - S_qq)). The half-angle pair
-// (ch, sh) = (2 (S_pp - S_qq), S_pq) is exact to first order; where it would
-// exceed pi/8 (that is, S_pq is large against the gap, gamma sh^2 >= ch^2
-// with gamma = (1 + sqrt 2)^2) the rotation is pi/4 instead (McAdams et al.
-// 2011, sec. 2.2). cos and sin of theta follow from the half angle with one
-// division and no square root.
+// S <- J^T S J, V <- V J. The angle theta that zeroes S_pq has tan 2 theta
+// = z = e / d, with d = S_pp - S_qq and e = 2 S_pq. J is built from
+// u = tan(theta / 2) by the half-angle formulas cos theta = (1 - u^2) / (1 +
+// u^2), sin theta = 2u / (1 + u^2): exactly orthogonal for any u, with one
+// division. u = tan(atan(z) / 4) is approximated by the rational function
+//   u ~ z (a + b|z|) / (1 + c|z| + d' z^2),  a = 1/4, d' = 5/16, b = a c,
+// c = 4 d' tan(pi/8): exact to third order in z, so that sweeps converge
+// fast once S is nearly diagonal, and exact at |z| -> infinity (a rotation
+// of pi/4), so that the first sweeps, far from diagonal, make progress (its
+// angle is within 0.065 rad of the exact one over all z). Written in d and e
+// so that there is no division: u = sh / ch.
 template <int p, int q, int k, class T>
 TACTILE_INLINE void apply_jacobi_rotation(T (&S)[3][3], T (&V)[3][3]) {
-  constexpr T kGamma = T(5.828427124746190097603377448419396157);
-  constexpr T kSqrtHalf = T(0.7071067811865475244008443621048490393);
-  const T spp = S[p][p], sqq = S[q][q], skk = S[k][k];
-  const T spq = std::fabs(S[p][q]) > kJacobiFloor<T> * (spp + sqq) ? S[p][q] : T(0);
-  const T spk = std::fabs(S[p][k]) > kJacobiFloor<T> * (spp + skk) ? S[p][k] : T(0);
-  const T sqk = std::fabs(S[q][k]) > kJacobiFloor<T> * (sqq + skk) ? S[q][k] : T(0);
-  const T ch = T(2) * (spp - sqq);
-  const T sh = spq;
+  using R = Scalar<T>;
+  const T kA = R(0.25), kD = R(0.3125);
+  const T kC = R(0.5177669529663688110021109052621225982);   // 4 d' tan(pi/8)
+  const T kB = R(0.1294417382415922027505277263155306496);   // a c
+  const T spp = S[p][p], sqq = S[q][q], spq = S[p][q], spk = S[p][k], sqk = S[q][k];
+  const T d = spp - sqq, e = T(R(2)) * spq;
+  const T ad = abs_of(d), ae = abs_of(e);
+  const T sh = e * (kA * d + kB * pick(d < T(R(0)), -ae, ae));
+  const T ch = d * d + kC * ad * ae + kD * e * e + T(kAngleTiny<T>);
   const T ch2 = ch * ch, sh2 = sh * sh;
-  const bool approximate = kGamma * sh2 < ch2 && ch2 > kRotationTiny<T>;
-  const T inv = T(1) / (approximate ? ch2 + sh2 : T(1));
-  const T c = approximate ? (ch2 - sh2) * inv : kSqrtHalf;
-  const T s = approximate ? T(2) * ch * sh * inv : kSqrtHalf;
+  const T inv = T(R(1)) / (ch2 + sh2);
+  const T c = (ch2 - sh2) * inv;
+  const T s = T(R(2)) * ch * sh * inv;
   const T cc = c * c, ss = s * s, cs = c * s;
-  S[p][p] = cc * spp + T(2) * cs * spq + ss * sqq;
-  S[q][q] = ss * spp - T(2) * cs * spq + cc * sqq;
+  S[p][p] = cc * spp + T(R(2)) * cs * spq + ss * sqq;
+  S[q][q] = ss * spp - T(R(2)) * cs * spq + cc * sqq;
   S[p][q] = S[q][p] = (cc - ss) * spq + cs * (sqq - spp);
   S[p][k] = S[k][p] = c * spk + s * sqk;
   S[q][k] = S[k][q] = c * sqk - s * spk;
@@ -221,53 +315,32 @@ TACTILE_INLINE void apply_jacobi_rotation(T (&S)[3][3], T (&V)[3][3]) {
 // new column j so that det V stays +1.
 template <int i, int j, class T>
 TACTILE_INLINE void sort_singular_pair(T (&B)[3][3], T (&V)[3][3], T (&rho)[3]) {
-  const bool swap = rho[i] < rho[j];
+  const auto swap = rho[i] < rho[j];
   const T ri = rho[i], rj = rho[j];
-  rho[i] = swap ? rj : ri;
-  rho[j] = swap ? ri : rj;
+  rho[i] = pick(swap, rj, ri);
+  rho[j] = pick(swap, ri, rj);
   #pragma GCC unroll 3
   for (int r = 0; r < 3; ++r) {
     const T bi = B[r][i], bj = B[r][j], vi = V[r][i], vj = V[r][j];
-    B[r][i] = swap ? bj : bi;
-    B[r][j] = swap ? -bi : bj;
-    V[r][i] = swap ? vj : vi;
-    V[r][j] = swap ? -vi : vj;
-  }
-}
-
-// Givens rotation G of rows i and j of B that zeroes B_j,col and leaves
-// B_i,col = |(B_i,col, B_j,col)| >= 0; U <- U G^T keeps B_before = U B.
-// Where both entries vanish G is the identity.
-template <int i, int j, int col, class T>
-TACTILE_INLINE void apply_givens_qr(T (&B)[3][3], T (&U)[3][3]) {
-  const T a1 = B[i][col], a2 = B[j][col];
-  const T rho2 = a1 * a1 + a2 * a2;
-  const bool nonzero = rho2 > kRotationTiny<T>;
-  const T r = T(1) / std::sqrt(nonzero ? rho2 : T(1));
-  const T c = nonzero ? a1 * r : T(1);
-  const T s = nonzero ? a2 * r : T(0);
-  #pragma GCC unroll 3
-  for (int m = 0; m < 3; ++m) {
-    const T bi = B[i][m], bj = B[j][m];
-    B[i][m] = c * bi + s * bj;
-    B[j][m] = c * bj - s * bi;
-    const T ui = U[m][i], uj = U[m][j];
-    U[m][i] = c * ui + s * uj;
-    U[m][j] = c * uj - s * ui;
+    B[r][i] = pick(swap, bj, bi);
+    B[r][j] = pick(swap, -bi, bj);
+    V[r][i] = pick(swap, vj, vi);
+    V[r][j] = pick(swap, -vi, vj);
   }
 }
 
 // The signed SVD F = U diag(sigma) V^T: U and V proper rotations, sigma_0 >=
 // sigma_1 >= |sigma_2|, and sigma_2 with the sign of det F (Irving et al.'s
-// flip). U[i][j], V[i][j] are row i, column j.
+// flip). U[i][j], V[i][j] are row i, column j. T is float, double or a Pair.
 template <class T>
 TACTILE_INLINE void svd_of(const T* F, T (&U)[3][3], T* sigma, T (&V)[3][3]) {
+  using R = Scalar<T>;
   // A = F / |F|: U and V do not change, and every threshold below is relative.
-  T f2 = 0;
+  T f2 = R(0);
   #pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) f2 += F[k] * F[k];
-  const T norm2 = f2 > kRotationTiny<T> ? f2 : kRotationTiny<T>;
-  const T scale = T(1) / std::sqrt(norm2);
+  const T norm2 = pick(f2 > T(kRotationTiny<T>), f2, T(kRotationTiny<T>));
+  const T scale = T(R(1)) / sqrt_of(norm2);
   T A[3][3];
   #pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
@@ -282,7 +355,7 @@ TACTILE_INLINE void svd_of(const T* F, T (&U)[3][3], T* sigma, T (&V)[3][3]) {
   #pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
     #pragma GCC unroll 16
-    for (int j = 0; j < 3; ++j) V[i][j] = i == j ? T(1) : T(0);
+    for (int j = 0; j < 3; ++j) V[i][j] = T(i == j ? R(1) : R(0));
   #pragma GCC unroll 16
   for (int sweep = 0; sweep < kJacobiSweeps<T>; ++sweep) {
     apply_jacobi_rotation<0, 1, 2>(S, V);
@@ -295,24 +368,52 @@ TACTILE_INLINE void svd_of(const T* F, T (&U)[3][3], T* sigma, T (&V)[3][3]) {
   for (int i = 0; i < 3; ++i)
     #pragma GCC unroll 16
     for (int j = 0; j < 3; ++j) B[i][j] = A[i][0] * V[0][j] + A[i][1] * V[1][j] + A[i][2] * V[2][j];
-  T rho[3];
-  #pragma GCC unroll 16
-  for (int j = 0; j < 3; ++j) rho[j] = B[0][j] * B[0][j] + B[1][j] * B[1][j] + B[2][j] * B[2][j];
+  T rho[3] = {S[0][0], S[1][1], S[2][2]};  // |b_j|^2, as S is now V^T A^T A V
   sort_singular_pair<0, 1>(B, V, rho);
   sort_singular_pair<0, 2>(B, V, rho);
   sort_singular_pair<1, 2>(B, V, rho);
-  // B = U Sigma' by Givens QR: Sigma'_00, Sigma'_11 >= 0 and Sigma'_22 has the
-  // sign of det F, which is the Irving et al. flip.
-  #pragma GCC unroll 16
-  for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
-    for (int j = 0; j < 3; ++j) U[i][j] = i == j ? T(1) : T(0);
-  apply_givens_qr<0, 1, 0>(B, U);
-  apply_givens_qr<0, 2, 0>(B, U);
-  apply_givens_qr<1, 2, 1>(B, U);
-  const T norm = norm2 * scale;  // |F|
+  // U from B's columns by Gram-Schmidt (they are orthogonal but for the
+  // Jacobi sweeps' residue): u0 = b0 / |b0|, u1 = the part of b1 normal to
+  // u0, normalised, and u2 = u0 x u1, so that U is a proper rotation and
+  // sigma_2 = u2 . b2 takes the sign of det F, which is the Irving et al.
+  // flip. |b0| >= 1/sqrt(3) as |A| = 1, unless F = 0; where b1's part is
+  // nil (F of rank one), u1 is any unit vector normal to u0. (Cheaper than the Givens QR
+  // of McAdams et al.: fem_bench --only=invertible; docs/perf.md.)
+  // (F = 0, the one case with b0 nil, takes b0 = e_x.)
+  const auto zero = rho[0] < T(kRotationTiny<T>);
+  const T b0[3] = {pick(zero, T(R(1)), B[0][0]), B[1][0], B[2][0]};
+  const T b2[3] = {B[0][2], B[1][2], B[2][2]};
+  const T r0 = sqrt_of(pick(zero, T(R(1)), rho[0]));
+  const T i0 = T(R(1)) / r0;
+  const T u0[3] = {b0[0] * i0, b0[1] * i0, b0[2] * i0};
+  const T p = u0[0] * B[0][1] + u0[1] * B[1][1] + u0[2] * B[2][1];
+  const T b1[3] = {B[0][1] - p * u0[0], B[1][1] - p * u0[1], B[2][1] - p * u0[2]};
+  const auto rank_one = b1[0] * b1[0] + b1[1] * b1[1] + b1[2] * b1[2] < T(kRotationTiny<T>);
+  // u0 x e_x, or u0 x e_y where u0 lies near x: never nil.
+  const auto near_x = abs_of(u0[0]) > T(R(0.5));
+  const T normal[3] = {pick(near_x, -u0[2], T(R(0))), pick(near_x, T(R(0)), u0[2]), pick(near_x, u0[0], -u0[1])};
+  T v[3];
   #pragma GCC unroll 3
-  for (int j = 0; j < 3; ++j) sigma[j] = B[j][j] * norm;
+  for (int i = 0; i < 3; ++i) v[i] = pick(rank_one, normal[i], b1[i]);
+  // Projected once more: where b1 is nearly parallel to b0, what is left of
+  // it after one projection is rounding, no longer normal to u0 to rounding
+  // of its own size (Kahan's "twice is enough").
+  const T q = u0[0] * v[0] + u0[1] * v[1] + u0[2] * v[2];
+  const T w[3] = {v[0] - q * u0[0], v[1] - q * u0[1], v[2] - q * u0[2]};
+  const T r1 = sqrt_of(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+  const T i1 = T(R(1)) / r1;
+  const T u1[3] = {w[0] * i1, w[1] * i1, w[2] * i1};
+  const T u2[3] = {u0[1] * u1[2] - u0[2] * u1[1], u0[2] * u1[0] - u0[0] * u1[2], u0[0] * u1[1] - u0[1] * u1[0]};
+  #pragma GCC unroll 3
+  for (int i = 0; i < 3; ++i) {
+    U[i][0] = u0[i];
+    U[i][1] = u1[i];
+    U[i][2] = u2[i];
+  }
+  const T norm = norm2 * scale;  // |F|
+  sigma[0] = pick(zero, T(R(0)), r0) * norm;
+  sigma[1] = pick(rank_one, T(R(0)), r1) * norm;
+  sigma[2] = (u2[0] * b2[0] + u2[1] * b2[1] + u2[2] * b2[2]) * norm;
 }
 
 template <class T>
@@ -326,11 +427,10 @@ TACTILE_INLINE void rotation_of(const T* F, T* R) {
 }
 
 // ---- corotational linear -----------------------------------------------------
-// psi = mu |F - R|^2 + lambda/2 tr(R^T F - I)^2, P = 2 mu (F - R) + lambda tr(R^T F - I) R.
+// psi = mu |F - R|^2 + lambda/2 tr(R^T F - I)^2, P = 2 mu (F - R) + lambda tr(R^T F - I) R,
+// with R the polar rotation of F.
 template <class T>
-TACTILE_INLINE T stress_corotational(const T* F, T lambda, T mu, T* P) {
-  T R[9];
-  rotation_of(F, R);
+TACTILE_INLINE T stress_corotational_of(const T* F, const T* R, T lambda, T mu, T* P) {
   T tr = -T(3);
   T dd = 0;
   #pragma GCC unroll 16
@@ -342,6 +442,35 @@ TACTILE_INLINE T stress_corotational(const T* F, T lambda, T mu, T* P) {
   #pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) P[k] = T(2) * mu * (F[k] - R[k]) + lambda * tr * R[k];
   return mu * dd + T(0.5) * lambda * tr * tr;
+}
+template <class T>
+TACTILE_INLINE T stress_corotational(const T* F, T lambda, T mu, T* P) {
+  T R[9];
+  rotation_of(F, R);
+  return stress_corotational_of(F, R, lambda, mu, P);
+}
+
+// One step of Newton's iteration for the polar rotation, X <- (X + X^-T) / 2
+// (Higham 1986), with X^-T = cof(X) / det X: from X = F it converges to R
+// for any F with det F > 0, quadratically once near (each step squares the
+// distance of every singular value from 1, halved), with one division a step
+// and no SVD. Returns |X_new - X|^2: once that is under the precision's
+// epsilon the new X is R to rounding. The kernels take it where F is well
+// away from singular (may_reach_floor says no), where it needs 3 to 5 steps.
+template <class T>
+TACTILE_INLINE T polar_newton_step(T* X) {
+  T C[9];
+  cofactor(X, C);
+  const T h = T(0.5) / (X[0] * C[0] + X[1] * C[1] + X[2] * C[2]);
+  T change = 0;
+  #pragma GCC unroll 16
+  for (int k = 0; k < 9; ++k) {
+    const T next = T(0.5) * X[k] + h * C[k];
+    const T d = next - X[k];
+    change += d * d;
+    X[k] = next;
+  }
+  return change;
 }
 
 // ---- invertible St. Venant-Kirchhoff ------------------------------------------
@@ -387,44 +516,56 @@ TACTILE_INLINE bool reaches_floor(const T* F) {
   return reaches_floor(c(0, 0), c(1, 1), c(2, 2), c(0, 1), c(0, 2), c(1, 2), det(F));
 }
 
+// 1 unless J > 0 and, by Gershgorin (every eigenvalue of C = F^T F lies
+// within a row's off-diagonal sum of its diagonal entry), each c_ii - sum
+// |c_ij| is above c^2, so that no singular value of F is under the floor c:
+// a dozen operations on C's entries. reaches_floor, exact, settles the lanes
+// this leaves in doubt.
+template <class T>
+TACTILE_INLINE T may_reach_floor(T c00, T c11, T c22, T c01, T c02, T c12, T J) {
+  const T a01 = std::fabs(c01), a02 = std::fabs(c02), a12 = std::fabs(c12);
+  const T g0 = c00 - a01 - a02, g1 = c11 - a01 - a12, g2 = c22 - a02 - a12;
+  const T lo = g0 < g1 ? (g0 < g2 ? g0 : g2) : (g1 < g2 ? g1 : g2);
+  return (lo > T(kInversionFloor * kInversionFloor)) & (J > T(0)) ? T(0) : T(1);
+}
+template <class T>
+TACTILE_INLINE T may_reach_floor(const T* F) {
+  auto c = [F](int i, int j) { return F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j]; };
+  return may_reach_floor(c(0, 0), c(1, 1), c(2, 2), c(0, 1), c(0, 2), c(1, 2), det(F));
+}
+
 // StVK's stress and energy (as stress_stvk), and from the same entries of C
-// whether F may reach invertible StVK's floor: near = 1 unless J > 0 and,
-// by Gershgorin (every eigenvalue of C lies within a row's off-diagonal sum
-// of its diagonal entry), each c_ii - sum |c_ij| is above c^2, so that no
-// singular value is under the floor. A dozen operations more than StVK's;
-// reaches_floor(F), exact, settles the lanes this leaves in doubt.
+// whether F may reach invertible StVK's floor (near = may_reach_floor).
 template <class T>
 TACTILE_INLINE T stress_stvk_near(const T* F, T lambda, T mu, T* P, T& near) {
   auto c = [F](int i, int j) { return F[i] * F[j] + F[3 + i] * F[3 + j] + F[6 + i] * F[6 + j]; };
   const T c00 = c(0, 0), c11 = c(1, 1), c22 = c(2, 2), c01 = c(0, 1), c02 = c(0, 2), c12 = c(1, 2);
-  const T a01 = std::fabs(c01), a02 = std::fabs(c02), a12 = std::fabs(c12);
-  const T g0 = c00 - a01 - a02, g1 = c11 - a01 - a12, g2 = c22 - a02 - a12;
-  const T lo = g0 < g1 ? (g0 < g2 ? g0 : g2) : (g1 < g2 ? g1 : g2);
-  near = (lo > T(kInversionFloor * kInversionFloor)) & (det(F) > T(0)) ? T(0) : T(1);
+  near = may_reach_floor(c00, c11, c22, c01, c02, c12, det(F));
   return stress_stvk_of_c(F, c00, c11, c22, c01, c02, c12, lambda, mu, P);
 }
 
 template <class T>
 TACTILE_INLINE T stress_invertible_stvk(const T* F, T lambda, T mu, T* P) {
+  using R = Scalar<T>;
   T U[3][3], V[3][3], s[3];
   svd_of(F, U, s, V);
-  const T c = T(kInversionFloor), k = lambda + T(2) * mu;
+  const T c = T(R(kInversionFloor)), k = lambda + T(R(2)) * mu;
   T sh[3], d[3], E[3];
   #pragma GCC unroll 3
   for (int i = 0; i < 3; ++i) {
-    sh[i] = s[i] > c ? s[i] : c;
+    sh[i] = pick(s[i] > c, s[i], c);
     d[i] = s[i] - sh[i];
-    E[i] = T(0.5) * (sh[i] * sh[i] - T(1));
+    E[i] = T(R(0.5)) * (sh[i] * sh[i] - T(R(1)));
   }
   const T tr = E[0] + E[1] + E[2];
   const T q = sh[0] * d[0] + sh[1] * d[1] + sh[2] * d[2];  // sum_j sigma^_j d_j, over the held ones
-  T Ph[3], psi = mu * (E[0] * E[0] + E[1] * E[1] + E[2] * E[2]) + T(0.5) * lambda * tr * tr;
+  T Ph[3], psi = mu * (E[0] * E[0] + E[1] * E[1] + E[2] * E[2]) + T(R(0.5)) * lambda * tr * tr;
   #pragma GCC unroll 3
   for (int i = 0; i < 3; ++i) {
-    const T g = sh[i] * (T(2) * mu * E[i] + lambda * tr);
-    const bool held = d[i] < T(0);
-    Ph[i] = held ? g + k * d[i] : g + lambda * sh[i] * q;
-    psi += g * d[i] + T(0.5) * k * d[i] * d[i];
+    const T g = sh[i] * (T(R(2)) * mu * E[i] + lambda * tr);
+    const auto held = d[i] < T(R(0));
+    Ph[i] = pick(held, g + k * d[i], g + lambda * sh[i] * q);
+    psi += g * d[i] + T(R(0.5)) * k * d[i] * d[i];
   }
   #pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)

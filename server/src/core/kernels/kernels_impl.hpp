@@ -45,6 +45,36 @@
 namespace tactile::kernel_impl {
 namespace {
 
+// ---- subnormals ----------------------------------------------------------------
+
+// Whether model M's stress runs the SVD (material.hpp) on some elements.
+constexpr bool uses_svd(MaterialModel m) {
+  return m == MaterialModel::Corotational || m == MaterialModel::InvertibleStVK;
+}
+
+// Subnormal inputs read as zero and subnormal results written as zero (the
+// DAZ and FTZ bits of MXCSR) for the life of the object, where `on`: the SVD's
+// Jacobi sweeps drive entries towards zero, and each operation on a subnormal
+// number costs a microcode assist (fem_bench --only=invertible: the float SVD
+// about 5 times slower without). MXCSR is per thread; the old value comes
+// back on exit. Values that small change nothing the kernels compute.
+class FlushSubnormals {
+ public:
+  explicit FlushSubnormals(bool on) : on_(on), saved_(on ? _mm_getcsr() : 0u) {
+    if (on_) _mm_setcsr(saved_ | kFlushBits);
+  }
+  ~FlushSubnormals() {
+    if (on_) _mm_setcsr(saved_);
+  }
+  FlushSubnormals(const FlushSubnormals&) = delete;
+  FlushSubnormals& operator=(const FlushSubnormals&) = delete;
+
+ private:
+  static constexpr unsigned kFlushBits = 0x8040;  // FTZ (bit 15), DAZ (bit 6)
+  bool on_;
+  unsigned saved_;
+};
+
 // ---- corner loads and force adds ---------------------------------------------
 
 // x[3c + i][l] = u[node[c][l]].v[i]: the corner displacements of every lane.
@@ -300,80 +330,225 @@ inline constexpr bool kAddsAfterF = true;
 inline constexpr bool kAddsAfterF = false;
 #endif
 
-// Invertible StVK: a block with at most this many lanes near the floor
-// takes the SVD lane by lane, scalar; one with more, across all its lanes
-// at once (fem_bench --only=invertible; docs/perf.md).
+// A block with at most this many lanes near the floor takes the SVD lane by
+// lane, scalar; one with more, across all its lanes at once, paired with the
+// next such block (fem_bench --only=invertible; docs/perf.md).
 inline constexpr int kScalarNearLanes = 2;
 
 // How many blocks ahead the element pass prefetches (see forces()).
 constexpr int32_t kPrefetchBlocks = 4;
 
-// Whether any of a block's W flags (1 or 0) is set: one compare and mask
-// test per vector, not a chain of scalar adds on every block
+// Whether any of a block's W values is above t: one compare and mask test
+// per vector, not a chain of scalar adds on every block
 // (fem_bench --only=invertible; docs/perf.md).
 template <class Real>
-TACTILE_INLINE bool any_set(const Real* flags) {
+TACTILE_INLINE bool any_above(const Real* v, Real t) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
 #if defined(__AVX512F__)
   if constexpr (sizeof(Real) == 4) {
-    return _mm512_cmp_ps_mask(_mm512_load_ps(flags), _mm512_setzero_ps(), _CMP_NEQ_OQ) != 0;
+    return _mm512_cmp_ps_mask(_mm512_load_ps(v), _mm512_set1_ps(t), _CMP_GT_OQ) != 0;
   } else {
-    return _mm512_cmp_pd_mask(_mm512_load_pd(flags), _mm512_setzero_pd(), _CMP_NEQ_OQ) != 0;
+    return _mm512_cmp_pd_mask(_mm512_load_pd(v), _mm512_set1_pd(t), _CMP_GT_OQ) != 0;
   }
 #elif defined(__AVX2__)
   if constexpr (sizeof(Real) == 4) {
-    const __m256 z = _mm256_setzero_ps();
-    return (_mm256_movemask_ps(_mm256_cmp_ps(_mm256_load_ps(flags), z, _CMP_NEQ_OQ)) |
-            _mm256_movemask_ps(_mm256_cmp_ps(_mm256_load_ps(flags + 8), z, _CMP_NEQ_OQ))) != 0;
+    const __m256 tv = _mm256_set1_ps(t);
+    return (_mm256_movemask_ps(_mm256_cmp_ps(_mm256_load_ps(v), tv, _CMP_GT_OQ)) |
+            _mm256_movemask_ps(_mm256_cmp_ps(_mm256_load_ps(v + 8), tv, _CMP_GT_OQ))) != 0;
   } else {
-    const __m256d z = _mm256_setzero_pd();
-    return (_mm256_movemask_pd(_mm256_cmp_pd(_mm256_load_pd(flags), z, _CMP_NEQ_OQ)) |
-            _mm256_movemask_pd(_mm256_cmp_pd(_mm256_load_pd(flags + 4), z, _CMP_NEQ_OQ))) != 0;
+    const __m256d tv = _mm256_set1_pd(t);
+    return (_mm256_movemask_pd(_mm256_cmp_pd(_mm256_load_pd(v), tv, _CMP_GT_OQ)) |
+            _mm256_movemask_pd(_mm256_cmp_pd(_mm256_load_pd(v + 4), tv, _CMP_GT_OQ))) != 0;
   }
 #else
   bool any = false;
-  for (int l = 0; l < W; ++l) any = any || flags[l] != Real(0);
+  for (int l = 0; l < W; ++l) any = any || v[l] > t;
   return any;
 #endif
 }
 
-// Invertible StVK's lanes that may be near the floor (near[l] = 1;
-// material::stress_stvk_near): those that are (material::reaches_floor)
-// get their stress and energy from the SVD (stress_invertible_stvk) in place
-// of plain StVK's. Out of line: inlined, its code slows the element pass on
-// every block, also where no lane is near the floor (fem_bench
-// --only=invertible; docs/perf.md).
+// ---- the SVD's lanes (invertible StVK and corotational) --------------------------
+//
+// Both models run a cheap form on every lane (StVK's stress; Newton's polar
+// iteration) and flag the lanes that may be near the floor, where only the
+// SVD will do (near[l] = 1). Those lanes get their stress and energy from
+// material::stress<M>, which runs the SVD. A block with a lane or two near
+// takes them one at a time; one with more is held until the next such block
+// comes, and the two run the SVD together, two elements in one instruction
+// stream (material::Pair): the SVD is a chain of dependent operations, and
+// two chains keep the core busy where one leaves it waiting. The functions
+// are out of line: inlined, their code slows the element pass on every
+// block, also where no lane is near (fem_bench --only=invertible;
+// docs/perf.md).
+
+// Whether lane F of a flagged lane takes the SVD: invertible StVK is plain
+// StVK down to the floor, which reaches_floor finds exactly.
+template <MaterialModel M, class T>
+TACTILE_INLINE bool takes_svd(const T* F) {
+  if constexpr (M == MaterialModel::InvertibleStVK) return material::reaches_floor(F);
+  return true;
+}
+
+// What one block holds between its stresses and its corner forces.
 template <class Real>
-__attribute__((noinline)) void invertible_lanes(const ElementBlock<Real>& B, const Real (*F)[kLanes<Real>],
-                                                const Real* near, Real lambda, Real mu, Real (*P)[kLanes<Real>],
-                                                Real* psiV) {
-  constexpr int W = kLanes<Real>;
-  int n_near = 0;
-  for (int l = 0; l < W; ++l) n_near += near[l] != Real(0);
-  if (n_near <= kScalarNearLanes) {
-    // A lane or two (a crushed spot in a body at ease): those alone, one at a time.
-    for (int l = 0; l < W; ++l) {
-      if (near[l] == Real(0)) continue;
-      Real Fl[9], Pl[9];
-      for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
-      if (!material::reaches_floor(Fl)) continue;
-      psiV[l] = material::stress_invertible_stvk(Fl, lambda * B.V[l], mu * B.V[l], Pl);
-      for (int k = 0; k < 9; ++k) P[k][l] = Pl[k];
-    }
-    return;
+struct BlockStress {
+  alignas(64) Real F[9][kLanes<Real>];  // deformation gradient per lane: F[3i + j][lane]
+  alignas(64) Real P[9][kLanes<Real>];  // V P per lane [N/m^2 m^3]: P[3i + j][lane]
+  alignas(64) Real psiV[kLanes<Real>];  // V psi per lane [J]
+  alignas(64) Real near[kLanes<Real>];  // 1 where the SVD may be needed, else 0
+};
+
+template <class Real>
+int count_near(const Real* near) {
+  int n = 0;
+  for (int l = 0; l < kLanes<Real>; ++l) n += near[l] != Real(0);
+  return n;
+}
+
+// The flagged lanes of one block, one at a time.
+template <class Real, MaterialModel M>
+__attribute__((noinline)) void svd_lanes_one_by_one(const ElementBlock<Real>& B, Real lambda, Real mu,
+                                                    BlockStress<Real>& s) {
+  for (int l = 0; l < kLanes<Real>; ++l) {
+    if (s.near[l] == Real(0)) continue;
+    Real Fl[9], Pl[9];
+    for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
+    if (!takes_svd<M>(Fl)) continue;
+    s.psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+    for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
   }
+}
+
+// Every lane of one block through the SVD; the flagged ones keep its result.
+template <class Real, MaterialModel M>
+__attribute__((noinline)) void svd_lanes_of_block(const ElementBlock<Real>& B, Real lambda, Real mu,
+                                                  BlockStress<Real>& s) {
+  constexpr int W = kLanes<Real>;
   #pragma GCC unroll 1
   for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
   for (int l = h; l < h + kMathLanes<Real>; ++l) {
     Real Fl[9], Pl[9];
     #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
-    const Real psi = material::stress_invertible_stvk(Fl, lambda * B.V[l], mu * B.V[l], Pl);
-    const bool take = near[l] != Real(0) && material::reaches_floor(Fl);
-    psiV[l] = take ? psi : psiV[l];
+    for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
+    const Real psi = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+    const bool take = s.near[l] != Real(0) && takes_svd<M>(Fl);
+    s.psiV[l] = take ? psi : s.psiV[l];
     #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) P[k][l] = take ? Pl[k] : P[k][l];
+    for (int k = 0; k < 9; ++k) s.P[k][l] = take ? Pl[k] : s.P[k][l];
+  }
+}
+
+// Two blocks' lanes through the SVD at once, lane l of each in one Pair.
+template <class Real, MaterialModel M>
+__attribute__((noinline)) void svd_lanes_of_pair(const ElementBlock<Real>& A, BlockStress<Real>& s,
+                                                 const ElementBlock<Real>& B, BlockStress<Real>& t, Real lambda,
+                                                 Real mu) {
+  using Two = material::Pair<Real>;
+  constexpr int W = kLanes<Real>;
+  #pragma GCC unroll 1
+  for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+  for (int l = h; l < h + kMathLanes<Real>; ++l) {
+    Two Fl[9], Pl[9];
+    Real Fa[9], Fb[9];
+    #pragma GCC unroll 16
+    for (int k = 0; k < 9; ++k) {
+      Fa[k] = s.F[k][l];
+      Fb[k] = t.F[k][l];
+      Fl[k] = Two(Fa[k], Fb[k]);
+    }
+    const Two psi = material::stress<M>(Fl, Two(lambda * A.V[l], lambda * B.V[l]), Two(mu * A.V[l], mu * B.V[l]), Pl);
+    const bool take_a = s.near[l] != Real(0) && takes_svd<M>(Fa);
+    const bool take_b = t.near[l] != Real(0) && takes_svd<M>(Fb);
+    s.psiV[l] = take_a ? psi.a : s.psiV[l];
+    t.psiV[l] = take_b ? psi.b : t.psiV[l];
+    #pragma GCC unroll 16
+    for (int k = 0; k < 9; ++k) {
+      s.P[k][l] = take_a ? Pl[k].a : s.P[k][l];
+      t.P[k][l] = take_b ? Pl[k].b : t.P[k][l];
+    }
+  }
+}
+
+// Corotational on lanes away from the floor: R by Newton's polar iteration
+// (material::polar_newton_step), every lane at once, until every lane has
+// converged; lanes that may be near the floor (may_reach_floor), or that
+// have not converged after kPolarSteps, are flagged for the SVD.
+template <class Real>
+inline constexpr int kPolarSteps = sizeof(Real) == 4 ? 8 : 10;
+
+template <class Real>
+TACTILE_INLINE void corotational_stresses(const ElementBlock<Real>& B, Real lambda, Real mu, BlockStress<Real>& s) {
+  constexpr int W = kLanes<Real>;
+  alignas(64) Real X[9][W];    // the iterate, per lane
+  alignas(64) Real change[W];  // |X_new - X|^2 of the last step, per lane
+  #pragma GCC unroll 1
+  for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+  for (int l = h; l < h + kMathLanes<Real>; ++l) {
+    Real Fl[9];
+    #pragma GCC unroll 16
+    for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
+    const Real near = material::may_reach_floor(Fl);
+    s.near[l] = near;
+    #pragma GCC unroll 16
+    for (int k = 0; k < 9; ++k) X[k][l] = near != Real(0) ? (k % 4 == 0 ? Real(1) : Real(0)) : Fl[k];
+  }
+  constexpr Real kConverged = std::numeric_limits<Real>::epsilon();
+  for (int step = 0; step < kPolarSteps<Real>; ++step) {
+    #pragma GCC unroll 1
+    for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+    for (int l = h; l < h + kMathLanes<Real>; ++l) {
+      Real Xl[9];
+      #pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) Xl[k] = X[k][l];
+      change[l] = material::polar_newton_step(Xl);
+      #pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) X[k][l] = Xl[k];
+    }
+    if (!any_above(change, kConverged)) break;
+  }
+  #pragma GCC unroll 1
+  for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+  for (int l = h; l < h + kMathLanes<Real>; ++l) {
+    Real Fl[9], Rl[9], Pl[9];
+    #pragma GCC unroll 16
+    for (int k = 0; k < 9; ++k) {
+      Fl[k] = s.F[k][l];
+      Rl[k] = X[k][l];
+    }
+    s.psiV[l] = material::stress_corotational_of(Fl, Rl, lambda * B.V[l], mu * B.V[l], Pl);
+    s.near[l] = change[l] > kConverged ? Real(1) : s.near[l];
+    #pragma GCC unroll 16
+    for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
+  }
+}
+
+// [f1 f2 f3] = -V P Dm^-T, f0 = -(f1 + f2 + f3): the corner forces [N] of a
+// block's lanes, g[3c + i][lane].
+template <class Real>
+TACTILE_INLINE void corner_forces(const ElementBlock<Real>& B, const Real (*P)[kLanes<Real>], Real (*g)[kLanes<Real>]) {
+  constexpr int W = kLanes<Real>;
+  #pragma GCC unroll 1
+  for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+  for (int l = h; l < h + kMathLanes<Real>; ++l) {
+    // (Negated products: fused negating multiply-adds, no negation of their own.)
+    #pragma GCC unroll 16
+    for (int i = 0; i < 3; ++i) {
+      Real sum = 0;
+      #pragma GCC unroll 16
+      for (int c = 0; c < 3; ++c) {
+        const Real fa = -(P[3 * i][l] * B.Dinv[3 * c][l]) - P[3 * i + 1][l] * B.Dinv[3 * c + 1][l] -
+                       P[3 * i + 2][l] * B.Dinv[3 * c + 2][l];
+        g[3 * (c + 1) + i][l] = fa;
+        sum = c == 0 ? fa : sum + fa;
+      }
+      g[i][l] = -sum;
+    }
   }
 }
 
@@ -381,6 +556,7 @@ template <class Real, MaterialModel M>
 ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu,
                    const Node4<Real>* u, Node4<Real>* f) {
   constexpr int W = kLanes<Real>;
+  const FlushSubnormals flush(uses_svd(M));
   using RealW = typename LaneVectors<Real>::RealW;
   using DoubleW = typename LaneVectors<Real>::DoubleW;
   using MaskW = typename LaneVectors<Real>::MaskW;
@@ -389,14 +565,38 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
   DoubleW energy = {};
   MaskW inverted = {};
   // Corner forces [N], fc[k][3c + i][lane], of this block (k = b & 1) and
-  // the previous one, whose adds into f wait until this block's math is
-  // under way (kAddsAfterF): a block is some 800 instructions, more than the
-  // core reorders at once, so in block order the adds and the stress math
-  // ran one after the other; placed inside the math, they overlap (the
-  // kernel alone, alternated in one process, 20 k to 1 M tets, after the
-  // stresses: AVX-512 3-8 % faster in float and 5-19 % in double, AVX2
-  // 3-5 %; SSE4.2 1-4 % slower).
+  // the last one before it (block `queued`), whose adds into f wait until
+  // this block's math is under way (kAddsAfterF): a block is some 800
+  // instructions, more than the core reorders at once, so in block order the
+  // adds and the stress math ran one after the other; placed inside the
+  // math, they overlap (the kernel alone, alternated in one process, 20 k to
+  // 1 M tets, after the stresses: AVX-512 3-8 % faster in float and 5-19 % in
+  // double, AVX2 3-5 %; SSE4.2 1-4 % slower). Its adds always come before
+  // this block's forces are written, so the two may share a slot.
   alignas(64) Real fc[2][12][W];
+  int32_t queued = -1;
+  // This block's stresses, and (the SVD's models) a block held for the SVD
+  // until the next block that needs it for more than a lane or two comes.
+  BlockStress<Real> stress[2];
+  int cur = 0;
+  int32_t held = -1;
+  // The held block through the SVD (with `other`, or alone), its forces
+  // added at once.
+  auto finish_held = [&](const ElementBlock<Real>* B, BlockStress<Real>* other) {
+    if constexpr (uses_svd(M)) {
+      BlockStress<Real>& h = stress[cur ^ 1];
+      if (other) {
+        svd_lanes_of_pair<Real, M>(blocks[held], h, *B, *other, lambda, mu);
+      } else {
+        svd_lanes_of_block<Real, M>(blocks[held], lambda, mu, h);
+      }
+      alignas(64) Real g[12][W];
+      corner_forces(blocks[held], h.P, g);
+      add_corner_forces(blocks[held], g, f);
+      energy += __builtin_convertvector(*reinterpret_cast<const RealW*>(h.psiV), DoubleW);
+      held = -1;
+    }
+  };
   for (int32_t b = begin; b < end; ++b) {
     const ElementBlock<Real>& B = blocks[b];
     // The blocks stream in order, but the hardware prefetcher alone leaves
@@ -414,19 +614,12 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       #pragma GCC unroll 16
       for (size_t o = 0; o < sizeof(ElementBlock<Real>); o += 64) __builtin_prefetch(next + o, 0, 0);
     }
+    BlockStress<Real>& s = stress[cur];
     alignas(64) Real x[12][W];  // corner displacements [m]: x[3c + i][lane]
-    alignas(64) Real P[9][W];   // V P per lane [N/m^2 m^3]: P[3i + j][lane]
-    alignas(64) Real psiV[W];   // V psi per lane [J]
     alignas(64) Real J[W];      // det F per lane
-    // Invertible StVK: lanes whose F has a singular value under the floor
-    // (1 or 0). Only a block with one takes the SVD, and only those lanes
-    // take its result: the others keep plain StVK's, which is the same
-    // function there (material.hpp).
-    [[maybe_unused]] alignas(64) Real near[W];
     load_corners(B, u, x);
     // Per-lane outputs and no OpenMP pragma: GCC's `omp simd` would keep F and
     // P in memory as per-lane arrays; its plain vectoriser does far better.
-    alignas(64) Real F[9][W];  // deformation gradient per lane: F[3i + j][lane]
     #pragma GCC unroll 1
     for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
@@ -435,55 +628,55 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       deformation_gradient(B, l, x, Fl);
       if constexpr (!can_invert(M)) J[l] = material::det(Fl);
       #pragma GCC unroll 16
-      for (int k = 0; k < 9; ++k) F[k][l] = Fl[k];
+      for (int k = 0; k < 9; ++k) s.F[k][l] = Fl[k];
     }
-    if (kAddsAfterF && b > begin) add_corner_forces(blocks[b - 1], fc[(b - 1) & 1], f);
-    #pragma GCC unroll 1
-    for (int h = 0; h < W; h += kMathLanes<Real>)
+    if (kAddsAfterF && queued >= 0) add_corner_forces(blocks[queued], fc[queued & 1], f);
+    if constexpr (M == MaterialModel::Corotational) {
+      corotational_stresses(B, lambda, mu, s);
+    } else {
+      #pragma GCC unroll 1
+      for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
-    for (int l = h; l < h + kMathLanes<Real>; ++l) {
-      Real Fl[9], Pl[9];
-      #pragma GCC unroll 16
-      for (int k = 0; k < 9; ++k) Fl[k] = F[k][l];
-      // P and psi are linear in (lambda, mu) at a fixed ratio, so passing
-      // (lambda V, mu V) gives V P and V psi. (One volume a lane and the
-      // group's lambda and mu, rather than lambda V and mu V a lane: 4 bytes
-      // a tet less to stream, and a load fewer; fem_bench --only=passes.)
-      if constexpr (M == MaterialModel::InvertibleStVK) {
-        psiV[l] = material::stress_stvk_near(Fl, lambda * B.V[l], mu * B.V[l], Pl, near[l]);
-      } else {
-        psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
-      }
-      #pragma GCC unroll 16
-      for (int k = 0; k < 9; ++k) P[k][l] = Pl[k];
-    }
-    if constexpr (M == MaterialModel::InvertibleStVK)
-      if (any_set(near)) invertible_lanes(B, F, near, lambda, mu, P, psiV);
-    if (!kAddsAfterF && b > begin) add_corner_forces(blocks[b - 1], fc[(b - 1) & 1], f);
-    Real(*g)[W] = fc[b & 1];
-    #pragma GCC unroll 1
-    for (int h = 0; h < W; h += kMathLanes<Real>)
-#pragma GCC ivdep
-    for (int l = h; l < h + kMathLanes<Real>; ++l) {
-      // [f1 f2 f3] = -V P Dm^-T (negated products: fused negating
-      // multiply-adds, no negation of their own), f0 = -(f1 + f2 + f3).
-      #pragma GCC unroll 16
-      for (int i = 0; i < 3; ++i) {
-        Real sum = 0;
+      for (int l = h; l < h + kMathLanes<Real>; ++l) {
+        Real Fl[9], Pl[9];
         #pragma GCC unroll 16
-        for (int c = 0; c < 3; ++c) {
-          const Real fa = -(P[3 * i][l] * B.Dinv[3 * c][l]) - P[3 * i + 1][l] * B.Dinv[3 * c + 1][l] -
-                         P[3 * i + 2][l] * B.Dinv[3 * c + 2][l];
-          g[3 * (c + 1) + i][l] = fa;
-          sum = c == 0 ? fa : sum + fa;
+        for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
+        // P and psi are linear in (lambda, mu) at a fixed ratio, so passing
+        // (lambda V, mu V) gives V P and V psi. (One volume a lane and the
+        // group's lambda and mu, rather than lambda V and mu V a lane: 4 bytes
+        // a tet less to stream, and a load fewer; fem_bench --only=passes.)
+        if constexpr (M == MaterialModel::InvertibleStVK) {
+          s.psiV[l] = material::stress_stvk_near(Fl, lambda * B.V[l], mu * B.V[l], Pl, s.near[l]);
+        } else {
+          s.psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
         }
-        g[i][l] = -sum;
+        #pragma GCC unroll 16
+        for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
       }
     }
-    energy += __builtin_convertvector(*reinterpret_cast<const RealW*>(psiV), DoubleW);
+    if constexpr (uses_svd(M)) {
+      if (any_above(s.near, Real(0))) {
+        if (count_near(s.near) <= kScalarNearLanes) {
+          svd_lanes_one_by_one<Real, M>(B, lambda, mu, s);
+        } else if (held < 0) {
+          // Held for a partner; its forces come with the partner's SVD.
+          if (kAddsAfterF) queued = -1;
+          held = b;
+          cur ^= 1;
+          continue;
+        } else {
+          finish_held(&B, &s);
+        }
+      }
+    }
+    if (queued >= 0 && !kAddsAfterF) add_corner_forces(blocks[queued], fc[queued & 1], f);
+    corner_forces(B, s.P, fc[b & 1]);
+    queued = b;
+    energy += __builtin_convertvector(*reinterpret_cast<const RealW*>(s.psiV), DoubleW);
     if constexpr (!can_invert(M)) inverted -= *reinterpret_cast<const RealW*>(J) <= Real(0);  // true is -1
   }
-  if (begin < end) add_corner_forces(blocks[end - 1], fc[(end - 1) & 1], f);
+  if (queued >= 0) add_corner_forces(blocks[queued], fc[queued & 1], f);
+  if (held >= 0) finish_held(nullptr, nullptr);  // (never for the other models)
   ElasticSums sums;
   for (int l = 0; l < W; ++l) {
     sums.energy += energy[l];
@@ -505,6 +698,7 @@ template <class Real, MaterialModel M>
 void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu, const Real* u,
             double* out, Real* J) {
   constexpr int W = kLanes<Real>;
+  const FlushSubnormals flush(uses_svd(M));
   for (int32_t b = begin; b < end; ++b) {
     const ElementBlock<Real>& B = blocks[b];
     alignas(64) Real x[12][W];
