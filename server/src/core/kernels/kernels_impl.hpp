@@ -381,8 +381,11 @@ TACTILE_INLINE bool any_above(const Real* v, Real t) {
 // block, also where no lane is near (fem_bench --only=invertible;
 // docs/perf.md).
 
-// Whether lane F of a flagged lane takes the SVD: invertible StVK is plain
-// StVK down to the floor, which reaches_floor finds exactly.
+// Whether a flagged lane with deformation F takes the SVD one by one:
+// invertible StVK is plain StVK down to the floor, which reaches_floor finds
+// exactly, sparing the SVD. Where the SVD runs on a whole block anyway, its
+// flagged lanes all take its result (the same as plain StVK's to rounding,
+// and the exact test is some 30 operations a lane).
 template <MaterialModel M, class T>
 TACTILE_INLINE bool takes_svd(const T* F) {
   if constexpr (M == MaterialModel::InvertibleStVK) return material::reaches_floor(F);
@@ -432,7 +435,7 @@ __attribute__((noinline)) void svd_lanes_of_block(const ElementBlock<Real>& B, R
     #pragma GCC unroll 16
     for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
     const Real psi = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
-    const bool take = s.near[l] != Real(0) && takes_svd<M>(Fl);
+    const bool take = s.near[l] != Real(0);
     s.psiV[l] = take ? psi : s.psiV[l];
     #pragma GCC unroll 16
     for (int k = 0; k < 9; ++k) s.P[k][l] = take ? Pl[k] : s.P[k][l];
@@ -451,16 +454,11 @@ __attribute__((noinline)) void svd_lanes_of_pair(const ElementBlock<Real>& A, Bl
 #pragma GCC ivdep
   for (int l = h; l < h + kMathLanes<Real>; ++l) {
     Two Fl[9], Pl[9];
-    Real Fa[9], Fb[9];
     #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) {
-      Fa[k] = s.F[k][l];
-      Fb[k] = t.F[k][l];
-      Fl[k] = Two(Fa[k], Fb[k]);
-    }
+    for (int k = 0; k < 9; ++k) Fl[k] = Two(s.F[k][l], t.F[k][l]);
     const Two psi = material::stress<M>(Fl, Two(lambda * A.V[l], lambda * B.V[l]), Two(mu * A.V[l], mu * B.V[l]), Pl);
-    const bool take_a = s.near[l] != Real(0) && takes_svd<M>(Fa);
-    const bool take_b = t.near[l] != Real(0) && takes_svd<M>(Fb);
+    const bool take_a = s.near[l] != Real(0);
+    const bool take_b = t.near[l] != Real(0);
     s.psiV[l] = take_a ? psi.a : s.psiV[l];
     t.psiV[l] = take_b ? psi.b : t.psiV[l];
     #pragma GCC unroll 16
@@ -577,14 +575,17 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
   int32_t queued = -1;
   // This block's stresses, and (the SVD's models) a block held for the SVD
   // until the next block that needs it for more than a lane or two comes.
-  BlockStress<Real> stress[2];
-  int cur = 0;
+  // (Held by a copy: this block's arrays stay at fixed places on the stack,
+  // which the double kernel needs to keep its speed with nothing near the
+  // floor; fem_bench --only=invertible.)
+  BlockStress<Real> s;
+  [[maybe_unused]] BlockStress<Real> held_stress;
   int32_t held = -1;
   // The held block through the SVD (with `other`, or alone), its forces
   // added at once.
   auto finish_held = [&](const ElementBlock<Real>* B, BlockStress<Real>* other) {
     if constexpr (uses_svd(M)) {
-      BlockStress<Real>& h = stress[cur ^ 1];
+      BlockStress<Real>& h = held_stress;
       if (other) {
         svd_lanes_of_pair<Real, M>(blocks[held], h, *B, *other, lambda, mu);
       } else {
@@ -614,7 +615,6 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       #pragma GCC unroll 16
       for (size_t o = 0; o < sizeof(ElementBlock<Real>); o += 64) __builtin_prefetch(next + o, 0, 0);
     }
-    BlockStress<Real>& s = stress[cur];
     alignas(64) Real x[12][W];  // corner displacements [m]: x[3c + i][lane]
     alignas(64) Real J[W];      // det F per lane
     load_corners(B, u, x);
@@ -662,7 +662,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
           // Held for a partner; its forces come with the partner's SVD.
           if (kAddsAfterF) queued = -1;
           held = b;
-          cur ^= 1;
+          held_stress = s;
           continue;
         } else {
           finish_held(&B, &s);
