@@ -791,7 +791,7 @@ void table_invertible(const Options& opt) {
   invertible_step_rows<double>(opt);
   std::printf("\nThe element pass alone, a share of the box squashed to half its height (past the floor); near: elements\n"
               "under the floor, blocks: element blocks with one (the SVD runs lane by lane for one or two, else for\n"
-              "the whole block):\n\n");
+              "the whole block, two such blocks at once):\n\n");
   std::printf("| real   |      tets |     near    |   blocks    |  stvk pass | invertible | ratio   |\n");
   std::printf("|--------|-----------|-------------|-------------|------------|------------|---------|\n");
   invertible_pass_rows<float>(opt);

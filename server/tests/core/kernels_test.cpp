@@ -176,17 +176,21 @@ void check_forces_against_reference() {
 TEST(Kernels, ForcesAndEnergyEqualScalarReferenceFloat) { check_forces_against_reference<float>(); }
 TEST(Kernels, ForcesAndEnergyEqualScalarReferenceDouble) { check_forces_against_reference<double>(); }
 
-// Invertible StVK's kernel takes the SVD only in blocks with a lane near the
-// floor, and only for those lanes: crushed and inverted elements among
-// mildly strained ones (blocks of both kinds, and blocks that mix them) give
-// the forces and energy of the scalar function on every element.
+// The SVD's models (invertible StVK, corotational) take the SVD only in
+// blocks with a lane near the floor, and only for those lanes, one by one
+// for a lane or two and for whole blocks, two at a time, beyond: crushed
+// and inverted elements among mildly strained ones (blocks of each kind,
+// and blocks that mix them) give the forces and energy of the scalar
+// function on every element.
 template <class Real>
-void check_invertible_mixed_blocks() {
-  const ModelSpec spec = make_random_spec(MaterialModel::InvertibleStVK, 11);
+void check_svd_mixed_blocks(MaterialModel model) {
+  const ModelSpec spec = make_random_spec(model, 11);
   const Model<Real> m = build_model<Real>(spec);
+  constexpr int W = kLanes<Real>;
   for (double amplitude : {0.02, 0.03, 0.05}) {
     const std::vector<double> u = make_random_u(m.n_nodes, amplitude, 7);
     int near = 0, inverted = 0;
+    std::vector<char> flagged(spec.mesh.tets.size(), 0);
     for (const Tet& t : spec.mesh.tets) {  // how many elements the SVD path serves
       Vec3 X[4], x[4];
       for (int c = 0; c < 4; ++c) {
@@ -201,6 +205,17 @@ void check_invertible_mixed_blocks() {
         for (int j = 0; j < 3; ++j) F[3 * i + j] = Fg[j][i];
       near += material::reaches_floor(F);
       inverted += material::det(F) <= 0;
+      flagged[size_t(&t - spec.mesh.tets.data())] = material::may_reach_floor(F) != 0;
+    }
+    // Blocks whose flagged lanes take the SVD as a whole block (more than two).
+    int whole_blocks = 0;
+    for (size_t b = 0; b * W < m.lane_tet.size(); ++b) {
+      int n = 0;
+      for (int l = 0; l < W; ++l) {
+        const int32_t e = m.lane_tet[b * W + size_t(l)];
+        n += e >= 0 && flagged[size_t(e)];
+      }
+      whole_blocks += n > 2;
     }
     const Forces ref = compute_reference(spec, u);
     for (const char* isa : kIsas) {
@@ -208,19 +223,28 @@ void check_invertible_mixed_blocks() {
       if (!k) continue;
       const Forces got = compute_kernel(*k, m, u);
       EXPECT_LE(max_abs_diff(got.f, ref.f), kRoundOff<Real> * max_abs(ref.f))
-          << "amplitude " << amplitude << " " << isa << ": " << near << " of " << spec.mesh.tets.size()
-          << " elements near the floor, " << inverted << " inverted";
-      EXPECT_NEAR(got.energy, ref.energy, kRoundOff<Real> * std::fabs(ref.energy)) << "amplitude " << amplitude;
+          << to_string(model) << " amplitude " << amplitude << " " << isa << ": " << near << " of "
+          << spec.mesh.tets.size() << " elements near the floor, " << inverted << " inverted, " << whole_blocks
+          << " whole blocks";
+      EXPECT_NEAR(got.energy, ref.energy, kRoundOff<Real> * std::fabs(ref.energy))
+          << to_string(model) << " amplitude " << amplitude;
     }
     if (amplitude == 0.05) {
       EXPECT_GT(inverted, 0) << "the test should invert some elements";
       EXPECT_LT(near, int(spec.mesh.tets.size())) << "the test should leave some elements far from the floor";
+      EXPECT_GE(whole_blocks, 3) << "the test should pair blocks for the SVD, and leave one to run alone";
     }
   }
 }
 
-TEST(Kernels, InvertibleStvkTakesTheSvdWhereItIsNeededFloat) { check_invertible_mixed_blocks<float>(); }
-TEST(Kernels, InvertibleStvkTakesTheSvdWhereItIsNeededDouble) { check_invertible_mixed_blocks<double>(); }
+TEST(Kernels, SvdModelsTakeTheSvdWhereItIsNeededFloat) {
+  check_svd_mixed_blocks<float>(MaterialModel::InvertibleStVK);
+  check_svd_mixed_blocks<float>(MaterialModel::Corotational);
+}
+TEST(Kernels, SvdModelsTakeTheSvdWhereItIsNeededDouble) {
+  check_svd_mixed_blocks<double>(MaterialModel::InvertibleStVK);
+  check_svd_mixed_blocks<double>(MaterialModel::Corotational);
+}
 
 template <class Real>
 void check_isas_agree() {
