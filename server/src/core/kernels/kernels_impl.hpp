@@ -53,15 +53,23 @@ constexpr bool uses_svd(MaterialModel m) {
 }
 
 // Subnormal inputs read as zero and subnormal results written as zero (the
-// DAZ and FTZ bits of MXCSR) for the life of the object, where `on`: the SVD's
-// Jacobi sweeps drive entries towards zero, and each operation on a subnormal
-// number costs a microcode assist (fem_bench --only=invertible: the float SVD
-// about 5 times slower without). MXCSR is per thread; the old value comes
-// back on exit. Values that small change nothing the kernels compute.
+// DAZ and FTZ bits of MXCSR) from engage() to the end of the object's life:
+// the SVD's Jacobi sweeps drive entries towards zero, and each operation on
+// a subnormal number costs a microcode assist (fem_bench --only=invertible:
+// the float SVD about 5 times slower without). Engaged only once a pass
+// meets a lane that takes the SVD, so that a pass with none computes
+// exactly what the plain model's does (docs/accuracy: invertible StVK has
+// StVK's error to the last bit; with subnormals flushed for the whole pass,
+// float wave-speed cases differed by 0.03 percentage points). MXCSR is per
+// thread; the old value comes back on exit.
 class FlushSubnormals {
  public:
-  explicit FlushSubnormals(bool on) : on_(on), saved_(on ? _mm_getcsr() : 0u) {
-    if (on_) _mm_setcsr(saved_ | kFlushBits);
+  FlushSubnormals() = default;
+  void engage() {
+    if (on_) return;
+    saved_ = _mm_getcsr();
+    _mm_setcsr(saved_ | kFlushBits);
+    on_ = true;
   }
   ~FlushSubnormals() {
     if (on_) _mm_setcsr(saved_);
@@ -71,8 +79,8 @@ class FlushSubnormals {
 
  private:
   static constexpr unsigned kFlushBits = 0x8040;  // FTZ (bit 15), DAZ (bit 6)
-  bool on_;
-  unsigned saved_;
+  bool on_ = false;
+  unsigned saved_ = 0;
 };
 
 // ---- corner loads and force adds ---------------------------------------------
@@ -554,7 +562,7 @@ template <class Real, MaterialModel M>
 ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu,
                    const Node4<Real>* u, Node4<Real>* f) {
   constexpr int W = kLanes<Real>;
-  const FlushSubnormals flush(uses_svd(M));
+  FlushSubnormals flush;
   using RealW = typename LaneVectors<Real>::RealW;
   using DoubleW = typename LaneVectors<Real>::DoubleW;
   using MaskW = typename LaneVectors<Real>::MaskW;
@@ -656,6 +664,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
     }
     if constexpr (uses_svd(M)) {
       if (any_above(s.near, Real(0))) {
+        flush.engage();
         if (count_near(s.near) <= kScalarNearLanes) {
           svd_lanes_one_by_one<Real, M>(B, lambda, mu, s);
         } else if (held < 0) {
@@ -698,7 +707,7 @@ template <class Real, MaterialModel M>
 void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu, const Real* u,
             double* out, Real* J) {
   constexpr int W = kLanes<Real>;
-  const FlushSubnormals flush(uses_svd(M));
+  FlushSubnormals flush;
   for (int32_t b = begin; b < end; ++b) {
     const ElementBlock<Real>& B = blocks[b];
     alignas(64) Real x[12][W];
@@ -708,10 +717,11 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real l
       deformation_gradient(B, l, x, F);
       // (Invertible StVK: the SVD only where F reaches the floor, as in forces().)
       constexpr MaterialModel kFast = M == MaterialModel::InvertibleStVK ? MaterialModel::StVK : M;
-      out[static_cast<int64_t>(b - begin) * W + l] =
-          M == MaterialModel::InvertibleStVK && material::reaches_floor(F)
-              ? material::stress<M>(F, lambda * B.V[l], mu * B.V[l], P)
-              : material::stress<kFast>(F, lambda * B.V[l], mu * B.V[l], P);
+      const bool svd = M == MaterialModel::Corotational ||
+                       (M == MaterialModel::InvertibleStVK && material::reaches_floor(F));
+      if (svd) flush.engage();
+      out[static_cast<int64_t>(b - begin) * W + l] = svd ? material::stress<M>(F, lambda * B.V[l], mu * B.V[l], P)
+                                                         : material::stress<kFast>(F, lambda * B.V[l], mu * B.V[l], P);
       if (J) J[static_cast<int64_t>(b - begin) * W + l] = material::det(F);
     }
   }
