@@ -1248,8 +1248,15 @@ void Server::Impl::stop_recording() {
 
 std::string Server::Impl::check_recorder() {
   std::erase_if(finishing, [](const std::unique_ptr<Recorder>& r) {
-    if (!r->stats().finished) return false;
+    const RecorderStats st = r->stats();
+    if (!st.finished) return false;
     r->wait();
+    std::fprintf(stderr, "recording: closed %s: %llu messages, %llu bytes", st.path.c_str(),
+                 static_cast<unsigned long long>(st.messages), static_cast<unsigned long long>(st.bytes));
+    if (st.late > 0)
+      std::fprintf(stderr, "; %llu came after a later-stamped one and carry its log time",
+                   static_cast<unsigned long long>(st.late));
+    std::fprintf(stderr, "\n");
     return true;
   });
   if (!recorder) return "";

@@ -108,9 +108,18 @@ RecorderStats Recorder::stats() const {
   return stats_;
 }
 
+int64_t Recorder::log_now_ns() const { return steady_now_ns() + epoch_offset_ns_; }
+
 void Recorder::run() {
   using Clock = std::chrono::steady_clock;
+  const int64_t hold_ns = int64_t(options_.order_seconds * 1e9);
   std::deque<Item> batch;
+  // Posted, waiting for earlier-stamped messages, by log time (equal
+  // stamps in the order posted).
+  std::multimap<int64_t, Item> waiting;
+  int64_t newest = INT64_MIN;   // the latest log time posted
+  int64_t written = INT64_MIN;  // the log time last written
+  uint64_t late = 0;
   Clock::time_point chunk_opened{};
   bool stopping = false;
   std::string error;
@@ -118,20 +127,45 @@ void Recorder::run() {
     {
       std::unique_lock<std::mutex> lock(mutex_);
       const auto ready = [&] { return stopping_ || !queue_.empty(); };
-      if (writer_.chunk_empty()) wake_.wait(lock, ready);
-      else wake_.wait_until(lock, chunk_opened + std::chrono::duration<double>(options_.chunk_seconds), ready);
+      // Wake for new messages, for the open chunk's deadline, and (live) for
+      // the moment the earliest waiting message may go.
+      Clock::time_point until = Clock::time_point::max();
+      if (!writer_.chunk_empty())
+        until = chunk_opened + std::chrono::duration_cast<Clock::duration>(
+                                   std::chrono::duration<double>(options_.chunk_seconds));
+      if (!waiting.empty() && !options_.wait_for_room)
+        until = std::min(until, Clock::now() + std::chrono::nanoseconds(
+                                                   std::max<int64_t>(0, waiting.begin()->first + hold_ns - log_now_ns())));
+      if (until == Clock::time_point::max()) wake_.wait(lock, ready);
+      else wake_.wait_until(lock, until, ready);
       batch.swap(queue_);
       queued_bytes_ = 0;
       stopping = stopping_;
     }
     room_.notify_all();
+    for (Item& item : batch) {
+      newest = std::max(newest, item.log_ns);
+      const int64_t key = item.log_ns;
+      waiting.emplace(key, std::move(item));
+    }
+    batch.clear();
+    // What may go: all once stopping; else what is older than the hold,
+    // reckoned from the clock live, from the newest message offline (a
+    // re-simulation posts faster than real time).
+    const int64_t due = stopping ? INT64_MAX : (options_.wait_for_room ? newest : log_now_ns()) - hold_ns;
     try {
-      for (Item& item : batch) {
+      while (!waiting.empty() && waiting.begin()->first <= due) {
+        Item& item = waiting.begin()->second;
+        if (item.log_ns < written) {
+          item.log_ns = written;
+          ++late;
+        }
+        written = item.log_ns;
         if (writer_.chunk_empty()) chunk_opened = Clock::now();
         writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes);
+        waiting.erase(waiting.begin());
         if (writer_.chunk_bytes() >= options_.chunk_bytes) writer_.close_chunk();
       }
-      batch.clear();
       if (!writer_.chunk_empty() && Clock::now() - chunk_opened >= std::chrono::duration<double>(options_.chunk_seconds))
         writer_.close_chunk();
     } catch (const mcap::McapError& e) {
@@ -141,6 +175,7 @@ void Recorder::run() {
     std::lock_guard<std::mutex> lock(mutex_);
     stats_.messages = writer_.messages();
     stats_.bytes = writer_.bytes();
+    stats_.late = late;
   }
   try {
     if (error.empty()) writer_.finish();
@@ -154,6 +189,7 @@ void Recorder::run() {
   queue_.clear();
   stats_.messages = writer_.messages();
   stats_.bytes = writer_.bytes();
+  stats_.late = late;
   stats_.finished = true;
 }
 

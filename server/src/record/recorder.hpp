@@ -6,9 +6,12 @@
 // The network thread post()s each message (the simulation's frames reach
 // it through the feed's recording rings, which never overwrite); a queue
 // over its bound is a fault that stops the recording, reported, never
-// silent loss. Chunks close at chunk_bytes or chunk_seconds after their
-// first message, each in one write: a process killed mid-recording loses
-// at most the chunk it had open.
+// silent loss. Messages wait order_seconds before they are written, so that
+// the two sources (the simulation's frames, the network's messages), whose
+// stamps interleave out of order, reach the file in log-time order across
+// channels. Chunks close at chunk_bytes or chunk_seconds after their first
+// message, each in one write: a process killed mid-recording loses at most
+// the messages still waiting and the chunk it had open.
 #pragma once
 
 #include <atomic>
@@ -16,6 +19,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <span>
@@ -37,6 +41,11 @@ const char* topic_name(Topic t);  // "/scene", "/state", ...
 struct RecorderOptions {
   size_t chunk_bytes = 1 << 20;
   double chunk_seconds = 0.25;
+  // How long a message waits for earlier-stamped ones [s]: frames are
+  // stamped when the simulation made them and network messages when they
+  // came, and the two reach the recorder up to ~50 ms apart under load
+  // (tests/test_recording.py, a session beside busy processes).
+  double order_seconds = 0.2;
   size_t queue_bytes = size_t(256) << 20;  // posted, not yet written, before it is a fault
   // An offline writer (a re-simulation) waits for room instead: post() blocks.
   bool wait_for_room = false;
@@ -46,6 +55,10 @@ struct RecorderStats {
   std::string path;
   uint64_t messages = 0;  // written (in the file or its open chunk)
   uint64_t bytes = 0;
+  // Messages that came after a later-stamped one had been written: each is
+  // written with its log time raised to that one's (its publish time keeps
+  // its own stamp), so that the file stays in log-time order.
+  uint64_t late = 0;
   std::string fault;      // what stopped it early, "" if nothing
   bool finished = false;  // the file is closed
 };
@@ -81,6 +94,7 @@ class Recorder {
     std::vector<uint8_t> bytes;
   };
   void run();
+  int64_t log_now_ns() const;  // the steady clock as log time
 
   std::string path_;
   RecorderOptions options_;

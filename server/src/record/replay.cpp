@@ -51,8 +51,9 @@ Replay::Replay(const std::string& path) : path_(path) {
   }
   if (bad > 0)
     problems_.push_back(std::to_string(bad) + " messages are not what their topic carries: left out");
-  // Frames are stamped with the time they were made, network messages with
-  // when they came: in the file they interleave slightly out of order.
+  // In log-time order already, but in recordings made before the recorder
+  // merged its two sources (frames stamped when made, network messages when
+  // they came), which interleave slightly out of order.
   std::stable_sort(items_.begin(), items_.end(), [](const Item& a, const Item& b) { return a.t_ns < b.t_ns; });
   if (!std::any_of(items_.begin(), items_.end(), [](const Item& i) { return i.topic == Topic::Scene; }))
     throw mcap::McapError("recording '" + path + "' holds no scene description (/scene): nothing to replay");
