@@ -64,6 +64,14 @@ if [ ! -f "$web/dist/app.js" ] ||
   npm --prefix "$web" run -s build
 fi
 
+# --- JavaScript (the Foxglove decoding check, tests/foxglove) -----------------
+fox=tests/foxglove
+if ! cmp -s "$fox/package-lock.json" "$fox/node_modules/.setup-package-lock.json" 2>/dev/null; then
+  echo "setup: installing JavaScript packages ($fox/package-lock.json)"
+  (cd "$fox" && npm ci --ignore-scripts --no-audit --no-fund)
+  cp "$fox/package-lock.json" "$fox/node_modules/.setup-package-lock.json"
+fi
+
 # --- C++ build -------------------------------------------------------------
 build="${TACTILE_BUILD:-build/release}"
 if [ ! -f "$build/build.ninja" ]; then

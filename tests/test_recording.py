@@ -31,9 +31,10 @@ from test_scenes_schema import built
 from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, url
 
 from tactile_proto import codec
-from tactile_proto.recording import open_recording
+from tactile_proto.recording import TOPICS, open_recording
 from tactile_proto.generated.ControlCommand import ControlCommand
 from tactile_proto.generated.DeviceLimits import DeviceLimitsT
+from tactile_proto.generated.Envelope import Envelope
 from tactile_proto.generated.ErrorCode import ErrorCode
 from tactile_proto.generated.Pause import PauseT
 from tactile_proto.generated.Resume import ResumeT
@@ -63,9 +64,19 @@ def read_closed(path: pathlib.Path) -> dict[str, list[tuple[int, Any]]]:
                 assert channel.message_encoding == "json"
                 out[channel.topic].append((message.log_time, json.loads(message.data)))
                 continue
-            assert schema.name == "tactile.proto.Envelope" and schema.encoding == "flatbuffer"
-            assert channel.message_encoding == "flatbuffer"
-            out[channel.topic].append((message.log_time, codec.decode(message.data).message))
+            assert schema.encoding == "flatbuffer" and channel.message_encoding == "flatbuffer"
+            data = message.data
+            if channel.topic == "/control":  # a union inside: whole Envelopes (RECORDING.md)
+                assert schema.name == "tactile.proto.Envelope" and "envelope_offset" not in channel.metadata
+            else:
+                # The message type is the buffer's root (what Foxglove decodes), the Envelope behind its header.
+                assert schema.name == f"tactile.proto.{TOPICS[channel.topic]}", (channel.topic, schema.name)
+                at = int(channel.metadata["envelope_offset"])
+                assert data[4:8] == b"TCTL"
+                env = Envelope.GetRootAs(data[at:], 0).Message()
+                assert env is not None and int.from_bytes(data[0:4], "little") == at + env.Pos, channel.topic
+                data = data[at:]
+            out[channel.topic].append((message.log_time, codec.decode(data).message))
         assert summary.statistics.message_count == sum(len(v) for v in out.values())
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
     out["@meta"] = [(0, meta)]
@@ -74,17 +85,18 @@ def read_closed(path: pathlib.Path) -> dict[str, list[tuple[int, Any]]]:
 
 def read_cut(path: pathlib.Path) -> tuple[list[tuple[str, int, bytes]], bool]:
     """A recording that may have been cut short, read in file order with the stream reader (CRCs checked) up to
-    where it ends: ([(topic, log_time, data)], complete)."""
-    channels: dict[int, str] = {}
+    where it ends: ([(topic, log_time, data)], complete), data the Envelope (past a channel's root header)."""
+    channels: dict[int, tuple[str, int]] = {}  # id -> (topic, where its Envelopes start)
     messages: list[tuple[str, int, bytes]] = []
     complete = False
     with path.open("rb") as f:
         try:
             for record in StreamReader(f, validate_crcs=True).records:
                 if type(record).__name__ == "Channel":
-                    channels[record.id] = record.topic
+                    channels[record.id] = (record.topic, int(record.metadata.get("envelope_offset", 0)))
                 elif isinstance(record, McapMessage):
-                    messages.append((channels[record.channel_id], record.log_time, record.data))
+                    topic, at = channels[record.channel_id]
+                    messages.append((topic, record.log_time, record.data[at:]))
                 elif isinstance(record, Footer):
                     complete = True
         except Exception as e:  # the end of a cut file: a record cut short
@@ -256,7 +268,8 @@ def recover_and_read(path: pathlib.Path, out: pathlib.Path) -> tuple[list[tuple[
         reader = make_reader(f)
         summary = reader.get_summary()
         assert summary is not None and summary.statistics is not None
-        messages = [(c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages(log_time_order=False)]
+        messages = [(c.topic, m.log_time, m.data[int(c.metadata.get("envelope_offset", 0)):])
+                    for _, c, m in reader.iter_messages(log_time_order=False)]
     return messages, summary.statistics.message_count
 
 

@@ -58,8 +58,11 @@ from .codec import ProtocolError, decode
 from .generated.Envelope import EnvelopeT
 
 MAGIC = b"\x89MCAP0\r\n"
-SCHEMA_NAME = "tactile.proto.Envelope"  # the one schema (id 1) of a recording
+SCHEMA_NAME = "tactile.proto.Envelope"  # the schema of a channel of whole Envelopes (all of them before 1.7)
 MESSAGE_ENCODING = "flatbuffer"
+# A channel whose metadata names this carries each Envelope behind a root header of that many bytes, which makes
+# the message type the buffer's root (schema "tactile.proto.<Type>"): what Foxglove decodes (RECORDING.md).
+ENVELOPE_OFFSET_KEY = "envelope_offset"
 METADATA_NAME = "tactile"
 # Topic -> the message type its Envelopes hold (RECORDING.md's table).
 TOPICS: dict[str, str] = {
@@ -425,7 +428,7 @@ class Recording:
         publish_time_ns, Envelope bytes). Raises RecordingError for a topic no recording has."""
         wanted = self._wanted(topics)
         for channel, message in self._records(wanted):
-            yield RecordedMessage(channel.topic, message.log_time, message.publish_time, message.data)
+            yield RecordedMessage(channel.topic, message.log_time, message.publish_time, _envelope(channel, message))
 
     def applied(self) -> Iterator[dict[str, int]]:
         """The inputs the simulation applied, in order (/applied, JSON): {"loop_step", "device", "sequence"}."""
@@ -442,14 +445,16 @@ class Recording:
                 continue
             where = (channel.id, message.log_time, message.sequence, len(message.data))
             schema = self._schemas.get(channel.schema_id)
-            if channel.message_encoding != MESSAGE_ENCODING or (schema is not None and schema.name != SCHEMA_NAME):
+            rooted = ENVELOPE_OFFSET_KEY in channel.metadata
+            expected_schema = f"tactile.proto.{TOPICS.get(channel.topic, '')}" if rooted else SCHEMA_NAME
+            if channel.message_encoding != MESSAGE_ENCODING or (schema is not None and schema.name != expected_schema):
                 self._note(("encoding", channel.id), where,
                            f"{channel.topic}: message encoding {channel.message_encoding!r}, schema "
                            f"{schema.name if schema is not None else channel.schema_id!r}; not {MESSAGE_ENCODING!r} "
-                           f"{SCHEMA_NAME}: not decoded")
+                           f"{expected_schema}: not decoded")
                 continue
             try:
-                envelope = decode(message.data)
+                envelope = decode(_envelope(channel, message))
             except ProtocolError as e:
                 self._note(("decode", channel.topic), where, f"{channel.topic}: a message at log time "
                                                              f"{message.log_time} ns does not decode ({e}): skipped")
@@ -461,6 +466,12 @@ class Recording:
                                                            "belongs: skipped")
                 continue
             yield DecodedMessage(channel.topic, message.log_time, envelope)
+
+
+def _envelope(channel: Channel, message: Message) -> bytes:
+    """The Envelope a message holds: its bytes, less the root header where its channel has one."""
+    at = channel.metadata.get(ENVELOPE_OFFSET_KEY)
+    return message.data[int(at):] if at is not None else message.data
 
 
 class Recovered(NamedTuple):
@@ -511,5 +522,5 @@ def open_recording(path: str | os.PathLike[str]) -> Recording:
     return Recording(path)
 
 
-__all__ = ["JSON_TOPICS", "MAGIC", "MESSAGE_ENCODING", "METADATA_NAME", "SCHEMA_NAME", "TOPICS", "DecodedMessage",
+__all__ = ["ENVELOPE_OFFSET_KEY", "JSON_TOPICS", "MAGIC", "MESSAGE_ENCODING", "METADATA_NAME", "SCHEMA_NAME", "TOPICS", "DecodedMessage",
            "RecordedMessage", "Recording", "RecordingError", "open_recording"]

@@ -86,7 +86,8 @@ const Frame* nearest(const std::map<double, const Frame*>& frames, double t, dou
 }  // namespace
 
 ResimReport resimulate(const ResimOptions& o) {
-  const mcap::Recording rec = mcap::read_file(o.recording);
+  mcap::Recording rec = mcap::read_file(o.recording);
+  restore_envelopes(rec);
   const mcap::Map& meta = tactile_metadata(rec, o.recording);
 
   // The recorded session: its first scene, from its start.

@@ -1256,6 +1256,9 @@ std::string Server::Impl::check_recorder() {
     if (st.late > 0)
       std::fprintf(stderr, "; %llu came after a later-stamped one and carry its log time",
                    static_cast<unsigned long long>(st.late));
+    if (st.unreadable > 0)
+      std::fprintf(stderr, "; %llu did not verify as Envelopes and are left out",
+                   static_cast<unsigned long long>(st.unreadable));
     std::fprintf(stderr, "\n");
     return true;
   });

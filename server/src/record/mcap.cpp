@@ -177,7 +177,8 @@ void Writer::add_metadata(const std::string& name, const Map& metadata) {
   emit(out_);
 }
 
-void Writer::write(uint16_t channel, uint64_t log_time, uint64_t publish_time, std::span<const uint8_t> data) {
+void Writer::write(uint16_t channel, uint64_t log_time, uint64_t publish_time, std::span<const uint8_t> data,
+                   std::span<const uint8_t> prefix) {
   if (channel == 0 || channel > channels_.size()) throw McapError("no channel " + std::to_string(channel));
   ChannelInfo& c = channels_[channel - 1];
   c.index.emplace_back(log_time, chunk_.size());
@@ -187,6 +188,7 @@ void Writer::write(uint16_t channel, uint64_t log_time, uint64_t publish_time, s
   o.u32(c.sequence++);
   o.u64(log_time);
   o.u64(publish_time);
+  o.bytes(prefix);
   o.bytes(data);
   o.end_record(r);
   ++c.count;

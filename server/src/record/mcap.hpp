@@ -43,8 +43,10 @@ class Writer {
                        const Map& metadata = {});
   void add_metadata(const std::string& name, const Map& metadata);
 
-  // Appends a message to the open chunk (sequence: per channel, from 0).
-  void write(uint16_t channel, uint64_t log_time, uint64_t publish_time, std::span<const uint8_t> data);
+  // Appends a message to the open chunk (sequence: per channel, from 0):
+  // the bytes of `prefix`, then those of `data`.
+  void write(uint16_t channel, uint64_t log_time, uint64_t publish_time, std::span<const uint8_t> data,
+             std::span<const uint8_t> prefix = {});
 
   // Writes the open chunk and its message indexes to the file (one write
   // call), if it holds any message.

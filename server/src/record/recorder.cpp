@@ -1,7 +1,12 @@
 #include "record/recorder.hpp"
 
+#include <flatbuffers/idl.h>
+
 #include <cstdio>
+#include <cstring>
 #include <string_view>
+
+#include "tactile_generated.h"
 
 namespace tactile {
 
@@ -21,7 +26,47 @@ const char* topic_name(Topic t) {
   return "?";
 }
 
+const char* message_type_name(Topic t) {
+  switch (t) {
+    case Topic::Scene: return "SceneDescription";
+    case Topic::State: return "StateFrame";
+    case Topic::Haptic: return "HapticFrame";
+    case Topic::Input: return "DeviceInput";
+    case Topic::Control: return "Control";
+    case Topic::Error: return "Error";
+    case Topic::Telemetry: return "Telemetry";
+    case Topic::Safety: return "SafetyEvent";
+    case Topic::DeviceStatus: return "DeviceStatus";
+    case Topic::Applied: return "";
+  }
+  return "";
+}
+
+void restore_envelopes(mcap::Recording& rec) {
+  for (const auto& [id, channel] : rec.channels) {
+    const auto it = channel.metadata.find("envelope_offset");
+    if (it == channel.metadata.end()) continue;
+    const size_t at = size_t(std::stoul(it->second));
+    for (mcap::Message& m : rec.messages)
+      if (m.channel == id) m.data.erase(m.data.begin(), m.data.begin() + std::ptrdiff_t(std::min(at, m.data.size())));
+  }
+}
+
 namespace {
+
+// Whether a topic's channel carries its Envelopes behind a root header
+// rooted at their message type. Not /control: a Control holds a union,
+// which Foxglove's FlatBuffers reader does not decode either way.
+bool rooted_at_message(Topic t) { return t != Topic::Applied && t != Topic::Control; }
+
+// The protocol's schema with `type` as its root table, serialised as a
+// binary schema (what flatc --binary --schema writes for a root_type).
+std::vector<uint8_t> schema_rooted_at(flatbuffers::Parser& parser, const std::string& type) {
+  if (!parser.SetRootType(("tactile.proto." + type).c_str()))
+    throw mcap::McapError("the protocol schema has no table tactile.proto." + type);
+  parser.Serialize();
+  return {parser.builder_.GetBufferPointer(), parser.builder_.GetBufferPointer() + parser.builder_.GetSize()};
+}
 
 int64_t steady_now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
@@ -37,7 +82,7 @@ int64_t unix_now_ns() {
 Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderOptions options)
     : path_(path), options_(options), writer_(path, "", "tactile-server"),
       epoch_offset_ns_(unix_now_ns() - steady_now_ns()) {
-  const uint16_t schema = writer_.add_schema("tactile.proto.Envelope", "flatbuffer", tactile_bfbs());
+  const uint16_t envelope = writer_.add_schema("tactile.proto.Envelope", "flatbuffer", tactile_bfbs());
   static constexpr char kAppliedSchema[] =
       R"({"title":"tactile.AppliedInput","type":"object","properties":{)"
       R"("loop_step":{"type":"integer","description":"steps the loop had taken when it applied the input"},)"
@@ -50,9 +95,23 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
   const uint16_t applied = writer_.add_schema(
       "tactile.AppliedInput", "jsonschema",
       {reinterpret_cast<const uint8_t*>(applied_schema.data()), applied_schema.size()});
-  for (int t = 0; t < kTopicCount; ++t)
-    channel_[t] = Topic(t) == Topic::Applied ? writer_.add_channel(applied, topic_name(Topic(t)), "json")
-                                             : writer_.add_channel(schema, topic_name(Topic(t)), "flatbuffer");
+  flatbuffers::Parser parser;
+  const std::span<const uint8_t> fbs = tactile_fbs();
+  if (!parser.Parse(std::string(reinterpret_cast<const char*>(fbs.data()), fbs.size()).c_str()))
+    throw mcap::McapError("the embedded protocol schema does not parse: " + parser.error_);
+  for (int t = 0; t < kTopicCount; ++t) {
+    const Topic topic = Topic(t);
+    if (topic == Topic::Applied) {
+      channel_[t] = writer_.add_channel(applied, topic_name(topic), "json");
+    } else if (rooted_at_message(topic)) {
+      const std::string type = message_type_name(topic);
+      const uint16_t schema = writer_.add_schema("tactile.proto." + type, "flatbuffer", schema_rooted_at(parser, type));
+      channel_[t] = writer_.add_channel(schema, topic_name(topic), "flatbuffer",
+                                        {{"envelope_offset", std::to_string(kEnvelopeOffset)}});
+    } else {
+      channel_[t] = writer_.add_channel(envelope, topic_name(topic), "flatbuffer");
+    }
+  }
   mcap::Map meta = metadata;
   meta["started_unix_ns"] = std::to_string(unix_now_ns());
   writer_.add_metadata("tactile", meta);
@@ -119,7 +178,7 @@ void Recorder::run() {
   std::multimap<int64_t, Item> waiting;
   int64_t newest = INT64_MIN;   // the latest log time posted
   int64_t written = INT64_MIN;  // the log time last written
-  uint64_t late = 0;
+  uint64_t late = 0, unreadable = 0;
   Clock::time_point chunk_opened{};
   bool stopping = false;
   std::string error;
@@ -162,7 +221,27 @@ void Recorder::run() {
         }
         written = item.log_ns;
         if (writer_.chunk_empty()) chunk_opened = Clock::now();
-        writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes);
+        if (rooted_at_message(item.topic)) {
+          // The root header: offset of the message table (behind the header),
+          // then the file identifier. Envelopes come from the server's own
+          // encoders and its verified inputs; one that does not verify here
+          // is left out, counted.
+          flatbuffers::Verifier v(item.bytes.data(), item.bytes.size());
+          if (!proto::VerifyEnvelopeBuffer(v) || !proto::GetEnvelope(item.bytes.data())->message()) {
+            ++unreadable;
+            waiting.erase(waiting.begin());
+            continue;
+          }
+          const auto* table = static_cast<const uint8_t*>(proto::GetEnvelope(item.bytes.data())->message());
+          const uint32_t root = uint32_t(kEnvelopeOffset + size_t(table - item.bytes.data()));
+          uint8_t head[kEnvelopeOffset];
+          std::memcpy(head, &root, 4);  // little-endian, as FlatBuffers are on every target we build for
+          std::memcpy(head + 4, proto::EnvelopeIdentifier(), 4);
+          writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes,
+                        {head, kEnvelopeOffset});
+        } else {
+          writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes);
+        }
         waiting.erase(waiting.begin());
         if (writer_.chunk_bytes() >= options_.chunk_bytes) writer_.close_chunk();
       }
@@ -176,6 +255,7 @@ void Recorder::run() {
     stats_.messages = writer_.messages();
     stats_.bytes = writer_.bytes();
     stats_.late = late;
+    stats_.unreadable = unreadable;
   }
   try {
     if (error.empty()) writer_.finish();
@@ -190,6 +270,7 @@ void Recorder::run() {
   stats_.messages = writer_.messages();
   stats_.bytes = writer_.bytes();
   stats_.late = late;
+  stats_.unreadable = unreadable;
   stats_.finished = true;
 }
 

@@ -59,6 +59,7 @@ struct RecorderStats {
   // written with its log time raised to that one's (its publish time keeps
   // its own stamp), so that the file stays in log-time order.
   uint64_t late = 0;
+  uint64_t unreadable = 0;  // Envelopes that did not verify: left out
   std::string fault;      // what stopped it early, "" if nothing
   bool finished = false;  // the file is closed
 };
@@ -111,8 +112,26 @@ class Recorder {
   std::thread thread_;
 };
 
-// The protocol's binary schema (flatc --binary --schema proto/tactile.fbs),
-// embedded at build time.
+// The protocol's binary schema (flatc --binary --schema proto/tactile.fbs,
+// rooted at the Envelope) and its text, embedded at build time.
 std::span<const uint8_t> tactile_bfbs();
+std::span<const uint8_t> tactile_fbs();
+
+// The layout of a message on a FlatBuffers channel whose metadata has
+// "envelope_offset" (RECORDING.md): an 8-byte root header (a root offset to
+// the message table inside the Envelope, and the file identifier), then the
+// Envelope's bytes as they went over the wire. The header makes the channel's
+// message type the buffer's root, which is how Foxglove decodes a channel
+// (by its schema's root table); dropping it gives the Envelope back.
+inline constexpr size_t kEnvelopeOffset = 8;
+
+// The message type a topic's Envelopes hold ("StateFrame", ...); "" for
+// the JSON topic (/applied).
+const char* message_type_name(Topic t);
+
+// A recording read back as Envelopes, whatever its layout: each message of a
+// channel with "envelope_offset" loses its root header. A message shorter
+// than the header is left empty (its Envelope no longer verifies).
+void restore_envelopes(mcap::Recording& rec);
 
 }  // namespace tactile

@@ -29,6 +29,7 @@ proto::Message message_of(Topic t) {
 
 Replay::Replay(const std::string& path) : path_(path) {
   mcap::Recording rec = mcap::read_file(path);
+  restore_envelopes(rec);
   problems_ = rec.problems;
   // Topic of each channel; channels of other topics are not served.
   std::vector<std::pair<uint16_t, Topic>> topics;

@@ -11,6 +11,7 @@
 
 #include "record/mcap.hpp"
 #include "record/recorder.hpp"
+#include "tactile_generated.h"
 #include "temp_dir.hpp"
 
 namespace tactile {
@@ -20,6 +21,43 @@ std::vector<uint8_t> payload(int i) {
   std::vector<uint8_t> p(size_t(5 + i % 37));
   for (size_t k = 0; k < p.size(); ++k) p[k] = uint8_t(i * 31 + int(k));
   return p;
+}
+
+// An Envelope of the message type `topic` carries, numbered i (its step),
+// with `floats` surface positions for a StateFrame.
+std::vector<uint8_t> envelope(Topic topic, int i, size_t floats = 0) {
+  proto::EnvelopeT e;
+  switch (topic) {
+    case Topic::Input: {
+      proto::DeviceInputT m;
+      m.device = "stylus";
+      m.sequence = uint64_t(i);
+      e.message.Set(std::move(m));
+      break;
+    }
+    case Topic::Haptic: {
+      proto::HapticFrameT m;
+      m.step = uint64_t(i);
+      e.message.Set(std::move(m));
+      break;
+    }
+    case Topic::State: {
+      proto::StateFrameT m;
+      m.step = uint64_t(i);
+      m.positions.assign(floats, 0.5f);
+      e.message.Set(std::move(m));
+      break;
+    }
+    default: {
+      proto::TelemetryT m;
+      m.step = uint64_t(i);
+      e.message.Set(std::move(m));
+      break;
+    }
+  }
+  flatbuffers::FlatBufferBuilder fbb;
+  proto::FinishEnvelopeBuffer(fbb, proto::Envelope::Pack(fbb, &e));
+  return {fbb.GetBufferPointer(), fbb.GetBufferPointer() + fbb.GetSize()};
 }
 
 std::vector<uint8_t> read_bytes(const std::string& path) {
@@ -135,19 +173,21 @@ TEST(Mcap, NotAnMcapFileIsRefusedByName) {
 TEST(Recorder, EveryPostedMessageIsWrittenInOrderPerTopic) {
   test::TempDir dir;
   const std::string path = dir.file("r.mcap");
+  auto topic_of = [](int i) { return i % 2 ? Topic::Haptic : Topic::Input; };
   {
     Recorder rec(path, {{"scene_name", "block"}}, {.chunk_bytes = 4096, .chunk_seconds = 0.25});
     for (int i = 0; i < 3000; ++i)
-      ASSERT_TRUE(rec.post(i % 2 ? Topic::Haptic : Topic::Input, 1'000'000 + i, i % 2 ? 500 + i : 0, payload(i)));
+      ASSERT_TRUE(rec.post(topic_of(i), 1'000'000 + i, i % 2 ? 500 + i : 0, envelope(topic_of(i), i)));
     rec.stop();
     rec.wait();
     const RecorderStats st = rec.stats();
     EXPECT_TRUE(st.finished);
     EXPECT_EQ(st.messages, 3000u);
+    EXPECT_EQ(st.late, 0u);
     EXPECT_TRUE(st.fault.empty()) << st.fault;
-    EXPECT_FALSE(rec.post(Topic::Input, 0, 0, payload(0)));  // stopped: takes no more
+    EXPECT_FALSE(rec.post(Topic::Input, 0, 0, envelope(Topic::Input, 0)));  // stopped: takes no more
   }
-  const mcap::Recording r = mcap::read_file(path);
+  mcap::Recording r = mcap::read_file(path);
   ASSERT_TRUE(r.complete);
   ASSERT_EQ(r.messages.size(), 3000u);
   EXPECT_GT(r.chunks, 10u);  // closed by size
@@ -155,25 +195,79 @@ TEST(Recorder, EveryPostedMessageIsWrittenInOrderPerTopic) {
   ASSERT_NE(haptic, 0);
   ASSERT_NE(input, 0);
   EXPECT_EQ(r.channels.size(), size_t(kTopicCount));
+  EXPECT_EQ(r.channels.at(haptic).metadata.at("envelope_offset"), "8");
   const uint64_t offset = r.messages[0].log_time - 1'000'000;  // steady -> Unix: a constant
   EXPECT_GT(offset, uint64_t(1.6e18));
+  // As written: each message is its type's root (what Foxglove reads), behind
+  // which the Envelope sits whole.
   for (int i = 0; i < 3000; ++i) {
     const mcap::Message& m = r.messages[size_t(i)];
-    EXPECT_EQ(m.channel, i % 2 ? haptic : input);
+    ASSERT_EQ(m.channel, i % 2 ? haptic : input);
     EXPECT_EQ(m.log_time, offset + uint64_t(1'000'000 + i));
     EXPECT_EQ(m.publish_time, i % 2 ? offset + uint64_t(500 + i) : m.log_time);
-    EXPECT_EQ(m.data, payload(i));
+    ASSERT_GT(m.data.size(), kEnvelopeOffset);
+    EXPECT_EQ(std::string(m.data.begin() + 4, m.data.begin() + 8), "TCTL");
+    if (i % 2) {
+      flatbuffers::Verifier v(m.data.data(), m.data.size());
+      ASSERT_TRUE(v.VerifyBuffer<proto::HapticFrame>(nullptr)) << "message " << i;
+      EXPECT_EQ(flatbuffers::GetRoot<proto::HapticFrame>(m.data.data())->step(), uint64_t(i));
+    } else {
+      flatbuffers::Verifier v(m.data.data(), m.data.size());
+      ASSERT_TRUE(v.VerifyBuffer<proto::DeviceInput>(nullptr)) << "message " << i;
+      EXPECT_EQ(flatbuffers::GetRoot<proto::DeviceInput>(m.data.data())->sequence(), uint64_t(i));
+    }
   }
+  // Read back as Envelopes: the bytes posted.
+  restore_envelopes(r);
+  for (int i = 0; i < 3000; ++i) EXPECT_EQ(r.messages[size_t(i)].data, envelope(topic_of(i), i)) << "message " << i;
   ASSERT_EQ(r.metadata.size(), 1u);
   EXPECT_EQ(r.metadata[0].second.at("scene_name"), "block");
   EXPECT_EQ(r.metadata[0].second.count("started_unix_ns"), 1u);
+}
+
+TEST(Recorder, MessagesPostedOutOfOrderAreWrittenInLogTimeOrder) {
+  test::TempDir dir;
+  const std::string path = dir.file("r.mcap");
+  {
+    Recorder rec(path, {}, {.chunk_bytes = 4096, .chunk_seconds = 0.25});
+    // Two sources stamped 30 ms apart, as frames and network messages come
+    // under load, stamped from now on (the live recorder holds a message
+    // until the clock is 0.2 s past it).
+    const int64_t now =
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+            .count();
+    for (int i = 0; i < 1000; ++i) {
+      const int64_t t = now + int64_t(i) * 100'000;
+      ASSERT_TRUE(rec.post(Topic::Haptic, t, 0, envelope(Topic::Haptic, i)));
+      ASSERT_TRUE(rec.post(Topic::Input, t - 30'000'000, 0, envelope(Topic::Input, i)));
+    }
+    rec.stop();
+    rec.wait();
+    EXPECT_EQ(rec.stats().late, 0u);
+  }
+  const mcap::Recording r = mcap::read_file(path);
+  ASSERT_EQ(r.messages.size(), 2000u);
+  for (size_t k = 1; k < r.messages.size(); ++k)
+    ASSERT_LE(r.messages[k - 1].log_time, r.messages[k].log_time) << "message " << k;
+}
+
+TEST(Recorder, BytesThatAreNoEnvelopeAreLeftOutAndCounted) {
+  test::TempDir dir;
+  const std::string path = dir.file("r.mcap");
+  Recorder rec(path, {}, {});
+  ASSERT_TRUE(rec.post(Topic::Haptic, 1, 0, payload(3)));
+  ASSERT_TRUE(rec.post(Topic::Haptic, 2, 0, envelope(Topic::Haptic, 2)));
+  rec.stop();
+  rec.wait();
+  EXPECT_EQ(rec.stats().unreadable, 1u);
+  EXPECT_EQ(mcap::read_file(path).messages.size(), 1u);
 }
 
 TEST(Recorder, AChunkClosesWithinItsTimeEvenWhenTheSessionIsQuiet) {
   test::TempDir dir;
   const std::string path = dir.file("r.mcap");
   Recorder rec(path, {}, {.chunk_bytes = 1 << 20, .chunk_seconds = 0.05});
-  ASSERT_TRUE(rec.post(Topic::Telemetry, 1, 0, payload(1)));
+  ASSERT_TRUE(rec.post(Topic::Telemetry, 1, 0, envelope(Topic::Telemetry, 1)));
   // Without a footer yet, the file already holds the message once its chunk
   // has closed by time (a kill now would keep it).
   mcap::Recording r;
@@ -192,7 +286,7 @@ TEST(Recorder, AQueueOverItsBoundIsAFaultAndTheFileStaysReadable) {
   test::TempDir dir;
   const std::string path = dir.file("r.mcap");
   Recorder rec(path, {}, {.chunk_bytes = 1 << 20, .chunk_seconds = 0.25, .queue_bytes = 64 << 10});
-  const std::vector<uint8_t> big(16 << 10, 7);
+  const std::vector<uint8_t> big = envelope(Topic::State, 0, 4 << 10);
   int accepted = 0;
   for (int i = 0; i < 1000; ++i)
     if (rec.post(Topic::State, i, 0, big)) ++accepted;
