@@ -5,13 +5,22 @@ table, and its numbers are there for a Plot panel."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import pathlib
 import shutil
 import subprocess
 
 import pytest
-from test_recording import record_a_press
+import websockets
+from serverproc import server_process
+from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, url
+
+from tactile_proto import codec
+from tactile_proto.generated.ControlCommand import ControlCommand
+from tactile_proto.generated.Pause import PauseT
+from tactile_proto.generated.Resume import ResumeT
+from tactile_proto.generated.Role import Role
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CHECK = ROOT / "tests" / "foxglove"
@@ -27,15 +36,39 @@ def decode_with_foxglove_libraries(path: pathlib.Path) -> dict[str, dict]:
     return json.loads(out.stdout)
 
 
+def record_a_session(tmp_path: pathlib.Path) -> pathlib.Path:
+    """A device presses the block while a controller pauses and resumes the simulation: every kind of message
+    the session makes but errors and safety events."""
+    path = tmp_path / "session.mcap"
+
+    async def session(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as dev, websockets.connect(url(port), **READ_ON) as ctl:
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            await hello(ctl, Role.Controller, TOKEN)
+            for k in range(1, 400):
+                await dev.send(codec.encode(device_input(k, 0.029 - 0.003 * min(k, 200) / 200)))
+                if k == 150:
+                    await ctl.send(codec.encode(control(ControlCommand.Pause, PauseT(), 1)))
+                    await next_of(ctl, "TelemetryT", 3.0)
+                if k == 200:
+                    await ctl.send(codec.encode(control(ControlCommand.Resume, ResumeT(), 2)))
+                await asyncio.sleep(0.002)
+            await asyncio.sleep(1.2)  # a telemetry message
+
+    with server_process(tmp_path, SCENE, TOKEN, "--record", str(path), file_name="scene.json") as (port, _):
+        asyncio.run(session(port))
+    return path
+
+
 def test_every_channel_of_a_fresh_recording_decodes_with_foxglove_libraries(tmp_path: pathlib.Path) -> None:
-    report = decode_with_foxglove_libraries(record_a_press(tmp_path))
+    report = decode_with_foxglove_libraries(record_a_session(tmp_path))
     recorded = {topic: r for topic, r in report.items() if r["messages"] > 0}
-    assert {"/scene", "/state", "/haptic", "/input", "/applied"} <= set(recorded), sorted(recorded)
+    assert {"/scene", "/state", "/haptic", "/input", "/control", "/telemetry", "/applied"} <= set(recorded), \
+        sorted(recorded)
     for topic, r in recorded.items():
-        # /control holds a union (ControlCommand) that Foxglove's FlatBuffers reader refuses: RECORDING.md.
-        if topic == "/control":
-            continue
         assert r["error"] is None and r["decoded"] == r["messages"], (topic, r)
+    assert report["/control"]["schema"] == "tactile.Control" and report["/control"]["message_encoding"] == "json"
+    assert "request_id" in report["/control"]["numeric_fields"], report["/control"]
     for topic, r in report.items():
         if topic not in ("/control", "/applied"):
             assert r["schema"] == "tactile.proto." + {

@@ -7,6 +7,7 @@ back all but its last moments."""
 from __future__ import annotations
 
 import asyncio
+import base64
 import contextlib
 import json
 import pathlib
@@ -64,11 +65,17 @@ def read_closed(path: pathlib.Path) -> dict[str, list[tuple[int, Any]]]:
                 assert channel.message_encoding == "json"
                 out[channel.topic].append((message.log_time, json.loads(message.data)))
                 continue
-            assert schema.encoding == "flatbuffer" and channel.message_encoding == "flatbuffer"
             data = message.data
-            if channel.topic == "/control":  # a union inside: whole Envelopes (RECORDING.md)
-                assert schema.name == "tactile.proto.Envelope" and "envelope_offset" not in channel.metadata
+            if channel.topic == "/control":  # a union inside: JSON, with the Envelope in base64 (RECORDING.md)
+                assert schema.name == "tactile.Control" and schema.encoding == "jsonschema"
+                assert channel.message_encoding == "json" and channel.metadata["envelope_field"] == "envelope"
+                obj = json.loads(data)
+                data = base64.b64decode(obj["envelope"])
+                control = codec.decode(data).message
+                assert obj.get("request_id", 0) == control.requestId
+                assert obj["command_type"] == type(control.command).__name__[:-1], (obj, control)
             else:
+                assert schema.encoding == "flatbuffer" and channel.message_encoding == "flatbuffer"
                 # The message type is the buffer's root (what Foxglove decodes), the Envelope behind its header.
                 assert schema.name == f"tactile.proto.{TOPICS[channel.topic]}", (channel.topic, schema.name)
                 at = int(channel.metadata["envelope_offset"])

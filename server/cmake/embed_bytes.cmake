@@ -1,6 +1,6 @@
 # cmake -DINPUT=file -DOUTPUT=file.cpp -DSYMBOL=name -P embed_bytes.cmake
 # Writes a C++ source defining `std::span<const uint8_t> SYMBOL()` over the
-# bytes of INPUT (the protocol's schema, text and binary, embedded in the recorder).
+# bytes of INPUT (the protocol schema's text, embedded in the recorder).
 file(READ "${INPUT}" hex HEX)
 string(LENGTH "${hex}" n)
 math(EXPR size "${n} / 2")

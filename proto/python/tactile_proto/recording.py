@@ -27,6 +27,7 @@ check (mcap.stream_reader.get_chunk_data_stream).
 
 from __future__ import annotations
 
+import base64
 import io
 import json
 import os
@@ -63,6 +64,8 @@ MESSAGE_ENCODING = "flatbuffer"
 # A channel whose metadata names this carries each Envelope behind a root header of that many bytes, which makes
 # the message type the buffer's root (schema "tactile.proto.<Type>"): what Foxglove decodes (RECORDING.md).
 ENVELOPE_OFFSET_KEY = "envelope_offset"
+# A JSON channel whose metadata names this (/control) holds each Envelope in that field of its object, base64.
+ENVELOPE_FIELD_KEY = "envelope_field"
 METADATA_NAME = "tactile"
 # Topic -> the message type its Envelopes hold (RECORDING.md's table).
 TOPICS: dict[str, str] = {
@@ -446,11 +449,14 @@ class Recording:
             where = (channel.id, message.log_time, message.sequence, len(message.data))
             schema = self._schemas.get(channel.schema_id)
             rooted = ENVELOPE_OFFSET_KEY in channel.metadata
-            expected_schema = f"tactile.proto.{TOPICS.get(channel.topic, '')}" if rooted else SCHEMA_NAME
-            if channel.message_encoding != MESSAGE_ENCODING or (schema is not None and schema.name != expected_schema):
+            in_json = ENVELOPE_FIELD_KEY in channel.metadata
+            expected_schema = (f"tactile.proto.{TOPICS.get(channel.topic, '')}" if rooted else
+                               f"tactile.{TOPICS.get(channel.topic, '')}" if in_json else SCHEMA_NAME)
+            expected_encoding = "json" if in_json else MESSAGE_ENCODING
+            if channel.message_encoding != expected_encoding or (schema is not None and schema.name != expected_schema):
                 self._note(("encoding", channel.id), where,
                            f"{channel.topic}: message encoding {channel.message_encoding!r}, schema "
-                           f"{schema.name if schema is not None else channel.schema_id!r}; not {MESSAGE_ENCODING!r} "
+                           f"{schema.name if schema is not None else channel.schema_id!r}; not {expected_encoding!r} "
                            f"{expected_schema}: not decoded")
                 continue
             try:
@@ -469,9 +475,18 @@ class Recording:
 
 
 def _envelope(channel: Channel, message: Message) -> bytes:
-    """The Envelope a message holds: its bytes, less the root header where its channel has one."""
+    """The Envelope a message holds: its bytes, less the root header where its channel has one, or the base64
+    of its JSON object's envelope field (b"" where that is missing: it will not decode)."""
     at = channel.metadata.get(ENVELOPE_OFFSET_KEY)
-    return message.data[int(at):] if at is not None else message.data
+    if at is not None:
+        return message.data[int(at):]
+    field = channel.metadata.get(ENVELOPE_FIELD_KEY)
+    if field is not None:
+        try:
+            return base64.b64decode(json.loads(message.data)[field], validate=True)
+        except (ValueError, KeyError, TypeError):
+            return b""
+    return message.data
 
 
 class Recovered(NamedTuple):
@@ -522,5 +537,5 @@ def open_recording(path: str | os.PathLike[str]) -> Recording:
     return Recording(path)
 
 
-__all__ = ["ENVELOPE_OFFSET_KEY", "JSON_TOPICS", "MAGIC", "MESSAGE_ENCODING", "METADATA_NAME", "SCHEMA_NAME", "TOPICS", "DecodedMessage",
+__all__ = ["ENVELOPE_FIELD_KEY", "ENVELOPE_OFFSET_KEY", "JSON_TOPICS", "MAGIC", "MESSAGE_ENCODING", "METADATA_NAME", "SCHEMA_NAME", "TOPICS", "DecodedMessage",
            "RecordedMessage", "Recording", "RecordingError", "open_recording"]

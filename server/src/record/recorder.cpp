@@ -2,9 +2,12 @@
 
 #include <flatbuffers/idl.h>
 
+#include <array>
 #include <cstdio>
 #include <cstring>
 #include <string_view>
+
+#include <nlohmann/json.hpp>
 
 #include "tactile_generated.h"
 
@@ -42,13 +45,66 @@ const char* message_type_name(Topic t) {
   return "";
 }
 
+namespace {
+constexpr char kBase64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+}  // namespace
+
+std::string to_base64(std::span<const uint8_t> bytes) {
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  for (size_t i = 0; i < bytes.size(); i += 3) {
+    const size_t n = std::min<size_t>(3, bytes.size() - i);
+    const uint32_t v = uint32_t(bytes[i]) << 16 | (n > 1 ? uint32_t(bytes[i + 1]) << 8 : 0u) |
+                       (n > 2 ? uint32_t(bytes[i + 2]) : 0u);
+    for (size_t k = 0; k < 4; ++k) out += k <= n ? kBase64[(v >> (18 - 6 * k)) & 63] : '=';
+  }
+  return out;
+}
+
+std::vector<uint8_t> from_base64(std::string_view text) {
+  std::array<int, 256> value;
+  value.fill(-1);
+  for (int k = 0; k < 64; ++k) value[size_t(uint8_t(kBase64[k]))] = k;
+  if (text.size() % 4 != 0) return {};
+  std::vector<uint8_t> out;
+  out.reserve(text.size() / 4 * 3);
+  for (size_t i = 0; i < text.size(); i += 4) {
+    uint32_t v = 0;
+    int pad = 0;
+    for (size_t k = 0; k < 4; ++k) {
+      const char c = text[i + k];
+      if (c == '=' && i + 4 == text.size() && k >= 2) {
+        ++pad;
+        v <<= 6;
+        continue;
+      }
+      const int d = value[size_t(uint8_t(c))];
+      if (d < 0 || pad > 0) return {};
+      v = v << 6 | uint32_t(d);
+    }
+    out.push_back(uint8_t(v >> 16));
+    if (pad < 2) out.push_back(uint8_t(v >> 8));
+    if (pad < 1) out.push_back(uint8_t(v));
+  }
+  return out;
+}
+
 void restore_envelopes(mcap::Recording& rec) {
   for (const auto& [id, channel] : rec.channels) {
-    const auto it = channel.metadata.find("envelope_offset");
-    if (it == channel.metadata.end()) continue;
-    const size_t at = size_t(std::stoul(it->second));
-    for (mcap::Message& m : rec.messages)
-      if (m.channel == id) m.data.erase(m.data.begin(), m.data.begin() + std::ptrdiff_t(std::min(at, m.data.size())));
+    if (const auto it = channel.metadata.find("envelope_offset"); it != channel.metadata.end()) {
+      const size_t at = size_t(std::stoul(it->second));
+      for (mcap::Message& m : rec.messages)
+        if (m.channel == id)
+          m.data.erase(m.data.begin(), m.data.begin() + std::ptrdiff_t(std::min(at, m.data.size())));
+    } else if (const auto f = channel.metadata.find("envelope_field"); f != channel.metadata.end()) {
+      for (mcap::Message& m : rec.messages) {
+        if (m.channel != id) continue;
+        const auto j = nlohmann::json::parse(m.data.begin(), m.data.end(), nullptr, false);
+        m.data = j.is_object() && j.contains(f->second) && j[f->second].is_string()
+                     ? from_base64(j[f->second].get<std::string>())
+                     : std::vector<uint8_t>{};
+      }
+    }
   }
 }
 
@@ -56,7 +112,8 @@ namespace {
 
 // Whether a topic's channel carries its Envelopes behind a root header
 // rooted at their message type. Not /control: a Control holds a union,
-// which Foxglove's FlatBuffers reader does not decode either way.
+// which Foxglove's FlatBuffers reader does not decode either way; it is
+// JSON, with its Envelope in base64 beside the decoded fields.
 bool rooted_at_message(Topic t) { return t != Topic::Applied && t != Topic::Control; }
 
 // The protocol's schema with `type` as its root table, serialised as a
@@ -82,7 +139,6 @@ int64_t unix_now_ns() {
 Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderOptions options)
     : path_(path), options_(options), writer_(path, "", "tactile-server"),
       epoch_offset_ns_(unix_now_ns() - steady_now_ns()) {
-  const uint16_t envelope = writer_.add_schema("tactile.proto.Envelope", "flatbuffer", tactile_bfbs());
   static constexpr char kAppliedSchema[] =
       R"({"title":"tactile.AppliedInput","type":"object","properties":{)"
       R"("loop_step":{"type":"integer","description":"steps the loop had taken when it applied the input"},)"
@@ -95,7 +151,21 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
   const uint16_t applied = writer_.add_schema(
       "tactile.AppliedInput", "jsonschema",
       {reinterpret_cast<const uint8_t*>(applied_schema.data()), applied_schema.size()});
-  flatbuffers::Parser parser;
+  static constexpr char kControlSchema[] =
+      R"({"title":"tactile.Control","type":"object","properties":{)"
+      R"("request_id":{"type":"integer","description":"echoed in the server's answer"},)"
+      R"("command_type":{"type":"string","description":"the ControlCommand it holds"},)"
+      R"("command":{"type":"object","description":"its fields, named as in proto/tactile.fbs"},)"
+      R"("envelope":{"type":"string","contentEncoding":"base64",)"
+      R"("description":"the Control's Envelope as it came, for replay"}}})";
+  const std::string_view control_schema(kControlSchema);
+  const uint16_t control = writer_.add_schema(
+      "tactile.Control", "jsonschema",
+      {reinterpret_cast<const uint8_t*>(control_schema.data()), control_schema.size()});
+  schema_ = std::make_unique<flatbuffers::Parser>();
+  flatbuffers::Parser& parser = *schema_;
+  parser.opts.strict_json = true;
+  parser.opts.indent_step = -1;  // one line
   const std::span<const uint8_t> fbs = tactile_fbs();
   if (!parser.Parse(std::string(reinterpret_cast<const char*>(fbs.data()), fbs.size()).c_str()))
     throw mcap::McapError("the embedded protocol schema does not parse: " + parser.error_);
@@ -103,13 +173,13 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
     const Topic topic = Topic(t);
     if (topic == Topic::Applied) {
       channel_[t] = writer_.add_channel(applied, topic_name(topic), "json");
+    } else if (topic == Topic::Control) {
+      channel_[t] = writer_.add_channel(control, topic_name(topic), "json", {{"envelope_field", "envelope"}});
     } else if (rooted_at_message(topic)) {
       const std::string type = message_type_name(topic);
       const uint16_t schema = writer_.add_schema("tactile.proto." + type, "flatbuffer", schema_rooted_at(parser, type));
       channel_[t] = writer_.add_channel(schema, topic_name(topic), "flatbuffer",
                                         {{"envelope_offset", std::to_string(kEnvelopeOffset)}});
-    } else {
-      channel_[t] = writer_.add_channel(envelope, topic_name(topic), "flatbuffer");
     }
   }
   mcap::Map meta = metadata;
@@ -239,6 +309,27 @@ void Recorder::run() {
           std::memcpy(head + 4, proto::EnvelopeIdentifier(), 4);
           writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes,
                         {head, kEnvelopeOffset});
+        } else if (item.topic == Topic::Control) {
+          // {"request_id", "command_type", "command", "envelope"}: the
+          // Control's fields as flatbuffers' text generator writes them, and
+          // its Envelope for replay.
+          flatbuffers::Verifier v(item.bytes.data(), item.bytes.size());
+          const proto::Control* c = proto::VerifyEnvelopeBuffer(v)
+                                        ? proto::GetEnvelope(item.bytes.data())->message_as_Control()
+                                        : nullptr;
+          std::string text;
+          nlohmann::json j;
+          if (c && flatbuffers::GenerateTextFromTable(*schema_, c, "tactile.proto.Control", &text))
+            j = nlohmann::json::parse(text, nullptr, false);
+          if (!j.is_object()) {
+            ++unreadable;
+            waiting.erase(waiting.begin());
+            continue;
+          }
+          j["envelope"] = to_base64(item.bytes);
+          const std::string json = j.dump();
+          writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns),
+                        {reinterpret_cast<const uint8_t*>(json.data()), json.size()});
         } else {
           writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes);
         }

@@ -24,10 +24,15 @@
 #include <mutex>
 #include <span>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
 #include "record/mcap.hpp"
+
+namespace flatbuffers {
+class Parser;
+}
 
 namespace tactile {
 
@@ -100,6 +105,7 @@ class Recorder {
   std::string path_;
   RecorderOptions options_;
   mcap::Writer writer_;
+  std::unique_ptr<flatbuffers::Parser> schema_;  // the protocol schema, for /control's JSON
   uint16_t channel_[kTopicCount] = {};
   int64_t epoch_offset_ns_;  // steady -> Unix time, fixed at the start
 
@@ -112,9 +118,7 @@ class Recorder {
   std::thread thread_;
 };
 
-// The protocol's binary schema (flatc --binary --schema proto/tactile.fbs,
-// rooted at the Envelope) and its text, embedded at build time.
-std::span<const uint8_t> tactile_bfbs();
+// The protocol schema's text (proto/tactile.fbs), embedded at build time.
 std::span<const uint8_t> tactile_fbs();
 
 // The layout of a message on a FlatBuffers channel whose metadata has
@@ -130,8 +134,14 @@ inline constexpr size_t kEnvelopeOffset = 8;
 const char* message_type_name(Topic t);
 
 // A recording read back as Envelopes, whatever its layout: each message of a
-// channel with "envelope_offset" loses its root header. A message shorter
-// than the header is left empty (its Envelope no longer verifies).
+// channel with "envelope_offset" loses its root header; each of a JSON
+// channel with "envelope_field" (/control) is that field's Envelope (base64).
+// A message that holds none is left empty (it no longer verifies).
 void restore_envelopes(mcap::Recording& rec);
+
+// RFC 4648 base64 (with padding), for /control's Envelopes in JSON.
+std::string to_base64(std::span<const uint8_t> bytes);
+// Empty for text that is not base64.
+std::vector<uint8_t> from_base64(std::string_view text);
 
 }  // namespace tactile

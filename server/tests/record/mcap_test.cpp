@@ -303,3 +303,27 @@ TEST(Recorder, AQueueOverItsBoundIsAFaultAndTheFileStaysReadable) {
 
 }  // namespace
 }  // namespace tactile
+
+namespace tactile {
+namespace {
+
+// RFC 4648's test vectors, both ways; text that is not base64 gives nothing.
+TEST(Base64, RoundTripsTheRfcVectorsAndRefusesWhatIsNotBase64) {
+  const std::pair<std::string, std::string> vectors[] = {{"", ""},          {"f", "Zg=="},     {"fo", "Zm8="},
+                                                         {"foo", "Zm9v"},   {"foob", "Zm9vYg=="}, {"fooba", "Zm9vYmE="},
+                                                         {"foobar", "Zm9vYmFy"}};
+  for (const auto& [plain, coded] : vectors) {
+    const std::vector<uint8_t> bytes(plain.begin(), plain.end());
+    EXPECT_EQ(to_base64(bytes), coded);
+    EXPECT_EQ(from_base64(coded), bytes) << coded;
+  }
+  std::vector<uint8_t> all(256);
+  for (size_t k = 0; k < all.size(); ++k) all[k] = uint8_t(k);
+  EXPECT_EQ(from_base64(to_base64(all)), all);
+  EXPECT_TRUE(from_base64("Zm9").empty());    // not a multiple of 4
+  EXPECT_TRUE(from_base64("Zm9*").empty());   // not in the alphabet
+  EXPECT_TRUE(from_base64("Z=9v").empty());   // padding inside
+}
+
+}  // namespace
+}  // namespace tactile
