@@ -68,9 +68,15 @@ def test_every_channel_of_a_fresh_recording_decodes_with_foxglove_libraries(tmp_
     for topic, r in recorded.items():
         assert r["error"] is None and r["decoded"] == r["messages"], (topic, r)
     assert report["/control"]["schema"] == "tactile.Control" and report["/control"]["message_encoding"] == "json"
+    # Foxglove's own schemas, checked against @foxglove/schemas' JSON Schemas: the body for the 3D panel, one
+    # update per state.
+    body = report["/foxglove/body"]
+    assert body["schema"] == "foxglove.SceneUpdate" and body["decoded"] == recorded["/state"]["messages"], body
+    assert "entities[0].triangles[0].points[0].x" in body["numeric_fields"], body["numeric_fields"][:20]
+    assert report["/foxglove/log"]["schema"] == "foxglove.Log"
     assert "request_id" in report["/control"]["numeric_fields"], report["/control"]
     for topic, r in report.items():
-        if topic not in ("/control", "/applied"):
+        if topic not in ("/control", "/applied") and not topic.startswith("/foxglove/"):
             assert r["schema"] == "tactile.proto." + {
                 "/scene": "SceneDescription", "/state": "StateFrame", "/haptic": "HapticFrame",
                 "/input": "DeviceInput", "/error": "Error", "/telemetry": "Telemetry", "/safety": "SafetyEvent",

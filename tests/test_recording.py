@@ -65,6 +65,11 @@ def read_closed(path: pathlib.Path) -> dict[str, list[tuple[int, Any]]]:
                 assert channel.message_encoding == "json"
                 out[channel.topic].append((message.log_time, json.loads(message.data)))
                 continue
+            if channel.topic.startswith("/foxglove/"):  # Foxglove's views (tests/test_foxglove.py checks them)
+                assert schema.name in ("foxglove.SceneUpdate", "foxglove.Log") and schema.encoding == "jsonschema"
+                assert channel.message_encoding == "json"
+                out[channel.topic].append((message.log_time, json.loads(message.data)))
+                continue
             data = message.data
             if channel.topic == "/control":  # a union inside: JSON, with the Envelope in base64 (RECORDING.md)
                 assert schema.name == "tactile.Control" and schema.encoding == "jsonschema"

@@ -1,14 +1,19 @@
 // Decodes every message of a recording the way Foxglove does: the MCAP file
 // through @mcap/core's indexed reader, each FlatBuffers channel through
 // flatbuffers_reflection against the channel's own binary schema (rooted at
-// its message type), each JSON channel with JSON.parse. Prints a JSON report
-// on stdout: per topic, its schema, encoding, message count, what failed to
-// decode (with the first error) and the numeric fields a Plot panel could
-// draw (paths to numbers in the first decoded message).
+// its message type), each JSON channel with JSON.parse; a message of one of
+// Foxglove's own schemas (foxglove.SceneUpdate, foxglove.Log) must also
+// satisfy that schema's official JSON Schema (@foxglove/schemas), which is
+// what its panels read. Prints a JSON report on stdout: per topic, its
+// schema, encoding, message count, what failed to decode (with the first
+// error) and the numeric fields a Plot panel could draw (paths to numbers in
+// the first decoded message).
 //   node decode_recording.mjs FILE.mcap
 import { open } from "node:fs/promises";
 
+import * as foxgloveSchemas from "@foxglove/schemas/jsonschema.js";
 import { McapIndexedReader } from "@mcap/core";
+import Ajv from "ajv";
 import { ByteBuffer } from "flatbuffers";
 import { Parser, Schema, Table } from "flatbuffers_reflection";
 
@@ -29,6 +34,8 @@ const readable = {
 };
 const reader = await McapIndexedReader.Initialize({ readable });
 
+const ajv = new Ajv({ strict: false });
+
 // One decoder per schema, as Foxglove builds them: FlatBuffers by
 // reflection over the binary schema's root table, JSON by parsing.
 function decoderFor(schema, encoding) {
@@ -41,7 +48,16 @@ function decoderFor(schema, encoding) {
   }
   if (encoding === "json") {
     const text = new TextDecoder();
-    return (data) => JSON.parse(text.decode(data));
+    const name = schema?.name ?? "";
+    if (!name.startsWith("foxglove.")) return (data) => JSON.parse(text.decode(data));
+    const official = foxgloveSchemas[name.slice("foxglove.".length)];
+    if (!official) throw new Error(`${name} is not one of @foxglove/schemas`);
+    const valid = ajv.compile(official);
+    return (data) => {
+      const object = JSON.parse(text.decode(data));
+      if (!valid(object)) throw new Error(`not a valid ${name}: ${ajv.errorsText(valid.errors)}`);
+      return object;
+    };
   }
   throw new Error(`message encoding ${encoding} is not one Foxglove decodes here`);
 }

@@ -182,6 +182,14 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
                                         {{"envelope_offset", std::to_string(kEnvelopeOffset)}});
     }
   }
+  // Foxglove's own schemas, for its 3D and Log panels (foxglove_views.hpp).
+  const std::string_view update = scene_update_json_schema(), log = log_json_schema();
+  body_channel_ = writer_.add_channel(
+      writer_.add_schema("foxglove.SceneUpdate", "jsonschema", {reinterpret_cast<const uint8_t*>(update.data()), update.size()}),
+      "/foxglove/body", "json");
+  log_channel_ = writer_.add_channel(
+      writer_.add_schema("foxglove.Log", "jsonschema", {reinterpret_cast<const uint8_t*>(log.data()), log.size()}),
+      "/foxglove/log", "json");
   mcap::Map meta = metadata;
   meta["started_unix_ns"] = std::to_string(unix_now_ns());
   writer_.add_metadata("tactile", meta);
@@ -309,6 +317,23 @@ void Recorder::run() {
           std::memcpy(head + 4, proto::EnvelopeIdentifier(), 4);
           writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes,
                         {head, kEnvelopeOffset});
+          // Foxglove's views of it, at the same time.
+          const proto::Envelope* e = proto::GetEnvelope(item.bytes.data());
+          std::optional<std::string> view;
+          uint16_t to = log_channel_;
+          if (const auto* scene = e->message_as_SceneDescription()) {
+            views_.scene(*scene);
+          } else if (const auto* state = e->message_as_StateFrame()) {
+            view = views_.body(*state, item.log_ns);
+            to = body_channel_;
+          } else if (const auto* safety = e->message_as_SafetyEvent()) {
+            view = FoxgloveViews::log(*safety, item.log_ns);
+          } else if (const auto* err = e->message_as_Error()) {
+            view = FoxgloveViews::log(*err, item.log_ns);
+          }
+          if (view)
+            writer_.write(to, uint64_t(item.log_ns), uint64_t(item.publish_ns),
+                          {reinterpret_cast<const uint8_t*>(view->data()), view->size()});
         } else if (item.topic == Topic::Control) {
           // {"request_id", "command_type", "command", "envelope"}: the
           // Control's fields as flatbuffers' text generator writes them, and
