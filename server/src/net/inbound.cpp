@@ -11,7 +11,17 @@ Inbound read_inbound(const uint8_t* data, size_t size) {
   Inbound in;
   flatbuffers::Verifier v(data, size);
   if (!proto::VerifyEnvelopeBuffer(v)) {
-    in.message = "not a tactile Envelope (" + std::to_string(size) + " bytes failed verification)";
+    // A client that builds Envelopes from the schema but finishes the buffer
+    // without the file identifier (flatbuffers' Finish, not FinishEnvelope-
+    // Buffer) is the common case in a new language: name what is missing.
+    flatbuffers::Verifier again(data, size);
+    const bool no_identifier = again.VerifyBuffer<proto::Envelope>(nullptr) &&
+                               !flatbuffers::BufferHasIdentifier(data, proto::EnvelopeIdentifier());
+    in.message = no_identifier
+                     ? std::string("an Envelope without the file identifier \"") + proto::EnvelopeIdentifier() +
+                           "\" at bytes 4-7: finish the buffer with it (FinishEnvelopeBuffer in C++, "
+                           "finishEnvelopeBuffer in JavaScript, FinishWithFileIdentifier in Go; proto/README.md)"
+                     : "not a tactile Envelope (" + std::to_string(size) + " bytes failed verification)";
     return in;
   }
   const proto::Envelope* e = proto::GetEnvelope(data);

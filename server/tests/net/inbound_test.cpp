@@ -38,6 +38,25 @@ std::string check(const EventFields& f) {
 
 bool says(const std::string& what, const char* part) { return what.find(part) != std::string::npos; }
 
+// A client in a new language that finishes its buffer without "TCTL" is told
+// so by name; bytes that are no Envelope at all are told that instead.
+TEST(Inbound, AnEnvelopeWithoutTheFileIdentifierIsRefusedNamingIt) {
+  flatbuffers::FlatBufferBuilder b;
+  const auto name = b.CreateString("pytest");
+  proto::HelloBuilder hello(b);
+  hello.add_protocol_major(1);
+  hello.add_client_name(name);
+  const auto h = hello.Finish();
+  b.Finish(proto::CreateEnvelope(b, proto::Message::Hello, h.Union()));  // no file identifier
+  const Inbound in = read_inbound(b.GetBufferPointer(), b.GetSize());
+  EXPECT_FALSE(in);
+  EXPECT_TRUE(says(in.message, "without the file identifier \"TCTL\"")) << in.message;
+  const uint8_t junk[16] = {12, 0, 0, 0, 'T', 'C', 'T', 'L', 1, 2, 3, 4, 5, 6, 7, 8};
+  const Inbound bad = read_inbound(junk, sizeof junk);
+  EXPECT_FALSE(bad);
+  EXPECT_TRUE(says(bad.message, "not a tactile Envelope")) << bad.message;
+}
+
 TEST(Inbound, AWellFormedSafetyEventPasses) {
   EXPECT_EQ(check({}), "");
   EventFields f;
