@@ -584,8 +584,13 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
     energy_fields = [name for name, _ in schema_fields("Energies")]
     states = [w for w in written if w.topic == "/state"]
     rows = read_csv(tmp_path / "energies.csv")
-    assert list(rows[0]) == ["log_time_ns", "sim_time_s", "step", "scene_id"] + [f"{f}_J" for f in energy_fields]
+    assert list(rows[0]) == (["log_time_ns", "sim_time_s", "step", "scene_id"] + [f"{f}_J" for f in energy_fields]
+                             + ["balance_drift_J"])
     assert len(rows) == len(states)
+    # The balance as the schema's comment on struct Energies gives it: the drift column is the terms' sum.
+    signs = {"kinetic": 1, "discrete": 1, "restated": -1, "elastic": 1, "gravity": 1, "work_loads": -1,
+             "work_essential": -1, "work_contact": -1, "dissipated": 1}
+    assert set(signs) == set(energy_fields)
     for row, w in zip(rows, states):
         assert int(row["step"]) == w.message.step and float(row["sim_time_s"]) == w.message.simTime
         for f in energy_fields:
@@ -593,18 +598,25 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
                 assert row[f"{f}_J"] == ""
             else:
                 assert float(row[f"{f}_J"]) == getattr(w.message.energies, camel(f))
+        if w.message.energies is not None:
+            drift = sum(sign * float(row[f"{f}_J"]) for f, sign in signs.items())
+            assert abs(float(row["balance_drift_J"]) - drift) <= 1e-12 * sum(abs(float(row[f"{f}_J"])) for f in signs)
     assert any("6 of 12 state frames carry no energies" in n for n in result.notes)
 
     # telemetry: every scalar and string field of the schema's Telemetry
     scalars = [(name, ftype) for name, ftype in schema_fields("Telemetry") if ftype in SCALARS]
     telemetry_rows = read_csv(tmp_path / "telemetry.csv")
     sent = [w for w in written if w.topic == "/telemetry"]
-    assert list(telemetry_rows[0]) == ["log_time_ns"] + [n for n, _ in scalars] + ["effect_costs", "faults"]
+    column = {"sim_time": "sim_time_s"}  # names that get their unit
+    assert list(telemetry_rows[0]) == ["log_time_ns"] + [column.get(n, n) for n, _ in scalars] + ["faults"]
     assert len(telemetry_rows) == len(sent) == 4
+    costs = read_csv(tmp_path / "effect_costs.csv")  # long: one row per effect per message
+    assert list(costs[0]) == ["log_time_ns", "sim_time_s", "effect", "ns_per_step"]
+    assert [(r["effect"], f32(r["ns_per_step"])) for r in costs] == [("elastic", np.float32(1250.5))] * len(sent)
     for row, w in zip(telemetry_rows, sent):
         for name, ftype in scalars:
             value = getattr(w.message, camel(name))
-            cell = row[name]
+            cell = row[column.get(name, name)]
             if ftype == "float":
                 assert f32(cell) == np.float32(value), name
             elif ftype == "double":
@@ -615,7 +627,7 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
                 assert cell == value, name
             else:
                 assert int(cell) == value, name
-        assert row["effect_costs"] == "elastic=1250.5" and row["faults"] == "a fault; another"
+        assert row["faults"] == "a fault; another"
 
     # inputs
     inputs = [w for w in written if w.topic == "/input"]
@@ -699,8 +711,8 @@ def test_info_prints_counts_scene_duration_and_problems(tmp_path, closed, capsys
 
 def test_export_command_writes_what_its_flags_ask(tmp_path, closed, capsys):
     assert recording_cli.main(["export", str(closed), "--out", str(tmp_path / "csv"), "--csv"]) == 0
-    assert sorted(p.name for p in (tmp_path / "csv").iterdir()) == ["energies.csv", "forces.2.csv", "forces.csv",
-                                                                      "inputs.csv", "telemetry.csv"]
+    assert sorted(p.name for p in (tmp_path / "csv").iterdir()) == ["effect_costs.csv", "energies.csv", "forces.2.csv",
+                                                                      "forces.csv", "inputs.csv", "telemetry.csv"]
     assert f"{tmp_path / 'csv'}/forces.csv: 60 rows" in capsys.readouterr().out
     assert recording_cli.main(["export", str(closed), "--out", str(tmp_path / "all")]) == 0
     names = {p.name for p in (tmp_path / "all").iterdir()}

@@ -11,10 +11,14 @@ CSV, one row per message, in file order; floats as the shortest text that reads 
                  other devices or proxies was loaded), the table continues in forces.2.csv, forces.3.csv...
                  and a note says where.
   energies.csv   /state: log_time_ns, sim_time_s, step, scene_id and each field of StateFrame.energies [J]
-                 (`kinetic_J`, ...: the fields the generated code has). Frames without energies (a server
-                 before protocol 1.4) leave those columns empty, and a note counts them.
-  telemetry.csv  /telemetry: log_time_ns and every scalar and string field of Telemetry, then effect_costs
-                 (`name=ns_per_step; ...`) and faults (`; `-joined).
+                 (`kinetic_J`, ...: the fields the generated code has), then balance_drift_J, their sum as the
+                 protocol defines it (kinetic + discrete - restated + elastic + gravity - work_loads -
+                 work_essential - work_contact + dissipated). Frames without energies (a server before
+                 protocol 1.4) leave those columns empty, and a note counts them.
+  telemetry.csv  /telemetry: log_time_ns and every scalar and string field of Telemetry (sim_time as
+                 sim_time_s), then faults (`; `-joined).
+  effect_costs.csv  /telemetry, long: log_time_ns, sim_time_s, effect, ns_per_step: one row per effect per
+                 message (what each effect of the simulation cost a step, Telemetry.effect_costs).
   inputs.csv     /input: log_time_ns, device, sequence, device_time_ns, position [m], orientation, buttons.
 VTU: one series per scene_id (a load or a reset starts a new one, since sim_time restarts and the mesh may
 differ): `surface-<scene_id>/<index>.vtu` per StateFrame (points: positions; cells: the scene's triangles;
@@ -78,6 +82,12 @@ def _snake(attr: str) -> str:
     return re.sub(r"(?<=[a-z0-9])([A-Z])", r"_\1", attr).lower()
 
 
+def _camel(name: str) -> str:
+    """The object API attribute of a schema field name (work_loads -> workLoads)."""
+    head, *rest = name.split("_")
+    return head + "".join(w[:1].upper() + w[1:] for w in rest)
+
+
 def _fields(cls: type) -> list[tuple[str, str]]:
     """(attribute, kind) of each scalar or string field of a generated object API class, in schema order;
     kind ("int", "f32", "f64", "bool", "str") read from the names its table's accessor uses. Vectors, tables,
@@ -138,8 +148,15 @@ def _names(names: list[str] | None, n: int, kind: str) -> list[str]:
     return [f"{kind}{i}" for i in range(n)]
 
 
+# The energy balance's terms and signs (proto/tactile.fbs, struct Energies): their sum is the drift.
+_BALANCE = {"kinetic": 1, "discrete": 1, "restated": -1, "elastic": 1, "gravity": 1, "work_loads": -1,
+            "work_essential": -1, "work_contact": -1, "dissipated": 1}
+# Columns whose schema name lacks its unit.
+_UNITS = {"sim_time": "sim_time_s"}
+
+
 class _Tables:
-    """The four CSV tables of a recording."""
+    """The CSV tables of a recording."""
 
     ENERGIES = _fields(EnergiesT)
     TELEMETRY = _fields(TelemetryT)
@@ -149,6 +166,7 @@ class _Tables:
         self.forces = _Table(out_dir, "forces", result)
         self.energies = _Table(out_dir, "energies", result)
         self.telemetry = _Table(out_dir, "telemetry", result)
+        self.effect_costs = _Table(out_dir, "effect_costs", result)
         self.inputs = _Table(out_dir, "inputs", result)
         self.states_without_energies = 0
         self.states = 0
@@ -177,21 +195,25 @@ class _Tables:
 
     def add_state(self, t: int, frame: StateFrameT) -> None:
         self.states += 1
-        header = ("log_time_ns", "sim_time_s", "step", "scene_id") + tuple(f"{_snake(a)}_J" for a, _ in self.ENERGIES)
+        header = (("log_time_ns", "sim_time_s", "step", "scene_id") + tuple(f"{_snake(a)}_J" for a, _ in self.ENERGIES)
+                  + ("balance_drift_J",))
         row = [str(t), _f64(frame.simTime), str(frame.step), str(frame.sceneId)]
         if frame.energies is None:
             self.states_without_energies += 1
-            row += [""] * len(self.ENERGIES)
+            row += [""] * (len(self.ENERGIES) + 1)
         else:
             row += [_text(getattr(frame.energies, a), kind) for a, kind in self.ENERGIES]
+            row.append(_f64(sum(sign * getattr(frame.energies, _camel(name)) for name, sign in _BALANCE.items())))
         self.energies.write(header, row, t)
 
     def add_telemetry(self, t: int, telemetry: TelemetryT) -> None:
-        header = ("log_time_ns",) + tuple(_snake(a) for a, _ in self.TELEMETRY) + ("effect_costs", "faults")
+        header = ("log_time_ns",) + tuple(_UNITS.get(_snake(a), _snake(a)) for a, _ in self.TELEMETRY) + ("faults",)
         row = [str(t)] + [_text(getattr(telemetry, a), kind) for a, kind in self.TELEMETRY]
-        row.append("; ".join(f"{c.name or ''}={_f32(c.nsPerStep)}" for c in telemetry.effectCosts or []))
         row.append("; ".join(telemetry.faults or []))
         self.telemetry.write(header, row, t)
+        for c in telemetry.effectCosts or []:
+            self.effect_costs.write(("log_time_ns", "sim_time_s", "effect", "ns_per_step"),
+                                    [str(t), _f64(telemetry.simTime), c.name or "", _f32(c.nsPerStep)], t)
 
     def add_input(self, t: int, device_input: Any) -> None:
         header = ("log_time_ns", "device", "sequence", "device_time_ns", "x_m", "y_m", "z_m", "qw", "qx", "qy", "qz",
@@ -204,7 +226,7 @@ class _Tables:
         self.inputs.write(header, row, t)
 
     def close(self) -> None:
-        for table in (self.forces, self.energies, self.telemetry, self.inputs):
+        for table in (self.forces, self.energies, self.telemetry, self.effect_costs, self.inputs):
             table.close()
         if self.states_without_energies:
             self.result.notes.append(f"energies: {self.states_without_energies} of {self.states} state frames carry "
