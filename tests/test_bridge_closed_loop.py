@@ -198,6 +198,6 @@ def static_force(tmp_path: pathlib.Path, y: float) -> float:
     subprocess.run([exe, "run", str(path), "--out", str(tmp_path / "out"), "--no-vtu", "--quiet"], check=True,
                    capture_output=True)
     rows = list(csv.DictReader((next((tmp_path / "out").rglob("forces.csv"))).open()))
-    late = [r for r in rows if float(r["t_s"]) > 2.2]
+    late = [r for r in rows if float(r["sim_time_s"]) > 2.2]
     assert late, "the static run wrote no forces after 2.2 s"
     return float(np.mean([float(r["fy_N"]) for r in late]))

@@ -13,7 +13,7 @@ SIM = tactile_sim()
 pytestmark = pytest.mark.skipif(SIM is None, reason="tactile-sim is not built (scripts/setup.sh builds it)")
 
 POKE = ROOT / "server/scenes/poke.json"
-COLUMNS = ["t_s", "proxy", "device", "fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm", "contacts", "px_m", "py_m", "pz_m"]
+COLUMNS = ["sim_time_s", "proxy", "device", "fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm", "contacts", "px_m", "py_m", "pz_m"]
 
 
 @pytest.fixture(scope="module")
@@ -44,8 +44,8 @@ def test_forces_csv_has_the_columns_and_one_row_per_millisecond(poke_trace):
     header, trace, _ = poke_trace
     assert header == COLUMNS
     assert set(trace["proxy"]) == {"tip"}
-    assert len(trace["t_s"]) == 600
-    np.testing.assert_allclose(np.diff(trace["t_s"]), 1e-3, atol=1e-8)
+    assert len(trace["sim_time_s"]) == 600
+    np.testing.assert_allclose(np.diff(trace["sim_time_s"]), 1e-3, atol=1e-8)
 
 
 def test_no_force_before_contact(poke_trace):

@@ -224,7 +224,7 @@ def truth(tmp: pathlib.Path, t: np.ndarray, pos: np.ndarray, scene: dict[str, An
         faults = [json.loads(p.read_text()).get("fault") for p in out.rglob("summary.json")]
         sys.exit(f"the ground-truth run failed ({r.returncode}): {r.stderr.strip()[-2000:]} {faults}")
     rows = list(csv.DictReader(next(out.rglob("forces.csv")).open()))
-    tt = np.array([float(r["t_s"]) for r in rows])
+    tt = np.array([float(r["sim_time_s"]) for r in rows])
     f = np.array([[float(r["fx_N"]), float(r["fy_N"]), float(r["fz_N"])] for r in rows])
     # Per 1 ms the contact's force comes in pulses (it bounces resting nodes every other step or so, and
     # a millisecond holds a step count that is not always even): the truth is its mean over `smooth_ms`,
@@ -420,7 +420,7 @@ def probe_body_stiffness(tmp: pathlib.Path, scene: dict[str, Any], channel: str,
     subprocess.run([built("tactile-sim"), "run", str(path), "--out", str(out), "--no-vtu", "--quiet"],
                    capture_output=True, text=True, check=False)
     rows = list(csv.DictReader(next(out.rglob("forces.csv")).open()))
-    t = np.array([float(r["t_s"]) for r in rows])
+    t = np.array([float(r["sim_time_s"]) for r in rows])
     fy = np.array([float(r["fy_N"]) for r in rows])
     w = 50  # a 50 ms mean: the beam's ringing out
     fy = np.convolve(fy, np.ones(w) / w, mode="same")

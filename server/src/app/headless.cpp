@@ -87,7 +87,7 @@ Json energy_json(const Energy& e) {
 
 Json fault_json(const Fault& f) {
   if (!f) return Json(nullptr);
-  return Json{{"kind", to_string(f.kind)}, {"message", f.message}, {"step", f.step}, {"t_s", f.t},
+  return Json{{"kind", to_string(f.kind)}, {"message", f.message}, {"step", f.step}, {"sim_time_s", f.t},
               {"elements", f.elements}};
 }
 
@@ -149,7 +149,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   for (const SectionCut& c : cuts) rest_area.push_back(compute_section_area(c, mesh, {}));
 
   // frames.csv: one row per frame, frame 0 at rest.
-  std::string csv = "frame,t_s,substeps,dt_s";
+  std::string csv = "frame,sim_time_s,substeps,dt_s";
   for (const TrackedPoint& p : scene.track) csv += "," + p.name + "_ux_m," + p.name + "_uy_m," + p.name + "_uz_m";
   for (const SectionPlane& p : run.sections) csv += "," + p.name + "_area_m2";
   csv += ",kinetic_J,elastic_J,gravity_J,work_loads_J,work_essential_J,work_contact_J,dissipated_J,discrete_J,"
@@ -209,8 +209,8 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
                  << " s, " << sim.parts() << " thread(s)\n";
 
   // forces.csv and devices.csv: one row per proxy (device) per control interval.
-  std::string forces = "t_s,proxy,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts,px_m,py_m,pz_m\n";
-  std::string devices = "t_s,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts\n";
+  std::string forces = "sim_time_s,proxy,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts,px_m,py_m,pz_m\n";
+  std::string devices = "sim_time_s,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts\n";
   const std::vector<ProxySpec>& proxies = sim.proxies();
   for (size_t j = 0; j < proxies.size(); ++j)
     result.proxies.push_back({proxies[j].name, proxies[j].device, {}, {}, 0, sim.proxy_pose(int32_t(j)).position, 0});
@@ -446,7 +446,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
 
 void write_comparison(const std::string& dir, const std::vector<HeadlessResult>& results) {
   fs::create_directories(dir);
-  std::string csv = "variant,status,t_s";
+  std::string csv = "variant,status,sim_time_s";
   if (!results.empty()) {
     for (const TrackedResult& t : results.front().tracked)
       csv += "," + t.name + "_ux_m," + t.name + "_uy_m," + t.name + "_uz_m," + t.name + "_distance_m";
@@ -473,7 +473,7 @@ void write_comparison(const std::string& dir, const std::vector<HeadlessResult>&
     csv += "\n";
     variants.push_back(Json{{"variant", r.variant},
                             {"status", r.fault ? "fault" : "ok"},
-                            {"t_s", r.t},
+                            {"sim_time_s", r.t},
                             {"fault", fault_json(r.fault)},
                             {"tracked", tracked},
                             {"sections", sections}});

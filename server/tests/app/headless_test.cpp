@@ -185,7 +185,7 @@ TEST(Headless, SummaryAndFramesReportTheTrackedDisplacementOfTheState) {
 
   const std::vector<std::string> lines = csv_lines(r.dir + "/frames.csv");
   ASSERT_EQ(lines.size(), 7u);
-  EXPECT_EQ(lines[0].rfind("frame,t_s,substeps,dt_s,tip_ux_m,tip_uy_m,tip_uz_m,", 0), 0u);
+  EXPECT_EQ(lines[0].rfind("frame,sim_time_s,substeps,dt_s,tip_ux_m,tip_uy_m,tip_uz_m,", 0), 0u);
   const std::vector<double> last = csv_numbers(lines.back());
   EXPECT_EQ(last[0], 5);
   EXPECT_NEAR(last[1], 0.05, 1e-12);
@@ -285,7 +285,7 @@ TEST(Headless, PaperFig2LinearStrainChangesTheTwistedSectionAndStvkKeepsIt) {
 // One row of forces.csv or devices.csv: the names, and the numbers in order.
 struct TraceRow {
   std::string proxy, device;
-  std::vector<double> x;  // t_s, then the columns after the names
+  std::vector<double> x;  // sim_time_s, then the columns after the names
 };
 
 std::vector<TraceRow> read_trace(const std::string& path, int names) {
@@ -309,8 +309,8 @@ std::vector<TraceRow> read_trace(const std::string& path, int names) {
   return rows;
 }
 
-constexpr const char* kForcesHeader = "t_s,proxy,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts,px_m,py_m,pz_m";
-constexpr const char* kDevicesHeader = "t_s,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts";
+constexpr const char* kForcesHeader = "sim_time_s,proxy,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts,px_m,py_m,pz_m";
+constexpr const char* kDevicesHeader = "sim_time_s,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts";
 
 TEST(HeadlessProxies, PokeForcePushesTheSphereOutOfTheBlockAndIsZeroBeforeContact) {
   TempDir dir;
