@@ -245,9 +245,9 @@ TACTILE_INLINE Pair<T> sqrt_of(Pair<T> x) {
 //
 // Speed: the sweeps drive off-diagonal entries towards zero, into the
 // subnormal range, where every operation on them costs a microcode assist
-// (float: about 5 times slower). The kernels run these functions with
-// subnormals flushed to zero (kernels_impl.hpp, FlushSubnormals); elsewhere
-// they are as accurate, only slower.
+// (fem_bench --only=invertible; docs/perf.md). The kernels run these
+// functions with subnormals flushed to zero (kernels_impl.hpp,
+// FlushSubnormals); elsewhere they are as accurate, only slower.
 
 // Below this a squared length counts as zero: far enough above the smallest
 // normal number that its square root and reciprocal keep full precision.

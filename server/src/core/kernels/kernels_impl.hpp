@@ -55,13 +55,11 @@ constexpr bool uses_svd(MaterialModel m) {
 // Subnormal inputs read as zero and subnormal results written as zero (the
 // DAZ and FTZ bits of MXCSR) from engage() to the end of the object's life:
 // the SVD's Jacobi sweeps drive entries towards zero, and each operation on
-// a subnormal number costs a microcode assist (fem_bench --only=invertible:
-// the float SVD about 5 times slower without). Engaged only once a pass
-// meets a lane that takes the SVD, so that a pass with none computes
-// exactly what the plain model's does (docs/accuracy: invertible StVK has
-// StVK's error to the last bit; with subnormals flushed for the whole pass,
-// float wave-speed cases differed by 0.03 percentage points). MXCSR is per
-// thread; the old value comes back on exit.
+// a subnormal number costs a microcode assist (fem_bench --only=invertible;
+// docs/perf.md). Engaged only once a pass meets a lane that takes the SVD,
+// so that a pass with none computes exactly what the plain model's does
+// (docs/accuracy: invertible StVK has StVK's error). MXCSR is per thread;
+// the old value comes back on exit.
 class FlushSubnormals {
  public:
   FlushSubnormals() = default;
