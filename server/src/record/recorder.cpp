@@ -125,6 +125,10 @@ std::vector<uint8_t> schema_rooted_at(flatbuffers::Parser& parser, const std::st
   return {parser.builder_.GetBufferPointer(), parser.builder_.GetBufferPointer() + parser.builder_.GetSize()};
 }
 
+std::span<const uint8_t> bytes_of(std::string_view text) {
+  return {reinterpret_cast<const uint8_t*>(text.data()), text.size()};
+}
+
 int64_t steady_now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
       .count();
@@ -147,10 +151,7 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
       R"("direct":{"type":"boolean","description":"its device drove the proxy directly (kinematic); absent: coupled"},)"
       R"("limits":{"type":"array","items":{"type":"number"},"minItems":3,"maxItems":3,)"
       R"("description":"the coupling limits its device gave: max force [N], max torque [N m], stiffness [N/m]; absent: none"}}})";
-  const std::string_view applied_schema(kAppliedSchema);
-  const uint16_t applied = writer_.add_schema(
-      "tactile.AppliedInput", "jsonschema",
-      {reinterpret_cast<const uint8_t*>(applied_schema.data()), applied_schema.size()});
+  const uint16_t applied = writer_.add_schema("tactile.AppliedInput", "jsonschema", bytes_of(kAppliedSchema));
   static constexpr char kControlSchema[] =
       R"({"title":"tactile.Control","type":"object","properties":{)"
       R"("request_id":{"type":"integer","description":"echoed in the server's answer"},)"
@@ -158,10 +159,7 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
       R"("command":{"type":"object","description":"its fields, named as in proto/tactile.fbs"},)"
       R"("envelope":{"type":"string","contentEncoding":"base64",)"
       R"("description":"the Control's Envelope as it came, for replay"}}})";
-  const std::string_view control_schema(kControlSchema);
-  const uint16_t control = writer_.add_schema(
-      "tactile.Control", "jsonschema",
-      {reinterpret_cast<const uint8_t*>(control_schema.data()), control_schema.size()});
+  const uint16_t control = writer_.add_schema("tactile.Control", "jsonschema", bytes_of(kControlSchema));
   schema_ = std::make_unique<flatbuffers::Parser>();
   flatbuffers::Parser& parser = *schema_;
   parser.opts.strict_json = true;
@@ -183,13 +181,12 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
     }
   }
   // Foxglove's own schemas, for its 3D and Log panels (foxglove_views.hpp).
-  const std::string_view update = scene_update_json_schema(), log = log_json_schema();
   body_channel_ = writer_.add_channel(
-      writer_.add_schema("foxglove.SceneUpdate", "jsonschema", {reinterpret_cast<const uint8_t*>(update.data()), update.size()}),
-      "/foxglove/body", "json");
-  log_channel_ = writer_.add_channel(
-      writer_.add_schema("foxglove.Log", "jsonschema", {reinterpret_cast<const uint8_t*>(log.data()), log.size()}),
-      "/foxglove/log", "json");
+      writer_.add_schema("foxglove.SceneUpdate", "jsonschema", bytes_of(scene_update_json_schema())), "/foxglove/body",
+      "json");
+  log_channel_ =
+      writer_.add_channel(writer_.add_schema("foxglove.Log", "jsonschema", bytes_of(log_json_schema())), "/foxglove/log",
+                          "json");
   mcap::Map meta = metadata;
   meta["started_unix_ns"] = std::to_string(unix_now_ns());
   writer_.add_metadata("tactile", meta);
@@ -331,9 +328,7 @@ void Recorder::run() {
           } else if (const auto* err = e->message_as_Error()) {
             view = FoxgloveViews::log(*err, item.log_ns);
           }
-          if (view)
-            writer_.write(to, uint64_t(item.log_ns), uint64_t(item.publish_ns),
-                          {reinterpret_cast<const uint8_t*>(view->data()), view->size()});
+          if (view) writer_.write(to, uint64_t(item.log_ns), uint64_t(item.publish_ns), bytes_of(*view));
         } else if (item.topic == Topic::Control) {
           // {"request_id", "command_type", "command", "envelope"}: the
           // Control's fields as flatbuffers' text generator writes them, and
@@ -352,9 +347,8 @@ void Recorder::run() {
             continue;
           }
           j["envelope"] = to_base64(item.bytes);
-          const std::string json = j.dump();
           writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns),
-                        {reinterpret_cast<const uint8_t*>(json.data()), json.size()});
+                        bytes_of(j.dump()));
         } else {
           writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes);
         }
