@@ -51,16 +51,15 @@ def test_frames_read_back_with_meshio_and_agree_with_the_summary(default_run):
         assert frame.points.shape == (n_nodes, 3)
         assert sum(len(block.data) for block in frame.cells if block.type == "tetra") == n_tets
         assert np.isfinite(frame.points).all()
-    # The first frame is the rest state; positions move by exactly the written displacement.
-    rest = first.points - first.point_data["displacement"]
+    # The points are the rest positions in every frame; the first frame is the rest state.
     assert np.abs(first.point_data["displacement"]).max() == 0.0
-    np.testing.assert_allclose(last.points, rest + last.point_data["displacement"], atol=1e-12)
+    np.testing.assert_array_equal(last.points, first.points)
     # Under gravity the beam sags: every node moves down or stays (clamped ones).
     assert last.point_data["displacement"][:, 1].max() <= 1e-9
     assert last.point_data["displacement"][:, 1].min() < -1e-4
     # Tets are positively oriented in the deformed state (no inversion in a healthy run).
     tets = np.concatenate([b.data for b in last.cells if b.type == "tetra"])
-    p = last.points
+    p = last.points + last.point_data["displacement"]
     vol = np.einsum("ij,ij->i", p[tets[:, 1]] - p[tets[:, 0]],
                     np.cross(p[tets[:, 2]] - p[tets[:, 0]], p[tets[:, 3]] - p[tets[:, 0]]))
     assert (vol > 0).all()
@@ -101,3 +100,132 @@ def test_the_energy_columns_add_up_to_the_drift_they_report(tmp_path):
         assert abs(_drift(r) - float(r["balance_drift_J"])) <= 1e-8 * max(scale, 1e-30), r
     energy = json.loads((folder / "summary.json").read_text())["energy"]
     assert abs(_drift(energy) - energy["balance_drift_J"]) <= 1e-12 * sum(abs(v) for v in energy.values())
+
+
+# ---- the VTU series as ParaView users read it ------------------------------------------------------------------
+
+def _readme_vtu_arrays() -> dict[str, str]:
+    """The arrays server/scenes/README.md lists under "VTU arrays": name -> where (body points, proxy field
+    data...)."""
+    text = (ROOT / "server/scenes/README.md").read_text()
+    table = text.split("### VTU arrays", 1)[1].split("| array | where | unit | what |", 1)[1]
+    rows = {}
+    for line in table.strip().splitlines()[1:]:  # after the |---| line, to the table's end
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        assert len(cells) == 4 and cells[2], line  # a name, where, a unit, what
+        rows[cells[0].strip("`")] = cells[1]
+    return rows
+
+
+@pytest.fixture(scope="module")
+def poke_series(tmp_path_factory):
+    """The poke (a sphere 8 mm into a block) with every optional VTU array asked for, run to its deepest press
+    (0.6-0.8 s), a VTU frame every second output frame."""
+    out = tmp_path_factory.mktemp("poke")
+    scene = json.loads((ROOT / "server/scenes/poke.json").read_text())
+    assert "primitive" in scene["mesh"]  # (a mesh file would be named relative to the scene's folder)
+    scene["run"]["vtu_fields"] = ["cauchy_stress", "green_strain", "von_mises", "contact_force"]
+    path = out / "poke.json"
+    path.write_text(json.dumps(scene))
+    result = subprocess.run([SIM, "run", str(path), "--out", str(out), "--duration", "0.7", "--quiet"],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    folder = out / "poke" / "run"
+    datasets = ET.parse(folder / "series.pvd").getroot().findall("./Collection/DataSet")
+    return folder, datasets
+
+
+def test_the_series_has_the_body_and_each_proxy_as_blocks(poke_series):
+    folder, datasets = poke_series
+    blocks = {(d.get("part"), d.get("name")) for d in datasets}
+    assert blocks == {("0", "body"), ("1", "tip")}
+    for part in ("0", "1"):
+        times = [float(d.get("timestep")) for d in datasets if d.get("part") == part]
+        assert times == sorted(times) and len(times) == 19  # frames 0, 2, ... 34 and the last, 35
+    for d in datasets:
+        assert (folder / d.get("file")).is_file()
+
+
+def test_every_array_written_is_listed_in_the_readme_with_its_unit(poke_series):
+    folder, datasets = poke_series
+    listed = _readme_vtu_arrays()
+    body = meshio.read(folder / [d.get("file") for d in datasets if d.get("part") == "0"][-1])
+    proxy = meshio.read(folder / [d.get("file") for d in datasets if d.get("part") == "1"][-1])
+    written = {**{k: "body points" for k in body.point_data}, **{k: "body cells" for k in body.cell_data},
+               **{k: "proxy field data" for k in proxy.field_data}}
+    assert written == {k: v for k, v in listed.items() if k != "displacement" or v == "body points"}
+    assert set(proxy.point_data) == {"displacement"} and not proxy.point_data["displacement"].any()
+
+
+def test_warping_by_the_displacement_gives_the_deformed_body_once(poke_series):
+    """The points are at rest and `displacement` is the vector to warp by: warped once, the tracked node is
+    where frames.csv has it and the top face wraps the sphere (no node deeper in it than the contact lets one
+    go); the rest points, or a second warp (what ParaView showed when the points were already deformed), put
+    nodes millimetres inside it or off it."""
+    import csv
+    folder, datasets = poke_series
+    files = {float(d.get("timestep")): d.get("file") for d in datasets if d.get("part") == "0"}
+    proxies = {float(d.get("timestep")): d.get("file") for d in datasets if d.get("part") == "1"}
+    t = 0.68
+    body, tip = meshio.read(folder / files[t]), meshio.read(folder / proxies[t])
+    rest = meshio.read(folder / files[0.0]).points
+    np.testing.assert_array_equal(body.points, rest)
+    u = body.point_data["displacement"]
+    # The tracked node (nearest the rest point top_centre) against frames.csv's row at t.
+    scene = json.loads((ROOT / "server/scenes/poke.json").read_text())
+    node = int(np.argmin(np.linalg.norm(rest - np.array(scene["run"]["track"][0]["point"]), axis=1)))
+    row = next(r for r in csv.DictReader((folder / "frames.csv").open()) if abs(float(r["sim_time_s"]) - t) < 1e-9)
+    np.testing.assert_allclose(u[node], [float(row[f"top_centre_u{c}_m"]) for c in "xyz"], rtol=1e-8, atol=1e-15)
+    centre = tip.points.mean(axis=0)
+    radius = np.linalg.norm(tip.points - centre, axis=1).mean()
+    assert radius == pytest.approx(0.012, rel=1e-9)
+
+    def deepest(points):
+        return (np.linalg.norm(points - centre, axis=1) - radius).min()  # < 0: inside the sphere [m]
+    assert deepest(rest + u) > -0.2e-3
+    assert deepest(rest) < -7e-3
+    assert deepest(rest + 2 * u) > 2e-3 or deepest(rest + 2 * u) < -2e-3
+
+
+def test_contact_forces_on_the_nodes_sum_to_minus_the_proxys_force(poke_series):
+    import csv
+    folder, datasets = poke_series
+    files = sorted((float(d.get("timestep")), d.get("file")) for d in datasets if d.get("part") == "0")
+    forces = [(float(r["sim_time_s"]), np.array([float(r[f"f{c}_N"]) for c in "xyz"]))
+              for r in csv.DictReader((folder / "forces.csv").open())]
+    pressed = 0
+    for (t0, _), (t1, name) in zip(files, files[1:]):
+        on_nodes = meshio.read(folder / name).point_data["contact_force"].sum(axis=0)
+        window = [f for s, f in forces if t0 + 1e-9 < s <= t1 + 1e-9]  # equal 1 ms intervals
+        on_proxy = np.mean(window, axis=0)
+        np.testing.assert_allclose(on_nodes, -on_proxy, atol=1e-7 * max(1.0, np.abs(on_proxy).max()))
+        pressed += on_proxy[1] > 1.0
+    assert pressed >= 5
+
+
+def test_strain_and_stress_are_those_of_the_written_displacement(poke_series):
+    """green_strain recomputed from the file's own rest points and displacement, tet by tet; the Cauchy stress
+    symmetric, von Mises its deviatoric norm; all zero at rest, to round-off."""
+    folder, datasets = poke_series
+    files = [d.get("file") for d in datasets if d.get("part") == "0"]
+    first, frame = meshio.read(folder / files[0]), meshio.read(folder / files[-3])
+    tets = np.concatenate([b.data for b in frame.cells if b.type == "tetra"])
+    X, x = frame.points, frame.points + frame.point_data["displacement"]
+    Dm = np.stack([X[tets[:, k]] - X[tets[:, 0]] for k in (1, 2, 3)], axis=2)
+    Ds = np.stack([x[tets[:, k]] - x[tets[:, 0]] for k in (1, 2, 3)], axis=2)
+    F = Ds @ np.linalg.inv(Dm)
+    E = 0.5 * (np.transpose(F, (0, 2, 1)) @ F - np.eye(3))
+    green = frame.cell_data["green_strain"][0].reshape(-1, 3, 3)
+    assert np.abs(E).max() > 1e-2  # pressed: strains of a few per cent
+    np.testing.assert_allclose(green, E, atol=1e-9)
+    sigma = frame.cell_data["cauchy_stress"][0].reshape(-1, 3, 3)
+    np.testing.assert_allclose(sigma, np.transpose(sigma, (0, 2, 1)), atol=1e-9 * np.abs(sigma).max())
+    s = sigma - np.trace(sigma, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
+    np.testing.assert_allclose(frame.cell_data["von_mises"][0], np.sqrt(1.5 * (s * s).sum(axis=(1, 2))),
+                               rtol=1e-9, atol=1e-9 * np.abs(sigma).max())
+    assert not first.cell_data["green_strain"][0].any()
+    E_young = json.loads((ROOT / "server/scenes/poke.json").read_text())["material"]["E"]
+    for k in ("cauchy_stress", "von_mises"):  # (Neo-Hookean's P(I) is zero to round-off)
+        assert np.abs(first.cell_data[k][0]).max() <= 1e-12 * E_young, k

@@ -21,9 +21,11 @@ CSV, one row per message, in file order; floats as the shortest text that reads 
                  message (what each effect of the simulation cost a step, Telemetry.effect_costs).
   inputs.csv     /input: log_time_ns, device, sequence, device_time_ns, position [m], orientation, buttons.
 VTU: one series per scene_id (a load or a reset starts a new one, since sim_time restarts and the mesh may
-differ): `surface-<scene_id>/<index>.vtu` per StateFrame (points: positions; cells: the scene's triangles;
-point data: the scalar under SceneDescription.scalar_name and `displacement`, positions minus rest
-positions [m]) and `surface-<scene_id>.pvd`, the collection ParaView opens, with sim_time as the timestep.
+differ): `surface-<scene_id>/<index>.vtu` per StateFrame (points: the rest positions, as the headless
+series has them; cells: the scene's triangles; point data: `displacement`, positions minus rest positions
+[m], the active vector that ParaView's Warp By Vector deforms the surface by, and the scalar under
+SceneDescription.scalar_name) and `surface-<scene_id>.pvd`, the collection ParaView opens, with sim_time as
+the timestep.
 `surface_every=N` (the CLI's `--every N`) writes the first state of each series and every Nth after it: a
 20 k-vertex surface takes about 0.1 s and 0.7 MB per file (meshio's zlib-compressed binary VTU).
 The VTU files are written by meshio (imported only for them; tests/requirements.txt pins it); meshio writes
@@ -284,7 +286,7 @@ class _Surface:
             point_data[scalar_name] = np.asarray(frame.scalar, np.float32)
         frames = self.series[scene_id]
         name = f"surface-{scene_id}/{len(frames):06d}.vtu"
-        self.meshio.write(self.out_dir / name, self.meshio.Mesh(x, self.cells[scene_id], point_data=point_data),
+        self.meshio.write(self.out_dir / name, self.meshio.Mesh(X, self.cells[scene_id], point_data=point_data),
                           file_format="vtu")
         frames.append((float(frame.simTime), name))
 

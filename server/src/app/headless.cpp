@@ -11,6 +11,7 @@
 #include <ostream>
 #include <stdexcept>
 
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 
@@ -62,10 +63,10 @@ Json vec(const Vec3& v) { return Json::array({v.x, v.y, v.z}); }
 
 const char* precision_name(Precision p) { return p == Precision::Float ? "float" : "double"; }
 
-std::string frame_name(int32_t frame) {
+std::string frame_name(const std::string& prefix, int32_t frame) {
   char buf[32];
-  std::snprintf(buf, sizeof buf, "frame_%06d.vtu", frame);
-  return buf;
+  std::snprintf(buf, sizeof buf, "_%06d.vtu", frame);
+  return prefix + buf;
 }
 
 // Every term of the energy balance (Energy::balance()), so that the drift a
@@ -111,7 +112,8 @@ void clear_old_output(const fs::path& dir) {
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
     const std::string name = entry.path().filename().string();
-    if ((name.starts_with("frame_") && name.ends_with(".vtu")) || name == "series.pvd" || name == "forces.csv" ||
+    if (((name.starts_with("frame_") || name.starts_with("proxy-")) && name.ends_with(".vtu")) ||
+        name == "series.pvd" || name == "forces.csv" ||
         name == "devices.csv")
       fs::remove(entry.path(), ec);
   }
@@ -155,8 +157,20 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   csv += ",kinetic_J,elastic_J,gravity_J,work_loads_J,work_essential_J,work_contact_J,dissipated_J,discrete_J,"
          "restated_J,balance_drift_J\n";
 
-  std::vector<double> u, v, density;
-  std::vector<double> u_given(3 * size_t(scene.spec.mesh.n_nodes())), v_given(u_given.size());  // for the VTU frames
+  std::vector<double> u, v, density, contact;
+  // For the VTU frames, in the mesh's numbering.
+  std::vector<double> u_given(3 * size_t(scene.spec.mesh.n_nodes())), v_given(u_given.size()),
+      contact_given(u_given.size());
+  std::vector<uint8_t> fixed_given(size_t(scene.spec.mesh.n_nodes()));
+  {
+    const std::vector<uint8_t> fixed = sim.node_constraint();
+    for (int32_t g = 0; g < scene.spec.mesh.n_nodes(); ++g) fixed_given[size_t(g)] = fixed[size_t(sim.model_node(g))];
+  }
+  if (options.write_vtu && run.vtu_contact_force) sim.track_contact_forces(true);
+  // A plane proxy is drawn as a square this big about its origin: the body's size.
+  Vec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+  for (const Vec3& x : mesh.X) lo = glm::min(lo, x), hi = glm::max(hi, x);
+  const double plane_half_size = mesh.X.empty() ? 1.0 : glm::length(hi - lo);
   std::vector<PvdEntry> pvd;
   Range substeps, dt_used, dt_critical, frame_wall, max_u, section_ratio;
   int64_t subdivided_frames = 0;
@@ -189,6 +203,11 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
     sim.copy_velocity(v);
     density = sim.compute_element_energy();
     for (size_t t = 0; t < density.size(); ++t) density[t] /= sim.tet_volume()[t];
+    const ElementFields fields = sim.compute_element_fields(run.vtu_cells);
+    if (run.vtu_contact_force) {
+      const double span = sim.take_contact_impulses(contact);
+      for (double& x : contact) x = span > 0 ? x / span : 0.0;
+    }
     // Written with the nodes as the scene's mesh numbers them (the model
     // numbers them for its element pass; tets keep their ids).
     for (int32_t g = 0; g < scene.spec.mesh.n_nodes(); ++g)
@@ -196,10 +215,21 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
         const size_t k = 3 * size_t(sim.model_node(g)) + d;
         u_given[3 * size_t(g) + d] = u[k];
         v_given[3 * size_t(g) + d] = v[k];
+        if (run.vtu_contact_force) contact_given[3 * size_t(g) + d] = contact[k];
       }
-    const std::string name = frame_name(frame);
-    write_vtu((dir / name).string(), VtuFrame{&scene.spec.mesh, &u_given, &v_given, &density});
-    pvd.push_back({sim.time(), name});
+    const std::string name = frame_name("frame", frame);
+    write_vtu((dir / name).string(), VtuFrame{&scene.spec.mesh, &u_given, &v_given, &fixed_given,
+                                              run.vtu_contact_force ? &contact_given : nullptr, &density, &fields});
+    pvd.push_back({sim.time(), name, 0, "body"});
+    // Each proxy a block of its own: its surface where it is, and what it felt.
+    for (size_t j = 0; j < sim.proxies().size(); ++j) {
+      const ProxySpec& p = sim.proxies()[j];
+      const ProxySurface surface = make_proxy_surface(p.geometry, sim.proxy_pose(int32_t(j)), plane_half_size);
+      const ContactResult& c = result.proxies[j];
+      const std::string proxy_file = frame_name("proxy-" + p.name, frame);
+      write_vtu((dir / proxy_file).string(), VtuProxy{&surface, c.force, c.torque, c.contacts});
+      pvd.push_back({sim.time(), proxy_file, int32_t(1 + j), p.name});
+    }
   };
 
   if (options.log)

@@ -1,5 +1,6 @@
 #include "app/simulation.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <utility>
@@ -46,6 +47,10 @@ struct Simulation::Engine {
   virtual const Energy& energy() const = 0;
   virtual Energy compute_energy() const = 0;
   virtual std::vector<double> compute_element_energy() const = 0;
+  virtual ElementFields compute_element_fields(const ElementFieldRequest& ask) const = 0;
+  virtual std::vector<uint8_t> node_constraint() const = 0;
+  virtual void track_contact_forces(bool on) = 0;
+  virtual double take_contact_impulses(std::vector<double>& impulse) = 0;
   virtual void copy_displacement(std::vector<double>& u) const = 0;
   virtual void copy_velocity(std::vector<double>& v) const = 0;
   virtual Vec3 displacement(int32_t node) const = 0;
@@ -158,6 +163,20 @@ class EngineOf final : public Simulation::Engine {
   const Energy& energy() const override { return stepper_.energy(); }
   Energy compute_energy() const override { return stepper_.compute_energy(state_); }
   std::vector<double> compute_element_energy() const override { return stepper_.compute_element_energy(state_); }
+  ElementFields compute_element_fields(const ElementFieldRequest& ask) const override {
+    return tactile::compute_element_fields(*model_, state_, ask);
+  }
+  std::vector<uint8_t> node_constraint() const override {
+    std::vector<uint8_t> out(size_t(model_->n_nodes), 0);
+    for (const EssentialSet& set : model_->essential)
+      for (int32_t i : set.nodes) out[size_t(i)] = std::max<uint8_t>(out[size_t(i)], set.moving ? 2 : 1);
+    return out;
+  }
+  void track_contact_forces(bool on) override { stepper_.contact().track_node_impulses(on); }
+  double take_contact_impulses(std::vector<double>& impulse) override {
+    impulse.assign(state_.u.size(), 0.0);
+    return stepper_.contact().take_node_impulses(impulse);
+  }
   void copy_displacement(std::vector<double>& u) const override { u.assign(state_.u.begin(), state_.u.end()); }
   void copy_velocity(std::vector<double>& v) const override { v.assign(state_.v.begin(), state_.v.end()); }
   Vec3 displacement(int32_t node) const override {
@@ -235,6 +254,14 @@ double Simulation::compute_critical_dt() const { return engine_->compute_critica
 const Energy& Simulation::energy() const { return engine_->energy(); }
 Energy Simulation::compute_energy() const { return engine_->compute_energy(); }
 std::vector<double> Simulation::compute_element_energy() const { return engine_->compute_element_energy(); }
+ElementFields Simulation::compute_element_fields(const ElementFieldRequest& ask) const {
+  return engine_->compute_element_fields(ask);
+}
+std::vector<uint8_t> Simulation::node_constraint() const { return engine_->node_constraint(); }
+void Simulation::track_contact_forces(bool on) { engine_->track_contact_forces(on); }
+double Simulation::take_contact_impulses(std::vector<double>& impulse) {
+  return engine_->take_contact_impulses(impulse);
+}
 void Simulation::copy_positions(std::vector<double>& x) const {
   engine_->copy_displacement(x);
   const TetMesh& m = mesh();

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "core/fields.hpp"
 #include "core/spec.hpp"
 #include "core/state.hpp"
 #include "core/stepper.hpp"
@@ -51,6 +52,11 @@ class Simulation {
   const Energy& energy() const;               // as of the latest step
   Energy compute_energy() const;              // full pass
   std::vector<double> compute_element_energy() const;  // V psi per tet [J] (n_tets)
+  // Stress and strain per tet, only those asked for (core/fields.hpp).
+  ElementFields compute_element_fields(const ElementFieldRequest& ask) const;
+  // Per node: 0 free, 1 held in place, 2 moved by a prescribed motion (an
+  // essential BC) (n_nodes).
+  std::vector<uint8_t> node_constraint() const;
 
   void copy_positions(std::vector<double>& x) const;     // X + u [m] (n_nodes x 3)
   void copy_displacement(std::vector<double>& u) const;  // [m] (n_nodes x 3)
@@ -84,6 +90,12 @@ class Simulation {
   const std::vector<ProxyReport>& proxy_reports() const;    // (n_proxies)
   const std::vector<DeviceReport>& device_reports() const;  // (n_devices)
   void clear_impulses();
+  // The contact force on each node, for an output that asks: summed from
+  // track_contact_forces(true) on, and taken as impulses [N s] (n_nodes x 3,
+  // overwritten) with the time they cover [s] returned; the mean force over
+  // it is impulse / time.
+  void track_contact_forces(bool on);
+  double take_contact_impulses(std::vector<double>& impulse);
 
   // Takes over another simulation's body and proxies: displacements,
   // velocities, time, step count, energy sums and proxy motions, so that a

@@ -1,10 +1,13 @@
 #include "app/vtu.hpp"
 
+#include <algorithm>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <stdexcept>
+
+#include <glm/geometric.hpp>
 
 namespace tactile {
 
@@ -36,7 +39,8 @@ namespace {
 
 // An inline binary DataArray: base64 of [UInt64 byte count][values].
 template <class T>
-void write_array(std::ofstream& out, const char* type, const char* name, int components, const std::vector<T>& values) {
+void write_array(std::ofstream& out, const char* type, const char* name, int components, const std::vector<T>& values,
+                 int tuples = 0) {
   std::vector<uint8_t> bytes(sizeof(uint64_t) + values.size() * sizeof(T));
   const uint64_t n = values.size() * sizeof(T);
   std::memcpy(bytes.data(), &n, sizeof n);
@@ -44,6 +48,7 @@ void write_array(std::ofstream& out, const char* type, const char* name, int com
   out << "        <DataArray type=\"" << type << "\"";
   if (name) out << " Name=\"" << name << "\"";
   if (components > 1) out << " NumberOfComponents=\"" << components << "\"";
+  if (tuples > 0) out << " NumberOfTuples=\"" << tuples << "\"";  // field data gives its count
   out << " format=\"binary\">\n          " << encode_base64(bytes.data(), bytes.size()) << "\n        </DataArray>\n";
 }
 
@@ -58,39 +63,24 @@ void close(std::ofstream& out, const std::string& path) {
   if (!out) throw std::runtime_error(path + ": write failed");
 }
 
-}  // namespace
-
-void write_vtu(const std::string& path, const VtuFrame& f) {
-  const TetMesh& mesh = *f.mesh;
-  const auto nn = size_t(mesh.n_nodes()), nt = size_t(mesh.n_tets());
-  std::vector<double> points(3 * nn);
-  for (size_t i = 0; i < nn; ++i)
-    for (size_t d = 0; d < 3; ++d) points[3 * i + d] = mesh.X[i][int(d)] + (f.u ? (*f.u)[3 * i + d] : 0.0);
-  std::vector<int32_t> connectivity(4 * nt), offsets(nt), material(nt);
-  std::vector<uint8_t> types(nt, 10);  // VTK_TETRA
-  for (size_t e = 0; e < nt; ++e) {
-    for (size_t k = 0; k < 4; ++k) connectivity[4 * e + k] = mesh.tets[e][k];
-    offsets[e] = int32_t(4 * (e + 1));
-    material[e] = mesh.region_of(int32_t(e));
-  }
-
-  std::ofstream out = open(path);
+// The file's opening, up to the grid's FieldData and Piece; write_piece ends
+// the piece with its Points and Cells (one VTK cell type) and the file.
+void begin_grid(std::ofstream& out) {
   out << "<?xml version=\"1.0\"?>\n"
          "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
-         "  <UnstructuredGrid>\n"
-      << "    <Piece NumberOfPoints=\"" << nn << "\" NumberOfCells=\"" << nt << "\">\n";
-  out << "      <PointData Vectors=\"displacement\">\n";
-  if (f.u) write_array(out, "Float64", "displacement", 3, *f.u);
-  if (f.v) write_array(out, "Float64", "velocity", 3, *f.v);
-  out << "      </PointData>\n";
-  out << "      <CellData Scalars=\"strain_energy_density\">\n";
-  if (f.energy_density) write_array(out, "Float64", "strain_energy_density", 1, *f.energy_density);
-  write_array(out, "Int32", "material", 1, material);
-  out << "      </CellData>\n";
+         "  <UnstructuredGrid>\n";
+}
+
+void write_piece(std::ofstream& out, const std::vector<double>& points, const std::vector<int32_t>& connectivity,
+                 int corners, uint8_t type) {
+  const size_t nc = connectivity.size() / size_t(corners);
+  std::vector<int32_t> offsets(nc);
+  for (size_t e = 0; e < nc; ++e) offsets[e] = int32_t(size_t(corners) * (e + 1));
+  const std::vector<uint8_t> types(nc, type);
   out << "      <Points>\n";
   write_array(out, "Float64", "Points", 3, points);
-  out << "      </Points>\n";
-  out << "      <Cells>\n";
+  out << "      </Points>\n"
+         "      <Cells>\n";
   write_array(out, "Int32", "connectivity", 1, connectivity);
   write_array(out, "Int32", "offsets", 1, offsets);
   write_array(out, "UInt8", "types", 1, types);
@@ -98,6 +88,111 @@ void write_vtu(const std::string& path, const VtuFrame& f) {
          "    </Piece>\n"
          "  </UnstructuredGrid>\n"
          "</VTKFile>\n";
+}
+
+}  // namespace
+
+void write_vtu(const std::string& path, const VtuFrame& f) {
+  const TetMesh& mesh = *f.mesh;
+  const auto nn = size_t(mesh.n_nodes()), nt = size_t(mesh.n_tets());
+  std::vector<double> points(3 * nn);
+  for (size_t i = 0; i < nn; ++i)
+    for (size_t d = 0; d < 3; ++d) points[3 * i + d] = mesh.X[i][int(d)];
+  std::vector<int32_t> connectivity(4 * nt), material(nt);
+  for (size_t e = 0; e < nt; ++e) {
+    for (size_t k = 0; k < 4; ++k) connectivity[4 * e + k] = mesh.tets[e][k];
+    material[e] = mesh.region_of(int32_t(e));
+  }
+
+  std::ofstream out = open(path);
+  begin_grid(out);
+  out << "    <Piece NumberOfPoints=\"" << nn << "\" NumberOfCells=\"" << nt << "\">\n";
+  out << "      <PointData" << (f.u ? " Vectors=\"displacement\"" : "") << ">\n";
+  if (f.u) write_array(out, "Float64", "displacement", 3, *f.u);
+  if (f.v) write_array(out, "Float64", "velocity", 3, *f.v);
+  if (f.fixed) write_array(out, "UInt8", "fixed", 1, *f.fixed);
+  if (f.contact_force) write_array(out, "Float64", "contact_force", 3, *f.contact_force);
+  out << "      </PointData>\n";
+  const ElementFields* fields = f.fields;
+  const bool stress = fields && !fields->cauchy_stress.empty();
+  out << "      <CellData Scalars=\"" << (fields && !fields->von_mises.empty() ? "von_mises" : "strain_energy_density")
+      << "\"" << (stress ? " Tensors=\"cauchy_stress\"" : "") << ">\n";
+  if (f.energy_density) write_array(out, "Float64", "strain_energy_density", 1, *f.energy_density);
+  if (stress) write_array(out, "Float64", "cauchy_stress", 9, fields->cauchy_stress);
+  if (fields && !fields->green_strain.empty()) write_array(out, "Float64", "green_strain", 9, fields->green_strain);
+  if (fields && !fields->von_mises.empty()) write_array(out, "Float64", "von_mises", 1, fields->von_mises);
+  write_array(out, "Int32", "material", 1, material);
+  out << "      </CellData>\n";
+  write_piece(out, points, connectivity, 4, 10);  // VTK_TETRA
+  close(out, path);
+}
+
+ProxySurface make_proxy_surface(const ProxyGeometry& g, const Pose& pose, double plane_half_size, int n) {
+  ProxySurface s;
+  auto put = [&](const Vec3& local) {
+    const Vec3 x = pose.to_world(local);
+    s.points.insert(s.points.end(), {x.x, x.y, x.z});
+  };
+  if (g.shape == ProxyShape::Plane) {  // the half-space y <= 0: its face, a square in the proxy's xz plane
+    const double h = plane_half_size;
+    for (const Vec3& c : {Vec3(-h, 0, -h), Vec3(h, 0, -h), Vec3(h, 0, h), Vec3(-h, 0, h)}) put(c);
+    s.triangles = {0, 2, 1, 0, 3, 2};  // facing +y, out of the half-space
+    return s;
+  }
+  n = std::max(2, n + (n & 1));
+  // The core's support point along d, with sign(0) = 0 so that directions on
+  // the cube's middle lines land on the middles of the core's faces and edges.
+  auto sign = [](double x) { return x > 0 ? 1.0 : x < 0 ? -1.0 : 0.0; };
+  auto support = [&](const Vec3& d) {
+    switch (g.shape) {
+      case ProxyShape::Capsule: return Vec3(sign(d.x) * g.half_length, 0.0, 0.0);
+      case ProxyShape::Box: return Vec3(sign(d.x), sign(d.y), sign(d.z)) * g.half_extents;
+      default: return Vec3(0.0);
+    }
+  };
+  for (int face = 0; face < 6; ++face) {
+    const int axis = face / 2;
+    const double side = face % 2 ? -1.0 : 1.0;
+    const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+    const auto base = int32_t(s.points.size() / 3);
+    for (int i = 0; i <= n; ++i)
+      for (int j = 0; j <= n; ++j) {
+        Vec3 q(0.0);
+        q[axis] = side;
+        q[a1] = -1.0 + 2.0 * i / n;
+        q[a2] = -1.0 + 2.0 * j / n;
+        const Vec3 d = glm::normalize(q);
+        put(support(d) + g.radius * d);
+      }
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) {
+        const int32_t k = base + int32_t(i * (n + 1) + j);
+        const int32_t right = k + n + 1, up = k + 1, diag = k + n + 2;
+        // Outward: (a1, a2, axis) is right-handed, so (i, j) counter-clockwise seen from +axis.
+        if (side > 0)
+          s.triangles.insert(s.triangles.end(), {k, right, diag, k, diag, up});
+        else
+          s.triangles.insert(s.triangles.end(), {k, diag, right, k, up, diag});
+      }
+  }
+  return s;
+}
+
+void write_vtu(const std::string& path, const VtuProxy& p) {
+  const ProxySurface& surface = *p.surface;
+  const size_t np = surface.points.size() / 3, nc = surface.triangles.size() / 3;
+  std::ofstream out = open(path);
+  begin_grid(out);
+  out << "    <FieldData>\n";
+  write_array(out, "Float64", "force", 3, std::vector<double>{p.force.x, p.force.y, p.force.z}, 1);
+  write_array(out, "Float64", "torque", 3, std::vector<double>{p.torque.x, p.torque.y, p.torque.z}, 1);
+  write_array(out, "Int32", "contacts", 1, std::vector<int32_t>{p.contacts}, 1);
+  out << "    </FieldData>\n";
+  out << "    <Piece NumberOfPoints=\"" << np << "\" NumberOfCells=\"" << nc << "\">\n"
+      << "      <PointData Vectors=\"displacement\">\n";
+  write_array(out, "Float64", "displacement", 3, std::vector<double>(3 * np, 0.0));
+  out << "      </PointData>\n";
+  write_piece(out, surface.points, surface.triangles, 3, 5);  // VTK_TRIANGLE
   close(out, path);
 }
 
@@ -109,7 +204,9 @@ void write_pvd(const std::string& path, const std::vector<PvdEntry>& entries) {
   char t[32];
   for (const PvdEntry& e : entries) {
     std::snprintf(t, sizeof t, "%.9g", e.t);
-    out << "    <DataSet timestep=\"" << t << "\" group=\"\" part=\"0\" file=\"" << e.file << "\"/>\n";
+    out << "    <DataSet timestep=\"" << t << "\" group=\"\" part=\"" << e.part << "\"";
+    if (!e.name.empty()) out << " name=\"" << e.name << "\"";
+    out << " file=\"" << e.file << "\"/>\n";
   }
   out << "  </Collection>\n"
          "</VTKFile>\n";

@@ -200,6 +200,28 @@ void Contact<Real>::clear_impulses() {
 }
 
 template <class Real>
+void Contact<Real>::track_node_impulses(bool on) {
+  track_nodes_ = on;
+  node_impulse_.assign(on ? free_nodes_.size() : 0, Vec3(0.0));
+  impulse_slots_.clear();
+  impulse_slots_.reserve(on ? free_nodes_.size() : 0);
+  node_elapsed_ = 0;
+}
+
+template <class Real>
+double Contact<Real>::take_node_impulses(std::vector<double>& impulse) {
+  for (int32_t k : impulse_slots_) {
+    const size_t i = 3 * size_t(free_nodes_[size_t(k)]);
+    for (int c = 0; c < 3; ++c) impulse[i + size_t(c)] += node_impulse_[size_t(k)][c];
+    node_impulse_[size_t(k)] = Vec3(0.0);
+  }
+  impulse_slots_.clear();
+  const double elapsed = node_elapsed_;
+  node_elapsed_ = 0;
+  return elapsed;
+}
+
+template <class Real>
 void Contact<Real>::start(const State<Real>& s) {
   for (size_t k = 0; k < slot_node_.size(); ++k) x_prev_[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
   std::fill(f_prev_.begin(), f_prev_.end(), Vec3(0.0));
@@ -344,6 +366,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   ContactSums sums;
   const size_t n_proxies = motion_.size();
   if (n_proxies == 0) return sums;
+  if (track_nodes_) node_elapsed_ += dt;
   for (ProxyReport& r : reports_) {
     r.force = r.torque = Vec3(0.0);
     r.contacts = 0;
@@ -476,6 +499,10 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     sums.ma2_delta += m * (glm::dot(a_new, a_new) - glm::dot(a, a));
     f_now_[size_t(k)] = (m * to_force) * dv;
     touched_now_.push_back(k);  // (reserved: never allocates)
+    if (track_nodes_) {
+      if (node_impulse_[size_t(k)] == Vec3(0.0)) impulse_slots_.push_back(k);  // (reserved)
+      node_impulse_[size_t(k)] += f_now_[size_t(k)] * dt;
+    }
   }
   moved_.clear();
   for (const Point& c : points_) {

@@ -195,6 +195,15 @@ class Contact {
   int32_t node_contacts() const { return node_contacts_; }
   int32_t face_contacts() const { return face_contacts_; }
 
+  // Per-node contact force for an output that asks (VTU point data), summed
+  // only while tracking is on: the impulse q dv each free surface node took
+  // (the force of eq. (10) times the step), and the time it was summed over.
+  void track_node_impulses(bool on);
+  bool tracks_node_impulses() const { return track_nodes_; }
+  // Adds the sums since the last take to `impulse` [N s] (n_nodes x 3, model
+  // numbering), clears them and returns the time they cover [s].
+  double take_node_impulses(std::vector<double>& impulse);
+
  private:
   struct Memory {
     int32_t proxy = -1;  // proxy it is inside, or -1
@@ -316,6 +325,10 @@ class Contact {
   std::vector<int32_t> proxy_body_;  // per proxy: its body in bodies_, -1 when kinematic (n_proxies)
   double alpha_ = 0;  // Rayleigh mass damping [1/s], for q = m (1 + alpha dt / 2)
   bool friction_ = false;
+  bool track_nodes_ = false;
+  std::vector<Vec3> node_impulse_;      // per free slot, while tracking [N s]
+  std::vector<int32_t> impulse_slots_;  // free slots with a nonzero node_impulse_
+  double node_elapsed_ = 0;             // [s]
 };
 
 }  // namespace tactile

@@ -459,7 +459,7 @@ bool plane_cuts_mesh(const TetMesh& mesh, const Vec3& point, const Vec3& normal)
 }
 
 void read_run(const Json& j, const Origin& o, const TetMesh& mesh, Scene& scene) {
-  const Fields f(j, "run", o, {"duration", "frame_rate", "vtu_every", "track", "sections"});
+  const Fields f(j, "run", o, {"duration", "frame_rate", "vtu_every", "vtu_fields", "track", "sections"});
   RunSettings& r = scene.run;
   r.duration = f.positive("duration");
   r.frame_rate = f.positive_or("frame_rate", r.frame_rate);
@@ -467,6 +467,21 @@ void read_run(const Json& j, const Origin& o, const TetMesh& mesh, Scene& scene)
     o.fail(f.path("frame_rate"), "asks for " + std::to_string(std::llround(r.duration * r.frame_rate)) +
                                      " frames; the limit is 1000000");
   r.vtu_every = int32_t(f.integer_or("vtu_every", 1, std::numeric_limits<int32_t>::max(), 1));
+  if (const Json* v = f.find("vtu_fields")) {
+    const Json& arr = scene_json::read_array(*v, f.path("vtu_fields"), o, 0);
+    std::vector<std::string> seen;
+    for (size_t i = 0; i < arr.size(); ++i) {
+      const std::string path = join(f.path("vtu_fields"), i);
+      const std::string name =
+          scene_json::read_choice(arr[i], path, o, {"cauchy_stress", "green_strain", "von_mises", "contact_force"});
+      if (std::find(seen.begin(), seen.end(), name) != seen.end()) o.fail(path, "'" + name + "' is asked for twice");
+      seen.push_back(name);
+      if (name == "cauchy_stress") r.vtu_cells.cauchy_stress = true;
+      if (name == "green_strain") r.vtu_cells.green_strain = true;
+      if (name == "von_mises") r.vtu_cells.von_mises = true;
+      if (name == "contact_force") r.vtu_contact_force = true;
+    }
+  }
   if (const Json* t = f.find("track")) {
     const Json& arr = scene_json::read_array(*t, f.path("track"), o, 0);
     for (size_t i = 0; i < arr.size(); ++i) {

@@ -18,6 +18,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 
+#include "core/fields.hpp"
 #include "core/spec.hpp"
 #include "mesh/quality.hpp"
 
@@ -68,6 +69,11 @@ struct RunSettings {
   double duration = 1.0;     // simulated time [s]
   double frame_rate = 30.0;  // output frames per simulated second [Hz]
   int32_t vtu_every = 1;     // a VTU file every this many frames
+  // Optional VTU arrays, computed only because the scene asks for them:
+  // "cauchy_stress", "green_strain", "von_mises" (cell data) and
+  // "contact_force" (point data).
+  ElementFieldRequest vtu_cells;
+  bool vtu_contact_force = false;
   std::vector<SectionPlane> sections;
 };
 

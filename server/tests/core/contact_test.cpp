@@ -268,6 +268,53 @@ TEST(Contact, ReactionEqualsTheMomentumTheContactsGave) {
   EXPECT_GT(push, 0.0);        // the body pushed the proxy back up
 }
 
+// The per-node contact forces an output asks for (VTU point data) are the
+// proxy's reaction spread over the nodes: summed over the body they give the
+// impulse the proxy took back, to round-off, over the time reported.
+TEST(Contact, NodeImpulsesSumToTheProxysReaction) {
+  ModelSpec spec = block_spec();
+  spec.proxies = {sphere_proxy("tip", "left", Vec3(0.02, 0.03, 0.02), 0.01)};
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  stepper.contact().track_node_impulses(true);
+  const double dt = 0.5 * model.dt_rest;
+  Pose pose = model.proxies[0].pose;
+  const Vec3 velocity(0.0, -0.2, 0.05);
+  std::vector<double> impulse(3 * size_t(model.n_nodes), 0.0);
+  Vec3 reaction(0.0);
+  double elapsed = 0;
+  int taken = 0;
+  for (int k = 0; k < 300; ++k) {
+    move_proxy(stepper, 0, pose, velocity, s.t, dt);
+    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    reaction += stepper.contact().reports()[0].force * dt;
+    pose.position += velocity * dt;
+    if (k % 37 == 36) elapsed += stepper.contact().take_node_impulses(impulse), ++taken;  // takes add up
+  }
+  elapsed += stepper.contact().take_node_impulses(impulse);
+  Vec3 on_nodes(0.0);
+  int pushed = 0;
+  for (int32_t i = 0; i < model.n_nodes; ++i) {
+    const Vec3 J(impulse[3 * size_t(i)], impulse[3 * size_t(i) + 1], impulse[3 * size_t(i) + 2]);
+    on_nodes += J;
+    pushed += J != Vec3(0.0) ? 1 : 0;
+  }
+  EXPECT_GT(taken, 5);
+  EXPECT_GT(pushed, 4);
+  EXPECT_GT(reaction.y, 1e-6);  // it pressed, and the body pushed it back up
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(on_nodes[c], -reaction[c], 1e-10 * glm::length(reaction)) << c;
+  EXPECT_NEAR(elapsed, 300 * dt, 1e-12);
+  // Taken again: nothing more, and nothing while tracking is off.
+  std::vector<double> again(impulse.size(), 0.0);
+  EXPECT_EQ(stepper.contact().take_node_impulses(again), 0.0);
+  stepper.contact().track_node_impulses(false);
+  move_proxy(stepper, 0, pose, velocity, s.t, dt);
+  ASSERT_FALSE(stepper.step(s, dt));
+  EXPECT_EQ(stepper.contact().take_node_impulses(again), 0.0);
+  for (double x : again) EXPECT_EQ(x, 0.0);
+}
+
 // A block on a floor with friction, pulled sideways by a load: below mu m g it
 // sticks, above it slides with acceleration (F - mu m g) / m.
 double slide_acceleration(double pull_over_mu_mg, double* creep) {

@@ -136,6 +136,26 @@ TEST(SceneMapping, AbsentEffectsAreOffAndAutoStepIsZero) {
   EXPECT_EQ(s.spec.integrator.precision, Precision::Double);
 }
 
+// Optional VTU arrays are made only when the run lists them; a name not
+// known, or one listed twice, is refused naming the entry.
+TEST(SceneMapping, VtuFieldsAreAskedForByName) {
+  SceneDir dir;
+  json j = make_beam_scene();
+  Scene s = load_scene(dir.write_json("a.json", j)).at(0);
+  EXPECT_FALSE(s.run.vtu_cells.any());
+  EXPECT_FALSE(s.run.vtu_contact_force);
+  j["run"]["vtu_fields"] = json::array({"von_mises", "contact_force"});
+  s = load_scene(dir.write_json("a.json", j)).at(0);
+  EXPECT_TRUE(s.run.vtu_cells.von_mises);
+  EXPECT_FALSE(s.run.vtu_cells.cauchy_stress);
+  EXPECT_FALSE(s.run.vtu_cells.green_strain);
+  EXPECT_TRUE(s.run.vtu_contact_force);
+  j["run"]["vtu_fields"] = json::array({"von_mises", "stress"});
+  expect_scene_error(dir, "s.json", j, {"run.vtu_fields[1]", "stress", "cauchy_stress"});
+  j["run"]["vtu_fields"] = json::array({"green_strain", "green_strain"});
+  expect_scene_error(dir, "s.json", j, {"run.vtu_fields[1]: 'green_strain' is asked for twice"});
+}
+
 TEST(SceneMapping, NameDefaultsToTheFileStem) {
   SceneDir dir;
   json j = make_beam_scene();
