@@ -18,15 +18,18 @@ COLUMNS = ["sim_time_s", "proxy", "device", "fx_N", "fy_N", "fz_N", "tx_Nm", "ty
 
 @pytest.fixture(scope="module")
 def poke_trace(tmp_path_factory):
-    """The poke's approach and press (0.6 s: 8 mm deep at the end), as columns of forces.csv."""
+    """The poke's approach and press (0.6 s: 8 mm deep at the end), as columns of forces.csv (and the headers of
+    forces.csv and devices.csv)."""
     out = tmp_path_factory.mktemp("out")
     result = subprocess.run([SIM, "run", str(POKE), "--out", str(out), "--duration", "0.6", "--no-vtu", "--quiet"],
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     with open(out / "poke" / "run" / "forces.csv", newline="") as f:
         reader = csv.DictReader(f)
-        header = reader.fieldnames
+        header = {"forces": reader.fieldnames}
         rows = list(reader)
+    with open(out / "poke" / "run" / "devices.csv", newline="") as f:
+        header["devices"] = csv.DictReader(f).fieldnames
     scene = json.loads(POKE.read_text())
     trace = {k: np.array([float(r[k]) for r in rows]) for k in COLUMNS if k not in ("proxy", "device")}
     trace["proxy"] = [r["proxy"] for r in rows]
@@ -42,10 +45,20 @@ def depth_of(trace, scene):
 
 def test_forces_csv_has_the_columns_and_one_row_per_millisecond(poke_trace):
     header, trace, _ = poke_trace
-    assert header == COLUMNS
+    assert header["forces"] == COLUMNS
     assert set(trace["proxy"]) == {"tip"}
     assert len(trace["sim_time_s"]) == 600
     np.testing.assert_allclose(np.diff(trace["sim_time_s"]), 1e-3, atol=1e-8)
+
+
+def test_the_headless_and_the_exported_force_tables_have_the_same_columns(poke_trace):
+    """One convention: a recording's exported forces.csv is the headless one with the recording's keys (log time,
+    step, scene id) added, never other names for the same quantities."""
+    from tactile_proto.export import _Tables
+    header, _, _ = poke_trace
+    extra = ("log_time_ns", "step", "scene_id")
+    assert [c for c in _Tables.FORCES if c not in extra] == header["forces"]
+    assert [c for c in _Tables.DEVICES if c not in extra] == header["devices"]
 
 
 def test_no_force_before_contact(poke_trace):

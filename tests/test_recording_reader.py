@@ -562,23 +562,34 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
     result = export(open_recording(closed), tmp_path, tables=True, surface=False)
     written = session()
 
-    # forces: one table per set of columns (scene 2 has two proxies): forces.csv, then forces.2.csv
-    for name, scene_id, proxies in (("forces.csv", 1, ["tip"]), ("forces.2.csv", 2, ["tip", "palm"])):
-        frames = [w for w in written if w.topic == "/haptic" and w.message.sceneId == scene_id]
-        rows = read_csv(tmp_path / name)
-        assert list(rows[0]) == (["log_time_ns", "sim_time_s", "step", "scene_id"]
-                                 + [f"device.stylus.f{a}_N" for a in "xyz"]
-                                 + [f"proxy.{p}.f{a}_N" for p in proxies for a in "xyz"])
-        assert len(rows) == len(frames) == result.files[name]
-        for row, w in zip(rows, frames):
-            frame = w.message
-            assert int(row["log_time_ns"]) == w.log_time_ns and int(row["step"]) == frame.step
-            assert float(row["sim_time_s"]) == frame.simTime and int(row["scene_id"]) == scene_id
-            for a in "xyz":
-                assert f32(row[f"device.stylus.f{a}_N"]) == np.float32(getattr(frame.devices[0].force, a))
-                for p, proxy in zip(proxies, frame.proxies):
-                    assert f32(row[f"proxy.{p}.f{a}_N"]) == np.float32(getattr(proxy.force, a))
-    assert any("forces.csv ends" in n and "forces.2.csv continues" in n for n in result.notes)
+    # forces and devices: long, one row per proxy (device) per haptic frame, across both scenes (scene 2 has two
+    # proxies) in one table, with the headless simulator's columns after the recording's keys
+    frames = [w for w in written if w.topic == "/haptic"]
+    keys = ["log_time_ns", "sim_time_s", "step", "scene_id"]
+    wrench = ["fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm", "contacts"]
+    rows = read_csv(tmp_path / "forces.csv")
+    assert list(rows[0]) == keys + ["proxy", "device"] + wrench + ["px_m", "py_m", "pz_m"]
+    expected = [(w, p, name) for w in frames
+                for p, name in zip(w.message.proxies, ["tip"] if w.message.sceneId == 1 else ["tip", "palm"])]
+    assert len(rows) == len(expected) == result.files["forces.csv"]
+    for row, (w, proxy, name) in zip(rows, expected):
+        frame = w.message
+        assert int(row["log_time_ns"]) == w.log_time_ns and int(row["step"]) == frame.step
+        assert float(row["sim_time_s"]) == frame.simTime and int(row["scene_id"]) == frame.sceneId
+        assert row["proxy"] == name and row["device"] == "stylus"
+        for a in "xyz":
+            assert f32(row[f"f{a}_N"]) == np.float32(getattr(proxy.force, a))
+            assert f32(row[f"t{a}_Nm"]) == np.float32(getattr(proxy.torque, a))
+            assert f32(row[f"p{a}_m"]) == np.float32(getattr(proxy.pose.position, a))
+        assert int(row["contacts"]) == proxy.contacts
+    rows = read_csv(tmp_path / "devices.csv")
+    assert list(rows[0]) == keys + ["device"] + wrench
+    assert len(rows) == len(frames)
+    for row, w in zip(rows, frames):
+        assert row["device"] == "stylus" and int(row["step"]) == w.message.step
+        for a in "xyz":
+            assert f32(row[f"f{a}_N"]) == np.float32(getattr(w.message.devices[0].force, a))
+    assert not any("forces.csv ends" in n for n in result.notes)
 
     # energies: each field of the schema's Energies; scene 2's states carry none, so their cells are empty
     energy_fields = [name for name, _ in schema_fields("Energies")]
@@ -647,9 +658,10 @@ def test_forces_of_frames_no_scene_names_are_named_by_index(tmp_path):
     result = export(open_recording(write_recording(tmp_path / "noscene.mcap", frames)), tmp_path / "out",
                     surface=False)
     rows = read_csv(tmp_path / "out" / "forces.csv")
-    assert list(rows[0])[4:] == [f"device.device0.f{a}_N" for a in "xyz"] + [f"proxy.proxy0.f{a}_N" for a in "xyz"]
-    assert [f32(r["proxy.proxy0.fz_N"]) for r in rows] == [np.float32(w.message.proxies[0].force.z) for w in frames]
-    assert any("which no scene read names: their columns are named by index" in n for n in result.notes)
+    assert [(r["proxy"], r["device"]) for r in rows] == [("proxy0", "")] * len(frames)
+    assert [f32(r["fz_N"]) for r in rows] == [np.float32(w.message.proxies[0].force.z) for w in frames]
+    assert [r["device"] for r in read_csv(tmp_path / "out" / "devices.csv")] == ["device0"] * len(frames)
+    assert any("which no scene read names: they are named by index" in n for n in result.notes)
 
 
 def test_vtu_series_hold_the_written_surfaces(tmp_path, closed):
@@ -713,9 +725,10 @@ def test_info_prints_counts_scene_duration_and_problems(tmp_path, closed, capsys
 
 def test_export_command_writes_what_its_flags_ask(tmp_path, closed, capsys):
     assert recording_cli.main(["export", str(closed), "--out", str(tmp_path / "csv"), "--csv"]) == 0
-    assert sorted(p.name for p in (tmp_path / "csv").iterdir()) == ["effect_costs.csv", "energies.csv", "forces.2.csv",
+    assert sorted(p.name for p in (tmp_path / "csv").iterdir()) == ["devices.csv", "effect_costs.csv", "energies.csv",
                                                                       "forces.csv", "inputs.csv", "telemetry.csv"]
-    assert f"{tmp_path / 'csv'}/forces.csv: 60 rows" in capsys.readouterr().out
+    haptic = [w.message for w in session() if w.topic == "/haptic"]
+    assert f"{tmp_path / 'csv'}/forces.csv: {sum(len(f.proxies) for f in haptic)} rows" in capsys.readouterr().out
     assert recording_cli.main(["export", str(closed), "--out", str(tmp_path / "all")]) == 0
     names = {p.name for p in (tmp_path / "all").iterdir()}
     assert {"forces.csv", "surface-1.pvd", "surface-2.pvd", "surface-1", "surface-2"} <= names

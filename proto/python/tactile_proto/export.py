@@ -4,12 +4,14 @@
 
 CSV, one row per message, in file order; floats as the shortest text that reads back as the same value
 (float32 fields as float32):
-  forces.csv     /haptic: log_time_ns, sim_time_s, step, scene_id, then the force [N] of each device channel
-                 (`device.<name>.fx_N`, fy, fz) and of each proxy (`proxy.<name>.fx_N`, ...), named by the
-                 SceneDescription of the frame's scene_id (else the latest one). A frame whose counts differ
-                 from its scene's names gets `device<i>` / `proxy<i>`. When the columns change (a scene with
-                 other devices or proxies was loaded), the table continues in forces.2.csv, forces.3.csv...
-                 and a note says where.
+  forces.csv     /haptic, long (one row per proxy per frame, as the headless simulator's forces.csv has it):
+                 log_time_ns, sim_time_s, step, scene_id, proxy, device, fx_N, fy_N, fz_N, tx_Nm, ty_Nm, tz_Nm
+                 (about the proxy's position), contacts, px_m, py_m, pz_m (the proxy's position); names from
+                 the SceneDescription of the frame's scene_id (else the latest one). A frame whose counts differ
+                 from its scene's names gets `proxy<i>` (and an empty device), and a note says so.
+  devices.csv    /haptic, long: log_time_ns, sim_time_s, step, scene_id, device, fx_N .. tz_Nm (about the
+                 channel's reference point), contacts: one row per device channel per frame (`device<i>`
+                 when unnamed).
   energies.csv   /state: log_time_ns, sim_time_s, step, scene_id and each field of StateFrame.energies [J]
                  (`kinetic_J`, ...: the fields the generated code has), then balance_drift_J, their sum as the
                  protocol defines it (kinetic + discrete - restated + elastic + gravity - work_loads -
@@ -162,10 +164,16 @@ class _Tables:
 
     ENERGIES = _fields(EnergiesT)
     TELEMETRY = _fields(TelemetryT)
+    # The headless simulator's forces.csv and devices.csv columns, after the recording's own keys.
+    _KEYS = ("log_time_ns", "sim_time_s", "step", "scene_id")
+    _WRENCH = ("fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm", "contacts")
+    FORCES = _KEYS + ("proxy", "device") + _WRENCH + ("px_m", "py_m", "pz_m")
+    DEVICES = _KEYS + ("device",) + _WRENCH
 
     def __init__(self, out_dir: pathlib.Path, result: Export) -> None:
         self.result = result
         self.forces = _Table(out_dir, "forces", result)
+        self.devices = _Table(out_dir, "devices", result)
         self.energies = _Table(out_dir, "energies", result)
         self.telemetry = _Table(out_dir, "telemetry", result)
         self.effect_costs = _Table(out_dir, "effect_costs", result)
@@ -177,23 +185,25 @@ class _Tables:
     def add_haptic(self, t: int, frame: HapticFrameT, scene: SceneDescriptionT | None) -> None:
         devices, proxies = frame.devices or [], frame.proxies or []
         scene_devices = list(scene.devices or []) if scene is not None else None
-        scene_proxies = [p.name or "" for p in scene.proxies or []] if scene is not None else None
+        scene_proxies = list(scene.proxies or []) if scene is not None else None
         device_names = _names(scene_devices, len(devices), "device")
-        proxy_names = _names(scene_proxies, len(proxies), "proxy")
-        if scene_devices is None or len(scene_devices) != len(devices) or len(scene_proxies or []) != len(proxies):
+        named = scene_proxies is not None and len(scene_proxies) == len(proxies)
+        proxy_names = _names([p.name or "" for p in scene_proxies] if named else None, len(proxies), "proxy")
+        proxy_devices = [p.device or "" for p in scene_proxies] if named else [""] * len(proxies)
+        if scene_devices is None or len(scene_devices) != len(devices) or not named:
             key = (frame.sceneId, len(devices), len(proxies))
             if key not in self.unnamed:
                 self.unnamed.add(key)
                 self.result.notes.append(f"forces: haptic frames of scene_id {frame.sceneId} (from log time {t} ns) "
                                          f"have {len(devices)} devices and {len(proxies)} proxies, which no scene "
-                                         "read names: their columns are named by index")
-        header = (("log_time_ns", "sim_time_s", "step", "scene_id")
-                  + tuple(f"device.{d}.f{a}_N" for d in device_names for a in "xyz")
-                  + tuple(f"proxy.{p}.f{a}_N" for p in proxy_names for a in "xyz"))
-        row = [str(t), _f64(frame.simTime), str(frame.step), str(frame.sceneId)]
-        for haptics in (*devices, *proxies):
-            row += _xyz(haptics.force)
-        self.forces.write(header, row, t)
+                                         "read names: they are named by index")
+        key = [str(t), _f64(frame.simTime), str(frame.step), str(frame.sceneId)]
+        for name, device, h in zip(proxy_names, proxy_devices, proxies):
+            position = h.pose.position if h.pose is not None else None
+            self.forces.write(self.FORCES, key + [name, device] + _xyz(h.force) + _xyz(h.torque) + [str(h.contacts)]
+                              + _xyz(position), t)
+        for name, h in zip(device_names, devices):
+            self.devices.write(self.DEVICES, key + [name] + _xyz(h.force) + _xyz(h.torque) + [str(h.contacts)], t)
 
     def add_state(self, t: int, frame: StateFrameT) -> None:
         self.states += 1
@@ -228,7 +238,7 @@ class _Tables:
         self.inputs.write(header, row, t)
 
     def close(self) -> None:
-        for table in (self.forces, self.energies, self.telemetry, self.effect_costs, self.inputs):
+        for table in (self.forces, self.devices, self.energies, self.telemetry, self.effect_costs, self.inputs):
             table.close()
         if self.states_without_energies:
             self.result.notes.append(f"energies: {self.states_without_energies} of {self.states} state frames carry "

@@ -107,7 +107,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     out = commands.add_parser("export", help="CSV tables and/or a VTU series of the surface")
     out.add_argument("file")
     out.add_argument("--out", required=True, metavar="DIR", help="folder to write into (made if missing)")
-    out.add_argument("--csv", action="store_true", help="forces.csv, energies.csv, telemetry.csv, effect_costs.csv, inputs.csv")
+    out.add_argument("--csv", action="store_true",
+                     help="forces.csv, devices.csv, energies.csv, telemetry.csv, effect_costs.csv, inputs.csv")
     out.add_argument("--vtu", action="store_true", help="surface-<scene_id>.pvd and its .vtu files (needs meshio)")
     out.add_argument("--every", type=_count, default=1, metavar="N",
                      help="VTU of every Nth state frame of each scene (default 1: all of them)")
