@@ -2,7 +2,8 @@
 # Installs what the project needs on Debian 12 and builds it. Idempotent:
 # packages already present are not fetched again, and the build is incremental.
 #   scripts/setup.sh            -> packages, Python venv (.venv), C++ build (build/release),
-#                                  JavaScript codec (proto/js: node_modules, dist)
+#                                  JavaScript codec (proto/js: node_modules, dist), Go modules
+#                                  of the example client (proto/go)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -20,6 +21,8 @@ done
 # npm) serves as well, and Debian's npm package would conflict with it.
 command -v node >/dev/null || missing+=(nodejs)
 command -v npm >/dev/null || missing+=(npm)
+# Go for the example client in a fourth language (proto/go): any Go 1.19 or newer, Debian's if none.
+command -v go >/dev/null || missing+=(golang-go)
 if [ ${#missing[@]} -gt 0 ]; then
   echo "setup: installing Debian packages: ${missing[*]}"
   $sudo apt-get update -qq
@@ -71,6 +74,9 @@ if ! cmp -s "$fox/package-lock.json" "$fox/node_modules/.setup-package-lock.json
   (cd "$fox" && npm ci --ignore-scripts --no-audit --no-fund)
   cp "$fox/package-lock.json" "$fox/node_modules/.setup-package-lock.json"
 fi
+
+# --- Go (the example client, proto/go) ---------------------------------------
+(cd proto/go && GOFLAGS=-mod=readonly go mod download)
 
 # --- C++ build -------------------------------------------------------------
 build="${TACTILE_BUILD:-build/release}"
