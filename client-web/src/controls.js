@@ -6,7 +6,7 @@
 import {
   ControlCommand, ControlT, EnvelopeT, ErrorCode, LoadSceneT, Message, PauseT, ResetT, ResumeT, Role,
   SetParameterT, StartRecordingT, StopRecordingT, decode, encode, makeHello, messageTypeOf,
-} from '../../proto/js/src/index.ts';
+} from '@tactile/proto';
 
 // An element with properties and children.
 export const el = (tag, attrs = {}, ...children) => {

@@ -6,7 +6,7 @@ import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
 import {
   ControlCommand, Message, ResetT, Role, decode, encode, makeHello, messageTypeOf, readStateFrame, checkVersion,
-} from '../../proto/js/src/index.ts';
+} from '@tactile/proto';
 import { cssGradient } from './colormap.js';
 import { ControlPanel } from './controls.js';
 import { FrameBuffer } from './frames.js';

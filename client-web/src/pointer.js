@@ -7,7 +7,7 @@ import * as THREE from 'three';
 import {
   ByteBuffer, DeviceInputT, Envelope, EnvelopeT, ErrorCode, HapticFrame, Message, QuatdT, Role, Vec3dT,
   decode, encode, makeHello, messageTypeOf,
-} from '../../proto/js/src/index.ts';
+} from '@tactile/proto';
 import { channelOrder, pressTarget } from './press.js';
 
 export class PointerDevice {

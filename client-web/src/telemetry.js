@@ -4,7 +4,7 @@
 // Telemetry arrives, about once a second). Safety events relayed from device bridges are listed with their
 // time and cause.
 
-import { SafetyKind } from '../../proto/js/src/index.ts';
+import { SafetyKind } from '@tactile/proto';
 
 const SPAN = 60; // samples kept (about a minute)
 // 'ContinuousLimit' -> 'continuous limit'

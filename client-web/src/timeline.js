@@ -4,7 +4,7 @@
 // token; without it the timeline only shows where the replay is.
 import {
   ControlCommand, PauseT, ResumeT, SeekT, SetSpeedT,
-} from '../../proto/js/src/index.ts';
+} from '@tactile/proto';
 import { el } from './controls.js';
 
 export const SPEEDS = [0.25, 0.5, 1, 2, 4];

@@ -7,7 +7,7 @@ import fs from 'node:fs';
 import path from 'node:path';
 import test from 'node:test';
 
-import * as proto from '../../proto/js/dist/tactile-proto.js';
+import * as proto from '@tactile/proto';
 import { openLive, root } from './live.js';
 
 const ARTEFACTS = path.join(root, 'client-web', 'test-results');
