@@ -30,14 +30,14 @@ HERE = pathlib.Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import websockets  # noqa: E402
-from serverproc import server_process  # noqa: E402
-from test_hardening import frame, ping_burst, rss_kb, still_open, upgrade, welcome_time  # noqa: E402
-from test_recording import read_cut, record_and_kill, recover_and_read  # noqa: E402
-from test_server import SCENE, TOKEN, device_input, hello, url  # noqa: E402
 
+from serverproc import server_process  # noqa: E402
 from tactile_proto import codec  # noqa: E402
 from tactile_proto.generated.Role import Role  # noqa: E402
 from tactile_proto.generated.Telemetry import TelemetryT  # noqa: E402
+from test_hardening import frame, ping_burst, rss_kb, still_open, upgrade, welcome_time  # noqa: E402
+from test_recording import read_cut, record_and_kill, recover_and_read  # noqa: E402
+from test_server import SCENE, TOKEN, device_input, hello, url  # noqa: E402
 
 
 def slots(tmp: pathlib.Path) -> None:
@@ -96,7 +96,7 @@ def inputs(tmp: pathlib.Path) -> None:
     for direct in (False, True):
         with server_process(tmp, SCENE, TOKEN, file_name="scene.json") as (port, _):
 
-            async def run() -> int:
+            async def run(direct: bool = direct) -> int:  # bound now, though it runs in this iteration
                 async with websockets.connect(url(port), max_queue=None) as dev, \
                         websockets.connect(url(port), max_queue=None) as viewer:
                     h = codec.make_hello(Role.Device, TOKEN, "battery", ["stylus"])

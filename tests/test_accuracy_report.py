@@ -6,6 +6,7 @@ error. Speed is printed by the study, never asserted here."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import pathlib
@@ -16,6 +17,7 @@ from collections import defaultdict
 from typing import Any
 
 import pytest
+
 from test_scenes_schema import built
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -70,7 +72,7 @@ def test_errors_fall_as_the_mesh_refines(study: tuple[pathlib.Path, dict[str, An
         for key, pts in series.items():
             pts.sort()
             assert len(pts) >= 2, (problem, key)
-            assert all(b[1] < a[1] for a, b in zip(pts, pts[1:])), (problem, key, pts)
+            assert all(b[1] < a[1] for a, b in itertools.pairwise(pts)), (problem, key, pts)
 
 
 def test_a_rigid_turn_strains_only_the_linear_model(study: tuple[pathlib.Path, dict[str, Any]]) -> None:

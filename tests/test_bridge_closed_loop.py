@@ -20,12 +20,12 @@ from typing import Any
 
 import numpy as np
 import websockets
-from serverproc import server_process
-from test_scenes_schema import built
 
+from serverproc import server_process
 from tactile_proto import codec
 from tactile_proto.generated.Role import Role
 from tactile_proto.generated.StateFrame import StateFrameT
+from test_scenes_schema import built
 
 TOKEN = "bridge-test"
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -92,7 +92,7 @@ def test_bridge_presses_the_block_and_the_force_settles(tmp_path: pathlib.Path) 
                 while bridge.poll() is None:
                     try:
                         raw = await asyncio.wait_for(ws.recv(), 1.0)
-                    except asyncio.TimeoutError:
+                    except TimeoutError:
                         continue
                     m = codec.decode(raw).message
                     if type(m).__name__ == "SceneDescriptionT":

@@ -19,6 +19,7 @@ import sys
 from typing import Any
 
 import numpy as np
+
 from serverproc import server_process
 
 TOKEN = "coupled-test"

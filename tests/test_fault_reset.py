@@ -10,6 +10,7 @@ import subprocess
 import sys
 
 import numpy as np
+
 import test_fault_to_zero_force as fault_case
 from serverproc import server_process
 from tactile_proto import decode

@@ -11,6 +11,7 @@ import sys
 from typing import Any
 
 import numpy as np
+
 import test_bridge_closed_loop as closed_loop
 from serverproc import server_process
 

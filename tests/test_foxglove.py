@@ -13,14 +13,14 @@ import subprocess
 
 import pytest
 import websockets
-from serverproc import server_process
-from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, url
 
+from serverproc import server_process
 from tactile_proto import codec
 from tactile_proto.generated.ControlCommand import ControlCommand
 from tactile_proto.generated.Pause import PauseT
 from tactile_proto.generated.Resume import ResumeT
 from tactile_proto.generated.Role import Role
+from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, url
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CHECK = ROOT / "tests" / "foxglove"

@@ -3,6 +3,7 @@ frames from a live server, as proto/README.md's "A client in another language" s
 from __future__ import annotations
 
 import filecmp
+import itertools
 import json
 import os
 import pathlib
@@ -10,10 +11,10 @@ import shutil
 import subprocess
 
 import pytest
-from serverproc import server_process
-from test_scenes_schema import ROOT
 
+from serverproc import server_process
 from tactile_proto import codec
+from test_scenes_schema import ROOT
 
 GO_DIR = ROOT / "proto" / "go"
 GO = shutil.which("go")
@@ -79,7 +80,7 @@ def test_the_go_example_decodes_state_frames_from_a_live_server(tmp_path: pathli
     assert all(s["vertices"] == scene["vertices"] and s["scene_id"] == scene["scene_id"] for s in states)
     # One state per 1/30 s of simulated time, in order.
     times = [s["sim_time_s"] for s in states]
-    gaps = [b - a for a, b in zip(times, times[1:])]
+    gaps = [b - a for a, b in itertools.pairwise(times)]
     assert all(abs(g - 1 / 30) < 2e-3 for g in gaps), gaps
     assert [s["step"] for s in states] == sorted({s["step"] for s in states})
     # The beam sags under gravity from its rest surface: by the 20th state (2/3 s on) centimetres, never metres.

@@ -17,12 +17,12 @@ import urllib.request
 from typing import Any
 
 import websockets
-from test_server import TOKEN, device_input, hello, next_error, running_server, url
 
 from tactile_proto import codec
 from tactile_proto.generated.ErrorCode import ErrorCode
 from tactile_proto.generated.Ping import PingT
 from tactile_proto.generated.Role import Role
+from test_server import TOKEN, device_input, hello, next_error, running_server, url
 
 # ---- a raw WebSocket client: upgrades, then sends what it is told and reads nothing ----------------------------
 
@@ -279,9 +279,8 @@ def test_a_parameter_the_loop_cannot_run_in_real_time_is_refused_and_the_scene_r
     """A controller sets material.E = 1e12 (a step of some 1e-7 s): refused with the step and the rate it
     would need, naming the headless runner, and the scene it would have replaced keeps sending states.
     Before: taken, and the loop then sent one state every few seconds."""
-    from test_server import control, set_parameter
-
     from tactile_proto.generated.ControlCommand import ControlCommand
+    from test_server import control, set_parameter
 
     with running_server(tmp_path) as (port, _):
 

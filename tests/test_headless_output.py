@@ -1,9 +1,8 @@
 """The headless simulator's output reads back with an independent VTU reader (meshio), as ParaView would."""
+import itertools
 import json
-import os
 import subprocess
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import meshio
 import numpy as np
@@ -196,7 +195,7 @@ def test_contact_forces_on_the_nodes_sum_to_minus_the_proxys_force(poke_series):
     forces = [(float(r["sim_time_s"]), np.array([float(r[f"f{c}_N"]) for c in "xyz"]))
               for r in csv.DictReader((folder / "forces.csv").open())]
     pressed = 0
-    for (t0, _), (t1, name) in zip(files, files[1:]):
+    for (t0, _), (t1, name) in itertools.pairwise(files):
         on_nodes = meshio.read(folder / name).point_data["contact_force"].sum(axis=0)
         window = [f for s, f in forces if t0 + 1e-9 < s <= t1 + 1e-9]  # equal 1 ms intervals
         on_proxy = np.mean(window, axis=0)

@@ -20,6 +20,7 @@ from typing import Any
 import flatbuffers
 import numpy as np
 import pytest
+
 import tactile_proto as tp
 from tactile_proto import generated
 from tactile_proto.generated import Envelope as envelope_api

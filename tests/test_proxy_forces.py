@@ -13,7 +13,8 @@ SIM = tactile_sim()
 pytestmark = pytest.mark.skipif(SIM is None, reason="tactile-sim is not built (scripts/setup.sh builds it)")
 
 POKE = ROOT / "server/scenes/poke.json"
-COLUMNS = ["sim_time_s", "proxy", "device", "fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm", "contacts", "px_m", "py_m", "pz_m"]
+COLUMNS = ["sim_time_s", "proxy", "device", "fx_N", "fy_N", "fz_N", "tx_Nm", "ty_Nm", "tz_Nm", "contacts",
+           "px_m", "py_m", "pz_m"]
 
 
 @pytest.fixture(scope="module")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
+import itertools
 import json
 import pathlib
 import re
@@ -27,12 +28,9 @@ from mcap.reader import make_reader
 from mcap.records import Footer
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
-from serverproc import server_process
-from test_scenes_schema import built
-from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, url
 
+from serverproc import server_process
 from tactile_proto import codec
-from tactile_proto.recording import TOPICS, open_recording
 from tactile_proto.generated.ControlCommand import ControlCommand
 from tactile_proto.generated.DeviceLimits import DeviceLimitsT
 from tactile_proto.generated.Envelope import Envelope
@@ -44,6 +42,9 @@ from tactile_proto.generated.Seek import SeekT
 from tactile_proto.generated.SetSpeed import SetSpeedT
 from tactile_proto.generated.StartRecording import StartRecordingT
 from tactile_proto.generated.StopRecording import StopRecordingT
+from tactile_proto.recording import TOPICS, open_recording
+from test_scenes_schema import built
+from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, url
 
 
 def start(name: str, request_id: int = 1) -> Any:
@@ -181,11 +182,11 @@ def test_a_controller_records_every_frame_input_and_control_of_the_session(tmp_p
     haptic = [m for _, m in got["/haptic"]]
     dt = scenes[0].dt
     assert len(haptic) > 100
-    steps_between = [round((b.simTime - a.simTime) / dt, 6) for a, b in zip(haptic, haptic[1:])]
+    steps_between = [round((b.simTime - a.simTime) / dt, 6) for a, b in itertools.pairwise(haptic)]
     assert set(steps_between) == {1.0}, f"a haptic frame is missing: {sorted(set(steps_between))[-3:]} steps apart"
     states = [m for _, m in got["/state"]]
     times = [s.simTime for s in states]
-    gaps = [b - a for a, b in zip(times, times[1:])]
+    gaps = [b - a for a, b in itertools.pairwise(times)]
     assert len(states) > 10, f"{len(states)} states recorded"
     assert max(gaps) < 1.5 / 30, f"a state is missing: gaps up to {max(gaps):.4f} s"
     # Every input the device sent, in order; each applied by the simulation once, before a step, in order;
@@ -317,7 +318,8 @@ def test_a_server_killed_mid_recording_leaves_a_file_that_reads_back_to_its_last
 # ---- replay -------------------------------------------------------------------------------------
 
 
-def record_a_press(tmp_path: pathlib.Path, name: str = "press.mcap", limits: DeviceLimitsT | None = None) -> pathlib.Path:
+def record_a_press(tmp_path: pathlib.Path, name: str = "press.mcap",
+                   limits: DeviceLimitsT | None = None) -> pathlib.Path:
     """A closed recording of a second or more: a device presses the block and holds (with `limits` in its Hello:
     coupled within them; without, the scene's coupling)."""
     path = tmp_path / name
@@ -367,7 +369,7 @@ def test_a_recording_made_beside_busy_processes_is_in_log_time_order_across_chan
         summary = make_reader(f).get_summary()
     assert summary is not None
     chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-    for a, b in zip(chunks, chunks[1:]):
+    for a, b in itertools.pairwise(chunks):
         assert a.message_end_time <= b.message_start_time, "chunks overlap in time"
 
 

@@ -15,6 +15,7 @@ from collections.abc import Callable
 import matplotlib.image
 import numpy as np
 import pytest
+
 import tactile_proto as tp
 from tactile_proto import recording_cli
 from tactile_proto.compare import compare, compute_rotation_angle, pair_nearest, read_frames

@@ -26,7 +26,6 @@ from typing import Any
 import meshio
 import numpy as np
 import pytest
-import tactile_proto as tp
 from mcap.data_stream import ReadDataStream, RecordBuilder
 from mcap.reader import make_reader
 from mcap.records import (
@@ -46,6 +45,8 @@ from mcap.records import (
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import breakup_chunk
 from mcap.writer import CompressionType, Writer
+
+import tactile_proto as tp
 from tactile_proto import recording_cli
 from tactile_proto.export import export
 from tactile_proto.generated.Control import ControlT
@@ -381,7 +382,7 @@ def test_every_message_reads_back_in_file_order(tmp_path, compression):
 def test_decoded_messages_are_the_written_ones(closed):
     decoded = list(open_recording(closed).decoded())
     assert [(d.topic, d.log_time_ns) for d in decoded] == [(w.topic, w.log_time_ns) for w in session()]
-    for d, w in zip(decoded, session()):
+    for d, w in zip(decoded, session(), strict=True):
         assert type(d.envelope.message) is type(w.message)
     first_state = next(d.envelope.message for d in decoded if d.topic == "/state")
     written = next(w.message for w in session() if w.topic == "/state")
@@ -570,9 +571,10 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
     rows = read_csv(tmp_path / "forces.csv")
     assert list(rows[0]) == keys + ["proxy", "device"] + wrench + ["px_m", "py_m", "pz_m"]
     expected = [(w, p, name) for w in frames
-                for p, name in zip(w.message.proxies, ["tip"] if w.message.sceneId == 1 else ["tip", "palm"])]
+                for p, name in zip(w.message.proxies, ["tip"] if w.message.sceneId == 1 else ["tip", "palm"],
+                                   strict=True)]
     assert len(rows) == len(expected) == result.files["forces.csv"]
-    for row, (w, proxy, name) in zip(rows, expected):
+    for row, (w, proxy, name) in zip(rows, expected, strict=True):
         frame = w.message
         assert int(row["log_time_ns"]) == w.log_time_ns and int(row["step"]) == frame.step
         assert float(row["sim_time_s"]) == frame.simTime and int(row["scene_id"]) == frame.sceneId
@@ -585,7 +587,7 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
     rows = read_csv(tmp_path / "devices.csv")
     assert list(rows[0]) == keys + ["device"] + wrench
     assert len(rows) == len(frames)
-    for row, w in zip(rows, frames):
+    for row, w in zip(rows, frames, strict=True):
         assert row["device"] == "stylus" and int(row["step"]) == w.message.step
         for a in "xyz":
             assert f32(row[f"f{a}_N"]) == np.float32(getattr(w.message.devices[0].force, a))
@@ -602,7 +604,7 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
     signs = {"kinetic": 1, "discrete": 1, "restated": -1, "elastic": 1, "gravity": 1, "work_loads": -1,
              "work_essential": -1, "work_contact": -1, "dissipated": 1}
     assert set(signs) == set(energy_fields)
-    for row, w in zip(rows, states):
+    for row, w in zip(rows, states, strict=True):
         assert int(row["step"]) == w.message.step and float(row["sim_time_s"]) == w.message.simTime
         for f in energy_fields:
             if w.message.energies is None:
@@ -624,7 +626,7 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
     costs = read_csv(tmp_path / "effect_costs.csv")  # long: one row per effect per message
     assert list(costs[0]) == ["log_time_ns", "sim_time_s", "effect", "ns_per_step"]
     assert [(r["effect"], f32(r["ns_per_step"])) for r in costs] == [("elastic", np.float32(1250.5))] * len(sent)
-    for row, w in zip(telemetry_rows, sent):
+    for row, w in zip(telemetry_rows, sent, strict=True):
         for name, ftype in scalars:
             value = getattr(w.message, camel(name))
             cell = row[column.get(name, name)]
@@ -644,7 +646,7 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
     inputs = [w for w in written if w.topic == "/input"]
     rows = read_csv(tmp_path / "inputs.csv")
     assert len(rows) == len(inputs)
-    for row, w in zip(rows, inputs):
+    for row, w in zip(rows, inputs, strict=True):
         d = w.message
         assert (row["device"], int(row["sequence"]), int(row["device_time_ns"]), int(row["buttons"])) == \
             (d.device, d.sequence, d.deviceTimeNs, d.buttons)
@@ -673,7 +675,7 @@ def test_vtu_series_hold_the_written_surfaces(tmp_path, closed):
         datasets = ET.parse(pvd).getroot().findall("./Collection/DataSet")
         assert [float(d.get("timestep", "")) for d in datasets] == [s.simTime for s in states]
         assert result.files[pvd.name] == len(states)
-        for dataset, s in zip(datasets, states):
+        for dataset, s in zip(datasets, states, strict=True):
             mesh = meshio.read(tmp_path / dataset.get("file", ""))
             x = s.positions.reshape(-1, 3)
             # Points at rest, warped by the displacement to the written positions (once, not twice).
@@ -691,7 +693,7 @@ def test_vtu_series_can_hold_every_nth_state(tmp_path, closed):
     datasets = ET.parse(tmp_path / "surface-1.pvd").getroot().findall("./Collection/DataSet")
     assert [float(d.get("timestep", "")) for d in datasets] == [s.simTime for s in states[::4]]
     assert result.files["surface-1.pvd"] == len(states[::4]) == len(list((tmp_path / "surface-1").glob("*.vtu")))
-    for dataset, s in zip(datasets, states[::4]):
+    for dataset, s in zip(datasets, states[::4], strict=True):
         mesh = meshio.read(tmp_path / dataset.get("file", ""))
         np.testing.assert_array_equal(mesh.point_data["displacement"], s.positions.reshape(-1, 3) - REST.reshape(-1, 3))
     with pytest.raises(ValueError, match="surface_every is 0"):

@@ -10,7 +10,8 @@ import json
 import os
 import pathlib
 import subprocess
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import jsonschema
 import pytest
@@ -116,10 +117,12 @@ def proxy_change(change: Callable[[dict[str, Any]], None]) -> dict[str, Any]:
 GOOD: dict[str, dict[str, Any]] = {
     "beam": BEAM,
     "cylinder": amended(
-        set_path(["mesh"], {"primitive": "cylinder", "radius": 0.05, "height": 0.4, "around": 12, "layers": 8, "rings": 2})
+        set_path(["mesh"], {"primitive": "cylinder", "radius": 0.05, "height": 0.4, "around": 12, "layers": 8,
+                            "rings": 2})
     ),
     "variants": amended(
-        set_path(["variants"], [{"name": "lin", "material": {"model": "linear"}}, {"name": "f32", "integrator": {"precision": "float"}}])
+        set_path(["variants"], [{"name": "lin", "material": {"model": "linear"}},
+                                {"name": "f32", "integrator": {"precision": "float"}}])
     ),
     "rotate_and_translate": amended(
         set_path(
@@ -135,7 +138,8 @@ GOOD: dict[str, dict[str, Any]] = {
     "no_effects": amended(delete("effects")),
     "gravity_false": amended(set_path(["effects"], {"gravity": False, "damping": False})),
     "proxies": amended(with_proxies),
-    "friction_variants": proxy_change(set_path(["variants"], [{"name": "dry"}, {"name": "wet", "effects": {"friction": False}}])),
+    "friction_variants": proxy_change(set_path(["variants"], [{"name": "dry"},
+                                                              {"name": "wet", "effects": {"friction": False}}])),
 }
 
 BAD: dict[str, dict[str, Any]] = {
@@ -186,7 +190,8 @@ BAD: dict[str, dict[str, Any]] = {
     "box_without_half_extents": proxy_change(lambda s: s["proxies"][3].pop("half_extents")),
     "proxy_without_device_or_hand": proxy_change(lambda s: s["proxies"][1].pop("device")),
     "proxy_without_position_or_script": proxy_change(lambda s: s["proxies"][1].pop("position")),
-    "hand_proxy_with_script": proxy_change(set_path(["proxies", 2, "script"], {"keyframes": [{"t": 0, "position": [0, 0, 0]}]})),
+    "hand_proxy_with_script": proxy_change(set_path(["proxies", 2, "script"],
+                                                    {"keyframes": [{"t": 0, "position": [0, 0, 0]}]})),
     "zero_quaternion": proxy_change(set_path(["proxies", 1, "orientation"], [0, 0, 0, 0])),
     "quaternion_of_three": proxy_change(set_path(["proxies", 1, "orientation"], [1, 0, 0])),
     "negative_friction": proxy_change(set_path(["proxies", 0, "friction"], -0.5)),

@@ -16,33 +16,33 @@ import subprocess
 import time
 import urllib.error
 import urllib.request
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import pytest
 import websockets
-from serverproc import server_process
-from test_scenes_schema import built
 
+from serverproc import server_process
 from tactile_proto import codec
 from tactile_proto.generated.Control import ControlT
 from tactile_proto.generated.ControlCommand import ControlCommand
 from tactile_proto.generated.DeviceInput import DeviceInputT
 from tactile_proto.generated.Envelope import Envelope
 from tactile_proto.generated.ErrorCode import ErrorCode
-from tactile_proto.generated.Hello import HelloT
+from tactile_proto.generated.LoadScene import LoadSceneT
+from tactile_proto.generated.Message import Message
 from tactile_proto.generated.Pause import PauseT
 from tactile_proto.generated.Ping import PingT
 from tactile_proto.generated.Quatd import QuatdT
-from tactile_proto.generated.LoadScene import LoadSceneT
 from tactile_proto.generated.Reset import ResetT
 from tactile_proto.generated.Resume import ResumeT
-from tactile_proto.generated.SetParameter import SetParameterT
-from tactile_proto.generated.StopRecording import StopRecordingT
-from tactile_proto.generated.Message import Message
 from tactile_proto.generated.Role import Role
 from tactile_proto.generated.SafetyEvent import SafetyEventT
 from tactile_proto.generated.SafetyKind import SafetyKind
+from tactile_proto.generated.SetParameter import SetParameterT
+from tactile_proto.generated.StopRecording import StopRecordingT
 from tactile_proto.generated.Vec3d import Vec3dT
+from test_scenes_schema import built
 
 TOKEN = "s3cret"
 
@@ -435,9 +435,9 @@ def set_parameter(name: str, value: float) -> SetParameterT:
 
 
 def load(path: str) -> LoadSceneT:
-    l = LoadSceneT()
-    l.path = path
-    return l
+    m = LoadSceneT()
+    m.path = path
+    return m
 
 
 def parameters(scene: Any) -> dict[str, float]:

@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+
 from serverproc import server_process
+from tactile_proto.recording import open_recording
 from test_bridge_closed_loop import PROFILE, RADIUS, SCENE, TOP
 from test_scenes_schema import built
-
-from tactile_proto.recording import open_recording
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 BRIDGE = pathlib.Path(sys.executable).with_name("tactile-bridge")
@@ -38,8 +38,8 @@ pytestmark = pytest.mark.skipif(not pathlib.Path(os.environ.get("TACTILE_CHROMIU
 
 # The closed-loop test's simulated arm (the sphere starts 5 mm above the block), pressing 14 mm over 2 s, then
 # holding.
-SIM_PROFILE = PROFILE.replace('name = "closed_loop"', 'name = "e2e_sim"').replace("depth_m = 0.020", "depth_m = 0.014") \
-    .replace("period_s = 16.0", "period_s = 8.0")
+SIM_PROFILE = (PROFILE.replace('name = "closed_loop"', 'name = "e2e_sim"').replace("depth_m = 0.020", "depth_m = 0.014")
+               .replace("period_s = 16.0", "period_s = 8.0"))
 assert "depth_m = 0.014" in SIM_PROFILE and "period_s = 8.0" in SIM_PROFILE
 
 

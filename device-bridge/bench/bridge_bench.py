@@ -19,7 +19,8 @@
 
   .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
   .venv/bin/python device-bridge/bench/bridge_bench.py modes --seconds 12 [--object stiff] [--json modes.json]
-  .venv/bin/python device-bridge/bench/bridge_bench.py loop [--cases soft,stiff] [--rates 1000] [--loaded] [--json loop.json]
+  .venv/bin/python device-bridge/bench/bridge_bench.py loop [--cases soft,stiff] [--rates 1000] [--loaded]
+      [--json loop.json]
 """
 
 from __future__ import annotations
@@ -175,7 +176,8 @@ def lateness(args: argparse.Namespace) -> None:
     print(f"tick lateness over {args.seconds:g} s at 1 kHz, server stepping at {args.dt * 1e3:g} ms with a haptic "
           f"frame per step, simulated arm poking (2 cores, shared)")
     print("  steal: CPU time the hypervisor took from this virtual machine meanwhile, per second (a tick cannot run\n"
-          "  while its virtual CPU is not running, whatever its priority); C: rt-tests' cyclictest beside it, a C loop\n"
+          "  while its virtual CPU is not running, whatever its priority); C: rt-tests' cyclictest beside it, "
+          "a C loop\n"
           "  at SCHED_FIFO 79 waking every 1 ms: what compiled code gets from this machine at the same time")
     print(f"{'tick in':>8} {'FIFO':>5} {'p50 us':>8} {'p99 us':>8} {'p99.9 us':>9} {'max us':>8} {'missed':>7} "
           f"{'ticks':>7} {'states':>7} {'delay ms':>9} {'steal ms/s':>11} {'C p99':>6} {'C p99.9':>8} {'C max':>6}")
@@ -245,7 +247,8 @@ def modes(args: argparse.Namespace) -> None:
     scene = object_scene(args.object)
     print(f"force error of each mode against the force at 1 kHz (headless, same motion; its mean over one server "
           f"step, centred), {args.object} block (E = {OBJECTS[args.object] / 1e3:g} kPa), server step "
-          f"{args.dt * 1e3:g} ms, arm following its script open-loop (gain 0), {args.seconds:g} s each; in contact only")
+          f"{args.dt * 1e3:g} ms, arm following its script open-loop (gain 0), {args.seconds:g} s each; "
+          "in contact only")
     print("  rms/max: |F - truth| in contact; lag: the shift that best aligns F with the truth (the server's own\n"
           "  latency included); steps: rms of the force's change from tick to tick, which the hand feels as buzz\n"
           "  (the truth's own, at 1 kHz, in brackets)")
@@ -502,12 +505,17 @@ def loop(args: argparse.Namespace) -> None:
           f"peak, 3 N continuous, {LOOP_STIFFNESS:g} N/m), {args.seconds:g} s per run; coupled (the default) against "
           f"direct (a kinematic proxy, the paper's delay); haptic states at each rate; 'loaded': two busy processes "
           f"beside it")
-    print("  server/cmd: the peak force the server sent / the bridge commanded [N] (limit 6); clips: safety clip events;\n"
-          "  ripple: rms about the 20 ms moving mean over the mean in steady holds [%]; hold: its mean [N]; contact: ticks\n"
-          "  in contact during holds [%]; work/cycle: the most work the device did on the hand over one cycle (passive\n"
-          "  <= 0) [mJ]; pc: passivity controller's active ticks and what it dissipated [mJ]; K felt / K due: dF/dx while\n"
+    print("  server/cmd: the peak force the server sent / the bridge commanded [N] (limit 6); "
+          "clips: safety clip events;\n"
+          "  ripple: rms about the 20 ms moving mean over the mean in steady holds [%]; hold: its mean [N]; "
+          "contact: ticks\n"
+          "  in contact during holds [%]; work/cycle: the most work the device did on the hand over one cycle "
+          "(passive\n"
+          "  <= 0) [mJ]; pc: passivity controller's active ticks and what it dissipated [mJ]; K felt / K due: "
+          "dF/dx while\n"
           "  pressing in, and the body's (headless static probe) in series with the coupling's [N/m]; drag: force at\n"
-          "  0.45-0.55 m/s in free space, median and max [N]; motion: the latency from the hand's own motion to force,\n"
+          "  0.45-0.55 m/s in free space, median and max [N]; motion: the latency from the hand's own motion "
+          "to force,\n"
           "  from the device's first motion at each of the tap's steps to the force's first answer [ms]; delay:\n"
           "  display delay, what a change of the body takes to reach the hand [ms]")
     print(f"{'case':>8} {'mode':>8} {'states':>7} {'server':>7} {'cmd':>6} {'clips':>5} {'ripple':>7} {'hold':>6} "
@@ -560,7 +568,8 @@ def loop(args: argparse.Namespace) -> None:
         rows.append(row)
         print(f"{case_name:>8} {label:>8} {1e3 / rate:>5.2f}ms {peak:>7.2f} {a['peak_cmd']:>6.2f} {clips:>5d} "
               f"{a['ripple_pct']:>6.2f}% {a['hold_N']:>6.2f} {a['contact_pct']:>7.2f}% {a['cycle_work_mJ']:>9.2f} "
-              f"{a['pc_ticks']:>6.0f} {a['pc_mJ']:>7.2f} {a['k_felt']:>7.0f} {k_due:>7.0f} {a['drag_N']:>6.3f} {a['drag_max_N']:>6.3f} "
+              f"{a['pc_ticks']:>6.0f} {a['pc_mJ']:>7.2f} {a['k_felt']:>7.0f} {k_due:>7.0f} {a['drag_N']:>6.3f} "
+              f"{a['drag_max_N']:>6.3f} "
               f"{a['motion_lag_ms']:>6.1f} {s['delay_ms']:>6.2f} {faults:>6d}", flush=True)
     if args.json:
         pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
@@ -575,7 +584,8 @@ def main() -> None:
     b = sub.add_parser("modes")
     b.add_argument("--seconds", type=float, default=12.0)
     b.add_argument("--dt", type=float, default=4e-3, help="server step [s] (slower than the 1 ms tick)")
-    b.add_argument("--object", choices=sorted(OBJECTS), default="soft", help="the block: soft (30 kPa) or stiff (300 kPa)")
+    b.add_argument("--object", choices=sorted(OBJECTS), default="soft",
+                   help="the block: soft (30 kPa) or stiff (300 kPa)")
     b.add_argument("--json", help="also write the figures to this file")
     c = sub.add_parser("loop")
     c.add_argument("--seconds", type=float, default=12.0, help="per run")

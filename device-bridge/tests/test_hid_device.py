@@ -16,8 +16,14 @@ import pytest
 from tactile_bridge import drivers
 from tactile_bridge.drivers import DeviceError, DeviceSample
 from tactile_bridge.drivers.hid_device import (
-    HidDevice, decode_input, encode_output, enumerate_devices, format_device_list, make_device,
-    make_output_buffer)
+    HidDevice,
+    decode_input,
+    encode_output,
+    enumerate_devices,
+    format_device_list,
+    make_device,
+    make_output_buffer,
+)
 from tactile_bridge.profile import Profile, ProfileError, load_profile, parse_profile
 
 EXAMPLE = pathlib.Path(__file__).resolve().parents[1] / "src" / "tactile_bridge" / "profiles" / "hid_example.toml"

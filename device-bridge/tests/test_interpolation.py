@@ -16,7 +16,7 @@ ZERO_X = (0.0, 0.0, 0.0)
 
 def push_forces(h: StateHistory, t_ns: np.ndarray, forces: np.ndarray) -> None:
     """Pushes states (t_ns[i], forces[i]) with arrival = t and step = i, out of contact."""
-    for i, (t, f) in enumerate(zip(t_ns, forces)):
+    for i, (t, f) in enumerate(zip(t_ns, forces, strict=True)):
         h.push(int(t), int(t), i, [float(v) for v in f], ZERO_K, ZERO_X, 0)
 
 

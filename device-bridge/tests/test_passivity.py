@@ -151,7 +151,7 @@ def test_observer_energy_is_the_sum_of_minus_f_dot_v_dt() -> None:
     for i in range(n):
         pc.observe_position(tuple(vi * i * DT_S for vi in vel))
         pc.commit(force)
-    power = -sum(fi * vi for fi, vi in zip(force, vel))           # [W] once the velocity filter has settled
+    power = -sum(fi * vi for fi, vi in zip(force, vel, strict=True))  # [W] once the velocity filter has settled
     # The filter starts at v = 0 and settles with time constant rc + dT; what it misses is a few ticks' worth.
     rc = 1.0 / (2.0 * math.pi * 200.0)
     missed = power * (rc + DT_S)

@@ -25,7 +25,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 SHIPPED = sorted((ROOT / "src" / "tactile_bridge" / "profiles").glob("*.toml"))
 
 # Every signed axis map: 6 orders x 8 signs.
-SIGNED_AXES = [tuple(s + a for s, a in zip(signs, order))
+SIGNED_AXES = [tuple(s + a for s, a in zip(signs, order, strict=True))
                for order in itertools.permutations("xyz") for signs in itertools.product(("", "-"), repeat=3)]
 
 BASE: dict[str, Any] = {

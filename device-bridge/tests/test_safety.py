@@ -7,10 +7,9 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-
-from tactile_bridge import safety
 import pytest
 
+from tactile_bridge import safety
 from tactile_bridge.profile import ForceLimits
 from tactile_bridge.safety import HOLD_S, WINDOW_S, ZERO_S, Inputs, Kind, Mode, Safety, SafetyEvent
 
@@ -278,7 +277,7 @@ def test_stalled_states_hold_then_fade_to_exactly_zero_by_50_ms(command: tuple[f
     n_events = len(rig.events)
     out = np.array(rig.run(command, 100))
     age_s = (np.arange(len(out)) * DT_NS + rig.now_ns - 100 * DT_NS - last_arrival) * 1e-9
-    for f, age in zip(out, age_s):
+    for f, age in zip(out, age_s, strict=True):
         if age <= HOLD_S + 1e-12:
             np.testing.assert_allclose(f, c, rtol=1e-12)                     # hold: the command
         elif age < ZERO_S - 1e-12:

@@ -4,6 +4,7 @@ stop, a link that drops, a server fault, a non-finite or huge state, a device th
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import tracemalloc
@@ -114,7 +115,7 @@ def test_states_that_stop_hold_10ms_then_zero_by_50ms(rig: Rig) -> None:
     # The display is 2 ms late, so the renderer holds the newest state: full force for the first 10 ms...
     assert all(m == pytest.approx(2.0, abs=1e-9) for m in mags[:10])
     # ...then it fades, never rising, and is zero from 50 ms after the last state on.
-    assert all(b <= a + 1e-12 for a, b in zip(mags[9:], mags[10:]))
+    assert all(b <= a + 1e-12 for a, b in itertools.pairwise(mags[9:]))
     assert mags[48] > 0.0 and all(m == 0.0 for m in mags[49:])  # index i: (i + 1) ms after the last state
     assert 0.0 < mags[30] < 2.0
     assert rig.now - last_arrival == 60 * MS
@@ -166,7 +167,7 @@ def test_a_huge_state_is_clipped_and_slewed(rig: Rig) -> None:
     rig.engage((0.0, 0.5, 0.0))
     out = [norm(f) for f in rig.run(30, (0.0, 1e9, 0.0))]
     assert max(out) <= 3.0 + 1e-12
-    assert all(b - a <= 0.3 + 1e-9 for a, b in zip([0.5] + out, out))
+    assert all(b - a <= 0.3 + 1e-9 for a, b in itertools.pairwise([0.5] + out))
     assert out[-1] == pytest.approx(3.0)
     assert Kind.CLIPPED in [e[1] for e in rig.events()]
 

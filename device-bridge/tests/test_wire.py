@@ -7,6 +7,7 @@ import random
 
 import pytest
 
+from tactile_bridge.wire import HAPTIC_FRAME, HapticReader, InputTemplate, message_type
 from tactile_proto import ProtocolError, decode, encode
 from tactile_proto.generated.DeviceHaptics import DeviceHapticsT
 from tactile_proto.generated.HapticFrame import HapticFrameT
@@ -14,8 +15,6 @@ from tactile_proto.generated.Mat3f import Mat3fT
 from tactile_proto.generated.ProxyPose import ProxyPoseT
 from tactile_proto.generated.Quatf import QuatfT
 from tactile_proto.generated.Vec3f import Vec3fT
-
-from tactile_bridge.wire import HAPTIC_FRAME, HapticReader, InputTemplate, message_type
 
 VECTORS = pathlib.Path(__file__).resolve().parents[2] / "proto" / "vectors"
 MAT = ("m00", "m01", "m02", "m10", "m11", "m12", "m20", "m21", "m22")

@@ -65,7 +65,8 @@ def run_all(out: pathlib.Path, quick: bool, haptic_seconds: float) -> None:
         for obj in ("soft", "stiff"):
             print(f"haptic modes, {obj} block: bridge_bench.py modes --seconds {haptic_seconds:g}", flush=True)
             subprocess.run([sys.executable, str(ROOT / "device-bridge" / "bench" / "bridge_bench.py"), "modes",
-                            "--seconds", str(haptic_seconds), "--object", obj, "--json", str(out / f"modes_{obj}.json")],
+                            "--seconds", str(haptic_seconds), "--object", obj,
+                            "--json", str(out / f"modes_{obj}.json")],
                            check=True)
     print("effects: fem_bench --only=effects, --only=passes", flush=True)
     tables = []
@@ -102,7 +103,7 @@ def label(r: dict[str, Any]) -> str:
 def plot_convergence(records: list[dict[str, Any]], path: pathlib.Path) -> None:
     problems = [p for p in TITLES if any(r["problem"] == p for r in records)]
     fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
-    for ax, problem in zip(axes.flat, problems):
+    for ax, problem in zip(axes.flat, problems, strict=False):
         for m in MATERIALS:
             for prec in ("double", "float"):
                 rs = sorted((r for r in records if r["problem"] == problem and r["material"] == m
@@ -123,7 +124,8 @@ def plot_convergence(records: list[dict[str, Any]], path: pathlib.Path) -> None:
         vals = []
         for m in MATERIALS:
             for p in ("double", "float"):
-                rs = [abs(r["value"]) for r in rot if r["problem"] == problem and r["material"] == m and r["precision"] == p]
+                rs = [abs(r["value"]) for r in rot
+                      if r["problem"] == problem and r["material"] == m and r["precision"] == p]
                 vals.append(max(max(rs), 1e-35) if rs else np.nan)
         ax.bar(x + (k - 0.5) * 0.4, vals, 0.4, color=colour,
                label="elastic energy / (E V)" if k == 0 else "|volume change| / V")
@@ -145,7 +147,7 @@ def plot_pareto(records: list[dict[str, Any]], path: pathlib.Path) -> dict[str, 
                 if any(r["problem"] == p for r in records)]
     fig, axes = plt.subplots(1, len(problems), figsize=(5 * len(problems), 4.6), squeeze=False)
     fronts = {}
-    for ax, problem in zip(axes[0], problems):
+    for ax, problem in zip(axes[0], problems, strict=True):
         rs = [r for r in records if r["problem"] == problem and not r["fault"]]
         for r in rs:
             ax.loglog(cost_per_sim_second(r), max(abs(r["error"]), 1e-9), MARKER[r["precision"]],
@@ -172,7 +174,7 @@ def plot_pareto(records: list[dict[str, Any]], path: pathlib.Path) -> dict[str, 
 
 def plot_timestep(records: list[dict[str, Any]], path: pathlib.Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    for ax, problem in zip(axes, ("cantilever_frequency", "wave_speed")):
+    for ax, problem in zip(axes, ("cantilever_frequency", "wave_speed"), strict=True):
         rs = [r for r in records if r["problem"] == problem and r["precision"] == "double" and not r["fault"]]
         if not rs:
             continue
@@ -180,7 +182,8 @@ def plot_timestep(records: list[dict[str, Any]], path: pathlib.Path) -> None:
         for m in MATERIALS:
             pts = sorted((r for r in rs if r["material"] == m and r["level"] == level), key=lambda r: r["safety"])
             if pts:
-                ax.plot([r["safety"] for r in pts], [100 * r["error"] for r in pts], marker="o", color=COLOURS[m], label=m)
+                ax.plot([r["safety"] for r in pts], [100 * r["error"] for r in pts], marker="o", color=COLOURS[m],
+                        label=m)
         ax.set_title(f"{TITLES[problem]} (level {level}, double)", fontsize=9)
         ax.set_xlabel("time step / critical step")
         ax.set_ylabel("error %")
@@ -265,7 +268,8 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
         nonlin_f = max((v for (m, p), v in rot.items() if m != "linear" and p == "float"), default=float("nan"))
         L.append(f"- **Invariance (the paper's claim).** Turned rigidly by 90 degrees, the linear model stores "
                  f"{rot.get(('linear', 'double'), float('nan')):.2f} E V of elastic energy (as if strained by ~100 %); "
-                 f"StVK, corotational and Neo-Hookean store at most {nonlin:.1e} E V in double, {nonlin_f:.1e} in float "
+                 f"StVK, corotational and Neo-Hookean store at most {nonlin:.1e} E V in double, "
+                 f"{nonlin_f:.1e} in float "
                  "(round-off).")
     f2 = pick(records, problem="fig2_area", precision="double")
     if f2:
@@ -323,7 +327,8 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
             rates[(r["material"], r["precision"])].append(r["tet_steps_per_s"])
     if rates:
         L.append("- **Cost per material** (median tet-steps per second, meshes of 1000 tets and more): " + "; ".join(
-            f"{m} {np.median(rates[(m, 'double')]) / 1e6:.0f} M (double), {np.median(rates[(m, 'float')]) / 1e6:.0f} M (float)"
+            f"{m} {np.median(rates[(m, 'double')]) / 1e6:.0f} M (double), "
+            f"{np.median(rates[(m, 'float')]) / 1e6:.0f} M (float)"
             for m in MATERIALS if (m, "double") in rates and (m, "float") in rates) + ".")
     if realtime:
         L.append("- **Real time.** The largest poke block (30 kPa, contact on) that steps 1 ms in under 1 ms on one "
@@ -383,7 +388,9 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
               "(buzz several times the truth's); extrapolating adds the least latency and amplifies the contact's "
               "chatter. On the stiff block the truth itself chatters (its tick-to-tick change, in brackets, is "
               "large), which dominates every mode's error there.", "",
-              "The modes below drive a kinematic proxy, open-loop. The closed loop the hand feels, with the proxy coupled to the device (the default) against these direct modes, per case and at each haptic rate: [haptic_loop.md](haptic_loop.md) (`bridge_bench.py loop`).", "",
+              "The modes below drive a kinematic proxy, open-loop. The closed loop the hand feels, with the proxy "
+              "coupled to the device (the default) against these direct modes, per case and at each haptic rate: "
+              "[haptic_loop.md](haptic_loop.md) (`bridge_bench.py loop`).", "",
               "![haptic](haptic.png)", "",
               "| object | mode | rms N | rms % | max N | lag ms | display delay ms | buzz mN (truth) |",
               "|---|---|---|---|---|---|---|---|"]
@@ -399,7 +406,8 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
               "them. Differences under a few percent are this machine's noise (compare the bare step timed twice).",
               "", (out / "effects.md").read_text().strip()]
     L += ["", "## All records", "",
-          "| problem | material | level | tets | dt | precision | value | reference | error | us/step | M tet-steps/s | fault |",
+          "| problem | material | level | tets | dt | precision | value | reference | error | us/step "
+          "| M tet-steps/s | fault |",
           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in records:
         L.append(f"| {r['problem']} | {r['material']} | {r['level']} | {r['tets']} | {r['safety']:.1f} | "

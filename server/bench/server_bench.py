@@ -32,6 +32,7 @@ import argparse
 import asyncio
 import contextlib
 import glob
+import itertools
 import json
 import os
 import pathlib
@@ -73,7 +74,8 @@ PRESS_TO = (0.0, 0.026, 0.0)
 
 
 def built(name: str) -> str | None:
-    """A built executable of the server tree: in $TACTILE_BUILD (default build/release), else the newest under build/."""
+    """A built executable of the server tree: in $TACTILE_BUILD (default build/release), else the newest under
+    build/."""
     build = pathlib.Path(os.environ.get("TACTILE_BUILD", "build/release"))
     candidate = (build if build.is_absolute() else ROOT / build) / name
     if os.access(candidate, os.X_OK):
@@ -99,7 +101,7 @@ def device_input(seq: int, a: float) -> bytes:
     d = DeviceInputT()
     d.device, d.sequence, d.deviceTimeNs = "stylus", seq, time.monotonic_ns()
     d.position = Vec3dT()
-    d.position.x, d.position.y, d.position.z = (f + a * (t - f) for f, t in zip(PRESS_FROM, PRESS_TO))
+    d.position.x, d.position.y, d.position.z = (f + a * (t - f) for f, t in zip(PRESS_FROM, PRESS_TO, strict=True))
     d.orientation = QuatdT()
     d.orientation.w, d.orientation.x, d.orientation.y, d.orientation.z = 1.0, 0.0, 0.0, 0.0
     return codec.encode(d)
@@ -170,7 +172,7 @@ async def latency_and_delivery(port: int, seconds: float) -> tuple[float, float]
             print(f"latency ms: p50 {statistics.median(lat):.3f}  p99 {pct(lat, 99):.3f}  max {max(lat):.3f}")
         if times:
             # One frame per loop step of scene.dt (a step the stepper sub-divides is still one frame).
-            gaps = [b - a for a, b in zip(times, times[1:])]
+            gaps = [b - a for a, b in itertools.pairwise(times)]
             missing = sum(max(0, round(g / scene.dt) - 1) for g in gaps)
             print(f"\nhaptic frames received {len(times)}, missing {missing} "
                   f"({100 * missing / (len(times) + missing):.2f} %) over {times[-1] - times[0]:.2f} s simulated\n")
@@ -241,7 +243,8 @@ async def viewers_cost(port: int, n: int, seconds: float) -> None:
             print(f"state frame: {statistics.mean(sizes):.0f} bytes for {verts} surface vertices "
                   f"({statistics.mean(sizes) / verts:.1f} bytes per vertex)")
         if decode_s:
-            print(f"Python decode per message (object API, this client): median {statistics.median(decode_s) * 1e6:.0f} us")
+            median_us = statistics.median(decode_s) * 1e6
+            print(f"Python decode per message (object API, this client): median {median_us:.0f} us")
 
 
 async def viewers_cost_cpp(port: int, n: int, seconds: float, exe: str, rounds: int = 3) -> None:

@@ -147,7 +147,7 @@ class Bridge:
         deadline = time.monotonic() + timeout
         while self.ex.i[ex.H_READY] == 0:
             if time.monotonic() > deadline:
-                raise DeviceError("the tick did not start within %.0f s" % timeout)
+                raise DeviceError(f"the tick did not start within {timeout:.0f} s")
             if self._process is not None and not self._process.is_alive():
                 break
             time.sleep(0.01)
@@ -195,7 +195,7 @@ class Bridge:
                     break
                 try:
                     await asyncio.wait_for(stop.wait(), 0.1)
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     pass
         finally:
             stop.set()

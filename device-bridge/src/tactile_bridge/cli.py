@@ -14,6 +14,7 @@ import time
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from . import exchange as ex
 from .bridge import Bridge, Options
@@ -51,7 +52,7 @@ class StatusLine:
         self.prev_frames = 0
         self.prev_t = time.monotonic()
 
-    def histogram(self) -> np.ndarray:
+    def histogram(self) -> npt.NDArray[np.int64]:
         x = self.bridge.ex
         return np.array(x.i[x.hist_base: x.hist_base + ex.HIST_US + 1], dtype=np.int64)  # a copy: no export
 
@@ -92,7 +93,7 @@ class StatusLine:
         while not stop.is_set():
             try:
                 await asyncio.wait_for(stop.wait(), self.period)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 pass
             text = self.line()
             if self.tty:
@@ -209,7 +210,8 @@ def main(argv: list[str] | None = None) -> int:
                 "late_p50_us": ex.percentile_us(hist, 0.5), "late_p99_us": ex.percentile_us(hist, 0.99),
                 "late_p999_us": ex.percentile_us(hist, 0.999), "late_max_us": x.i[ex.H_LATE_MAX] / 1e3,
                 "missed": x.i[ex.H_MISSED], "reanchors": x.i[ex.H_REANCHORS], "states": net.frames,
-                "bad_states": net.bad_frames, "delay_ms": x.i[ex.H_DELAY_NS] / 1e6, "state_interval_ms": x.i[ex.H_DT_NS] / 1e6,
+                "bad_states": net.bad_frames, "delay_ms": x.i[ex.H_DELAY_NS] / 1e6,
+                "state_interval_ms": x.i[ex.H_DT_NS] / 1e6,
                 "allowance_ms": x.i[ex.H_ALLOW_NS] / 1e6, "rtt_best_ms": net.sync.best_rtt_ns / 1e6,
                 "clock_offset_us": net.sync.offset_ns(time.monotonic_ns()) / 1e3 if net.sync.synced else None,
                 "connects": net.connects, "events": x.i[ex.H_EVENTS],

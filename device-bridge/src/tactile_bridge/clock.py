@@ -62,10 +62,10 @@ class ClockSync:
             # Least squares through the kept samples, weighted toward short round trips.
             w = [1.0 / (1.0 + (s.rtt_ns - self.best_rtt_ns) / 1e5) for s in k]
             sw = sum(w)
-            tm = sum(wi * s.t_ns for wi, s in zip(w, k)) / sw
-            om = sum(wi * s.offset_ns for wi, s in zip(w, k)) / sw
-            stt = sum(wi * (s.t_ns - tm) ** 2 for wi, s in zip(w, k))
-            sto = sum(wi * (s.t_ns - tm) * (s.offset_ns - om) for wi, s in zip(w, k))
+            tm = sum(wi * s.t_ns for wi, s in zip(w, k, strict=True)) / sw
+            om = sum(wi * s.offset_ns for wi, s in zip(w, k, strict=True)) / sw
+            stt = sum(wi * (s.t_ns - tm) ** 2 for wi, s in zip(w, k, strict=True))
+            sto = sum(wi * (s.t_ns - tm) * (s.offset_ns - om) for wi, s in zip(w, k, strict=True))
             self._drift = sto / stt if stt > 0 else 0.0
             self._offset_ns, self._ref_ns = om, int(tm)
         else:

@@ -30,7 +30,6 @@ Every array is a preallocated list; `render` allocates nothing but the floats Py
 from __future__ import annotations
 
 import math
-
 from collections.abc import Sequence
 
 MODES = ("coupled", "delay", "hold", "extrapolate")

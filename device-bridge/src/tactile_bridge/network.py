@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import itertools
 import logging
 import math
 import os
@@ -26,6 +27,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import websockets
+
 from tactile_proto import PROTOCOL_MAJOR, PROTOCOL_MINOR, ProtocolError, check_version, decode, encode, make_hello
 from tactile_proto.generated.DeviceLimits import DeviceLimitsT
 from tactile_proto.generated.Ping import PingT
@@ -111,8 +113,7 @@ class Network:
             while not stop.is_set():
                 try:
                     await self._session(stop)
-                except (OSError, websockets.exceptions.WebSocketException, LinkError, ProtocolError,
-                        asyncio.TimeoutError) as e:
+                except (TimeoutError, OSError, websockets.exceptions.WebSocketException, LinkError, ProtocolError) as e:
                     msg = str(e) or type(e).__name__
                     if msg != self.last_error:
                         log.warning("link: %s; retrying every %.1f s", msg, self.reconnect_s)
@@ -121,7 +122,7 @@ class Network:
                     self._link_down()
                 try:
                     await asyncio.wait_for(stop.wait(), self.reconnect_s)
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     pass
         finally:
             loop.remove_reader(self.wake_fd)
@@ -188,7 +189,7 @@ class Network:
     def _on_scene(self, scene: Any) -> None:
         wire_devices = list(scene.devices or [])
         self.channels = [wire_devices.index(p.channel) if p.channel in wire_devices else -1 for p in self.profiles]
-        for p, w in zip(self.profiles, self.channels):
+        for p, w in zip(self.profiles, self.channels, strict=True):
             if w < 0:
                 log.warning("scene %r has no device channel %r (it has: %s): that device gets no force",
                             scene.sceneName, p.channel, ", ".join(wire_devices) or "none")
@@ -298,7 +299,7 @@ class Network:
         t0, ticks0, hist0 = self._status_at
         ticks, hist = x.i[ex.H_TICKS], x.histogram()
         self._status_at = (now, ticks, hist)
-        h = [b - a for a, b in zip(hist0, hist)]
+        h = [b - a for a, b in zip(hist0, hist, strict=True)]
         p99 = ex.percentile_us(h, 0.99)
         top = max((us for us, n in enumerate(h) if n), default=math.nan)
         out = []
@@ -325,7 +326,7 @@ class Network:
         ws = self._ws
         if ws is None or self.server_minor < 3:
             return
-        for m, channel in zip(messages, self.channels):
+        for m, channel in zip(messages, self.channels, strict=True):
             if channel >= 0:
                 asyncio.ensure_future(self._send_quietly(ws, encode(m)))
 
@@ -335,7 +336,7 @@ class Network:
         s = sorted(self.lateness)
         self.allowance_ns = max(0, s[min(len(s) - 1, int(0.99 * len(s)))])
         st = list(self.stamps)
-        gaps = sorted(b - a for a, b in zip(st, st[1:]) if b > a)
+        gaps = sorted(b - a for a, b in itertools.pairwise(st) if b > a)
         self.interval_ns = max(self.dt_ns, gaps[len(gaps) // 2]) if gaps else self.dt_ns
         self.ex.i[ex.H_DT_NS] = self.interval_ns
         self.ex.i[ex.H_ALLOW_NS] = self.allowance_ns

@@ -150,16 +150,16 @@ class Workspace:
         tr = m[0][0] + m[1][1] + m[2][2]
         if tr > 0:
             s = 2.0 * (tr + 1.0) ** 0.5
-            out[0], out[1], out[2], out[3] = 0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s
+            out[0], out[1], out[2], out[3] = 0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s  # noqa: E501 (the four cases read as one table)
         elif m[0][0] > m[1][1] and m[0][0] > m[2][2]:
             s = 2.0 * (1.0 + m[0][0] - m[1][1] - m[2][2]) ** 0.5
-            out[0], out[1], out[2], out[3] = (m[2][1] - m[1][2]) / s, 0.25 * s, (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s
+            out[0], out[1], out[2], out[3] = (m[2][1] - m[1][2]) / s, 0.25 * s, (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s  # noqa: E501 (the four cases read as one table)
         elif m[1][1] > m[2][2]:
             s = 2.0 * (1.0 + m[1][1] - m[0][0] - m[2][2]) ** 0.5
-            out[0], out[1], out[2], out[3] = (m[0][2] - m[2][0]) / s, (m[0][1] + m[1][0]) / s, 0.25 * s, (m[1][2] + m[2][1]) / s
+            out[0], out[1], out[2], out[3] = (m[0][2] - m[2][0]) / s, (m[0][1] + m[1][0]) / s, 0.25 * s, (m[1][2] + m[2][1]) / s  # noqa: E501 (the four cases read as one table)
         else:
             s = 2.0 * (1.0 + m[2][2] - m[0][0] - m[1][1]) ** 0.5
-            out[0], out[1], out[2], out[3] = (m[1][0] - m[0][1]) / s, (m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, 0.25 * s
+            out[0], out[1], out[2], out[3] = (m[1][0] - m[0][1]) / s, (m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, 0.25 * s  # noqa: E501 (the four cases read as one table)
 
     def vector_to_scene(self, device: Any, out: list[float]) -> None:
         """A device-frame vector -> the scene frame, without scale: out (3)."""

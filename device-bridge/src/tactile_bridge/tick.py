@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from . import exchange as ex
 from .drivers import Device, DeviceSample
@@ -30,7 +31,6 @@ from .interpolation import ForceRender, StateHistory
 from .passivity import PassivityController
 from .profile import Profile
 from .safety import Inputs, Kind, Mode, Safety, SafetyEvent
-
 
 # One row per tick and device: bridge time [s], device, safety mode, device position (scene) [m] (3),
 # rendered force (scene) [N] (3), output force (device frame) [N] (3), passivity damping [N s/m], newest step,
@@ -88,9 +88,9 @@ class Tick:
         self.max_backlog = max_backlog
         self.clock = clock
         self.channels = [Channel(k, p, d, exchange, mode, passivity, self._event)
-                         for k, (p, d) in enumerate(zip(profiles, devices))]
+                         for k, (p, d) in enumerate(zip(profiles, devices, strict=True))]
         self._hist = ex.H_INTS
-        self.trace: np.ndarray | None = None   # (capacity x TRACE_COLUMNS), see start_trace
+        self.trace: npt.NDArray[np.float64] | None = None   # (capacity x TRACE_COLUMNS), see start_trace
         self.trace_rows = 0
 
     def start_trace(self, seconds: float) -> None:

@@ -56,7 +56,7 @@ class Table:
         o = 4 + 2 * slot
         if o + 2 > self.vt_len:
             return 0
-        off = _U16.unpack_from(self.buf, self.vt + o)[0]
+        off: int = _U16.unpack_from(self.buf, self.vt + o)[0]
         if off == 0:
             return 0
         p = self.pos + off

@@ -187,22 +187,22 @@ class _Tables:
         scene_devices = list(scene.devices or []) if scene is not None else None
         scene_proxies = list(scene.proxies or []) if scene is not None else None
         device_names = _names(scene_devices, len(devices), "device")
-        named = scene_proxies is not None and len(scene_proxies) == len(proxies)
-        proxy_names = _names([p.name or "" for p in scene_proxies] if named else None, len(proxies), "proxy")
-        proxy_devices = [p.device or "" for p in scene_proxies] if named else [""] * len(proxies)
-        if scene_devices is None or len(scene_devices) != len(devices) or not named:
-            key = (frame.sceneId, len(devices), len(proxies))
-            if key not in self.unnamed:
-                self.unnamed.add(key)
+        named = scene_proxies if scene_proxies is not None and len(scene_proxies) == len(proxies) else None
+        proxy_names = _names([p.name or "" for p in named] if named is not None else None, len(proxies), "proxy")
+        proxy_devices = [p.device or "" for p in named] if named is not None else [""] * len(proxies)
+        if scene_devices is None or len(scene_devices) != len(devices) or named is None:
+            shape = (frame.sceneId, len(devices), len(proxies))
+            if shape not in self.unnamed:
+                self.unnamed.add(shape)
                 self.result.notes.append(f"forces: haptic frames of scene_id {frame.sceneId} (from log time {t} ns) "
                                          f"have {len(devices)} devices and {len(proxies)} proxies, which no scene "
                                          "read names: they are named by index")
         key = [str(t), _f64(frame.simTime), str(frame.step), str(frame.sceneId)]
-        for name, device, h in zip(proxy_names, proxy_devices, proxies):
+        for name, device, h in zip(proxy_names, proxy_devices, proxies, strict=True):
             position = h.pose.position if h.pose is not None else None
             self.forces.write(self.FORCES, key + [name, device] + _xyz(h.force) + _xyz(h.torque) + [str(h.contacts)]
                               + _xyz(position), t)
-        for name, h in zip(device_names, devices):
+        for name, h in zip(device_names, devices, strict=True):
             self.devices.write(self.DEVICES, key + [name] + _xyz(h.force) + _xyz(h.torque) + [str(h.contacts)], t)
 
     def add_state(self, t: int, frame: StateFrameT) -> None:

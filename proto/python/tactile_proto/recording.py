@@ -539,5 +539,6 @@ def open_recording(path: str | os.PathLike[str]) -> Recording:
     return Recording(path)
 
 
-__all__ = ["ENVELOPE_FIELD_KEY", "ENVELOPE_OFFSET_KEY", "JSON_TOPICS", "MAGIC", "MESSAGE_ENCODING", "METADATA_NAME", "SCHEMA_NAME", "TOPICS", "DecodedMessage",
-           "RecordedMessage", "Recording", "RecordingError", "open_recording"]
+__all__ = ["ENVELOPE_FIELD_KEY", "ENVELOPE_OFFSET_KEY", "JSON_TOPICS", "MAGIC", "MESSAGE_ENCODING", "METADATA_NAME",
+           "SCHEMA_NAME", "TOPICS", "DecodedMessage", "RecordedMessage", "Recording", "RecordingError",
+           "open_recording"]

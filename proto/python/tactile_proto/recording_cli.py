@@ -175,14 +175,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "recover":
         try:
             recording = open_recording(args.file)
-            result = recover(recording, args.out)
+            recovered = recover(recording, args.out)
         except (RecordingError, OSError) as e:
             print(f"tactile-recording: cannot recover: {e}", file=sys.stderr)
             return 2
         state = "complete already" if recording.complete else "cut short"
-        print(f"{args.out}: {result.messages} messages ({', '.join(f'{t} {n}' for t, n in sorted(result.topics.items()))}) "
+        topics = ", ".join(f"{t} {n}" for t, n in sorted(recovered.topics.items()))
+        print(f"{args.out}: {recovered.messages} messages ({topics}) "
               f"from {args.file} ({state}), closed and indexed")
-        for problem in result.problems:
+        for problem in recovered.problems:
             print(f"problem: {problem}", file=sys.stderr)
         return 0
     try:

@@ -86,4 +86,5 @@ def parse_config(driver: str, table: dict[str, Any], where: str) -> Any:
 def make_device(profile: Profile, **options: Any) -> Device:
     """The driver a profile names, not yet opened."""
     module = importlib.import_module(f"{__name__}.{_MODULES[profile.driver]}")
-    return module.make_device(profile, **options)
+    device: Device = module.make_device(profile, **options)
+    return device

@@ -65,7 +65,7 @@ def parse_config(table: dict[str, Any], where: str, fields: Any) -> SimConfig:
     d = SimConfig()
     return SimConfig(
         script=f.string("script", d.script, choices=SCRIPTS),
-        home_m=f.vector("home_m", d.home_m, 3),  # type: ignore[arg-type]
+        home_m=f.vector("home_m", d.home_m, 3),
         direction=_unit(f.vector("direction", d.direction, 3), "direction", where, ProfileError),
         depth_m=f.number("depth_m", d.depth_m, low=0.0, high=1.0),
         period_s=f.number("period_s", d.period_s, low=0.1, high=3600.0),
