@@ -6,6 +6,9 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 scripts/setup.sh
+echo "test: Python lint and types (ruff, mypy)"
+.venv/bin/ruff check device-bridge proto/python tests server/bench
+.venv/bin/mypy
 build="${TACTILE_BUILD:-build/release}"
 echo "test: C++ (ctest)"
 ctest --test-dir "$build" --output-on-failure -j"$(nproc)"
