@@ -25,6 +25,7 @@
 
 #include "net/inbound.hpp"
 #include "net/mailbox.hpp"
+#include "net/session.hpp"
 #include "record/recorder.hpp"
 #include "record/replay.hpp"
 #include "scene/parameters.hpp"
@@ -39,7 +40,6 @@ namespace websocket = beast::websocket;
 namespace fb = flatbuffers;
 namespace wire = proto;
 using tcp = asio::ip::tcp;
-using Bytes = std::shared_ptr<const std::vector<uint8_t>>;
 
 namespace {
 
@@ -50,26 +50,12 @@ int64_t now_ns() {
 
 Bytes copy_bytes(const uint8_t* data, size_t n) { return std::make_shared<const std::vector<uint8_t>>(data, data + n); }
 
-template <class T>
-Bytes seal(fb::FlatBufferBuilder& b, wire::Message type, fb::Offset<T> body) {
-  b.Finish(wire::CreateEnvelope(b, type, body.Union()), wire::EnvelopeIdentifier());
-  return copy_bytes(b.GetBufferPointer(), b.GetSize());
-}
-
-Bytes make_error(wire::ErrorCode code, const std::string& message, uint32_t request_id = 0) {
-  fb::FlatBufferBuilder b;
-  const std::string text = utf8_text(message);
-  const auto body = wire::CreateError(b, code, b.CreateString(text), request_id);
-  return seal(b, wire::Message::Error, body);
-}
-
 // A string for a one-line log: control characters shown as '?'.
 std::string printable_text(std::string out) {
   for (char& c : out)
     if (uint8_t(c) < 0x20 || c == 0x7f) c = '?';
   return out;
 }
-std::string printable(const fb::String* s) { return printable_text(s ? s->str() : ""); }
 
 const char* content_type(const std::filesystem::path& p) {
   const std::string ext = p.extension().string();
@@ -151,7 +137,7 @@ struct Feed {
   size_t haptic_bytes() const { return 512 + 128 * live->sim().proxies().size() + 160 * live->sim().devices().size(); }
 };
 
-struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
+struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
   asio::io_context& ioc;
   Director* director;  // the live session, or
   Replay* replay;      // a recording played back (one of the two)
@@ -174,6 +160,30 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
 
   std::unordered_set<WsSession*> sessions;
   WsSession* controller = nullptr;
+  WsSession* shell_of(const Session& s) const;
+
+  // ---- SessionHost: what a connection's rules (net/session.hpp) need of the server ----
+  int64_t now_ns() const override { return tactile::now_ns(); }
+  const Bytes& description() const override { return feed->description; }
+  const std::vector<std::string>& devices() const override { return feed->devices; }
+  const std::string& scene_name() const override { return feed->scene_name; }
+  bool workspace(Vec3& lo, Vec3& hi) const override {
+    if (!feed->live) return false;
+    lo = feed->live->loop().workspace_lo();
+    hi = feed->live->loop().workspace_hi();
+    return true;
+  }
+  uint64_t driver_of(const std::string& channel, const Session& asking) const override;
+  bool claim_controller(Session& s) override;
+  void post_input(const DeviceSample& s) override {
+    if (feed->live) feed->live->loop().post_input(s);  // a full queue drops it and counts; a replay moves nothing
+  }
+  void relay(const Bytes& message, OutKind kind) override;
+  void record(Topic topic, std::span<const uint8_t> m, int64_t time_ns) override {
+    record(topic, m.data(), m.size(), time_ns);
+  }
+  void control(const wire::Control& c, Session& from) override;
+  void greeted(Session& s) override;
   asio::steady_timer telemetry_timer;
 
   asio::steady_timer replay_timer;
@@ -184,6 +194,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   void serve_replayed(const Replay::Item& item);
   void show_replay_position();  // the scene and state at the position, after a seek
   void replay_control(const wire::Control& c, WsSession& from);
+  void live_control(const wire::Control& c, WsSession& from);
 
   std::unique_ptr<Recorder> recorder;               // the recording under way
   std::vector<std::unique_ptr<Recorder>> finishing;  // stopped, closing their files
@@ -278,18 +289,23 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       : server_(std::move(server)),
         ws_(std::move(socket)),
         hello_timer_(server_->ioc),
-        loopback_(loopback),
-        address_(std::move(address)) {}
+        core_(*server_, limits(server_->options), loopback, std::move(address), next_id_++, SessionClock::now()) {}
 
   ~WsSession() {
     server_->sessions.erase(this);
     if (server_->controller == this) server_->controller = nullptr;
-    if (safety_dropped_ > 0)
+    if (core_.safety_dropped() > 0)
       std::fprintf(stderr, "safety: connection %llu sent %lld events over the limit of %g per second: dropped\n",
-                   (unsigned long long)id_, (long long)safety_dropped_, server_->options.max_safety_events_per_s);
-    if (events_dropped_ > 0)
+                   (unsigned long long)core_.id(), (long long)core_.safety_dropped(),
+                   server_->options.max_safety_events_per_s);
+    if (core_.events_dropped() > 0)
       std::fprintf(stderr, "safety: connection %llu (%s) read too slowly and missed %lld safety events\n",
-                   (unsigned long long)id_, wire::EnumNameRole(role_), (long long)events_dropped_);
+                   (unsigned long long)core_.id(), wire::EnumNameRole(core_.role()), (long long)core_.events_dropped());
+  }
+
+  static SessionLimits limits(const ServerOptions& o) {
+    return {o.token,        o.server_name,   o.viewer_rate_hz, o.max_messages_per_s, o.device_queue,
+            o.max_safety_events_per_s, o.event_queue, o.control_queue};
   }
 
   void start(http::request<http::string_body> req) {
@@ -312,98 +328,30 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     });
   }
 
-  wire::Role role() const { return role_; }
-  bool greeted() const { return greeted_; }
-  // Upgraded and not yet greeted: it holds a waiting slot (Impl::make_room).
-  bool waiting() const { return !greeted_ && !closing_; }
-  const std::string& address() const { return address_; }
-  uint64_t id() const { return id_; }
+  Session& core() { return core_; }
+  const Session& core() const { return core_; }
+  // After a scene change: its channels mapped onto the new scene's.
+  void rebind() {
+    core_.bind_devices();
+    pump();
+  }
+
+  // Queues a message under its kind's rule (net/session.hpp) and writes.
+  void send(const Bytes& message, OutKind kind) {
+    core_.send(message, kind);
+    pump();
+  }
   // Closes the socket at once (a waiting slot given to a newer connection):
   // its pending operations end, and with them the session.
   void drop() {
-    if (closing_) return;
-    closing_ = true;
+    if (core_.closed()) return;
+    core_.mark_closed();
     hello_timer_.cancel();
     beast::get_lowest_layer(ws_).close();
   }
-  // SafetyEvent came in 1.2: a 1.1 codec refuses a message type it does not know.
-  bool reads_safety_events() const { return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 2; }
-  // DeviceStatus came in 1.3.
-  bool reads_device_status() const { return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 3; }
-  // ReplayStatus in 1.4.
-  bool reads_replay_status() const { return greeted_ && protocol_minor_ >= 4; }
-  bool drives_devices() const { return greeted_ && role_ == wire::Role::Device; }
-  bool drives(const std::string& channel) const {
-    return drives_devices() && std::find(device_names_.begin(), device_names_.end(), channel) != device_names_.end();
-  }
-
-  // Queues a message; `kind` decides what a slow reader loses: a State is
-  // replaced by the next, a Haptic frame, an Event (SafetyEvent) or a Status
-  // (DeviceStatus) beyond its bound drops the oldest of its kind waiting
-  // (counted), a Control message (replies: Pong, Error, Welcome; Telemetry,
-  // ReplayStatus) is never dropped: a reader that lets control_queue of
-  // them wait is not reading, and is disconnected.
-  enum class Kind { Control, State, Haptic, Event, Status };
-  void send(const Bytes& message, Kind kind) {
-    if (kind == Kind::Control && role_ == wire::Role::Controller && greeted_ &&
-        wire::GetEnvelope(message->data())->message_type() == wire::Message::Error)
-      server_->record(Topic::Error, message);
-    if (closing_) return;
-    if (kind == Kind::State) {
-      // Latest wins, at the viewer's rate on average: each state passed sets
-      // the next one's due time a period on, and a state a little early (a
-      // quarter period: the simulation's publishing jitters) still passes,
-      // or states made at exactly the viewer's rate would lose every other one.
-      const auto now = std::chrono::steady_clock::now();
-      const auto period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-          std::chrono::duration<double>(1.0 / server_->options.viewer_rate_hz));
-      if (now + period / 4 < next_state_due_) return;
-      if (pending_state_) {
-        pending_state_ = message;  // replaces the one not yet sent
-        return;
-      }
-      next_state_due_ = std::max(next_state_due_, now - period) + period;
-      pending_state_ = message;
-      queue_.push_back(nullptr);  // a marker: the pending state goes here
-    } else if (kind == Kind::Haptic || kind == Kind::Event || kind == Kind::Status) {
-      // A reader too slow: its oldest waiting message of the kind goes (not
-      // the one being written), so what it does read is the newest.
-      const bool haptic = kind == Kind::Haptic;
-      size_t& queued = haptic ? haptics_queued_ : kind == Kind::Event ? events_queued_ : statuses_queued_;
-      if (queued >= (haptic ? server_->options.device_queue : server_->options.event_queue))
-        for (size_t k = writing_ ? 1 : 0; k < queue_.size(); ++k)
-          if (kinds_[k] == kind) {
-            queue_.erase(queue_.begin() + long(k));
-            kinds_.erase(kinds_.begin() + long(k));
-            --queued;
-            ++(haptic ? haptics_dropped_ : events_dropped_);
-            break;
-          }
-      ++queued;
-      queue_.push_back(message);
-    } else {
-      if (controls_queued_ >= server_->options.control_queue) {
-        std::fprintf(stderr, "connection %llu (%s, %s) let %zu control messages wait unread: disconnected\n",
-                     (unsigned long long)id_, wire::EnumNameRole(role_), address_.c_str(), controls_queued_);
-        return drop();
-      }
-      ++controls_queued_;
-      queue_.push_back(message);
-    }
-    kinds_.push_back(kind);
-    write();
-  }
-
-  // Sends an error, then closes.
-  void refuse(wire::ErrorCode code, const std::string& message) {
-    send(make_error(code, message), Kind::Control);
-    close_after_write_ = true;
-    write();
-  }
-
   void close() {
-    if (closing_) return;
-    closing_ = true;
+    if (core_.closed()) return;
+    core_.mark_closed();
     hello_timer_.cancel();
     ws_.async_close(websocket::close_code::normal, [self = shared_from_this()](beast::error_code) {});
   }
@@ -413,378 +361,48 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     hello_timer_.expires_after(std::chrono::milliseconds(int64_t(server_->options.hello_timeout_s * 1000)));
     hello_timer_.async_wait([weak = weak_from_this()](beast::error_code ec) {
       auto self = weak.lock();
-      if (ec || !self || self->greeted_) return;
-      self->refuse(wire::ErrorCode::BadRequest, "no Hello within the hello timeout");
+      if (ec || !self) return;
+      self->core_.hello_timed_out();
+      self->pump();
     });
   }
 
   void read() {
     ws_.async_read(in_, [self = shared_from_this()](beast::error_code ec, size_t) {
       if (ec) {
-        self->closing_ = true;  // closed, timed out, or too big (Beast sends close code 1009)
+        self->core_.mark_closed();  // closed, timed out, or too big (Beast sends close code 1009)
         self->hello_timer_.cancel();
         return;
       }
-      self->on_message();
-      if (!self->closing_) self->read();
+      const auto* data = static_cast<const uint8_t*>(self->in_.data().data());
+      self->core_.receive({data, self->in_.size()}, self->ws_.got_binary(), SessionClock::now());
+      self->in_.consume(self->in_.size());
+      if (self->core_.greeted()) self->hello_timer_.cancel();
+      self->pump();
+      if (!self->core_.closed()) self->read();
     });
   }
 
-  void on_message() {
-    const auto* data = static_cast<const uint8_t*>(in_.data().data());
-    const size_t size = in_.size();
-    // Rate limit: a token bucket of max_messages_per_s, a second's burst.
-    const auto now = std::chrono::steady_clock::now();
-    const double rate = server_->options.max_messages_per_s;
-    tokens_ = std::min(rate, tokens_ + rate * std::chrono::duration<double>(now - last_message_).count());
-    last_message_ = now;
-    if ((tokens_ -= 1) < 0) {
-      in_.consume(size);
-      return refuse(wire::ErrorCode::RateLimited, "more than " + std::to_string(int64_t(rate)) + " messages per second");
-    }
-    if (!ws_.got_binary()) {
-      in_.consume(size);
-      return send(make_error(wire::ErrorCode::Malformed, "text message: the protocol is binary FlatBuffers"),
-                  Kind::Control);
-    }
-    const Inbound inbound = read_inbound(data, size);
-    if (!inbound) {
-      in_.consume(size);
-      return send(make_error(inbound.error, inbound.message), Kind::Control);
-    }
-    const wire::Envelope* e = inbound.envelope;
-    raw_ = {data, size};  // what a recording keeps of an input or a control
-    dispatch(*e);
-    raw_ = {};
-    in_.consume(size);
-  }
-
-  void dispatch(const wire::Envelope& e) {
-    if (!greeted_ && e.message_type() != wire::Message::Hello && e.message_type() != wire::Message::Ping)
-      return refuse(wire::ErrorCode::WrongRole, std::string("the first message must be Hello, got ") +
-                                                    wire::EnumNameMessage(e.message_type()));
-    switch (e.message_type()) {
-      case wire::Message::Hello: return on_hello(*e.message_as_Hello());
-      case wire::Message::Ping: return on_ping(*e.message_as_Ping());
-      case wire::Message::DeviceInput: return on_input(*e.message_as_DeviceInput());
-      case wire::Message::Control: return on_control(*e.message_as_Control());
-      case wire::Message::SafetyEvent: return on_safety_event(*e.message_as_SafetyEvent());
-      case wire::Message::DeviceStatus: return on_device_status(*e.message_as_DeviceStatus());
-      default:
-        return send(make_error(wire::ErrorCode::WrongRole, std::string("a client may not send ") +
-                                                               wire::EnumNameMessage(e.message_type())),
-                    Kind::Control);
-    }
-  }
-
-  void on_hello(const wire::Hello& h) {
-    if (greeted_) return send(make_error(wire::ErrorCode::BadRequest, "Hello sent twice"), Kind::Control);
-    const int major = int(wire::ProtocolMajor::Current), minor = int(wire::ProtocolMinor::Current);
-    if (h.protocol_major() != major)
-      return refuse(wire::ErrorCode::VersionMismatch,
-                    "client speaks protocol " + std::to_string(h.protocol_major()) + "." +
-                        std::to_string(h.protocol_minor()) + ", this server " + std::to_string(major) + "." +
-                        std::to_string(minor));
-    if (h.role() > wire::Role::MAX)
-      return refuse(wire::ErrorCode::BadRequest, "Hello.role " + std::to_string(int(h.role())) +
-                                                     " is not a role (0 viewer, 1 device, 2 controller)");
-    const std::string token = h.token() ? h.token()->str() : "";
-    const bool needs_token = h.role() != wire::Role::Viewer || !loopback_;
-    if (needs_token && (server_->options.token.empty() || token != server_->options.token))
-      return refuse(wire::ErrorCode::Unauthorized,
-                    std::string(server_->options.token.empty() ? "this server has no token set: the "
-                                                               : "a wrong or missing token for the ") +
-                        wire::EnumNameRole(h.role()) + " role" + (loopback_ ? "" : " (off loopback every role needs it)"));
-    if (h.role() == wire::Role::Controller) {
-      if (server_->controller) return refuse(wire::ErrorCode::Busy, "another controller is connected");
-      server_->controller = this;
-    }
-    if (h.role() == wire::Role::Device) {
-      if (const std::string bad = check_device_limits(h); !bad.empty()) return refuse(wire::ErrorCode::BadRequest, bad);
-      const std::vector<std::string>& names = server_->feed->devices;
-      if (h.devices())
-        for (const fb::String* d : *h.devices()) {
-          if (std::find(names.begin(), names.end(), d->str()) == names.end())
-            return refuse(wire::ErrorCode::BadRequest, "no device channel '" + d->str() + "' in this scene");
-          // One device drives a channel: two would pull its proxy both ways.
-          for (const WsSession* other : server_->sessions)
-            if (other != this && other->drives(d->str()))
-              return refuse(wire::ErrorCode::Busy, "device channel '" + d->str() + "' is driven by another device "
-                                                   "(connection " + std::to_string(other->id_) + ")");
-          device_names_.push_back(d->str());
-          DeviceDrive drive;
-          if (h.device_limits() && h.device_limits()->size() > drives_.size()) {
-            const wire::DeviceLimits& l = *h.device_limits()->Get(uint32_t(drives_.size()));
-            drive.direct = l.direct();
-            drive.has_limits = true;
-            drive.limits = {double(l.max_force_N()), double(l.max_torque_Nm()), double(l.stiffness_N_per_m())};
-          }
-          drives_.push_back(drive);
-          outside_.push_back(false);
-        }
-      bind_devices();
-    }
-    greeted_ = true;
-    role_ = h.role();
-    protocol_minor_ = h.protocol_minor();
-    hello_timer_.cancel();
-    fb::FlatBufferBuilder b;
-    send(seal(b, wire::Message::Welcome,
-              wire::CreateWelcomeDirect(b, uint16_t(major), uint16_t(minor), role_,
-                                        server_->options.server_name.c_str(), id_, now_ns())),
-         Kind::Control);
-    send(server_->feed->description, Kind::Control);
-    if (server_->replay && !server_->replay_started) {  // the first client starts the playback
-      server_->replay_started = true;
-      server_->replay->play(Replay::Clock::now());
-      server_->replay_status_due = Replay::Clock::now();
-      server_->replay_timer.cancel();
-      server_->tick_replay();
-    }
-    if (server_->replay) {  // where the replay is: the body as it was there, and the playback
-      if (const Replay::Item* st = server_->replay->state_before(); st && role_ != wire::Role::Device)
-        send(copy_bytes(st->bytes.data(), st->bytes.size()), Kind::State);
-      if (reads_replay_status()) send(server_->replay_status(), Kind::Control);
-    }
-  }
-
-  // The current scene's channel index for each channel this device named
-  // (-1 for one the scene lacks: its inputs are dropped, said once here).
-  void bind_devices() {
-    const std::vector<std::string>& names = server_->feed->devices;
-    devices_.clear();
-    for (const std::string& d : device_names_) {
-      const auto it = std::find(names.begin(), names.end(), d);
-      devices_.push_back(it == names.end() ? -1 : int32_t(it - names.begin()));
-      if (it == names.end())
-        send(make_error(wire::ErrorCode::BadRequest, "scene '" + server_->feed->scene_name +
-                                                         "' has no device channel '" + d +
-                                                         "': its inputs are dropped until a scene has it"),
-             Kind::Control);
-    }
-  }
-
-  void on_ping(const wire::Ping& p) {
-    const int64_t received = now_ns();
-    fb::FlatBufferBuilder b;
-    send(seal(b, wire::Message::Pong, wire::CreatePong(b, p.id(), p.client_time_ns(), received, now_ns())),
-         Kind::Control);
-  }
-
-  void on_input(const wire::DeviceInput& in) {
-    if (role_ != wire::Role::Device)
-      return send(make_error(wire::ErrorCode::WrongRole, "DeviceInput needs the device role"), Kind::Control);
-    const std::string name = in.device() ? in.device()->str() : "";
-    const auto named = std::find(device_names_.begin(), device_names_.end(), name);
-    if (named == device_names_.end())
-      return send(make_error(wire::ErrorCode::BadRequest, "DeviceInput for channel '" + name +
-                                                              "', which this connection did not name in its Hello"),
-                  Kind::Control);
-    const int32_t index = devices_[size_t(named - device_names_.begin())];
-    if (index < 0) return;  // not in this scene (said at the switch)
-    if (const std::string bad = check_device_input(in); !bad.empty())
-      return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
-    const size_t k = size_t(named - device_names_.begin());
-    if (server_->feed->live) {  // outside the workspace: the loop holds it at the edge; said once per excursion
-      const RealtimeLoop& loop = server_->feed->live->loop();
-      const Vec3 x(in.position()->x(), in.position()->y(), in.position()->z());
-      const bool outside = glm::any(glm::lessThan(x, loop.workspace_lo())) ||
-                           glm::any(glm::greaterThan(x, loop.workspace_hi()));
-      if (outside && !outside_[k]) {
-        char text[320];
-        const Vec3 lo = loop.workspace_lo(), hi = loop.workspace_hi();
-        std::snprintf(text, sizeof text,
-                      "DeviceInput.position (%.4g, %.4g, %.4g) m for channel '%s' is outside the scene's workspace "
-                      "[%.3g, %.3g] x [%.3g, %.3g] x [%.3g, %.3g] m: its proxy is held at the edge",
-                      x.x, x.y, x.z, utf8_text(name).c_str(), lo.x, hi.x, lo.y, hi.y, lo.z, hi.z);
-        send(make_error(wire::ErrorCode::BadRequest, text), Kind::Control);
-      }
-      outside_[k] = outside;
-    }
-    const DeviceSample s = device_sample(in, index, drives_[k]);
-    // Recorded first: stamped before the simulation can apply it.
-    server_->record(Topic::Input, raw_.data(), raw_.size(), now_ns());
-    // (A replay simulates nothing: its inputs move nothing.)
-    if (server_->feed->live) server_->feed->live->loop().post_input(s);  // a full queue drops it and counts
-  }
-
-  // A device's safety event: checked, rate limited, stamped with the server
-  // clock, logged, and relayed to every viewer and controller (of protocol
-  // 1.2 or later: see reads_safety_events).
-  void on_safety_event(const wire::SafetyEvent& ev) {
-    if (role_ != wire::Role::Device)
-      return send(make_error(wire::ErrorCode::WrongRole,
-                             std::string("SafetyEvent needs the Device role; this connection has the ") +
-                                 wire::EnumNameRole(role_) + " role"),
-                  Kind::Control);
-    if (const std::string bad = check_safety_event(ev); !bad.empty())
-      return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
-    const std::string name = ev.device()->str();  // UTF-8 and bounded: checked
-    if (std::find(device_names_.begin(), device_names_.end(), name) == device_names_.end())
-      return send(make_error(wire::ErrorCode::BadRequest, "SafetyEvent for channel '" + name +
-                                                              "', which this connection did not name in its Hello"),
-                  Kind::Control);
-    // A token bucket of max_safety_events_per_s, a second's burst; beyond it
-    // events are dropped and counted, and the device is told once per run of drops.
-    const auto now = std::chrono::steady_clock::now();
-    const double rate = server_->options.max_safety_events_per_s;
-    safety_tokens_ = std::min(rate, safety_tokens_ + rate * std::chrono::duration<double>(now - last_safety_).count());
-    last_safety_ = now;
-    if (safety_tokens_ < 1) {
-      ++safety_dropped_;
-      if (!safety_limited_)
-        send(make_error(wire::ErrorCode::RateLimited, "more than " + std::to_string(int64_t(rate)) +
-                                                          " safety events per second: dropped, not relayed (" +
-                                                          std::to_string(safety_dropped_) + " so far)"),
-             Kind::Control);
-      safety_limited_ = true;
+  // Writes what the rules queued, one message at a time; closes when they say.
+  void pump() {
+    if (core_.disconnect()) return drop();
+    if (const Bytes* message = core_.next_write()) {
+      ws_.async_write(asio::buffer(**message), [self = shared_from_this()](beast::error_code ec, size_t) {
+        self->core_.written();
+        if (ec) return self->core_.mark_closed();
+        self->pump();
+      });
       return;
     }
-    safety_tokens_ -= 1;
-    safety_limited_ = false;
-    fb::FlatBufferBuilder b(128 + name.size() + (ev.message() ? ev.message()->size() : 0));
-    const auto device = b.CreateString(ev.device());
-    const auto message = b.CreateString(ev.message());
-    const Bytes relayed = seal(b, wire::Message::SafetyEvent,
-                               wire::CreateSafetyEvent(b, device, ev.device_time_ns(), now_ns(), ev.kind(), message,
-                                                       ev.force_N()));
-    std::fprintf(stderr, "safety: %s %s %s (%.3f N)\n", printable(ev.device()).c_str(),
-                 wire::EnumNameSafetyKind(ev.kind()), printable(ev.message()).c_str(), double(ev.force_N()));
-    for (WsSession* s : server_->sessions)
-      if (s->reads_safety_events()) s->send(relayed, Kind::Event);
-    server_->record(Topic::Safety, relayed);
-  }
-
-  // A device's status (how its loop keeps time): checked, at most a few a
-  // second per connection (more are dropped: it is a figure, not an event),
-  // stamped with the server clock and relayed to every viewer and controller
-  // of protocol 1.3 or later.
-  void on_device_status(const wire::DeviceStatus& st) {
-    if (role_ != wire::Role::Device)
-      return send(make_error(wire::ErrorCode::WrongRole,
-                             std::string("DeviceStatus needs the Device role; this connection has the ") +
-                                 wire::EnumNameRole(role_) + " role"),
-                  Kind::Control);
-    if (const std::string bad = check_device_status(st); !bad.empty())
-      return send(make_error(wire::ErrorCode::BadRequest, bad), Kind::Control);
-    const std::string name = st.device()->str();
-    if (std::find(device_names_.begin(), device_names_.end(), name) == device_names_.end())
-      return send(make_error(wire::ErrorCode::BadRequest, "DeviceStatus for channel '" + name +
-                                                              "', which this connection did not name in its Hello"),
-                  Kind::Control);
-    const auto now = std::chrono::steady_clock::now();
-    constexpr double kRate = 10;  // per second, a second's burst
-    status_tokens_ = std::min(kRate, status_tokens_ + kRate * std::chrono::duration<double>(now - last_status_).count());
-    last_status_ = now;
-    if (status_tokens_ < 1) return;
-    status_tokens_ -= 1;
-    fb::FlatBufferBuilder b(256 + name.size());
-    const auto device = b.CreateString(st.device());
-    const auto mode = b.CreateString(st.mode());
-    const Bytes relayed =
-        seal(b, wire::Message::DeviceStatus,
-             wire::CreateDeviceStatus(b, device, st.device_time_ns(), now_ns(), st.tick_rate_hz(), st.lateness_p99_us(),
-                                      st.lateness_max_us(), st.missed_ticks(), st.display_delay_ms(),
-                                      st.state_interval_ms(), st.jitter_allowance_ms(), mode, st.force_N()));
-    for (WsSession* s : server_->sessions)
-      if (s->reads_device_status()) s->send(relayed, Kind::Status);
-    server_->record(Topic::DeviceStatus, relayed);
-  }
-
-  void on_control(const wire::Control& c) {
-    if (role_ != wire::Role::Controller)
-      return send(make_error(wire::ErrorCode::WrongRole, "Control needs the controller role", c.request_id()),
-                  Kind::Control);
-    server_->record(Topic::Control, raw_.data(), raw_.size(), now_ns());
-    if (server_->replay) return server_->replay_control(c, *this);
-    switch (c.command_type()) {
-      // A pause sent while a change is under way is carried over to the new scene.
-      case wire::ControlCommand::Pause: return server_->director->current()->loop().set_paused(true);
-      case wire::ControlCommand::Resume: return server_->director->current()->loop().set_paused(false);
-      case wire::ControlCommand::Reset: return server_->change(Server::Impl::Change::Reset, &c);
-      case wire::ControlCommand::LoadScene: return server_->change(Server::Impl::Change::Load, &c);
-      case wire::ControlCommand::SetParameter: return server_->change(Server::Impl::Change::Parameter, &c);
-      case wire::ControlCommand::StartRecording: {
-        const wire::StartRecording* r = c.command_as_StartRecording();
-        if (const std::string bad = server_->start_recording(r && r->path() ? r->path()->str() : ""); !bad.empty())
-          return send(make_error(bad.starts_with("a recording") ? wire::ErrorCode::Busy : wire::ErrorCode::BadRequest,
-                                 bad, c.request_id()),
-                      Kind::Control);
-        return;
-      }
-      case wire::ControlCommand::StopRecording:
-        if (!server_->recorder)
-          return send(make_error(wire::ErrorCode::BadRequest, "StopRecording: no recording is under way",
-                                 c.request_id()),
-                      Kind::Control);
-        return server_->stop_recording();
-      default:
-        return send(make_error(wire::ErrorCode::BadRequest,
-                               std::string("control command ") + wire::EnumNameControlCommand(c.command_type()) +
-                                   " is for a server replaying a recording; this one runs a live scene",
-                               c.request_id()),
-                    Kind::Control);
-    }
-  }
-
-  void write() {
-    if (writing_ || queue_.empty()) {
-      if (!writing_ && queue_.empty() && close_after_write_) close();
-      return;
-    }
-    writing_ = true;
-    Bytes message = queue_.front() ? queue_.front() : pending_state_;
-    if (!queue_.front()) pending_state_.reset();
-    current_ = message;
-    ws_.async_write(asio::buffer(*current_), [self = shared_from_this()](beast::error_code ec, size_t) {
-      self->writing_ = false;
-      if (self->kinds_.front() == Kind::Haptic) --self->haptics_queued_;
-      if (self->kinds_.front() == Kind::Event) --self->events_queued_;
-      if (self->kinds_.front() == Kind::Status) --self->statuses_queued_;
-      if (self->kinds_.front() == Kind::Control) --self->controls_queued_;
-      self->queue_.pop_front();
-      self->kinds_.pop_front();
-      self->current_.reset();
-      if (ec) {
-        self->closing_ = true;
-        return;
-      }
-      self->write();
-    });
+    if (core_.idle() && core_.close_after_write()) close();
   }
 
   std::shared_ptr<Server::Impl> server_;
   websocket::stream<beast::tcp_stream> ws_;
   beast::flat_buffer in_;
   asio::steady_timer hello_timer_;
-  bool loopback_;
-  std::string address_;  // the peer's IP address
-  bool greeted_ = false, closing_ = false, writing_ = false, close_after_write_ = false;
-  wire::Role role_ = wire::Role::Viewer;
-  uint16_t protocol_minor_ = 0;            // the client's, from its Hello
-  std::vector<std::string> device_names_;  // channels named in Hello
-  std::vector<DeviceDrive> drives_;        // how each drives its channel (Hello.device_limits)
-  std::vector<int32_t> devices_;           // their index in the current scene, -1 if absent
-  std::vector<bool> outside_;              // each one's latest input was outside the workspace
-  std::span<const uint8_t> raw_;           // the message being dispatched
-  std::deque<Bytes> queue_;          // null entries stand for pending_state_
-  std::deque<Kind> kinds_;          // per queue entry
-  Bytes pending_state_, current_;
-  size_t haptics_queued_ = 0, events_queued_ = 0, statuses_queued_ = 0, controls_queued_ = 0;
-  int64_t haptics_dropped_ = 0, events_dropped_ = 0;  // (events: safety events relayed to this reader)
-  std::chrono::steady_clock::time_point next_state_due_{}, last_message_ = std::chrono::steady_clock::now();
-  double tokens_ = 1e18;  // clamped to the burst at the first message
-  // Safety events this device sent: their own bucket, and those dropped over it.
-  std::chrono::steady_clock::time_point last_safety_ = std::chrono::steady_clock::now();
-  double safety_tokens_ = 1e18;
-  std::chrono::steady_clock::time_point last_status_ = std::chrono::steady_clock::now();
-  double status_tokens_ = 1e18;  // (clamped to the burst at the first status)
-  bool safety_limited_ = false;
-  int64_t safety_dropped_ = 0;
-  uint64_t id_ = next_id_++;
+  Session core_;
   static inline uint64_t next_id_ = 1;
-
-  friend struct Server::Impl;
 };
 
 // ---- HTTP: static files, or the upgrade to a WebSocket -------------------------------------
@@ -903,19 +521,97 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   std::optional<http::request_parser<http::string_body>> parser_;
 };
 
+// ---- what a connection's rules ask of the server ---------------------------------------------
+
+WsSession* Server::Impl::shell_of(const Session& s) const {
+  for (WsSession* w : sessions)
+    if (&w->core() == &s) return w;
+  return nullptr;
+}
+
+uint64_t Server::Impl::driver_of(const std::string& channel, const Session& asking) const {
+  for (const WsSession* w : sessions)
+    if (&w->core() != &asking && w->core().drives(channel)) return w->core().id();
+  return 0;
+}
+
+bool Server::Impl::claim_controller(Session& s) {
+  if (controller) return false;
+  controller = shell_of(s);
+  return true;
+}
+
+void Server::Impl::relay(const Bytes& message, OutKind kind) {
+  for (WsSession* w : sessions)
+    if (w->core().reads(kind)) w->send(message, kind);
+}
+
+void Server::Impl::greeted(Session& s) {
+  if (!replay) return;
+  if (!replay_started) {  // the first client starts the playback
+    replay_started = true;
+    replay->play(Replay::Clock::now());
+    replay_status_due = Replay::Clock::now();
+    replay_timer.cancel();
+    tick_replay();
+  }
+  // Where the replay is: the body as it was there, and the playback.
+  WsSession* w = shell_of(s);
+  if (const Replay::Item* st = replay->state_before(); st && s.role() != wire::Role::Device)
+    w->send(copy_bytes(st->bytes.data(), st->bytes.size()), OutKind::State);
+  if (s.reads_replay_status()) w->send(replay_status(), OutKind::Control);
+}
+
+void Server::Impl::control(const wire::Control& c, Session& from) {
+  WsSession& w = *shell_of(from);
+  if (replay) return replay_control(c, w);
+  live_control(c, w);
+}
+
+void Server::Impl::live_control(const wire::Control& c, WsSession& from) {
+  switch (c.command_type()) {
+    // A pause sent while a change is under way is carried over to the new scene.
+    case wire::ControlCommand::Pause: return director->current()->loop().set_paused(true);
+    case wire::ControlCommand::Resume: return director->current()->loop().set_paused(false);
+    case wire::ControlCommand::Reset: return change(Change::Reset, &c);
+    case wire::ControlCommand::LoadScene: return change(Change::Load, &c);
+    case wire::ControlCommand::SetParameter: return change(Change::Parameter, &c);
+    case wire::ControlCommand::StartRecording: {
+      const wire::StartRecording* r = c.command_as_StartRecording();
+      if (const std::string bad = start_recording(r && r->path() ? r->path()->str() : ""); !bad.empty())
+        return from.send(make_error(bad.starts_with("a recording") ? wire::ErrorCode::Busy : wire::ErrorCode::BadRequest,
+                                    bad, c.request_id()),
+                         OutKind::Control);
+      return;
+    }
+    case wire::ControlCommand::StopRecording:
+      if (!recorder)
+        return from.send(make_error(wire::ErrorCode::BadRequest, "StopRecording: no recording is under way",
+                                    c.request_id()),
+                         OutKind::Control);
+      return stop_recording();
+    default:
+      return from.send(make_error(wire::ErrorCode::BadRequest,
+                                  std::string("control command ") + wire::EnumNameControlCommand(c.command_type()) +
+                                      " is for a server replaying a recording; this one runs a live scene",
+                                  c.request_id()),
+                       OutKind::Control);
+  }
+}
+
 // ---- the server ------------------------------------------------------------------------------
 
 bool Server::Impl::make_room(const std::string& address) {
   size_t greeted = 0, waiting = 0, waiting_here = 0;
   WsSession *oldest = nullptr, *oldest_here = nullptr;
   for (WsSession* s : sessions) {
-    if (s->greeted() && !s->closing_) ++greeted;
-    if (!s->waiting()) continue;
+    if (s->core().greeted() && !s->core().closed()) ++greeted;
+    if (!s->core().waiting()) continue;
     ++waiting;
-    if (!oldest || s->id() < oldest->id()) oldest = s;
-    if (s->address() != address) continue;
+    if (!oldest || s->core().id() < oldest->core().id()) oldest = s;
+    if (s->core().address() != address) continue;
     ++waiting_here;
-    if (!oldest_here || s->id() < oldest_here->id()) oldest_here = s;
+    if (!oldest_here || s->core().id() < oldest_here->core().id()) oldest_here = s;
   }
   if (greeted >= options.max_connections) return false;
   if (waiting_here >= options.max_waiting_per_address) oldest_here->drop();
@@ -991,18 +687,18 @@ void Server::Impl::deliver() {
   drain_tap(*feed);
   std::vector<WsSession*> devices, viewers;
   for (WsSession* s : sessions) {
-    if (!s->greeted()) continue;
-    (s->role() == wire::Role::Device ? devices : viewers).push_back(s);
+    if (!s->core().greeted()) continue;
+    (s->core().role() == wire::Role::Device ? devices : viewers).push_back(s);
   }
   feed->haptics.drain([&](const uint8_t* data, size_t n) {
     if (devices.empty()) return;
     const Bytes frame = copy_bytes(data, n);
-    for (WsSession* s : devices) s->send(frame, WsSession::Kind::Haptic);
+    for (WsSession* s : devices) s->send(frame, OutKind::Haptic);
   });
   if (const std::vector<uint8_t>* state = feed->states.take()) {
     const Bytes frame = copy_bytes(state->data(), state->size());
     for (WsSession* s : sessions)
-      if (s->greeted()) s->send(frame, WsSession::Kind::State);
+      if (s->core().greeted()) s->send(frame, OutKind::State);
   }
 }
 
@@ -1014,7 +710,7 @@ void Server::Impl::tick_replay() {
   if (now >= replay_status_due) {
     const Bytes status = replay_status();
     for (WsSession* s : sessions)
-      if (s->reads_replay_status()) s->send(status, WsSession::Kind::Control);
+      if (s->core().reads_replay_status()) s->send(status, OutKind::Control);
     replay_status_due = now + std::chrono::milliseconds(100);
   }
   // Until the next message is due or the next status, whichever is first.
@@ -1034,30 +730,30 @@ void Server::Impl::serve_replayed(const Replay::Item& item) {
       if (*m == *feed->description) return;
       feed = std::make_shared<Feed>(m);
       for (WsSession* s : sessions) {
-        if (!s->greeted()) continue;
-        s->send(m, WsSession::Kind::Control);
-        if (s->role() == wire::Role::Device) s->bind_devices();
+        if (!s->core().greeted()) continue;
+        s->send(m, OutKind::Control);
+        if (s->core().role() == wire::Role::Device) s->rebind();
       }
       return;
     case Topic::State:
       for (WsSession* s : sessions)
-        if (s->greeted() && s->role() != wire::Role::Device) s->send(m, WsSession::Kind::State);
+        if (s->core().greeted() && s->core().role() != wire::Role::Device) s->send(m, OutKind::State);
       return;
     case Topic::Haptic:  // a bridge plays the recorded forces to its device, under its safety rules
       for (WsSession* s : sessions)
-        if (s->drives_devices()) s->send(m, WsSession::Kind::Haptic);
+        if ((s->core().greeted() && s->core().role() == wire::Role::Device)) s->send(m, OutKind::Haptic);
       return;
     case Topic::Telemetry:
       for (WsSession* s : sessions)
-        if (s->greeted()) s->send(m, WsSession::Kind::Control);
+        if (s->core().greeted()) s->send(m, OutKind::Control);
       return;
     case Topic::Safety:
       for (WsSession* s : sessions)
-        if (s->reads_safety_events()) s->send(m, WsSession::Kind::Event);
+        if (s->core().reads(OutKind::Event)) s->send(m, OutKind::Event);
       return;
     case Topic::DeviceStatus:
       for (WsSession* s : sessions)
-        if (s->reads_device_status()) s->send(m, WsSession::Kind::Status);
+        if (s->core().reads(OutKind::Status)) s->send(m, OutKind::Status);
       return;
     case Topic::Input:
     case Topic::Control:
@@ -1089,7 +785,7 @@ void Server::Impl::replay_control(const wire::Control& c, WsSession& from) {
       const double t = c.command_as_Seek() ? c.command_as_Seek()->time_s() : 0;
       if (!std::isfinite(t))
         return from.send(make_error(wire::ErrorCode::BadRequest, "Seek: time_s is not finite", c.request_id()),
-                         WsSession::Kind::Control);
+                         OutKind::Control);
       replay->seek(t, now);
       show_replay_position();
       break;
@@ -1099,7 +795,7 @@ void Server::Impl::replay_control(const wire::Control& c, WsSession& from) {
         replay->set_speed(c.command_as_SetSpeed() ? c.command_as_SetSpeed()->speed() : 0, now);
       } catch (const std::invalid_argument& e) {
         return from.send(make_error(wire::ErrorCode::BadRequest, std::string("SetSpeed: ") + e.what(), c.request_id()),
-                         WsSession::Kind::Control);
+                         OutKind::Control);
       }
       break;
     default:
@@ -1108,7 +804,7 @@ void Server::Impl::replay_control(const wire::Control& c, WsSession& from) {
                                       " needs a live session; this server replays the recording '" +
                                       std::filesystem::path(replay->path()).filename().string() + "'",
                                   c.request_id()),
-                       WsSession::Kind::Control);
+                       OutKind::Control);
   }
   // The change, to everyone at once (and the timer re-armed for the new pace).
   replay_status_due = now;
@@ -1226,7 +922,7 @@ std::string Server::Impl::start_recording(const std::string& name, bool any_path
   if (incoming) tap_feed(*incoming);
   const Bytes t = telemetry_message("");
   for (WsSession* s : sessions)
-    if (s->greeted()) s->send(t, WsSession::Kind::Control);
+    if (s->core().greeted()) s->send(t, OutKind::Control);
   return "";
 }
 
@@ -1243,7 +939,7 @@ void Server::Impl::stop_recording() {
   finishing.push_back(std::move(recorder));
   const Bytes t = telemetry_message("");
   for (WsSession* s : sessions)
-    if (s->greeted()) s->send(t, WsSession::Kind::Control);
+    if (s->core().greeted()) s->send(t, OutKind::Control);
 }
 
 std::string Server::Impl::check_recorder() {
@@ -1275,9 +971,9 @@ Bytes Server::Impl::telemetry_message(const std::string& extra_fault) {
   const RealtimeStats st = loop.stats();
   uint32_t viewers = 0, devices = 0, controllers = 0;
   for (WsSession* s : sessions) {
-    if (!s->greeted()) continue;
-    if (s->role() == wire::Role::Viewer) ++viewers;
-    else if (s->role() == wire::Role::Device) ++devices;
+    if (!s->core().greeted()) continue;
+    if (s->core().role() == wire::Role::Viewer) ++viewers;
+    else if (s->core().role() == wire::Role::Device) ++devices;
     else ++controllers;
   }
   fb::FlatBufferBuilder b;
@@ -1304,7 +1000,7 @@ void Server::Impl::tick_telemetry() {
     if (ec || self->stopped) return;
     const Bytes t = self->telemetry_message(self->check_recorder());
     for (WsSession* s : self->sessions)
-      if (s->greeted()) s->send(t, WsSession::Kind::Control);
+      if (s->core().greeted()) s->send(t, OutKind::Control);
     self->record(Topic::Telemetry, t);
     // Once a telemetry has told every client (and the recording) the
     // fault's cause, the scene starts again from rest, as a controller's
@@ -1327,7 +1023,7 @@ void Server::Impl::close_all() {
 // ---- control: reset, load, set a parameter ------------------------------------------------
 
 void Server::Impl::send_to_controller(const Bytes& message) {
-  if (controller) controller->send(message, WsSession::Kind::Control);
+  if (controller) controller->send(message, OutKind::Control);
 }
 
 void Server::Impl::change(Change kind, const wire::Control* c) {
@@ -1405,9 +1101,9 @@ void Server::Impl::installed(const std::shared_ptr<LiveScene>& live) {
   changing = false;
   record(Topic::Scene, feed->description);
   for (WsSession* s : sessions) {
-    if (!s->greeted()) continue;
-    s->send(feed->description, WsSession::Kind::Control);
-    if (s->role() == wire::Role::Device) s->bind_devices();
+    if (!s->core().greeted()) continue;
+    s->send(feed->description, OutKind::Control);
+    if (s->core().role() == wire::Role::Device) s->rebind();
   }
   deliver();
 }
