@@ -6,6 +6,7 @@ const STOPS = [
 ];
 
 // Writes the colour of u in [0, 1] (clamped) into out[o..o+2].
+/** @param {number} u @param {{ [i: number]: number }} out @param {number} [o] */
 export function viridis(u, out, o = 0) {
   const x = Math.min(1, Math.max(0, Number.isFinite(u) ? u : 0)) * (STOPS.length - 1);
   const i = Math.min(STOPS.length - 2, Math.floor(x));

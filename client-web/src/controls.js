@@ -7,8 +7,14 @@ import {
   ControlCommand, ControlT, EnvelopeT, ErrorCode, LoadSceneT, Message, PauseT, ResetT, ResumeT, Role,
   SetParameterT, StartRecordingT, StopRecordingT, decode, encode, makeHello, messageTypeOf,
 } from '@tactile/proto';
+/** @import { ErrorT, SceneDescriptionT } from '@tactile/proto' */
 
 // An element with properties and children.
+/**
+ * @template {keyof HTMLElementTagNameMap} K
+ * @param {K} tag @param {Partial<HTMLElementTagNameMap[K]>} [attrs] @param {...(Node | string)} children
+ * @returns {HTMLElementTagNameMap[K]}
+ */
 export const el = (tag, attrs = {}, ...children) => {
   const e = document.createElement(tag);
   Object.assign(e, attrs);
@@ -17,16 +23,21 @@ export const el = (tag, attrs = {}, ...children) => {
 };
 
 export class ControlPanel {
+  /** @param {HTMLElement} element @param {{ token: string, url: string }} options */
   constructor(element, { token, url }) {
     this.token = token;
     this.url = url;
+    /** @type {WebSocket | null} */
     this.ws = null;
     this.granted = false;
     this.requestId = 0;
+    /** @type {Map<number, string>} */
     this.pending = new Map();   // request id -> what it asked, for the answer
+    /** @type {SceneDescriptionT | null} */
     this.description = null;
     this.paused = false;
     this.replaying = false;    // the server replays a recording: only the timeline steers it
+    /** @type {[ControlCommand, ControlT['command'], string][]} */
     this.queued = [];          // sent once control is granted (sendWhenGranted)
     this.head = el('div', { className: 'head' });
     this.take = el('button', { textContent: 'take control', disabled: !token,
@@ -39,6 +50,7 @@ export class ControlPanel {
     this.say(token ? '' : 'controls need the token (?token=...)');
   }
 
+  /** @param {string} text */
   say(text) { this.message.textContent = text; }
 
   connect() {
@@ -56,10 +68,11 @@ export class ControlPanel {
         this.build();
         for (const [type, command, what] of this.queued.splice(0)) this.send(type, command, what);
       } else if (type === Message.Error) {
-        const err = decode(data).message;
+        const err = /** @type {ErrorT} */ (decode(data).message);
         const asked = this.pending.get(err.requestId);
         this.pending.delete(err.requestId);
-        this.say(asked ? `${asked}: ${err.message}` : err.message);
+        // (The object API decodes a string as one; null where the field is absent.)
+        this.say(asked ? `${asked}: ${err.message}` : /** @type {string} */ (err.message));
         if (!this.granted && err.code === ErrorCode.Busy) this.say('another controller is connected');
       }
     };
@@ -73,12 +86,14 @@ export class ControlPanel {
   }
 
   // Sends now if in control, else takes control first (the page has the token) and sends then.
+  /** @param {ControlCommand} type @param {ControlT['command']} command @param {string} what */
   sendWhenGranted(type, command, what) {
     if (this.granted) { this.send(type, command, what); return; }
     this.queued.push([type, command, what]);
     if (!this.ws) this.connect();
   }
 
+  /** @param {boolean} replaying */
   setReplaying(replaying) {
     if (replaying === this.replaying) return;
     this.replaying = replaying;
@@ -90,22 +105,25 @@ export class ControlPanel {
   }
 
   // From the viewer connection: every description (a load, a reset, a parameter set) and telemetry.
+  /** @param {SceneDescriptionT} d */
   setDescription(d) {
     this.description = d;
     this.build();
   }
 
+  /** @param {boolean} paused */
   setPaused(paused) {
     if (paused === this.paused) return;
     this.paused = paused;
     if (this.pauseButton) this.pauseButton.textContent = paused ? 'resume' : 'pause';
   }
 
+  /** @param {ControlCommand} type @param {ControlT['command']} command @param {string} what */
   send(type, command, what) {
     if (!this.ws || !this.granted) return;
     this.requestId += 1;
     this.pending.set(this.requestId, what);  // (answered by an Error, or by the change: the latest 64 kept)
-    if (this.pending.size > 64) this.pending.delete(this.pending.keys().next().value);
+    if (this.pending.size > 64) this.pending.delete(/** @type {number} */ (this.pending.keys().next().value));
     this.ws.send(encode(new EnvelopeT(Message.Control, new ControlT(this.requestId, type, command))));
     this.say(`${what}…`);
   }
@@ -137,7 +155,8 @@ export class ControlPanel {
     // Parameters: a switch for on/off, a number field (applied on change) for the rest.
     const table = el('div', { className: 'params' });
     for (const p of d.parameters || []) {
-      const name = p.name;
+      const name = /** @type {string} */ (p.name);
+      /** @type {HTMLInputElement} */
       let input;
       if (p.unit === 'on/off') {
         input = el('input', { type: 'checkbox', checked: p.value !== 0 });

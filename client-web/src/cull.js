@@ -9,10 +9,15 @@
 // Writes into `out` the triangles of `tris` (vertex indices, 3 a triangle, wound outward) that face `eye`
 // ([x, y, z], in the positions' frame) in positions `a` or `b` (x, y, z a vertex), allowing `margin`.
 // Returns how many indices it wrote.
+/**
+ * @param {ArrayLike<number>} tris @param {ArrayLike<number>} a @param {ArrayLike<number>} b
+ * @param {number[]} eye @param {{ [i: number]: number }} out @param {number} [margin]
+ */
 export function frontTriangles(tris, a, b, eye, out, margin = 0.2) {
   const m2 = margin * margin;
   const [ex, ey, ez] = eye;
   let k = 0;
+  /** @param {ArrayLike<number>} P @param {number} i @param {number} j @param {number} l */
   const faces = (P, i, j, l) => {
     const ux = P[j] - P[i], uy = P[j + 1] - P[i + 1], uz = P[j + 2] - P[i + 2];
     const vx = P[l] - P[i], vy = P[l + 1] - P[i + 1], vz = P[l + 2] - P[i + 2];

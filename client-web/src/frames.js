@@ -9,6 +9,7 @@
 
 export class FrameBuffer {
   // nValues: floats per frame (3 x surface vertices); nScalars: per-vertex scalars.
+  /** @param {number} nValues @param {number} [nScalars] */
   constructor(nValues, nScalars = 0) {
     this.a = new Float32Array(nValues);        // older frame
     this.b = new Float32Array(nValues);        // newer frame
@@ -27,6 +28,10 @@ export class FrameBuffer {
   }
 
   // Adds a frame (positions, scalars: array-likes of the right lengths; simTime [s]; now: local clock [s]).
+  /**
+   * @param {ArrayLike<number>} positions @param {ArrayLike<number> | null} scalars
+   * @param {number} simTime @param {number} now
+   */
   push(positions, scalars, simTime, now) {
     if (positions.length !== this.a.length) {
       throw new RangeError(`frame has ${positions.length} position values, the scene ${this.a.length}`);
@@ -57,12 +62,14 @@ export class FrameBuffer {
 
   // The simulated time shown at local time `now`: one interval behind the newest frame, advancing with
   // the clock since it arrived, never past it.
+  /** @param {number} now */
   displayTime(now) {
     if (this.count === 0) return 0;
     return Math.min(this.tb, this.tb - this.interval + Math.max(0, now - this.arrival));
   }
 
   // The weight of the newer frame at local time `now` (0..1): what a shader mixes the two with.
+  /** @param {number} now */
   weight(now) {
     const t = this.displayTime(now);
     const span = this.tb - this.ta;
@@ -71,6 +78,7 @@ export class FrameBuffer {
 
   // Writes the positions (and scalars) at local time `now` into `out` (and `outScalars`); returns the
   // weight of the newer frame (0..1).
+  /** @param {number} now @param {Float32Array | number[]} out @param {Float32Array | number[] | null} [outScalars] */
   sample(now, out, outScalars = null) {
     const w = this.weight(now);
     const a = this.a;

@@ -14,9 +14,14 @@ import { PointerDevice } from './pointer.js';
 import { TelemetryPanel } from './telemetry.js';
 import { Timeline } from './timeline.js';
 import { SceneView } from './view.js';
+/**
+ * @import { DeviceStatusT, ErrorT, ReplayStatusT, SafetyEventT, SceneDescriptionT, TelemetryT, WelcomeT }
+ *   from '@tactile/proto'
+ */
 
-const $ = (id) => document.getElementById(id);
-const status = (text) => { $('status').textContent = text; };
+// (index.html has every element the page asks for by id.)
+const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
+const status = (/** @type {string} */ text) => { $('status').textContent = text; };
 
 // Shadows and multisampling where a GPU draws; without them where the CPU does (SwiftShader, llvmpipe:
 // headless browsers, remote desktops), which they would slow to a few frames a second.
@@ -55,9 +60,16 @@ const telemetry = new TelemetryPanel($('telemetry'));
 // ?device=NAME: the channel the mouse drives (default: one meant for the page, such as 'mouse').
 const pointer = new PointerDevice({ canvas: renderer.domElement, camera, controls, token,
                                     wanted: query.get('device') || '',
-                                    onStatus: (text) => { $('poke').textContent = text; } });
+                                    onStatus: (/** @type {string} */ text) => { $('poke').textContent = text; } });
 
 // What the tests read (and a person can, in the console).
+/**
+ * @type {{ frames: number, rendered: number, sceneId: number, sceneName: string, vertices: number,
+ *   errors: ErrorT['message'][], lastStep: number, quality: string, decodeMs: number[], slotMs: number[],
+ *   frameMs: number[], timeline?: Timeline, pointer?: PointerDevice, controls?: ControlPanel,
+ *   project?: (x: number, y: number, z: number) => number[], fault?: string, view?: SceneView,
+ *   drawnTriangles?: number, telemetry?: TelemetryT, deviceStatus?: DeviceStatusT, replay?: ReplayStatusT }}
+ */
 const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality,
                 decodeMs: [], slotMs: [], frameMs: [] };
 const controlPanel = new ControlPanel($('controls'), { token, url: wsUrl });
@@ -71,16 +83,18 @@ stats.project = (x, y, z) => {
   const r = renderer.domElement.getBoundingClientRect();
   return [r.left + ((v.x + 1) / 2) * r.width, r.top + ((1 - v.y) / 2) * r.height];
 };
-window.tactile = stats;
+/** @type {Window & { tactile?: typeof stats }} */ (window).tactile = stats;
 
 // A fault that stopped the simulation (the telemetry names it until the scene is reset or another loaded):
 // said in the middle of the page, with a reset, which takes control (with the token) and resets.
 stats.fault = '';
-$('fault-reset').disabled = !token;
-$('fault-reset').title = token ? '' : 'resetting needs the token: open the URL with ?token=...';
-$('fault-reset').addEventListener('click', () => {
+const faultReset = /** @type {HTMLButtonElement} */ ($('fault-reset'));
+faultReset.disabled = !token;
+faultReset.title = token ? '' : 'resetting needs the token: open the URL with ?token=...';
+faultReset.addEventListener('click', () => {
   controlPanel.sendWhenGranted(ControlCommand.Reset, new ResetT(), 'reset');
 });
+/** @param {string[]} faults */
 function showFault(faults) {
   const text = faults.length ? `the simulation stopped: ${faults.join('; ')}` : '';
   if (text === stats.fault) return;
@@ -89,11 +103,14 @@ function showFault(faults) {
   $('fault').hidden = !text;
 }
 
+/** @type {SceneView | null} */
 let view = null;
+/** @type {FrameBuffer | null} */
 let buffer = null;
 let cameraMoved = false;  // since the last cull
 const legendRange = [NaN, NaN];  // as the legend shows it
 controls.addEventListener('change', () => { cameraMoved = true; });
+/** @type {THREE.Mesh<THREE.PlaneGeometry, THREE.ShadowMaterial> | null} */
 let ground = null;
 
 function resize() {
@@ -105,19 +122,20 @@ function resize() {
 }
 window.addEventListener('resize', resize);
 
+/** @param {SceneDescriptionT} d */
 function onScene(d) {
   if (view) view.dispose();
   view = new SceneView(scene, d, quality);
   stats.view = view;
   buffer = new FrameBuffer(view.positions.length, view.scalars.length);
   stats.sceneId = d.sceneId;
-  stats.sceneName = d.sceneName || '';
+  stats.sceneName = /** @type {string | null} */ (d.sceneName) || '';
   showFault([]);
   stats.vertices = view.positions.length / 3;
   $('scene').textContent = `${stats.sceneName}: ${stats.vertices} surface vertices, step ${(d.dt * 1e3).toFixed(3)} ms`;
-  $('legend-name').textContent = d.scalarName || 'scalar';
+  $('legend-name').textContent = /** @type {string | null} */ (d.scalarName) || 'scalar';
   // Frame the body: look at its centre from the front, above.
-  const s = view.geometry.boundingSphere;
+  const s = /** @type {THREE.Sphere} */ (view.geometry.boundingSphere);  // (SceneView computes it)
   const c = s.center;
   const r = s.radius || 0.05;
   controls.target.copy(c);
@@ -140,7 +158,7 @@ function onScene(d) {
     view.geometry.computeBoundingBox();
     ground = new THREE.Mesh(new THREE.PlaneGeometry(12 * r, 12 * r).rotateX(-Math.PI / 2),
                             new THREE.ShadowMaterial({ opacity: 0.35 }));
-    ground.position.set(c.x, view.geometry.boundingBox.min.y - 1e-4, c.z);
+    ground.position.set(c.x, /** @type {THREE.Box3} */ (view.geometry.boundingBox).min.y - 1e-4, c.z);
     ground.receiveShadow = true;
     scene.add(ground);
   }
@@ -149,10 +167,11 @@ function onScene(d) {
   controlPanel.setDescription(d);
 }
 
+/** @param {Uint8Array} data */
 function onMessage(data) {
   const type = messageTypeOf(data);
   if (type === Message.StateFrame) {
-    if (!buffer) return;
+    if (!buffer || !view) return;  // (onScene makes both)
     const t0 = performance.now();
     const f = readStateFrame(data);
     if (f.sceneId !== stats.sceneId) return;
@@ -181,24 +200,40 @@ function onMessage(data) {
     }
     return;
   }
+  // The message is of the type the Envelope names (decode checked that it holds one); flatc types it as
+  // the union of them all.
   const m = decode(data);
   switch (m.messageType) {
-    case Message.Welcome: checkVersion(m.message); break;
-    case Message.SceneDescription: onScene(m.message); break;
-    case Message.Error: status(`server: ${m.message.message}`); stats.errors.push(m.message.message); break;
-    case Message.Telemetry:
-      telemetry.update(m.message, pointer.latencies);
-      controlPanel.setPaused(m.message.paused);
-      showFault(m.message.faults || []);
-      stats.telemetry = m.message;
+    case Message.Welcome: checkVersion(/** @type {WelcomeT} */ (m.message)); break;
+    case Message.SceneDescription: onScene(/** @type {SceneDescriptionT} */ (m.message)); break;
+    case Message.Error: {
+      const err = /** @type {ErrorT} */ (m.message);
+      status(`server: ${err.message}`);
+      stats.errors.push(err.message);
       break;
-    case Message.SafetyEvent: telemetry.safety(m.message); break;
-    case Message.DeviceStatus: telemetry.deviceStatus(m.message); stats.deviceStatus = m.message; break;
-    case Message.ReplayStatus:
-      timeline.update(m.message);
+    }
+    case Message.Telemetry: {
+      const t = /** @type {TelemetryT} */ (m.message);
+      telemetry.update(t, pointer.latencies);
+      controlPanel.setPaused(t.paused);
+      showFault(t.faults || []);
+      stats.telemetry = t;
+      break;
+    }
+    case Message.SafetyEvent: telemetry.safety(/** @type {SafetyEventT} */ (m.message)); break;
+    case Message.DeviceStatus: {
+      const d = /** @type {DeviceStatusT} */ (m.message);
+      telemetry.deviceStatus(d);
+      stats.deviceStatus = d;
+      break;
+    }
+    case Message.ReplayStatus: {
+      const r = /** @type {ReplayStatusT} */ (m.message);
+      timeline.update(r);
       controlPanel.setReplaying(true);
-      stats.replay = m.message;
+      stats.replay = r;
       break;
+    }
     default: break;
   }
 }
@@ -216,8 +251,8 @@ function connect() {
     try {
       onMessage(new Uint8Array(e.data));
     } catch (err) {
-      status(`bad message: ${err.message}`);
-      stats.errors.push(String(err.message));
+      status(`bad message: ${/** @type {Error} */ (err).message}`);
+      stats.errors.push(String(/** @type {Error} */ (err).message));
     }
   };
   ws.onclose = () => {

@@ -9,10 +9,17 @@ import {
   decode, encode, makeHello, messageTypeOf,
 } from '@tactile/proto';
 import { channelOrder, pressTarget } from './press.js';
+/** @import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js' */
+/** @import { DeviceHaptics, ErrorT, SceneDescriptionT, Vec3f } from '@tactile/proto' */
+/** @import { SceneView } from './view.js' */
 
 export class PointerDevice {
   // `canvas`, `camera`, `controls` (OrbitControls, paused while dragging); `token` for the device role;
   // `onStatus(text)` for what it is doing.
+  /**
+   * @param {{ canvas: HTMLCanvasElement, camera: THREE.Camera, controls: OrbitControls, token: string,
+   *           onStatus: (text: string) => void, wanted?: string }} options
+   */
   constructor({ canvas, camera, controls, token, onStatus, wanted = '' }) {
     this.canvas = canvas;
     this.wanted = wanted;  // the channel ?device= names, or '' for those meant for the page
@@ -20,23 +27,29 @@ export class PointerDevice {
     this.controls = controls;
     this.token = token;
     this.onStatus = onStatus;
+    /** @type {WebSocket | null} */
     this.ws = null;
+    /** @type {string | null} */
     this.channel = null;        // the channel it drives, once the server welcomed it
     this.channelIndex = -1;     // in SceneDescription.devices
     this.proxy = -1;            // the first proxy of that channel (index in the scene)
     this.radius = 0.01;
+    /** @type {THREE.Vector3 | null} */
     this.home = null;           // where that proxy waits: its pose before any input [m]
     this.target = new THREE.Vector3();
     this.dragging = false;
     this.depth = 0;             // how far past the grabbed surface [m]
     this.sequence = 0;
+    /** @type {Map<number, number>} */
     this.sent = new Map();      // sequence -> performance.now() it was sent, for the latency
     this.latencyMs = NaN;       // input to the haptic frame that had seen it, latest
     this.force = new THREE.Vector3();  // what the channel felt, latest haptic frame [N]
+    /** @type {number[]} */
     this.latencies = [];        // the latest input round trips [ms]
     this.ray = new THREE.Raycaster();
     this.ndc = new THREE.Vector2();
     this.plane = { point: new THREE.Vector3(), normal: new THREE.Vector3() };
+    /** @type {SceneView | null} */
     this.view = null;
     canvas.addEventListener('pointerdown', (e) => this.down(e));
     canvas.addEventListener('pointermove', (e) => this.move(e));
@@ -46,6 +59,7 @@ export class PointerDevice {
   }
 
   // A new scene (or the first): its channels may differ, so the connection starts again.
+  /** @param {SceneDescriptionT} description @param {SceneView} view @param {string} url */
   setScene(description, view, url) {
     this.view = view;
     this.close();
@@ -66,6 +80,7 @@ export class PointerDevice {
     this.tryChannels(url, description, order, 0);
   }
 
+  /** @param {string} url @param {SceneDescriptionT} description @param {string[]} order @param {number} k */
   tryChannels(url, description, order, k) {
     if (k >= order.length) {
       this.onStatus(order.length ? 'poke: every device channel is driven by a device' : 'poke: this scene has no device channel');
@@ -93,7 +108,7 @@ export class PointerDevice {
         return;
       }
       if (type === Message.Error) {
-        const err = decode(data).message;
+        const err = /** @type {ErrorT} */ (decode(data).message);
         if (!welcomed && err.code === ErrorCode.Busy) {
           ws.onclose = null;
           ws.close();
@@ -122,11 +137,13 @@ export class PointerDevice {
   }
 
   // From each state frame: the proxies' poses (n x 7). The first one seen is where the proxy waits.
+  /** @param {Float32Array} poses */
   observe(poses) {
     if (this.proxy < 0 || this.home || 7 * this.proxy + 2 >= poses.length) return;
     this.home = new THREE.Vector3(poses[7 * this.proxy], poses[7 * this.proxy + 1], poses[7 * this.proxy + 2]);
   }
 
+  /** @param {MouseEvent} e */
   pointerRay(e) {
     const r = this.canvas.getBoundingClientRect();
     this.ndc.set(((e.clientX - r.left) / r.width) * 2 - 1, -((e.clientY - r.top) / r.height) * 2 + 1);
@@ -134,6 +151,7 @@ export class PointerDevice {
     return this.ray.ray;
   }
 
+  /** @param {PointerEvent} e */
   down(e) {
     if (!this.channel || !this.view || this.proxy < 0 || e.button > 0) return;
     this.pointerRay(e);
@@ -141,7 +159,8 @@ export class PointerDevice {
     if (!hit) return;  // not on the body: the view turns instead
     this.plane.point.copy(hit.point);
     // The face's outward normal (the body is drawn untransformed: its local frame is the scene's).
-    this.plane.normal.copy(hit.face.normal).normalize();
+    // (A mesh's hit always has its face.)
+    this.plane.normal.copy(/** @type {THREE.Face} */ (hit.face).normal).normalize();
     if (!this.aim(e)) return;
     this.dragging = true;
     this.controls.enabled = false;
@@ -149,10 +168,12 @@ export class PointerDevice {
     e.preventDefault();
   }
 
+  /** @param {PointerEvent} e */
   move(e) {
     if (this.dragging) this.aim(e);
   }
 
+  /** @param {PointerEvent} e */
   up(e) {
     if (!this.dragging) return;
     this.dragging = false;
@@ -160,18 +181,21 @@ export class PointerDevice {
     if (this.canvas.hasPointerCapture(e.pointerId)) this.canvas.releasePointerCapture(e.pointerId);
   }
 
+  /** @param {WheelEvent} e */
   wheel(e) {
     if (!this.dragging) return;
     e.preventDefault();
     this.depth = Math.min(2 * this.radius, Math.max(0, this.depth - 1e-3 * this.radius * e.deltaY));
   }
 
+  /** @param {MouseEvent} e */
   aim(e) {
     return pressTarget(this.pointerRay(e), this.plane.point, this.plane.normal, this.radius, this.depth, this.target);
   }
 
   // Once per animation frame: sends the pose (the target while dragging, home otherwise: the server
   // glides between inputs over their interval).
+  /** @param {number} now */
   tick(now) {
     if (!this.channel || !this.ws || this.ws.readyState !== WebSocket.OPEN) return;
     const to = this.dragging ? this.target : this.home;
@@ -181,17 +205,20 @@ export class PointerDevice {
                                      new Vec3dT(to.x, to.y, to.z), new QuatdT(1, 0, 0, 0), this.dragging ? 1 : 0);
       this.ws.send(encode(new EnvelopeT(Message.DeviceInput, input)));
       this.sent.set(this.sequence, now);
-      if (this.sent.size > 600) this.sent.delete(this.sent.keys().next().value);
+      if (this.sent.size > 600) this.sent.delete(/** @type {number} */ (this.sent.keys().next().value));
     }
   }
 
   // Each haptic frame as it arrives (a few thousand a second, read in place, nothing copied): the force,
   // and the first frame that had seen an input gives that input's round trip.
+  /** @param {Uint8Array} bytes @param {number} now */
   onHaptic(bytes, now) {
     const env = Envelope.getRootAsEnvelope(new ByteBuffer(bytes));
-    const frame = env.message(new HapticFrame());
+    const frame = /** @type {HapticFrame | null} */ (env.message(new HapticFrame()));
     if (!frame || this.channelIndex < 0 || this.channelIndex >= frame.devicesLength()) return;
-    const f = frame.devices(this.channelIndex).force();
+    // A struct in range (checked above), and a struct's struct, which flatc's types call nullable.
+    const device = /** @type {DeviceHaptics} */ (frame.devices(this.channelIndex));
+    const f = /** @type {Vec3f} */ (device.force());
     this.force.set(f.x(), f.y(), f.z());
     if (this.channelIndex < frame.deviceInputSequencesLength()) {
       const seen = Number(frame.deviceInputSequences(this.channelIndex));

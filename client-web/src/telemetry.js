@@ -5,35 +5,42 @@
 // time and cause.
 
 import { SafetyKind } from '@tactile/proto';
+/** @import { DeviceStatusT, SafetyEventT, TelemetryT } from '@tactile/proto' */
 
 const SPAN = 60; // samples kept (about a minute)
 // 'ContinuousLimit' -> 'continuous limit'
+/** @param {SafetyKind} k */
 const kindName = (k) => (SafetyKind[k] ?? `kind ${k}`).replace(/([a-z])([A-Z])/g, '$1 $2').toLowerCase();
 
 export class TelemetryPanel {
+  /** @param {HTMLElement} element */
   constructor(element) {
-    this.text = element.querySelector('.figures');
-    this.canvas = element.querySelector('canvas');
-    this.events = element.querySelector('.events');
+    // (index.html has each of them.)
+    this.text = /** @type {HTMLElement} */ (element.querySelector('.figures'));
+    this.canvas = /** @type {HTMLCanvasElement} */ (element.querySelector('canvas'));
+    this.events = /** @type {HTMLElement} */ (element.querySelector('.events'));
     this.stepUs = new Float64Array(SPAN);
     this.rtf = new Float64Array(SPAN);
     this.latency = new Float64Array(SPAN).fill(NaN);
     this.bridgeLate = new Float64Array(SPAN).fill(NaN);   // tick lateness p99 [ms], the first bridge's
     this.bridgeDelay = new Float64Array(SPAN).fill(NaN);  // its display delay [ms]
+    /** @type {Map<DeviceStatusT['device'], DeviceStatusT>} */
     this.devices = new Map();  // channel -> its latest DeviceStatusT
     this.count = 0;
+    /** @type {TelemetryT | null} */
     this.latest = null;
   }
 
   // A TelemetryT (object API); `latencies`: this page's latest input-to-force round trips [ms] (the
   // ones since the previous call are summarised: median and 95th percentile).
+  /** @param {TelemetryT} t @param {number[]} [latencies] */
   update(t, latencies = []) {
     this.latest = t;
     const k = this.count % SPAN;
     this.stepUs[k] = t.stepTimeMeanUs;
     this.rtf[k] = t.realTimeFactor;
     const fresh = latencies.splice(0).sort((a, b) => a - b);
-    const pick = (q) => fresh[Math.min(fresh.length - 1, Math.floor(q * fresh.length))];
+    const pick = (/** @type {number} */ q) => fresh[Math.min(fresh.length - 1, Math.floor(q * fresh.length))];
     this.latency[k] = fresh.length ? pick(0.5) : NaN;
     const bridge = this.devices.values().next().value;
     const current = bridge && Number(t.serverTimeNs - bridge.serverTimeNs) < 3e9;  // reported in the last 3 s
@@ -61,22 +68,24 @@ export class TelemetryPanel {
   }
 
   // A DeviceStatusT (object API): a bridge's loop timing, shown and plotted with the next Telemetry.
+  /** @param {DeviceStatusT} d */
   deviceStatus(d) {
     this.devices.set(d.device, d);
   }
 
   // A SafetyEventT (object API), newest on top, the latest 8 kept.
+  /** @param {SafetyEventT} e */
   safety(e) {
     const li = document.createElement('li');
     const kind = kindName(e.kind);
     li.textContent = `${new Date().toLocaleTimeString()} ${e.device}: ${kind}: ${e.message} (${e.forceN.toFixed(2)} N)`;
     this.events.prepend(li);
-    while (this.events.children.length > 8) this.events.lastChild.remove();
+    while (this.events.children.length > 8) /** @type {ChildNode} */ (this.events.lastChild).remove();
   }
 
   draw() {
     const c = this.canvas;
-    const g = c.getContext('2d');
+    const g = /** @type {CanvasRenderingContext2D} */ (c.getContext('2d'));
     const w = c.width;
     const h = c.height;
     g.clearRect(0, 0, w, h);
@@ -85,6 +94,7 @@ export class TelemetryPanel {
     let top = 0;
     for (let i = 0; i < n; i++) top = Math.max(top, this.stepUs[i]);
     top = top * 1.2 || 1;
+    /** @param {Float64Array} values @param {number} scale @param {string} colour */
     const series = (values, scale, colour) => {
       g.strokeStyle = colour;
       g.beginPath();

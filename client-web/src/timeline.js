@@ -6,13 +6,17 @@ import {
   ControlCommand, PauseT, ResumeT, SeekT, SetSpeedT,
 } from '@tactile/proto';
 import { el } from './controls.js';
+/** @import { ControlT, ReplayStatusT } from '@tactile/proto' */
+/** @import { ControlPanel } from './controls.js' */
 
 export const SPEEDS = [0.25, 0.5, 1, 2, 4];
 
 export class Timeline {
+  /** @param {HTMLElement} element @param {ControlPanel} controlPanel */
   constructor(element, controlPanel) {
     this.element = element;
     this.control = controlPanel;
+    /** @type {ReplayStatusT | null} */
     this.status = null;
     this.dragging = false;
     this.name = el('div', { className: 'name' });
@@ -41,6 +45,7 @@ export class Timeline {
     element.hidden = true;
   }
 
+  /** @param {ControlCommand} type @param {ControlT['command']} command @param {string} what */
   send(type, command, what) {
     if (!this.control.token) {
       this.control.say('steering a replay needs the token (?token=...)');
@@ -50,6 +55,7 @@ export class Timeline {
   }
 
   // From the viewer connection, ten times a second.
+  /** @param {ReplayStatusT} st */
   update(st) {
     this.status = st;
     this.element.hidden = false;
@@ -63,6 +69,7 @@ export class Timeline {
     if (document.activeElement !== this.speed) this.speed.value = String(st.speed);
   }
 
+  /** @param {number} t */
   showTime(t) {
     const st = this.status;
     this.time.textContent = `${t.toFixed(2)} / ${st ? st.durationS.toFixed(2) : '?'} s` +

@@ -12,6 +12,7 @@ import * as THREE from 'three';
 
 import { viridisBytes } from './colormap.js';
 import { frontTriangles } from './cull.js';
+/** @import { ProxyInfoT, SceneDescriptionT } from '@tactile/proto' */
 
 const VIRIDIS = viridisBytes();
 
@@ -22,6 +23,7 @@ const SHAPES = ['sphere', 'capsule', 'box', 'plane'];
 // its light loop, colour management and the attributes it declares, cost half the frame rate in
 // SwiftShader on the same mesh (client-web/bench/render_bench.mjs, 20 k vertices). The colours are the
 // colour map's bytes as they are, so the surface shows the legend's colours exactly.
+/** @param {{ [name: string]: THREE.IUniform }} uniforms */
 function lowQualityMaterial(uniforms) {
   return new THREE.ShaderMaterial({
     uniforms,
@@ -58,6 +60,7 @@ function lowQualityMaterial(uniforms) {
 export class SceneView {
   // `quality`: 'high' shades physically (MeshStandardMaterial) with shadows; 'low' (software renderers)
   // with a camera light in a shader of its own (lowQualityMaterial), a fraction of the cost.
+  /** @param {THREE.Scene} scene @param {SceneDescriptionT} description @param {string} [quality] */
   constructor(scene, description, quality = 'high') {
     this.root = new THREE.Group();
     scene.add(this.root);
@@ -93,6 +96,7 @@ export class SceneView {
     this.bindSlots(geometry);
     geometry.computeBoundingSphere();
     this.geometry = geometry;
+    /** @param {THREE.WebGLProgramParametersWithUniforms} shader @param {boolean} colours */
     const inject = (shader, colours) => {
       Object.assign(shader.uniforms, this.uniforms);
       shader.vertexShader = 'attribute vec3 posA;\nattribute vec3 posB;\nattribute vec3 colA;\nattribute vec3 colB;\n' +
@@ -135,7 +139,7 @@ export class SceneView {
     this.pickAttr = new THREE.BufferAttribute(this.positions, 3);
     pickGeometry.setAttribute('position', this.pickAttr);
     this.pick = new THREE.Mesh(pickGeometry, new THREE.MeshBasicMaterial({ side: THREE.DoubleSide }));
-    this.size = geometry.boundingSphere.radius || 0.05;
+    this.size = /** @type {THREE.Sphere} */ (geometry.boundingSphere).radius || 0.05;  // (computed above)
 
     this.proxies = (description.proxies || []).map((p) => this.makeProxy(p));
     this.arrows = this.proxies.map(() => {
@@ -148,6 +152,7 @@ export class SceneView {
     this.tmp = new THREE.Vector3();
   }
 
+  /** @param {ProxyInfoT} info */
   makeProxy(info) {
     const shape = SHAPES[info.shape] ?? 'sphere';
     let geometry;
@@ -162,7 +167,7 @@ export class SceneView {
                                                      transparent: shape === 'plane', opacity: shape === 'plane' ? 0.3 : 1 });
     const mesh = new THREE.Mesh(geometry, material);
     mesh.castShadow = shape !== 'plane';
-    mesh.name = info.name || '';
+    mesh.name = /** @type {string | null} */ (info.name) || '';
     this.root.add(mesh);
     return mesh;
   }
@@ -178,6 +183,10 @@ export class SceneView {
 
   // Positions quantized over the box, and scalars as colours over the range seen so far (it only widens,
   // so that colours do not flicker).
+  /**
+   * @param {{ p: THREE.BufferAttribute, c: THREE.BufferAttribute }} slot
+   * @param {ArrayLike<number>} positions @param {ArrayLike<number>} scalars
+   */
   writeSlot(slot, positions, scalars) {
     const p = slot.p.array;
     const k = 32767 / this.half;
@@ -204,6 +213,10 @@ export class SceneView {
   // A new state (positions [m], n x 3; scalars, n): written once into the free slot, which becomes the
   // newer; `older` (the frame before it, as the frame buffer holds it) is rewritten only when the box or
   // the colour range had to widen.
+  /**
+   * @param {Float32Array} positions @param {Float32Array} scalars
+   * @param {Float32Array} older @param {Float32Array} olderScalars
+   */
   pushState(positions, scalars, older, olderScalars) {
     let far = 0;
     const c = this.centre;
@@ -238,8 +251,9 @@ export class SceneView {
 
   // Sends only the triangles that face `eye` (a THREE.Vector3 in world space) in the two states mixed on
   // screen, where the CPU draws; the count sent, or all of them where it does not cull.
+  /** @param {THREE.Vector3} eye */
   cullFor(eye) {
-    const all = this.pick.geometry.index;
+    const all = /** @type {THREE.BufferAttribute} */ (this.pick.geometry.index);  // (set in the constructor)
     if (!this.culls) return all.count / 3;
     this.root.worldToLocal(this.eye.copy(eye));
     const out = this.culls[this.cullNext];
@@ -255,11 +269,13 @@ export class SceneView {
   }
 
   // The weight of the newer state on screen now (0..1).
+  /** @param {number} w */
   setMix(w) {
     this.uniforms.surfaceMix.value = w;
   }
 
   // Proxy poses (n x 7: position, orientation w x y z) and forces (n x 3) from a state frame.
+  /** @param {Float32Array} poses @param {Float32Array} forces */
   updateProxies(poses, forces) {
     for (let j = 0; j < this.proxies.length && 7 * j + 6 < poses.length; j++) {
       const m = this.proxies[j];
@@ -288,8 +304,10 @@ export class SceneView {
     this.pick.geometry.dispose();
     this.pick.material.dispose();
     this.root.traverse((o) => {
-      if (o.geometry) o.geometry.dispose();
-      if (o.material) o.material.dispose();
+      // The surface, the proxies and the arrows' lines and cones, each with a geometry and a material of its own.
+      const drawn = /** @type {THREE.Object3D & { geometry?: THREE.BufferGeometry, material?: THREE.Material }} */ (o);
+      if (drawn.geometry) drawn.geometry.dispose();
+      if (drawn.material) drawn.material.dispose();
     });
     this.root.removeFromParent();
   }

@@ -15,8 +15,9 @@ function cube() {
 }
 
 // The outward normal of triangle t, from scratch.
+/** @param {Float32Array} x @param {Uint32Array} tris @param {number} t */
 function normal(x, tris, t) {
-  const v = (k) => [0, 1, 2].map((c) => x[3 * tris[3 * t + k] + c]);
+  const v = (/** @type {number} */ k) => [0, 1, 2].map((c) => x[3 * tris[3 * t + k] + c]);
   const [a, b, c] = [v(0), v(1), v(2)];
   const u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
   const w = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
@@ -55,7 +56,7 @@ test('a triangle facing the eye in either state is kept, and the margin keeps th
   const tris = Uint32Array.of(0, 1, 2);
   const flat = Float32Array.of(0, 0, 0, 1, 0, 0, 0, 1, 0);
   const out = new Uint32Array(3);
-  const tilted = (deg) => {  // turned about the y axis: positive angles turn the normal toward +x
+  const tilted = (/** @type {number} */ deg) => {  // turned about the y axis: positive angles turn the normal toward +x
     const r = (deg * Math.PI) / 180;
     return Float32Array.of(0, 0, 0, Math.cos(r), 0, -Math.sin(r), 0, 1, 0);
   };

@@ -6,7 +6,7 @@ import { FrameBuffer } from '../src/frames.js';
 
 test('linear motion is reproduced exactly between frames, one interval late', () => {
   const fb = new FrameBuffer(3);
-  const x = (t) => [2 * t, -t, 0.5 + 3 * t]; // linear in time
+  const x = (/** @type {number} */ t) => [2 * t, -t, 0.5 + 3 * t]; // linear in time
   const dt = 1 / 30;
   for (let k = 0; k < 5; k++) fb.push(x(k * dt), null, k * dt, 10 + k * dt);
   const out = new Float32Array(3);

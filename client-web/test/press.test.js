@@ -22,10 +22,10 @@ test('the proxy stands off the grabbed tangent plane so that it reaches the chos
   const normal = new THREE.Vector3(0, 1, 0);
   assert.ok(pressTarget(ray, new THREE.Vector3(0, 0.03, 0), normal, 0.01, 0.003, out));
   // The ray meets the plane at (0.01, 0.03, 0); the centre is r - depth above it.
-  assert.ok(out.distanceTo(new THREE.Vector3(0.01, 0.037, 0)) < 1e-12, out.toArray());
+  assert.ok(out.distanceTo(new THREE.Vector3(0.01, 0.037, 0)) < 1e-12, `${out.toArray()}`);
   // Deeper: the centre comes down by as much.
   assert.ok(pressTarget(ray, new THREE.Vector3(0, 0.03, 0), normal, 0.01, 0.008, out));
-  assert.ok(Math.abs(out.y - 0.032) < 1e-12, out.y);
+  assert.ok(Math.abs(out.y - 0.032) < 1e-12, `${out.y}`);
   // A ray along the plane, or one pointing away from it, gives no target.
   assert.equal(pressTarget(new THREE.Ray(new THREE.Vector3(0, 0.05, 0), new THREE.Vector3(1, 0, 0)),
                            new THREE.Vector3(0, 0.03, 0), normal, 0.01, 0.003, out), false);
