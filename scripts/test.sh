@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Sets everything up, then runs all the tests: the C++ suites (ctest), the
-# JavaScript codec's (node --test), the browser view's (node --test, with an end-to-end test in
-# Chromium), the device bridge's (pytest) and the cross-piece tests in tests/ (pytest).
+# JavaScript codec's (node --test), the browser view's (tsc --checkJs, then node --test, with an
+# end-to-end test in Chromium), the device bridge's (pytest) and the cross-piece tests in tests/ (pytest).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -14,7 +14,7 @@ echo "test: C++ (ctest)"
 ctest --test-dir "$build" --output-on-failure -j"$(nproc)"
 echo "test: JavaScript codec (proto/js, node --test)"
 npm --prefix proto/js test
-echo "test: browser view (client-web, node --test; end to end in Chromium against the server)"
+echo "test: browser view (client-web, tsc --checkJs, then node --test; end to end in Chromium against the server)"
 TACTILE_BUILD="$build" npm --prefix client-web test
 echo "test: device bridge (pytest device-bridge/tests)"
 .venv/bin/python -m pytest -q device-bridge/tests
