@@ -1,10 +1,10 @@
-"""The HID driver: the report codec on reference bytes, the profile's refusals, and the link (drain, stale,
-unplug and reconnect) against a stand-in for hidapi that behaves as cython-hidapi 0.15 does."""
+"""The HID driver: the profile's report layouts and their refusals, and the link (drain, bad reports, stale,
+unplug and reconnect) against a stand-in for hidapi that behaves as cython-hidapi 0.15 does. The codec's own
+tests are in test_hid_report.py."""
 
 from __future__ import annotations
 
 import importlib
-import math
 import pathlib
 import struct
 import tomllib
@@ -15,15 +15,8 @@ import pytest
 
 from tactile_bridge import drivers
 from tactile_bridge.drivers import DeviceError, DeviceSample
-from tactile_bridge.drivers.hid_device import (
-    HidDevice,
-    decode_input,
-    encode_output,
-    enumerate_devices,
-    format_device_list,
-    make_device,
-    make_output_buffer,
-)
+from tactile_bridge.drivers.hid_device import HidDevice, enumerate_devices, format_device_list, make_device
+from tactile_bridge.drivers.hid_report import decode_input, decode_output, encode_output, make_output_buffer
 from tactile_bridge.profile import Profile, ProfileError, load_profile, parse_profile
 
 EXAMPLE = pathlib.Path(__file__).resolve().parents[1] / "src" / "tactile_bridge" / "profiles" / "hid_example.toml"
@@ -193,82 +186,7 @@ def opened(text: str = BASE, **kw: Any) -> tuple[HidDevice, Arm, StandInHid]:
     return dev, arm, bus
 
 
-# ----------------------------------------------------------------------------------------------- codec
-
-def test_decode_reference_bytes_little_endian_with_negatives_and_bias() -> None:
-    text = (BASE.replace('x = { offset = 1, type = "i16", scale = 1e-5 }',
-                         'x = { offset = 1, type = "i16", scale = 1e-5, bias = -24 }')
-            .replace('z = { offset = 5, type = "i16", scale = 1e-5 }',
-                     'z = { offset = 5, type = "i16", scale = 1e-5, bias = 100 }'))
-    layout = profile_of(text).driver_config.input
-    # x = -1000 (0xFC18; -976 from its bias), y = 300 (0x012C), z = 100 (its bias: 0 m), buttons 0b101,
-    # sequence 0xBEEF.
-    raw = bytes([1, 0x18, 0xFC, 0x2C, 0x01, 0x64, 0x00, 0x05, 0xEF, 0xBE, 0, 0, 0, 0, 0, 0])
-    s = DeviceSample()
-    assert decode_input(layout, raw, s)
-    assert s.position == pytest.approx([-0.00976, 0.003, 0.0], abs=1e-15)
-    assert (s.buttons, s.sequence) == (5, 0xBEEF)
-
-
-def test_decode_big_endian_and_wide_types() -> None:
-    text = (BASE.replace('[hid.input]', 'endian = "big"\n[hid.input]')
-            .replace('x = { offset = 1, type = "i16", scale = 1e-5 }', 'x = { offset = 9, type = "f32", scale = 0.5 }')
-            .replace('y = { offset = 3, type = "i16", scale = 1e-5 }', 'y = { offset = 1, type = "i32", scale = 1e-6 }')
-            .replace('z = { offset = 5, type = "i16", scale = 1e-5 }', 'z = { offset = 5, type = "i8", scale = 1e-3 }')
-            .replace('sequence = { offset = 8, type = "u16" }', 'sequence = { offset = 13, type = "u16" }'))
-    layout = profile_of(text).driver_config.input
-    raw = bytearray(16)
-    raw[0] = 1
-    raw[1:5] = bytes([0xFF, 0xFE, 0x1D, 0xC0])       # i32 big-endian -123456
-    raw[5] = 0x81                                    # i8 -127
-    raw[7] = 0x80                                    # buttons
-    raw[9:13] = bytes([0x3F, 0xC0, 0x00, 0x00])      # f32 big-endian 1.5
-    raw[13:15] = bytes([0x01, 0x02])                 # u16 big-endian 258
-    s = DeviceSample()
-    assert decode_input(layout, raw, s)
-    assert s.position == pytest.approx([0.75, -0.123456, -0.127], rel=1e-12)
-    assert (s.buttons, s.sequence) == (0x80, 258)
-    raw[9:13] = bytes([0x7F, 0xC0, 0x00, 0x00])      # f32 NaN: refused, the sample keeps its reading
-    assert not decode_input(layout, raw, s)
-    assert s.position == pytest.approx([0.75, -0.123456, -0.127], rel=1e-12)
-
-
-def test_decode_refuses_wrong_length_or_id_and_leaves_the_sample() -> None:
-    layout = profile_of(BASE).driver_config.input
-    s = DeviceSample()
-    s.position = [9.0, 9.0, 9.0]
-    assert not decode_input(layout, bytes(report(1, 2, 3, length=15)), s)
-    assert not decode_input(layout, bytes(report(1, 2, 3, rid=3)), s)
-    assert s.position == [9.0, 9.0, 9.0]
-
-
-def test_encode_reference_bytes_saturation_and_not_a_number() -> None:
-    layout = profile_of(BASE).driver_config.output
-    buf = make_output_buffer(layout)
-    assert len(buf) == 8
-    encode_output(layout, (1.5, -0.25, 0.0014), buf)     # 1500, -250, 1 (rounded) counts
-    assert bytes(buf) == bytes([2, 0xDC, 0x05, 0x06, 0xFF, 0x01, 0x00, 1])
-    encode_output(layout, (1e6, -1e6, math.nan), buf)    # saturates to i16's range; NaN commands nothing
-    assert bytes(buf) == bytes([2, 0xFF, 0x7F, 0x00, 0x80, 0x00, 0x00, 1])
-    encode_output(layout, (math.inf, -math.inf, 0.0), buf, enabled=False)
-    assert bytes(buf) == bytes([2, 0xFF, 0x7F, 0x00, 0x80, 0x00, 0x00, 0])
-
-
-def test_encode_unnumbered_big_endian_unsigned_with_bias() -> None:
-    text = (BASE.replace('report_id = 2\nlength = 8', 'report_id = 0\nlength = 6')
-            .replace('[hid.input]', 'endian = "big"\n[hid.input]')
-            .replace('fx = { offset = 1, type = "i16", scale = 1e-3 }',
-                     'fx = { offset = 0, type = "u16", scale = 1e-3, bias = 32768 }')
-            .replace('fy = { offset = 3, type = "i16", scale = 1e-3 }', 'fy = { offset = 2, type = "u8", scale = 0.1 }')
-            .replace('fz = { offset = 5, type = "i16", scale = 1e-3 }', 'fz = { offset = 3, type = "i8", scale = 0.1 }')
-            .replace('enable = { offset = 7, type = "u8", value = 1 }',
-                     'enable = { offset = 5, type = "u8", value = 7 }'))
-    layout = profile_of(text).driver_config.output
-    buf = make_output_buffer(layout)
-    assert len(buf) == 7                                 # hid_write's 0x00 + the 6-byte report
-    encode_output(layout, (-1.0, -3.0, 20.0), buf)       # 31768; u8 floor 0; i8 ceiling 127
-    assert bytes(buf) == bytes([0x00, 0x7C, 0x18, 0x00, 0x7F, 0x00, 7])
-
+# ---------------------------------------------------------------------------------------------- layouts
 
 def test_example_profile_loads_and_its_layouts_round_trip() -> None:
     p = load_profile(EXAMPLE)
@@ -285,7 +203,7 @@ def test_example_profile_loads_and_its_layouts_round_trip() -> None:
     raw[0] = 1
     struct.pack_into("<hhhBH", raw, 1, *(round(v / 1e-5) for v in position), 3, 65535)
     s = DeviceSample()
-    assert decode_input(c.input, raw, s)
+    decode_input(c.input, raw, s)
     assert s.position == pytest.approx(position, abs=0.5e-5)
     assert (s.buttons, s.sequence) == (3, 65535)
 
@@ -296,6 +214,7 @@ def test_example_profile_loads_and_its_layouts_round_trip() -> None:
     rid, *counts, enable = struct.unpack("<BhhhB", buf)
     assert (rid, enable) == (2, 1)
     assert [n * 1e-3 for n in counts] == pytest.approx(force, abs=0.5e-3)
+    assert decode_output(c.output, buf) == (pytest.approx(force, abs=0.5e-3), True)
 
 
 # ----------------------------------------------------------------------------------------------- refusals
@@ -344,7 +263,7 @@ def test_a_valid_variant_by_path_and_unnumbered_input_loads() -> None:
     c = profile_of(text).driver_config
     assert (c.path, c.vendor_id, c.stale_ms, c.input.report_id, c.input.length) == ("/dev/hidraw7", None, 5.0, 0, 10)
     s = DeviceSample()
-    assert decode_input(c.input, bytes([0xFF, 0xFF, 2, 0, 0, 0x80, 9, 1, 0, 0]), s)
+    decode_input(c.input, bytes([0xFF, 0xFF, 2, 0, 0, 0x80, 9, 1, 0, 0]), s)
     assert s.position == pytest.approx([-1e-5, 2e-5, -0.32768])
     assert (s.buttons, s.sequence) == (9, 1)
 
@@ -370,11 +289,15 @@ def test_bad_reports_are_skipped_and_counted() -> None:
     assert dev.read(MS, s)
     assert s.position[0] == pytest.approx(1e-3)         # the only good one, older than the bad ones
     assert (dev.reports, dev.bad_reports) == (1, 3)
+    assert dev.last_bad_report == "input report id 4, not the 1 of [hid.input] report_id"
     arm.inputs.append(report(1, 2, 3, length=17))
     s2 = DeviceSample()
     assert dev.read(2 * MS, s2)                          # no new good report: the held one, still fresh
     assert s2.position[0] == pytest.approx(1e-3) and s2.time_ns == MS
     assert dev.bad_reports == 4
+    assert dev.last_bad_report == "input report of 17 bytes, not the 16 of [hid.input] length"
+    assert dev.describe().endswith("4 bad, 0 reconnects (last bad: input report of 17 bytes, not the 16 of "
+                                   "[hid.input] length)")
 
 
 def test_write_force_sends_the_exact_report() -> None:

@@ -9,6 +9,9 @@ Drivers:
   sim     tactile_bridge.drivers.sim_arm     a mass-damper arm held by a scripted, yielding hand (default)
   serial  tactile_bridge.drivers.serial_link  the framed binary protocol of docs/serial-protocol.md (pyserial)
   hid     tactile_bridge.drivers.hid_device   report layouts from the profile (hidapi)
+
+A driver that speaks a byte protocol keeps its codec in a module of its own, without I/O (serial_protocol,
+hid_report), so that tests feed it bytes and an emulator plays the device with it.
 """
 
 from __future__ import annotations

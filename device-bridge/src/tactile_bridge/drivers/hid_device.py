@@ -5,16 +5,15 @@ describes two reports: `[hid.input]`, where the device reports its position (x, 
 optional sequence counter, and `[hid.output]`, where it takes force (fx, fy, fz) and an optional enable value.
 profiles/hid_example.toml is a complete, commented example.
 
-Offsets count bytes in the report as hidapi reads and writes it. With a report id (`report_id` > 0) byte 0
-is that id, `length` counts it, and fields start at 1. Without one (`report_id = 0`) input fields start at 0,
-and the driver puts the 0x00 in front of each output report that hid_write wants for unnumbered reports.
-
-The codec (`decode_input`, `encode_output`) does no I/O and keeps no state: bytes and a layout in, values out.
-`HidDevice` moves bytes between it and a `hid.device` handle, and owns the link state:
+The report layouts and their codec are in hid_report (no I/O, no state: report bytes and a layout in,
+values out; its docstring gives the byte layout). This module checks the profile's tables into layouts
+(`parse_config`, refusals naming the field) and `HidDevice` moves bytes between the codec and a `hid.device`
+handle, and owns the link state:
 
 - `read` drains every pending report (the handle is non-blocking, so an empty queue reads as []) and keeps
-  the newest good one; reports of the wrong length or report id are counted in `bad_reports` and skipped.
-  With no good report for `stale_ms` it reads False.
+  the newest good one; a report the codec refuses (wrong length or report id, a position that is not
+  finite) is counted in `bad_reports`, its reason kept in `last_bad_report`, and skipped. With no good
+  report for `stale_ms` it reads False.
 - An OSError or ValueError from the handle, or a negative count from hid_write (which signals a failed write
   by its return value, not by raising), marks the device unplugged: the handle is closed, reads are False,
   writes are dropped, and `read` tries to open it again at most once per `reconnect_s`.
@@ -31,32 +30,32 @@ The codec (`decode_input`, `encode_output`) does no I/O and keeps no state: byte
 from __future__ import annotations
 
 import importlib
-import math
-import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 from ..profile import Fields, ProfileError
 from . import Device, DeviceError, DeviceSample
+from .hid_report import (
+    FIELD_TYPES,
+    INTEGER_TYPES,
+    MAX_REPORT_BYTES,
+    UNSIGNED_TYPES,
+    InputLayout,
+    OutputLayout,
+    ReportError,
+    ReportField,
+    check_input,
+    decode_input,
+    encode_output,
+    make_input_layout,
+    make_output_buffer,
+    make_output_layout,
+)
 
 if TYPE_CHECKING:
     from ..profile import Profile
 
-# The field types a report may hold: struct code, lowest and highest value.
-_F32_MAX = 3.4028234663852886e38
-FIELD_TYPES: dict[str, tuple[str, float, float]] = {
-    "i8": ("b", -(1 << 7), (1 << 7) - 1),
-    "u8": ("B", 0, (1 << 8) - 1),
-    "i16": ("h", -(1 << 15), (1 << 15) - 1),
-    "u16": ("H", 0, (1 << 16) - 1),
-    "i32": ("i", -(1 << 31), (1 << 31) - 1),
-    "u32": ("I", 0, (1 << 32) - 1),
-    "f32": ("f", -_F32_MAX, _F32_MAX),
-}
-UNSIGNED_TYPES = ("u8", "u16", "u32")
-INTEGER_TYPES = ("i8", "u8", "i16", "u16", "i32", "u32")
-MAX_REPORT_BYTES = 4096    # hidraw's buffer on Linux; USB reports are 64 (full speed) to 1024 (high speed)
 MAX_DRAIN = 256            # reports read per tick at most, so a flooding device cannot hold the tick
 
 
@@ -78,147 +77,6 @@ class HidModule(Protocol):
 
     def device(self) -> HidHandle: ...
     def enumerate(self, vendor_id: int = 0, product_id: int = 0) -> list[dict[str, Any]]: ...
-
-
-# ---------------------------------------------------------------------------------------------------- layout
-
-@dataclass(frozen=True)
-class ReportField:
-    """One value in a report: where it is and how counts map to the physical value."""
-
-    offset: int          # first byte in the report (as hidapi sees it)
-    type: str            # one of FIELD_TYPES
-    scale: float = 1.0   # physical unit per count: m (position) or N (force); 1 for buttons and counters
-    bias: float = 0.0    # counts at the physical zero: value = (counts - bias) * scale
-    value: int = 0       # the constant the field carries (the enable value)
-
-    @property
-    def size(self) -> int:
-        return struct.calcsize(FIELD_TYPES[self.type][0])
-
-
-@dataclass(frozen=True)
-class InputLayout:
-    """Where the input report carries position, buttons and sequence; built once from the profile."""
-
-    report_id: int                                       # byte 0 of every report when > 0; 0: unnumbered
-    length: int                                          # bytes per report, report id byte included
-    axes: tuple[ReportField, ReportField, ReportField]   # x, y, z: counts -> m
-    buttons: ReportField | None                          # bit mask, unsigned
-    sequence: ReportField | None                         # the device's counter, unsigned, wraps
-    codec: struct.Struct                                 # the whole report, its fields in offset order
-    slots: tuple[int, int, int, int, int]                # codec index of x, y, z, buttons, sequence (-1: none)
-
-    def accepts(self, report: Sequence[int]) -> bool:
-        """Whether `report` has this layout's length and report id."""
-        return len(report) == self.length and (self.report_id == 0 or report[0] == self.report_id)
-
-
-@dataclass(frozen=True)
-class OutputLayout:
-    """Where the output report takes force and the enable value; built once from the profile."""
-
-    report_id: int                                       # byte 0 of every report; 0: unnumbered
-    length: int                                          # bytes per report, report id byte included
-    forces: tuple[ReportField, ReportField, ReportField]  # fx, fy, fz: counts -> N
-    enable: ReportField | None                           # carries `value` while forces are on, 0 at close
-    codec: struct.Struct                                 # the written buffer, its values in offset order
-    order: tuple[int, ...]                               # per codec value: 0-2 fx-fz, 3 enable, 4 report id
-
-    @property
-    def buffer_size(self) -> int:
-        """Bytes handed to hid_write: the report, after the 0x00 that unnumbered reports need."""
-        return self.codec.size
-
-
-def _make_codec(endian: str, size: int, placed: Sequence[tuple[int, str]]) -> struct.Struct:
-    """A struct of `size` bytes with the given (byte, field type) values and pad bytes between them."""
-    fmt = [">" if endian == "big" else "<"]
-    at = 0
-    for offset, kind in sorted(placed):
-        if offset > at:
-            fmt.append(f"{offset - at}x")
-        fmt.append(FIELD_TYPES[kind][0])
-        at = offset + struct.calcsize(FIELD_TYPES[kind][0])
-    if size > at:
-        fmt.append(f"{size - at}x")
-    return struct.Struct("".join(fmt))
-
-
-def make_input_layout(report_id: int, length: int, axes: tuple[ReportField, ReportField, ReportField],
-                      buttons: ReportField | None = None, sequence: ReportField | None = None,
-                      endian: str = "little") -> InputLayout:
-    """The input layout for fields already checked to fit (parse_config checks them)."""
-    named = (*axes, buttons, sequence)
-    present = sorted((f.offset, i) for i, f in enumerate(named) if f is not None)
-    slot = [-1] * 5
-    for k, (_, i) in enumerate(present):
-        slot[i] = k
-    codec = _make_codec(endian, length, [(f.offset, f.type) for f in named if f is not None])
-    return InputLayout(report_id, length, axes, buttons, sequence, codec,
-                       (slot[0], slot[1], slot[2], slot[3], slot[4]))
-
-
-def make_output_layout(report_id: int, length: int, forces: tuple[ReportField, ReportField, ReportField],
-                       enable: ReportField | None = None, endian: str = "little") -> OutputLayout:
-    """The output layout for fields already checked to fit (parse_config checks them)."""
-    # Unnumbered reports go to hid_write after a 0x00 byte, so every field moves one byte on.
-    shift = 1 if report_id == 0 else 0
-    placed: list[tuple[int, str, int]] = [(f.offset + shift, f.type, i) for i, f in enumerate(forces)]
-    if enable is not None:
-        placed.append((enable.offset + shift, enable.type, 3))
-    if report_id > 0:
-        placed.append((0, "u8", 4))
-    placed.sort()
-    codec = _make_codec(endian, length + shift, [(at, kind) for at, kind, _ in placed])
-    return OutputLayout(report_id, length, forces, enable, codec, tuple(what for _, _, what in placed))
-
-
-# ----------------------------------------------------------------------------------------------------- codec
-
-def decode_input(layout: InputLayout, report: bytes | bytearray | memoryview, sample: DeviceSample) -> bool:
-    """Writes the report's position [m], buttons and raw sequence into `sample`; False (untouched) if the
-    report's length or id is not the layout's, or an f32 axis is not finite. Leaves `time_ns` and
-    `orientation` to the caller."""
-    if not layout.accepts(report):
-        return False
-    v = layout.codec.unpack_from(report)
-    s = layout.slots
-    x, y, z = layout.axes
-    px, py, pz = (v[s[0]] - x.bias) * x.scale, (v[s[1]] - y.bias) * y.scale, (v[s[2]] - z.bias) * z.scale
-    if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(pz)):
-        return False
-    sample.position[0], sample.position[1], sample.position[2] = px, py, pz
-    if s[3] >= 0:
-        sample.buttons = v[s[3]]
-    if s[4] >= 0:
-        sample.sequence = v[s[4]]
-    return True
-
-
-def _counts(value: float, f: ReportField) -> int | float:
-    """value / scale in the field's type, saturated to its range; not-a-number gives 0."""
-    _, low, high = FIELD_TYPES[f.type]
-    c = value / f.scale + f.bias
-    if c != c:   # NaN: no direction to saturate towards, so no force
-        return 0
-    c = min(max(c, low), high)
-    return c if f.type == "f32" else round(c)
-
-
-def encode_output(layout: OutputLayout, force_N: Sequence[float], buffer: bytearray, *,
-                  enabled: bool = True) -> None:
-    """Writes the output report for force [N] (3, device frame) into `buffer` (layout.buffer_size bytes),
-    each axis saturated to its type's range; the enable field carries its value, or 0 when not `enabled`."""
-    fx, fy, fz = layout.forces
-    what = (_counts(force_N[0], fx), _counts(force_N[1], fy), _counts(force_N[2], fz),
-            layout.enable.value if layout.enable is not None and enabled else 0, layout.report_id)
-    layout.codec.pack_into(buffer, 0, *[what[w] for w in layout.order])
-
-
-def make_output_buffer(layout: OutputLayout) -> bytearray:
-    """The preallocated buffer that encode_output fills and the driver writes."""
-    return bytearray(layout.buffer_size)
 
 
 # ---------------------------------------------------------------------------------------------------- config
@@ -362,7 +220,8 @@ class HidDevice(Device):
         self.config: HidConfig = profile.driver_config
         self.hid = hid_module
         self.reports = 0          # good input reports received
-        self.bad_reports = 0      # input reports skipped: wrong length or report id
+        self.bad_reports = 0      # input reports the codec refused: wrong length or report id, position not finite
+        self.last_bad_report = ""  # why the codec refused the last of them
         self.reconnects = 0       # times the device was opened again after it was lost
         self.manufacturer = ""    # the device's USB strings, read at open
         self.product = ""
@@ -489,10 +348,12 @@ class HidDevice(Device):
     def _take(self, now_ns: int, report: list[int]) -> bool:
         """Decodes one report into the latest reading, unwrapping the device's counter; False if it is bad."""
         layout, latest = self.config.input, self._latest
-        if len(report) != layout.length:   # checked here too, so the copy below never resizes the buffer
-            return False
-        self._report[:] = report   # into the preallocated buffer that struct can read
-        if not decode_input(layout, self._report, latest):
+        try:
+            check_input(layout, report)  # before the copy, so the preallocated buffer is never resized
+            self._report[:] = report     # into the buffer that struct can read
+            decode_input(layout, self._report, latest)
+        except ReportError as e:
+            self.last_bad_report = str(e)
             return False
         latest.time_ns = now_ns
         self._last_report_ns = now_ns
@@ -551,7 +412,8 @@ class HidDevice(Device):
             state = ("connected" if self._fresh else "waiting for reports" if self._last_report_ns is None
                      else f"no reports for {self.config.stale_ms:g} ms")
         return (f"hid {self.config.device_name()}{f' ({label})' if label else ''} {state}; "
-                f"{self.reports} reports, {self.bad_reports} bad, {self.reconnects} reconnects")
+                f"{self.reports} reports, {self.bad_reports} bad, {self.reconnects} reconnects"
+                f"{f' (last bad: {self.last_bad_report})' if self.bad_reports else ''}")
 
 
 def make_device(profile: Profile, *, hid_module: HidModule | None = None) -> HidDevice:
