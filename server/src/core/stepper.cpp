@@ -624,9 +624,30 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     return make_fault(Fault::Kind::StepTooLarge, s, "time step must be finite and > 0, got " + std::to_string(dt), {});
   cur_ = &s;
   cur_dt_ = Real(dt);
-  const double t1 = s.t + dt;
-  const size_t nc = model_.constrained.size();
+  cur_t1_ = s.t + dt;
+  open_energy_account(s, dt);
+  keep_work_positions(s);
+  predict_and_add_elastic_forces(s);  // eq. (7), essential positions, R(u_{n+1})
+  correct(s);                         // F_{n+1}, eqs. (8)-(10), then (9)
+  const ContactSums contact = apply_contact(s, dt);  // section 5.1
+  essential_mv2_delta_ = essential_ma2_delta_ = 0;
+  if (!model_.essential.empty()) {
+    enter(Pass::Essential);
+    apply_essential_rates(s, cur_t1_, dt);
+    leave(Pass::Essential);
+  }
+  enter(Pass::Guard);
+  close_energy_account(s, dt, contact);
+  const Fault fault = check_step(s);
+  leave(Pass::Guard);
+  return fault;
+}
 
+// The energy account at t_n: on the first step (or after a fault) the
+// reference it is checked against; on a change of step, the discrete term
+// restated with the new step.
+template <class Real>
+void Stepper<Real>::open_energy_account(State<Real>& s, double dt) {
   if (!energy_started_) {  // loads at t_n for the work trapezoid, and the reference energy
     size_t c = 0;
     for (const LoadSet& load : model_.loads) {
@@ -653,8 +674,13 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     energy_.discrete = restated;
   }
   energy_dt_ = dt;
-  // Positions at t_n of the nodes whose work is accounted.
-  // In the order apply_essential_rates reads them: set by set, not sorted.
+}
+
+// Positions at t_n of the nodes whose work is accounted, in the order
+// apply_essential_rates and apply_loads read them: set by set, not sorted.
+template <class Real>
+void Stepper<Real>::keep_work_positions(const State<Real>& s) {
+  const size_t nc = model_.constrained.size();
   size_t held = 0;
   for (const EssentialSet& set : model_.essential) {
     for (int32_t i : set.nodes) {
@@ -666,38 +692,44 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     const size_t j = 3 * size_t(loaded_[c]);
     u_before_[nc + c] = Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
   }
+}
 
-  cur_t1_ = t1;
+template <class Real>
+void Stepper<Real>::predict_and_add_elastic_forces(State<Real>& s) {
   if (n_parts_ == 1) {
     enter(Pass::Predict);
     run_parts(&Stepper::predict_part, this);  // eq. (7)
     leave(Pass::Predict);
     if (!model_.essential.empty()) {
       enter(Pass::Essential);
-      apply_essential_positions(s, t1, 0, essential_entries_.size());
+      apply_essential_positions(s, cur_t1_, 0, essential_entries_.size());
       leave(Pass::Essential);
     }
     enter(Pass::Elastic);
     run_elastic();  // R(u_{n+1})
     leave(Pass::Elastic);
-  } else {
-    // Split over threads, one job per part predicts its nodes (eq. 7), sets
-    // its essential positions, adds its elements' forces and, without loads,
-    // corrects its nodes (eqs. 8-10), waiting only for what each of those
-    // reads (see elastic_part): one hand-off where there were three.
-    ++epoch_;
-    fused_ = true;
-    fused_correct_ = model_.loads.empty();  // loads go into the force arrays between the two
-    enter(Pass::Elastic);
-    run_elastic();
-    leave(Pass::Elastic);
-    fused_ = false;
+    return;
   }
+  // Split over threads, one job per part predicts its nodes (eq. 7), sets
+  // its essential positions, adds its elements' forces and, without loads,
+  // corrects its nodes (eqs. 8-10), waiting only for what each of those
+  // reads (see elastic_part): one hand-off where there were three.
+  ++epoch_;
+  fused_ = true;
+  fused_correct_ = model_.loads.empty();  // loads go into the force arrays between the two
+  enter(Pass::Elastic);
+  run_elastic();
+  leave(Pass::Elastic);
+  fused_ = false;
+}
 
+// The loads and the corrector, unless the element pass corrected already.
+template <class Real>
+void Stepper<Real>::correct(State<Real>& s) {
   if (!fused_correct_) {
     if (!model_.loads.empty()) {
       enter(Pass::Loads);
-      apply_loads(s, t1);  // F_{n+1}
+      apply_loads(s, cur_t1_);  // F_{n+1}
       leave(Pass::Loads);
     }
     enter(Pass::Correct);
@@ -705,26 +737,22 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     leave(Pass::Correct);
   }
   fused_correct_ = false;
+}
 
-  double contact_mv2_delta = 0, contact_ma2_delta = 0;
-  if (!model_.proxies.empty()) {
-    enter(Pass::Contact);
-    const ContactSums sums = contact_.apply(s, s.t, t1, dt);
-    s.work_contact += sums.work;
-    contact_mv2_delta = sums.mv2_delta;
-    contact_ma2_delta = sums.ma2_delta;
-    contact_given_ += sums.proxy_work;
-    leave(Pass::Contact);
-  }
+template <class Real>
+ContactSums Stepper<Real>::apply_contact(State<Real>& s, double dt) {
+  if (model_.proxies.empty()) return {};
+  enter(Pass::Contact);
+  const ContactSums sums = contact_.apply(s, s.t, cur_t1_, dt);
+  s.work_contact += sums.work;
+  contact_given_ += sums.proxy_work;
+  leave(Pass::Contact);
+  return sums;
+}
 
-  essential_mv2_delta_ = essential_ma2_delta_ = 0;
-  if (!model_.essential.empty()) {
-    enter(Pass::Essential);
-    apply_essential_rates(s, t1, dt);
-    leave(Pass::Essential);
-  }
-
-  enter(Pass::Guard);
+// The energies at t_{n+1} from the sums the passes made, and the state's time.
+template <class Real>
+void Stepper<Real>::close_energy_account(State<Real>& s, double dt, const ContactSums& contact) {
   ElasticSums el;
   CorrectSums co;
   for (const ElasticSums& e : elastic_) {  // in region order, whichever thread filled each
@@ -737,12 +765,13 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
     co.mgu += correct_sums_[size_t(p)].mgu;
     co.ma2 += correct_sums_[size_t(p)].ma2;
   }
-  s.t = t1;
+  step_sums_ = {el, co};
+  s.t = cur_t1_;
   ++s.step;
   // The corrector's sum saw the constrained nodes before their velocities
   // were prescribed; apply_essential_rates swapped their terms.
-  const double mv2 = std::max(0.0, co.mv2 + essential_mv2_delta_ + contact_mv2_delta);
-  const double ma2 = std::max(0.0, co.ma2 + essential_ma2_delta_ + contact_ma2_delta);
+  const double mv2 = std::max(0.0, co.mv2 + essential_mv2_delta_ + contact.mv2_delta);
+  const double ma2 = std::max(0.0, co.ma2 + essential_ma2_delta_ + contact.ma2_delta);
   // Power alpha m |v|^2 integrated by the trapezoid over the step: its error
   // telescopes (O(dt^2) in all), where the rectangle alpha m |v_{n+1}|^2 dt
   // drifted by alpha dt times the change of kinetic energy.
@@ -755,7 +784,14 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   energy_.work_essential = s.work_essential;
   energy_.work_contact = s.work_contact;
   energy_.dissipated = s.dissipated;
+}
 
+// The guard: non-finite values, inverted elements a model cannot take, and
+// energy growth beyond the work done (or a runaway past the critical step).
+template <class Real>
+Fault Stepper<Real>::check_step(const State<Real>& s) {
+  const ElasticSums& el = step_sums_.elastic;
+  const CorrectSums& co = step_sums_.correct;
   Fault fault;
   if (!std::isfinite(co.abs_a) || !std::isfinite(el.energy)) {
     fault = make_fault(Fault::Kind::NonFinite, s, "non-finite acceleration or energy", find_nonfinite_elements(s));
@@ -801,7 +837,6 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
       energy_window_start_ = double(s.t);
     }
   }
-  leave(Pass::Guard);
   return fault;
 }
 

@@ -181,6 +181,15 @@ class Stepper {
   void apply_loads(const State<Real>& s, double t);
   void add_load_force(int32_t node, const Vec3& force);
 
+  // The passes of step(), in order.
+  void open_energy_account(State<Real>& s, double dt);
+  void keep_work_positions(const State<Real>& s);
+  void predict_and_add_elastic_forces(State<Real>& s);
+  void correct(State<Real>& s);
+  ContactSums apply_contact(State<Real>& s, double dt);
+  void close_energy_account(State<Real>& s, double dt, const ContactSums& contact);
+  Fault check_step(const State<Real>& s);
+
   Fault make_fault(Fault::Kind kind, const State<Real>& s, std::string message, std::vector<int32_t> elements);
   std::vector<int32_t> find_nonfinite_elements(const State<Real>& s) const;
   std::vector<int32_t> find_inverted_elements(const State<Real>& s) const;
@@ -243,6 +252,11 @@ class Stepper {
   Real cur_dt_ = 0;
   double cur_t1_ = 0;  // the time the step reaches [s]
 
+  struct StepSums {
+    ElasticSums elastic;
+    CorrectSums correct;
+  };
+  StepSums step_sums_;              // the passes' sums of the latest step, for its guard
   double essential_mv2_delta_ = 0;  // constrained nodes' change of m |v|^2 in this step
   double essential_ma2_delta_ = 0;  // and of m |a|^2
   double initial_ma2_ = 0;          // sum m |a_0|^2 of the starting state
