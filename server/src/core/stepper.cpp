@@ -64,19 +64,6 @@ Kinematics compute_bc_kinematics(const EssentialBc& bc, const Vec3& X, double t)
   return {x, v, a};
 }
 
-// Share of each part of a pair that its thread always takes (to the nearest
-// strip): the rest, in the middle of the pair, goes in chunks of whole
-// strips to whichever thread gets there first (see elastic_part).
-constexpr int32_t kShareOwnPercent = 75;
-// Chunks per pair, at most. A chunk is what one thread may be left waiting
-// for, and each adds a force array the correctors read: a strip of the sweep
-// reaches the layer of nodes before it, so a chunk's array spans about a
-// layer, and small chunks pile several arrays on each node (a probe outside
-// the repo timing each part of each pass, 20 k tets: 64 chunks of one strip,
-// corrector 4.7 us; 8 chunks, 3.2-4.2 us, and the faster thread waits
-// 1.2-1.7 us).
-constexpr int32_t kShareMaxChunks = 8;
-
 // Between polls of a spinning wait.
 inline void cpu_relax() {
 #if defined(__x86_64__) || defined(__i386__)
@@ -116,16 +103,14 @@ std::string list_ids(const std::vector<int32_t>& ids) {
 
 template <class Real>
 Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
-    : model_(model), parallel_(parallel), kernels_(kernels<Real>()), contact_(model) {
+    : model_(model),
+      parallel_(parallel),
+      kernels_(kernels<Real>()),
+      contact_(model),
+      // One part covering everything without a pool to run them on.
+      plan_(make_step_plan(model, parallel && parallel->workers() >= 2)) {
   correct_ = kernels_.correct[model_.effects.gravity ? 1 : 0][model_.effects.damping ? 1 : 0];
-  // The model's parts (integrator.threads of them, fewer on small meshes);
-  // one covering everything without a pool to run them on.
-  if (parallel_ && parallel_->workers() >= 2) {
-    for (const ModelPart& mp : model_.parts) part_.push_back({mp.block_begin, mp.block_end, mp.node_begin, mp.node_end});
-  } else {
-    part_.push_back({0, static_cast<int32_t>(model_.blocks.size()), 0, model_.n_nodes});
-  }
-  n_parts_ = static_cast<int32_t>(part_.size());
+  n_parts_ = static_cast<int32_t>(plan_.parts.size());
   // The elastic energy is a sum of densities that cancel to nearly nothing at
   // small strain (psi = mu/2 (I1 - 3) - ..., I1 ~ 3), each carrying a round-off
   // of a few eps (mu + lambda) V. In float that is far above the energy of a
@@ -134,178 +119,13 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
   for (size_t e = 0; e < model_.tet_volume.size(); ++e)
     stiffness_volume += (model_.tet_mu[e] + model_.tet_lambda[e]) * model_.tet_volume[e];
   energy_floor_ = 16.0 * double(std::numeric_limits<Real>::epsilon()) * stiffness_volume;
-  // The nodes each block touches, rounded out to 16.
-  const auto n_blocks = static_cast<int32_t>(model_.blocks.size());
-  std::vector<int32_t> lo(size_t(n_blocks), model_.n_nodes), hi(size_t(n_blocks), 0);
-  for (int32_t b = 0; b < n_blocks; ++b) {
-    for (int l = 0; l < kLanes<Real>; ++l) {
-      if (model_.lane_tet[size_t(b) * kLanes<Real> + size_t(l)] < 0) continue;  // padding adds only zeros
-      for (int c = 0; c < 4; ++c) {
-        lo[size_t(b)] = std::min(lo[size_t(b)], model_.blocks[size_t(b)].node4[c][l] / 4 / 16 * 16);
-        hi[size_t(b)] = std::max(hi[size_t(b)], (model_.blocks[size_t(b)].node4[c][l] / 4 + 16) / 16 * 16);
-      }
-    }
-  }
-  // Force arrays ("regions"): one per part for the blocks it always takes,
-  // then one per middle chunk of each pair (see elastic_part). Each holds
-  // only the nodes its blocks touch, at an offset into f_ of at least its
-  // first node (so that f_.data() + offset stays inside f_); the parts are
-  // slabs of the body, so regions overlap only where their elements meet.
-  int64_t next = 0;
-  auto add_region = [&](int32_t b0, int32_t b1) {
-    int32_t rlo = model_.n_nodes, rhi = 0;
-    for (int32_t b = b0; b < b1; ++b) {
-      rlo = std::min(rlo, lo[size_t(b)]);
-      rhi = std::max(rhi, hi[size_t(b)]);
-    }
-    if (rlo >= rhi) rlo = rhi = 0;
-    const int64_t base = std::max(next, int64_t(rlo));  // both multiples of 16
-    regions_.push_back({base - rlo, rlo, rhi});
-    next = base + (rhi - rlo);
-    return static_cast<int32_t>(regions_.size() - 1);
-  };
-  // Where strips start (model.hpp): a range of blocks that cut a strip would
-  // touch the nodes of the whole strip, so shares and chunks end there.
-  std::vector<int32_t> cuts;
-  for (const ElementGroup& g : model_.groups) {
-    for (int32_t b = g.begin; b < g.end; b += kStripBlocks) cuts.push_back(b);
-    cuts.push_back(g.end);
-  }
-  std::sort(cuts.begin(), cuts.end());
-  cuts.erase(std::unique(cuts.begin(), cuts.end()), cuts.end());
-  auto snap = [&cuts](int32_t b) {  // the strip start nearest b
-    if (cuts.empty()) return b;
-    const auto it = std::lower_bound(cuts.begin(), cuts.end(), b);
-    if (it == cuts.end()) return cuts.back();
-    if (it == cuts.begin() || *it - b <= b - *(it - 1)) return *it;
-    return *(it - 1);
-  };
-  const int32_t n_pairs = n_parts_ / 2;
-  for (int32_t p = 0; p < n_parts_; ++p) {
-    Part& part = part_[size_t(p)];
-    part.own_begin = part.block_begin;
-    part.own_end = part.block_end;
-    if (p < 2 * n_pairs) {
-      part.side = p % 2 == 0 ? 1 : 2;
-      part.share = p / 2;
-      const int32_t own = (part.block_end - part.block_begin) * kShareOwnPercent / 100;
-      if (part.side == 1) part.own_end = std::clamp(snap(part.block_begin + own), part.block_begin, part.block_end);
-      else part.own_begin = std::clamp(snap(part.block_end - own), part.block_begin, part.block_end);
-    }
-    part.own_region = add_region(part.own_begin, part.own_end);
-  }
-  for (int32_t k = 0; k < n_pairs; ++k) {
-    Part& left = part_[size_t(2 * k)];
-    Part& right = part_[size_t(2 * k + 1)];
-    const int32_t m0 = left.own_end, m1 = right.own_begin;  // the middle, whole strips
-    std::vector<int32_t> strips;  // its strip starts, and its end
-    for (int32_t c : cuts)
-      if (c >= m0 && c <= m1) strips.push_back(c);
-    const auto n_strips = static_cast<int32_t>(strips.size()) - 1;
-    const int32_t n_chunks = std::min(n_strips, kShareMaxChunks);
-    left.chunk_begin = right.chunk_begin = static_cast<int32_t>(chunks_.size());
-    for (int32_t j = 0; j < n_chunks; ++j) {  // whole strips, as even as they go
-      const int32_t b0 = strips[size_t(int64_t(n_strips) * j / n_chunks)];
-      const int32_t b1 = strips[size_t(int64_t(n_strips) * (j + 1) / n_chunks)];
-      chunks_.push_back({b0, b1, add_region(b0, b1), 0, -1});
-    }
-    left.chunk_end = right.chunk_end = static_cast<int32_t>(chunks_.size());
-  }
-  shares_ = std::make_unique<PairShare[]>(size_t(std::max(n_pairs, 1)));
-  f_.assign(size_t(next), Node4<Real>{});
-  // Which regions hold each 16 nodes, in regions_ order: the correctors sum
-  // them in that order whichever thread filled them.
-  const int32_t n_groups = (model_.n_nodes + 15) / 16;
-  group_begin_.assign(size_t(n_groups) + 1, 0);
-  for (const Region& r : regions_)
-    for (int32_t g = r.begin / 16; g < r.end / 16; ++g) ++group_begin_[size_t(g) + 1];
-  for (int32_t g = 0; g < n_groups; ++g) group_begin_[size_t(g) + 1] += group_begin_[size_t(g)];
-  group_offset_.assign(size_t(group_begin_.back()), 0);
-  std::vector<int32_t> group_region(group_offset_.size(), 0);  // the same lists, as region indices
-  {
-    std::vector<int32_t> fill(group_begin_.begin(), group_begin_.end() - 1);
-    for (size_t r = 0; r < regions_.size(); ++r)
-      for (int32_t g = regions_[r].begin / 16; g < regions_[r].end / 16; ++g) {
-        group_region[size_t(fill[size_t(g)])] = int32_t(r);
-        group_offset_[size_t(fill[size_t(g)]++)] = regions_[r].offset;
-      }
-  }
-  // The parts whose nodes a range of blocks reads (parts tile the nodes in order).
-  auto waits = [&](int32_t b0, int32_t b1, int32_t& wait_lo, int32_t& wait_hi) {
-    int32_t nlo = model_.n_nodes, nhi = 0;
-    for (int32_t b = b0; b < b1; ++b) {
-      nlo = std::min(nlo, lo[size_t(b)]);
-      nhi = std::max(nhi, hi[size_t(b)]);
-    }
-    wait_lo = 0;
-    wait_hi = -1;
-    for (int32_t q = 0; q < n_parts_; ++q) {
-      const Part& part = part_[size_t(q)];
-      if (part.node_begin >= nhi || part.node_end <= nlo || part.node_begin >= part.node_end) continue;
-      if (wait_hi < wait_lo) wait_lo = q;
-      wait_hi = q;
-    }
-  };
-  for (Part& part : part_) waits(part.own_begin, part.own_end, part.wait_lo, part.wait_hi);
-  for (Chunk& c : chunks_) waits(c.block_begin, c.block_end, c.wait_lo, c.wait_hi);
-  {
-    int32_t c = 0;
-    for (size_t k = 0; k < model_.essential.size(); ++k)
-      for (int32_t i : model_.essential[k].nodes) essential_entries_.push_back({int32_t(k), i, c++});
-    // By part (a node's entries stay in set order: a node in two sets takes the later one's motion).
-    auto part_of = [&](int32_t node) {
-      int32_t q = 0;
-      while (q + 1 < n_parts_ && node >= part_[size_t(q)].node_end) ++q;
-      return q;
-    };
-    std::stable_sort(essential_entries_.begin(), essential_entries_.end(),
-                     [&](const EssentialEntry& a, const EssentialEntry& b) { return part_of(a.node) < part_of(b.node); });
-    size_t k = 0;
-    for (int32_t q = 0; q < n_parts_; ++q) {
-      part_[size_t(q)].essential_begin = k;
-      while (k < essential_entries_.size() && part_of(essential_entries_[k].node) == q) ++k;
-      part_[size_t(q)].essential_end = k;
-    }
-  }
-  // Who fills each region, and each part's nodes in A (only its own blocks'
-  // region holds them: the longer run of such 16-node groups at either end of
-  // its range) and B (the rest, with the regions they wait for).
-  region_part_.assign(regions_.size(), -1);
-  region_pair_.assign(regions_.size(), -1);
-  for (int32_t q = 0; q < n_parts_; ++q) region_part_[size_t(part_[size_t(q)].own_region)] = q;
-  for (int32_t k = 0; k < n_pairs; ++k)
-    for (int32_t j = part_[size_t(2 * k)].chunk_begin; j < part_[size_t(2 * k)].chunk_end; ++j)
-      region_pair_[size_t(chunks_[size_t(j)].region)] = k;
-  for (Part& part : part_) {
-    const int32_t g0 = part.node_begin / 16, g1 = (part.node_end + 15) / 16;
-    auto own_only = [&](int32_t g) {
-      for (int32_t k = group_begin_[size_t(g)]; k < group_begin_[size_t(g) + 1]; ++k)
-        if (group_region[size_t(k)] != part.own_region) return false;
-      return true;
-    };
-    int32_t head = g0, tail = g1;
-    while (head < g1 && own_only(head)) ++head;
-    while (tail > head && own_only(tail - 1)) --tail;
-    auto node = [&](int32_t g) { return std::min(g * 16, part.node_end); };
-    if (head - g0 >= g1 - tail) {
-      part.a_begin = part.node_begin, part.a_end = node(head), part.b_begin = node(head), part.b_end = part.node_end;
-    } else {
-      part.a_begin = node(tail), part.a_end = part.node_end, part.b_begin = part.node_begin, part.b_end = node(tail);
-    }
-    std::vector<int32_t> wait;
-    for (int32_t g = part.b_begin / 16; g < (part.b_end + 15) / 16 && part.b_begin < part.b_end; ++g)
-      for (int32_t k = group_begin_[size_t(g)]; k < group_begin_[size_t(g) + 1]; ++k) wait.push_back(group_region[size_t(k)]);
-    std::sort(wait.begin(), wait.end());
-    wait.erase(std::unique(wait.begin(), wait.end()), wait.end());
-    part.wait_region_begin = wait_regions_.size();
-    wait_regions_.insert(wait_regions_.end(), wait.begin(), wait.end());
-    part.wait_region_end = wait_regions_.size();
-  }
+  shares_ = std::make_unique<PairShare[]>(size_t(std::max(n_parts_ / 2, 1)));
+  f_.assign(size_t(plan_.force_slots), Node4<Real>{});
   predicted_ = std::make_unique<PredictClaim[]>(size_t(n_parts_));
   own_claim_ = std::make_unique<PredictClaim[]>(size_t(n_parts_));
-  region_done_ = std::make_unique<RegionDone[]>(regions_.size());
+  region_done_ = std::make_unique<RegionDone[]>(plan_.regions.size());
   u4_.assign(size_t(model_.n_nodes), Node4<Real>{});
-  elastic_.assign(regions_.size(), ElasticSums{});
+  elastic_.assign(plan_.regions.size(), ElasticSums{});
   correct_sums_.assign(size_t(n_parts_), CorrectSums{});
   for (const LoadSet& load : model_.loads) loaded_.insert(loaded_.end(), load.nodes.begin(), load.nodes.end());
   u_before_.assign(model_.constrained.size() + loaded_.size(), Vec3(0.0));
@@ -340,7 +160,7 @@ void Stepper<Real>::run_parts(void (*fn)(void*, int32_t), void* ctx) {
 template <class Real>
 void Stepper<Real>::predict_part(void* ctx, int32_t p) {
   auto* self = static_cast<Stepper*>(ctx);
-  const Part& part = self->part_[size_t(p)];
+  const Part& part = self->plan_.parts[size_t(p)];
   State<Real>& s = *self->cur_;
   self->kernels_.predict(part.node_begin, part.node_end, self->cur_dt_, s.u.data(), s.v.data(), s.a.data(),
                          self->u4_.data());
@@ -349,13 +169,13 @@ void Stepper<Real>::predict_part(void* ctx, int32_t p) {
 template <class Real>
 void Stepper<Real>::pad_part(void* ctx, int32_t p) {
   auto* self = static_cast<Stepper*>(ctx);
-  const Part& part = self->part_[size_t(p)];
+  const Part& part = self->plan_.parts[size_t(p)];
   self->kernels_.pad(part.node_begin, part.node_end, self->cur_->u.data(), self->u4_.data());
 }
 
 template <class Real>
 void Stepper<Real>::elastic_blocks(int32_t begin, int32_t end, int32_t r) {
-  Node4<Real>* f = f_.data() + regions_[size_t(r)].offset;
+  Node4<Real>* f = f_.data() + plan_.regions[size_t(r)].offset;
   ElasticSums sums;
   for (const ElementGroup& g : model_.groups) {
     const int32_t b0 = std::max(g.begin, begin), b1 = std::min(g.end, end);
@@ -371,7 +191,7 @@ void Stepper<Real>::elastic_blocks(int32_t begin, int32_t end, int32_t r) {
 template <class Real>
 void Stepper<Real>::run_elastic() {
   for (int32_t p = 0; p + 1 < n_parts_; p += 2) {
-    const Part& left = part_[size_t(p)];
+    const Part& left = plan_.parts[size_t(p)];
     shares_[size_t(left.share)].ends.store(uint64_t(uint32_t(left.chunk_end)) << 32 | uint32_t(left.chunk_begin),
                                            std::memory_order_relaxed);
   }
@@ -381,7 +201,7 @@ void Stepper<Real>::run_elastic() {
 template <class Real>
 void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   auto* self = static_cast<Stepper*>(ctx);
-  const Part& part = self->part_[size_t(p)];
+  const Part& part = self->plan_.parts[size_t(p)];
   if (!self->fused_) {
     // Every region is zero on entry: the correctors cleared every entry they read.
     self->elastic_blocks(part.own_begin, part.own_end, part.own_region);
@@ -404,7 +224,7 @@ void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   if (!self->fused_correct_) return;
   self->ensure_region(part.own_region);
   const CorrectSums a = self->correct_range(part.a_begin, part.a_end);
-  for (size_t k = part.wait_region_begin; k < part.wait_region_end; ++k) self->ensure_region(self->wait_regions_[k]);
+  for (size_t k = part.wait_region_begin; k < part.wait_region_end; ++k) self->ensure_region(self->plan_.wait_regions[k]);
   const CorrectSums b = self->correct_range(part.b_begin, part.b_end);
   self->correct_sums_[size_t(p)] = {a.abs_a + b.abs_a, a.mv2 + b.mv2, a.mgu + b.mgu, a.ma2 + b.ma2};
 }
@@ -428,7 +248,7 @@ void Stepper<Real>::claim_chunks(int32_t k, int side) {
     const uint64_t next =
         side == 1 ? (uint64_t(uint32_t(r)) << 32 | uint32_t(l + 1)) : (uint64_t(uint32_t(r - 1)) << 32 | uint32_t(l));
     if (!ends.compare_exchange_weak(e, next, std::memory_order_relaxed)) continue;
-    const Chunk& c = chunks_[size_t(side == 1 ? l : r - 1)];
+    const Chunk& c = plan_.chunks[size_t(side == 1 ? l : r - 1)];
     if (fused_) {
       for (int32_t q = c.wait_lo; q <= c.wait_hi; ++q) ensure_predicted(q);
     }
@@ -441,7 +261,7 @@ void Stepper<Real>::claim_chunks(int32_t k, int side) {
 template <class Real>
 void Stepper<Real>::ensure_own(int32_t q) {
   run_once(own_claim_[size_t(q)].state, epoch_, [&] {
-    const Part& part = part_[size_t(q)];
+    const Part& part = plan_.parts[size_t(q)];
     for (int32_t w = part.wait_lo; w <= part.wait_hi; ++w) ensure_predicted(w);
     // Every region is zero on entry: the correctors cleared every entry they read.
     elastic_blocks(part.own_begin, part.own_end, part.own_region);
@@ -453,8 +273,8 @@ template <class Real>
 void Stepper<Real>::ensure_region(int32_t r) {
   std::atomic<uint32_t>& done = region_done_[size_t(r)].epoch;
   if (done.load(std::memory_order_acquire) == epoch_) return;
-  if (region_part_[size_t(r)] >= 0) ensure_own(region_part_[size_t(r)]);
-  else if (region_pair_[size_t(r)] >= 0) claim_chunks(region_pair_[size_t(r)], 1);
+  if (plan_.region_part[size_t(r)] >= 0) ensure_own(plan_.region_part[size_t(r)]);
+  else if (plan_.region_pair[size_t(r)] >= 0) claim_chunks(plan_.region_pair[size_t(r)], 1);
   while (done.load(std::memory_order_acquire) != epoch_) cpu_relax();  // claimed: a thread is at it
 }
 
@@ -468,8 +288,8 @@ CorrectSums Stepper<Real>::correct_range(int32_t begin, int32_t end) {
   args.end = end;
   args.dt = cur_dt_;
   args.f = f_.data();
-  args.group_begin = group_begin_.data();
-  args.group_offset = group_offset_.data();
+  args.group_begin = plan_.group_begin.data();
+  args.group_offset = plan_.group_offset.data();
   args.inv_m = m.inv_m.data();
   args.m = m.m.data();
   for (int k = 0; k < 3; ++k) args.g[k] = Real(m.effects.g[k]);
@@ -483,7 +303,7 @@ CorrectSums Stepper<Real>::correct_range(int32_t begin, int32_t end) {
 template <class Real>
 void Stepper<Real>::correct_part(void* ctx, int32_t p) {
   auto* self = static_cast<Stepper*>(ctx);
-  const Part& part = self->part_[size_t(p)];
+  const Part& part = self->plan_.parts[size_t(p)];
   self->correct_sums_[size_t(p)] = self->correct_range(part.node_begin, part.node_end);
 }
 
@@ -491,7 +311,7 @@ template <class Real>
 void Stepper<Real>::apply_essential_positions(State<Real>& s, double t, size_t begin, size_t end) {
   // Essential BCs set displacement and velocity directly, section 4.1.
   for (size_t k = begin; k < end; ++k) {
-    const EssentialEntry& entry = essential_entries_[k];
+    const EssentialEntry& entry = plan_.essential_entries[k];
     const EssentialSet& set = model_.essential[size_t(entry.set)];
     const auto i = size_t(entry.node), c = size_t(entry.c);
     const Vec3& X = model_.mesh.X[i];
@@ -509,7 +329,7 @@ void Stepper<Real>::apply_essential_positions(State<Real>& s, double t, size_t b
 template <class Real>
 void Stepper<Real>::ensure_predicted(int32_t q) {
   run_once(predicted_[size_t(q)].state, epoch_, [&] {
-    const Part& part = part_[size_t(q)];
+    const Part& part = plan_.parts[size_t(q)];
     State<Real>& s = *cur_;
     kernels_.predict(part.node_begin, part.node_end, cur_dt_, s.u.data(), s.v.data(), s.a.data(), u4_.data());
     apply_essential_positions(s, cur_t1_, part.essential_begin, part.essential_end);
@@ -552,7 +372,7 @@ void Stepper<Real>::apply_essential_rates(State<Real>& s, double t, double dt) {
 template <class Real>
 void Stepper<Real>::add_load_force(int32_t node, const Vec3& force) {
   // Into the first region that holds the node: the corrector reads it there.
-  for (const Region& r : regions_) {
+  for (const Region& r : plan_.regions) {
     if (node < r.begin || node >= r.end) continue;
     Real* f = f_[size_t(r.offset + node)].v;
     for (int d = 0; d < 3; ++d) f[d] += Real(force[d]);
@@ -586,7 +406,7 @@ void Stepper<Real>::apply_initial_acceleration(State<Real>& s) {
   // that and leaves v alone.
   cur_ = &s;
   cur_dt_ = Real(0);
-  if (!model_.essential.empty()) apply_essential_positions(s, s.t, 0, essential_entries_.size());
+  if (!model_.essential.empty()) apply_essential_positions(s, s.t, 0, plan_.essential_entries.size());
   run_parts(&Stepper::pad_part, this);  // no predictor has written u4_
   run_elastic();
   if (!model_.loads.empty()) {
@@ -702,7 +522,7 @@ void Stepper<Real>::predict_and_add_elastic_forces(State<Real>& s) {
     leave(Pass::Predict);
     if (!model_.essential.empty()) {
       enter(Pass::Essential);
-      apply_essential_positions(s, cur_t1_, 0, essential_entries_.size());
+      apply_essential_positions(s, cur_t1_, 0, plan_.essential_entries.size());
       leave(Pass::Essential);
     }
     enter(Pass::Elastic);

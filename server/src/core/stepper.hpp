@@ -26,6 +26,7 @@
 
 #include "core/contact.hpp"
 #include "core/model.hpp"
+#include "core/step_plan.hpp"
 #include "core/state.hpp"
 
 namespace tactile {
@@ -110,44 +111,10 @@ class Stepper {
   const Contact<Real>& contact() const { return contact_; }
 
  private:
-  struct Part {
-    int32_t block_begin, block_end;  // lane blocks
-    int32_t node_begin, node_end;    // nodes
-    // Parts 2k and 2k + 1 share the middle of their blocks (see
-    // elastic_part): 1 for the one whose own share is on the left, 2 for
-    // the one on the right, 0 for a part without a partner.
-    int32_t side = 0;
-    int32_t share = -1;           // its pair's index in shares_
-    int32_t own_begin = 0, own_end = 0;  // the blocks it always takes
-    int32_t own_region = 0;       // where their forces go, in regions_
-    int32_t chunk_begin = 0, chunk_end = 0;  // its pair's middle chunks, in chunks_
-    // The parts whose nodes its own blocks read: [wait_lo, wait_hi].
-    int32_t wait_lo = 0, wait_hi = -1;
-    // Its constrained nodes' entries, [essential_begin, essential_end) in essential_entries_.
-    size_t essential_begin = 0, essential_end = 0;
-    // Its nodes in two ranges for the corrector inside the element pass: A,
-    // held by its own blocks' force array alone (corrected as soon as those
-    // are done), then B, after the regions [wait_region_begin,
-    // wait_region_end) of wait_regions_ are done.
-    int32_t a_begin = 0, a_end = 0, b_begin = 0, b_end = 0;
-    size_t wait_region_begin = 0, wait_region_end = 0;
-  };
-  // A force array: the nodes [begin, end) (multiples of 16) one part's own
-  // blocks or one middle chunk touch, stored at f_[offset + begin, offset + end).
-  struct Region {
-    int64_t offset;
-    int32_t begin, end;
-  };
-  // A middle chunk: blocks [block_begin, block_end), forces into `region`.
-  struct Chunk {
-    int32_t block_begin, block_end, region;
-    int32_t wait_lo, wait_hi;  // the parts whose nodes its blocks read
-  };
-  // One node of one essential set: c counts the sets' nodes in order (the
-  // index into v_prescribed_ and a_prescribed_).
-  struct EssentialEntry {
-    int32_t set, node, c;
-  };
+  using Part = StepPlan::Part;
+  using Region = StepPlan::Region;
+  using Chunk = StepPlan::Chunk;
+  using EssentialEntry = StepPlan::EssentialEntry;
   // Whether a part's nodes are predicted (or its own blocks done) this step:
   // (epoch << 2) | 1 while a thread is at it, | 2 once done.
   struct alignas(64) PredictClaim {
@@ -216,19 +183,13 @@ class Stepper {
   const KernelTable<Real>& kernels_;
   CorrectFn<Real> correct_;
   Contact<Real> contact_;
+  StepPlan plan_;  // how the step's work splits over threads (core/step_plan.hpp)
   int32_t n_parts_ = 1;
-  std::vector<Part> part_;
 
   // Workspace, sized once.
   std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> u4_;  // u for the element pass [m] (n_nodes)
   std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> f_;   // the regions' force arrays [N]
-  std::vector<Region> regions_;          // parts' own shares, then middle chunks
-  std::vector<Chunk> chunks_;
   std::unique_ptr<PairShare[]> shares_;  // per pair of parts
-  // Per 16 nodes g, the offsets of the regions that hold them, in regions_
-  // order: group_offset_[group_begin_[g] .. group_begin_[g + 1]).
-  std::vector<int32_t> group_begin_;
-  std::vector<int64_t> group_offset_;
   std::vector<ElasticSums> elastic_;     // per region, whichever thread filled it
   std::vector<CorrectSums> correct_sums_;  // per part
   std::vector<Vec3> u_before_;           // constrained and loaded nodes' u at t_n [m]
@@ -236,13 +197,9 @@ class Stepper {
   std::vector<Real> a_prescribed_;       // prescribed accelerations (n_constrained x 3)
   std::vector<Real> v_prescribed_;       // prescribed velocities (n_constrained x 3)
   std::vector<int32_t> loaded_;          // loaded node ids, flattened over loads
-  std::vector<EssentialEntry> essential_entries_;  // grouped by part, each part's in set order
   std::unique_ptr<PredictClaim[]> predicted_;      // per part
   std::unique_ptr<PredictClaim[]> own_claim_;      // per part: its own blocks
   std::unique_ptr<RegionDone[]> region_done_;      // per region
-  std::vector<int32_t> region_part_;     // per region: the part whose own blocks fill it, or -1
-  std::vector<int32_t> region_pair_;     // per region: the pair whose middle chunk fills it, or -1
-  std::vector<int32_t> wait_regions_;    // per part, the regions its B nodes wait for
   uint32_t epoch_ = 0;                   // steps that predicted inside the element pass
   bool fused_ = false;                   // the element pass predicts first (see elastic_part)
   bool fused_correct_ = false;           // and corrects last
