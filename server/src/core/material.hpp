@@ -122,9 +122,8 @@ TACTILE_INLINE T stress_linear(const T* F, T lambda, T mu, T* P) {
 // ---- St. Venant-Kirchhoff ----------------------------------------------------
 // E = (F^T F - I)/2 (eqs. 5-6), S = lambda tr(E) I + 2 mu E, P = F S.
 // Written on the six entries of the symmetric C = F^T F, with the halves
-// folded into the constants: fewer multiplies for the element pass (the
-// double kernel alone, alternated in one process, see kernels_impl.hpp: 2-4 %
-// faster; float unchanged).
+// folded into the constants: fewer multiplies for the element pass
+// (fem_bench --only=passes; docs/perf.md, The element pass).
 // StVK from C's six entries, c_ij = (F^T F)_ij.
 template <class T>
 TACTILE_INLINE T stress_stvk_of_c(const T* F, T c00, T c11, T c22, T c01, T c02, T c12, T lambda, T mu, T* P) {

@@ -209,16 +209,13 @@ Model<Real> build_model(const ModelSpec& spec) {
   // the sweep (integrator.threads parts, cut at equal element counts), so two
   // parts meet on one layer of nodes. At least kMinPartElements per part:
   // below that the hand-offs between threads cost more than the split saves
-  // (fem_bench: 1.0x at 4.4 k tets, 1.5x at 20 k, 2.0x at 100 k).
+  // (fem_bench --only=threads; docs/perf.md, Threads).
   //
   // A sweep, not a space-filling curve: the elements around a node follow
   // one another within a layer or two, so the node arrays stream through
-  // the cache once a step, where a Morton curve came back to a node's
-  // neighbours half the body later. 1 M tets, float, one thread: the
-  // elastic kernel timed alone, alternated in one process (a probe outside
-  // the repo), Morton 9.3 ns a tet, this sweep with the renumbering below
-  // 7.0; fem_bench --large --only=passes, elastic pass, three alternated
-  // runs each, 8.8-10.3 ms before, 6.6-9.3 after (a noisy host).
+  // the cache once a step, where a Morton curve comes back to a node's
+  // neighbours half the body later (fem_bench --large --only=passes, the
+  // elastic column at 1 M tets; docs/perf.md, Element and node order).
   constexpr size_t kMinPartElements = 4096;
   const auto n_parts = static_cast<int32_t>(std::clamp<size_t>(nt / kMinPartElements, 1,
                                                                 size_t(std::max(1, spec.integrator.threads))));
@@ -304,12 +301,10 @@ Model<Real> build_model(const ModelSpec& spec) {
 
   // Nodes renumbered in the order the blocks first touch them, so that the
   // element pass reads and adds into the node arrays nearly in sequence, a
-  // few new cache lines a block (the same probe: 7.0 ns a tet against 8.2
-  // in the sweep order with the nodes as given). The hardware prefetcher follows
-  // such a stream: fetching each block's new node lines ahead in software,
-  // which gained 8-15 % under the Morton order, now lost 1-5 %, and went.
-  // Everything the model holds uses these numbers; node_given and node_model
-  // translate.
+  // few new cache lines a block: a stream the hardware prefetcher follows
+  // with no prefetches in software (fem_bench --large --only=passes;
+  // docs/perf.md, Element and node order). Everything the model holds uses
+  // these numbers; node_given and node_model translate.
   std::vector<int32_t> cut(size_t(n_parts) + 1, 0);
   model.node_model.assign(nn, -1);
   model.node_given.assign(nn, -1);

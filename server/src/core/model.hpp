@@ -33,12 +33,11 @@ struct ElementGroup {
 // of the strip's elements, so that elements that share nodes sit in one lane
 // of consecutive blocks rather than side by side in one block: a block's
 // corner-force adds seldom hit the same node back to back (a store-to-load
-// forwarding chain), while each strip stays compact in space. Measured: 6-14 %
-// on the element pass. A range of blocks that cuts a strip touches the nodes
-// of the whole strip, so threads share work in whole strips (stepper.cpp).
-// 16 blocks rather than 64, for finer shares: the float kernel alone,
-// alternated runs (see kernels_impl.hpp), 1-4 % slower at 20 k tets, 6-15 %
-// faster at 1 M.
+// forwarding chain), while each strip stays compact in space. A range of
+// blocks that cuts a strip touches the nodes of the whole strip, so threads
+// share work in whole strips (stepper.cpp): 16 blocks, for fine shares.
+// Guarded by fem_bench --only=passes and --large --only=passes (the elastic
+// column; docs/perf.md, Element and node order).
 inline constexpr int32_t kStripBlocks = 16;
 
 // A share of the step's work for one thread: the lane blocks [block_begin,

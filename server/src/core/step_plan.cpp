@@ -13,10 +13,9 @@ constexpr int32_t kShareOwnPercent = 75;
 // Chunks per pair, at most. A chunk is what one thread may be left waiting
 // for, and each adds a force array the correctors read: a strip of the sweep
 // reaches the layer of nodes before it, so a chunk's array spans about a
-// layer, and small chunks pile several arrays on each node (a probe outside
-// the repo timing each part of each pass, 20 k tets: 64 chunks of one strip,
-// corrector 4.7 us; 8 chunks, 3.2-4.2 us, and the faster thread waits
-// 1.2-1.7 us).
+// layer, and small chunks pile several arrays on each node, which lengthens
+// the correctors; a few chunks keep both the wait and the correctors short
+// (fem_bench --only=threads and --only=passes; docs/perf.md, Threads).
 constexpr int32_t kShareMaxChunks = 8;
 
 }  // namespace

@@ -235,11 +235,11 @@ void Stepper<Real>::claim_chunks(int32_t k, int side) {
   // takes its own share first (three quarters of its part, at the pair's
   // ends), then claims middle chunks (whole strips) from its side until the
   // two meet. A thread that runs slower (a busier core, a later start) then
-  // leaves more of the middle to its partner instead of holding up the step:
-  // with a fixed split, the faster of this machine's two cores waited 6-16 us
-  // of a 70 us step at 20 k tets. Each chunk has its own force array, which
-  // the correctors add in a fixed order: the result is the same bit for bit
-  // wherever the two threads meet (resim relies on it).
+  // leaves more of the middle to its partner instead of holding up the step
+  // (fem_bench --only=threads; docs/perf.md, Threads). Each chunk has its
+  // own force array, which the correctors add in a fixed order: the result
+  // is the same bit for bit wherever the two threads meet (resim relies on
+  // it).
   std::atomic<uint64_t>& ends = shares_[size_t(k)].ends;
   uint64_t e = ends.load(std::memory_order_relaxed);
   for (;;) {
@@ -533,7 +533,7 @@ void Stepper<Real>::predict_and_add_elastic_forces(State<Real>& s) {
   // Split over threads, one job per part predicts its nodes (eq. 7), sets
   // its essential positions, adds its elements' forces and, without loads,
   // corrects its nodes (eqs. 8-10), waiting only for what each of those
-  // reads (see elastic_part): one hand-off where there were three.
+  // reads (see elastic_part): one hand-off, not one per pass.
   ++epoch_;
   fused_ = true;
   fused_correct_ = model_.loads.empty();  // loads go into the force arrays between the two
@@ -777,10 +777,9 @@ double Stepper<Real>::compute_critical_dt(const State<Real>& s) const {
 
 template <class Real>
 double Stepper<Real>::compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const {
-  // Lane blocks, SIMD (kernels.hpp), 9-12 ns a tet. Per element from
-  // positions it took 53-65, and advance()'s sixteenth of the body made a
-  // frame of one sub-step cost 44-92 % more than the step alone; now 8-14 %
-  // (fem_bench --only=refresh).
+  // Lane blocks, SIMD (kernels.hpp), so that the sixteenth of the body
+  // advance() examines each call adds little to a frame beside its steps
+  // (fem_bench --only=refresh; docs/perf.md, The critical step's refresh).
   double dt = model_.dt_rest;
   for (const ElementGroup& g : model_.groups) {
     const int32_t b0 = std::max(g.begin, begin), b1 = std::min(g.end, end);

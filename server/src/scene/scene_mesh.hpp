@@ -25,7 +25,7 @@ SceneMesh build_scene_mesh(const scene_json::Json& j, const std::string& path, c
 // What watches long meshing: TetGen reports no progress of its own, so a
 // meshing expected to take a while is announced with the tets the size
 // check expects (an estimate) and the time that takes at TetGen's pace
-// (100 k tets/s measured); the command-line tools draw a progress bar on it
+// (docs/perf.md, Meshing); the command-line tools draw a progress bar on it
 // (app/progress.hpp, MeshingProgress).
 class MeshingWatch {
  public:

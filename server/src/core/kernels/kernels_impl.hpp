@@ -14,11 +14,10 @@
 // vectorises a scatter whose lanes may share a node. Lanes that share a node
 // simply add in turn.
 //
-// Figures quoted below as "the kernel alone, alternated in one process" come
-// from a probe outside the repo that times two versions of forces() in turns
-// on one model: changes of a few per cent that this host's noise hides in
-// fem_bench, whose --only=isas and --only=passes time the whole step and
-// each pass.
+// The choices below that move the step by a few per cent are guarded by
+// fem_bench --only=passes (each pass) and --only=isas (the step per ISA
+// level); docs/perf.md (The element pass) holds their figures, some from
+// timing the kernel alone, where such changes stand out of the host's noise.
 #pragma once
 
 // GCC 12's intrinsics headers trip -Wmaybe-uninitialized in their own
@@ -96,8 +95,7 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
     if constexpr (sizeof(Real) == 4) {
       // Chunk k of r[j] is lane 4k + j; a 4x4 transpose per chunk gives x, y, z in lane order.
       // Each half of r[j] is built in 256 bits and the halves joined: one
-      // 512-bit insert instead of three (the kernel alone, alternated in one
-      // process: 3-4 % faster at 20 k, 100 k and 1 M tets).
+      // 512-bit insert instead of three (fem_bench --only=isas; docs/perf.md).
       __m512 r[4];
       #pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
@@ -314,9 +312,9 @@ TACTILE_INLINE void deformation_gradient(const ElementBlock<Real>& B, int l, con
 }
 
 // Lanes the material math runs at once. With AVX2's 16 registers, one
-// register's worth: GCC otherwise interleaves a block's two halves and spills
-// (fem_bench --only=passes, 20 k tets: elastic float 180 -> 171 us, double
-// 281 -> 248). Below AVX2 the whole block (measured faster there).
+// register's worth: GCC otherwise interleaves a block's two halves and spills.
+// Below AVX2 the whole block, which runs no slower there (fem_bench
+// --only=isas and --only=passes; docs/perf.md).
 #if defined(__AVX2__) && !defined(__AVX512F__)
 template <class Real>
 inline constexpr int kMathLanes = 32 / int(sizeof(Real));
@@ -327,9 +325,8 @@ inline constexpr int kMathLanes = kLanes<Real>;
 
 // Where the element pass adds the previous block's corner forces (see
 // forces()): after this block's deformation gradients with AVX-512, after
-// its stresses below it (the kernel alone, alternated in one process, 20 k
-// tets: after F, AVX-512 9-10 % faster in float and 3-10 % in double; AVX2
-// 0-4 % slower, SSE4.2 about 2 % slower).
+// its stresses below it; each ISA level keeps the place that runs faster on
+// it (fem_bench --only=isas; docs/perf.md).
 #if defined(__AVX512F__)
 inline constexpr bool kAddsAfterF = true;
 #else
@@ -572,10 +569,9 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
   // the last one before it (block `queued`), whose adds into f wait until
   // this block's math is under way (kAddsAfterF): a block is some 800
   // instructions, more than the core reorders at once, so in block order the
-  // adds and the stress math ran one after the other; placed inside the
-  // math, they overlap (the kernel alone, alternated in one process, 20 k to
-  // 1 M tets, after the stresses: AVX-512 3-8 % faster in float and 5-19 % in
-  // double, AVX2 3-5 %; SSE4.2 1-4 % slower). Its adds always come before
+  // adds and the stress math would run one after the other; placed inside
+  // the math, they overlap (AVX2 and AVX-512; the SSE4.2 fallback loses a
+  // little; fem_bench --only=isas; docs/perf.md). Its adds always come before
   // this block's forces are written, so the two may share a slot.
   alignas(64) Real fc[2][12][W];
   int32_t queued = -1;
@@ -607,15 +603,12 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
   for (int32_t b = begin; b < end; ++b) {
     const ElementBlock<Real>& B = blocks[b];
     // The blocks stream in order, but the hardware prefetcher alone leaves
-    // the pass waiting on memory once they outgrow the caches (fem_bench,
-    // 2 M tets: 98 M tets/s without this, 130 M with it; 1 block ahead: 110 M;
-    // 8 ahead: 125 M). Prefetching the next blocks' corner nodes as well cost
-    // more than it saved (64 prefetches per block: 150 -> 115 M at 2 M tets).
-    // Non-temporal (prefetchnta): a block is read once a step, and kept out
-    // of L2 and L3 it leaves them to the node arrays, which the node passes
-    // read next (fem_bench --large --only=passes, 1 M tets, six alternated
-    // pairs, median step: float 8.75 -> 7.43 ms on one thread, 5.4 -> 4.6 on
-    // two; double and 20 k tets unchanged).
+    // the pass waiting on memory once they outgrow the caches. The blocks
+    // only: a prefetch per corner node (64 a block) costs more than it saves,
+    // and the node arrays stream in order (model.cpp). Non-temporal
+    // (prefetchnta): a block is read once a step, and kept out of L2 and L3
+    // it leaves them to the node arrays, which the node passes read next.
+    // Guarded by fem_bench --large --only=passes (docs/perf.md).
     if (b + kPrefetchBlocks < end) {
       const char* next = reinterpret_cast<const char*>(blocks + b + kPrefetchBlocks);
       #pragma GCC unroll 16
@@ -797,11 +790,11 @@ double critical(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, co
 //
 // The vectors are the hardware's width, not the element blocks' 64 bytes:
 // below AVX-512 GCC lowers a two-input shuffle of 64-byte vectors lane by lane
-// through the stack (the AVX2 corrector took 13 ns a node, fem_bench
-// --only=passes), where one of 32 bytes is two permutes and a blend.
+// through the stack, where one of 32 bytes is two permutes and a blend
+// (fem_bench --only=passes, the predict and correct columns; docs/perf.md).
 
 // At least 4 lanes (first4 and first3 below need them): double below AVX2
-// keeps 64 bytes, which measured 4 % faster there than 32.
+// keeps 64 bytes, which runs faster there than 32 (fem_bench --only=isas).
 #if defined(__AVX512F__)
 inline constexpr int kNodeBytes = 64, kNodeBytesDouble = 64;
 #elif defined(__AVX2__)
