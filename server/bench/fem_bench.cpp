@@ -18,17 +18,18 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <fstream>
 #include <functional>
 #include <malloc.h>
 #include <pthread.h>
 #include <sched.h>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "app/command_line.hpp"
 #include "app/thread_pool.hpp"
 #include "core/kernels/kernels.hpp"
 #include "core/material.hpp"
@@ -803,17 +804,21 @@ void table_invertible(const Options& opt) {
 
 int main(int argc, char** argv) {
   using namespace tactile;
+  const std::pair<const char*, void (*)(const Options&)> tables[] = {
+      {"rates", table_rates}, {"threads", table_threads}, {"passes", table_passes}, {"effects", table_effects},
+      {"hand", table_hand},   {"refresh", table_refresh}, {"isas", table_isas},
+      {"precision", table_precision}, {"invertible", table_invertible}};
+  std::vector<std::string> names;
+  for (const auto& [name, table] : tables) names.emplace_back(name);
   Options opt;
-  for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--quick")) opt.quick = true;
-    else if (!std::strcmp(argv[i], "--large")) opt.large = true;
-    else if (!std::strncmp(argv[i], "--only=", 7)) opt.only = argv[i] + 7;
-    else {
-      std::fprintf(stderr, "usage: %s [--quick] [--large] [--only=rates|threads|passes|effects|hand|refresh|isas|precision|invertible]\n",
-                   argv[0]);
-      return 2;
-    }
-  }
+  CLI::App app("fem_bench: the FEM step benchmark; prints figures, passes and fails nothing.", "fem_bench");
+  configure_command_line(app);
+  app.add_flag("--quick", opt.quick, "small meshes and few repeats, for CI (seconds)");
+  app.add_flag("--large", opt.large, "also 1 M and 2 M tets");
+  app.add_option("--only", opt.only, "one table: " + CLI::detail::join(names, ", "))
+      ->type_name("TABLE")
+      ->check(one_of(names));
+  if (const std::optional<int> status = parse_command_line(app, argc, argv)) return *status;
   std::printf("# tactile FEM step benchmark%s\n\n", opt.quick ? " (--quick)" : "");
   std::printf("CPU: %s, %u hardware threads; kernels: %s\n", cpu_name().c_str(), std::thread::hardware_concurrency(),
               std::string(kernel_isa()).c_str());
@@ -821,20 +826,10 @@ int main(int argc, char** argv) {
   std::printf("free bodies swinging and twisting unless a scene says otherwise. Medians of alternated runs.\n");
   std::fflush(stdout);
 
-  const std::pair<const char*, void (*)(const Options&)> tables[] = {
-      {"rates", table_rates}, {"threads", table_threads}, {"passes", table_passes}, {"effects", table_effects},
-      {"hand", table_hand},   {"refresh", table_refresh}, {"isas", table_isas},
-      {"precision", table_precision}, {"invertible", table_invertible}};
-  bool any = false;
   for (const auto& [name, table] : tables) {
     if (!opt.wants(name)) continue;
     table(opt);
     std::fflush(stdout);
-    any = true;
-  }
-  if (!any) {
-    std::fprintf(stderr, "unknown table '%s'\n", opt.only.c_str());
-    return 2;
   }
 
   std::printf("\n## Allocations inside steps (all timed loops above): %lld\n",

@@ -5,57 +5,36 @@
 #include <cstdio>
 #include <exception>
 #include <fstream>
+#include <optional>
 #include <string>
-#include <string_view>
 
 #include <nlohmann/json.hpp>
 
+#include "app/command_line.hpp"
 #include "app/progress.hpp"
 #include "study/accuracy.hpp"
-
-namespace {
-
-constexpr const char* kUsage =
-    "usage: tactile-accuracy --out FILE.json [--quick] [--scenes DIR] [--only PROBLEM] [--quiet]\n"
-    "  --quick         coarse levels and fewer variations (seconds), as the test suite runs it\n"
-    "  --scenes DIR    the shipped scenes (fig2_twist.json, fig3_cantilever.json); default server/scenes\n"
-    "  --only PROBLEM  cantilever_deflection, cantilever_frequency, wave_speed, rotation, fig3_tip, fig2_area\n"
-    "                  or realtime\n"
-    "  --quiet         no progress bar\n";
-
-}  // namespace
 
 int main(int argc, char** argv) {
   using namespace tactile::study;
   AccuracyOptions options;
   std::string out_path;
-  bool progress = true;
-  for (int i = 1; i < argc; ++i) {
-    const std::string_view a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "tactile-accuracy: %s needs a value\n%s", argv[i], kUsage);
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--quick") options.quick = true;
-    else if (a == "--out") out_path = value();
-    else if (a == "--scenes") options.scenes = value();
-    else if (a == "--only") options.only = value();
-    else if (a == "--quiet") progress = false;
-    else if (a == "--help" || a == "-h") {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else {
-      std::fprintf(stderr, "tactile-accuracy: unknown argument '%s'\n%s", argv[i], kUsage);
-      return 2;
-    }
-  }
-  if (out_path.empty()) {
-    std::fprintf(stderr, "tactile-accuracy: --out FILE.json is needed\n%s", kUsage);
-    return 2;
-  }
+  bool quiet = false;
+  CLI::App app("tactile-accuracy: the accuracy-cost study, as JSON for server/bench/accuracy_report.py.",
+               "tactile-accuracy");
+  tactile::configure_command_line(app);
+  app.footer("exit status: 0 done, 1 a run failed to build, 2 bad command line");
+  app.add_option("--out", out_path, "where the records go")->type_name("FILE.json")->required();
+  app.add_flag("--quick", options.quick, "coarse levels and fewer variations (seconds), as the test suite runs it");
+  app.add_option("--scenes", options.scenes, "the shipped scenes (fig2_twist.json, fig3_cantilever.json)")
+      ->type_name("DIR")
+      ->capture_default_str();
+  app.add_option("--only", options.only,
+                 "cantilever_deflection, cantilever_frequency, wave_speed, rotation, fig3_tip, fig2_area\n"
+                 "or realtime")
+      ->type_name("PROBLEM");
+  app.add_flag("--quiet", quiet, "no progress bar");
+  if (const std::optional<int> status = tactile::parse_command_line(app, argc, argv)) return *status;
+  const bool progress = !quiet;
   tactile::ProgressBar bar(stderr, progress, "accuracy");
   options.progress = [&](size_t done, size_t total, const std::string& what) {
     bar.update(total ? double(done) / double(total) : 1.0, what);

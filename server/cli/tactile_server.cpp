@@ -5,16 +5,13 @@
 // Exit codes: 0 stopped by a signal, 1 a fault stopped the simulation, 2 bad
 // input (scene, mesh, command line, or an address it may not listen on).
 #include <atomic>
-#include <cmath>
 #include <limits>
 #include <csignal>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <optional>
 #include <string>
-#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -22,6 +19,7 @@
 #include <boost/asio/post.hpp>
 #include <boost/asio/signal_set.hpp>
 
+#include "app/command_line.hpp"
 #include "app/progress.hpp"
 #include "app/simulation.hpp"
 #include "core/model.hpp"
@@ -34,35 +32,7 @@ namespace {
 
 using namespace tactile;
 
-constexpr const char* kUsage =
-    "usage: tactile-server SCENE.json [options]\n"
-    "       tactile-server --replay RECORDING.mcap [options]\n"
-    "\n"
-    "Runs the scene in real time and serves it: WebSocket clients (viewers, devices, a controller)\n"
-    "and static files over HTTP, on one port. With --replay, serves a recording the same way, at its\n"
-    "recorded pace (a controller may pause, resume, seek and change the speed).\n"
-    "\n"
-    "options:\n"
-    "  --bind ADDR          listen address (default 127.0.0.1; off loopback a token is required)\n"
-    "  --port N             port (default 8765; 0 picks a free one)\n"
-    "  --token T            token devices and controllers must present (default: $TACTILE_TOKEN)\n"
-    "  --allow-origin O     also accept WebSockets from browser Origin O (repeatable)\n"
-    "  --static DIR         serve DIR over HTTP (e.g. client-web)\n"
-    "  --scenes DIR         scenes a controller may load (default: the scene file's folder)\n"
-    "  --dt S               simulation step (default: the scene's fixed step, else 0.7 x critical at rest)\n"
-    "  --state-rate HZ      state frames per second to viewers (default 30)\n"
-    "  --haptic-rate HZ     haptic frames per second to devices at most (default: one after every step)\n"
-    "  --force-window S     haptic forces are means over S, and over the frame interval at least (default 0.001)\n"
-    "  --variant NAME       run this variant of the scene (default: the first)\n"
-    "  --duration S         stop after S simulated seconds (default: run until stopped)\n"
-    "  --recordings DIR     where a controller's StartRecording writes (MCAP; default: none, refused)\n"
-    "  --record FILE        record the session from the start into FILE (MCAP), until stopped\n"
-    "  --replay FILE        serve the recording FILE (MCAP) instead of a scene; it plays from the first client\n"
-    "  --on-fault WHAT      stop: a fault stops the simulation until a controller resets it (default);\n"
-    "                       reset: the server resets the scene itself, once its telemetry has named the fault\n"
-    "\n"
-    "exit status: 0 stopped, 1 a fault stopped the simulation, 2 bad input\n";
-
+// Refusals after the command line is read (an unknown variant, a missing folder).
 struct BadInput {
   std::string message;
 };
@@ -79,65 +49,71 @@ struct Options {
   std::string replay;
 };
 
-double number(std::string_view flag, const std::string& text) {
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (text.empty() || *end != '\0' || !std::isfinite(v)) throw BadInput{std::string(flag) + ": not a number: " + text};
-  return v;
-}
-
-Options parse_args(int argc, char** argv) {
-  Options o;
-  if (const char* t = std::getenv("TACTILE_TOKEN")) o.server.token = t;
-  std::vector<std::string> args(argv + 1, argv + argc);
-  for (size_t i = 0; i < args.size(); ++i) {
-    const std::string& a = args[i];
-    auto value = [&]() -> const std::string& {
-      if (i + 1 >= args.size()) throw BadInput{a + " needs a value"};
-      return args[++i];
-    };
-    if (a == "--help" || a == "-h") {
-      std::cout << kUsage;
-      std::exit(0);
-    } else if (a == "--bind") o.server.bind = value();
-    else if (a == "--port") {
-      const double p = number(a, value());
-      if (p < 0 || p > 65535 || p != std::floor(p)) throw BadInput{"--port: not a port: " + args[i]};
-      o.server.port = uint16_t(p);
-    } else if (a == "--token") o.server.token = value();
-    else if (a == "--allow-origin") o.server.allowed_origins.push_back(value());
-    else if (a == "--static") o.server.static_dir = value();
-    else if (a == "--scenes") o.scenes_dir = value();
-    else if (a == "--dt") {
-      o.dt = number(a, value());
-      if (!(*o.dt > 0)) throw BadInput{"--dt must be > 0"};
-    } else if (a == "--state-rate") {
-      o.state_rate = number(a, value());
-      if (!(o.state_rate > 0)) throw BadInput{"--state-rate must be > 0"};
-    } else if (a == "--haptic-rate") {
-      o.haptic_rate = number(a, value());
-      if (!(o.haptic_rate > 0)) throw BadInput{"--haptic-rate must be > 0"};
-    } else if (a == "--force-window") {
-      o.force_window = number(a, value());
-      if (!(o.force_window > 0 && o.force_window <= 0.1)) throw BadInput{"--force-window must be in (0, 0.1] s"};
-    } else if (a == "--variant") o.variant = value();
-    else if (a == "--duration") o.duration = number(a, value());
-    else if (a == "--recordings") o.server.recordings_dir = value();
-    else if (a == "--record") o.server.record = value();
-    else if (a == "--replay") o.replay = value();
-    else if (a == "--on-fault") {
-      const std::string& w = value();
-      if (w != "stop" && w != "reset") throw BadInput{"--on-fault: stop or reset, not " + w};
-      o.server.reset_on_fault = w == "reset";
-    }
-    else if (!a.empty() && a[0] == '-') throw BadInput{"unknown option " + a};
-    else if (o.scene.empty()) o.scene = a;
-    else throw BadInput{"one scene only (got " + o.scene + " and " + a + ")"};
-  }
-  if (!o.replay.empty() && !o.scene.empty()) throw BadInput{"a scene or --replay, not both"};
-  if (o.scene.empty() && o.replay.empty()) throw BadInput{"no scene given"};
-  o.server.viewer_rate_hz = o.state_rate;
-  return o;
+// The command line's options, bound to `o`.
+void add_options(CLI::App& app, Options& o, std::string& on_fault) {
+  app.description(
+      "Runs the scene in real time and serves it: WebSocket clients (viewers, devices, a controller)\n"
+      "and static files over HTTP, on one port. With --replay, serves a recording the same way, at its\n"
+      "recorded pace (a controller may pause, resume, seek and change the speed).");
+  app.footer("exit status: 0 stopped, 1 a fault stopped the simulation, 2 bad input");
+  CLI::Option* scene = app.add_option("SCENE.json", o.scene, "the scene to run")->type_name("");
+  app.add_option("--bind", o.server.bind, "listen address (off loopback a token is required)")
+      ->type_name("ADDR")
+      ->capture_default_str();
+  app.add_option("--port", o.server.port, "port (0 picks a free one)")
+      ->type_name("N")
+      ->check(CLI::Range(0, 65535).description(""))
+      ->capture_default_str();
+  app.add_option("--token", o.server.token, "token devices and controllers must present")
+      ->type_name("T")
+      ->envname("TACTILE_TOKEN");
+  app.add_option("--allow-origin", o.server.allowed_origins,
+                 "also accept WebSockets from browser Origin O (repeatable)")
+      ->type_name("O")
+      ->allow_extra_args(false)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  app.add_option("--static", o.server.static_dir, "serve DIR over HTTP (e.g. client-web)")->type_name("DIR");
+  app.add_option("--scenes", o.scenes_dir, "scenes a controller may load (default: the scene file's folder)")
+      ->type_name("DIR");
+  app.add_option("--dt", o.dt, "simulation step, > 0 (default: the scene's fixed step, else 0.7 x critical at rest)")
+      ->type_name("S")
+      ->check(positive_number());
+  app.add_option("--state-rate", o.state_rate, "state frames per second to viewers, > 0")
+      ->type_name("HZ")
+      ->check(positive_number())
+      ->capture_default_str();
+  app.add_option("--haptic-rate", o.haptic_rate,
+                 "haptic frames per second to devices at most, > 0 (default: one after every step)")
+      ->type_name("HZ")
+      ->check(positive_number());
+  app.add_option("--force-window", o.force_window,
+                 "haptic forces are means over S, and over the frame interval at least; in (0, 0.1]")
+      ->type_name("S")
+      ->check(number_where([](double v) { return v > 0 && v <= 0.1; }, "in (0, 0.1] s"))
+      ->capture_default_str();
+  app.add_option("--variant", o.variant, "run this variant of the scene (default: the first)")->type_name("NAME");
+  app.add_option("--duration", o.duration, "stop after S simulated seconds (default: run until stopped)")
+      ->type_name("S")
+      ->check(finite_number());
+  app.add_option("--recordings", o.server.recordings_dir,
+                 "where a controller's StartRecording writes (MCAP; default: none, refused)")
+      ->type_name("DIR");
+  app.add_option("--record", o.server.record, "record the session from the start into FILE (MCAP), until stopped")
+      ->type_name("FILE");
+  CLI::Option* replay =
+      app.add_option("--replay", o.replay,
+                     "serve the recording FILE (MCAP) instead of a scene; it plays from the first client")
+          ->type_name("FILE");
+  app.add_option("--on-fault", on_fault,
+                 "stop: a fault stops the simulation until a controller resets it;\n"
+                 "reset: the server resets the scene itself, once its telemetry has named the fault")
+      ->type_name("stop|reset")
+      ->check(one_of({"stop", "reset"}))
+      ->capture_default_str();
+  scene->excludes(replay);
+  app.callback([&o] {
+    if (o.scene.empty() && o.replay.empty()) throw CLI::RequiredError("a scene or --replay");
+  });
 }
 
 std::atomic<bool> g_stop{false};
@@ -173,8 +149,15 @@ int main(int argc, char** argv) {
   // closed. A write to a closed pipe fails instead (EPIPE), and the shutdown
   // goes on.
   std::signal(SIGPIPE, SIG_IGN);
+  Options o;
+  std::string on_fault = "stop";
+  CLI::App app("", "tactile-server");
+  configure_command_line(app);
+  add_options(app, o, on_fault);
+  if (const std::optional<int> status = parse_command_line(app, argc, argv)) return *status;
+  o.server.reset_on_fault = on_fault == "reset";
+  o.server.viewer_rate_hz = o.state_rate;
   try {
-    const Options o = parse_args(argc, argv);
     if (!o.replay.empty()) return replay(o);
     tactile::MeshingProgress meshing(stderr, true);
     tactile::set_meshing_watch(&meshing);
@@ -240,7 +223,7 @@ int main(int argc, char** argv) {
     }
     return 0;
   } catch (const BadInput& e) {
-    std::fprintf(stderr, "tactile-server: %s\n%s", e.message.c_str(), kUsage);
+    std::fprintf(stderr, "tactile-server: %s\n", e.message.c_str());
     return 2;
   } catch (const SceneError& e) {
     std::fprintf(stderr, "tactile-server: %s\n", e.what());

@@ -4,13 +4,12 @@
 // command line; the message on stderr names the field at fault).
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <iostream>
 #include <optional>
 #include <string>
-#include <string_view>
 #include <vector>
 
+#include "app/command_line.hpp"
 #include "app/headless.hpp"
 #include "app/progress.hpp"
 #include "app/simulation.hpp"
@@ -24,33 +23,6 @@ namespace {
 
 using namespace tactile;
 
-constexpr const char* kUsage =
-    "usage:\n"
-    "  tactile-sim run SCENE.json [options]   run a scene headless, write VTU frames, frames.csv, summary.json\n"
-    "                                         (and forces.csv, devices.csv when it has proxies)\n"
-    "  tactile-sim check SCENE.json           load and validate; print mesh quality and the critical step\n"
-    "  tactile-sim resim RECORDING.mcap [--scene OTHER.json] [--variant V] [--out RESIM.mcap]\n"
-    "                                         feed a recording's device inputs to the simulator again, each\n"
-    "                                         before the same step as live; with its own scene the states come\n"
-    "                                         out bit for bit as recorded (exit 1 when one differs); with\n"
-    "                                         another, compare the two: tactile-recording compare REC RESIM\n"
-    "  tactile-sim --help\n"
-    "\n"
-    "run options:\n"
-    "  --out DIR                 output folder (default: out); writes DIR/<scene>/<variant or run>/\n"
-    "  --duration S              simulated seconds, instead of the scene's run.duration\n"
-    "  --precision float|double  instead of the scene's integrator.precision\n"
-    "  --threads N               instead of the scene's integrator.threads\n"
-    "  --variant NAME            run only this variant\n"
-    "  --no-vtu                  no VTU frames (frames.csv and summary.json only)\n"
-    "  --quiet                   no progress bar, no mesh report unless it warns\n"
-    "\n"
-    "exit status: 0 ok, 1 a fault stopped a run, 2 bad input\n";
-
-struct BadInput {
-  std::string message;
-};
-
 struct Options {
   std::string command, scene;
   std::string out = "out";
@@ -62,60 +34,49 @@ struct Options {
   bool vtu = true, quiet = false;
 };
 
-Options parse_args(int argc, char** argv) {
-  Options o;
-  std::vector<std::string_view> args(argv + 1, argv + argc);
-  auto value = [&](size_t& i) {
-    if (i + 1 >= args.size()) throw BadInput{std::string(args[i]) + " needs a value"};
-    return std::string(args[++i]);
-  };
-  for (size_t i = 0; i < args.size(); ++i) {
-    const std::string_view a = args[i];
-    if (a == "--help" || a == "-h") {
-      o.command = "help";
-      return o;
-    }
-    if (a == "--out") {
-      o.out = value(i);
-    } else if (a == "--duration") {
-      const std::string s = value(i);
-      char* end = nullptr;
-      const double d = std::strtod(s.c_str(), &end);
-      if (end == s.c_str() || *end || !(d > 0)) throw BadInput{"--duration must be a number of seconds > 0, got " + s};
-      o.duration = d;
-    } else if (a == "--precision") {
-      const std::string s = value(i);
-      if (s != "float" && s != "double") throw BadInput{"--precision must be float or double, got " + s};
-      o.precision = s == "float" ? Precision::Float : Precision::Double;
-    } else if (a == "--threads") {
-      const std::string s = value(i);
-      char* end = nullptr;
-      const long n = std::strtol(s.c_str(), &end, 10);
-      if (end == s.c_str() || *end || n < 1 || n > 256) throw BadInput{"--threads must be an integer in 1..256, got " + s};
-      o.threads = int32_t(n);
-    } else if (a == "--variant") {
-      o.variant = value(i);
-    } else if (a == "--scene") {
-      o.other_scene = value(i);
-    } else if (a == "--no-vtu") {
-      o.vtu = false;
-    } else if (a == "--quiet") {
-      o.quiet = true;
-    } else if (a.starts_with("-")) {
-      throw BadInput{"unknown option " + std::string(a)};
-    } else if (o.command.empty()) {
-      o.command = a;
-    } else if (o.scene.empty()) {
-      o.scene = a;
-    } else {
-      throw BadInput{"unexpected argument " + std::string(a)};
-    }
-  }
-  if (o.command.empty()) throw BadInput{"no command given"};
-  if (o.command != "run" && o.command != "check" && o.command != "resim") throw BadInput{"unknown command " + o.command};
-  if (o.scene.empty()) throw BadInput{o.command + (o.command == "resim" ? " needs a recording" : " needs a scene file")};
-  if (o.other_scene && o.command != "resim") throw BadInput{"--scene is for resim"};
-  return o;
+// The command line's options, bound to `o`; a command sets o.command when it is given.
+void add_options(CLI::App& app, Options& o, std::string& precision) {
+  app.description("tactile-sim: runs a scene headless, or checks it.");
+  app.footer("exit status: 0 ok, 1 a fault stopped a run, 2 bad input");
+  app.require_subcommand(1);
+
+  CLI::App* run = app.add_subcommand(
+      "run", "run a scene headless, write VTU frames, frames.csv, summary.json\n"
+             "(and forces.csv, devices.csv when it has proxies)");
+  run->add_option("SCENE.json", o.scene, "the scene file")->required()->type_name("");
+  run->add_option("--out", o.out, "output folder; writes DIR/<scene>/<variant or run>/")
+      ->type_name("DIR")
+      ->capture_default_str();
+  run->add_option("--duration", o.duration, "simulated seconds (> 0), instead of the scene's run.duration")
+      ->type_name("S")
+      ->check(positive_number());
+  run->add_option("--precision", precision, "instead of the scene's integrator.precision")
+      ->type_name("float|double")
+      ->check(one_of({"float", "double"}));
+  run->add_option("--threads", o.threads, "instead of the scene's integrator.threads (1 to 256)")
+      ->type_name("N")
+      ->check(CLI::Range(1, 256).description(""));
+  run->add_option("--variant", o.variant, "run only this variant")->type_name("NAME");
+  run->add_flag_callback("--no-vtu", [&o] { o.vtu = false; }, "no VTU frames (frames.csv and summary.json only)");
+  run->add_flag("--quiet", o.quiet, "no progress bar, no mesh report unless it warns");
+  run->callback([&o] { o.command = "run"; });
+
+  CLI::App* check = app.add_subcommand("check", "load and validate; print mesh quality and the critical step");
+  check->add_option("SCENE.json", o.scene, "the scene file")->required()->type_name("");
+  check->callback([&o] { o.command = "check"; });
+
+  CLI::App* resim = app.add_subcommand(
+      "resim",
+      "feed a recording's device inputs to the simulator again, each before the same step as live;\n"
+      "with its own scene the states come out bit for bit as recorded (exit 1 when one differs);\n"
+      "with another, compare the two: tactile-recording compare REC RESIM");
+  resim->add_option("RECORDING.mcap", o.scene, "the recording")->required()->type_name("");
+  resim->add_option("--scene", o.other_scene, "simulate this scene instead of the recorded one")
+      ->type_name("OTHER.json");
+  resim->add_option("--variant", o.variant, "the variant to run (default: the recorded one, or the first)")
+      ->type_name("V");
+  resim->add_option("--out", o.resim_out, "write the re-simulation as a recording")->type_name("RESIM.mcap");
+  resim->callback([&o] { o.command = "resim"; });
 }
 
 std::string label(const Scene& s) { return s.name + (s.variant.empty() ? "" : " [" + s.variant + "]"); }
@@ -163,7 +124,7 @@ int resim(const Options& o) {
   r.recording = o.scene;
   r.scene = o.other_scene.value_or("");
   r.variant = o.variant.value_or("");
-  if (o.out != "out") r.out = o.out;  // (--out names the re-simulation's recording here)
+  r.out = o.resim_out.value_or("");
   const ResimReport rep = resimulate(r);
   std::cout << "resim " << o.scene << " on scene " << rep.scene_name << ": " << rep.steps << " steps, " << rep.inputs
             << " inputs applied\n";
@@ -232,17 +193,16 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  Options o;
+  std::string precision;
+  CLI::App app("", "tactile-sim");
+  configure_command_line(app);
+  add_options(app, o, precision);
+  if (const std::optional<int> status = parse_command_line(app, argc, argv)) return *status;
+  if (!precision.empty()) o.precision = precision == "float" ? Precision::Float : Precision::Double;
   try {
-    const Options o = parse_args(argc, argv);
-    if (o.command == "help") {
-      std::cout << kUsage;
-      return 0;
-    }
     if (o.command == "resim") return resim(o);
     return o.command == "check" ? check(o) : run(o);
-  } catch (const BadInput& e) {
-    std::cerr << "tactile-sim: " << e.message << "\n\n" << kUsage;
-    return 2;
   } catch (const SceneError& e) {
     std::cerr << "tactile-sim: " << e.what() << "\n";
     return 2;

@@ -3,28 +3,19 @@
 //
 // Exit codes: 0 every case passed, 1 a case failed, 2 bad command line.
 #include <cstdio>
-#include <cstdlib>
 #include <fstream>
+#include <optional>
 #include <string>
-#include <string_view>
 
 #include <nlohmann/json.hpp>
 
+#include "app/command_line.hpp"
 #include "app/progress.hpp"
 #include "study/stability.hpp"
 
 namespace {
 
 using namespace tactile::study;
-
-constexpr const char* kUsage =
-    "usage: tactile-stability [--quick] [--only TEXT] [--seed N] [--json FILE] [--quiet]\n"
-    "  --quick      the short version (coarse meshes, shorter runs), as ctest runs it\n"
-    "  --only TEXT  only the cases whose name (group/material/mesh) contains TEXT\n"
-    "  --seed N     seed of the random velocities and device input (default 1)\n"
-    "  --json FILE  also write every case's figures as JSON\n"
-    "  --quiet      no progress bar\n"
-    "exit status: 0 all passed, 1 a case failed, 2 bad command line\n";
 
 std::string figure(double v, const char* f) {
   if (v < 0) return "-";
@@ -38,36 +29,20 @@ std::string figure(double v, const char* f) {
 int main(int argc, char** argv) {
   SuiteOptions options;
   std::string json_path;
-  bool progress = true;
-  for (int i = 1; i < argc; ++i) {
-    const std::string_view a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "tactile-stability: %s needs a value\n%s", argv[i], kUsage);
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--quick") options.quick = true;
-    else if (a == "--only") options.filter = value();
-    else if (a == "--json") json_path = value();
-    else if (a == "--quiet") progress = false;
-    else if (a == "--seed") {
-      const std::string s = value();
-      char* end = nullptr;
-      options.seed = std::strtoull(s.c_str(), &end, 10);
-      if (s.empty() || *end != '\0') {
-        std::fprintf(stderr, "tactile-stability: --seed wants a whole number, got '%s'\n", s.c_str());
-        return 2;
-      }
-    } else if (a == "--help" || a == "-h") {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else {
-      std::fprintf(stderr, "tactile-stability: unknown argument '%s'\n%s", argv[i], kUsage);
-      return 2;
-    }
-  }
+  bool quiet = false;
+  CLI::App app("tactile-stability: the hard-case stability suite, case by case.", "tactile-stability");
+  tactile::configure_command_line(app);
+  app.footer("exit status: 0 all passed, 1 a case failed, 2 bad command line");
+  app.add_flag("--quick", options.quick, "the short version (coarse meshes, shorter runs), as ctest runs it");
+  app.add_option("--only", options.filter, "only the cases whose name (group/material/mesh) contains TEXT")
+      ->type_name("TEXT");
+  app.add_option("--seed", options.seed, "seed of the random velocities and device input")
+      ->type_name("N")
+      ->capture_default_str();
+  app.add_option("--json", json_path, "also write every case's figures as JSON")->type_name("FILE");
+  app.add_flag("--quiet", quiet, "no progress bar");
+  if (const std::optional<int> status = tactile::parse_command_line(app, argc, argv)) return *status;
+  const bool progress = !quiet;
 
   const std::vector<StabilityCase> cases = stability_cases(options);
   if (cases.empty()) {

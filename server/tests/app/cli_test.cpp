@@ -48,16 +48,26 @@ TEST(Cli, HelpAndBadCommandLines) {
   TempDir dir;
   Outcome o = run_cli(dir, "--help");
   EXPECT_EQ(o.code, 0);
-  EXPECT_NE(o.out.find("tactile-sim run SCENE.json"), std::string::npos);
+  for (const char* part : {"run", "check", "resim", "--precision", "--no-vtu", "--scene"})
+    EXPECT_NE(o.out.find(part), std::string::npos) << part;  // every command's options, in one text
+  o = run_cli(dir, "run --help");
+  EXPECT_EQ(o.code, 0);
+  EXPECT_NE(o.out.find("tactile-sim run [OPTIONS] SCENE.json"), std::string::npos) << o.out;
   o = run_cli(dir, "");
   EXPECT_EQ(o.code, 2);
-  EXPECT_NE(o.err.find("no command given"), std::string::npos);
+  EXPECT_NE(o.err.find("A subcommand is required"), std::string::npos) << o.err;
   o = run_cli(dir, "run x.json --precision half");
   EXPECT_EQ(o.code, 2);
-  EXPECT_NE(o.err.find("--precision must be float or double"), std::string::npos);
+  EXPECT_NE(o.err.find("--precision: must be float or double, got half"), std::string::npos) << o.err;
+  o = run_cli(dir, "run x.json --threads 0");
+  EXPECT_EQ(o.code, 2);
+  EXPECT_NE(o.err.find("--threads"), std::string::npos) << o.err;
   o = run_cli(dir, "run x.json --frobnicate");
   EXPECT_EQ(o.code, 2);
-  EXPECT_NE(o.err.find("unknown option --frobnicate"), std::string::npos);
+  EXPECT_NE(o.err.find("not expected: --frobnicate"), std::string::npos) << o.err;
+  o = run_cli(dir, "run x.json --scene y.json");  // --scene is resim's
+  EXPECT_EQ(o.code, 2);
+  EXPECT_NE(o.err.find("--scene"), std::string::npos) << o.err;
 }
 
 TEST(Cli, BadSceneExitsTwoNamingTheField) {
@@ -65,7 +75,8 @@ TEST(Cli, BadSceneExitsTwoNamingTheField) {
   const std::string scene = dir.file("bad.json");
   test::write_file(scene, beam_scene(R"({ "dt": "fast" })"));
   for (const char* cmd : {"check", "run"}) {
-    const Outcome o = run_cli(dir, std::string(cmd) + " '" + scene + "' --out '" + dir.file("out") + "'");
+    const std::string out = std::string(cmd) == "run" ? " --out '" + dir.file("out") + "'" : "";
+    const Outcome o = run_cli(dir, std::string(cmd) + " '" + scene + "'" + out);
     EXPECT_EQ(o.code, 2) << cmd;
     EXPECT_NE(o.err.find(scene + ": variant 'lin': integrator.dt: must be \"auto\" or a number > 0, got \"fast\""),
               std::string::npos)
