@@ -1,6 +1,6 @@
-// Shared helpers of the app tests: a temporary folder, a strict little XML
-// reader (to check that the VTU and PVD files are well-formed XML without a
-// parser dependency in the build), base64 decoding, and file reading.
+// Shared helpers of the app tests: a temporary folder, file reading, and the
+// reading of our VTU and PVD files: XML through pugixml, then base64 and VTK's
+// binary arrays.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -10,13 +10,14 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <map>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include <unistd.h>
+
+#include <pugixml.hpp>
 
 #include "temp_dir.hpp"
 
@@ -35,123 +36,26 @@ inline void write_file(const std::string& path, const std::string& text) {
   out << text;
 }
 
-struct XmlElement {
-  std::string name;
-  std::map<std::string, std::string> attributes;
-  std::vector<XmlElement> children;
-  std::string text;  // character data directly inside, whitespace kept
+// An XML file parsed by pugixml (Debian: libpugixml-dev); throws, naming the
+// file, the byte and what is wrong, unless it is well-formed XML with one root
+// element (pugixml itself accepts several).
+inline pugi::xml_document read_xml(const std::string& path) {
+  pugi::xml_document doc;
+  const pugi::xml_parse_result r = doc.load_file(path.c_str());
+  if (!r) throw std::runtime_error(path + ": XML error at byte " + std::to_string(r.offset) + ": " + r.description());
+  size_t roots = 0;
+  for (pugi::xml_node n : doc.children()) roots += n.type() == pugi::node_element ? 1 : 0;
+  if (roots != 1) throw std::runtime_error(path + ": " + std::to_string(roots) + " root elements");
+  return doc;
+}
 
-  const XmlElement& child(const std::string& n) const {
-    for (const XmlElement& c : children)
-      if (c.name == n) return c;
-    throw std::runtime_error("<" + name + "> has no <" + n + ">");
-  }
-  const std::string& attr(const std::string& n) const {
-    auto it = attributes.find(n);
-    if (it == attributes.end()) throw std::runtime_error("<" + name + "> has no attribute " + n);
-    return it->second;
-  }
-};
-
-// Parses a document of elements, attributes and text (the XML subset VTK
-// files use) and throws on anything malformed: unclosed or mismatched tags,
-// duplicate or unquoted attributes, a bare '<' or '&' in text, trailing content.
-class XmlReader {
- public:
-  static XmlElement parse(const std::string& s) {
-    XmlReader r(s);
-    r.skip_space();
-    if (r.starts("<?xml")) {
-      const size_t end = s.find("?>", r.i_);
-      if (end == std::string::npos) r.fail("unterminated XML declaration");
-      r.i_ = end + 2;
-    }
-    r.skip_space();
-    XmlElement root = r.element();
-    r.skip_space();
-    if (r.i_ != s.size()) r.fail("content after the root element");
-    return root;
-  }
-
- private:
-  explicit XmlReader(const std::string& s) : s_(s) {}
-  [[noreturn]] void fail(const std::string& what) const {
-    throw std::runtime_error("XML error at byte " + std::to_string(i_) + ": " + what);
-  }
-  bool starts(const char* p) const { return s_.compare(i_, std::strlen(p), p) == 0; }
-  void skip_space() {
-    while (i_ < s_.size() && std::isspace(static_cast<unsigned char>(s_[i_]))) ++i_;
-  }
-  std::string name() {
-    const size_t b = i_;
-    while (i_ < s_.size() && (std::isalnum(static_cast<unsigned char>(s_[i_])) || s_[i_] == '_' || s_[i_] == ':' ||
-                              s_[i_] == '-' || s_[i_] == '.'))
-      ++i_;
-    if (i_ == b) fail("expected a name");
-    return s_.substr(b, i_ - b);
-  }
-  void check_text(const std::string& t) const {
-    for (size_t k = 0; k < t.size(); ++k) {
-      if (t[k] == '<') fail("'<' in text");
-      if (t[k] == '&' && !(t.compare(k, 5, "&amp;") == 0 || t.compare(k, 4, "&lt;") == 0 ||
-                           t.compare(k, 4, "&gt;") == 0 || t.compare(k, 6, "&quot;") == 0 ||
-                           t.compare(k, 6, "&apos;") == 0))
-        fail("bare '&' in text");
-    }
-  }
-  XmlElement element() {
-    if (i_ >= s_.size() || s_[i_] != '<') fail("expected '<'");
-    ++i_;
-    XmlElement e;
-    e.name = name();
-    for (;;) {
-      const size_t before = i_;
-      skip_space();
-      if (starts("/>")) {
-        i_ += 2;
-        return e;
-      }
-      if (starts(">")) {
-        ++i_;
-        break;
-      }
-      if (i_ == before) fail("expected whitespace before an attribute");
-      const std::string key = name();
-      skip_space();
-      if (!starts("=")) fail("expected '=' after " + key);
-      ++i_;
-      skip_space();
-      if (i_ >= s_.size() || (s_[i_] != '"' && s_[i_] != '\'')) fail("unquoted attribute " + key);
-      const char q = s_[i_++];
-      const size_t end = s_.find(q, i_);
-      if (end == std::string::npos) fail("unterminated attribute " + key);
-      const std::string value = s_.substr(i_, end - i_);
-      check_text(value);
-      if (!e.attributes.emplace(key, value).second) fail("duplicate attribute " + key);
-      i_ = end + 1;
-    }
-    for (;;) {
-      const size_t lt = s_.find('<', i_);
-      if (lt == std::string::npos) fail("<" + e.name + "> is not closed");
-      const std::string text = s_.substr(i_, lt - i_);
-      check_text(text);
-      e.text += text;
-      i_ = lt;
-      if (starts("</")) {
-        i_ += 2;
-        if (name() != e.name) fail("mismatched end tag for <" + e.name + ">");
-        skip_space();
-        if (!starts(">")) fail("expected '>'");
-        ++i_;
-        return e;
-      }
-      e.children.push_back(element());
-    }
-  }
-
-  const std::string& s_;
-  size_t i_ = 0;
-};
+// The element children of `parent`, in order (a PVD's DataSets).
+inline std::vector<pugi::xml_node> elements(pugi::xml_node parent) {
+  std::vector<pugi::xml_node> out;
+  for (pugi::xml_node n : parent.children())
+    if (n.type() == pugi::node_element) out.push_back(n);
+  return out;
+}
 
 inline std::vector<uint8_t> decode_base64(const std::string& text) {
   auto value = [](char c) -> int {
@@ -179,11 +83,18 @@ inline std::vector<uint8_t> decode_base64(const std::string& text) {
   return out;
 }
 
+// The DataArray of `parent` named `name`; throws when there is none.
+inline pugi::xml_node find_array(pugi::xml_node parent, const std::string& name) {
+  const pugi::xml_node a = parent.find_child_by_attribute("DataArray", "Name", name.c_str());
+  if (!a) throw std::runtime_error("<" + std::string(parent.name()) + "> has no DataArray " + name);
+  return a;
+}
+
 // Values of an inline binary VTK DataArray: base64 of [UInt64 byte count][values].
 template <class T>
-std::vector<T> decode_vtk_array(const XmlElement& a) {
-  if (a.attr("format") != "binary") throw std::runtime_error("not a binary array");
-  const std::vector<uint8_t> bytes = decode_base64(a.text);
+std::vector<T> decode_vtk_array(pugi::xml_node a) {
+  if (std::string(a.attribute("format").value()) != "binary") throw std::runtime_error("not a binary array");
+  const std::vector<uint8_t> bytes = decode_base64(a.child_value());
   if (bytes.size() < 8) throw std::runtime_error("no header");
   uint64_t n = 0;
   std::memcpy(&n, bytes.data(), 8);
@@ -191,12 +102,6 @@ std::vector<T> decode_vtk_array(const XmlElement& a) {
   std::vector<T> out(n / sizeof(T));
   std::memcpy(out.data(), bytes.data() + 8, n);
   return out;
-}
-
-inline const XmlElement& find_array(const XmlElement& parent, const std::string& name) {
-  for (const XmlElement& c : parent.children)
-    if (c.name == "DataArray" && c.attributes.count("Name") && c.attr("Name") == name) return c;
-  throw std::runtime_error("no DataArray " + name);
 }
 
 }  // namespace tactile::test
