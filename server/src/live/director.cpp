@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <thread>
 
 #include "scene/parameters.hpp"
@@ -66,7 +67,76 @@ std::vector<uint8_t> LiveScene::describe(std::span<const std::string> scenes) {
   return {d.begin(), d.end()};
 }
 
-Director::Director(std::shared_ptr<LiveScene> first) : current_(std::move(first)) {}
+Director::Director(std::shared_ptr<LiveScene> first) : next_id_(first->id() + 1), current_(std::move(first)) {}
+
+Director::~Director() { finish_building(); }
+
+void Director::finish_building() {
+  if (builder_.joinable()) builder_.join();
+}
+
+void Director::set_library(const std::string& scenes_dir, const LiveOptions& options) {
+  scenes_dir_ = scenes_dir;
+  options_ = options;
+  scenes_.clear();
+  if (scenes_dir.empty()) return;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(scenes_dir, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (entry.is_regular_file() && entry.path().extension() == ".json" && name.find(".schema.") == std::string::npos)
+      scenes_.push_back(name);
+  }
+  std::sort(scenes_.begin(), scenes_.end());
+}
+
+std::string Director::request(const Change& change, Built built, bool* busy) {
+  if (busy) *busy = false;
+  if (building_.load()) {
+    if (busy) *busy = true;
+    return "a scene change is under way: wait for its SceneDescription";
+  }
+  const std::shared_ptr<LiveScene> running = current();
+  Scene scene = running->scene();
+  std::string load_path;
+  bool carry = false;
+  uint32_t id = next_id_;
+  if (change.kind == Change::Kind::Load) {
+    if (std::find(scenes_.begin(), scenes_.end(), change.scene) == scenes_.end()) {
+      std::string known;
+      for (const std::string& n : scenes_) known += (known.empty() ? "" : ", ") + n;
+      return "no scene '" + change.scene + "' on this server; it has: " +
+             (known.empty() ? "none (no scene folder)" : known);
+    }
+    load_path = (std::filesystem::path(scenes_dir_) / change.scene).string();
+  } else if (change.kind == Change::Kind::Parameter) {
+    try {
+      apply_parameter(scene.spec, change.parameter, change.value);
+    } catch (const SceneError& e) {
+      return e.what();
+    }
+    // The body goes on under the new parameter, in the same timeline; after
+    // a fault there is no body to carry, and it starts again from rest.
+    carry = fault().empty();
+    if (carry) id = running->id();
+  }
+  if (id == next_id_) ++next_id_;
+  finish_building();
+  building_.store(true);
+  builder_ = std::thread([this, scene = std::move(scene), load_path, id, carry, built = std::move(built),
+                          options = options_]() mutable {
+    std::shared_ptr<LiveScene> live;
+    std::string error;
+    try {
+      if (!load_path.empty()) scene = load_scene(load_path).front();
+      live = std::make_shared<LiveScene>(std::move(scene), id, options);
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+    building_.store(false);
+    built(std::move(live), carry, error);
+  });
+  return "";
+}
 
 std::shared_ptr<LiveScene> Director::current() const {
   std::lock_guard<std::mutex> lock(mutex_);

@@ -16,6 +16,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "app/simulation.hpp"
@@ -65,6 +66,37 @@ class Director {
   using Installed = std::function<void(const std::shared_ptr<LiveScene>&)>;
 
   explicit Director(std::shared_ptr<LiveScene> first);
+  ~Director();  // waits for a scene being built
+  Director(const Director&) = delete;
+  Director& operator=(const Director&) = delete;
+
+  // Where a Load finds scenes (the JSON files of the folder, not the
+  // schema; "" for none) and how the scenes it builds run. Set before the
+  // first change.
+  void set_library(const std::string& scenes_dir, const LiveOptions& options);
+  const std::vector<std::string>& scenes() const { return scenes_; }  // the names a Load may give
+
+  // A change a controller (or the server, after a fault) asks for.
+  struct Change {
+    enum class Kind { Reset, Load, Parameter } kind = Kind::Reset;
+    std::string scene;      // Load: one of scenes()
+    std::string parameter;  // Parameter: its name (scene/parameters.hpp)
+    double value = 0;
+  };
+  // Called on the builder thread with the scene a change built and whether
+  // it carries the body on, or with what went wrong (scene null).
+  using Built = std::function<void(std::shared_ptr<LiveScene> scene, bool carry, const std::string& error)>;
+  // Checks the change and builds its scene on a thread of the director's
+  // own (meshing and model building take from milliseconds to seconds: never
+  // on the network's or the simulation's thread). Returns "" when the build
+  // started, else why not (a scene it lacks, a parameter the scene refuses).
+  // A parameter change carries the body on in the same timeline with the
+  // same scene id; a reset or a load (and a parameter change after a fault,
+  // when there is no body to carry) starts from rest with a new id. The
+  // caller hands the built scene to replace() once its sinks are attached.
+  // `busy` is set when a build is still under way (the change is refused).
+  std::string request(const Change& change, Built built, bool* busy = nullptr);
+  void finish_building();  // waits for the scene being built, if any
 
   // From any thread: the scene the simulation thread runs (or is about to).
   std::shared_ptr<LiveScene> current() const;
@@ -89,6 +121,13 @@ class Director {
   std::string fault() const;
 
  private:
+  std::string scenes_dir_;
+  std::vector<std::string> scenes_;
+  LiveOptions options_;
+  uint32_t next_id_;
+  std::thread builder_;
+  std::atomic<bool> building_{false};
+
   mutable std::mutex mutex_;
   std::shared_ptr<LiveScene> current_, next_;
   bool carry_ = false;

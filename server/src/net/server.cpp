@@ -54,9 +54,9 @@ void Server::Impl::live_control(const wire::Control& c, WsSession& from) {
     // A pause sent while a change is under way is carried over to the new scene.
     case wire::ControlCommand::Pause: return director->current()->loop().set_paused(true);
     case wire::ControlCommand::Resume: return director->current()->loop().set_paused(false);
-    case wire::ControlCommand::Reset: return change(Change::Reset, &c);
-    case wire::ControlCommand::LoadScene: return change(Change::Load, &c);
-    case wire::ControlCommand::SetParameter: return change(Change::Parameter, &c);
+    case wire::ControlCommand::Reset: return change(Director::Change::Kind::Reset, &c);
+    case wire::ControlCommand::LoadScene: return change(Director::Change::Kind::Load, &c);
+    case wire::ControlCommand::SetParameter: return change(Director::Change::Kind::Parameter, &c);
     case wire::ControlCommand::StartRecording: {
       const wire::StartRecording* r = c.command_as_StartRecording();
       if (const std::string bad = start_recording(r && r->path() ? r->path()->str() : ""); !bad.empty())
@@ -226,7 +226,7 @@ void Server::Impl::tick_telemetry() {
       ++self->fault_resets;
       std::fprintf(stderr, "tactile-server: resetting the scene after the fault (--on-fault reset; %u so far)\n",
                    self->fault_resets);
-      self->change(Change::Reset, nullptr);
+      self->change(Director::Change::Kind::Reset, nullptr);
     }
     self->tick_telemetry();
   });
@@ -243,67 +243,42 @@ void Server::Impl::send_to_controller(const Bytes& message) {
   if (controller) controller->send(message, OutKind::Control);
 }
 
-void Server::Impl::change(Change kind, const wire::Control* c) {
+// The director checks the change and builds its scene (live/director.hpp);
+// the network thread attaches the new scene's sinks, then hands it over.
+void Server::Impl::change(Director::Change::Kind kind, const wire::Control* c) {
   const uint32_t request = c ? c->request_id() : 0;
   if (changing)
     return send_to_controller(make_error(wire::ErrorCode::Busy,
                                          "a scene change is under way: wait for its SceneDescription", request));
-  Scene scene = feed->live->scene();
-  std::string load_path;
-  bool carry = false;
-  uint32_t id = next_scene_id;
-  if (kind == Change::Load) {
-    const wire::LoadScene* l = c ? c->command_as_LoadScene() : nullptr;
-    const std::string name = l && l->path() ? l->path()->str() : "";
-    if (std::find(scene_names.begin(), scene_names.end(), name) == scene_names.end()) {
-      std::string known;
-      for (const std::string& n : scene_names) known += (known.empty() ? "" : ", ") + n;
-      return send_to_controller(make_error(
-          wire::ErrorCode::BadRequest,
-          "no scene '" + name + "' on this server; it has: " + (known.empty() ? "none (no scene folder)" : known),
-          request));
-    }
-    load_path = (std::filesystem::path(options.scenes_dir) / name).string();
-  } else if (kind == Change::Parameter) {
-    const wire::SetParameter* p = c ? c->command_as_SetParameter() : nullptr;
-    const std::string name = p && p->name() ? p->name()->str() : "";
-    try {
-      apply_parameter(scene.spec, name, p ? p->value() : 0.0);
-    } catch (const SceneError& e) {
-      return send_to_controller(make_error(wire::ErrorCode::BadRequest, e.what(), request));
-    }
-    // The body goes on under the new parameter, in the same timeline; after
-    // a fault there is no body to carry, and it starts again from rest.
-    carry = director->fault().empty();
-    if (carry) id = feed->live->id();
+  Director::Change ask;
+  ask.kind = kind;
+  if (const wire::LoadScene* l = c ? c->command_as_LoadScene() : nullptr; l && l->path()) ask.scene = l->path()->str();
+  if (const wire::SetParameter* p = c ? c->command_as_SetParameter() : nullptr) {
+    ask.parameter = p->name() ? p->name()->str() : "";
+    ask.value = p->value();
   }
-  if (id == next_scene_id) ++next_scene_id;
-  changing = true;
-  if (builder.joinable()) builder.join();
-  // Meshing and model building take from milliseconds to seconds: on their
-  // own thread, never the network's or the simulation's.
-  builder = std::thread([weak = weak_from_this(), &io = ioc, scene = std::move(scene), load_path, id, carry, request,
-                         live_options = options.live]() mutable {
-    try {
-      if (!load_path.empty()) scene = load_scene(load_path).front();
-      auto live = std::make_shared<LiveScene>(std::move(scene), id, live_options);
-      asio::post(io, [weak, live, carry] {
-        if (auto self = weak.lock()) self->built(live, carry);
-      });
-    } catch (const std::exception& e) {
-      asio::post(io, [weak, message = std::string(e.what()), request] {
-        if (auto self = weak.lock()) {
+  bool busy = false;
+  const std::string refused = director->request(
+      ask,
+      [weak = weak_from_this(), &io = ioc, request](std::shared_ptr<LiveScene> live, bool carry,
+                                                    const std::string& error) {
+        asio::post(io, [weak, live = std::move(live), carry, error, request] {
+          auto self = weak.lock();
+          if (!self) return;
+          if (live) return self->built(live, carry);
           self->changing = false;
-          self->send_to_controller(make_error(wire::ErrorCode::BadRequest, message, request));
-        }
-      });
-    }
-  });
+          self->send_to_controller(make_error(wire::ErrorCode::BadRequest, error, request));
+        });
+      },
+      &busy);
+  if (!refused.empty())
+    return send_to_controller(make_error(busy ? wire::ErrorCode::Busy : wire::ErrorCode::BadRequest, refused, request));
+  changing = true;
 }
 
 void Server::Impl::built(std::shared_ptr<LiveScene> live, bool carry) {
   if (stopped) return;
-  incoming = std::make_shared<Feed>(live, scene_names);
+  incoming = std::make_shared<Feed>(live, director->scenes());
   attach(*incoming);
   if (recorder) tap_feed(*incoming);
   director->replace(std::move(live), carry);
@@ -354,7 +329,7 @@ uint16_t Server::port() const { return impl_->acceptor.local_endpoint().port(); 
 void Server::stop() {
   if (impl_->stopped) return;
   impl_->stopped = true;
-  if (impl_->builder.joinable()) impl_->builder.join();
+  if (impl_->director) impl_->director->finish_building();
   beast::error_code ec;
   impl_->acceptor.close(ec);
   impl_->wake_fd.close(ec);

@@ -64,20 +64,6 @@ inline std::string printable_text(std::string out) {
   return out;
 }
 
-// The scenes LoadScene may name: the JSON files of the scene folder (not the schema).
-inline std::vector<std::string> list_scenes(const std::string& dir) {
-  std::vector<std::string> names;
-  if (dir.empty()) return names;
-  std::error_code ec;
-  for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
-    const std::string name = entry.path().filename().string();
-    if (entry.is_regular_file() && entry.path().extension() == ".json" && name.find(".schema.") == std::string::npos)
-      names.push_back(name);
-  }
-  std::sort(names.begin(), names.end());
-  return names;
-}
-
 class WsSession;
 
 // What a recording takes from the simulation thread: every frame, in rings
@@ -145,11 +131,8 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
 
   std::shared_ptr<Feed> feed;      // the scene clients are served
   std::shared_ptr<Feed> incoming;  // handed to the director, not yet running
-  std::vector<std::string> scene_names;
-  bool changing = false;           // a load, reset or parameter change under way
+  bool changing = false;           // a load, reset or parameter change under way, until its scene is served
   uint32_t fault_resets = 0;       // resets the server made after a fault (reset_on_fault)
-  uint32_t next_scene_id;
-  std::thread builder;             // builds the scene a change asks for
 
   std::unordered_set<WsSession*> sessions;
   WsSession* controller = nullptr;
@@ -199,19 +182,15 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
         options(std::move(o)),
         acceptor(io),
         wake_fd(io, ::dup(wakeup->fd())),
-        scene_names(d ? list_scenes(options.scenes_dir) : std::vector<std::string>{}),
-        next_scene_id(d ? d->current()->id() + 1 : 0),
         telemetry_timer(io),
         replay_timer(io) {
     if (d) {
-      feed = std::make_shared<Feed>(d->current(), scene_names);
+      d->set_library(options.scenes_dir, options.live);
+      feed = std::make_shared<Feed>(d->current(), d->scenes());
       attach(*feed);
     } else {
       feed = std::make_shared<Feed>(copy_bytes(r->first_scene().bytes.data(), r->first_scene().bytes.size()));
     }
-  }
-  ~Impl() {
-    if (builder.joinable()) builder.join();
   }
 
   // The loop's sinks: copy into the feed's mailboxes and wake the network
@@ -247,10 +226,9 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
   void tap_feed(Feed& f);
   std::string check_recorder();  // a fault that stopped the recording, once
 
-  enum class Change { Reset, Load, Parameter };
   // A change a controller asked for (c), or the server itself (nullptr: a
   // reset after a fault, ServerOptions::reset_on_fault).
-  void change(Change kind, const wire::Control* c);
+  void change(Director::Change::Kind kind, const wire::Control* c);
   void built(std::shared_ptr<LiveScene> live, bool carry);
   void installed(const std::shared_ptr<LiveScene>& live);
   void send_to_controller(const Bytes& message);

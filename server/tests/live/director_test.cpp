@@ -123,3 +123,82 @@ TEST(Director, AFaultedSceneWaitsForItsReplacement) {
 
 }  // namespace
 }  // namespace tactile
+
+namespace tactile {
+namespace {
+
+// What a change asks for is checked before anything is built, and built on
+// the director's own thread: a load names a scene of its folder, a parameter
+// one the scene has; a reset takes a new id, a parameter change the same.
+TEST(Director, ChangesAreCheckedThenBuiltOffTheCallersThread) {
+  LiveOptions options;
+  options.dt = 2e-4;
+  auto first = std::make_shared<LiveScene>(block_scene(), 4, options);
+  Director director(first);
+  director.set_library(TACTILE_SCENE_DIR, options);
+  EXPECT_NE(std::find(director.scenes().begin(), director.scenes().end(), "poke.json"), director.scenes().end());
+  EXPECT_EQ(std::find(director.scenes().begin(), director.scenes().end(), "scene.schema.json"), director.scenes().end());
+
+  struct Result {
+    std::mutex mutex;
+    std::shared_ptr<LiveScene> scene;
+    bool carry = false, done = false;
+    std::string error;
+    std::thread::id thread;
+  } r;
+  auto built = [&r](std::shared_ptr<LiveScene> s, bool carry, const std::string& error) {
+    std::lock_guard<std::mutex> lock(r.mutex);
+    r.scene = std::move(s), r.carry = carry, r.error = error, r.done = true, r.thread = std::this_thread::get_id();
+  };
+  auto take = [&r] {
+    EXPECT_TRUE(wait_for([&] {
+      std::lock_guard<std::mutex> lock(r.mutex);
+      return r.done;
+    }));
+    std::lock_guard<std::mutex> lock(r.mutex);
+    r.done = false;
+    EXPECT_NE(r.thread, std::this_thread::get_id());
+  };
+
+  Director::Change load;
+  load.kind = Director::Change::Kind::Load;
+  load.scene = "nowhere.json";
+  const std::string no = director.request(load, built);
+  EXPECT_NE(no.find("no scene 'nowhere.json' on this server; it has: "), std::string::npos) << no;
+  EXPECT_NE(no.find("poke.json"), std::string::npos) << no;
+
+  Director::Change parameter;
+  parameter.kind = Director::Change::Kind::Parameter;
+  parameter.parameter = "material.X";
+  EXPECT_NE(director.request(parameter, built), "");
+
+  parameter.parameter = "material.E";
+  parameter.value = 6e4;
+  ASSERT_EQ(director.request(parameter, built), "");
+  take();
+  ASSERT_NE(r.scene, nullptr) << r.error;
+  EXPECT_TRUE(r.carry);
+  EXPECT_EQ(r.scene->id(), 4u);  // the same timeline
+
+  ASSERT_EQ(director.request(Director::Change{}, built), "");  // a reset
+  take();
+  ASSERT_NE(r.scene, nullptr) << r.error;
+  EXPECT_FALSE(r.carry);
+  EXPECT_EQ(r.scene->id(), 5u);
+
+  load.scene = "poke.json";
+  ASSERT_EQ(director.request(load, built), "");
+  // While the load builds (meshing a 12 k-tet block takes far longer than
+  // this call), another change is refused as busy.
+  bool busy = false;
+  EXPECT_EQ(director.request(Director::Change{}, built, &busy),
+            "a scene change is under way: wait for its SceneDescription");
+  EXPECT_TRUE(busy);
+  take();
+  ASSERT_NE(r.scene, nullptr) << r.error;
+  EXPECT_EQ(r.scene->scene().name, "poke");
+  EXPECT_EQ(r.scene->id(), 6u);
+}
+
+}  // namespace
+}  // namespace tactile
