@@ -30,7 +30,7 @@
 
 #include <flatbuffers/flatbuffers.h>
 
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "live/frames.hpp"
 #include "mesh/primitives.hpp"
 #include "tactile_generated.h"

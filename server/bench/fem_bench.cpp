@@ -30,7 +30,7 @@
 #include <vector>
 
 #include "app/command_line.hpp"
-#include "app/thread_pool.hpp"
+#include "parallel/thread_pool.hpp"
 #include "core/kernels/kernels.hpp"
 #include "core/material.hpp"
 #include "core/model.hpp"
@@ -39,7 +39,7 @@
 
 // Every heap allocation of the process, counted only while a timed loop of
 // steps runs (alloc_count::all).
-#include "app/alloc_count.hpp"
+#include "alloc_count.hpp"
 
 namespace tactile {
 namespace {

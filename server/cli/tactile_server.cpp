@@ -21,7 +21,7 @@
 
 #include "app/command_line.hpp"
 #include "app/progress.hpp"
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "core/model.hpp"
 #include "live/director.hpp"
 #include "mesh/mesh_error.hpp"

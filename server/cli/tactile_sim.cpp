@@ -12,7 +12,7 @@
 #include "app/command_line.hpp"
 #include "app/headless.hpp"
 #include "app/progress.hpp"
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "live/resim.hpp"
 #include "record/mcap.hpp"
 #include "core/model.hpp"

@@ -17,7 +17,7 @@
 
 #include "app/progress.hpp"
 #include "app/section.hpp"
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "app/vtu.hpp"
 #include "core/kernels/kernels.hpp"
 

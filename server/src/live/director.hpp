@@ -19,7 +19,7 @@
 #include <thread>
 #include <vector>
 
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "live/frames.hpp"
 #include "live/realtime.hpp"
 #include "scene/scene.hpp"

@@ -15,7 +15,7 @@
 
 #include <flatbuffers/flatbuffers.h>
 
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "scene/parameters.hpp"
 #include "tactile_generated.h"
 

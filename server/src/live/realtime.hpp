@@ -31,7 +31,7 @@
 #include <string>
 #include <vector>
 
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "live/device_path.hpp"
 #include "live/frames.hpp"
 #include "live/spsc_ring.hpp"

@@ -9,7 +9,7 @@
 //   effects.gravity | effects.damping | effects.friction   1 on, 0 off
 //
 // A change is applied to the spec, which the caller rebuilds the model from
-// (the live server carries the body's state over: app/simulation.hpp).
+// (the live server carries the body's state over: sim/simulation.hpp).
 // Setting a value that needs an effect turns the effect on, so that a scene
 // only pays for the effects it uses: alpha > 0 turns damping on, alpha = 0
 // off. Values out of range are refused with a message naming the parameter

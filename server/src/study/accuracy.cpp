@@ -12,7 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/section.hpp"
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "core/spec.hpp"
 #include "mesh/primitives.hpp"
 #include "scene/scene.hpp"

@@ -17,7 +17,7 @@
 
 #include <glm/gtc/quaternion.hpp>
 
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "core/spec.hpp"
 #include "mesh/primitives.hpp"
 #include "mesh/quality.hpp"

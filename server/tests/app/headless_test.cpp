@@ -11,7 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/headless.hpp"
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "app_fixtures.hpp"
 #include "scene/scene.hpp"
 

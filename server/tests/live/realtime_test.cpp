@@ -22,7 +22,7 @@
 #include "tactile_generated.h"
 
 // Heap allocations made on a thread while it has alloc_count::here set.
-#include "app/alloc_count.hpp"
+#include "alloc_count.hpp"
 
 namespace tactile {
 namespace {

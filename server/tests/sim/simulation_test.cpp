@@ -14,7 +14,7 @@
 #include <glm/gtc/quaternion.hpp>
 #include <nlohmann/json.hpp>
 
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 #include "core/coupling.hpp"
 #include "mesh/primitives.hpp"
 #include "scene/parameters.hpp"

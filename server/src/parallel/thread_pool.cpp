@@ -1,4 +1,4 @@
-#include "app/thread_pool.hpp"
+#include "parallel/thread_pool.hpp"
 
 #include <immintrin.h>
 
@@ -9,10 +9,10 @@ namespace {
 // Between polls of a spinning wait: a hint to the core (and its hyperthread sibling).
 inline void relax() { _mm_pause(); }
 
-// How many polls a worker spins for the next job before it blocks: about
-// 35 us on a Sapphire Rapids core (a pause is ~17 ns there), far longer than
-// the gaps between a step's passes, short enough that an idle pool soon
-// costs nothing. A blocked worker wakes through the futex (tens of us).
+// How many polls a worker spins for the next job before it blocks: far
+// longer than the gaps between a step's passes, short enough that an idle
+// pool soon costs nothing; a blocked worker wakes through the futex, much
+// later (docs/perf.md, Threads; guarded by `fem_bench --only=threads`).
 constexpr int kSpinPolls = 2000;
 
 }  // namespace

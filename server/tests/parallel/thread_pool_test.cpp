@@ -1,7 +1,7 @@
 // The thread pool: every index runs exactly once per run, runs are truly
 // concurrent and include the caller, idle workers wake for the next run, and
 // the stepper gives the same motion on it as on one thread.
-#include "app/thread_pool.hpp"
+#include "parallel/thread_pool.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "app/simulation.hpp"
+#include "sim/simulation.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -9,8 +9,8 @@
 
 // The thread pool is another part of the application layer; until it is in
 // the tree, integrator.threads > 1 runs on one thread.
-#if __has_include("app/thread_pool.hpp")
-#include "app/thread_pool.hpp"
+#if __has_include("parallel/thread_pool.hpp")
+#include "parallel/thread_pool.hpp"
 #define TACTILE_HAS_THREAD_POOL 1
 #endif
 
