@@ -13,6 +13,7 @@
 
 #include "app/section.hpp"
 #include "sim/simulation.hpp"
+#include "study/beam_theory.hpp"
 #include "core/spec.hpp"
 #include "mesh/primitives.hpp"
 #include "scene/scene.hpp"
@@ -88,17 +89,7 @@ double mean_displacement(const Simulation& sim, const std::vector<int32_t>& node
 
 // Length L along x, square section h = L / 10, clamped at x = 0; 10 n x n x n cells (the centred split, which
 // bends without the Kuhn split's bias).
-struct Beam {
-  double L = 1.0, h = 0.1, E = 1e6, nu = 0.3, rho = 1000;
-  double I() const { return h * h * h * h / 12; }
-  double A() const { return h * h; }
-  double omega1() const { return 3.5160 * std::sqrt(E * I() / (rho * A())) / (L * L); }  // [rad/s]
-  double f1() const { return 0.55959 * std::sqrt(E * I() / (rho * A())) / (L * L); }   // [Hz]
-  // Timoshenko, with Cowper's shear coefficient.
-  double deflection(double P) const {
-    const double G = E / (2 * (1 + nu)), kappa = 10 * (1 + nu) / (12 + 11 * nu);
-    return P * L * L * L / (3 * E * I()) + P * L / (kappa * G * A());
-  }
+struct Beam : CantileverTheory {
   ModelSpec spec(MaterialModel m, int n, Precision p, double safety) const {
     ModelSpec s;
     s.mesh = make_box(Vec3(0.0), Vec3(L, h, h), {10 * n, n, n}, BoxSplit::centred24);

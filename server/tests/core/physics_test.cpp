@@ -13,6 +13,7 @@
 #include "core/fem_fixtures.hpp"
 #include "core/model.hpp"
 #include "core/stepper.hpp"
+#include "study/beam_theory.hpp"
 
 namespace tactile {
 namespace {
@@ -207,19 +208,9 @@ TEST(PatchTest, DampedDynamicsReproducesALinearField) {
 
 // A cantilever of length L along x, square section h = L / 10, clamped at
 // x = 0 and loaded at x = L by a shear force P spread over the end nodes
-// (natural load). Its tip deflection by Timoshenko: P L^3 / (3 E I) +
-// P L / (kappa G A) with Cowper's kappa = 10 (1 + nu) / (12 + 11 nu), and its
-// first natural frequency by Euler-Bernoulli: 0.55959 sqrt(E I / (rho A)) / L^2 Hz.
-struct Beam {
-  double L = 1.0, h = 0.1, E = 1e6, nu = 0.3, rho = 1000;
-  double I() const { return h * h * h * h / 12; }
-  double A() const { return h * h; }
-  double omega1() const { return 3.5160 * std::sqrt(E * I() / (rho * A())) / (L * L); }  // [rad/s]
-  double f1() const { return 0.55959 * std::sqrt(E * I() / (rho * A())) / (L * L); }   // [Hz]
-  double deflection(double P) const {
-    const double G = E / (2 * (1 + nu)), kappa = 10 * (1 + nu) / (12 + 11 * nu);
-    return P * L * L * L / (3 * E * I()) + P * L / (kappa * G * A());
-  }
+// (natural load): its tip deflection and first frequency against the closed
+// forms of study/beam_theory.hpp (Timoshenko, Euler-Bernoulli).
+struct Beam : CantileverTheory {
   // n cells through the thickness, 10 n along; the centred split bends better than Kuhn's.
   TetMesh mesh(int n) const { return make_box(Vec3(0.0), Vec3(L, h, h), {10 * n, n, n}, BoxSplit::centred24); }
   ModelSpec spec(int n) const {
