@@ -203,8 +203,8 @@ struct Run {
         const bool counting = alloc_count::all;
         alloc_count::all = false;
         ++faults;
-        std::fprintf(stderr, "fault (restarting): %s\n", stepper.fault().message.c_str());
-        stepper.clear_fault();
+        std::fprintf(stderr, "fault (restarting): %s\n", state.fault.message.c_str());
+        stepper.clear_fault(state);
         state = start;
         alloc_count::all = counting && !warm_up;
       }
@@ -529,7 +529,7 @@ void hand_rows(const Options& opt) {
   const char* names[] = {"no proxies", "hand: contact", "hand: contact + friction", "hand 1 m away"};
   for (int v = 0; v < 4; ++v) {
     int32_t contacts = 0;
-    for (const ProxyReport& r : runs[size_t(v)]->stepper.contact().reports()) contacts += r.contacts;
+    for (const ProxyReport& r : runs[size_t(v)]->state.contact.reports) contacts += r.contacts;
     std::printf("| %-6s | %9d | %-24s | %11.0f | %+7.1f %% | %8d |\n", name_of(precision), runs[0]->model.n_tets,
                 names[v], t[size_t(v)] * 1e9, 100.0 * (t[size_t(v)] / t[0] - 1), contacts);
   }

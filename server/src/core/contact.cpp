@@ -79,16 +79,6 @@ bool boxes_meet(const Vec3& alo, const Vec3& ahi, const Vec3& blo, const Vec3& b
 template <class Real>
 Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   const size_t n_proxies = model.proxies.size();
-  motion_.resize(n_proxies);
-  for (size_t j = 0; j < n_proxies; ++j) motion_[j] = hold(model.proxies[j].pose);
-  reports_.resize(n_proxies);
-  device_reports_.resize(model.devices.size());
-  hand_motion_.resize(model.hands.size());
-  for (size_t h = 0; h < model.hands.size(); ++h) hand_motion_[h] = hold(model.hands[h].pose);
-  fit_.resize(n_proxies);
-  device_fit_.resize(model.devices.size());
-  device_felt_.assign(model.devices.size(), glm::dmat3(0.0));
-  proxy_body_.assign(n_proxies, -1);
   pose0_.resize(n_proxies);
   pose1_.resize(n_proxies);
   velocity_.resize(n_proxies);
@@ -161,13 +151,9 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
     face_cluster_slot_begin_.push_back(int32_t(face_cluster_slots_.size()));
   }
 
-  x_prev_.assign(slot_node_.size(), Vec3(0.0));
   x_now_.assign(slot_node_.size(), Vec3(0.0));
-  f_prev_.assign(free_nodes_.size(), Vec3(0.0));
   f_now_.assign(free_nodes_.size(), Vec3(0.0));
-  touched_prev_.reserve(free_nodes_.size());
   touched_now_.reserve(free_nodes_.size());
-  memory_.assign(free_nodes_.size(), Memory{});
   dv_.assign(free_nodes_.size(), Vec3(0.0));
   moved_flag_.assign(free_nodes_.size(), 0);
   moved_.reserve(free_nodes_.size());
@@ -176,16 +162,37 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   // Solve groups: one per proxy, then one per coupled body (at most one per proxy and hand).
   proxy_begin_.assign(2 * n_proxies + model.hands.size() + 1, 0);
   proxy_fill_.assign(proxy_begin_.size() - 1, 0);
-  face_memory_.assign(faces_.size(), Memory{});
 }
 
 template <class Real>
-void Contact<Real>::set_hand_motion(int32_t hand, const ProxyMotion& m) {
-  hand_motion_[size_t(hand)] = m;
-  for (size_t j = 0; j < motion_.size(); ++j) {
+void Contact<Real>::init(ContactState& cs) const {
+  const size_t n_proxies = model_.proxies.size();
+  cs = ContactState{};
+  cs.motion.resize(n_proxies);
+  for (size_t j = 0; j < n_proxies; ++j) cs.motion[j] = hold(model_.proxies[j].pose);
+  cs.hand_motion.resize(model_.hands.size());
+  for (size_t h = 0; h < model_.hands.size(); ++h) cs.hand_motion[h] = hold(model_.hands[h].pose);
+  cs.reports.resize(n_proxies);
+  cs.device_reports.resize(model_.devices.size());
+  cs.proxy_body.assign(n_proxies, -1);
+  cs.x_prev.assign(slot_node_.size(), Vec3(0.0));
+  cs.f_prev.assign(free_nodes_.size(), Vec3(0.0));
+  cs.pushed.reserve(free_nodes_.size());
+  cs.memory.assign(free_nodes_.size(), Memory{});
+  cs.face_memory.assign(faces_.size(), Memory{});
+  cs.fit.resize(n_proxies);
+  cs.device_fit.resize(model_.devices.size());
+  cs.device_felt.assign(model_.devices.size(), glm::dmat3(0.0));
+}
+
+template <class Real>
+void Contact<Real>::set_hand_motion(State<Real>& s, int32_t hand, const ProxyMotion& m) const {
+  ContactState& cs = s.contact;
+  cs.hand_motion[size_t(hand)] = m;
+  for (size_t j = 0; j < cs.motion.size(); ++j) {
     if (model_.proxy_hand[j] != hand) continue;
     const Pose& offset = model_.proxy_offset[j];
-    ProxyMotion& pm = motion_[j];
+    ProxyMotion& pm = cs.motion[j];
     pm.t0 = m.t0;
     pm.t1 = m.t1;
     pm.from = {m.from.to_world(offset.position), m.from.orientation * offset.orientation};
@@ -194,47 +201,42 @@ void Contact<Real>::set_hand_motion(int32_t hand, const ProxyMotion& m) {
 }
 
 template <class Real>
-void Contact<Real>::clear_impulses() {
-  for (ProxyReport& r : reports_) r.clear_impulses();
-  for (DeviceReport& d : device_reports_) d.clear_impulses();
+void Contact<Real>::track_node_impulses(State<Real>& s, bool on) const {
+  ContactState& cs = s.contact;
+  cs.track_nodes = on;
+  cs.node_impulse.assign(on ? free_nodes_.size() : 0, Vec3(0.0));
+  cs.impulse_slots.clear();
+  cs.impulse_slots.reserve(on ? free_nodes_.size() : 0);
+  cs.node_elapsed = 0;
 }
 
 template <class Real>
-void Contact<Real>::track_node_impulses(bool on) {
-  track_nodes_ = on;
-  node_impulse_.assign(on ? free_nodes_.size() : 0, Vec3(0.0));
-  impulse_slots_.clear();
-  impulse_slots_.reserve(on ? free_nodes_.size() : 0);
-  node_elapsed_ = 0;
-}
-
-template <class Real>
-double Contact<Real>::take_node_impulses(std::vector<double>& impulse) {
-  for (int32_t k : impulse_slots_) {
+double Contact<Real>::take_node_impulses(State<Real>& s, std::vector<double>& impulse) const {
+  ContactState& cs = s.contact;
+  for (int32_t k : cs.impulse_slots) {
     const size_t i = 3 * size_t(free_nodes_[size_t(k)]);
-    for (int c = 0; c < 3; ++c) impulse[i + size_t(c)] += node_impulse_[size_t(k)][c];
-    node_impulse_[size_t(k)] = Vec3(0.0);
+    for (int c = 0; c < 3; ++c) impulse[i + size_t(c)] += cs.node_impulse[size_t(k)][c];
+    cs.node_impulse[size_t(k)] = Vec3(0.0);
   }
-  impulse_slots_.clear();
-  const double elapsed = node_elapsed_;
-  node_elapsed_ = 0;
+  cs.impulse_slots.clear();
+  const double elapsed = cs.node_elapsed;
+  cs.node_elapsed = 0;
   return elapsed;
 }
 
 template <class Real>
-void Contact<Real>::start(const State<Real>& s) {
-  for (size_t k = 0; k < slot_node_.size(); ++k) x_prev_[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
-  std::fill(f_prev_.begin(), f_prev_.end(), Vec3(0.0));
-  std::fill(f_now_.begin(), f_now_.end(), Vec3(0.0));
-  touched_prev_.clear();
-  touched_now_.clear();
-  std::fill(memory_.begin(), memory_.end(), Memory{});
-  std::fill(face_memory_.begin(), face_memory_.end(), Memory{});
-  for (Fit& f : fit_) f = Fit{};
-  for (Fit& f : device_fit_) f = Fit{};
-  std::fill(device_felt_.begin(), device_felt_.end(), glm::dmat3(0.0));
-  for (ProxyReport& r : reports_) r = ProxyReport{};
-  for (DeviceReport& d : device_reports_) d = DeviceReport{};
+void Contact<Real>::start(State<Real>& s) const {
+  ContactState& cs = s.contact;
+  for (size_t k = 0; k < slot_node_.size(); ++k) cs.x_prev[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
+  std::fill(cs.f_prev.begin(), cs.f_prev.end(), Vec3(0.0));
+  cs.pushed.clear();
+  std::fill(cs.memory.begin(), cs.memory.end(), Memory{});
+  std::fill(cs.face_memory.begin(), cs.face_memory.end(), Memory{});
+  for (Fit& f : cs.fit) f = Fit{};
+  for (Fit& f : cs.device_fit) f = Fit{};
+  std::fill(cs.device_felt.begin(), cs.device_felt.end(), glm::dmat3(0.0));
+  for (ProxyReport& r : cs.reports) r = ProxyReport{};
+  for (DeviceReport& d : cs.device_reports) d = DeviceReport{};
   // (Coupled bodies keep their motion: couple() placed them.)
 }
 
@@ -246,14 +248,16 @@ Pose Contact<Real>::body_proxy_pose(const Body& b, const Pose& body_pose, int32_
 }
 
 template <class Real>
-void Contact<Real>::couple(int32_t device, const DeviceLimits* limits, double t) {
+void Contact<Real>::couple(State<Real>& s, int32_t device, const DeviceLimits* limits) const {
+  ContactState& cs = s.contact;
+  const double t = s.t;
   const auto bounding = [&](int32_t j) {
     const double r = bounding_radius(model_.proxies[size_t(j)].geometry);
     return std::isfinite(r) ? r : 0.1;  // a plane: a body of a tenth of a metre
   };
   const auto add = [&](int32_t hand, int32_t proxy, const CouplingSpec& spec, double radius) {
     Body* b = nullptr;
-    for (Body& existing : bodies_)
+    for (Body& existing : cs.bodies)
       if (existing.hand == hand && existing.proxy == proxy) b = &existing;
     const Coupling c = fit_to_step(resolve_coupling(spec, limits, radius), model_.dt_rest);
     if (b) {  // coupled already: the new coupling only
@@ -269,17 +273,17 @@ void Contact<Real>::couple(int32_t device, const DeviceLimits* limits, double t)
     nb.hand = hand;
     nb.proxy = proxy;
     nb.c = c;
-    const ProxyMotion& m = hand >= 0 ? hand_motion_[size_t(hand)] : motion_[size_t(proxy)];
+    const ProxyMotion& m = hand >= 0 ? cs.hand_motion[size_t(hand)] : cs.motion[size_t(proxy)];
     nb.now.pose = m.at(t);
     if (t >= m.t0 && t < m.t1) {
       nb.now.v = m.velocity();
       nb.now.w = m.angular_velocity();
     }
     nb.target = nb.now.pose;
-    bodies_.push_back(nb);
+    cs.bodies.push_back(nb);
   };
-  device_fit_[size_t(device)] = Fit{};
-  device_felt_[size_t(device)] = glm::dmat3(0.0);
+  cs.device_fit[size_t(device)] = Fit{};
+  cs.device_felt[size_t(device)] = glm::dmat3(0.0);
   for (size_t h = 0; h < model_.hands.size(); ++h) {
     if (model_.devices[size_t(device)] != model_.hands[h].device) continue;
     double radius = 0;
@@ -291,87 +295,68 @@ void Contact<Real>::couple(int32_t device, const DeviceLimits* limits, double t)
   for (size_t j = 0; j < model_.proxies.size(); ++j)
     if (model_.proxy_device[j] == device && model_.proxy_hand[j] < 0)
       add(-1, int32_t(j), model_.proxies[j].coupling, bounding(int32_t(j)));
-  std::fill(proxy_body_.begin(), proxy_body_.end(), -1);
-  for (size_t b = 0; b < bodies_.size(); ++b)
+  index_bodies(cs);
+}
+
+template <class Real>
+void Contact<Real>::index_bodies(ContactState& cs) const {
+  std::fill(cs.proxy_body.begin(), cs.proxy_body.end(), -1);
+  for (size_t b = 0; b < cs.bodies.size(); ++b)
     for (size_t j = 0; j < model_.proxies.size(); ++j)
-      if (bodies_[b].hand >= 0 ? model_.proxy_hand[j] == bodies_[b].hand : int32_t(j) == bodies_[b].proxy)
-        proxy_body_[j] = int32_t(b);
+      if (cs.bodies[b].hand >= 0 ? model_.proxy_hand[j] == cs.bodies[b].hand : int32_t(j) == cs.bodies[b].proxy)
+        cs.proxy_body[j] = int32_t(b);
 }
 
 template <class Real>
-void Contact<Real>::release(int32_t device) {
-  bodies_.erase(std::remove_if(bodies_.begin(), bodies_.end(), [&](const Body& b) { return b.device == device; }),
-                bodies_.end());
-  std::fill(proxy_body_.begin(), proxy_body_.end(), -1);
-  for (size_t b = 0; b < bodies_.size(); ++b)
-    for (size_t j = 0; j < model_.proxies.size(); ++j)
-      if (bodies_[b].hand >= 0 ? model_.proxy_hand[j] == bodies_[b].hand : int32_t(j) == bodies_[b].proxy)
-        proxy_body_[j] = int32_t(b);
-  device_reports_[size_t(device)].coupled = false;
-  device_fit_[size_t(device)] = Fit{};
-  device_felt_[size_t(device)] = glm::dmat3(0.0);
+void Contact<Real>::release(State<Real>& s, int32_t device) const {
+  ContactState& cs = s.contact;
+  cs.bodies.erase(std::remove_if(cs.bodies.begin(), cs.bodies.end(), [&](const Body& b) { return b.device == device; }),
+                cs.bodies.end());
+  index_bodies(cs);
+  cs.device_reports[size_t(device)].coupled = false;
+  cs.device_fit[size_t(device)] = Fit{};
+  cs.device_felt[size_t(device)] = glm::dmat3(0.0);
 }
 
 template <class Real>
-bool Contact<Real>::coupled(int32_t device) const {
-  return coupling(device) != nullptr;
+Pose Contact<Real>::proxy_pose(const State<Real>& s, int32_t proxy) const {
+  const ContactState& cs = s.contact;
+  const double t = s.t;
+  const int32_t b = cs.proxy_body[size_t(proxy)];
+  if (b < 0) return cs.motion[size_t(proxy)].at(t);
+  return body_proxy_pose(cs.bodies[size_t(b)], cs.bodies[size_t(b)].now.pose, proxy);
 }
 
 template <class Real>
-const Coupling* Contact<Real>::coupling(int32_t device) const {
-  for (const Body& b : bodies_)
-    if (b.device == device) return &b.c;
-  return nullptr;
-}
-
-template <class Real>
-Pose Contact<Real>::proxy_pose(int32_t proxy, double t) const {
-  const int32_t b = proxy_body_[size_t(proxy)];
-  if (b < 0) return motion_[size_t(proxy)].at(t);
-  return body_proxy_pose(bodies_[size_t(b)], bodies_[size_t(b)].now.pose, proxy);
-}
-
-template <class Real>
-Pose Contact<Real>::hand_pose(int32_t hand, double t) const {
-  for (const Body& b : bodies_)
+Pose Contact<Real>::hand_pose(const State<Real>& s, int32_t hand) const {
+  const ContactState& cs = s.contact;
+  const double t = s.t;
+  for (const Body& b : cs.bodies)
     if (b.hand == hand) return b.now.pose;
-  return hand_motion_[size_t(hand)].at(t);
+  return cs.hand_motion[size_t(hand)].at(t);
 }
 
 template <class Real>
-std::vector<typename Contact<Real>::CoupledBody> Contact<Real>::coupled_bodies() const {
-  std::vector<CoupledBody> out;
-  for (const Body& b : bodies_) out.push_back({b.device, b.hand, b.proxy, b.has_limits, b.limits, b.now});
-  return out;
-}
-
-template <class Real>
-void Contact<Real>::take_bodies(const std::vector<CoupledBody>& bodies, double t) {
-  for (const CoupledBody& cb : bodies) {
-    couple(cb.device, cb.has_limits ? &cb.limits : nullptr, t);
-    for (Body& b : bodies_)
-      if (b.hand == cb.hand && b.proxy == cb.proxy) b.now = cb.state;
+void Contact<Real>::take_bodies(State<Real>& s, const std::vector<CoupledBodyState>& bodies) const {
+  for (const CoupledBodyState& taken : bodies) {
+    couple(s, taken.device, taken.has_limits ? &taken.limits : nullptr);
+    for (Body& b : s.contact.bodies)
+      if (b.hand == taken.hand && b.proxy == taken.proxy) b.now = taken.now;
   }
-}
-
-template <class Real>
-Vec3 Contact<Real>::body_momentum() const {
-  Vec3 p(0.0);
-  for (const Body& b : bodies_) p += b.c.mass * b.now.v;
-  return p;
 }
 
 template <class Real>
 ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt) {
+  ContactState& cs = s.contact;
   ContactSums sums;
-  const size_t n_proxies = motion_.size();
+  const size_t n_proxies = cs.motion.size();
   if (n_proxies == 0) return sums;
-  if (track_nodes_) node_elapsed_ += dt;
-  for (ProxyReport& r : reports_) {
+  if (cs.track_nodes) cs.node_elapsed += dt;
+  for (ProxyReport& r : cs.reports) {
     r.force = r.torque = Vec3(0.0);
     r.contacts = 0;
   }
-  for (DeviceReport& d : device_reports_) {
+  for (DeviceReport& d : cs.device_reports) {
     const DeviceReport kept = d;
     d = DeviceReport{};  // summed from its proxies below, but for the impulse sums
     d.impulse = kept.impulse;
@@ -383,8 +368,8 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   // Positions at t_{n+1}, and boxes around each cluster's motion over the step.
   for (size_t k = 0; k < slot_node_.size(); ++k) x_now_[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
   const auto sweep = [&](Cluster& c, int32_t k) {
-    c.lo = glm::min(c.lo, glm::min(x_now_[size_t(k)], x_prev_[size_t(k)]));
-    c.hi = glm::max(c.hi, glm::max(x_now_[size_t(k)], x_prev_[size_t(k)]));
+    c.lo = glm::min(c.lo, glm::min(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
+    c.hi = glm::max(c.hi, glm::max(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
   };
   constexpr double inf = std::numeric_limits<double>::infinity();
   for (Cluster& c : clusters_) {
@@ -402,8 +387,8 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
 
   // The coupled bodies' prediction and coupling (core/coupling.hpp): their
   // motion is the device's.
-  for (Body& b : bodies_) {
-    const ProxyMotion& m = b.hand >= 0 ? hand_motion_[size_t(b.hand)] : motion_[size_t(b.proxy)];
+  for (Body& b : cs.bodies) {
+    const ProxyMotion& m = b.hand >= 0 ? cs.hand_motion[size_t(b.hand)] : cs.motion[size_t(b.proxy)];
     b.previous = b.wrench;
     b.previous_target = b.target.position;
     b.target = m.at(t1);
@@ -415,17 +400,17 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   }
   // Each proxy's poses and the box its bounding sphere sweeps over the step.
   for (size_t j = 0; j < n_proxies; ++j) {
-    if (const int32_t bi = proxy_body_[j]; bi >= 0) {
-      const Body& b = bodies_[size_t(bi)];
+    if (const int32_t bi = cs.proxy_body[j]; bi >= 0) {
+      const Body& b = cs.bodies[size_t(bi)];
       pose0_[j] = body_proxy_pose(b, b.now.pose, int32_t(j));
       pose1_[j] = body_proxy_pose(b, b.next.pose, int32_t(j));
       spin_[j] = b.next.w;
       velocity_[j] = b.next.v + glm::cross(b.next.w, pose1_[j].position - b.next.pose.position);
     } else {
-      pose0_[j] = motion_[j].at(t0);
-      pose1_[j] = motion_[j].at(t1);
-      velocity_[j] = motion_[j].velocity();
-      spin_[j] = motion_[j].angular_velocity();
+      pose0_[j] = cs.motion[j].at(t0);
+      pose1_[j] = cs.motion[j].at(t1);
+      velocity_[j] = cs.motion[j].velocity();
+      spin_[j] = cs.motion[j].angular_velocity();
     }
     const Aabb b0 = world_bounds(model_.proxies[j].geometry, pose0_[j]);
     const Aabb b1 = world_bounds(model_.proxies[j].geometry, pose1_[j]);
@@ -440,13 +425,13 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
       for (int32_t k = c.begin; k < c.end; ++k) {
         // The node's own path over the step against the proxy's swept box.
         const Vec3& x = x_now_[size_t(k)];
-        const Vec3& xp = x_prev_[size_t(k)];
+        const Vec3& xp = cs.x_prev[size_t(k)];
         if (!boxes_meet(glm::min(x, xp), glm::max(x, xp), lo_[j], hi_[j])) {
-          Memory& mem = memory_[size_t(k)];
+          Memory& mem = cs.memory[size_t(k)];
           if (mem.proxy == int32_t(j)) mem.proxy = -1;
           continue;
         }
-        find_node_contact(k, int32_t(j), pose0_[j], pose1_[j]);
+        find_node_contact(cs, k, int32_t(j), pose0_[j], pose1_[j]);
       }
     }
   // Then the faces. A plane meets a triangle deepest at a corner: its nodes are all it needs.
@@ -456,15 +441,15 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
       for (int32_t f = c.begin; f < c.end; ++f) {
         Vec3 lo(inf), hi(-inf);
         for (int32_t k : faces_[size_t(f)].slot) {
-          lo = glm::min(lo, glm::min(x_now_[size_t(k)], x_prev_[size_t(k)]));
-          hi = glm::max(hi, glm::max(x_now_[size_t(k)], x_prev_[size_t(k)]));
+          lo = glm::min(lo, glm::min(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
+          hi = glm::max(hi, glm::max(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
         }
         if (!boxes_meet(lo, hi, lo_[j], hi_[j])) {
-          Memory& mem = face_memory_[size_t(f)];
+          Memory& mem = cs.face_memory[size_t(f)];
           if (mem.proxy == int32_t(j)) mem.proxy = -1;
           continue;
         }
-        find_face_contact(f, int32_t(j), pose0_[j], pose1_[j], dt);
+        find_face_contact(cs, f, int32_t(j), pose0_[j], pose1_[j], dt);
       }
     }
 
@@ -474,13 +459,13 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   solve(s);
   // The bodies: the contact's velocity change raises their acceleration as a
   // node's (eq. 9), and the step's end becomes their present.
-  for (Body& b : bodies_) {
+  for (Body& b : cs.bodies) {
     b.next.a += (2.0 / dt) * (b.next.v - b.v_free);
     b.next.alpha += (2.0 / dt) * (b.next.w - b.w_free);
     b.now = b.next;
   }
   for (Point& c : points_)
-    if (c.body >= 0) c.vp = proxy_velocity(c);
+    if (c.body >= 0) c.vp = proxy_velocity(cs, c);
   const double to_force = (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt;  // from an impulse to its force over the step
   for (int32_t k : moved_) {
     const Vec3 dv = dv_[size_t(k)];
@@ -499,14 +484,14 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     sums.ma2_delta += m * (glm::dot(a_new, a_new) - glm::dot(a, a));
     f_now_[size_t(k)] = (m * to_force) * dv;
     touched_now_.push_back(k);  // (reserved: never allocates)
-    if (track_nodes_) {
-      if (node_impulse_[size_t(k)] == Vec3(0.0)) impulse_slots_.push_back(k);  // (reserved)
-      node_impulse_[size_t(k)] += f_now_[size_t(k)] * dt;
+    if (cs.track_nodes) {
+      if (cs.node_impulse[size_t(k)] == Vec3(0.0)) cs.impulse_slots.push_back(k);  // (reserved)
+      cs.node_impulse[size_t(k)] += f_now_[size_t(k)] * dt;
     }
   }
   moved_.clear();
   for (const Point& c : points_) {
-    ProxyReport& r = reports_[size_t(c.proxy)];
+    ProxyReport& r = cs.reports[size_t(c.proxy)];
     ++r.contacts;
     const Vec3 fc = to_force * (c.jn * c.n + c.jt);  // on the body
     r.force -= fc;
@@ -520,43 +505,43 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   // by each proxy; then this step's positions and forces become the previous.
   // Only the nodes pushed in this step or the one before carry a force.
   for (int32_t k : touched_now_)
-    sums.work += 0.5 * glm::dot(f_prev_[size_t(k)] + f_now_[size_t(k)], x_now_[size_t(k)] - x_prev_[size_t(k)]);
-  for (int32_t k : touched_prev_) {
+    sums.work += 0.5 * glm::dot(cs.f_prev[size_t(k)] + f_now_[size_t(k)], x_now_[size_t(k)] - cs.x_prev[size_t(k)]);
+  for (int32_t k : cs.pushed) {
     if (f_now_[size_t(k)] != Vec3(0.0)) continue;  // counted above
-    sums.work += 0.5 * glm::dot(f_prev_[size_t(k)], x_now_[size_t(k)] - x_prev_[size_t(k)]);
+    sums.work += 0.5 * glm::dot(cs.f_prev[size_t(k)], x_now_[size_t(k)] - cs.x_prev[size_t(k)]);
   }
-  for (int32_t k : touched_prev_) f_prev_[size_t(k)] = Vec3(0.0);
+  for (int32_t k : cs.pushed) cs.f_prev[size_t(k)] = Vec3(0.0);
   for (int32_t k : touched_now_) {
-    f_prev_[size_t(k)] = f_now_[size_t(k)];
+    cs.f_prev[size_t(k)] = f_now_[size_t(k)];
     f_now_[size_t(k)] = Vec3(0.0);
   }
-  touched_prev_.swap(touched_now_);
+  cs.pushed.assign(touched_now_.begin(), touched_now_.end());  // (the workspace keeps its reserve)
   touched_now_.clear();
-  x_prev_.swap(x_now_);
+  cs.x_prev.swap(x_now_);
   // A proxy resting on the body is pushed every other step or so (eq. 13):
   // its fit goes on through steps without contact, their force zero, and
   // ends only when it has not touched for kFitIdleSteps.
   for (size_t j = 0; j < n_proxies; ++j) {
-    Fit& f = fit_[j];
-    f.idle = reports_[j].contacts > 0 ? 0 : f.idle + 1;
+    Fit& f = cs.fit[j];
+    f.idle = cs.reports[j].contacts > 0 ? 0 : f.idle + 1;
     if (f.idle > kFitIdleSteps) {
       f = Fit{};
       f.idle = kFitIdleSteps + 1;
-      reports_[j].stiffness = glm::dmat3(0.0);
+      cs.reports[j].stiffness = glm::dmat3(0.0);
     } else {
-      fit_stiffness(f, FitWindow::Proxy, pose1_[j].position, reports_[j].force, dt, reports_[j].stiffness);
+      fit_stiffness(f, FitWindow::Proxy, pose1_[j].position, cs.reports[j].force, dt, cs.reports[j].stiffness);
     }
   }
   // Per device: its proxies' sums, torques moved to the device's reference point.
   for (size_t j = 0; j < n_proxies; ++j) {
-    ProxyReport& r = reports_[j];
+    ProxyReport& r = cs.reports[j];
     r.add_step(dt);
-    DeviceReport& d = device_reports_[size_t(model_.proxy_device[j])];
+    DeviceReport& d = cs.device_reports[size_t(model_.proxy_device[j])];
     d.contacts += r.contacts;
     d.stiffness += r.stiffness;
-    if (proxy_body_[j] >= 0) continue;  // the coupling's force below
+    if (cs.proxy_body[j] >= 0) continue;  // the coupling's force below
     const int32_t hand = model_.proxy_hand[j];
-    const Vec3 reference = hand >= 0 ? hand_motion_[size_t(hand)].at(t1).position : pose1_[j].position;
+    const Vec3 reference = hand >= 0 ? cs.hand_motion[size_t(hand)].at(t1).position : pose1_[j].position;
     d.force += r.force;
     d.torque += r.torque + glm::cross(pose1_[j].position - reference, r.force);
   }
@@ -567,8 +552,8 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   // proxy resting on the body is pushed every other step, as a node is (eq.
   // 13), and its coupling's damper answers each push, so the force of one
   // step alternates while the pair's mean is steady.
-  for (const Body& b : bodies_) {
-    DeviceReport& d = device_reports_[size_t(b.device)];
+  for (const Body& b : cs.bodies) {
+    DeviceReport& d = cs.device_reports[size_t(b.device)];
     const CouplingWrench w{0.5 * (b.wrench.force + b.previous.force), 0.5 * (b.wrench.torque + b.previous.torque),
                            b.wrench.saturated};
     if (!d.coupled) {
@@ -584,16 +569,16 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     d.force -= w.force;
     d.torque -= w.torque + glm::cross(b.now.pose.position - d.body.position, w.force);
   }
-  for (size_t i = 0; i < device_reports_.size(); ++i) {
-    DeviceReport& d = device_reports_[i];
+  for (size_t i = 0; i < cs.device_reports.size(); ++i) {
+    DeviceReport& d = cs.device_reports[i];
     if (!d.coupled) continue;
-    fit_stiffness(device_fit_[i], FitWindow::Device, d.target.position, d.force, dt, device_felt_[i]);
+    fit_stiffness(cs.device_fit[i], FitWindow::Device, d.target.position, d.force, dt, cs.device_felt[i]);
     // A device feels at most its coupling's own spring (the contact in
     // series with it can only soften it); a fit across a contact's onset
     // can read stiffer, and the bridge would render that.
-    d.stiffness = nearest_passive(device_felt_[i], d.coupling_stiffness);
+    d.stiffness = nearest_passive(cs.device_felt[i], d.coupling_stiffness);
   }
-  for (DeviceReport& d : device_reports_) d.add_step(dt);
+  for (DeviceReport& d : cs.device_reports) d.add_step(dt);
   return sums;
 }
 
@@ -620,10 +605,10 @@ Vec3 Contact<Real>::outward(const ProxyGeometry& g, const Vec3& q0, const Vec3& 
 }
 
 template <class Real>
-void Contact<Real>::find_node_contact(int32_t k, int32_t proxy, const Pose& p0, const Pose& p1) {
+void Contact<Real>::find_node_contact(ContactState& cs, int32_t k, int32_t proxy, const Pose& p0, const Pose& p1) {
   const ProxySpec& spec = model_.proxies[size_t(proxy)];
   const ProxyGeometry& g = spec.geometry;
-  Memory& mem = memory_[size_t(k)];
+  Memory& mem = cs.memory[size_t(k)];
   const Vec3 x1 = x_now_[size_t(k)];
   const Vec3 q1 = p1.to_local(x1);
   const SurfacePoint at1 = locate(g, q1);
@@ -634,13 +619,13 @@ void Contact<Real>::find_node_contact(int32_t k, int32_t proxy, const Pose& p0, 
   // Inside at t_{n+1}: which way is out?
   Point c;
   c.proxy = proxy;
-  c.body = proxy_body_[size_t(proxy)];
+  c.body = cs.proxy_body[size_t(proxy)];
   c.slot = {k, -1, -1};
   c.w = Vec3(1, 0, 0);
   c.x = x1;
-  c.n = p1.orientation * outward(g, p0.to_local(x_prev_[size_t(k)]), q1, at1, mem, proxy);
+  c.n = p1.orientation * outward(g, p0.to_local(cs.x_prev[size_t(k)]), q1, at1, mem, proxy);
   c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], x1 - p1.position);
-  c.r = c.body >= 0 ? x1 - bodies_[size_t(c.body)].next.pose.position : Vec3(0.0);
+  c.r = c.body >= 0 ? x1 - cs.bodies[size_t(c.body)].next.pose.position : Vec3(0.0);
   c.v_held = Vec3(0.0);
   c.inv_mass = 1.0 / double(model_.m[size_t(free_nodes_[size_t(k)])]);
   c.mu = friction_ ? spec.friction : 0.0;
@@ -649,11 +634,11 @@ void Contact<Real>::find_node_contact(int32_t k, int32_t proxy, const Pose& p0, 
 }
 
 template <class Real>
-void Contact<Real>::find_face_contact(int32_t f, int32_t proxy, const Pose& p0, const Pose& p1, double dt) {
+void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy, const Pose& p0, const Pose& p1, double dt) {
   const ProxySpec& spec = model_.proxies[size_t(proxy)];
   const ProxyGeometry& g = spec.geometry;
   const Face& face = faces_[size_t(f)];
-  Memory& mem = face_memory_[size_t(f)];
+  Memory& mem = cs.face_memory[size_t(f)];
   std::array<Vec3, 3> q;
   for (size_t c = 0; c < 3; ++c) q[c] = p1.to_local(x_now_[size_t(face.slot[c])]);
   // Cheap ways out first. A face whose corners are all inside lies inside
@@ -679,7 +664,7 @@ void Contact<Real>::find_face_contact(int32_t f, int32_t proxy, const Pose& p0, 
   if (zeros == 1 && !(face.owns_edge & (1u << (w.x == 0 ? 0 : w.y == 0 ? 1 : 2)))) return;  // its edge's other face's
   Point c;
   c.proxy = proxy;
-  c.body = proxy_body_[size_t(proxy)];
+  c.body = cs.proxy_body[size_t(proxy)];
   c.slot = {-1, -1, -1};
   c.w = Vec3(0.0);
   c.x = Vec3(0.0);
@@ -691,20 +676,20 @@ void Contact<Real>::find_face_contact(int32_t f, int32_t proxy, const Pose& p0, 
     const auto k = size_t(face.slot[j]);
     const double wj = w[int(j)];
     if (wj == 0) continue;
-    x0 += wj * x_prev_[k];
+    x0 += wj * cs.x_prev[k];
     c.x += wj * x_now_[k];
     if (k < free_nodes_.size()) {
       c.slot[size_t(free)] = int32_t(k);
       c.w[free++] = wj;
       c.inv_mass += wj * wj / double(model_.m[size_t(free_nodes_[k])]);
     } else {
-      c.v_held += wj * (x_now_[k] - x_prev_[k]) / dt;  // held: as prescribed over the step
+      c.v_held += wj * (x_now_[k] - cs.x_prev[k]) / dt;  // held: as prescribed over the step
     }
   }
   if (!(c.inv_mass > 0)) return;
   c.n = p1.orientation * outward(g, p0.to_local(x0), q1, at1, mem, proxy);
   c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], c.x - p1.position);
-  c.r = c.body >= 0 ? c.x - bodies_[size_t(c.body)].next.pose.position : Vec3(0.0);
+  c.r = c.body >= 0 ? c.x - cs.bodies[size_t(c.body)].next.pose.position : Vec3(0.0);
   c.mu = friction_ ? spec.friction : 0.0;
   points_.push_back(c);
   ++face_contacts_;
@@ -722,7 +707,7 @@ Vec3 Contact<Real>::point_velocity(const State<Real>& s, const Point& c) const {
 }
 
 template <class Real>
-void Contact<Real>::give(Point& c, const Vec3& J) {
+void Contact<Real>::give(ContactState& cs, Point& c, const Vec3& J) {
   for (size_t j = 0; j < 3 && c.slot[j] >= 0; ++j) {
     const auto k = size_t(c.slot[j]);
     if (!moved_flag_[k]) {
@@ -732,21 +717,22 @@ void Contact<Real>::give(Point& c, const Vec3& J) {
     dv_[k] += (c.w[int(j)] / double(model_.m[size_t(free_nodes_[k])])) * J;
   }
   if (c.body >= 0) {  // and the opposite to the proxy's body
-    Body& b = bodies_[size_t(c.body)];
+    Body& b = cs.bodies[size_t(c.body)];
     b.next.v -= J / b.c.mass;
     b.next.w -= glm::cross(c.r, J) / b.c.inertia;
   }
 }
 
 template <class Real>
-Vec3 Contact<Real>::proxy_velocity(const Point& c) const {
+Vec3 Contact<Real>::proxy_velocity(const ContactState& cs, const Point& c) const {
   if (c.body < 0) return c.vp;
-  const Body& b = bodies_[size_t(c.body)];
+  const Body& b = cs.bodies[size_t(c.body)];
   return b.next.v + glm::cross(b.next.w, c.r);
 }
 
 template <class Real>
-void Contact<Real>::solve(const State<Real>& s) {
+void Contact<Real>::solve(State<Real>& s) {
+  ContactState& cs = s.contact;
   // Each point in turn takes the impulse that stops its normal motion into
   // the proxy (eq. (11)), its running sum kept at or above zero; friction's
   // tangential impulse stops its sliding, its sum held within mu times the
@@ -765,9 +751,9 @@ void Contact<Real>::solve(const State<Real>& s) {
   // They take more sweeps to settle than a kinematic proxy's.
   constexpr int kMaxSweeps = 32, kMaxBodySweeps = 128;
   // The points in group order (stable: each group's in the order found).
-  const size_t n_proxies = motion_.size();
+  const size_t n_proxies = cs.motion.size();
   const auto group = [&](const Point& c) { return c.body >= 0 ? n_proxies + size_t(c.body) : size_t(c.proxy); };
-  const size_t n_groups = n_proxies + bodies_.size();
+  const size_t n_groups = n_proxies + cs.bodies.size();
   std::fill(proxy_begin_.begin(), proxy_begin_.begin() + ptrdiff_t(n_groups + 1), 0);
   for (const Point& c : points_) ++proxy_begin_[group(c) + 1];
   for (size_t g = 0; g < n_groups; ++g) proxy_begin_[g + 1] += proxy_begin_[g];
@@ -776,7 +762,7 @@ void Contact<Real>::solve(const State<Real>& s) {
   for (size_t m = 0; m < points_.size(); ++m) point_order_[size_t(proxy_fill_[group(points_[m])]++)] = int32_t(m);
   for (size_t g = 0; g < n_groups; ++g) {
     if (proxy_begin_[g] == proxy_begin_[g + 1]) continue;
-    const Body* body = g >= n_proxies ? &bodies_[g - n_proxies] : nullptr;
+    const Body* body = g >= n_proxies ? &cs.bodies[g - n_proxies] : nullptr;
     // The inverse mass the point sees along unit e: its nodes', and its body's.
     const auto inv_mass = [&](const Point& c, const Vec3& e) {
       if (!body) return c.inv_mass;
@@ -788,7 +774,7 @@ void Contact<Real>::solve(const State<Real>& s) {
       double largest = 0;
       for (int32_t m = proxy_begin_[g]; m < proxy_begin_[g + 1]; ++m) {
         Point& c = points_[size_t(point_order_[size_t(m)])];
-        const Vec3 rel = point_velocity(s, c) - proxy_velocity(c);
+        const Vec3 rel = point_velocity(s, c) - proxy_velocity(cs, c);
         const double vn = glm::dot(rel, c.n);
         const double kn = inv_mass(c, c.n);
         const double jn = std::max(0.0, c.jn - vn / kn);
@@ -807,7 +793,7 @@ void Contact<Real>::solve(const State<Real>& s) {
           change = std::max(change, glm::length(jt - c.jt) * kt);
           c.jt = jt;
         }
-        if (J != Vec3(0.0)) give(c, J);
+        if (J != Vec3(0.0)) give(cs, c, J);
         largest = std::max(largest, change);
       }
       if (sweep == 0) first = largest;

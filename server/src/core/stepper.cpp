@@ -129,7 +129,6 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
   correct_sums_.assign(size_t(n_parts_), CorrectSums{});
   for (const LoadSet& load : model_.loads) loaded_.insert(loaded_.end(), load.nodes.begin(), load.nodes.end());
   u_before_.assign(model_.constrained.size() + loaded_.size(), Vec3(0.0));
-  load_force_.assign(loaded_.size(), Vec3(0.0));
   a_prescribed_.assign(3 * model_.constrained.size(), Real(0));
   v_prescribed_.assign(3 * model_.constrained.size(), Real(0));
   if (!model_.proxies.empty()) {
@@ -149,6 +148,18 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
     tet_mark_.assign(size_t(model_.n_tets), 0);
     contact_examined_.reserve(contact_tets_.size());
   }
+}
+
+template <class Real>
+State<Real> Stepper<Real>::make_state() const {
+  State<Real> s;
+  s.u.assign(3 * size_t(model_.n_nodes), Real(0));
+  s.v = s.u;
+  s.a = s.u;
+  s.reaction.assign(3 * model_.constrained.size(), Real(0));
+  contact_.init(s.contact);
+  s.energy.load_force.assign(loaded_.size(), Vec3(0.0));
+  return s;
 }
 
 template <class Real>
@@ -381,7 +392,7 @@ void Stepper<Real>::add_load_force(int32_t node, const Vec3& force) {
 }
 
 template <class Real>
-void Stepper<Real>::apply_loads(const State<Real>& s, double t) {
+void Stepper<Real>::apply_loads(State<Real>& s, double t) {
   double work = 0;
   size_t c = 0;
   for (const LoadSet& load : model_.loads) {
@@ -392,11 +403,11 @@ void Stepper<Real>::apply_loads(const State<Real>& s, double t) {
       const Vec3& u0 = u_before_[model_.constrained.size() + c];
       add_load_force(load.nodes[k], force);
       for (int d = 0; d < 3; ++d)  // trapezoid over the step
-        work += 0.5 * (load_force_[c][d] + force[d]) * (double(s.u[j + size_t(d)]) - u0[d]);
-      load_force_[c] = force;
+        work += 0.5 * (s.energy.load_force[c][d] + force[d]) * (double(s.u[j + size_t(d)]) - u0[d]);
+      s.energy.load_force[c] = force;
     }
   }
-  cur_->work_loads += work;
+  s.work_loads += work;
 }
 
 template <class Real>
@@ -412,7 +423,7 @@ void Stepper<Real>::apply_initial_acceleration(State<Real>& s) {
   if (!model_.loads.empty()) {
     size_t c = 0;
     for (const LoadSet& load : model_.loads) {
-      for (size_t k = 0; k < load.nodes.size(); ++k, ++c) add_load_force(load.nodes[k], load_force_[c]);
+      for (size_t k = 0; k < load.nodes.size(); ++k, ++c) add_load_force(load.nodes[k], s.energy.load_force[c]);
     }
   }
   run_parts(&Stepper::correct_part, this);
@@ -434,12 +445,12 @@ void Stepper<Real>::apply_initial_acceleration(State<Real>& s) {
       ++c;
     }
   }
-  initial_ma2_ = ma2;
+  s.energy.initial_ma2 = ma2;
 }
 
 template <class Real>
 Fault Stepper<Real>::step(State<Real>& s, double dt) {
-  if (fault_) return fault_;
+  if (s.fault) return s.fault;
   if (!(dt > 0) || !std::isfinite(dt))
     return make_fault(Fault::Kind::StepTooLarge, s, "time step must be finite and > 0, got " + std::to_string(dt), {});
   cur_ = &s;
@@ -468,32 +479,32 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
 // restated with the new step.
 template <class Real>
 void Stepper<Real>::open_energy_account(State<Real>& s, double dt) {
-  if (!energy_started_) {  // loads at t_n for the work trapezoid, and the reference energy
+  if (!s.energy.open) {  // loads at t_n for the work trapezoid, and the reference energy
     size_t c = 0;
     for (const LoadSet& load : model_.loads) {
       const double scale = load.spec.scale ? compute_profile(*load.spec.scale, s.t).s : 1.0;
-      for (size_t k = 0; k < load.nodes.size(); ++k, ++c) load_force_[c] = load.spec.force * (scale * load.weight[k]);
+      for (size_t k = 0; k < load.nodes.size(); ++k, ++c) s.energy.load_force[c] = load.spec.force * (scale * load.weight[k]);
     }
     apply_initial_acceleration(s);
     contact_.start(s);
-    contact_given_ = 0;
+    s.energy.proxy_given = 0;
     cur_dt_ = Real(dt);
     Energy e0 = compute_energy(s);
-    e0.discrete = -0.125 * dt * dt * initial_ma2_;
-    energy_reference_ = e0.balance();
-    energy_window_start_ = double(s.t);
-    energy_ = e0;  // the kinetic energy at t_n for the dissipation trapezoid below
-    energy_scale_ = std::fabs(e0.kinetic) + std::fabs(e0.elastic) + std::fabs(e0.gravity);
-    energy_started_ = true;
-  } else if (dt != energy_dt_ && energy_dt_ > 0) {
+    e0.discrete = -0.125 * dt * dt * s.energy.initial_ma2;
+    s.energy.reference = e0.balance();
+    s.energy.window_start = double(s.t);
+    s.energy.latest = e0;  // the kinetic energy at t_n for the dissipation trapezoid below
+    s.energy.scale = std::fabs(e0.kinetic) + std::fabs(e0.elastic) + std::fabs(e0.gravity);
+    s.energy.open = true;
+  } else if (dt != s.energy.dt && s.energy.dt > 0) {
     // The modified energy's -dt^2/8 sum m|a|^2 is measured with the step
     // that follows: a new step size restates it at t_n. That is no energy
     // the body gained or lost: the balance leaves the change out.
-    const double restated = energy_.discrete * (dt * dt) / (energy_dt_ * energy_dt_);
-    energy_.restated += restated - energy_.discrete;
-    energy_.discrete = restated;
+    const double restated = s.energy.latest.discrete * (dt * dt) / (s.energy.dt * s.energy.dt);
+    s.energy.latest.restated += restated - s.energy.latest.discrete;
+    s.energy.latest.discrete = restated;
   }
-  energy_dt_ = dt;
+  s.energy.dt = dt;
 }
 
 // Positions at t_n of the nodes whose work is accounted, in the order
@@ -565,7 +576,7 @@ ContactSums Stepper<Real>::apply_contact(State<Real>& s, double dt) {
   enter(Pass::Contact);
   const ContactSums sums = contact_.apply(s, s.t, cur_t1_, dt);
   s.work_contact += sums.work;
-  contact_given_ += sums.proxy_work;
+  s.energy.proxy_given += sums.proxy_work;
   leave(Pass::Contact);
   return sums;
 }
@@ -595,21 +606,21 @@ void Stepper<Real>::close_energy_account(State<Real>& s, double dt, const Contac
   // Power alpha m |v|^2 integrated by the trapezoid over the step: its error
   // telescopes (O(dt^2) in all), where the rectangle alpha m |v_{n+1}|^2 dt
   // drifted by alpha dt times the change of kinetic energy.
-  if (model_.effects.damping) s.dissipated += model_.effects.alpha * dt * 0.5 * (2.0 * energy_.kinetic + mv2);
-  energy_.kinetic = 0.5 * mv2;
-  energy_.discrete = -0.125 * dt * dt * ma2;
-  energy_.elastic = el.energy;
-  energy_.gravity = -co.mgu;
-  energy_.work_loads = s.work_loads;
-  energy_.work_essential = s.work_essential;
-  energy_.work_contact = s.work_contact;
-  energy_.dissipated = s.dissipated;
+  if (model_.effects.damping) s.dissipated += model_.effects.alpha * dt * 0.5 * (2.0 * s.energy.latest.kinetic + mv2);
+  s.energy.latest.kinetic = 0.5 * mv2;
+  s.energy.latest.discrete = -0.125 * dt * dt * ma2;
+  s.energy.latest.elastic = el.energy;
+  s.energy.latest.gravity = -co.mgu;
+  s.energy.latest.work_loads = s.work_loads;
+  s.energy.latest.work_essential = s.work_essential;
+  s.energy.latest.work_contact = s.work_contact;
+  s.energy.latest.dissipated = s.dissipated;
 }
 
 // The guard: non-finite values, inverted elements a model cannot take, and
 // energy growth beyond the work done (or a runaway past the critical step).
 template <class Real>
-Fault Stepper<Real>::check_step(const State<Real>& s) {
+Fault Stepper<Real>::check_step(State<Real>& s) {
   const ElasticSums& el = step_sums_.elastic;
   const CorrectSums& co = step_sums_.correct;
   Fault fault;
@@ -625,24 +636,24 @@ Fault Stepper<Real>::check_step(const State<Real>& s) {
                       list_ids(ids);
     fault = make_fault(Fault::Kind::Inverted, s, std::move(msg), std::move(ids));
   } else {
-    const double magnitude = std::fabs(energy_.kinetic) + std::fabs(energy_.elastic) + std::fabs(energy_.gravity) +
+    const double magnitude = std::fabs(s.energy.latest.kinetic) + std::fabs(s.energy.latest.elastic) + std::fabs(s.energy.latest.gravity) +
                              std::fabs(s.work_loads) + std::fabs(s.work_essential) + std::fabs(s.work_contact) + s.dissipated;
-    energy_scale_ = std::max(energy_scale_, magnitude);
-    const double growth = energy_.balance() - energy_reference_;
-    const double allowed = model_.integrator.energy_tolerance * energy_scale_ + energy_floor_ + 1e-12;
+    s.energy.scale = std::max(s.energy.scale, magnitude);
+    const double growth = s.energy.latest.balance() - s.energy.reference;
+    const double allowed = model_.integrator.energy_tolerance * s.energy.scale + energy_floor_ + 1e-12;
     // Past the critical step the balance stays conserved while the motion
     // grows without bound (kinetic + discrete falls as fast as kinetic +
     // elastic rises), so the physical energy is checked too, against all the
     // energy the body was given. Below the critical step it exceeds that by
     // at most -discrete <= U (w dt)^2/4 / (1 - (w dt)^2/4), 4.3x at 0.9 of it.
     constexpr double kRunaway = 10;
-    const double given = std::fabs(energy_reference_) + std::fabs(energy_.gravity) + std::fabs(s.work_loads) +
-                         std::fabs(s.work_essential) + std::fabs(s.work_contact) + contact_given_ + s.dissipated;
-    const double runaway = growth - energy_.discrete - kRunaway * given;
+    const double given = std::fabs(s.energy.reference) + std::fabs(s.energy.latest.gravity) + std::fabs(s.work_loads) +
+                         std::fabs(s.work_essential) + std::fabs(s.work_contact) + s.energy.proxy_given + s.dissipated;
+    const double runaway = growth - s.energy.latest.discrete - kRunaway * given;
     if (runaway > allowed) {
       std::vector<int32_t> ids = find_top_energy_elements(s, 10);
       std::ostringstream msg;
-      msg << "kinetic + elastic energy grew by " << growth - energy_.discrete << " J, over " << kRunaway
+      msg << "kinetic + elastic energy grew by " << growth - s.energy.latest.discrete << " J, over " << kRunaway
           << " times the " << given << " J the body was given: the step exceeds the critical step; highest strain "
           << "energy in elements " << list_ids(ids);
       fault = make_fault(Fault::Kind::EnergyGrowth, s, msg.str(), std::move(ids));
@@ -652,37 +663,37 @@ Fault Stepper<Real>::check_step(const State<Real>& s) {
       msg << "energy grew by " << growth << " J beyond the work done (allowed " << allowed
           << " J); highest strain energy in elements " << list_ids(ids);
       fault = make_fault(Fault::Kind::EnergyGrowth, s, msg.str(), std::move(ids));
-    } else if (double(s.t) - energy_window_start_ >= model_.integrator.energy_window) {
-      energy_reference_ = energy_.balance();  // the next window's growth counts from here
-      energy_window_start_ = double(s.t);
+    } else if (double(s.t) - s.energy.window_start >= model_.integrator.energy_window) {
+      s.energy.reference = s.energy.latest.balance();  // the next window's growth counts from here
+      s.energy.window_start = double(s.t);
     }
   }
   return fault;
 }
 
 template <class Real>
-Fault Stepper<Real>::make_fault(Fault::Kind kind, const State<Real>& s, std::string message,
+Fault Stepper<Real>::make_fault(Fault::Kind kind, State<Real>& s, std::string message,
                                 std::vector<int32_t> elements) {
-  fault_.kind = kind;
-  fault_.step = s.step;
-  fault_.t = s.t;
-  fault_.message = std::move(message);
-  fault_.elements = std::move(elements);
-  return fault_;
+  s.fault.kind = kind;
+  s.fault.step = s.step;
+  s.fault.t = s.t;
+  s.fault.message = std::move(message);
+  s.fault.elements = std::move(elements);
+  return s.fault;
 }
 
 template <class Real>
-void Stepper<Real>::clear_fault() {
-  fault_ = Fault{};
-  energy_started_ = false;
-  dt_refreshed_at_ = -1;
+void Stepper<Real>::clear_fault(State<Real>& s) const {
+  s.fault = Fault{};
+  s.energy.open = false;
+  s.critical.refreshed_at = -1;
 }
 
 template <class Real>
 AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
   AdvanceReport report;
-  if (fault_) {
-    report.fault = fault_;
+  if (s.fault) {
+    report.fault = s.fault;
     return report;
   }
   if (!(frame_dt > 0) || !std::isfinite(frame_dt)) {
@@ -695,45 +706,45 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
   // spike a real-time loop would feel as a missed deadline). Until a sweep
   // completes, the lower of the last sweep's estimate and this one's so far.
   constexpr int32_t kSweepCalls = 16;
-  if (dt_refreshed_at_ < 0) {
-    dt_critical_ = sweep_last_ = compute_critical_dt(s);
-    sweep_next_ = 0;
-    sweep_min_ = model_.dt_rest;
-    dt_refreshed_at_ = s.step;
+  if (s.critical.refreshed_at < 0) {
+    s.critical.dt = s.critical.last = compute_critical_dt(s);
+    s.critical.next = 0;
+    s.critical.min = model_.dt_rest;
+    s.critical.refreshed_at = s.step;
   } else {
     const auto n_blocks = static_cast<int32_t>(model_.blocks.size());
     const int32_t chunk = (n_blocks + kSweepCalls - 1) / kSweepCalls;
-    const int32_t end = std::min(n_blocks, sweep_next_ + chunk);
-    sweep_min_ = std::min(sweep_min_, compute_critical_dt(s, sweep_next_, end));
-    sweep_next_ = end;
-    if (sweep_next_ >= n_blocks) {
-      sweep_last_ = sweep_min_;
-      sweep_min_ = model_.dt_rest;
-      sweep_next_ = 0;
-      dt_refreshed_at_ = s.step;
+    const int32_t end = std::min(n_blocks, s.critical.next + chunk);
+    s.critical.min = std::min(s.critical.min, compute_critical_dt(s, s.critical.next, end));
+    s.critical.next = end;
+    if (s.critical.next >= n_blocks) {
+      s.critical.last = s.critical.min;
+      s.critical.min = model_.dt_rest;
+      s.critical.next = 0;
+      s.critical.refreshed_at = s.step;
     }
-    dt_critical_ = std::min(sweep_last_, sweep_min_);
+    s.critical.dt = std::min(s.critical.last, s.critical.min);
   }
-  if (!contact_tets_.empty() && !contact_.pushed().empty())
-    dt_critical_ = std::min(dt_critical_, compute_contact_critical_dt(s));
-  report.dt_critical = dt_critical_;
+  if (!contact_tets_.empty() && !s.contact.pushed.empty())
+    s.critical.dt = std::min(s.critical.dt, compute_contact_critical_dt(s));
+  report.dt_critical = s.critical.dt;
   const double fixed = model_.integrator.dt;
   int64_t n = 1;
   if (fixed > 0) {
     n = std::max<int64_t>(1, std::llround(frame_dt / fixed));
-    if (frame_dt / double(n) > dt_critical_) {
+    if (frame_dt / double(n) > s.critical.dt) {
       if (model_.integrator.unstable == UnstablePolicy::Refuse) {
         std::ostringstream msg;
-        msg << "integrator.dt = " << fixed << " s exceeds the critical step " << dt_critical_
+        msg << "integrator.dt = " << fixed << " s exceeds the critical step " << s.critical.dt
             << " s of the current configuration; refused (set integrator.unstable to \"subdivide\" to split it)";
         report.fault = make_fault(Fault::Kind::StepTooLarge, s, msg.str(), {});
         return report;
       }
-      n = static_cast<int64_t>(std::ceil(frame_dt / (model_.integrator.safety * dt_critical_)));
+      n = static_cast<int64_t>(std::ceil(frame_dt / (model_.integrator.safety * s.critical.dt)));
       report.subdivided = true;
     }
   } else {
-    n = static_cast<int64_t>(std::ceil(frame_dt / (model_.integrator.safety * dt_critical_)));
+    n = static_cast<int64_t>(std::ceil(frame_dt / (model_.integrator.safety * s.critical.dt)));
   }
   double dt = frame_dt / double(n);
   report.dt = dt;
@@ -748,10 +759,10 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
     // A proxy that squashes the elements under it within the interval: the
     // rest of the interval is split again at their new critical step. (After
     // the last step the next advance() looks, before it plans its steps.)
-    if (k + 1 == n || contact_tets_.empty() || contact_.pushed().empty()) continue;
+    if (k + 1 == n || contact_tets_.empty() || s.contact.pushed.empty()) continue;
     const double dc = compute_contact_critical_dt(s);
-    if (dc >= dt_critical_) continue;
-    dt_critical_ = report.dt_critical = dc;
+    if (dc >= s.critical.dt) continue;
+    s.critical.dt = report.dt_critical = dc;
     if (dt <= model_.integrator.safety * dc) continue;
     if (fixed > 0 && model_.integrator.unstable == UnstablePolicy::Refuse) {
       std::ostringstream msg;
@@ -796,7 +807,7 @@ double Stepper<Real>::compute_contact_critical_dt(const State<Real>& s) {
     mark_ = 1;
   }
   contact_examined_.clear();  // (its capacity holds every contact tet: no allocation)
-  for (int32_t k : contact_.pushed())
+  for (int32_t k : s.contact.pushed)
     for (int32_t j = contact_tet_begin_[size_t(k)]; j < contact_tet_begin_[size_t(k) + 1]; ++j) {
       const int32_t e = contact_tets_[size_t(j)];
       if (tet_mark_[size_t(e)] == mark_) continue;

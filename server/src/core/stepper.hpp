@@ -68,9 +68,11 @@ class Stepper {
   explicit Stepper(const Model<Real>& model, ParallelFor* parallel = nullptr);
 
   const Model<Real>& model() const { return model_; }
-  State<Real> make_state() const { return make_rest_state<Real>(model_.n_nodes, n_constrained()); }
+  // A body at rest in this model, its proxies and hands held at their scene
+  // poses: the State every run starts from (core/state.hpp).
+  State<Real> make_state() const;
 
-  // One step of dt [s]. After a fault, returns it again until clear_fault().
+  // One step of dt [s]. After a fault (s.fault), returns it again until clear_fault(s).
   Fault step(State<Real>& s, double dt);
 
   // Covers frame_dt [s] with as many equal sub-steps as stability needs
@@ -97,16 +99,16 @@ class Stepper {
   // Elastic energy density V psi per tet [J] (n_tets).
   std::vector<double> compute_element_energy(const State<Real>& s) const;
 
-  // Energies as of the latest step, from sums the step computes anyway.
-  const Energy& energy() const { return energy_; }
-
-  void clear_fault();
-  const Fault& fault() const { return fault_; }
+  // Forgets s.fault; the next step starts again from s (the energy account
+  // and the critical step anew). The energies of the latest step, from sums
+  // the step computes anyway, are s.energy.latest.
+  void clear_fault(State<Real>& s) const;
   void set_probe(StepProbe* probe) { probe_ = probe; }
   int32_t parts() const { return n_parts_; }
 
-  // The proxies: their motion over the coming steps (set by the application
-  // from device inputs or scripts) and what each felt in the latest step.
+  // The contact pass: what moves the proxies and hands of a state (set by
+  // the application from device inputs or scripts); what each felt in the
+  // latest step is in s.contact.
   Contact<Real>& contact() { return contact_; }
   const Contact<Real>& contact() const { return contact_; }
 
@@ -130,7 +132,6 @@ class Stepper {
     std::atomic<uint64_t> ends{0};
   };
 
-  int32_t n_constrained() const { return static_cast<int32_t>(model_.constrained.size()); }
   // The entries [begin, end) of essential_entries_.
   void apply_essential_positions(State<Real>& s, double t, size_t begin, size_t end);
   // Part q's predictor and essential positions of this step, run by this
@@ -145,7 +146,7 @@ class Stepper {
   void ensure_region(int32_t r);
   CorrectSums correct_range(int32_t begin, int32_t end);
   void apply_essential_rates(State<Real>& s, double t, double dt);
-  void apply_loads(const State<Real>& s, double t);
+  void apply_loads(State<Real>& s, double t);
   void add_load_force(int32_t node, const Vec3& force);
 
   // The passes of step(), in order.
@@ -155,9 +156,9 @@ class Stepper {
   void correct(State<Real>& s);
   ContactSums apply_contact(State<Real>& s, double dt);
   void close_energy_account(State<Real>& s, double dt, const ContactSums& contact);
-  Fault check_step(const State<Real>& s);
+  Fault check_step(State<Real>& s);
 
-  Fault make_fault(Fault::Kind kind, const State<Real>& s, std::string message, std::vector<int32_t> elements);
+  Fault make_fault(Fault::Kind kind, State<Real>& s, std::string message, std::vector<int32_t> elements);
   std::vector<int32_t> find_nonfinite_elements(const State<Real>& s) const;
   std::vector<int32_t> find_inverted_elements(const State<Real>& s) const;
   std::vector<int32_t> find_top_energy_elements(const State<Real>& s, size_t count) const;
@@ -193,7 +194,6 @@ class Stepper {
   std::vector<ElasticSums> elastic_;     // per region, whichever thread filled it
   std::vector<CorrectSums> correct_sums_;  // per part
   std::vector<Vec3> u_before_;           // constrained and loaded nodes' u at t_n [m]
-  std::vector<Vec3> load_force_;         // load force at t_n per loaded node [N]
   std::vector<Real> a_prescribed_;       // prescribed accelerations (n_constrained x 3)
   std::vector<Real> v_prescribed_;       // prescribed velocities (n_constrained x 3)
   std::vector<int32_t> loaded_;          // loaded node ids, flattened over loads
@@ -216,24 +216,7 @@ class Stepper {
   StepSums step_sums_;              // the passes' sums of the latest step, for its guard
   double essential_mv2_delta_ = 0;  // constrained nodes' change of m |v|^2 in this step
   double essential_ma2_delta_ = 0;  // and of m |a|^2
-  double initial_ma2_ = 0;          // sum m |a_0|^2 of the starting state
-  // Energy the moving proxies gave since the start (sum of |F.v_proxy| dt): a
-  // contact kick raises the kinetic energy at once, while its work on the
-  // body (trapezoid) shows in the balance a step later.
-  double contact_given_ = 0;
-  Energy energy_;
-  double energy_reference_ = 0;  // balance at the start of the current window (the first step at first)
-  double energy_window_start_ = 0;  // simulated time the current window started [s]
-  double energy_scale_ = 0;      // running max of the energy magnitudes [J]
   double energy_floor_ = 0;      // the elastic energy's round-off in Real: the balance's resolution [J]
-  bool energy_started_ = false;
-  double energy_dt_ = 0;         // the step the latest energies were measured with [s]
-  Fault fault_;
-  double dt_critical_ = 0;
-  int64_t dt_refreshed_at_ = -1;  // step of the last complete sweep, -1 before the first
-  double sweep_last_ = 0;         // estimate of the last complete sweep [s]
-  double sweep_min_ = 0;          // of the sweep under way, so far [s]
-  int32_t sweep_next_ = 0;        // first lane block the next call examines
   // A proxy squashes the elements under it faster than the sweep comes
   // round: those around the nodes it pushed are examined after every step.
   std::vector<int32_t> contact_tet_begin_;  // per contact surface node: range in contact_tets_ (+1)

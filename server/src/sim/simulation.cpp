@@ -23,7 +23,7 @@ struct Carry {
   int64_t step = 0;
   double work_loads = 0, work_essential = 0, work_contact = 0, dissipated = 0;
   std::vector<ProxyMotion> proxy, hand;
-  std::vector<Contact<double>::CoupledBody> bodies;  // (the same type in float: plain doubles)
+  std::vector<CoupledBodyState> bodies;
 };
 
 struct Simulation::Engine {
@@ -100,10 +100,9 @@ class EngineOf final : public Simulation::Engine {
     c.work_essential = state_.work_essential;
     c.work_contact = state_.work_contact;
     c.dissipated = state_.dissipated;
-    for (int32_t j = 0; j < int32_t(model_->proxies.size()); ++j) c.proxy.push_back(stepper_.contact().motion(j));
-    for (int32_t h = 0; h < int32_t(model_->hands.size()); ++h) c.hand.push_back(stepper_.contact().hand_motion(h));
-    for (const auto& b : stepper_.contact().coupled_bodies())
-      c.bodies.push_back({b.device, b.hand, b.proxy, b.has_limits, b.limits, b.state});
+    c.proxy = state_.contact.motion;
+    c.hand = state_.contact.hand_motion;
+    c.bodies = state_.contact.bodies;
     return c;
   }
   void carry_in(const Carry& c) override {
@@ -124,11 +123,9 @@ class EngineOf final : public Simulation::Engine {
     state_.work_essential = c.work_essential;
     state_.work_contact = c.work_contact;
     state_.dissipated = c.dissipated;
-    for (size_t h = 0; h < c.hand.size(); ++h) stepper_.contact().set_hand_motion(int32_t(h), c.hand[h]);
-    for (size_t j = 0; j < c.proxy.size(); ++j) stepper_.contact().set_motion(int32_t(j), c.proxy[j]);
-    std::vector<typename Contact<Real>::CoupledBody> bodies;
-    for (const auto& b : c.bodies) bodies.push_back({b.device, b.hand, b.proxy, b.has_limits, b.limits, b.state});
-    stepper_.contact().take_bodies(bodies, state_.t);
+    state_.contact.hand_motion = c.hand;
+    state_.contact.motion = c.proxy;
+    stepper_.contact().take_bodies(state_, c.bodies);
   }
 
   void set_initial_state(const std::vector<double>& u, const std::vector<double>& v) override {
@@ -160,7 +157,7 @@ class EngineOf final : public Simulation::Engine {
   int64_t steps() const override { return state_.step; }
   AdvanceReport advance(double frame_dt) override { return stepper_.advance(state_, frame_dt); }
   double compute_critical_dt() const override { return stepper_.compute_critical_dt(state_); }
-  const Energy& energy() const override { return stepper_.energy(); }
+  const Energy& energy() const override { return state_.energy.latest; }
   Energy compute_energy() const override { return stepper_.compute_energy(state_); }
   std::vector<double> compute_element_energy() const override { return stepper_.compute_element_energy(state_); }
   ElementFields compute_element_fields(const ElementFieldRequest& ask) const override {
@@ -172,10 +169,10 @@ class EngineOf final : public Simulation::Engine {
       for (int32_t i : set.nodes) out[size_t(i)] = std::max<uint8_t>(out[size_t(i)], set.moving ? 2 : 1);
     return out;
   }
-  void track_contact_forces(bool on) override { stepper_.contact().track_node_impulses(on); }
+  void track_contact_forces(bool on) override { stepper_.contact().track_node_impulses(state_, on); }
   double take_contact_impulses(std::vector<double>& impulse) override {
     impulse.assign(state_.u.size(), 0.0);
-    return stepper_.contact().take_node_impulses(impulse);
+    return stepper_.contact().take_node_impulses(state_, impulse);
   }
   void copy_displacement(std::vector<double>& u) const override { u.assign(state_.u.begin(), state_.u.end()); }
   void copy_velocity(std::vector<double>& v) const override { v.assign(state_.v.begin(), state_.v.end()); }
@@ -199,19 +196,21 @@ class EngineOf final : public Simulation::Engine {
   const std::vector<HandSpec>& hands() const override { return model_->hands; }
   const std::vector<std::string>& devices() const override { return model_->devices; }
   const std::vector<int32_t>& proxy_device() const override { return model_->proxy_device; }
-  void set_proxy_motion(int32_t proxy, const ProxyMotion& m) override { stepper_.contact().set_motion(proxy, m); }
-  void set_hand_motion(int32_t hand, const ProxyMotion& m) override { stepper_.contact().set_hand_motion(hand, m); }
-  Pose proxy_pose(int32_t proxy) const override { return stepper_.contact().proxy_pose(proxy, state_.t); }
-  Pose hand_pose(int32_t hand) const override { return stepper_.contact().hand_pose(hand, state_.t); }
-  void couple_device(int32_t device, const DeviceLimits* limits) override {
-    stepper_.contact().couple(device, limits, state_.t);
+  void set_proxy_motion(int32_t proxy, const ProxyMotion& m) override { stepper_.contact().set_motion(state_, proxy, m); }
+  void set_hand_motion(int32_t hand, const ProxyMotion& m) override {
+    stepper_.contact().set_hand_motion(state_, hand, m);
   }
-  void release_device(int32_t device) override { stepper_.contact().release(device); }
-  bool device_coupled(int32_t device) const override { return stepper_.contact().coupled(device); }
-  const std::vector<ProxyReport>& proxy_reports() const override { return stepper_.contact().reports(); }
-  const std::vector<DeviceReport>& device_reports() const override { return stepper_.contact().device_reports(); }
-  void clear_impulses() override { stepper_.contact().clear_impulses(); }
-  const Fault& fault() const override { return stepper_.fault(); }
+  Pose proxy_pose(int32_t proxy) const override { return stepper_.contact().proxy_pose(state_, proxy); }
+  Pose hand_pose(int32_t hand) const override { return stepper_.contact().hand_pose(state_, hand); }
+  void couple_device(int32_t device, const DeviceLimits* limits) override {
+    stepper_.contact().couple(state_, device, limits);
+  }
+  void release_device(int32_t device) override { stepper_.contact().release(state_, device); }
+  bool device_coupled(int32_t device) const override { return state_.contact.coupled(device); }
+  const std::vector<ProxyReport>& proxy_reports() const override { return state_.contact.reports; }
+  const std::vector<DeviceReport>& device_reports() const override { return state_.contact.device_reports; }
+  void clear_impulses() override { state_.contact.clear_impulses(); }
+  const Fault& fault() const override { return state_.fault; }
   void set_probe(StepProbe* probe) override { stepper_.set_probe(probe); }
 
  private:

@@ -177,14 +177,14 @@ Vec3 momentum(const Model<Real>& model, const State<Real>& s) {
 
 // Moves a proxy at constant velocity over the coming step.
 template <class Real>
-void move_proxy(Stepper<Real>& stepper, int32_t proxy, const Pose& from, const Vec3& velocity, double t, double dt) {
+void move_proxy(Stepper<Real>& stepper, State<Real>& s, int32_t proxy, const Pose& from, const Vec3& velocity, double t, double dt) {
   ProxyMotion m;
   m.t0 = t;
   m.t1 = t + dt;
   m.from = from;
   m.to = from;
   m.to.position += velocity * dt;
-  stepper.contact().set_motion(proxy, m);
+  stepper.contact().set_motion(s, proxy, m);
 }
 
 // ---- the laws --------------------------------------------------------------------
@@ -217,7 +217,7 @@ TEST(Contact, PenetrationStopsGrowingWithinTwoSteps) {
   double deepest = 0;
   int entries = 0;
   for (int k = 0; k < 400; ++k) {
-    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
     record();
     for (double h : height.back()) deepest = std::min(deepest, h);
   }
@@ -251,15 +251,15 @@ TEST(Contact, ReactionEqualsTheMomentumTheContactsGave) {
   int in_contact = 0;
   double push = 0;
   for (int k = 0; k < 600; ++k) {
-    move_proxy(stepper, 0, pose, velocity, s.t, dt);
+    move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
     const Vec3 P0 = momentum(model, s);
-    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
-    const Vec3 F = stepper.contact().reports()[0].force;
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    const Vec3 F = s.contact.reports[0].force;
     const Vec3 dP = momentum(model, s) - P0;
     const Vec3 expected = -0.5 * dt * (F_prev + F);
     const double scale = 1e-9 * glm::length(expected) + 1e-15;  // elastic forces cancel to round-off
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(dP[c], expected[c], scale) << "step " << k << " component " << c;
-    if (stepper.contact().reports()[0].contacts > 0) ++in_contact;
+    if (s.contact.reports[0].contacts > 0) ++in_contact;
     push = std::max(push, F.y);
     F_prev = F;
     pose.position += velocity * dt;
@@ -277,7 +277,7 @@ TEST(Contact, NodeImpulsesSumToTheProxysReaction) {
   const Model<double> model = build_model<double>(spec);
   Stepper<double> stepper(model);
   State<double> s = stepper.make_state();
-  stepper.contact().track_node_impulses(true);
+  stepper.contact().track_node_impulses(s, true);
   const double dt = 0.5 * model.dt_rest;
   Pose pose = model.proxies[0].pose;
   const Vec3 velocity(0.0, -0.2, 0.05);
@@ -286,13 +286,13 @@ TEST(Contact, NodeImpulsesSumToTheProxysReaction) {
   double elapsed = 0;
   int taken = 0;
   for (int k = 0; k < 300; ++k) {
-    move_proxy(stepper, 0, pose, velocity, s.t, dt);
-    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
-    reaction += stepper.contact().reports()[0].force * dt;
+    move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    reaction += s.contact.reports[0].force * dt;
     pose.position += velocity * dt;
-    if (k % 37 == 36) elapsed += stepper.contact().take_node_impulses(impulse), ++taken;  // takes add up
+    if (k % 37 == 36) elapsed += stepper.contact().take_node_impulses(s, impulse), ++taken;  // takes add up
   }
-  elapsed += stepper.contact().take_node_impulses(impulse);
+  elapsed += stepper.contact().take_node_impulses(s, impulse);
   Vec3 on_nodes(0.0);
   int pushed = 0;
   for (int32_t i = 0; i < model.n_nodes; ++i) {
@@ -307,11 +307,11 @@ TEST(Contact, NodeImpulsesSumToTheProxysReaction) {
   EXPECT_NEAR(elapsed, 300 * dt, 1e-12);
   // Taken again: nothing more, and nothing while tracking is off.
   std::vector<double> again(impulse.size(), 0.0);
-  EXPECT_EQ(stepper.contact().take_node_impulses(again), 0.0);
-  stepper.contact().track_node_impulses(false);
-  move_proxy(stepper, 0, pose, velocity, s.t, dt);
+  EXPECT_EQ(stepper.contact().take_node_impulses(s, again), 0.0);
+  stepper.contact().track_node_impulses(s, false);
+  move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
   ASSERT_FALSE(stepper.step(s, dt));
-  EXPECT_EQ(stepper.contact().take_node_impulses(again), 0.0);
+  EXPECT_EQ(stepper.contact().take_node_impulses(s, again), 0.0);
   for (double x : again) EXPECT_EQ(x, 0.0);
 }
 
@@ -347,7 +347,7 @@ double slide_acceleration(double pull_over_mu_mg, double* creep) {
     return x / mass;
   };
   auto run_until = [&](double t) {
-    while (s.t < t) EXPECT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    while (s.t < t) EXPECT_FALSE(stepper.step(s, dt)) << s.fault.message;
   };
   run_until(0.08);
   const double x0 = mean_x(), t0 = s.t;
@@ -385,26 +385,26 @@ TEST(Contact, ForcesAreRoutedPerProxy) {
   const double dt = 0.5 * model.dt_rest;
   Pose a = model.proxies[0].pose, b = model.proxies[1].pose;
   for (int k = 0; k < 100; ++k) {
-    move_proxy(stepper, 0, a, Vec3(0.0, -0.1, 0.0), s.t, dt);
-    move_proxy(stepper, 1, b, Vec3(0.0), s.t, dt);
-    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    move_proxy(stepper, s, 0, a, Vec3(0.0, -0.1, 0.0), s.t, dt);
+    move_proxy(stepper, s, 1, b, Vec3(0.0), s.t, dt);
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
     a.position.y -= 0.1 * dt;
-    const ProxyReport& rb = stepper.contact().reports()[1];
+    const ProxyReport& rb = s.contact.reports[1];
     EXPECT_EQ(rb.contacts, 0);
     EXPECT_EQ(rb.force, Vec3(0.0));
   }
-  EXPECT_GT(stepper.contact().reports()[0].contacts, 0);
-  EXPECT_GT(stepper.contact().reports()[0].force.y, 0.0);
+  EXPECT_GT(s.contact.reports[0].contacts, 0);
+  EXPECT_GT(s.contact.reports[0].force.y, 0.0);
   // Now b presses the bottom face from below as well: each feels its own side.
   for (int pressed = 0, k = 0; pressed < 100 && k < 5000; ++k) {  // until b has pressed for 100 steps
-    move_proxy(stepper, 0, a, Vec3(0.0), s.t, dt);
-    move_proxy(stepper, 1, b, Vec3(0.0, 0.1, 0.0), s.t, dt);
-    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    move_proxy(stepper, s, 0, a, Vec3(0.0), s.t, dt);
+    move_proxy(stepper, s, 1, b, Vec3(0.0, 0.1, 0.0), s.t, dt);
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
     b.position.y += 0.1 * dt;
-    if (stepper.contact().reports()[1].contacts > 0) ++pressed;
+    if (s.contact.reports[1].contacts > 0) ++pressed;
   }
-  EXPECT_GT(stepper.contact().reports()[0].force.y, 0.0);
-  EXPECT_LT(stepper.contact().reports()[1].force.y, 0.0);
+  EXPECT_GT(s.contact.reports[0].force.y, 0.0);
+  EXPECT_LT(s.contact.reports[1].force.y, 0.0);
 }
 
 // Over a press and a release, the body gains at most the work the proxy did:
@@ -429,13 +429,13 @@ TEST(Contact, NeverAddsEnergy) {
     int32_t faces = 0;
     for (int k = 0; k < steps; ++k) {
       const Vec3 velocity(0.0, k < steps / 2 ? -0.3 : 0.3, 0.0);
-      move_proxy(stepper, 0, pose, velocity, s.t, dt);
-      EXPECT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+      move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
+      EXPECT_FALSE(stepper.step(s, dt)) << s.fault.message;
       pose.position += velocity * dt;
       faces = std::max(faces, stepper.contact().face_contacts());
     }
     const Energy e = stepper.compute_energy(s);
-    return Run{e.kinetic + e.elastic, stepper.contact().reports()[0].work, s.work_contact, faces};
+    return Run{e.kinetic + e.elastic, s.contact.reports[0].work, s.work_contact, faces};
   };
   const Run coarse = press(1), fine = press(2);
   std::printf("  body %.6e J, proxy's work %.6e J (excess %+.2e), balance's contact work %.6e J; dt/2: "
@@ -473,11 +473,11 @@ TEST(Contact, FacesHoldABallThatFitsBetweenNodes) {
   double first_force_depth = -1, force_at_1mm = 0;
   int32_t faces_seen = 0;
   for (int k = 0; k < 100000 && pose.position.y - r > cell_centre.y - 0.003; ++k) {
-    move_proxy(stepper, 0, pose, velocity, s.t, dt);
-    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+    move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
     pose.position += velocity * dt;
     const double depth = cell_centre.y - (pose.position.y - r);  // of the ball's bottom below the rest surface
-    const ProxyReport& rep = stepper.contact().reports()[0];
+    const ProxyReport& rep = s.contact.reports[0];
     faces_seen = std::max(faces_seen, stepper.contact().face_contacts());
     if (rep.force.y > 0 && first_force_depth < 0) first_force_depth = depth;
     if (depth < 0.0015) {
@@ -551,7 +551,7 @@ TEST(Contact, FastImpactDoesNotTunnelThroughAThinPlate) {
     double deepest = 0;
     bool faulted = false;
     for (int k = 0; pose.position.y > -0.01 && k < 20000; ++k) {
-      move_proxy(stepper, 0, pose, velocity, s.t, dt);
+      move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
       if (stepper.step(s, dt)) {
         faulted = true;  // a reported fault is an allowed end (elements crushed flat)
         break;
@@ -637,16 +637,16 @@ double settled_sphere_force(int cells, double R, double delta, double* stiffness
     m.from = m.to = pose;
     m.from.position.y = R - depth(t0);
     m.to.position.y = R - depth(t1);
-    stepper.contact().set_motion(0, m);
+    stepper.contact().set_motion(s, 0, m);
     const Fault f = stepper.step(s, dt);
     EXPECT_FALSE(f) << f.message;
     if (f) return 0.0;
     if (s.t > ramp + 0.75 * hold) {
-      mean += stepper.contact().reports()[0].force;
+      mean += s.contact.reports[0].force;
       ++samples;
     }
     if (s.t > 0.45 * ramp && s.t < 0.55 * ramp) {  // around mid-ramp, depth delta / 2
-      k_sum += stepper.contact().reports()[0].stiffness[1][1];
+      k_sum += s.contact.reports[0].stiffness[1][1];
       ++k_samples;
     }
   }
@@ -702,7 +702,7 @@ Fault run_hard_case(ModelSpec spec, const std::vector<Vec3>& velocity, int move_
   for (int k = 0; k < frames; ++k) {
     for (size_t j = 0; j < pose.size(); ++j) {
       const Vec3 v = k < move_frames ? velocity[j] : Vec3(0.0);
-      move_proxy(stepper, int32_t(j), pose[j], v, s.t, frame);
+      move_proxy(stepper, s, int32_t(j), pose[j], v, s.t, frame);
       pose[j].position += v * frame;
     }
     if (Fault f = stepper.advance(s, frame).fault) return f;
@@ -815,12 +815,12 @@ TEST(ContactHardCases, FastPokeShrinksTheStepWithinTheInterval) {
   double smallest_dt = 1, peak = 0, worst = 0, gained = 0;
   for (int k = 0; k < 40; ++k) {
     const Vec3 velocity(0.0, k < 1 ? -4.0 : 0.0, 0.0);  // 4 mm down in the first interval, then held
-    move_proxy(stepper, 0, pose, velocity, s.t, interval);
+    move_proxy(stepper, s, 0, pose, velocity, s.t, interval);
     pose.position += velocity * interval;
     const AdvanceReport r = stepper.advance(s, interval);
     ASSERT_FALSE(r.fault) << "interval " << k << ": " << r.fault.message;
     smallest_dt = std::min(smallest_dt, r.dt);
-    const Energy& e = stepper.energy();
+    const Energy& e = s.energy.latest;
     peak = std::max(peak, e.kinetic + e.elastic);
     worst = std::max(worst, std::fabs(e.balance()));
     gained = std::max(gained, e.balance());
@@ -861,12 +861,12 @@ TEST(Contact, TorqueIsAboutTheProxyCentre) {
     int samples = 0;
     for (int k = 0; k < 2400; ++k) {
       const Vec3 v = k < 800 ? Vec3(0.0, -0.002 / (800 * dt), 0.0) : Vec3(0.01 / (1600 * dt), 0.0, 0.0);  // 2 mm in, 1 cm along x
-      move_proxy(stepper, 0, pose, v, s.t, dt);
-      ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
+      move_proxy(stepper, s, 0, pose, v, s.t, dt);
+      ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
       pose.position += v * dt;
       if (k >= 1200) {
-        F += stepper.contact().reports()[0].force;
-        T += stepper.contact().reports()[0].torque;
+        F += s.contact.reports[0].force;
+        T += s.contact.reports[0].torque;
         ++samples;
       }
     }
@@ -914,11 +914,11 @@ TEST(Contact, StiffnessEstimateIsPassiveOnAStiffRingingBlock) {
     m.from = pose;
     m.to = pose;
     m.to.position = to;
-    stepper.contact().set_motion(0, m);
+    stepper.contact().set_motion(s, 0, m);
     const AdvanceReport r = stepper.advance(s, frame);
     ASSERT_FALSE(r.fault) << r.fault.message;
     pose.position = to;
-    const glm::dmat3& K = stepper.contact().reports()[0].stiffness;
+    const glm::dmat3& K = s.contact.reports[0].stiffness;
     double scale = 0;
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) scale = std::max(scale, std::fabs(K[i][j]));
@@ -929,7 +929,7 @@ TEST(Contact, StiffnessEstimateIsPassiveOnAStiffRingingBlock) {
       const Vec3 u(std::sin(b) * std::cos(a), std::cos(b), std::sin(b) * std::sin(a));
       ASSERT_LE(glm::dot(u, K * u), 1e-9 * scale) << "t = " << t << ": the contact pulls the proxy in along this";
     }
-    if (stepper.contact().reports()[0].contacts > 0) ++pressed;
+    if (s.contact.reports[0].contacts > 0) ++pressed;
     most_negative = std::min(most_negative, K[1][1]);
   }
   std::printf("  %d frames in contact; dFy/dy down to %.3g N/m\n", pressed, most_negative);

@@ -54,20 +54,20 @@ ModelSpec poked_block(MaterialModel model, double E, bool free, Precision precis
 
 // The device's pose glides to `to` over [t, t + interval], as the live loop moves it between inputs.
 template <class Real>
-void move_device(Stepper<Real>& stepper, const Pose& from, const Pose& to, double t, double interval) {
+void move_device(Stepper<Real>& stepper, State<Real>& s, const Pose& from, const Pose& to, double t, double interval) {
   ProxyMotion m;
   m.t0 = t;
   m.t1 = t + interval;
   m.from = from;
   m.to = to;
-  stepper.contact().set_motion(0, m);
+  stepper.contact().set_motion(s, 0, m);
 }
 
 // Couples the stylus (device 0) at t = 0 as a device of 2000 N/m that renders max_force [N] and max_torque [N m].
 template <class Real>
-void couple_stylus(Stepper<Real>& stepper, double max_force, double max_torque = 0) {
+void couple_stylus(Stepper<Real>& stepper, State<Real>& s, double max_force, double max_torque = 0) {
   const DeviceLimits limits{max_force, max_torque, 2000.0};
-  stepper.contact().couple(0, &limits, 0.0);
+  stepper.contact().couple(s, 0, &limits);
 }
 
 template <class Real>
@@ -119,8 +119,8 @@ TEST(Coupling, MomentumPassesBetweenProxyAndBodyAndNoneIsMade) {
   Stepper<double> stepper(model);
   State<double> s = stepper.make_state();
   const double dt = 0.5 * model.dt_rest;
-  couple_stylus(stepper, 3.0);
-  ASSERT_TRUE(stepper.contact().coupled(0));
+  couple_stylus(stepper, s, 3.0);
+  ASSERT_TRUE(s.contact.coupled(0));
   Pose device = model.proxies[0].pose;
   const Vec3 velocity(0.0, -0.3, 0.05);
   int in_contact = 0;
@@ -128,17 +128,17 @@ TEST(Coupling, MomentumPassesBetweenProxyAndBodyAndNoneIsMade) {
   for (int k = 0; k < 1500; ++k) {
     Pose next = device;
     next.position += velocity * dt;
-    move_device(stepper, device, next, s.t, dt);
+    move_device(stepper, s, device, next, s.t, dt);
     device = next;
-    const Vec3 P0 = node_momentum(model, s) + stepper.contact().body_momentum();
-    ASSERT_FALSE(stepper.step(s, dt)) << stepper.fault().message;
-    const Vec3 F = -stepper.contact().device_reports()[0].force;  // the coupling's on the proxy, the two steps' mean
-    const Vec3 dP = node_momentum(model, s) + stepper.contact().body_momentum() - P0;
+    const Vec3 P0 = node_momentum(model, s) + s.contact.body_momentum();
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    const Vec3 F = -s.contact.device_reports[0].force;  // the coupling's on the proxy, the two steps' mean
+    const Vec3 dP = node_momentum(model, s) + s.contact.body_momentum() - P0;
     const Vec3 expected = dt * F;
     largest_momentum = std::max(largest_momentum, glm::length(node_momentum(model, s)));
     for (int c = 0; c < 3; ++c)
       ASSERT_NEAR(dP[c], expected[c], 1e-12 + 1e-9 * glm::length(expected)) << "step " << k << " component " << c;
-    if (stepper.contact().reports()[0].contacts > 0) ++in_contact;
+    if (s.contact.reports[0].contacts > 0) ++in_contact;
   }
   EXPECT_GT(in_contact, 50);  // (the free block is knocked away in the end)
   EXPECT_GT(largest_momentum, 1e-3) << "the proxy never pushed the block";
@@ -154,7 +154,7 @@ TEST(Coupling, ADevicePushedThroughTheBodyLeavesItsProxyAtTheSurface) {
     const Model<double> model = build_model<double>(spec);
     Stepper<double> stepper(model);
     State<double> s = stepper.make_state();
-    couple_stylus(stepper, 2.0);
+    couple_stylus(stepper, s, 2.0);
     const double interval = 1e-3, radius = 0.008;
     Pose device = model.proxies[0].pose;
     double peak = 0, lowest = 1;
@@ -162,14 +162,14 @@ TEST(Coupling, ADevicePushedThroughTheBodyLeavesItsProxyAtTheSurface) {
     for (int k = 0; k < 400; ++k) {  // down at 0.1 m/s for 0.4 s, to y = -0.01: through the block
       Pose next = device;
       next.position.y -= 0.1 * interval;
-      move_device(stepper, device, next, s.t, interval);
+      move_device(stepper, s, device, next, s.t, interval);
       device = next;
       const AdvanceReport r = stepper.advance(s, interval);
       ASSERT_FALSE(r.fault) << "E " << E << ", interval " << k << ": " << r.fault.message;
-      const DeviceReport& d = stepper.contact().device_reports()[0];
+      const DeviceReport& d = s.contact.device_reports[0];
       peak = std::max(peak, glm::length(d.force));
       saturated += d.saturated;
-      lowest = std::min(lowest, stepper.contact().proxy_pose(0, s.t).position.y);
+      lowest = std::min(lowest, stepper.contact().proxy_pose(s, 0).position.y);
     }
     std::printf("  E %.0e Pa: peak %.4f N (limit 2), proxy centre down to y = %.4f m (top 0.02, radius %.3f)\n", E,
                 peak, lowest, radius);
@@ -205,17 +205,17 @@ TEST(Coupling, AFastStrikeDoesNotFaultAnyMaterial) {
           const Model<Real> model = build_model<Real>(spec);
           Stepper<Real> stepper(model);
           State<Real> s = stepper.make_state();
-          couple_stylus(stepper, 6.0);
+          couple_stylus(stepper, s, 6.0);
           Pose device = model.proxies[0].pose;
           double peak = 0;
           for (int k = 0; k < 60; ++k) {  // 2 m/s for 25 ms (5 cm: 3.2 cm into the block), then held
             Pose next = device;
             if (k < 25) next.position.y -= 2.0 * 1e-3;
-            move_device(stepper, device, next, s.t, 1e-3);
+            move_device(stepper, s, device, next, s.t, 1e-3);
             device = next;
             const AdvanceReport r = stepper.advance(s, 1e-3);
             ASSERT_FALSE(r.fault) << what << ", interval " << k << ": " << r.fault.message;
-            peak = std::max(peak, glm::length(stepper.contact().device_reports()[0].force));
+            peak = std::max(peak, glm::length(s.contact.device_reports[0].force));
           }
           EXPECT_LE(peak, 6.0 * (1 + 1e-6)) << what;
           EXPECT_GT(peak, 5.9) << what << ": the coupling never reached its limit";
@@ -235,28 +235,28 @@ TEST(Coupling, APressingDeviceIsToldTheStiffnessItFeelsAtEveryStep) {
   for (double E : {3e4, 1e6}) {
     const ModelSpec spec = poked_block(MaterialModel::NeoHookean, E, false);
     const Model<double> model = build_model<double>(spec);
-    const auto press = [&](Stepper<double>& stepper, auto&& each) {
+    const auto press = [&](Stepper<double>& stepper, bool coupled, auto&& each) {
       State<double> s = stepper.make_state();
+      if (coupled) couple_stylus(stepper, s, 6.0);
       Pose device = model.proxies[0].pose;
       for (int k = 0; k < 400; ++k) {  // 4 mm down over 0.4 s: touching after 2 mm, then 2 mm in
         Pose next = device;
         next.position.y -= 1e-5;
-        move_device(stepper, device, next, s.t, 1e-3);
+        move_device(stepper, s, device, next, s.t, 1e-3);
         device = next;
         ASSERT_FALSE(stepper.advance(s, 1e-3).fault) << "E " << E;
-        each(k, device.position.y, stepper.contact().device_reports()[0]);
+        each(k, device.position.y, s.contact.device_reports[0]);
       }
     };
     // The block's own contact stiffness: a kinematic proxy pressed the same way.
     Stepper<double> kinematic(model);
     double k_body = 0;
-    press(kinematic, [&](int, double, const DeviceReport& d) { k_body = -d.stiffness[1][1]; });
+    press(kinematic, false, [&](int, double, const DeviceReport& d) { k_body = -d.stiffness[1][1]; });
     const double kc = 2000.0;
     Stepper<double> stepper(model);
-    couple_stylus(stepper, 6.0);
     int told = 0, intervals = 0;
     double sy = 0, sf = 0, syy = 0, syf = 0, told_sum = 0, stiffest = 0;
-    press(stepper, [&](int k, double y, const DeviceReport& d) {
+    press(stepper, true, [&](int k, double y, const DeviceReport& d) {
       for (int i = 0; i < 3; ++i) stiffest = std::max(stiffest, glm::length(d.stiffness[i]));
       if (k < 300) return;  // the second half of the press: in contact since 100 intervals
       ++intervals;
@@ -288,7 +288,7 @@ TEST(Coupling, InFreeSpaceTheDeviceFeelsAlmostNothing) {
   for (double noise_amplitude : {0.0, 5e-6}) {
     Stepper<double> stepper(model);
     State<double> s = stepper.make_state();
-    couple_stylus(stepper, 6.0);
+    couple_stylus(stepper, s, 6.0);
     Pose device = model.proxies[0].pose;
     Vec3 path = device.position;
     double drag = 0, stiffest = 0;
@@ -300,10 +300,10 @@ TEST(Coupling, InFreeSpaceTheDeviceFeelsAlmostNothing) {
         noise = noise * 1664525u + 1013904223u;
         next.position[i] = path[i] + ((noise >> 31) ? noise_amplitude : -noise_amplitude);
       }
-      move_device(stepper, device, next, s.t, 1e-3);
+      move_device(stepper, s, device, next, s.t, 1e-3);
       device = next;
       ASSERT_FALSE(stepper.advance(s, 1e-3).fault);
-      const DeviceReport& d = stepper.contact().device_reports()[0];
+      const DeviceReport& d = s.contact.device_reports[0];
       if (k >= 20 && k < 200) {
         drag = std::max(drag, glm::length(d.force));
         for (int i = 0; i < 3; ++i) stiffest = std::max(stiffest, glm::length(d.stiffness[i]));
@@ -315,8 +315,8 @@ TEST(Coupling, InFreeSpaceTheDeviceFeelsAlmostNothing) {
     EXPECT_LT(stiffest * 0.5 * 4e-3, 0.05) << "noise " << noise_amplitude;
     if (noise_amplitude > 0) continue;  // (the coupling's damper answers the noise's velocity)
     EXPECT_LT(drag, 0.05);
-    EXPECT_LT(glm::distance(stepper.contact().proxy_pose(0, s.t).position, device.position), 1e-4);
-    EXPECT_LT(glm::length(stepper.contact().device_reports()[0].force), 0.05);
+    EXPECT_LT(glm::distance(stepper.contact().proxy_pose(s, 0).position, device.position), 1e-4);
+    EXPECT_LT(glm::length(s.contact.device_reports[0].force), 0.05);
   }
 }
 
@@ -327,20 +327,62 @@ TEST(Coupling, TheBodyTurnsWithTheDeviceWithinTheTorqueLimit) {
   const Model<double> model = build_model<double>(spec);
   Stepper<double> stepper(model);
   State<double> s = stepper.make_state();
-  couple_stylus(stepper, 6.0, 0.01);
+  couple_stylus(stepper, s, 6.0, 0.01);
   const Pose start = model.proxies[0].pose;
   Pose turned = start;
   turned.orientation = glm::angleAxis(kPi / 2, Vec3(0.0, 1.0, 0.0));
-  move_device(stepper, start, turned, 0.0, 1e-3);  // a quarter turn in 1 ms
+  move_device(stepper, s, start, turned, 0.0, 1e-3);  // a quarter turn in 1 ms
   double peak = 0;
   for (int k = 0; k < 500; ++k) {
     ASSERT_FALSE(stepper.advance(s, 1e-3).fault);
-    peak = std::max(peak, glm::length(stepper.contact().device_reports()[0].torque));
+    peak = std::max(peak, glm::length(s.contact.device_reports[0].torque));
   }
-  const Quat q = stepper.contact().proxy_pose(0, s.t).orientation;
+  const Quat q = stepper.contact().proxy_pose(s, 0).orientation;
   EXPECT_NEAR(std::fabs(glm::dot(q, turned.orientation)), 1.0, 1e-6) << "the body did not follow the turn";
   EXPECT_LE(peak, 0.01 * (1 + 1e-12));
   EXPECT_GT(peak, 0.5 * 0.01);
+}
+
+// One State carries all a step depends on (core/state.hpp): a copy taken
+// mid-press, with the coupled proxy in contact, goes on bit for bit as the
+// original does, on the same stepper and on a fresh one (a checkpoint
+// restored into another process's stepper).
+TEST(Coupling, ACopiedStateGoesOnBitForBitAsTheOriginal) {
+  const ModelSpec spec = poked_block(MaterialModel::NeoHookean, 3e4, false);
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  couple_stylus(stepper, s, 6.0);
+  Pose device = model.proxies[0].pose;
+  const auto press = [&](Stepper<double>& st, State<double>& state, Pose& pose) {
+    Pose next = pose;
+    next.position.y -= 1e-5;
+    move_device(st, state, pose, next, state.t, 1e-3);
+    pose = next;
+    return st.advance(state, 1e-3).fault;
+  };
+  for (int k = 0; k < 300; ++k) ASSERT_FALSE(press(stepper, s, device));  // 1 mm into the block
+  ASSERT_GT(s.contact.reports[0].contacts, 0) << "the proxy is not in contact when the copy is taken";
+  State<double> same = s, fresh = s;
+  Pose device_same = device, device_fresh = device;
+  Stepper<double> other(model);
+  for (int k = 0; k < 100; ++k) {
+    ASSERT_FALSE(press(stepper, s, device));
+    ASSERT_FALSE(press(stepper, same, device_same));
+    ASSERT_FALSE(press(other, fresh, device_fresh));
+  }
+  for (const State<double>* c : {&same, &fresh}) {
+    const char* which = c == &same ? "same stepper" : "fresh stepper";
+    EXPECT_EQ(c->step, s.step) << which;
+    EXPECT_EQ(c->u, s.u) << which;
+    EXPECT_EQ(c->v, s.v) << which;
+    EXPECT_EQ(c->a, s.a) << which;
+    EXPECT_EQ(c->contact.device_reports[0].force, s.contact.device_reports[0].force) << which;
+    EXPECT_EQ(c->contact.reports[0].work, s.contact.reports[0].work) << which;
+    EXPECT_EQ(c->energy.latest.balance(), s.energy.latest.balance()) << which;
+    EXPECT_EQ(c->critical.dt, s.critical.dt) << which;
+    EXPECT_EQ(stepper.contact().proxy_pose(*c, 0).position, stepper.contact().proxy_pose(s, 0).position) << which;
+  }
 }
 
 }  // namespace

@@ -115,7 +115,7 @@ std::vector<Real> swing(ParallelFor* pool, int32_t threads) {
     s.v[3 * size_t(i) + 1] = Real(5.0 * X.x * X.x);  // a bending swing [m/s]
     s.v[3 * size_t(i) + 2] = Real(2.0 * X.x * (X.y - 0.05));
   }
-  for (int k = 0; k < 100; ++k) EXPECT_FALSE(stepper.step(s, 0.5 * model.dt_rest)) << stepper.fault().message;
+  for (int k = 0; k < 100; ++k) EXPECT_FALSE(stepper.step(s, 0.5 * model.dt_rest)) << s.fault.message;
   return s.u;
 }
 
