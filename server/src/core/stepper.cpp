@@ -64,34 +64,6 @@ Kinematics compute_bc_kinematics(const EssentialBc& bc, const Vec3& X, double t)
   return {x, v, a};
 }
 
-// Between polls of a spinning wait.
-inline void cpu_relax() {
-#if defined(__x86_64__) || defined(__i386__)
-  __builtin_ia32_pause();
-#endif
-}
-
-// Runs `work` once in step `epoch`, whichever threads ask: the first claims
-// it (state (epoch << 2) | 1) and runs it; the others wait while it is at it
-// and return once it is done ((epoch << 2) | 2).
-template <class Fn>
-void run_once(std::atomic<uint64_t>& state, uint32_t epoch, Fn&& work) {
-  const uint64_t claimed = uint64_t(epoch) << 2 | 1, done = uint64_t(epoch) << 2 | 2;
-  uint64_t v = state.load(std::memory_order_acquire);
-  for (;;) {
-    if (v == done) return;
-    if (v == claimed) {  // another thread is at it
-      cpu_relax();
-      v = state.load(std::memory_order_acquire);
-      continue;
-    }
-    if (!state.compare_exchange_weak(v, claimed, std::memory_order_acq_rel, std::memory_order_acquire)) continue;
-    work();
-    state.store(done, std::memory_order_release);
-    return;
-  }
-}
-
 std::string list_ids(const std::vector<int32_t>& ids) {
   std::ostringstream out;
   for (size_t i = 0; i < ids.size() && i < 10; ++i) out << (i ? ", " : "") << ids[i];
@@ -107,22 +79,16 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
       parallel_(parallel),
       kernels_(kernels<Real>()),
       contact_(model),
+      critical_(model, model.proxies.empty() ? std::vector<int32_t>{} : contact_.surface_nodes()),
       // One part covering everything without a pool to run them on.
       plan_(make_step_plan(model, parallel && parallel->workers() >= 2)) {
   correct_ = kernels_.correct[model_.effects.gravity ? 1 : 0][model_.effects.damping ? 1 : 0];
   n_parts_ = static_cast<int32_t>(plan_.parts.size());
-  // The elastic energy is a sum of densities that cancel to nearly nothing at
-  // small strain (psi = mu/2 (I1 - 3) - ..., I1 ~ 3), each carrying a round-off
-  // of a few eps (mu + lambda) V. In float that is far above the energy of a
-  // small deformation, and the balance cannot be checked finer than it.
-  double stiffness_volume = 0;
-  for (size_t e = 0; e < model_.tet_volume.size(); ++e)
-    stiffness_volume += (model_.tet_mu[e] + model_.tet_lambda[e]) * model_.tet_volume[e];
-  energy_floor_ = 16.0 * double(std::numeric_limits<Real>::epsilon()) * stiffness_volume;
+  energy_floor_ = energy_floor(model_);
   shares_ = std::make_unique<PairShare[]>(size_t(std::max(n_parts_ / 2, 1)));
   f_.assign(size_t(plan_.force_slots), Node4<Real>{});
-  predicted_ = std::make_unique<PredictClaim[]>(size_t(n_parts_));
-  own_claim_ = std::make_unique<PredictClaim[]>(size_t(n_parts_));
+  predicted_ = std::make_unique<OnceClaim[]>(size_t(n_parts_));
+  own_claim_ = std::make_unique<OnceClaim[]>(size_t(n_parts_));
   region_done_ = std::make_unique<RegionDone[]>(plan_.regions.size());
   u4_.assign(size_t(model_.n_nodes), Node4<Real>{});
   elastic_.assign(plan_.regions.size(), ElasticSums{});
@@ -131,23 +97,6 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
   u_before_.assign(model_.constrained.size() + loaded_.size(), Vec3(0.0));
   a_prescribed_.assign(3 * model_.constrained.size(), Real(0));
   v_prescribed_.assign(3 * model_.constrained.size(), Real(0));
-  if (!model_.proxies.empty()) {
-    const std::vector<int32_t>& surface = contact_.surface_nodes();
-    std::vector<int32_t> index(size_t(model_.n_nodes), -1);
-    for (size_t k = 0; k < surface.size(); ++k) index[size_t(surface[k])] = int32_t(k);
-    contact_tet_begin_.assign(surface.size() + 1, 0);
-    for (const Tet& t : model_.mesh.tets)
-      for (int32_t i : t)
-        if (index[size_t(i)] >= 0) ++contact_tet_begin_[size_t(index[size_t(i)]) + 1];
-    for (size_t k = 0; k < surface.size(); ++k) contact_tet_begin_[k + 1] += contact_tet_begin_[k];
-    contact_tets_.assign(size_t(contact_tet_begin_.back()), 0);
-    std::vector<int32_t> fill(contact_tet_begin_.begin(), contact_tet_begin_.end() - 1);
-    for (size_t e = 0; e < model_.mesh.tets.size(); ++e)
-      for (int32_t i : model_.mesh.tets[e])
-        if (index[size_t(i)] >= 0) contact_tets_[size_t(fill[size_t(index[size_t(i)])]++)] = int32_t(e);
-    tet_mark_.assign(size_t(model_.n_tets), 0);
-    contact_examined_.reserve(contact_tets_.size());
-  }
 }
 
 template <class Real>
@@ -203,10 +152,9 @@ template <class Real>
 void Stepper<Real>::run_elastic() {
   for (int32_t p = 0; p + 1 < n_parts_; p += 2) {
     const Part& left = plan_.parts[size_t(p)];
-    shares_[size_t(left.share)].ends.store(uint64_t(uint32_t(left.chunk_end)) << 32 | uint32_t(left.chunk_begin),
-                                           std::memory_order_relaxed);
+    shares_[size_t(left.share)].reset(left.chunk_begin, left.chunk_end);
   }
-  run_parts(&Stepper::elastic_part, this);  // the pool's hand-off publishes the stores above
+  run_parts(&Stepper::elastic_part, this);  // the pool's hand-off publishes the resets above
 }
 
 template <class Real>
@@ -251,42 +199,34 @@ void Stepper<Real>::claim_chunks(int32_t k, int side) {
   // own force array, which the correctors add in a fixed order: the result
   // is the same bit for bit wherever the two threads meet (resim relies on
   // it).
-  std::atomic<uint64_t>& ends = shares_[size_t(k)].ends;
-  uint64_t e = ends.load(std::memory_order_relaxed);
-  for (;;) {
-    const auto l = int32_t(uint32_t(e)), r = int32_t(e >> 32);
-    if (l >= r) return;
-    const uint64_t next =
-        side == 1 ? (uint64_t(uint32_t(r)) << 32 | uint32_t(l + 1)) : (uint64_t(uint32_t(r - 1)) << 32 | uint32_t(l));
-    if (!ends.compare_exchange_weak(e, next, std::memory_order_relaxed)) continue;
-    const Chunk& c = plan_.chunks[size_t(side == 1 ? l : r - 1)];
+  for (int32_t next; (next = shares_[size_t(k)].claim(side)) >= 0;) {
+    const Chunk& c = plan_.chunks[size_t(next)];
     if (fused_) {
       for (int32_t q = c.wait_lo; q <= c.wait_hi; ++q) ensure_predicted(q);
     }
     elastic_blocks(c.block_begin, c.block_end, c.region);
-    if (fused_) region_done_[size_t(c.region)].epoch.store(epoch_, std::memory_order_release);
-    e = next;
+    if (fused_) region_done_[size_t(c.region)].publish(epoch_);
   }
 }
 
 template <class Real>
 void Stepper<Real>::ensure_own(int32_t q) {
-  run_once(own_claim_[size_t(q)].state, epoch_, [&] {
+  run_once(own_claim_[size_t(q)], epoch_, [&] {
     const Part& part = plan_.parts[size_t(q)];
     for (int32_t w = part.wait_lo; w <= part.wait_hi; ++w) ensure_predicted(w);
     // Every region is zero on entry: the correctors cleared every entry they read.
     elastic_blocks(part.own_begin, part.own_end, part.own_region);
-    region_done_[size_t(part.own_region)].epoch.store(epoch_, std::memory_order_release);
+    region_done_[size_t(part.own_region)].publish(epoch_);
   });
 }
 
 template <class Real>
 void Stepper<Real>::ensure_region(int32_t r) {
-  std::atomic<uint32_t>& done = region_done_[size_t(r)].epoch;
-  if (done.load(std::memory_order_acquire) == epoch_) return;
+  const RegionDone& done = region_done_[size_t(r)];
+  if (done.done(epoch_)) return;
   if (plan_.region_part[size_t(r)] >= 0) ensure_own(plan_.region_part[size_t(r)]);
   else if (plan_.region_pair[size_t(r)] >= 0) claim_chunks(plan_.region_pair[size_t(r)], 1);
-  while (done.load(std::memory_order_acquire) != epoch_) cpu_relax();  // claimed: a thread is at it
+  done.wait(epoch_);  // claimed: a thread is at it
 }
 
 template <class Real>
@@ -339,7 +279,7 @@ void Stepper<Real>::apply_essential_positions(State<Real>& s, double t, size_t b
 
 template <class Real>
 void Stepper<Real>::ensure_predicted(int32_t q) {
-  run_once(predicted_[size_t(q)].state, epoch_, [&] {
+  run_once(predicted_[size_t(q)], epoch_, [&] {
     const Part& part = plan_.parts[size_t(q)];
     State<Real>& s = *cur_;
     kernels_.predict(part.node_begin, part.node_end, cur_dt_, s.u.data(), s.v.data(), s.a.data(), u4_.data());
@@ -474,37 +414,24 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   return fault;
 }
 
-// The energy account at t_n: on the first step (or after a fault) the
-// reference it is checked against; on a change of step, the discrete term
-// restated with the new step.
+// The energy account at t_n (core/energy_ledger.hpp): on the first step (or
+// after a fault) the reference it is checked against, from an acceleration
+// consistent with the forces; on a change of step, the discrete term restated.
 template <class Real>
 void Stepper<Real>::open_energy_account(State<Real>& s, double dt) {
-  if (!s.energy.open) {  // loads at t_n for the work trapezoid, and the reference energy
-    size_t c = 0;
-    for (const LoadSet& load : model_.loads) {
-      const double scale = load.spec.scale ? compute_profile(*load.spec.scale, s.t).s : 1.0;
-      for (size_t k = 0; k < load.nodes.size(); ++k, ++c) s.energy.load_force[c] = load.spec.force * (scale * load.weight[k]);
-    }
-    apply_initial_acceleration(s);
-    contact_.start(s);
-    s.energy.proxy_given = 0;
-    cur_dt_ = Real(dt);
-    Energy e0 = compute_energy(s);
-    e0.discrete = -0.125 * dt * dt * s.energy.initial_ma2;
-    s.energy.reference = e0.balance();
-    s.energy.window_start = double(s.t);
-    s.energy.latest = e0;  // the kinetic energy at t_n for the dissipation trapezoid below
-    s.energy.scale = std::fabs(e0.kinetic) + std::fabs(e0.elastic) + std::fabs(e0.gravity);
-    s.energy.open = true;
-  } else if (dt != s.energy.dt && s.energy.dt > 0) {
-    // The modified energy's -dt^2/8 sum m|a|^2 is measured with the step
-    // that follows: a new step size restates it at t_n. That is no energy
-    // the body gained or lost: the balance leaves the change out.
-    const double restated = s.energy.latest.discrete * (dt * dt) / (s.energy.dt * s.energy.dt);
-    s.energy.latest.restated += restated - s.energy.latest.discrete;
-    s.energy.latest.discrete = restated;
+  if (s.energy.open) {
+    restate_energy_account(s, dt);
+    return;
   }
-  s.energy.dt = dt;
+  size_t c = 0;  // loads at t_n for the work trapezoid
+  for (const LoadSet& load : model_.loads) {
+    const double scale = load.spec.scale ? compute_profile(*load.spec.scale, s.t).s : 1.0;
+    for (size_t k = 0; k < load.nodes.size(); ++k, ++c) s.energy.load_force[c] = load.spec.force * (scale * load.weight[k]);
+  }
+  apply_initial_acceleration(s);
+  contact_.start(s);
+  cur_dt_ = Real(dt);
+  tactile::open_energy_account(s, compute_energy(s), dt);
 }
 
 // Positions at t_n of the nodes whose work is accounted, in the order
@@ -599,22 +526,14 @@ void Stepper<Real>::close_energy_account(State<Real>& s, double dt, const Contac
   step_sums_ = {el, co};
   s.t = cur_t1_;
   ++s.step;
-  // The corrector's sum saw the constrained nodes before their velocities
-  // were prescribed; apply_essential_rates swapped their terms.
-  const double mv2 = std::max(0.0, co.mv2 + essential_mv2_delta_ + contact.mv2_delta);
-  const double ma2 = std::max(0.0, co.ma2 + essential_ma2_delta_ + contact.ma2_delta);
-  // Power alpha m |v|^2 integrated by the trapezoid over the step: its error
-  // telescopes (O(dt^2) in all), where the rectangle alpha m |v_{n+1}|^2 dt
-  // drifted by alpha dt times the change of kinetic energy.
-  if (model_.effects.damping) s.dissipated += model_.effects.alpha * dt * 0.5 * (2.0 * s.energy.latest.kinetic + mv2);
-  s.energy.latest.kinetic = 0.5 * mv2;
-  s.energy.latest.discrete = -0.125 * dt * dt * ma2;
-  s.energy.latest.elastic = el.energy;
-  s.energy.latest.gravity = -co.mgu;
-  s.energy.latest.work_loads = s.work_loads;
-  s.energy.latest.work_essential = s.work_essential;
-  s.energy.latest.work_contact = s.work_contact;
-  s.energy.latest.dissipated = s.dissipated;
+  // The corrector's sums saw the constrained and pushed nodes before the
+  // essential BCs and contact changed them; their passes kept the differences.
+  StepEnergySums sums;
+  sums.elastic = el.energy;
+  sums.mv2 = co.mv2 + essential_mv2_delta_ + contact.mv2_delta;
+  sums.ma2 = co.ma2 + essential_ma2_delta_ + contact.ma2_delta;
+  sums.mgu = co.mgu;
+  tactile::close_energy_account(s, sums, dt, model_.effects.damping ? model_.effects.alpha : 0.0);
 }
 
 // The guard: non-finite values, inverted elements a model cannot take, and
@@ -636,36 +555,20 @@ Fault Stepper<Real>::check_step(State<Real>& s) {
                       list_ids(ids);
     fault = make_fault(Fault::Kind::Inverted, s, std::move(msg), std::move(ids));
   } else {
-    const double magnitude = std::fabs(s.energy.latest.kinetic) + std::fabs(s.energy.latest.elastic) + std::fabs(s.energy.latest.gravity) +
-                             std::fabs(s.work_loads) + std::fabs(s.work_essential) + std::fabs(s.work_contact) + s.dissipated;
-    s.energy.scale = std::max(s.energy.scale, magnitude);
-    const double growth = s.energy.latest.balance() - s.energy.reference;
-    const double allowed = model_.integrator.energy_tolerance * s.energy.scale + energy_floor_ + 1e-12;
-    // Past the critical step the balance stays conserved while the motion
-    // grows without bound (kinetic + discrete falls as fast as kinetic +
-    // elastic rises), so the physical energy is checked too, against all the
-    // energy the body was given. Below the critical step it exceeds that by
-    // at most -discrete <= U (w dt)^2/4 / (1 - (w dt)^2/4), 4.3x at 0.9 of it.
-    constexpr double kRunaway = 10;
-    const double given = std::fabs(s.energy.reference) + std::fabs(s.energy.latest.gravity) + std::fabs(s.work_loads) +
-                         std::fabs(s.work_essential) + std::fabs(s.work_contact) + s.energy.proxy_given + s.dissipated;
-    const double runaway = growth - s.energy.latest.discrete - kRunaway * given;
-    if (runaway > allowed) {
+    const EnergyCheck check = check_energy_account(s, model_.integrator.energy_tolerance, energy_floor_,
+                                                   model_.integrator.energy_window);
+    if (check.verdict != EnergyCheck::Verdict::Ok) {
       std::vector<int32_t> ids = find_top_energy_elements(s, 10);
       std::ostringstream msg;
-      msg << "kinetic + elastic energy grew by " << growth - s.energy.latest.discrete << " J, over " << kRunaway
-          << " times the " << given << " J the body was given: the step exceeds the critical step; highest strain "
-          << "energy in elements " << list_ids(ids);
+      if (check.verdict == EnergyCheck::Verdict::Runaway)
+        msg << "kinetic + elastic energy grew by " << check.growth - s.energy.latest.discrete << " J, over "
+            << EnergyCheck::kRunaway << " times the " << check.given
+            << " J the body was given: the step exceeds the critical step; highest strain energy in elements "
+            << list_ids(ids);
+      else
+        msg << "energy grew by " << check.growth << " J beyond the work done (allowed " << check.allowed
+            << " J); highest strain energy in elements " << list_ids(ids);
       fault = make_fault(Fault::Kind::EnergyGrowth, s, msg.str(), std::move(ids));
-    } else if (growth > allowed) {
-      std::vector<int32_t> ids = find_top_energy_elements(s, 10);
-      std::ostringstream msg;
-      msg << "energy grew by " << growth << " J beyond the work done (allowed " << allowed
-          << " J); highest strain energy in elements " << list_ids(ids);
-      fault = make_fault(Fault::Kind::EnergyGrowth, s, msg.str(), std::move(ids));
-    } else if (double(s.t) - s.energy.window_start >= model_.integrator.energy_window) {
-      s.energy.reference = s.energy.latest.balance();  // the next window's growth counts from here
-      s.energy.window_start = double(s.t);
     }
   }
   return fault;
@@ -700,33 +603,7 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
     report.fault = make_fault(Fault::Kind::StepTooLarge, s, "frame interval must be finite and > 0", {});
     return report;
   }
-  // Refresh the estimate as the body deforms. It changes slowly, so each call
-  // re-examines a sixteenth of the elements: every element is seen again
-  // within 16 calls, at an even cost per call (a full pass at once is a
-  // spike a real-time loop would feel as a missed deadline). Until a sweep
-  // completes, the lower of the last sweep's estimate and this one's so far.
-  constexpr int32_t kSweepCalls = 16;
-  if (s.critical.refreshed_at < 0) {
-    s.critical.dt = s.critical.last = compute_critical_dt(s);
-    s.critical.next = 0;
-    s.critical.min = model_.dt_rest;
-    s.critical.refreshed_at = s.step;
-  } else {
-    const auto n_blocks = static_cast<int32_t>(model_.blocks.size());
-    const int32_t chunk = (n_blocks + kSweepCalls - 1) / kSweepCalls;
-    const int32_t end = std::min(n_blocks, s.critical.next + chunk);
-    s.critical.min = std::min(s.critical.min, compute_critical_dt(s, s.critical.next, end));
-    s.critical.next = end;
-    if (s.critical.next >= n_blocks) {
-      s.critical.last = s.critical.min;
-      s.critical.min = model_.dt_rest;
-      s.critical.next = 0;
-      s.critical.refreshed_at = s.step;
-    }
-    s.critical.dt = std::min(s.critical.last, s.critical.min);
-  }
-  if (!contact_tets_.empty() && !s.contact.pushed.empty())
-    s.critical.dt = std::min(s.critical.dt, compute_contact_critical_dt(s));
+  critical_.refresh(s);  // a sixteenth of the body, and the elements contact pushed
   report.dt_critical = s.critical.dt;
   const double fixed = model_.integrator.dt;
   int64_t n = 1;
@@ -759,8 +636,8 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
     // A proxy that squashes the elements under it within the interval: the
     // rest of the interval is split again at their new critical step. (After
     // the last step the next advance() looks, before it plans its steps.)
-    if (k + 1 == n || contact_tets_.empty() || s.contact.pushed.empty()) continue;
-    const double dc = compute_contact_critical_dt(s);
+    if (k + 1 == n || !critical_.contact_pushed(s)) continue;
+    const double dc = critical_.compute_contact(s);
     if (dc >= s.critical.dt) continue;
     s.critical.dt = report.dt_critical = dc;
     if (dt <= model_.integrator.safety * dc) continue;
@@ -779,69 +656,6 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
     report.subdivided = report.subdivided || fixed > 0;
   }
   return report;
-}
-
-template <class Real>
-double Stepper<Real>::compute_critical_dt(const State<Real>& s) const {
-  return compute_critical_dt(s, 0, static_cast<int32_t>(model_.blocks.size()));
-}
-
-template <class Real>
-double Stepper<Real>::compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const {
-  // Lane blocks, SIMD (kernels.hpp), so that the sixteenth of the body
-  // advance() examines each call adds little to a frame beside its steps
-  // (fem_bench --only=refresh; docs/perf.md, The critical step's refresh).
-  double dt = model_.dt_rest;
-  for (const ElementGroup& g : model_.groups) {
-    const int32_t b0 = std::max(g.begin, begin), b1 = std::min(g.end, end);
-    if (b0 >= b1) continue;
-    dt = std::min(dt, kernels_.critical[int(g.model)](model_.blocks.data(), b0, b1, s.u.data(), model_.lane_dt.data()));
-  }
-  return dt;
-}
-
-template <class Real>
-double Stepper<Real>::compute_contact_critical_dt(const State<Real>& s) {
-  if (++mark_ == 0) {  // wrapped: no tet may keep a mark of this pass
-    std::fill(tet_mark_.begin(), tet_mark_.end(), 0u);
-    mark_ = 1;
-  }
-  contact_examined_.clear();  // (its capacity holds every contact tet: no allocation)
-  for (int32_t k : s.contact.pushed)
-    for (int32_t j = contact_tet_begin_[size_t(k)]; j < contact_tet_begin_[size_t(k) + 1]; ++j) {
-      const int32_t e = contact_tets_[size_t(j)];
-      if (tet_mark_[size_t(e)] == mark_) continue;
-      tet_mark_[size_t(e)] = mark_;
-      contact_examined_.push_back(e);
-    }
-  // Their lanes, gathered W at a time into one block per material model, run
-  // through the same kernel as the sweep (compute_critical_dt).
-  constexpr int W = kLanes<Real>;
-  double dt = model_.dt_rest;
-  for (int m = 0; m < kMaterialModelCount; ++m) {
-    int n = 0;
-    auto flush = [&] {
-      for (int l = n; l < W; ++l) {  // padding: F = I at any u, no step of its own
-        for (int c = 0; c < 4; ++c) gathered_.node4[c][l] = gathered_.node4[0][0];
-        for (int q = 0; q < 9; ++q) gathered_.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
-        gathered_dt_[l] = std::numeric_limits<double>::infinity();
-      }
-      dt = std::min(dt, kernels_.critical[m](&gathered_, 0, 1, s.u.data(), gathered_dt_));
-      n = 0;
-    };
-    for (int32_t e : contact_examined_) {
-      if (int(model_.tet_model[size_t(e)]) != m) continue;
-      const auto lane = size_t(model_.tet_lane[size_t(e)]);
-      const ElementBlock<Real>& B = model_.blocks[lane / W];
-      const size_t l = lane % W;
-      for (int c = 0; c < 4; ++c) gathered_.node4[c][n] = B.node4[c][l];
-      for (int q = 0; q < 9; ++q) gathered_.Dinv[q][n] = B.Dinv[q][l];
-      gathered_dt_[n] = model_.lane_dt[lane];
-      if (++n == W) flush();
-    }
-    if (n > 0) flush();
-  }
-  return dt;
 }
 
 template <class Real>

@@ -1,33 +1,37 @@
 // Explicit Newmark time stepping, eqs. (7)-(10), assembled from only the
 // effects a model has.
 //
-// One step: predict u and the half-step velocity (eq. 7), impose essential
-// BCs, elastic forces R(u) (lane-blocked kernels), natural loads, then the
-// diagonal solve of eq. (10) with gravity and damping only if present, proxy
-// contact only if there are proxies (core/contact.hpp), and the essential
-// BCs' velocities and accelerations. Each step also checks for
-// non-finite values, inverted elements (for models that cannot take them)
-// and energy growth beyond the work done, and reports a Fault instead of
-// going on.
+// One step (step(), read as its list of passes): predict u and the half-step
+// velocity (eq. 7), impose essential BCs, elastic forces R(u) (lane-blocked
+// kernels), natural loads, then the diagonal solve of eq. (10) with gravity
+// and damping only if present, proxy contact only if there are proxies
+// (core/contact.hpp), and the essential BCs' velocities and accelerations.
+// Each step also checks for non-finite values, inverted elements (for models
+// that cannot take them) and energy growth beyond the work done
+// (core/energy_ledger.hpp), and reports a Fault instead of going on;
+// advance() plans its sub-steps on the critical step (core/critical_step.hpp).
 //
-// The stepper owns a preallocated workspace: a step allocates nothing. It
-// starts no threads: a ParallelFor from the application layer splits the
-// element and node passes. Split, a step is one job per part (predictor,
-// essential positions, elastic forces and, without loads, the corrector),
-// whose parts wait on each other only for the nodes and force arrays they
-// share (stepper.cpp, elastic_part).
+// The stepper owns a preallocated workspace: a step allocates nothing, and
+// all a step carries to the next is in the State (core/state.hpp). It starts
+// no threads: a ParallelFor from the application layer splits the element
+// and node passes by a plan made once (core/step_plan.hpp). Split, a step is
+// one job per part (predictor, essential positions, elastic forces and,
+// without loads, the corrector), whose parts wait on each other only for the
+// nodes and force arrays they share (elastic_part; core/step_sync.hpp).
 #pragma once
 
-#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "core/contact.hpp"
+#include "core/critical_step.hpp"
+#include "core/energy_ledger.hpp"
 #include "core/model.hpp"
 #include "core/step_plan.hpp"
 #include "core/state.hpp"
+#include "core/step_sync.hpp"
 
 namespace tactile {
 
@@ -85,14 +89,8 @@ class Stepper {
   // it starts from a state (first step, or after clear_fault()).
   void apply_initial_acceleration(State<Real>& s);
 
-  // Critical step of the current configuration [s]: each element's exact rest
-  // value scaled by how much it has been squashed and stiffened.
-  double compute_critical_dt(const State<Real>& s) const;
-  // The same over the lane blocks [begin, end) only.
-  double compute_critical_dt(const State<Real>& s, int32_t begin, int32_t end) const;
-  // The same over the elements around the surface nodes the latest step's
-  // contact pushed (the model's rest step when it pushed none).
-  double compute_contact_critical_dt(const State<Real>& s);
+  // Critical step of the current configuration [s] (core/critical_step.hpp).
+  double compute_critical_dt(const State<Real>& s) const { return critical_.compute(s); }
 
   // All energies from a full pass (not the hot path).
   Energy compute_energy(const State<Real>& s) const;
@@ -117,21 +115,6 @@ class Stepper {
   using Region = StepPlan::Region;
   using Chunk = StepPlan::Chunk;
   using EssentialEntry = StepPlan::EssentialEntry;
-  // Whether a part's nodes are predicted (or its own blocks done) this step:
-  // (epoch << 2) | 1 while a thread is at it, | 2 once done.
-  struct alignas(64) PredictClaim {
-    std::atomic<uint64_t> state{0};
-  };
-  // The step (epoch) whose forces a region holds in full.
-  struct alignas(64) RegionDone {
-    std::atomic<uint32_t> epoch{0};
-  };
-  // The chunks of a pair's middle not yet claimed, [left, right) as indices
-  // into chunks_ (left in the low 32 bits), on a cache line of their own.
-  struct alignas(64) PairShare {
-    std::atomic<uint64_t> ends{0};
-  };
-
   // The entries [begin, end) of essential_entries_.
   void apply_essential_positions(State<Real>& s, double t, size_t begin, size_t end);
   // Part q's predictor and essential positions of this step, run by this
@@ -184,6 +167,7 @@ class Stepper {
   const KernelTable<Real>& kernels_;
   CorrectFn<Real> correct_;
   Contact<Real> contact_;
+  CriticalStep<Real> critical_;
   StepPlan plan_;  // how the step's work splits over threads (core/step_plan.hpp)
   int32_t n_parts_ = 1;
 
@@ -197,9 +181,10 @@ class Stepper {
   std::vector<Real> a_prescribed_;       // prescribed accelerations (n_constrained x 3)
   std::vector<Real> v_prescribed_;       // prescribed velocities (n_constrained x 3)
   std::vector<int32_t> loaded_;          // loaded node ids, flattened over loads
-  std::unique_ptr<PredictClaim[]> predicted_;      // per part
-  std::unique_ptr<PredictClaim[]> own_claim_;      // per part: its own blocks
-  std::unique_ptr<RegionDone[]> region_done_;      // per region
+  // The split step's hand-offs (core/step_sync.hpp).
+  std::unique_ptr<OnceClaim[]> predicted_;    // per part: its nodes predicted, its essential positions set
+  std::unique_ptr<OnceClaim[]> own_claim_;    // per part: its own blocks
+  std::unique_ptr<RegionDone[]> region_done_;  // per region
   uint32_t epoch_ = 0;                   // steps that predicted inside the element pass
   bool fused_ = false;                   // the element pass predicts first (see elastic_part)
   bool fused_correct_ = false;           // and corrects last
@@ -216,18 +201,7 @@ class Stepper {
   StepSums step_sums_;              // the passes' sums of the latest step, for its guard
   double essential_mv2_delta_ = 0;  // constrained nodes' change of m |v|^2 in this step
   double essential_ma2_delta_ = 0;  // and of m |a|^2
-  double energy_floor_ = 0;      // the elastic energy's round-off in Real: the balance's resolution [J]
-  // A proxy squashes the elements under it faster than the sweep comes
-  // round: those around the nodes it pushed are examined after every step.
-  std::vector<int32_t> contact_tet_begin_;  // per contact surface node: range in contact_tets_ (+1)
-  std::vector<int32_t> contact_tets_;       // the tets around each contact surface node
-  std::vector<uint32_t> tet_mark_;          // per tet: the pass that last examined it (n_tets)
-  uint32_t mark_ = 0;
-  std::vector<int32_t> contact_examined_;   // the tets a pass examines (capacity: contact_tets_)
-  // The lanes of those tets gathered into one block for the critical-step
-  // kernel, with their rest steps.
-  ElementBlock<Real> gathered_{};
-  double gathered_dt_[kLanes<Real>] = {};
+  double energy_floor_ = 0;  // the balance's resolution in Real (energy_floor) [J]
 };
 
 }  // namespace tactile
