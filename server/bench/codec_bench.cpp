@@ -22,7 +22,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <cstring>
+#include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -30,8 +30,9 @@
 
 #include <flatbuffers/flatbuffers.h>
 
-#include "sim/simulation.hpp"
+#include "app/command_line.hpp"
 #include "live/frames.hpp"
+#include "sim/simulation.hpp"
 #include "mesh/primitives.hpp"
 #include "tactile_generated.h"
 
@@ -219,7 +220,12 @@ void print(const std::vector<Row>& rows) {
 }
 
 int run(int argc, char** argv) {
-  const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+  bool quick = false;
+  CLI::App app("Times the encoding and decoding of state and haptic frames of 5 k to 50 k-element bodies.",
+               "codec_bench");
+  configure_command_line(app);
+  app.add_flag("--quick", quick, "5 repeats a case instead of 31 (a smoke run, not figures to quote)");
+  if (const std::optional<int> status = parse_command_line(app, argc, argv)) return *status;
   const int repeats = quick ? 5 : 31;
   std::vector<Row> rows;
   flatbuffers::FlatBufferBuilder builder;

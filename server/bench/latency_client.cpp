@@ -53,6 +53,7 @@
 #include <boost/beast/core.hpp>
 #include <boost/beast/websocket.hpp>
 
+#include "app/command_line.hpp"
 #include "tactile_generated.h"
 
 namespace {
@@ -68,14 +69,6 @@ using Clock = std::chrono::steady_clock;
 constexpr auto kSpinWindow = std::chrono::microseconds(100);  // timer slack is ~50 us: spin the rest
 constexpr int64_t kLateSendNs = 50'000;                        // a send this far past its deadline is "late"
 
-constexpr const char* kUsage =
-    "usage: latency_client --port N --token T [--host 127.0.0.1] [--device stylus] [--rate 1000]\n"
-    "                      [--seconds 5] [--press 1] [--depth 0.003] [--from x,y,z --to x,y,z] [--no-sweep]\n";
-
-struct BadInput {
-  std::string message;
-};
-
 struct Vec3 {
   double x = 0, y = 0, z = 0;
 };
@@ -90,56 +83,60 @@ struct Options {
   bool sweep = true;      // slip the input phase against the steps over the run
 };
 
-double number(const std::string& flag, const std::string& text) {
-  char* end = nullptr;
-  const double v = std::strtod(text.c_str(), &end);
-  if (text.empty() || *end != '\0' || !std::isfinite(v)) throw BadInput{flag + ": not a number: " + text};
-  return v;
-}
-
-Vec3 vec3(const std::string& flag, const std::string& text) {
+// "x,y,z" as three finite numbers, or nullopt.
+std::optional<Vec3> parse_xyz(const std::string& text) {
   double c[3];
   size_t begin = 0;
   for (int i = 0; i < 3; ++i) {
     const size_t end = i < 2 ? text.find(',', begin) : text.size();
-    if (end == std::string::npos) throw BadInput{flag + ": not x,y,z: " + text};
-    c[i] = number(flag, text.substr(begin, end - begin));
+    if (end == std::string::npos) return std::nullopt;
+    const std::string part = text.substr(begin, end - begin);
+    char* stop = nullptr;
+    c[i] = std::strtod(part.c_str(), &stop);
+    if (part.empty() || *stop != '\0' || !std::isfinite(c[i])) return std::nullopt;
     begin = end + 1;
   }
-  return {c[0], c[1], c[2]};
+  return Vec3{c[0], c[1], c[2]};
 }
 
-Options parse_args(int argc, char** argv) {
-  Options o;
-  std::vector<std::string> args(argv + 1, argv + argc);
-  for (size_t i = 0; i < args.size(); ++i) {
-    const std::string& a = args[i];
-    auto value = [&]() -> const std::string& {
-      if (i + 1 >= args.size()) throw BadInput{a + " needs a value"};
-      return args[++i];
-    };
-    if (a == "--help" || a == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (a == "--host") o.host = value();
-    else if (a == "--port") o.port = value();
-    else if (a == "--token") o.token = value();
-    else if (a == "--device") o.device = value();
-    else if (a == "--rate") o.rate = number(a, value());
-    else if (a == "--seconds") o.seconds = number(a, value());
-    else if (a == "--press") o.press = number(a, value());
-    else if (a == "--depth") o.depth = number(a, value());
-    else if (a == "--from") o.from = vec3(a, value());
-    else if (a == "--to") o.to = vec3(a, value());
-    else if (a == "--no-sweep") o.sweep = false;
-    else throw BadInput{"unknown argument " + a};
-  }
-  if (o.port.empty()) throw BadInput{"--port is required"};
-  if (!(o.rate > 0 && o.rate <= 100'000)) throw BadInput{"--rate must be in (0, 100000]"};
-  if (!(o.seconds > 0)) throw BadInput{"--seconds must be > 0"};
-  if (!(o.press >= 0)) throw BadInput{"--press must be >= 0"};
-  if (o.from.has_value() != o.to.has_value()) throw BadInput{"--from and --to go together"};
-  return o;
+// Reads the command line into `o`: nullopt when the client is to run, else
+// its exit status (tactile::parse_command_line).
+std::optional<int> parse_args(int argc, char** argv, Options& o) {
+  CLI::App app(
+      "Connects to a running tactile-server as a device, presses the device's proxy into the body and holds it, "
+      "and prints the input-to-force latency, the frames lost and how steady the force is.",
+      "latency_client");
+  tactile::configure_command_line(app);
+  const CLI::Validator xyz(
+      [](std::string& text) { return parse_xyz(text) ? std::string() : "not x,y,z: " + text; }, "x,y,z");
+  std::string from, to;
+  bool no_sweep = false;
+  app.add_option("--host", o.host, "the server's address")->capture_default_str();
+  app.add_option("--port", o.port, "the server's port")->required();
+  app.add_option("--token", o.token, "the session's token, when the server asks for one");
+  app.add_option("--device", o.device, "the device channel to drive")->capture_default_str();
+  app.add_option("--rate", o.rate, "inputs per second, in (0, 100000] [Hz]")
+      ->capture_default_str()
+      ->check(tactile::number_where([](double v) { return v > 0 && v <= 100'000; }, "in (0, 100000]"));
+  app.add_option("--seconds", o.seconds, "how long to send inputs, > 0 [s]")
+      ->capture_default_str()
+      ->check(tactile::positive_number());
+  app.add_option("--press", o.press, "time to go from the start of the press to its end, >= 0 [s]")
+      ->capture_default_str()
+      ->check(tactile::number_where([](double v) { return v >= 0; }, ">= 0"));
+  app.add_option("--depth", o.depth, "press depth below the proxy's first position (-y) without --to [m]")
+      ->capture_default_str()
+      ->check(tactile::finite_number());
+  CLI::Option* from_option = app.add_option("--from", from, "where the press starts [m]")->check(xyz);
+  CLI::Option* to_option = app.add_option("--to", to, "where the press ends [m]")->check(xyz);
+  from_option->needs(to_option);
+  to_option->needs(from_option);
+  app.add_flag("--no-sweep", no_sweep, "keep the input's phase against the steps instead of slipping it");
+  if (const std::optional<int> status = tactile::parse_command_line(app, argc, argv)) return status;
+  if (!from.empty()) o.from = parse_xyz(from);
+  if (!to.empty()) o.to = parse_xyz(to);
+  o.sweep = !no_sweep;
+  return std::nullopt;
 }
 
 int64_t ns_of(Clock::time_point t) {
@@ -457,8 +454,10 @@ void LatencyClient::report() const {
 }  // namespace
 
 int main(int argc, char** argv) {
+  Options options;
+  if (const std::optional<int> status = parse_args(argc, argv, options)) return *status;
   try {
-    LatencyClient client(parse_args(argc, argv));
+    LatencyClient client(std::move(options));
     if (const std::string err = client.greet(); !err.empty()) {
       std::fprintf(stderr, "latency_client: %s\n", err.c_str());
       return 1;
@@ -466,9 +465,6 @@ int main(int argc, char** argv) {
     const bool ok = client.run();
     client.report();
     return ok ? 0 : 1;
-  } catch (const BadInput& e) {
-    std::fprintf(stderr, "latency_client: %s\n%s", e.message.c_str(), kUsage);
-    return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "latency_client: %s\n", e.what());
     return 1;

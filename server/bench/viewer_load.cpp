@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -18,6 +19,7 @@
 #include <boost/beast/websocket.hpp>
 #include <flatbuffers/flatbuffers.h>
 
+#include "app/command_line.hpp"
 #include "tactile_generated.h"
 
 namespace {
@@ -60,21 +62,17 @@ int main(int argc, char** argv) {
   std::string host = "127.0.0.1", port;
   int n = 50;
   double seconds = 5;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i], v = argv[i + 1];
-    if (a == "--host") host = v;
-    else if (a == "--port") port = v;
-    else if (a == "--viewers") n = std::atoi(v.c_str());
-    else if (a == "--seconds") seconds = std::atof(v.c_str());
-    else {
-      std::fprintf(stderr, "viewer_load: unknown option %s\n", a.c_str());
-      return 2;
-    }
-  }
-  if (port.empty() || n <= 0 || !(seconds > 0)) {
-    std::fprintf(stderr, "usage: viewer_load --port N [--host H] [--viewers 50] [--seconds 5]\n");
-    return 2;
-  }
+  CLI::App app("Opens N viewer connections to a running tactile-server from one thread, reads and discards every "
+               "message, and prints the state frames each viewer got per second.",
+               "viewer_load");
+  tactile::configure_command_line(app);
+  app.add_option("--host", host, "the server's address")->capture_default_str();
+  app.add_option("--port", port, "the server's port")->required();
+  app.add_option("--viewers", n, "viewer connections, >= 1")->capture_default_str()->check(tactile::number_where([](double v) { return v >= 1; }, ">= 1"));
+  app.add_option("--seconds", seconds, "how long to read, > 0 [s]")
+      ->capture_default_str()
+      ->check(tactile::positive_number());
+  if (const std::optional<int> status = tactile::parse_command_line(app, argc, argv)) return *status;
   try {
     asio::io_context ioc(1);
     tcp::resolver resolver(ioc);
