@@ -158,14 +158,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
          "restated_J,balance_drift_J\n";
 
   std::vector<double> u, v, density, contact;
-  // For the VTU frames, in the mesh's numbering.
-  std::vector<double> u_given(3 * size_t(scene.spec.mesh.n_nodes())), v_given(u_given.size()),
-      contact_given(u_given.size());
-  std::vector<uint8_t> fixed_given(size_t(scene.spec.mesh.n_nodes()));
-  {
-    const std::vector<uint8_t> fixed = sim.node_constraint();
-    for (int32_t g = 0; g < scene.spec.mesh.n_nodes(); ++g) fixed_given[size_t(g)] = fixed[size_t(sim.model_node(g))];
-  }
+  const std::vector<uint8_t> fixed = sim.node_constraint();
   if (options.write_vtu && run.vtu_contact_force) sim.track_contact_forces(true);
   // A plane proxy is drawn as a square this big about its origin: the body's size.
   Vec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
@@ -184,8 +177,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
     append_number(csv, report ? report->substeps : 0);
     append_number(csv, report ? report->dt : 0.0);
     for (const TrackedPoint& p : scene.track) {
-      const size_t j = 3 * size_t(sim.model_node(p.node));
-      for (size_t d = 0; d < 3; ++d) append_number(csv, u[j + d]);
+      for (size_t d = 0; d < 3; ++d) append_number(csv, u[3 * size_t(p.node) + d]);
     }
     for (size_t k = 0; k < cuts.size(); ++k) {
       const double a = compute_section_area(cuts[k], mesh, u);
@@ -208,18 +200,9 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
       const double span = sim.take_contact_impulses(contact);
       for (double& x : contact) x = span > 0 ? x / span : 0.0;
     }
-    // Written with the nodes as the scene's mesh numbers them (the model
-    // numbers them for its element pass; tets keep their ids).
-    for (int32_t g = 0; g < scene.spec.mesh.n_nodes(); ++g)
-      for (size_t d = 0; d < 3; ++d) {
-        const size_t k = 3 * size_t(sim.model_node(g)) + d;
-        u_given[3 * size_t(g) + d] = u[k];
-        v_given[3 * size_t(g) + d] = v[k];
-        if (run.vtu_contact_force) contact_given[3 * size_t(g) + d] = contact[k];
-      }
     const std::string name = frame_name("frame", frame);
-    write_vtu((dir / name).string(), VtuFrame{&scene.spec.mesh, &u_given, &v_given, &fixed_given,
-                                              run.vtu_contact_force ? &contact_given : nullptr, &density, &fields});
+    write_vtu((dir / name).string(), VtuFrame{&scene.spec.mesh, &u, &v, &fixed, run.vtu_contact_force ? &contact : nullptr,
+                                              &density, &fields});
     pvd.push_back({sim.time(), name, 0, "body"});
     // Each proxy a block of its own: its surface where it is, and what it felt.
     for (size_t j = 0; j < sim.proxies().size(); ++j) {
@@ -335,7 +318,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   result.t = sim.time();
   result.wall_s = wall;
   result.energy = sim.energy();
-  for (const TrackedPoint& p : scene.track) result.tracked.push_back({p.name, p.node, p.X, sim.displacement(sim.model_node(p.node))});
+  for (const TrackedPoint& p : scene.track) result.tracked.push_back({p.name, p.node, p.X, sim.displacement(p.node)});
   sim.copy_displacement(u);
   for (size_t k = 0; k < cuts.size(); ++k)
     result.sections.push_back({run.sections[k].name, rest_area[k], compute_section_area(cuts[k], mesh, u)});

@@ -17,10 +17,9 @@ Surface extract_surface(const Simulation& sim) {
   const TetMesh& mesh = sim.mesh();
   const std::vector<Tri> faces = compute_boundary_faces(mesh);
   std::vector<int32_t> nodes = compute_boundary_nodes(faces);
-  // Vertices in the order of the scene's mesh, not the model's (which
-  // depends on the precision and the materials): two runs of one mesh send
-  // the same vertex in the same place, as a re-simulation compares them.
-  std::sort(nodes.begin(), nodes.end(), [&](int32_t a, int32_t b) { return sim.given_node(a) < sim.given_node(b); });
+  // Vertices in the order of the scene's mesh: two runs of one mesh send the
+  // same vertex in the same place, as a re-simulation compares them.
+  std::sort(nodes.begin(), nodes.end());
   Surface s;
   std::vector<int32_t> vertex_of(size_t(mesh.n_nodes()), -1);
   for (size_t k = 0; k < nodes.size(); ++k) {

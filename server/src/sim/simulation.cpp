@@ -7,12 +7,7 @@
 
 #include "core/model.hpp"
 
-// The thread pool is another part of the application layer; until it is in
-// the tree, integrator.threads > 1 runs on one thread.
-#if __has_include("parallel/thread_pool.hpp")
 #include "parallel/thread_pool.hpp"
-#define TACTILE_HAS_THREAD_POOL 1
-#endif
 
 namespace tactile {
 
@@ -33,8 +28,6 @@ struct Simulation::Engine {
   virtual void set_initial_state(const std::vector<double>& u, const std::vector<double>& v) = 0;
   virtual const TetMesh& mesh() const = 0;
   virtual int32_t n_nodes() const = 0;
-  virtual int32_t model_node(int32_t given) const = 0;
-  virtual int32_t given_node(int32_t model) const = 0;
   virtual int32_t n_tets() const = 0;
   virtual double total_mass() const = 0;
   virtual const std::vector<double>& tet_volume() const = 0;
@@ -79,9 +72,11 @@ template <class Real>
 class EngineOf final : public Simulation::Engine {
  public:
   EngineOf(const ModelSpec& spec, ParallelFor* pool)
-      : model_(std::make_unique<Model<Real>>(build_model<Real>(spec))),
+      : mesh_(spec.mesh),
+        model_(std::make_unique<Model<Real>>(build_model<Real>(spec))),
         stepper_(*model_, pool),
-        state_(stepper_.make_state()) {}
+        state_(stepper_.make_state()),
+        node_model_(model_->node_model) {}
 
   Carry carry_out() const override {
     // In the mesh's own node numbering: another model of it may number its
@@ -136,18 +131,18 @@ class EngineOf final : public Simulation::Engine {
       throw std::invalid_argument("set_initial_state: " + std::to_string(u.size() / 3) + " displacements and " +
                                   std::to_string(v.size() / 3) + " velocities for " +
                                   std::to_string(state_.u.size() / 3) + " nodes");
-    for (size_t k = 0; k < u.size(); ++k) {
+    for (size_t k = 0; k < u.size(); ++k)
       if (!std::isfinite(u[k]) || !std::isfinite(v[k]))
         throw std::invalid_argument("set_initial_state: node " + std::to_string(k / 3) + " has a non-finite value");
-      state_.u[k] = Real(u[k]);
-      state_.v[k] = Real(v[k]);
-    }
+    for (size_t g = 0; g < node_model_.size(); ++g)
+      for (size_t d = 0; d < 3; ++d) {
+        state_.u[3 * size_t(node_model_[g]) + d] = Real(u[3 * g + d]);
+        state_.v[3 * size_t(node_model_[g]) + d] = Real(v[3 * g + d]);
+      }
   }
 
-  const TetMesh& mesh() const override { return model_->mesh; }
+  const TetMesh& mesh() const override { return mesh_; }
   int32_t n_nodes() const override { return model_->n_nodes; }
-  int32_t model_node(int32_t given) const override { return model_->node_model.at(size_t(given)); }
-  int32_t given_node(int32_t model) const override { return model_->node_given.at(size_t(model)); }
   int32_t n_tets() const override { return model_->n_tets; }
   double total_mass() const override { return model_->total_mass; }
   const std::vector<double>& tet_volume() const override { return model_->tet_volume; }
@@ -166,29 +161,34 @@ class EngineOf final : public Simulation::Engine {
   std::vector<uint8_t> node_constraint() const override {
     std::vector<uint8_t> out(size_t(model_->n_nodes), 0);
     for (const EssentialSet& set : model_->essential)
-      for (int32_t i : set.nodes) out[size_t(i)] = std::max<uint8_t>(out[size_t(i)], set.moving ? 2 : 1);
+      for (int32_t i : set.nodes) {
+        uint8_t& c = out[size_t(model_->node_given[size_t(i)])];
+        c = std::max<uint8_t>(c, set.moving ? 2 : 1);
+      }
     return out;
   }
   void track_contact_forces(bool on) override { stepper_.contact().track_node_impulses(state_, on); }
   double take_contact_impulses(std::vector<double>& impulse) override {
-    impulse.assign(state_.u.size(), 0.0);
-    return stepper_.contact().take_node_impulses(state_, impulse);
+    impulses_.assign(state_.u.size(), 0.0);
+    const double span = stepper_.contact().take_node_impulses(state_, impulses_);
+    copy_given(impulses_.data(), impulse);
+    return span;
   }
-  void copy_displacement(std::vector<double>& u) const override { u.assign(state_.u.begin(), state_.u.end()); }
-  void copy_velocity(std::vector<double>& v) const override { v.assign(state_.v.begin(), state_.v.end()); }
+  void copy_displacement(std::vector<double>& u) const override { copy_given(state_.u.data(), u); }
+  void copy_velocity(std::vector<double>& v) const override { copy_given(state_.v.data(), v); }
   Vec3 displacement(int32_t node) const override {
-    const size_t j = 3 * size_t(node);
+    const size_t j = 3 * size_t(node_model_.at(size_t(node)));
     return {double(state_.u[j]), double(state_.u[j + 1]), double(state_.u[j + 2])};
   }
   void gather(std::span<const uint32_t> nodes, float* positions, float* norm) const override {
-    const std::vector<Vec3>& X = model_->mesh.X;
+    const std::vector<Vec3>& X = mesh_.X;
     const Real* u = state_.u.data();
     for (size_t k = 0; k < nodes.size(); ++k) {
-      const size_t i = nodes[k];
+      const size_t g = nodes[k], i = size_t(node_model_[g]);
       const double ux = double(u[3 * i]), uy = double(u[3 * i + 1]), uz = double(u[3 * i + 2]);
-      positions[3 * k] = float(X[i].x + ux);
-      positions[3 * k + 1] = float(X[i].y + uy);
-      positions[3 * k + 2] = float(X[i].z + uz);
+      positions[3 * k] = float(X[g].x + ux);
+      positions[3 * k + 1] = float(X[g].y + uy);
+      positions[3 * k + 2] = float(X[g].z + uz);
       norm[k] = float(std::sqrt(ux * ux + uy * uy + uz * uz));
     }
   }
@@ -214,17 +214,26 @@ class EngineOf final : public Simulation::Engine {
   void set_probe(StepProbe* probe) override { stepper_.set_probe(probe); }
 
  private:
+  // A per-node array of the model's numbering, in the mesh's (n_nodes x 3).
+  template <class T>
+  void copy_given(const T* model_order, std::vector<double>& out) const {
+    out.resize(3 * node_model_.size());
+    for (size_t g = 0; g < node_model_.size(); ++g)
+      for (size_t d = 0; d < 3; ++d) out[3 * g + d] = double(model_order[3 * size_t(node_model_[g]) + d]);
+  }
+
+  TetMesh mesh_;                        // the spec's, in its own numbering
   std::unique_ptr<Model<Real>> model_;  // the stepper keeps a reference: the model must not move
   Stepper<Real> stepper_;
   State<Real> state_;
+  std::vector<int32_t> node_model_;     // the model's id of each mesh node
+  std::vector<double> impulses_;        // take_contact_impulses' model-ordered scratch
 };
 
 }  // namespace
 
 Simulation::Simulation(const ModelSpec& spec) {
-#ifdef TACTILE_HAS_THREAD_POOL
   if (spec.integrator.threads > 1) pool_ = std::make_unique<ThreadPool>(spec.integrator.threads);
-#endif
   if (spec.integrator.precision == Precision::Float)
     engine_ = std::make_unique<EngineOf<float>>(spec, pool_.get());
   else
@@ -238,8 +247,6 @@ Simulation& Simulation::operator=(Simulation&&) noexcept = default;
 
 Precision Simulation::precision() const { return precision_; }
 const TetMesh& Simulation::mesh() const { return engine_->mesh(); }
-int32_t Simulation::model_node(int32_t given) const { return engine_->model_node(given); }
-int32_t Simulation::given_node(int32_t model) const { return engine_->given_node(model); }
 int32_t Simulation::n_nodes() const { return engine_->n_nodes(); }
 int32_t Simulation::n_tets() const { return engine_->n_tets(); }
 double Simulation::total_mass() const { return engine_->total_mass(); }

@@ -2,6 +2,11 @@
 // the State of a ModelSpec, in float or double as the spec's integrator asks,
 // and hands out positions and energies in double.
 //
+// Every node id and per-node array here is in the numbering of the spec's
+// mesh, as the scene's file gave it; the model's own numbering (core/model.hpp,
+// ordered for its element pass, and different for another precision or set of
+// materials) stays below this API. Tets keep their ids throughout.
+//
 // The core is templated on the scalar; the application layer picks it once,
 // here, from the scene, so nothing above this file is a template.
 #pragma once
@@ -29,12 +34,7 @@ class Simulation {
   Simulation& operator=(Simulation&&) noexcept;
 
   Precision precision() const;
-  // The rest mesh with its nodes in the model's numbering (core/model.hpp),
-  // which every node id below uses; model_node translates a node id of the
-  // spec's mesh into it.
-  const TetMesh& mesh() const;
-  int32_t model_node(int32_t given) const;
-  int32_t given_node(int32_t model) const;  // the inverse
+  const TetMesh& mesh() const;  // the spec's rest mesh
   int32_t n_nodes() const;
   int32_t n_tets() const;
   double total_mass() const;                    // [kg]

@@ -499,9 +499,8 @@ Scenario bad_start(MaterialModel m, Level l, double through) {
   // the cell's lower face (tets flattened), 1.5 through it (tets inverted). Damped, it must recover.
   Scenario sc = damped_block(m, l, 20.0);
   const double h = kBlockH / (3 * l.k);
-  const int32_t given_corner = nearest_node(sc.spec.mesh, Vec3(kBlockW / 2, kBlockH, kBlockW / 2));
+  const int32_t corner = nearest_node(sc.spec.mesh, Vec3(kBlockW / 2, kBlockH, kBlockW / 2));
   sc.init = [=](Simulation& sim) {
-    const int32_t corner = sim.model_node(given_corner);
     std::vector<double> u(3 * size_t(sim.n_nodes()), 0.0), v(u.size(), 0.0);
     u[3 * size_t(corner) + 1] = -through * h;
     sim.set_initial_state(u, v);
@@ -547,10 +546,9 @@ Scenario impact(MaterialModel m, Level l, bool) {
   };
   sc.interval = 1e-4;  // the ball's path in steps of 1 mm
   sc.duration = 0.05;
-  const int32_t given_centre = nearest_node(sc.spec.mesh, Vec3(0, 0, 0));
+  const int32_t centre = nearest_node(sc.spec.mesh, Vec3(0, 0, 0));
   sc.final_check = [=](const Simulation& sim) -> std::string {
     // No tunnelling: the plate's centre is under the ball, not back at rest above it.
-    const int32_t centre = sim.model_node(given_centre);
     const double y = sim.mesh().X[size_t(centre)].y + sim.displacement(centre).y;
     const double bottom = sim.proxy_pose(0).position.y - r;
     if (y > bottom + 0.5e-3) return "the ball went through the plate (its centre at " + fmt("%.4f m", y) +
