@@ -32,8 +32,8 @@
 
 #include "app/command_line.hpp"
 #include "live/frames.hpp"
-#include "sim/simulation.hpp"
 #include "mesh/primitives.hpp"
+#include "sim/simulation.hpp"
 #include "tactile_generated.h"
 
 namespace tactile {
@@ -169,10 +169,10 @@ size_t build_state(flatbuffers::FlatBufferBuilder& b, const StateArrays& a) {
 }
 
 struct HapticArrays {
-  std::vector<wire::ProxyHaptics> proxies;   // (n_proxies)
-  std::vector<wire::DeviceHaptics> devices;  // (n_devices)
+  std::vector<wire::ProxyHaptics> proxies;    // (n_proxies)
+  std::vector<wire::DeviceHaptics> devices;   // (n_devices)
   std::vector<wire::ProxyPose> device_poses;  // (n_devices)
-  std::vector<uint64_t> sequences;           // (n_devices)
+  std::vector<uint64_t> sequences;            // (n_devices)
 };
 
 HapticArrays copy_haptic(std::span<const uint8_t> bytes) {
@@ -197,7 +197,7 @@ size_t build_haptic(flatbuffers::FlatBufferBuilder& b, const HapticArrays& a) {
 
 struct Row {
   std::string name;
-  size_t bytes = 0, vertices = 0;  // vertices: 0 for haptic frames
+  size_t bytes = 0, vertices = 0;                        // vertices: 0 for haptic frames
   double encode = 0, builder = 0, decode = 0, read = 0;  // [s per frame]
 };
 
@@ -215,8 +215,9 @@ void print(const std::vector<Row>& rows) {
     std::printf("%-18s %9s %8zu %8s %10.2f %11.2f %10.2f %9.2f\n", r.name.c_str(), vertices, r.bytes, per_vertex,
                 1e6 * r.encode, 1e6 * r.builder, 1e6 * r.decode, 1e6 * r.read);
   }
-  std::printf("\nencode: FrameEncoder (gathers from the Simulation); builder: from ready arrays;\n"
-              "decode: verify + read every value; read: without the verifier.\n");
+  std::printf(
+      "\nencode: FrameEncoder (gathers from the Simulation); builder: from ready arrays;\n"
+      "decode: verify + read every value; read: without the verifier.\n");
 }
 
 int run(int argc, char** argv) {

@@ -12,6 +12,9 @@
 // Times are wall-clock medians of repeated runs of many steps, so that other
 // processes on the machine shift them less than a mean would; rates are
 // element updates per second (tets x steps / s).
+#include <malloc.h>
+#include <pthread.h>
+#include <sched.h>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -20,9 +23,6 @@
 #include <cstdlib>
 #include <fstream>
 #include <functional>
-#include <malloc.h>
-#include <pthread.h>
-#include <sched.h>
 #include <memory>
 #include <optional>
 #include <string>
@@ -30,12 +30,12 @@
 #include <vector>
 
 #include "app/command_line.hpp"
-#include "parallel/thread_pool.hpp"
 #include "core/kernels/kernels.hpp"
 #include "core/material.hpp"
 #include "core/model.hpp"
 #include "core/stepper.hpp"
 #include "mesh/primitives.hpp"
+#include "parallel/thread_pool.hpp"
 
 // Every heap allocation of the process, counted only while a timed loop of
 // steps runs (alloc_count::all).
@@ -147,7 +147,7 @@ struct Run {
   State<Real> start;
   double dt;
   int64_t faults = 0;
-  int cpu = -1;  // >= 0: timed runs keep the calling thread on this CPU
+  int cpu = -1;         // >= 0: timed runs keep the calling thread on this CPU
   bool frames = false;  // timed runs call advance(dt), as the live loop does, rather than step(dt)
   Run* twin = nullptr;  // timed runs step this one at the same time, on another thread (see time_steps)
 
@@ -222,7 +222,8 @@ int64_t calibrate(Run<Real>& run, double target) {
     const Clock::time_point t0 = Clock::now();
     run.time_steps(steps);
     const double s = seconds_since(t0);
-    if (s > 0.25 * target || steps > (int64_t(1) << 24)) return std::max<int64_t>(1, int64_t(double(steps) * target / s));
+    if (s > 0.25 * target || steps > (int64_t(1) << 24))
+      return std::max<int64_t>(1, int64_t(double(steps) * target / s));
     steps *= 4;
   }
 }
@@ -262,8 +263,8 @@ void rate_rows(const Options& opt, MaterialModel model) {
     if (model != MaterialModel::StVK && size > 2.5e5) continue;  // the large meshes for the paper's model only
     Run<Real> run(make_spec(make_bench_box(size, 1, 0.1), model, precision), nullptr);
     const double s = time_alternating<Real>({&run}, opt)[0];
-    std::printf("| %-12s | %-6s | %9d | %12.0f | %10.1f |\n", std::string(to_string(model)).c_str(),
-                name_of(precision), run.model.n_tets, s * 1e9, run.model.n_tets / s * 1e-6);
+    std::printf("| %-12s | %-6s | %9d | %12.0f | %10.1f |\n", std::string(to_string(model)).c_str(), name_of(precision),
+                run.model.n_tets, s * 1e9, run.model.n_tets / s * 1e-6);
   }
 }
 
@@ -297,8 +298,8 @@ void thread_rows(const Options& opt, ThreadPool& pool, const std::vector<int>& c
     runs.insert(runs.begin() + 1, &two);
     const std::vector<double> t = time_alternating<Real>(runs, opt);
     const double tets = one.model.n_tets;
-    std::printf("| %-6s | %9d | %10.1f | %10.1f | %5d | %7.2fx |", name_of(precision), one.model.n_tets, tets / t[0] * 1e-6,
-                tets / t[1] * 1e-6, two.stepper.parts(), t[0] / t[1]);
+    std::printf("| %-6s | %9d | %10.1f | %10.1f | %5d | %7.2fx |", name_of(precision), one.model.n_tets,
+                tets / t[0] * 1e-6, tets / t[1] * 1e-6, two.stepper.parts(), t[0] / t[1]);
     if (cpus.size() == 2) std::printf(" %12.1f | %10.0f %% |", tets / t[2] * 1e-6, 100.0 * t[2] / t[1]);
     std::printf("\n");
   }
@@ -326,10 +327,11 @@ void table_threads(const Options& opt) {
   std::printf("\n## StVK, one thread against two (M tets/s)\n\n");
   std::printf("(parts: how many ways the stepper split the passes; small meshes stay on one)\n");
   if (cpus.size() == 2) {
-    std::printf("(2 at once: two one-thread runs stepping at the same time, one on cpu %d and one on cpu %d,\n"
-                " their rates added up: what these two CPUs give when both are busy, which on a shared or\n"
-                " virtual machine can fall well short of twice one; of 2 at once: two threads' rate against it)\n\n",
-                cpus[0], cpus[1]);
+    std::printf(
+        "(2 at once: two one-thread runs stepping at the same time, one on cpu %d and one on cpu %d,\n"
+        " their rates added up: what these two CPUs give when both are busy, which on a shared or\n"
+        " virtual machine can fall well short of twice one; of 2 at once: two threads' rate against it)\n\n",
+        cpus[0], cpus[1]);
     std::printf("| real   |      tets |  1 thread  | 2 threads  | parts | speedup  |   2 at once  | of 2 at once |\n");
     std::printf("|--------|-----------|------------|------------|-------|----------|--------------|--------------|\n");
   } else {
@@ -400,8 +402,7 @@ std::vector<Scene> effect_scenes() {
          bc.angle = rate;
          s.essential.push_back(bc);
        }},
-      {"contact (sphere on the top)",
-       [](ModelSpec& s) { s.proxies = {top_sphere(s.mesh, 0.0)}; }},
+      {"contact (sphere on the top)", [](ModelSpec& s) { s.proxies = {top_sphere(s.mesh, 0.0)}; }},
       {"contact + friction (mu 0.5)",
        [](ModelSpec& s) {
          s.proxies = {top_sphere(s.mesh, 0.5)};
@@ -447,7 +448,8 @@ void effect_rows(const Options& opt, double size) {
               t.back() * 1e9, (t.back() - bare) * 1e9, 100.0 * (t.back() - bare) / bare);
   for (size_t i = 0; i < scenes.size(); ++i)
     if (runs[i]->faults)
-      std::printf("(%s: %lld fault(s), restarted; see stderr)\n", scenes[i].name, static_cast<long long>(runs[i]->faults));
+      std::printf("(%s: %lld fault(s), restarted; see stderr)\n", scenes[i].name,
+                  static_cast<long long>(runs[i]->faults));
 }
 
 void table_effects(const Options& opt) {
@@ -465,9 +467,7 @@ void table_effects(const Options& opt) {
 class PassClock final : public StepProbe {
  public:
   void enter(Pass) override { t0_ = Clock::now(); }
-  void leave(Pass p) override {
-    total_[int(p)] += std::chrono::duration<double>(Clock::now() - t0_).count();
-  }
+  void leave(Pass p) override { total_[int(p)] += std::chrono::duration<double>(Clock::now() - t0_).count(); }
   double total(Pass p) const { return total_[int(p)]; }
 
  private:
@@ -551,30 +551,31 @@ void pass_rows(const Options& opt, ThreadPool& pool) {
   std::vector<double> sizes = {opt.quick ? 5e3 : 2e4};
   if (opt.large) sizes.push_back(1e6);
   for (double size : sizes)
-  for (int threads : {1, 2}) {
-    ModelSpec spec = make_spec(make_bench_box(size, 1, 0.1), MaterialModel::StVK, precision);
-    spec.integrator.threads = threads;
-    Run<Real> run(spec, threads > 1 ? &pool : nullptr);
-    const int64_t steps = std::max<int64_t>(3, calibrate(run, opt.quick ? 0.02 : 0.2));
-    PassClock clock;
-    run.stepper.set_probe(&clock);
-    run.time_steps(steps, true);  // (clock reads are not the step's)
-    run.stepper.set_probe(nullptr);
-    double all = 0;
-    for (int p = 0; p < kPassCount; ++p) all += clock.total(Pass(p));
-    std::printf("| %-6s | %9d | %7d | %9.1f |", name_of(precision), run.model.n_tets, run.stepper.parts(),
-                all / double(steps) * 1e6);
-    for (Pass p : {Pass::Predict, Pass::Elastic, Pass::Correct, Pass::Guard})
-      std::printf(" %6.1f |", clock.total(p) / double(steps) * 1e6);
-    std::printf("\n");
-  }
+    for (int threads : {1, 2}) {
+      ModelSpec spec = make_spec(make_bench_box(size, 1, 0.1), MaterialModel::StVK, precision);
+      spec.integrator.threads = threads;
+      Run<Real> run(spec, threads > 1 ? &pool : nullptr);
+      const int64_t steps = std::max<int64_t>(3, calibrate(run, opt.quick ? 0.02 : 0.2));
+      PassClock clock;
+      run.stepper.set_probe(&clock);
+      run.time_steps(steps, true);  // (clock reads are not the step's)
+      run.stepper.set_probe(nullptr);
+      double all = 0;
+      for (int p = 0; p < kPassCount; ++p) all += clock.total(Pass(p));
+      std::printf("| %-6s | %9d | %7d | %9.1f |", name_of(precision), run.model.n_tets, run.stepper.parts(),
+                  all / double(steps) * 1e6);
+      for (Pass p : {Pass::Predict, Pass::Elastic, Pass::Correct, Pass::Guard})
+        std::printf(" %6.1f |", clock.total(p) / double(steps) * 1e6);
+      std::printf("\n");
+    }
 }
 
 void table_passes(const Options& opt) {
   ThreadPool pool(2);
   std::printf("\n## Where the bare StVK step goes (us per step; threads: parts the passes were split in)\n\n");
-  std::printf("(split over threads, each part predicts and, with no loads, corrects its nodes inside the elastic\n"
-              " pass: its column has all three)\n\n");
+  std::printf(
+      "(split over threads, each part predicts and, with no loads, corrects its nodes inside the elastic\n"
+      " pass: its column has all three)\n\n");
   std::printf("| real   |      tets | threads | all       | predict | elastic | correct | guard  |\n");
   std::printf("|--------|-----------|---------|-----------|---------|---------|---------|--------|\n");
   pass_rows<float>(opt, pool);
@@ -599,7 +600,8 @@ void refresh_rows(const Options& opt) {
     }
     const AdvanceReport r = frame.stepper.advance(frame.state, frame.dt);
     std::printf("| %-6s | %9d | %9.1f | %12.1f | %8d | %+17.1f %% | %21.1f |\n", name_of(precision), step.model.n_tets,
-                t[0] * 1e6, t[1] * 1e6, r.substeps, 100.0 * (t[1] - t[0]) / t[0], median(sweep) * 1e9 / step.model.n_tets);
+                t[0] * 1e6, t[1] * 1e6, r.substeps, 100.0 * (t[1] - t[0]) / t[0],
+                median(sweep) * 1e9 / step.model.n_tets);
   }
 }
 
@@ -609,8 +611,10 @@ void refresh_rows(const Options& opt) {
 void table_refresh(const Options& opt) {
   std::printf("\n## The critical step's refresh: advance() of a frame of one sub-step against step() alone\n\n");
   std::printf("(whole estimate: every element examined once, ns a tet; advance() examines a sixteenth a call)\n\n");
-  std::printf("| real   |      tets | step() us | advance() us | substeps | advance() vs step() | whole estimate ns/tet |\n");
-  std::printf("|--------|-----------|-----------|--------------|----------|---------------------|-----------------------|\n");
+  std::printf(
+      "| real   |      tets | step() us | advance() us | substeps | advance() vs step() | whole estimate ns/tet |\n");
+  std::printf(
+      "|--------|-----------|-----------|--------------|----------|---------------------|-----------------------|\n");
   refresh_rows<float>(opt);
   refresh_rows<double>(opt);
 }
@@ -675,8 +679,8 @@ void table_precision(const Options& opt) {
   std::printf("\n## Float against double: loaded cantilever (0.4 m, 384 tets), %d steps\n\n", steps);
   std::printf("| material     | max |u| [m]  | max |u_float - u_double| / max |u| |\n");
   std::printf("|--------------|--------------|-------------------------------------|\n");
-  ModelSpec probe = make_spec(make_box(Vec3(0.0), Vec3(0.4, 0.1, 0.1), {16, 4, 4}), MaterialModel::StVK,
-                              Precision::Double);
+  ModelSpec probe =
+      make_spec(make_box(Vec3(0.0), Vec3(0.4, 0.1, 0.1), {16, 4, 4}), MaterialModel::StVK, Precision::Double);
   const double dt = 0.5 * build_model<double>(probe).dt_rest;
   for (int m = 0; m < kMaterialModelCount; ++m) {
     const std::vector<double> uf = beam_displacement<float>(MaterialModel(m), steps, dt);
@@ -722,8 +726,8 @@ template <class Real>
 void invertible_pass_rows(const Options& opt) {
   const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
   constexpr int W = kLanes<Real>;
-  const ModelSpec spec = make_spec(make_bench_box(opt.quick ? 2e4 : 1e5, 1, 0.1), MaterialModel::InvertibleStVK,
-                                   precision);
+  const ModelSpec spec =
+      make_spec(make_bench_box(opt.quick ? 2e4 : 1e5, 1, 0.1), MaterialModel::InvertibleStVK, precision);
   const Model<Real> model = build_model<Real>(spec);
   const KernelTable<Real>& k = kernels<Real>();
   for (double share : {0.0, 0.01, 0.1, 1.0}) {
@@ -778,8 +782,8 @@ void invertible_pass_rows(const Options& opt) {
     }
     const double n = model.n_tets, sp = median(tp), si = median(ti);
     std::printf("| %-6s | %9d | %9.1f %% | %9.1f %% | %10.1f | %10.1f | %6.2fx |\n", name_of(precision), model.n_tets,
-                100.0 * double(n_near) / n, 100.0 * double(blocks_near) / double(n_blocks), n / sp * 1e-6, n / si * 1e-6,
-                sp / si);
+                100.0 * double(n_near) / n, 100.0 * double(blocks_near) / double(n_blocks), n / sp * 1e-6,
+                n / si * 1e-6, sp / si);
   }
 }
 
@@ -790,9 +794,10 @@ void table_invertible(const Options& opt) {
   std::printf("|--------|-----------|------------|------------|---------|\n");
   invertible_step_rows<float>(opt);
   invertible_step_rows<double>(opt);
-  std::printf("\nThe element pass alone, a share of the box squashed to half its height (past the floor); near: elements\n"
-              "under the floor, blocks: element blocks with one (the SVD runs lane by lane for one or two, else for\n"
-              "the whole block, two such blocks at once):\n\n");
+  std::printf(
+      "\nThe element pass alone, a share of the box squashed to half its height (past the floor); near: elements\n"
+      "under the floor, blocks: element blocks with one (the SVD runs lane by lane for one or two, else for\n"
+      "the whole block, two such blocks at once):\n\n");
   std::printf("| real   |      tets |     near    |   blocks    |  stvk pass | invertible | ratio   |\n");
   std::printf("|--------|-----------|-------------|-------------|------------|------------|---------|\n");
   invertible_pass_rows<float>(opt);
@@ -805,9 +810,9 @@ void table_invertible(const Options& opt) {
 int main(int argc, char** argv) {
   using namespace tactile;
   const std::pair<const char*, void (*)(const Options&)> tables[] = {
-      {"rates", table_rates}, {"threads", table_threads}, {"passes", table_passes}, {"effects", table_effects},
-      {"hand", table_hand},   {"refresh", table_refresh}, {"isas", table_isas},
-      {"precision", table_precision}, {"invertible", table_invertible}};
+      {"rates", table_rates},     {"threads", table_threads},     {"passes", table_passes},
+      {"effects", table_effects}, {"hand", table_hand},           {"refresh", table_refresh},
+      {"isas", table_isas},       {"precision", table_precision}, {"invertible", table_invertible}};
   std::vector<std::string> names;
   for (const auto& [name, table] : tables) names.emplace_back(name);
   Options opt;

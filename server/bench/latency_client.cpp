@@ -67,7 +67,7 @@ using tcp = asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
 constexpr auto kSpinWindow = std::chrono::microseconds(100);  // timer slack is ~50 us: spin the rest
-constexpr int64_t kLateSendNs = 50'000;                        // a send this far past its deadline is "late"
+constexpr int64_t kLateSendNs = 50'000;                       // a send this far past its deadline is "late"
 
 struct Vec3 {
   double x = 0, y = 0, z = 0;
@@ -75,12 +75,12 @@ struct Vec3 {
 
 struct Options {
   std::string host = "127.0.0.1", port, token, device = "stylus";
-  double rate = 1000;     // inputs per second [Hz]
-  double seconds = 5;     // of inputs [s]
-  double press = 1;       // time to go from `from` to `to` [s]
-  double depth = 0.003;   // press depth when `to` is not given [m]
+  double rate = 1000;    // inputs per second [Hz]
+  double seconds = 5;    // of inputs [s]
+  double press = 1;      // time to go from `from` to `to` [s]
+  double depth = 0.003;  // press depth when `to` is not given [m]
   std::optional<Vec3> from, to;
-  bool sweep = true;      // slip the input phase against the steps over the run
+  bool sweep = true;  // slip the input phase against the steps over the run
 };
 
 // "x,y,z" as three finite numbers, or nullopt.
@@ -107,8 +107,8 @@ std::optional<int> parse_args(int argc, char** argv, Options& o) {
       "and prints the input-to-force latency, the frames lost and how steady the force is.",
       "latency_client");
   tactile::configure_command_line(app);
-  const CLI::Validator xyz(
-      [](std::string& text) { return parse_xyz(text) ? std::string() : "not x,y,z: " + text; }, "x,y,z");
+  const CLI::Validator xyz([](std::string& text) { return parse_xyz(text) ? std::string() : "not x,y,z: " + text; },
+                           "x,y,z");
   std::string from, to;
   bool no_sweep = false;
   app.add_option("--host", o.host, "the server's address")->capture_default_str();
@@ -152,11 +152,11 @@ Clock::duration seconds(double s) {
 // What this client keeps of one haptic frame.
 struct FrameRecord {
   uint64_t step = 0;
-  double sim_time = 0;        // [s]
-  int64_t server_ns = 0;      // start of the step, server steady_clock [ns]
-  int64_t received_ns = 0;    // this client's steady_clock [ns]
-  uint64_t last_input = 0;    // last_input_sequence
-  float force_y = 0;          // on the device's first proxy [N]
+  double sim_time = 0;      // [s]
+  int64_t server_ns = 0;    // start of the step, server steady_clock [ns]
+  int64_t received_ns = 0;  // this client's steady_clock [ns]
+  uint64_t last_input = 0;  // last_input_sequence
+  float force_y = 0;        // on the device's first proxy [N]
 };
 
 // Same rank rule as server_bench.py's pct(), so the two clients' figures compare.
@@ -344,11 +344,11 @@ class LatencyClient {
     const wire::Quatd orientation(1, 0, 0, 0);
     out_.Clear();  // keeps its buffer: no allocation per input
     const int64_t t = now_ns();
-    out_.Finish(wire::CreateEnvelope(out_, wire::Message::DeviceInput,
-                                     wire::CreateDeviceInputDirect(out_, opt_.device.c_str(), base_ + k, t, &position,
-                                                                   &orientation, 0)
-                                         .Union()),
-                wire::EnvelopeIdentifier());
+    out_.Finish(
+        wire::CreateEnvelope(
+            out_, wire::Message::DeviceInput,
+            wire::CreateDeviceInputDirect(out_, opt_.device.c_str(), base_ + k, t, &position, &orientation, 0).Union()),
+        wire::EnvelopeIdentifier());
     writing_ = true;
     sent_ns_[k] = now_ns();  // the write starts now: asio tries the send inside async_write
     ws_.async_write(asio::buffer(out_.GetBufferPointer(), out_.GetSize()), [this](beast::error_code ec, size_t) {
@@ -368,12 +368,12 @@ class LatencyClient {
   fb::FlatBufferBuilder out_{256};
   bool writing_ = false, failed_ = false, closing_ = false;
 
-  double dt_ = 0;            // the server's step, from SceneDescription [s]
-  int32_t proxy_ = -1;       // the device's first proxy in HapticFrame.proxies
-  Vec3 first_pose_;          // its position in the first frame [m]
-  std::vector<int64_t> sent_ns_;   // per input sequence (index 0 unused) [ns]
-  std::vector<int64_t> due_ns_;    // its deadline [ns]
-  std::vector<int32_t> answer_;    // per input: the first frame that saw it, or -1
+  double dt_ = 0;                 // the server's step, from SceneDescription [s]
+  int32_t proxy_ = -1;            // the device's first proxy in HapticFrame.proxies
+  Vec3 first_pose_;               // its position in the first frame [m]
+  std::vector<int64_t> sent_ns_;  // per input sequence (index 0 unused) [ns]
+  std::vector<int64_t> due_ns_;   // its deadline [ns]
+  std::vector<int32_t> answer_;   // per input: the first frame that saw it, or -1
   std::vector<FrameRecord> frames_;
   size_t measure_from_ = 0;  // frames before the first input are not counted
   uint64_t base_ = 0;        // sequence of input k is base_ + k: the server's count runs on over connections
@@ -428,11 +428,12 @@ void LatencyClient::report() const {
     for (size_t i = measure_from_ + 1; i < frames_.size(); ++i)
       missing += std::max<int64_t>(0, std::llround((frames_[i].sim_time - frames_[i - 1].sim_time) / dt_) - 1);
     const FrameRecord &a = frames_[measure_from_], &b = frames_.back();
-    std::printf("\nhaptic frames received %zu, missing %lld (%.2f %%) over %.2f s simulated in %.2f s; "
-                "steps %llu..%llu (%.1f per frame)\n",
-                n_frames, (long long)missing, 100.0 * double(missing) / double(int64_t(n_frames) + missing),
-                b.sim_time - a.sim_time, 1e-9 * double(end_ns_ - start_ns_), (unsigned long long)a.step,
-                (unsigned long long)b.step, double(b.step - a.step) / double(n_frames - 1 + size_t(missing)));
+    std::printf(
+        "\nhaptic frames received %zu, missing %lld (%.2f %%) over %.2f s simulated in %.2f s; "
+        "steps %llu..%llu (%.1f per frame)\n",
+        n_frames, (long long)missing, 100.0 * double(missing) / double(int64_t(n_frames) + missing),
+        b.sim_time - a.sim_time, 1e-9 * double(end_ns_ - start_ns_), (unsigned long long)a.step,
+        (unsigned long long)b.step, double(b.step - a.step) / double(n_frames - 1 + size_t(missing)));
   }
   if (invalid_) std::printf("messages that were not a valid Envelope: %lld\n", (long long)invalid_);
 

@@ -14,10 +14,10 @@
 #include <utility>
 #include <vector>
 
+#include <flatbuffers/flatbuffers.h>
 #include <boost/asio.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/websocket.hpp>
-#include <flatbuffers/flatbuffers.h>
 
 #include "app/command_line.hpp"
 #include "tactile_generated.h"
@@ -62,13 +62,16 @@ int main(int argc, char** argv) {
   std::string host = "127.0.0.1", port;
   int n = 50;
   double seconds = 5;
-  CLI::App app("Opens N viewer connections to a running tactile-server from one thread, reads and discards every "
-               "message, and prints the state frames each viewer got per second.",
-               "viewer_load");
+  CLI::App app(
+      "Opens N viewer connections to a running tactile-server from one thread, reads and discards every "
+      "message, and prints the state frames each viewer got per second.",
+      "viewer_load");
   tactile::configure_command_line(app);
   app.add_option("--host", host, "the server's address")->capture_default_str();
   app.add_option("--port", port, "the server's port")->required();
-  app.add_option("--viewers", n, "viewer connections, >= 1")->capture_default_str()->check(tactile::number_where([](double v) { return v >= 1; }, ">= 1"));
+  app.add_option("--viewers", n, "viewer connections, >= 1")
+      ->capture_default_str()
+      ->check(tactile::number_where([](double v) { return v >= 1; }, ">= 1"));
   app.add_option("--seconds", seconds, "how long to read, > 0 [s]")
       ->capture_default_str()
       ->check(tactile::positive_number());
@@ -78,11 +81,11 @@ int main(int argc, char** argv) {
     tcp::resolver resolver(ioc);
     const auto endpoints = resolver.resolve(host, port);
     fb::FlatBufferBuilder b;
-    b.Finish(wire::CreateEnvelope(b, wire::Message::Hello,
-                                  wire::CreateHelloDirect(b, uint16_t(wire::ProtocolMajor::Current),
-                                                          uint16_t(wire::ProtocolMinor::Current), wire::Role::Viewer,
-                                                          "", "viewer_load")
-                                      .Union()),
+    b.Finish(wire::CreateEnvelope(
+                 b, wire::Message::Hello,
+                 wire::CreateHelloDirect(b, uint16_t(wire::ProtocolMajor::Current),
+                                         uint16_t(wire::ProtocolMinor::Current), wire::Role::Viewer, "", "viewer_load")
+                     .Union()),
              wire::EnvelopeIdentifier());
     std::vector<std::shared_ptr<Viewer>> viewers;
     for (int k = 0; k < n; ++k) {

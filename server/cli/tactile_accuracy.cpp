@@ -50,14 +50,28 @@ int main(int argc, char** argv) {
   bar.finish();
   nlohmann::json records = nlohmann::json::array(), realtime = nlohmann::json::array();
   for (const AccuracyRecord& r : results.records)
-    records.push_back({{"problem", r.problem}, {"material", r.material}, {"level", r.level}, {"tets", r.tets},
-                       {"safety", r.safety}, {"precision", r.precision}, {"value", r.value},
-                       {"reference", r.reference}, {"error", r.error}, {"unit", r.unit}, {"steps", r.steps},
-                       {"sim_time_s", r.sim_time}, {"wall_s", r.wall_s}, {"us_per_step", r.us_per_step},
-                       {"tet_steps_per_s", r.tet_steps_per_s}, {"fault", r.fault}});
+    records.push_back({{"problem", r.problem},
+                       {"material", r.material},
+                       {"level", r.level},
+                       {"tets", r.tets},
+                       {"safety", r.safety},
+                       {"precision", r.precision},
+                       {"value", r.value},
+                       {"reference", r.reference},
+                       {"error", r.error},
+                       {"unit", r.unit},
+                       {"steps", r.steps},
+                       {"sim_time_s", r.sim_time},
+                       {"wall_s", r.wall_s},
+                       {"us_per_step", r.us_per_step},
+                       {"tet_steps_per_s", r.tet_steps_per_s},
+                       {"fault", r.fault}});
   for (const RealtimeRecord& r : results.realtime)
-    realtime.push_back({{"material", r.material}, {"precision", r.precision}, {"tets", r.tets},
-                        {"interval_ms", r.interval_ms}, {"substeps", r.substeps},
+    realtime.push_back({{"material", r.material},
+                        {"precision", r.precision},
+                        {"tets", r.tets},
+                        {"interval_ms", r.interval_ms},
+                        {"substeps", r.substeps},
                         {"largest_realtime_tets", r.largest_realtime_tets},
                         {"estimated_max_tets", r.estimated_max_tets}});
   std::ofstream f(out_path);

@@ -5,11 +5,11 @@
 // Exit codes: 0 stopped by a signal, 1 a fault stopped the simulation, 2 bad
 // input (scene, mesh, command line, or an address it may not listen on).
 #include <atomic>
-#include <limits>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <optional>
 #include <string>
 #include <thread>
@@ -21,12 +21,12 @@
 
 #include "app/command_line.hpp"
 #include "app/progress.hpp"
-#include "sim/simulation.hpp"
 #include "core/model.hpp"
 #include "live/director.hpp"
 #include "mesh/mesh_error.hpp"
 #include "net/server.hpp"
 #include "scene/scene.hpp"
+#include "sim/simulation.hpp"
 
 namespace {
 
@@ -214,9 +214,10 @@ int main(int argc, char** argv) {
     simulation.join();
     first.reset();
     const RealtimeStats st = director.current()->loop().stats();
-    std::printf("tactile-server: stopped after %.3f s simulated in %.3f s (real-time factor %.3f, %lld missed deadlines)\n",
-                st.sim_time, st.wall_time, st.wall_time > 0 ? st.sim_time / st.wall_time : 0.0,
-                static_cast<long long>(st.missed_deadlines));
+    std::printf(
+        "tactile-server: stopped after %.3f s simulated in %.3f s (real-time factor %.3f, %lld missed deadlines)\n",
+        st.sim_time, st.wall_time, st.wall_time > 0 ? st.sim_time / st.wall_time : 0.0,
+        static_cast<long long>(st.missed_deadlines));
     if (const std::string fault = director.fault(); !fault.empty()) {
       std::fprintf(stderr, "tactile-server: fault: %s\n", fault.c_str());
       return 1;

@@ -12,12 +12,12 @@
 #include "app/command_line.hpp"
 #include "app/headless.hpp"
 #include "app/progress.hpp"
-#include "sim/simulation.hpp"
-#include "live/resim.hpp"
-#include "record/mcap.hpp"
 #include "core/model.hpp"
+#include "live/resim.hpp"
 #include "mesh/mesh_error.hpp"
+#include "record/mcap.hpp"
 #include "scene/scene.hpp"
+#include "sim/simulation.hpp"
 
 namespace {
 
@@ -40,9 +40,9 @@ void add_options(CLI::App& app, Options& o, std::string& precision) {
   app.footer("exit status: 0 ok, 1 a fault stopped a run, 2 bad input");
   app.require_subcommand(1);
 
-  CLI::App* run = app.add_subcommand(
-      "run", "run a scene headless, write VTU frames, frames.csv, summary.json\n"
-             "(and forces.csv, devices.csv when it has proxies)");
+  CLI::App* run = app.add_subcommand("run",
+                                     "run a scene headless, write VTU frames, frames.csv, summary.json\n"
+                                     "(and forces.csv, devices.csv when it has proxies)");
   run->add_option("SCENE.json", o.scene, "the scene file")->required()->type_name("");
   run->add_option("--out", o.out, "output folder; writes DIR/<scene>/<variant or run>/")
       ->type_name("DIR")
@@ -57,7 +57,8 @@ void add_options(CLI::App& app, Options& o, std::string& precision) {
       ->type_name("N")
       ->check(CLI::Range(1, 256).description(""));
   run->add_option("--variant", o.variant, "run only this variant")->type_name("NAME");
-  run->add_flag_callback("--no-vtu", [&o] { o.vtu = false; }, "no VTU frames (frames.csv and summary.json only)");
+  run->add_flag_callback(
+      "--no-vtu", [&o] { o.vtu = false; }, "no VTU frames (frames.csv and summary.json only)");
   run->add_flag("--quiet", o.quiet, "no progress bar, no mesh report unless it warns");
   run->callback([&o] { o.command = "run"; });
 
@@ -65,11 +66,11 @@ void add_options(CLI::App& app, Options& o, std::string& precision) {
   check->add_option("SCENE.json", o.scene, "the scene file")->required()->type_name("");
   check->callback([&o] { o.command = "check"; });
 
-  CLI::App* resim = app.add_subcommand(
-      "resim",
-      "feed a recording's device inputs to the simulator again, each before the same step as live;\n"
-      "with its own scene the states come out bit for bit as recorded (exit 1 when one differs);\n"
-      "with another, compare the two: tactile-recording compare REC RESIM");
+  CLI::App* resim =
+      app.add_subcommand("resim",
+                         "feed a recording's device inputs to the simulator again, each before the same step as live;\n"
+                         "with its own scene the states come out bit for bit as recorded (exit 1 when one differs);\n"
+                         "with another, compare the two: tactile-recording compare REC RESIM");
   resim->add_option("RECORDING.mcap", o.scene, "the recording")->required()->type_name("");
   resim->add_option("--scene", o.other_scene, "simulate this scene instead of the recorded one")
       ->type_name("OTHER.json");
@@ -81,9 +82,7 @@ void add_options(CLI::App& app, Options& o, std::string& precision) {
 
 std::string label(const Scene& s) { return s.name + (s.variant.empty() ? "" : " [" + s.variant + "]"); }
 
-void print_quality(const Scene& s) {
-  std::cout << "mesh of " << label(s) << ": " << s.quality.summary() << "\n";
-}
+void print_quality(const Scene& s) { std::cout << "mesh of " << label(s) << ": " << s.quality.summary() << "\n"; }
 
 int check(const Options& o) {
   tactile::MeshingProgress meshing(stderr, true);
@@ -111,8 +110,8 @@ int check(const Options& o) {
       continue;
     }
     std::cout << (in.dt > 0 ? (too_large ? "fixed step above it, subdivided to " : "fixed step ") : "auto step ") << dt
-              << " s: " << static_cast<long long>(std::ceil(1.0 / (s.run.frame_rate * dt))) << " sub-steps per frame, about "
-              << std::llround(s.run.duration / dt) << " steps for " << s.run.duration
+              << " s: " << static_cast<long long>(std::ceil(1.0 / (s.run.frame_rate * dt)))
+              << " sub-steps per frame, about " << std::llround(s.run.duration / dt) << " steps for " << s.run.duration
               << " s (more if the body is squashed or stiffened)\n";
   }
   std::cout << "ok\n";

@@ -64,8 +64,9 @@ int main(int argc, char** argv) {
     std::printf("%-44s %-9s %-5s %6d %9lld %7s %6s %7s %7s %8d %6.1f  %s%s%s\n", r.name.c_str(), to_string(r.expect),
                 r.pass ? "pass" : "FAIL", r.tets, static_cast<long long>(r.steps), figure(r.size_ratio, "%.2f").c_str(),
                 figure(r.energy_drift < 0 ? -1 : 100 * r.energy_drift, "%.2f").c_str(),
-                figure(r.peak_force_N < 0 ? -1 : r.penetration_mm, "%.2f").c_str(), figure(r.peak_force_N, "%.2f").c_str(),
-                r.substeps_max, r.wall_s, r.outcome.c_str(), r.pass ? "" : " -- ", r.why.c_str());
+                figure(r.peak_force_N < 0 ? -1 : r.penetration_mm, "%.2f").c_str(),
+                figure(r.peak_force_N, "%.2f").c_str(), r.substeps_max, r.wall_s, r.outcome.c_str(),
+                r.pass ? "" : " -- ", r.why.c_str());
     std::fflush(stdout);
     all.push_back({{"name", r.name},
                    {"group", r.group},

@@ -17,9 +17,9 @@
 
 #include "app/progress.hpp"
 #include "app/section.hpp"
-#include "sim/simulation.hpp"
 #include "app/vtu.hpp"
 #include "core/kernels/kernels.hpp"
+#include "sim/simulation.hpp"
 
 namespace tactile {
 
@@ -88,7 +88,10 @@ Json energy_json(const Energy& e) {
 
 Json fault_json(const Fault& f) {
   if (!f) return Json(nullptr);
-  return Json{{"kind", to_string(f.kind)}, {"message", f.message}, {"step", f.step}, {"sim_time_s", f.t},
+  return Json{{"kind", to_string(f.kind)},
+              {"message", f.message},
+              {"step", f.step},
+              {"sim_time_s", f.t},
               {"elements", f.elements}};
 }
 
@@ -113,8 +116,7 @@ void clear_old_output(const fs::path& dir) {
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
     const std::string name = entry.path().filename().string();
     if (((name.starts_with("frame_") || name.starts_with("proxy-")) && name.ends_with(".vtu")) ||
-        name == "series.pvd" || name == "forces.csv" ||
-        name == "devices.csv")
+        name == "series.pvd" || name == "forces.csv" || name == "devices.csv")
       fs::remove(entry.path(), ec);
   }
 }
@@ -154,8 +156,9 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   std::string csv = "frame,sim_time_s,substeps,dt_s";
   for (const TrackedPoint& p : scene.track) csv += "," + p.name + "_ux_m," + p.name + "_uy_m," + p.name + "_uz_m";
   for (const SectionPlane& p : run.sections) csv += "," + p.name + "_area_m2";
-  csv += ",kinetic_J,elastic_J,gravity_J,work_loads_J,work_essential_J,work_contact_J,dissipated_J,discrete_J,"
-         "restated_J,balance_drift_J\n";
+  csv +=
+      ",kinetic_J,elastic_J,gravity_J,work_loads_J,work_essential_J,work_contact_J,dissipated_J,discrete_J,"
+      "restated_J,balance_drift_J\n";
 
   std::vector<double> u, v, density, contact;
   const std::vector<uint8_t> fixed = sim.node_constraint();
@@ -189,7 +192,8 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
       append_number(csv, x);
     csv += '\n';
     double umax = 0;
-    for (size_t i = 0; i < u.size(); i += 3) umax = std::max(umax, std::sqrt(u[i] * u[i] + u[i + 1] * u[i + 1] + u[i + 2] * u[i + 2]));
+    for (size_t i = 0; i < u.size(); i += 3)
+      umax = std::max(umax, std::sqrt(u[i] * u[i] + u[i + 1] * u[i + 1] + u[i + 2] * u[i + 2]));
     if (frame > 0) max_u.add(umax);
     if (!vtu) return;
     sim.copy_velocity(v);
@@ -201,8 +205,8 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
       for (double& x : contact) x = span > 0 ? x / span : 0.0;
     }
     const std::string name = frame_name("frame", frame);
-    write_vtu((dir / name).string(), VtuFrame{&scene.spec.mesh, &u, &v, &fixed, run.vtu_contact_force ? &contact : nullptr,
-                                              &density, &fields});
+    write_vtu((dir / name).string(), VtuFrame{&scene.spec.mesh, &u, &v, &fixed,
+                                              run.vtu_contact_force ? &contact : nullptr, &density, &fields});
     pvd.push_back({sim.time(), name, 0, "body"});
     // Each proxy a block of its own: its surface where it is, and what it felt.
     for (size_t j = 0; j < sim.proxies().size(); ++j) {
@@ -270,8 +274,7 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   };
 
   record(0, nullptr, options.write_vtu);
-  ProgressBar bar(stderr, options.progress,
-                  scene.name + (scene.variant.empty() ? "" : "/" + scene.variant));
+  ProgressBar bar(stderr, options.progress, scene.name + (scene.variant.empty() ? "" : "/" + scene.variant));
   double wall = 0;
   for (int32_t frame = 1; frame <= n_frames; ++frame) {
     AdvanceReport report;
@@ -346,7 +349,8 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
                    {"poor_tets", scene.quality.poor.size()}};
   Json materials = Json::array();
   for (const MaterialSpec& m : scene.spec.materials)
-    materials.push_back(Json{{"model", std::string(to_string(m.model))}, {"E_Pa", m.E}, {"nu", m.nu}, {"rho_kg_m3", m.rho}});
+    materials.push_back(
+        Json{{"model", std::string(to_string(m.model))}, {"E_Pa", m.E}, {"nu", m.nu}, {"rho_kg_m3", m.rho}});
   s["materials"] = materials;
   const Effects& fx = scene.spec.effects;
   s["effects"] = Json{{"gravity", fx.gravity ? vec(fx.g) : Json(false)},
@@ -365,27 +369,27 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
                          {"dt_critical_s", dt_critical.to_json()},
                          {"substeps_per_frame", substeps.to_json()},
                          {"frames_subdivided", subdivided_frames}};
-  s["run"] = Json{{"duration_s", run.duration},
-                  {"frame_rate_hz", run.frame_rate},
-                  {"frame_dt_s", frame_dt},
-                  {"frames_planned", n_frames},
-                  {"frames_done", result.frames},
-                  {"steps", result.steps},
-                  {"t_end_s", result.t},
-                  {"control_interval_s", has_proxies ? Json(interval) : Json(nullptr)},
-                  {"vtu", options.write_vtu},
-                  {"vtu_files", pvd.size()}};
-  s["frames"] = Json{{"wall_s", frame_wall.to_json()}, {"max_displacement_m", max_u.to_json()},
+  s["run"] = Json{{"duration_s", run.duration},   {"frame_rate_hz", run.frame_rate},
+                  {"frame_dt_s", frame_dt},       {"frames_planned", n_frames},
+                  {"frames_done", result.frames}, {"steps", result.steps},
+                  {"t_end_s", result.t},          {"control_interval_s", has_proxies ? Json(interval) : Json(nullptr)},
+                  {"vtu", options.write_vtu},     {"vtu_files", pvd.size()}};
+  s["frames"] = Json{{"wall_s", frame_wall.to_json()},
+                     {"max_displacement_m", max_u.to_json()},
                      {"section_area_ratio", section_ratio.to_json()}};
   Json tracked = Json::array();
   for (const TrackedResult& t : result.tracked)
-    tracked.push_back(Json{{"name", t.name}, {"node", t.node}, {"rest_m", vec(t.X)}, {"position_m", vec(t.X + t.u)},
-                           {"displacement_m", vec(t.u)}, {"distance_m", std::sqrt(glm::dot(t.u, t.u))}});
+    tracked.push_back(Json{{"name", t.name},
+                           {"node", t.node},
+                           {"rest_m", vec(t.X)},
+                           {"position_m", vec(t.X + t.u)},
+                           {"displacement_m", vec(t.u)},
+                           {"distance_m", std::sqrt(glm::dot(t.u, t.u))}});
   s["tracked"] = tracked;
   Json sections = Json::array();
   for (const SectionResult& r : result.sections)
-    sections.push_back(Json{{"name", r.name}, {"rest_area_m2", r.rest_area}, {"area_m2", r.area},
-                            {"ratio", r.area / r.rest_area}});
+    sections.push_back(
+        Json{{"name", r.name}, {"rest_area_m2", r.rest_area}, {"area_m2", r.area}, {"ratio", r.area / r.rest_area}});
   s["sections"] = sections;
   // Proxies and devices: means over the last control interval.
   Json proxies_json = Json::array();
@@ -408,15 +412,18 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
   s["proxies"] = proxies_json;
   Json devices_json = Json::array();
   for (const ContactResult& c : result.devices)
-    devices_json.push_back(Json{{"name", c.name}, {"force_N", vec(c.force)}, {"torque_Nm", vec(c.torque)},
-                                {"contacts", c.contacts}, {"peak_force_N", c.peak_force}});
+    devices_json.push_back(Json{{"name", c.name},
+                                {"force_N", vec(c.force)},
+                                {"torque_Nm", vec(c.torque)},
+                                {"contacts", c.contacts},
+                                {"peak_force_N", c.peak_force}});
   s["devices"] = devices_json;
   s["energy"] = energy_json(result.energy);
-  const double scale = std::max({std::fabs(result.energy.kinetic) + std::fabs(result.energy.elastic) +
-                                     std::fabs(result.energy.gravity) + std::fabs(result.energy.work_loads) +
-                                     std::fabs(result.energy.work_essential) + std::fabs(result.energy.work_contact) +
-                                     result.energy.dissipated,
-                                 1e-300});
+  const double scale =
+      std::max({std::fabs(result.energy.kinetic) + std::fabs(result.energy.elastic) + std::fabs(result.energy.gravity) +
+                    std::fabs(result.energy.work_loads) + std::fabs(result.energy.work_essential) +
+                    std::fabs(result.energy.work_contact) + result.energy.dissipated,
+                1e-300});
   s["energy"]["balance_drift_relative"] = result.energy.balance() / scale;
   const double step_time = std::max(wall, 1e-12);
   Json cost;
@@ -450,9 +457,9 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
     if (result.fault)
       *options.log << "  fault (" << to_string(result.fault.kind) << ") at t = " << result.fault.t
                    << " s: " << result.fault.message << "\n";
-    *options.log << "  wrote " << dir.string() << "/ (summary.json, frames.csv" << (has_proxies ? ", forces.csv, devices.csv" : "")
-                 << (options.write_vtu ? ", series.pvd and " + std::to_string(pvd.size()) + " VTU files" : "")
-                 << ")\n";
+    *options.log << "  wrote " << dir.string() << "/ (summary.json, frames.csv"
+                 << (has_proxies ? ", forces.csv, devices.csv" : "")
+                 << (options.write_vtu ? ", series.pvd and " + std::to_string(pvd.size()) + " VTU files" : "") << ")\n";
   }
   return result;
 }
@@ -480,8 +487,8 @@ void write_comparison(const std::string& dir, const std::vector<HeadlessResult>&
     }
     for (const SectionResult& s : r.sections) {
       for (double x : {s.rest_area, s.area, s.area / s.rest_area}) append_number(csv, x);
-      sections.push_back(Json{{"name", s.name}, {"rest_area_m2", s.rest_area}, {"area_m2", s.area},
-                              {"ratio", s.area / s.rest_area}});
+      sections.push_back(
+          Json{{"name", s.name}, {"rest_area_m2", s.rest_area}, {"area_m2", s.area}, {"ratio", s.area / s.rest_area}});
     }
     csv += "\n";
     variants.push_back(Json{{"variant", r.variant},

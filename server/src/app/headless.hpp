@@ -29,8 +29,8 @@ namespace tactile {
 struct HeadlessOptions {
   std::string out_dir = "out";
   bool write_vtu = true;
-  bool progress = true;           // a bar on stderr, when it is a terminal and the run takes over a second
-  std::ostream* log = nullptr;    // one line per thing done, when set
+  bool progress = true;            // a bar on stderr, when it is a terminal and the run takes over a second
+  std::ostream* log = nullptr;     // one line per thing done, when set
   double control_interval = 1e-3;  // longest control interval of a scene with proxies [s]
 };
 
@@ -50,23 +50,23 @@ struct SectionResult {
 // What a proxy or a device channel felt: means over the last control interval.
 struct ContactResult {
   std::string name;
-  std::string device;    // for a proxy: its device channel
-  Vec3 force{0.0};       // on the proxy (or the device's proxies) [N]
-  Vec3 torque{0.0};      // about the proxy's (or device's reference) position [N m]
-  int32_t contacts = 0;  // surface nodes inside, at the end
-  Vec3 position{0.0};    // proxy position at the end [m] (proxies only)
-  double peak_force = 0; // largest interval-mean |force| of the run [N]
+  std::string device;     // for a proxy: its device channel
+  Vec3 force{0.0};        // on the proxy (or the device's proxies) [N]
+  Vec3 torque{0.0};       // about the proxy's (or device's reference) position [N m]
+  int32_t contacts = 0;   // surface nodes inside, at the end
+  Vec3 position{0.0};     // proxy position at the end [m] (proxies only)
+  double peak_force = 0;  // largest interval-mean |force| of the run [N]
 };
 
 struct HeadlessResult {
   std::string scene, variant;
-  std::string dir;       // the folder written
-  Fault fault;           // kind None when the run finished
-  int32_t frames = 0;    // frames completed after frame 0
+  std::string dir;     // the folder written
+  Fault fault;         // kind None when the run finished
+  int32_t frames = 0;  // frames completed after frame 0
   int64_t steps = 0;
-  double t = 0;          // simulated time reached [s]
-  double wall_s = 0;     // stepping time [s]
-  Energy energy;         // at the end
+  double t = 0;       // simulated time reached [s]
+  double wall_s = 0;  // stepping time [s]
+  Energy energy;      // at the end
   std::vector<TrackedResult> tracked;
   std::vector<SectionResult> sections;
   std::vector<ContactResult> proxies;  // (n_proxies)

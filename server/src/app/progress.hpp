@@ -5,10 +5,10 @@
 #pragma once
 
 #include <chrono>
-#include <cstdio>
-#include <string>
 #include <condition_variable>
+#include <cstdio>
 #include <mutex>
+#include <string>
 #include <thread>
 
 #include "scene/scene_mesh.hpp"

@@ -13,14 +13,14 @@ SectionCut make_section_cut(const TetMesh& mesh, const SectionPlane& plane) {
     int above[4], n_above = 0, below[4], n_below = 0;
     for (int k = 0; k < 4; ++k) {
       d[k] = glm::dot(mesh.X[size_t(t[size_t(k)])] - plane.point, n);
-      if (d[k] >= 0) above[n_above++] = k;
-      else below[n_below++] = k;
+      if (d[k] >= 0)
+        above[n_above++] = k;
+      else
+        below[n_below++] = k;
     }
     if (n_above == 0 || n_below == 0) continue;
     // Corner on edge (i below, j above): s where the distance is 0, in (0, 1].
-    auto corner = [&](int i, int j) {
-      cut.corners.push_back({t[size_t(i)], t[size_t(j)], d[i] / (d[i] - d[j])});
-    };
+    auto corner = [&](int i, int j) { cut.corners.push_back({t[size_t(i)], t[size_t(j)], d[i] / (d[i] - d[j])}); };
     if (n_below == 1) {
       for (int k = 0; k < 3; ++k) corner(below[0], above[k]);
     } else if (n_above == 1) {

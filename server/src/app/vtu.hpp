@@ -25,10 +25,10 @@ namespace tactile {
 // One frame of a body; node arrays (n_nodes x 3) in the mesh's numbering.
 // Arrays left null are not written.
 struct VtuFrame {
-  const TetMesh* mesh = nullptr;                        // rest positions: the points written
-  const std::vector<double>* u = nullptr;               // displacement [m]
-  const std::vector<double>* v = nullptr;               // velocity [m/s]
-  const std::vector<uint8_t>* fixed = nullptr;          // 0 free, 1 held in place, 2 moved by a prescribed motion (n_nodes)
+  const TetMesh* mesh = nullptr;                // rest positions: the points written
+  const std::vector<double>* u = nullptr;       // displacement [m]
+  const std::vector<double>* v = nullptr;       // velocity [m/s]
+  const std::vector<uint8_t>* fixed = nullptr;  // 0 free, 1 held in place, 2 moved by a prescribed motion (n_nodes)
   const std::vector<double>* contact_force = nullptr;   // mean contact force on the node over the frame [N]
   const std::vector<double>* energy_density = nullptr;  // strain-energy density per tet [J/m^3] (n_tets)
   const ElementFields* fields = nullptr;                // stress and strain per tet, those computed
@@ -43,8 +43,8 @@ void write_vtu(const std::string& path, const VtuFrame& frame);
 // flat faces and its edges are in the sample); a plane is a square of
 // half-side `plane_half_size` about the proxy's origin.
 struct ProxySurface {
-  std::vector<double> points;       // world [m] (n_points x 3)
-  std::vector<int32_t> triangles;   // (n_triangles x 3)
+  std::vector<double> points;      // world [m] (n_points x 3)
+  std::vector<int32_t> triangles;  // (n_triangles x 3)
 };
 ProxySurface make_proxy_surface(const ProxyGeometry& g, const Pose& pose, double plane_half_size, int n = 8);
 

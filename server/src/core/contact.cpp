@@ -27,8 +27,8 @@ constexpr int32_t kFitMaxSteps = 64;
 // alone that a device's encoder noise meets before the proxy can follow
 // (free space would then read as the coupling's 2000 N/m).
 constexpr double kDeviceFitMinTime = 2e-3, kDeviceFitMaxTime = 50e-3;  // [s]
-constexpr double kDeviceFitMinMotion = 20e-6;  // [m]
-constexpr double kDeviceFitGain = 0.3;         // of each segment's secant, along its motion
+constexpr double kDeviceFitMinMotion = 20e-6;                          // [m]
+constexpr double kDeviceFitGain = 0.3;                                 // of each segment's secant, along its motion
 constexpr int32_t kFitIdleSteps = 16;  // a proxy's fit ends after this many steps without contact
 
 template <class Real>
@@ -227,7 +227,8 @@ double Contact<Real>::take_node_impulses(State<Real>& s, std::vector<double>& im
 template <class Real>
 void Contact<Real>::start(State<Real>& s) const {
   ContactState& cs = s.contact;
-  for (size_t k = 0; k < slot_node_.size(); ++k) cs.x_prev[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
+  for (size_t k = 0; k < slot_node_.size(); ++k)
+    cs.x_prev[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
   std::fill(cs.f_prev.begin(), cs.f_prev.end(), Vec3(0.0));
   cs.pushed.clear();
   std::fill(cs.memory.begin(), cs.memory.end(), Memory{});
@@ -311,7 +312,7 @@ template <class Real>
 void Contact<Real>::release(State<Real>& s, int32_t device) const {
   ContactState& cs = s.contact;
   cs.bodies.erase(std::remove_if(cs.bodies.begin(), cs.bodies.end(), [&](const Body& b) { return b.device == device; }),
-                cs.bodies.end());
+                  cs.bodies.end());
   index_bodies(cs);
   cs.device_reports[size_t(device)].coupled = false;
   cs.device_fit[size_t(device)] = Fit{};
@@ -366,7 +367,8 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   }
 
   // Positions at t_{n+1}, and boxes around each cluster's motion over the step.
-  for (size_t k = 0; k < slot_node_.size(); ++k) x_now_[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
+  for (size_t k = 0; k < slot_node_.size(); ++k)
+    x_now_[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
   const auto sweep = [&](Cluster& c, int32_t k) {
     c.lo = glm::min(c.lo, glm::min(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
     c.hi = glm::max(c.hi, glm::max(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
@@ -634,7 +636,8 @@ void Contact<Real>::find_node_contact(ContactState& cs, int32_t k, int32_t proxy
 }
 
 template <class Real>
-void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy, const Pose& p0, const Pose& p1, double dt) {
+void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy, const Pose& p0, const Pose& p1,
+                                      double dt) {
   const ProxySpec& spec = model_.proxies[size_t(proxy)];
   const ProxyGeometry& g = spec.geometry;
   const Face& face = faces_[size_t(f)];

@@ -66,10 +66,10 @@ namespace tactile {
 
 // What the contact pass changed, for the stepper's energy accounting.
 struct ContactSums {
-  double work = 0;       // work of the contact forces on the body over the step [J]
-  double mv2_delta = 0;  // change of sum m |v|^2 over the nodes it touched
-  double ma2_delta = 0;  // and of sum m |a|^2
-  double proxy_work = 0; // sum over proxies of |work they did| in the step [J]
+  double work = 0;        // work of the contact forces on the body over the step [J]
+  double mv2_delta = 0;   // change of sum m |v|^2 over the nodes it touched
+  double ma2_delta = 0;   // and of sum m |a|^2
+  double proxy_work = 0;  // sum over proxies of |work they did| in the step [J]
 };
 
 // The contact pass. It holds what it derives from the model (the surface
@@ -88,9 +88,7 @@ class Contact {
   int32_t proxies() const { return static_cast<int32_t>(model_.proxies.size()); }
   // A proxy's motion over the coming steps. For a proxy in a hand, prefer
   // set_hand_motion: this moves it alone.
-  void set_motion(State<Real>& s, int32_t proxy, const ProxyMotion& m) const {
-    s.contact.motion[size_t(proxy)] = m;
-  }
+  void set_motion(State<Real>& s, int32_t proxy, const ProxyMotion& m) const { s.contact.motion[size_t(proxy)] = m; }
   // Moves a hand's proxies rigidly with it: each keeps its offset from the hand.
   void set_hand_motion(State<Real>& s, int32_t hand, const ProxyMotion& m) const;
 
@@ -185,26 +183,26 @@ class Contact {
   // Slots: the surface nodes, the free ones first (in Morton order; slot k
   // of a free node is its index in free_nodes_), then those under an
   // essential BC (faces' corners, never pushed).
-  std::vector<int32_t> slot_node_;  // node id per slot
-  std::vector<int32_t> free_nodes_; // the first free_count slots' nodes
-  std::vector<Cluster> clusters_;   // of free nodes
-  std::vector<Face> faces_;         // surface triangles with a free corner, in Morton order of rest centroids
+  std::vector<int32_t> slot_node_;   // node id per slot
+  std::vector<int32_t> free_nodes_;  // the first free_count slots' nodes
+  std::vector<Cluster> clusters_;    // of free nodes
+  std::vector<Face> faces_;          // surface triangles with a free corner, in Morton order of rest centroids
   std::vector<Cluster> face_clusters_;
   std::vector<int32_t> face_cluster_slots_, face_cluster_slot_begin_;  // each face cluster's corners, once each
   // Workspace of one step.
-  std::vector<Vec3> x_now_;       // world position at t_{n+1} per slot [m]
-  std::vector<Vec3> f_now_;       // contact force on each free slot over this step [N]
-  std::vector<int32_t> touched_now_;  // free slots with a force in this step
-  std::vector<Point> points_;        // this step's contact points
-  std::vector<int32_t> point_order_; // their indices, by proxy
+  std::vector<Vec3> x_now_;                        // world position at t_{n+1} per slot [m]
+  std::vector<Vec3> f_now_;                        // contact force on each free slot over this step [N]
+  std::vector<int32_t> touched_now_;               // free slots with a force in this step
+  std::vector<Point> points_;                      // this step's contact points
+  std::vector<int32_t> point_order_;               // their indices, by proxy
   std::vector<int32_t> proxy_begin_, proxy_fill_;  // per proxy: its range in point_order_
-  std::vector<Vec3> dv_;             // velocity change per free slot, this step [m/s]
-  std::vector<int32_t> moved_;       // free slots given a dv_ this step
-  std::vector<uint8_t> moved_flag_;  // per free slot: in moved_
+  std::vector<Vec3> dv_;                           // velocity change per free slot, this step [m/s]
+  std::vector<int32_t> moved_;                     // free slots given a dv_ this step
+  std::vector<uint8_t> moved_flag_;                // per free slot: in moved_
   int32_t node_contacts_ = 0, face_contacts_ = 0;
-  std::vector<Pose> pose0_, pose1_;  // per proxy at t_n and t_{n+1}
+  std::vector<Pose> pose0_, pose1_;    // per proxy at t_n and t_{n+1}
   std::vector<Vec3> velocity_, spin_;  // per proxy over the step: velocity [m/s], angular velocity [rad/s]
-  std::vector<Vec3> lo_, hi_;        // per proxy: box its bounding sphere sweeps over the step
+  std::vector<Vec3> lo_, hi_;          // per proxy: box its bounding sphere sweeps over the step
   // Adds one step (the proxy or device at `position`, under `force`) to the
   // fit; where a segment closes with motion, sets `stiffness` to the fit.
   enum class FitWindow { Proxy, Device };  // segments of kFitMinMotion; of kDeviceFitMinTime and kDeviceFitMinMotion

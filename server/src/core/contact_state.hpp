@@ -23,8 +23,8 @@ namespace tactile {
 // never another device's; its torque is about its reference point (its
 // hand's or its proxy's position), a proxy's about the proxy's position.
 struct ContactReport {
-  Vec3 force{0.0};    // on the proxy or device [N] (the reaction of the contact impulses)
-  Vec3 torque{0.0};   // [N m]
+  Vec3 force{0.0};       // on the proxy or device [N] (the reaction of the contact impulses)
+  Vec3 torque{0.0};      // [N m]
   int32_t contacts = 0;  // contact points inside its proxies: surface nodes, and face points between them
   // Local contact stiffness dF/dx of the force with the position [N/m]: per
   // proxy a secant estimate fitted to the latest steps' changes (zero out of
@@ -69,9 +69,9 @@ struct ProxyReport : ContactReport {
 // coupling in series with the contact once it has).
 struct DeviceReport : ContactReport {
   bool coupled = false;
-  bool saturated = false;  // the coupling was at its force or torque limit
-  Pose target;             // the device's pose the coupling pulled toward at t_{n+1}
-  Pose body;               // where its body (hand, or first proxy) was at t_{n+1}
+  bool saturated = false;         // the coupling was at its force or torque limit
+  Pose target;                    // the device's pose the coupling pulled toward at t_{n+1}
+  Pose body;                      // where its body (hand, or first proxy) was at t_{n+1}
   double coupling_stiffness = 0;  // [N/m]
   double max_force = 0;           // the coupling's saturation [N]
   double max_torque = 0;          // [N m]
@@ -97,7 +97,7 @@ struct StiffnessFit {
 struct CoupledBodyState {
   int32_t device = -1, hand = -1, proxy = -1;
   bool has_limits = false;
-  DeviceLimits limits;            // what its device said (when has_limits)
+  DeviceLimits limits;  // what its device said (when has_limits)
   Coupling c;
   BodyState now, next;            // at t_n, and over the step under way
   Vec3 v_free{0.0}, w_free{0.0};  // next's velocities before contact
@@ -114,22 +114,22 @@ struct ContactMemory {
 };
 
 struct ContactState {
-  std::vector<ProxyMotion> motion;       // per proxy, over the coming steps (n_proxies)
-  std::vector<ProxyMotion> hand_motion;  // per hand (its position is the torque reference) (n_hands)
+  std::vector<ProxyMotion> motion;           // per proxy, over the coming steps (n_proxies)
+  std::vector<ProxyMotion> hand_motion;      // per hand (its position is the torque reference) (n_hands)
   std::vector<ProxyReport> reports;          // what each proxy felt (n_proxies)
   std::vector<DeviceReport> device_reports;  // what each device channel felt (n_devices)
-  std::vector<CoupledBodyState> bodies;  // the coupled devices' bodies
-  std::vector<int32_t> proxy_body;       // per proxy: its body in `bodies`, -1 when kinematic (n_proxies)
+  std::vector<CoupledBodyState> bodies;      // the coupled devices' bodies
+  std::vector<int32_t> proxy_body;           // per proxy: its body in `bodies`, -1 when kinematic (n_proxies)
 
   // Per surface slot (Contact's numbering: the free surface nodes in Morton
   // order, then the held ones) and per face with a free corner.
-  std::vector<Vec3> x_prev;                 // world position at t_n per slot [m]
-  std::vector<Vec3> f_prev;                 // contact force on each free slot over the previous step [N]
-  std::vector<int32_t> pushed;              // free slots with a force in the latest step
-  std::vector<ContactMemory> memory;        // per free slot
-  std::vector<ContactMemory> face_memory;   // per face
+  std::vector<Vec3> x_prev;                // world position at t_n per slot [m]
+  std::vector<Vec3> f_prev;                // contact force on each free slot over the previous step [N]
+  std::vector<int32_t> pushed;             // free slots with a force in the latest step
+  std::vector<ContactMemory> memory;       // per free slot
+  std::vector<ContactMemory> face_memory;  // per face
 
-  std::vector<StiffnessFit> fit;         // per proxy
+  std::vector<StiffnessFit> fit;  // per proxy
   // Per device: the fit of a coupled device's force against its own pose,
   // and the stiffness it gives (kept between steps: the device feels it
   // whether or not its proxy touches at this step).

@@ -50,8 +50,9 @@ Coupling resolve_coupling(const CouplingSpec& scene, const DeviceLimits* device,
   c.mass = scene.mass > 0 ? scene.mass : kDefaultProxyMass;
   c.inertia = scene.inertia > 0 ? scene.inertia : 0.4 * c.mass * r * r;
   c.damping = scene.damping > 0 ? scene.damping : 2.0 * kCouplingDampingRatio * std::sqrt(c.stiffness * c.mass);
-  c.angular_damping = scene.angular_damping > 0 ? scene.angular_damping
-                                                : 2.0 * kCouplingDampingRatio * std::sqrt(c.angular_stiffness * c.inertia);
+  c.angular_damping = scene.angular_damping > 0
+                          ? scene.angular_damping
+                          : 2.0 * kCouplingDampingRatio * std::sqrt(c.angular_stiffness * c.inertia);
   return c;
 }
 

@@ -54,9 +54,9 @@ struct CouplingSpec {
 // body still turns with it, through the scene's (or the default) soft
 // angular coupling.
 struct DeviceLimits {
-  double max_force = 0;  // [N]
-  double max_torque = 0; // [N m]
-  double stiffness = 0;  // the stiffest spring it renders stably [N/m]
+  double max_force = 0;   // [N]
+  double max_torque = 0;  // [N m]
+  double stiffness = 0;   // the stiffest spring it renders stably [N/m]
 };
 
 // A coupling as the body runs it: every field set.
@@ -93,8 +93,8 @@ Coupling fit_to_step(Coupling c, double dt);
 // A coupled body's motion: pose at t_n, Newmark velocity and acceleration.
 struct BodyState {
   Pose pose;
-  Vec3 v{0.0}, a{0.0};          // [m/s], [m/s^2]
-  Vec3 w{0.0}, alpha{0.0};      // angular [rad/s], [rad/s^2] (world frame)
+  Vec3 v{0.0}, a{0.0};      // [m/s], [m/s^2]
+  Vec3 w{0.0}, alpha{0.0};  // angular [rad/s], [rad/s^2] (world frame)
 };
 
 // The prediction of eq. (7) for the body over dt, and the coupling's force

@@ -45,7 +45,7 @@ class CriticalStep {
   std::vector<int32_t> contact_tets_;       // the tets around each contact surface node
   std::vector<uint32_t> tet_mark_;          // per tet: the pass that last examined it (n_tets)
   uint32_t mark_ = 0;
-  std::vector<int32_t> examined_;           // the tets a pass examines (capacity: contact_tets_)
+  std::vector<int32_t> examined_;  // the tets a pass examines (capacity: contact_tets_)
   // The lanes of those tets gathered into one block for the kernel, with their rest steps.
   ElementBlock<Real> gathered_{};
   double gathered_dt_[kLanes<Real>] = {};

@@ -83,11 +83,11 @@ EnergyCheck check_energy_account(State<Real>& s, double tolerance, double floor,
   return check;
 }
 
-#define TACTILE_ENERGY_LEDGER(Real)                                                              \
-  template double energy_floor(const Model<Real>&);                                              \
-  template void open_energy_account(State<Real>&, Energy, double);                               \
-  template void restate_energy_account(State<Real>&, double);                                    \
-  template void close_energy_account(State<Real>&, const StepEnergySums&, double, double);       \
+#define TACTILE_ENERGY_LEDGER(Real)                                                        \
+  template double energy_floor(const Model<Real>&);                                        \
+  template void open_energy_account(State<Real>&, Energy, double);                         \
+  template void restate_energy_account(State<Real>&, double);                              \
+  template void close_energy_account(State<Real>&, const StepEnergySums&, double, double); \
   template EnergyCheck check_energy_account(State<Real>&, double, double, double);
 TACTILE_ENERGY_LEDGER(float)
 TACTILE_ENERGY_LEDGER(double)

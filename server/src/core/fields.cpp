@@ -23,8 +23,8 @@ TetFields compute_tet_fields(MaterialModel m, const double* F, double lambda, do
   if (m == MaterialModel::Linear) {
     for (int k = 0; k < 9; ++k) f.cauchy[k] = P[k];
   } else {
-    const double J = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
-                     F[2] * (F[3] * F[7] - F[4] * F[6]);
+    const double J =
+        F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) + F[2] * (F[3] * F[7] - F[4] * F[6]);
     const double inv_J = J != 0 ? 1.0 / J : std::numeric_limits<double>::quiet_NaN();
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) {

@@ -63,8 +63,7 @@ TACTILE_INLINE T trace(const T* A) {
 }
 template <class T>
 TACTILE_INLINE T det(const T* A) {
-  return A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) +
-         A[2] * (A[3] * A[7] - A[4] * A[6]);
+  return A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) + A[2] * (A[3] * A[7] - A[4] * A[6]);
 }
 // cof(A) = d det(A) / dA (for invertible A, det(A) A^-T).
 template <class T>
@@ -82,19 +81,18 @@ TACTILE_INLINE void cofactor(const T* A, T* C) {
 // C = A^T B
 template <class T>
 TACTILE_INLINE void mul_tn(const T* A, const T* B, T* C) {
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int j = 0; j < 3; ++j) C[3 * i + j] = A[i] * B[j] + A[3 + i] * B[3 + j] + A[6 + i] * B[6 + j];
 }
 // C = A B
 template <class T>
 TACTILE_INLINE void mul_nn(const T* A, const T* B, T* C) {
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
-    for (int j = 0; j < 3; ++j)
-      C[3 * i + j] = A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j] + A[3 * i + 2] * B[6 + j];
+#pragma GCC unroll 16
+    for (int j = 0; j < 3; ++j) C[3 * i + j] = A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j] + A[3 * i + 2] * B[6 + j];
 }
 
 // ---- linear (small strain) ---------------------------------------------------
@@ -102,13 +100,13 @@ TACTILE_INLINE void mul_nn(const T* A, const T* B, T* C) {
 template <class T>
 TACTILE_INLINE T stress_linear(const T* F, T lambda, T mu, T* P) {
   T eps[9];
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int j = 0; j < 3; ++j) eps[3 * i + j] = T(0.5) * (F[3 * i + j] + F[3 * j + i]) - (i == j ? T(1) : T(0));
   const T tr = trace(eps);
   T ee = 0;
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) {
     P[k] = T(2) * mu * eps[k];
     ee += eps[k] * eps[k];
@@ -128,7 +126,7 @@ TACTILE_INLINE T stress_linear(const T* F, T lambda, T mu, T* P) {
 template <class T>
 TACTILE_INLINE T stress_stvk_of_c(const T* F, T c00, T c11, T c22, T c01, T c02, T c12, T lambda, T mu, T* P) {
   const T d0 = c00 - T(1), d1 = c11 - T(1), d2 = c22 - T(1);  // 2 E_ii; c01, c02, c12 are 2 E_ij
-  const T tr = T(0.5) * (d0 + d1 + d2);                        // tr E
+  const T tr = T(0.5) * (d0 + d1 + d2);                       // tr E
   const T lt = lambda * tr;
   // S = 2 mu E + lambda tr(E) I
   const T S[9] = {mu * d0 + lt, mu * c01, mu * c02, mu * c01, mu * d1 + lt, mu * c12, mu * c02, mu * c12, mu * d2 + lt};
@@ -172,26 +170,26 @@ struct ScalarOf<Pair<T>> {
 template <class T>
 using Scalar = typename ScalarOf<T>::type;
 
-#define TACTILE_PAIR_ARITHMETIC(op)                                                 \
-  template <class T>                                                                \
-  TACTILE_INLINE Pair<T> operator op(Pair<T> x, Pair<T> y) {                        \
-    return {x.a op y.a, x.b op y.b};                                                \
-  }                                                                                 \
-  template <class T>                                                                \
-  TACTILE_INLINE Pair<T>& operator op##=(Pair<T>& x, Pair<T> y) {                   \
-    x.a op##= y.a;                                                                 \
-    x.b op##= y.b;                                                                 \
-    return x;                                                                       \
+#define TACTILE_PAIR_ARITHMETIC(op)                               \
+  template <class T>                                              \
+  TACTILE_INLINE Pair<T> operator op(Pair<T> x, Pair<T> y) {      \
+    return {x.a op y.a, x.b op y.b};                              \
+  }                                                               \
+  template <class T>                                              \
+  TACTILE_INLINE Pair<T>& operator op##=(Pair<T>& x, Pair<T> y) { \
+    x.a op## = y.a;                                               \
+    x.b op## = y.b;                                               \
+    return x;                                                     \
   }
 TACTILE_PAIR_ARITHMETIC(+)
 TACTILE_PAIR_ARITHMETIC(-)
 TACTILE_PAIR_ARITHMETIC(*)
 TACTILE_PAIR_ARITHMETIC(/)
 #undef TACTILE_PAIR_ARITHMETIC
-#define TACTILE_PAIR_COMPARISON(op)                                                 \
-  template <class T>                                                                \
-  TACTILE_INLINE PairMask operator op(Pair<T> x, Pair<T> y) {                       \
-    return {x.a op y.a, x.b op y.b};                                                \
+#define TACTILE_PAIR_COMPARISON(op)                           \
+  template <class T>                                          \
+  TACTILE_INLINE PairMask operator op(Pair<T> x, Pair<T> y) { \
+    return {x.a op y.a, x.b op y.b};                          \
   }
 TACTILE_PAIR_COMPARISON(<)
 TACTILE_PAIR_COMPARISON(>)
@@ -285,8 +283,8 @@ template <int p, int q, int k, class T>
 TACTILE_INLINE void apply_jacobi_rotation(T (&S)[3][3], T (&V)[3][3]) {
   using R = Scalar<T>;
   const T kA = R(0.25), kD = R(0.3125);
-  const T kC = R(0.5177669529663688110021109052621225982);   // 4 d' tan(pi/8)
-  const T kB = R(0.1294417382415922027505277263155306496);   // a c
+  const T kC = R(0.5177669529663688110021109052621225982);  // 4 d' tan(pi/8)
+  const T kB = R(0.1294417382415922027505277263155306496);  // a c
   const T spp = S[p][p], sqq = S[q][q], spq = S[p][q], spk = S[p][k], sqk = S[q][k];
   const T d = spp - sqq, e = T(R(2)) * spq;
   const T ad = abs_of(d), ae = abs_of(e);
@@ -302,7 +300,7 @@ TACTILE_INLINE void apply_jacobi_rotation(T (&S)[3][3], T (&V)[3][3]) {
   S[p][q] = S[q][p] = (cc - ss) * spq + cs * (sqq - spp);
   S[p][k] = S[k][p] = c * spk + s * sqk;
   S[q][k] = S[k][q] = c * sqk - s * spk;
-  #pragma GCC unroll 3
+#pragma GCC unroll 3
   for (int i = 0; i < 3; ++i) {
     const T vp = V[i][p], vq = V[i][q];
     V[i][p] = c * vp + s * vq;
@@ -318,7 +316,7 @@ TACTILE_INLINE void sort_singular_pair(T (&B)[3][3], T (&V)[3][3], T (&rho)[3]) 
   const T ri = rho[i], rj = rho[j];
   rho[i] = pick(swap, rj, ri);
   rho[j] = pick(swap, ri, rj);
-  #pragma GCC unroll 3
+#pragma GCC unroll 3
   for (int r = 0; r < 3; ++r) {
     const T bi = B[r][i], bj = B[r][j], vi = V[r][i], vj = V[r][j];
     B[r][i] = pick(swap, bj, bi);
@@ -336,26 +334,26 @@ TACTILE_INLINE void svd_of(const T* F, T (&U)[3][3], T* sigma, T (&V)[3][3]) {
   using R = Scalar<T>;
   // A = F / |F|: U and V do not change, and every threshold below is relative.
   T f2 = R(0);
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) f2 += F[k] * F[k];
   const T norm2 = pick(f2 > T(kRotationTiny<T>), f2, T(kRotationTiny<T>));
   const T scale = T(R(1)) / sqrt_of(norm2);
   T A[3][3];
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int j = 0; j < 3; ++j) A[i][j] = scale * F[3 * i + j];
   // V: eigenvectors of S = A^T A, a proper rotation from the start.
   T S[3][3];
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int j = 0; j < 3; ++j) S[i][j] = A[0][i] * A[0][j] + A[1][i] * A[1][j] + A[2][i] * A[2][j];
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int j = 0; j < 3; ++j) V[i][j] = T(i == j ? R(1) : R(0));
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int sweep = 0; sweep < kJacobiSweeps<T>; ++sweep) {
     apply_jacobi_rotation<0, 1, 2>(S, V);
     apply_jacobi_rotation<1, 2, 0>(S, V);
@@ -363,9 +361,9 @@ TACTILE_INLINE void svd_of(const T* F, T (&U)[3][3], T* sigma, T (&V)[3][3]) {
   }
   // B = A V = U Sigma: columns in decreasing length, so the last is the smallest.
   T B[3][3];
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int j = 0; j < 3; ++j) B[i][j] = A[i][0] * V[0][j] + A[i][1] * V[1][j] + A[i][2] * V[2][j];
   T rho[3] = {S[0][0], S[1][1], S[2][2]};  // |b_j|^2, as S is now V^T A^T A V
   sort_singular_pair<0, 1>(B, V, rho);
@@ -392,7 +390,7 @@ TACTILE_INLINE void svd_of(const T* F, T (&U)[3][3], T* sigma, T (&V)[3][3]) {
   const auto near_x = abs_of(u0[0]) > T(R(0.5));
   const T normal[3] = {pick(near_x, -u0[2], T(R(0))), pick(near_x, T(R(0)), u0[2]), pick(near_x, u0[0], -u0[1])};
   T v[3];
-  #pragma GCC unroll 3
+#pragma GCC unroll 3
   for (int i = 0; i < 3; ++i) v[i] = pick(rank_one, normal[i], b1[i]);
   // Projected once more: where b1 is nearly parallel to b0, what is left of
   // it after one projection is rounding, no longer normal to u0 to rounding
@@ -403,7 +401,7 @@ TACTILE_INLINE void svd_of(const T* F, T (&U)[3][3], T* sigma, T (&V)[3][3]) {
   const T i1 = T(R(1)) / r1;
   const T u1[3] = {w[0] * i1, w[1] * i1, w[2] * i1};
   const T u2[3] = {u0[1] * u1[2] - u0[2] * u1[1], u0[2] * u1[0] - u0[0] * u1[2], u0[0] * u1[1] - u0[1] * u1[0]};
-  #pragma GCC unroll 3
+#pragma GCC unroll 3
   for (int i = 0; i < 3; ++i) {
     U[i][0] = u0[i];
     U[i][1] = u1[i];
@@ -419,9 +417,9 @@ template <class T>
 TACTILE_INLINE void rotation_of(const T* F, T* R) {
   T U[3][3], V[3][3], sigma[3];
   svd_of(F, U, sigma, V);
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int j = 0; j < 3; ++j) R[3 * i + j] = U[i][0] * V[j][0] + U[i][1] * V[j][1] + U[i][2] * V[j][2];
 }
 
@@ -432,13 +430,13 @@ template <class T>
 TACTILE_INLINE T stress_corotational_of(const T* F, const T* R, T lambda, T mu, T* P) {
   T tr = -T(3);
   T dd = 0;
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) {
     tr += R[k] * F[k];
     const T d = F[k] - R[k];
     dd += d * d;
   }
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) P[k] = T(2) * mu * (F[k] - R[k]) + lambda * tr * R[k];
   return mu * dd + T(0.5) * lambda * tr * tr;
 }
@@ -462,7 +460,7 @@ TACTILE_INLINE T polar_newton_step(T* X) {
   cofactor(X, C);
   const T h = T(0.5) / (X[0] * C[0] + X[1] * C[1] + X[2] * C[2]);
   T change = 0;
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) {
     const T next = T(0.5) * X[k] + h * C[k];
     const T d = next - X[k];
@@ -550,7 +548,7 @@ TACTILE_INLINE T stress_invertible_stvk(const T* F, T lambda, T mu, T* P) {
   svd_of(F, U, s, V);
   const T c = T(R(kInversionFloor)), k = lambda + T(R(2)) * mu;
   T sh[3], d[3], E[3];
-  #pragma GCC unroll 3
+#pragma GCC unroll 3
   for (int i = 0; i < 3; ++i) {
     sh[i] = pick(s[i] > c, s[i], c);
     d[i] = s[i] - sh[i];
@@ -559,16 +557,16 @@ TACTILE_INLINE T stress_invertible_stvk(const T* F, T lambda, T mu, T* P) {
   const T tr = E[0] + E[1] + E[2];
   const T q = sh[0] * d[0] + sh[1] * d[1] + sh[2] * d[2];  // sum_j sigma^_j d_j, over the held ones
   T Ph[3], psi = mu * (E[0] * E[0] + E[1] * E[1] + E[2] * E[2]) + T(R(0.5)) * lambda * tr * tr;
-  #pragma GCC unroll 3
+#pragma GCC unroll 3
   for (int i = 0; i < 3; ++i) {
     const T g = sh[i] * (T(R(2)) * mu * E[i] + lambda * tr);
     const auto held = d[i] < T(R(0));
     Ph[i] = pick(held, g + k * d[i], g + lambda * sh[i] * q);
     psi += g * d[i] + T(R(0.5)) * k * d[i] * d[i];
   }
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int j = 0; j < 3; ++j)
       P[3 * i + j] = U[i][0] * Ph[0] * V[j][0] + U[i][1] * Ph[1] * V[j][1] + U[i][2] * Ph[2] * V[j][2];
   return psi;
@@ -652,14 +650,14 @@ TACTILE_INLINE T stress_neohookean(const T* F, T lambda, T mu, T* P) {
   // NaN into the block's energy sum and into node 0's force.
   const T alpha = lambda_s != T(0) ? T(1) + T(0.75) * mu_s / lambda_s : T(1);
   T Ic = 0;
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) Ic += F[k] * F[k];
   T C[9];
   cofactor(F, C);
   const T J = F[0] * C[0] + F[1] * C[1] + F[2] * C[2];
   const T a = mu_s * (T(1) - T(1) / (Ic + T(1)));
   const T b = lambda_s * (J - alpha);
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int k = 0; k < 9; ++k) P[k] = a * F[k] + b * C[k];
   // The same log for both terms, so that psi(I) = 0 exactly.
   const T psi_rest = T(0.5) * lambda_s * (T(1) - alpha) * (T(1) - alpha) - T(0.5) * mu_s * branchless_log(T(4));
@@ -699,7 +697,7 @@ TACTILE_INLINE T stiffening(MaterialModel m, const T* F) {
   mul_tn(F, F, C);
   // Gershgorin bound on the largest eigenvalue of C = F^T F (exact when C is diagonal).
   T s2 = 0;
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i) {
     const T row = std::fabs(C[3 * i]) + std::fabs(C[3 * i + 1]) + std::fabs(C[3 * i + 2]);
     s2 = row > s2 ? row : s2;

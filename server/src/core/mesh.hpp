@@ -19,9 +19,9 @@ using Tet = std::array<int32_t, 4>;
 using Tri = std::array<int32_t, 3>;
 
 struct TetMesh {
-  std::vector<Vec3> X;           // rest positions [m] (n_nodes)
-  std::vector<Tet> tets;         // node ids, positively oriented (n_tets x 4)
-  std::vector<int32_t> region;   // region id per tet, selects a material (n_tets); empty = all 0
+  std::vector<Vec3> X;          // rest positions [m] (n_nodes)
+  std::vector<Tet> tets;        // node ids, positively oriented (n_tets x 4)
+  std::vector<int32_t> region;  // region id per tet, selects a material (n_tets); empty = all 0
 
   int32_t n_nodes() const { return static_cast<int32_t>(X.size()); }
   int32_t n_tets() const { return static_cast<int32_t>(tets.size()); }

@@ -132,7 +132,8 @@ Model<Real> build_model(const ModelSpec& spec) {
   for (size_t r = 0; r < spec.materials.size(); ++r) {
     const MaterialSpec& mat = spec.materials[r];
     const std::string where = "materials[" + std::to_string(r) + "]";
-    if (!(mat.E > 0) || !std::isfinite(mat.E)) throw ModelError(where + ".E must be > 0 Pa, got " + std::to_string(mat.E));
+    if (!(mat.E > 0) || !std::isfinite(mat.E))
+      throw ModelError(where + ".E must be > 0 Pa, got " + std::to_string(mat.E));
     if (!(mat.nu > -1.0 && mat.nu < 0.5))
       throw ModelError(where + ".nu must lie in (-1, 0.5), got " + std::to_string(mat.nu));
     if (!(mat.rho > 0) || !std::isfinite(mat.rho))
@@ -152,10 +153,12 @@ Model<Real> build_model(const ModelSpec& spec) {
     const Vec3 &x0 = mesh.X[size_t(t[0])], &x1 = mesh.X[size_t(t[1])], &x2 = mesh.X[size_t(t[2])],
                &x3 = mesh.X[size_t(t[3])];
     const double V = compute_tet_volume(x0, x1, x2, x3);
-    const double L = std::max({glm::length(x1 - x0), glm::length(x2 - x0), glm::length(x3 - x0),
-                               glm::length(x2 - x1), glm::length(x3 - x1), glm::length(x3 - x2)});
-    if (V < 0) inverted.push_back(int32_t(e));
-    else if (V <= 1e-9 * L * L * L) flat.push_back(int32_t(e));
+    const double L = std::max({glm::length(x1 - x0), glm::length(x2 - x0), glm::length(x3 - x0), glm::length(x2 - x1),
+                               glm::length(x3 - x1), glm::length(x3 - x2)});
+    if (V < 0)
+      inverted.push_back(int32_t(e));
+    else if (V <= 1e-9 * L * L * L)
+      flat.push_back(int32_t(e));
     model.tet_volume[e] = V;
   }
   if (!inverted.empty() || !flat.empty()) {
@@ -163,8 +166,8 @@ Model<Real> build_model(const ModelSpec& spec) {
     if (!inverted.empty())
       msg += " " + std::to_string(inverted.size()) + " inverted tet(s) (ids " + list_ids(inverted) + ")";
     if (!flat.empty())
-      msg += std::string(inverted.empty() ? "" : ";") + " " + std::to_string(flat.size()) +
-             " degenerate tet(s) (ids " + list_ids(flat) + ")";
+      msg += std::string(inverted.empty() ? "" : ";") + " " + std::to_string(flat.size()) + " degenerate tet(s) (ids " +
+             list_ids(flat) + ")";
     throw ModelError(msg);
   }
 
@@ -196,8 +199,10 @@ Model<Real> build_model(const ModelSpec& spec) {
   for (size_t i = 0; i < nn; ++i) {
     model.m[i] = Real(mass[i]);
     model.total_mass += mass[i];
-    if (mass[i] > 0) model.inv_m[i] = Real(1.0 / mass[i]);
-    else unreferenced.push_back(int32_t(i));
+    if (mass[i] > 0)
+      model.inv_m[i] = Real(1.0 / mass[i]);
+    else
+      unreferenced.push_back(int32_t(i));
   }
   if (!unreferenced.empty())
     throw ModelError("mesh has " + std::to_string(unreferenced.size()) + " node(s) in no tet (ids " +
@@ -217,8 +222,8 @@ Model<Real> build_model(const ModelSpec& spec) {
   // neighbours half the body later (fem_bench --large --only=passes, the
   // elastic column at 1 M tets; docs/perf.md, Element and node order).
   constexpr size_t kMinPartElements = 4096;
-  const auto n_parts = static_cast<int32_t>(std::clamp<size_t>(nt / kMinPartElements, 1,
-                                                                size_t(std::max(1, spec.integrator.threads))));
+  const auto n_parts =
+      static_cast<int32_t>(std::clamp<size_t>(nt / kMinPartElements, 1, size_t(std::max(1, spec.integrator.threads))));
   std::vector<int32_t> order(nt);
   std::iota(order.begin(), order.end(), 0);
   {
@@ -227,13 +232,12 @@ Model<Real> build_model(const ModelSpec& spec) {
     const Aabb box = compute_aabb(mesh.X);
     const Vec3 extent = box.size();
     const double cell = std::cbrt(6.0 * volume / double(nt));  // a cube of 6 tets of the mean volume
-    std::array<int, 3> axis{0, 1, 2};                         // slowest first
+    std::array<int, 3> axis{0, 1, 2};                          // slowest first
     std::stable_sort(axis.begin(), axis.end(), [&](int a, int b) { return extent[a] > extent[b]; });
     std::vector<std::array<int32_t, 3>> key(nt);
     for (size_t e = 0; e < nt; ++e) {
       const Tet& t = mesh.tets[e];
-      const Vec3 c =
-          (mesh.X[size_t(t[0])] + mesh.X[size_t(t[1])] + mesh.X[size_t(t[2])] + mesh.X[size_t(t[3])]) * 0.25;
+      const Vec3 c = (mesh.X[size_t(t[0])] + mesh.X[size_t(t[1])] + mesh.X[size_t(t[2])] + mesh.X[size_t(t[3])]) * 0.25;
       for (int k = 0; k < 3; ++k) key[e][size_t(k)] = int32_t((c[axis[size_t(k)]] - box.lo[axis[size_t(k)]]) / cell);
     }
     std::stable_sort(order.begin(), order.end(), [&](int32_t a, int32_t b) { return key[size_t(a)] < key[size_t(b)]; });
@@ -265,7 +269,7 @@ Model<Real> build_model(const ModelSpec& spec) {
         ElementBlock<Real> B{};
         for (int l = 0; l < W; ++l) {
           const size_t slot = size_t(l) * n_blocks + b;  // position in the chunk
-          if (slot >= count) {  // padding lane: zero stiffness, identity shape
+          if (slot >= count) {                           // padding lane: zero stiffness, identity shape
             // All corners at one node (lane 0's first; lane 0 is never
             // padding): F = I whatever u, and a node this block touches anyway.
             for (int c = 0; c < 4; ++c) B.node4[c][l] = B.node4[0][0];
@@ -452,7 +456,8 @@ Model<Real> build_model(const ModelSpec& spec) {
     if (!(std::fabs(std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z) - 1.0) < 1e-6))
       throw ModelError(where + ": orientation must be a unit quaternion");
     for (size_t k = 0; k < h; ++k)
-      if (spec.hands[k].name == hs.name) throw ModelError(where + ": name used twice (also hand " + std::to_string(k) + ")");
+      if (spec.hands[k].name == hs.name)
+        throw ModelError(where + ": name used twice (also hand " + std::to_string(k) + ")");
     if (std::find(model.proxy_hand.begin(), model.proxy_hand.end(), int32_t(h)) == model.proxy_hand.end())
       throw ModelError(where + ": no proxy belongs to it");
     model.hands.push_back(hs);

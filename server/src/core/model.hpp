@@ -60,8 +60,8 @@ struct EssentialSet {
 // Nodes loaded by one natural boundary condition, with their share of it.
 struct LoadSet {
   NaturalLoad spec;
-  std::vector<int32_t> nodes;   // node ids (n_set)
-  std::vector<double> weight;   // share of the total force, sums to 1 (n_set)
+  std::vector<int32_t> nodes;  // node ids (n_set)
+  std::vector<double> weight;  // share of the total force, sums to 1 (n_set)
 };
 
 template <class Real>
@@ -75,13 +75,13 @@ struct Model {
   TetMesh mesh;
   std::vector<int32_t> node_model;  // model id of each given node (n_nodes)
   std::vector<int32_t> node_given;  // given id of each model node (n_nodes)
-  std::vector<Tri> surface;        // boundary triangles, outward (n_faces x 3)
+  std::vector<Tri> surface;         // boundary triangles, outward (n_faces x 3)
   int32_t n_nodes = 0;
   int32_t n_tets = 0;
 
-  std::vector<Real> m;             // lumped mass [kg] (n_nodes), section 4.1
-  std::vector<Real> inv_m;         // 1 / m [1/kg] (n_nodes)
-  double total_mass = 0;           // [kg]
+  std::vector<Real> m;      // lumped mass [kg] (n_nodes), section 4.1
+  std::vector<Real> inv_m;  // 1 / m [1/kg] (n_nodes)
+  double total_mass = 0;    // [kg]
 
   std::vector<ElementBlock<Real>> blocks;  // lane-blocked elements (n_blocks)
   std::vector<ElementGroup> groups;        // ranges of blocks of one material model, per part
@@ -99,14 +99,14 @@ struct Model {
   bool any_non_invertible = false;         // some element uses a model that cannot invert
 
   std::vector<EssentialSet> essential;
-  std::vector<int32_t> constrained;        // all nodes under an essential BC, sorted unique
+  std::vector<int32_t> constrained;  // all nodes under an essential BC, sorted unique
   std::vector<LoadSet> loads;
-  std::vector<ProxySpec> proxies;          // device filled in from the hand for hand proxies
+  std::vector<ProxySpec> proxies;  // device filled in from the hand for hand proxies
   std::vector<HandSpec> hands;
-  std::vector<int32_t> proxy_hand;         // hand index per proxy, -1 if none (n_proxies)
-  std::vector<Pose> proxy_offset;          // pose in its hand's frame (n_proxies; identity if no hand)
-  std::vector<std::string> devices;        // distinct device channels, in order of first use
-  std::vector<int32_t> proxy_device;       // device index per proxy (n_proxies)
+  std::vector<int32_t> proxy_hand;    // hand index per proxy, -1 if none (n_proxies)
+  std::vector<Pose> proxy_offset;     // pose in its hand's frame (n_proxies; identity if no hand)
+  std::vector<std::string> devices;   // distinct device channels, in order of first use
+  std::vector<int32_t> proxy_device;  // device index per proxy (n_proxies)
   Effects effects;
   IntegratorSpec integrator;
 };

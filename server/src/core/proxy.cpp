@@ -235,7 +235,8 @@ Vec3 deepest_in_box(const Vec3& h, const Vec3& a, const Vec3& b, const Vec3& c) 
         if (!worth(glm::min(e0, e1), glm::max(e0, e1))) continue;
         Vec3 w;
         if (segment_meets_triangle(e0, e1, a, b, c, w)) consider(w);  // a box edge through the triangle
-        for (int k = 0; k < 3; ++k) consider(on_edge(k, closest_on_segments(e0, e1, corner[k], corner[(k + 1) % 3]).second));
+        for (int k = 0; k < 3; ++k)
+          consider(on_edge(k, closest_on_segments(e0, e1, corner[k], corner[(k + 1) % 3]).second));
       }
   }
   return best;
@@ -273,8 +274,7 @@ double trust_depth(const ProxyGeometry& g) {
   switch (g.shape) {
     case ProxyShape::Sphere:
     case ProxyShape::Capsule: return 0.5 * g.radius;
-    case ProxyShape::Box:
-      return 0.5 * (std::min({g.half_extents.x, g.half_extents.y, g.half_extents.z}) + g.radius);
+    case ProxyShape::Box: return 0.5 * (std::min({g.half_extents.x, g.half_extents.y, g.half_extents.z}) + g.radius);
     case ProxyShape::Plane: return std::numeric_limits<double>::infinity();
   }
   return 0.0;

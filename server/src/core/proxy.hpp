@@ -28,9 +28,9 @@ const char* to_string(ProxyShape s);
 //   Plane: the half-space y <= 0 of the proxy frame (a floor, a wall).
 struct ProxyGeometry {
   ProxyShape shape = ProxyShape::Sphere;
-  double radius = 0.01;       // [m]
-  double half_length = 0.0;   // Capsule [m]
-  Vec3 half_extents{0.01};    // Box [m]
+  double radius = 0.01;      // [m]
+  double half_length = 0.0;  // Capsule [m]
+  Vec3 half_extents{0.01};   // Box [m]
 };
 
 // Signed distance of p (proxy frame) and the outward unit normal there.

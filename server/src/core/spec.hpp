@@ -18,20 +18,20 @@ namespace tactile {
 
 struct MaterialSpec {
   MaterialModel model = MaterialModel::StVK;
-  double E = 1e5;      // Young's modulus [Pa]
-  double nu = 0.3;     // Poisson's ratio [-]
-  double rho = 1000;   // density [kg/m^3]
+  double E = 1e5;     // Young's modulus [Pa]
+  double nu = 0.3;    // Poisson's ratio [-]
+  double rho = 1000;  // density [kg/m^3]
 };
 
 // Which nodes a boundary condition or load applies to (rest positions).
 struct NodeSelector {
   enum class Kind : uint8_t { Box, Plane, Nodes };
   Kind kind = Kind::Box;
-  Vec3 lo{0.0}, hi{0.0};      // Box: inclusive corners [m]
-  Vec3 point{0.0};            // Plane: a point on it [m]
-  Vec3 normal{0.0, 1.0, 0.0}; // Plane: its normal (any length)
-  double tolerance = 1e-9;    // Plane: max distance [m]; Box: slack [m]
-  std::vector<int32_t> nodes; // Nodes: explicit ids
+  Vec3 lo{0.0}, hi{0.0};       // Box: inclusive corners [m]
+  Vec3 point{0.0};             // Plane: a point on it [m]
+  Vec3 normal{0.0, 1.0, 0.0};  // Plane: its normal (any length)
+  double tolerance = 1e-9;     // Plane: max distance [m]; Box: slack [m]
+  std::vector<int32_t> nodes;  // Nodes: explicit ids
 };
 
 // A scalar s(t) with its first two derivatives, used as an angle [rad] or a
@@ -80,27 +80,27 @@ struct NaturalLoad {
 // turned together, their forces summed for that device.
 struct ProxySpec {
   std::string name;
-  std::string device;   // device channel that drives it and receives its force ("" in a hand: the hand's)
-  std::string hand;     // hand it belongs to ("" = none)
+  std::string device;  // device channel that drives it and receives its force ("" in a hand: the hand's)
+  std::string hand;    // hand it belongs to ("" = none)
   ProxyGeometry geometry;
-  Pose pose;            // at t = 0 (world)
-  double friction = 0;  // Coulomb coefficient mu (used when effects.friction)
+  Pose pose;              // at t = 0 (world)
+  double friction = 0;    // Coulomb coefficient mu (used when effects.friction)
   CouplingSpec coupling;  // when a device drives it alone through a coupling (core/coupling.hpp)
 };
 
 struct HandSpec {
   std::string name;
-  std::string device;  // device channel that drives the hand
-  Pose pose;           // at t = 0 (world): its proxies keep their offsets from it
+  std::string device;     // device channel that drives the hand
+  Pose pose;              // at t = 0 (world): its proxies keep their offsets from it
   CouplingSpec coupling;  // when its device drives it through a coupling (core/coupling.hpp)
 };
 
 struct Effects {
-  bool friction = false;    // Coulomb friction at proxy contacts (contact itself: any proxy)
+  bool friction = false;  // Coulomb friction at proxy contacts (contact itself: any proxy)
   bool gravity = false;
   Vec3 g{0.0, -9.81, 0.0};  // [m/s^2]
   bool damping = false;
-  double alpha = 0.0;       // Rayleigh mass damping D = alpha M [1/s], eq. (10)
+  double alpha = 0.0;  // Rayleigh mass damping D = alpha M [1/s], eq. (10)
 };
 
 enum class Precision : uint8_t { Float, Double };
@@ -108,11 +108,11 @@ enum class UnstablePolicy : uint8_t { Subdivide, Refuse };
 
 struct IntegratorSpec {
   Precision precision = Precision::Double;
-  double dt = 0.0;                 // fixed step [s]; 0 = chosen from the critical step
-  double safety = 0.9;             // auto step = safety * critical step
+  double dt = 0.0;                                      // fixed step [s]; 0 = chosen from the critical step
+  double safety = 0.9;                                  // auto step = safety * critical step
   UnstablePolicy unstable = UnstablePolicy::Subdivide;  // fixed dt above the critical step
-  int32_t threads = 1;             // element and node passes split this many ways
-  double energy_tolerance = 0.05;  // energy growth allowed beyond the work done, relative
+  int32_t threads = 1;                                  // element and node passes split this many ways
+  double energy_tolerance = 0.05;                       // energy growth allowed beyond the work done, relative
   // The energy balance is checked over windows of this much simulated time [s]: the quadrature errors of
   // the work sums (second order per step) add up without bound over a live session of hours, and the
   // guard is there for blow-ups, which grow within milliseconds.

@@ -29,7 +29,8 @@ StepPlan make_step_plan(const Model<Real>& model, bool parallel) {
   using EssentialEntry = StepPlan::EssentialEntry;
   // The model's parts (integrator.threads of them, fewer on small meshes).
   if (parallel) {
-    for (const ModelPart& mp : model.parts) plan.parts.push_back({mp.block_begin, mp.block_end, mp.node_begin, mp.node_end});
+    for (const ModelPart& mp : model.parts)
+      plan.parts.push_back({mp.block_begin, mp.block_end, mp.node_begin, mp.node_end});
   } else {
     plan.parts.push_back({0, static_cast<int32_t>(model.blocks.size()), 0, model.n_nodes});
   }
@@ -89,8 +90,10 @@ StepPlan make_step_plan(const Model<Real>& model, bool parallel) {
       part.side = p % 2 == 0 ? 1 : 2;
       part.share = p / 2;
       const int32_t own = (part.block_end - part.block_begin) * kShareOwnPercent / 100;
-      if (part.side == 1) part.own_end = std::clamp(snap(part.block_begin + own), part.block_begin, part.block_end);
-      else part.own_begin = std::clamp(snap(part.block_end - own), part.block_begin, part.block_end);
+      if (part.side == 1)
+        part.own_end = std::clamp(snap(part.block_begin + own), part.block_begin, part.block_end);
+      else
+        part.own_begin = std::clamp(snap(part.block_end - own), part.block_begin, part.block_end);
     }
     part.own_region = add_region(part.own_begin, part.own_end);
   }
@@ -98,7 +101,7 @@ StepPlan make_step_plan(const Model<Real>& model, bool parallel) {
     Part& left = plan.parts[size_t(2 * k)];
     Part& right = plan.parts[size_t(2 * k + 1)];
     const int32_t m0 = left.own_end, m1 = right.own_begin;  // the middle, whole strips
-    std::vector<int32_t> strips;  // its strip starts, and its end
+    std::vector<int32_t> strips;                            // its strip starts, and its end
     for (int32_t c : cuts)
       if (c >= m0 && c <= m1) strips.push_back(c);
     const auto n_strips = static_cast<int32_t>(strips.size()) - 1;
@@ -157,8 +160,9 @@ StepPlan make_step_plan(const Model<Real>& model, bool parallel) {
       while (q + 1 < n_parts && node >= plan.parts[size_t(q)].node_end) ++q;
       return q;
     };
-    std::stable_sort(plan.essential_entries.begin(), plan.essential_entries.end(),
-                     [&](const EssentialEntry& a, const EssentialEntry& b) { return part_of(a.node) < part_of(b.node); });
+    std::stable_sort(
+        plan.essential_entries.begin(), plan.essential_entries.end(),
+        [&](const EssentialEntry& a, const EssentialEntry& b) { return part_of(a.node) < part_of(b.node); });
     size_t k = 0;
     for (int32_t q = 0; q < n_parts; ++q) {
       plan.parts[size_t(q)].essential_begin = k;
@@ -193,7 +197,8 @@ StepPlan make_step_plan(const Model<Real>& model, bool parallel) {
     }
     std::vector<int32_t> wait;
     for (int32_t g = part.b_begin / 16; g < (part.b_end + 15) / 16 && part.b_begin < part.b_end; ++g)
-      for (int32_t k = plan.group_begin[size_t(g)]; k < plan.group_begin[size_t(g) + 1]; ++k) wait.push_back(group_region[size_t(k)]);
+      for (int32_t k = plan.group_begin[size_t(g)]; k < plan.group_begin[size_t(g) + 1]; ++k)
+        wait.push_back(group_region[size_t(k)]);
     std::sort(wait.begin(), wait.end());
     wait.erase(std::unique(wait.begin(), wait.end()), wait.end());
     part.wait_region_begin = plan.wait_regions.size();

@@ -30,9 +30,9 @@ struct StepPlan {
     // elastic_part): 1 for the one whose own share is on the left, 2 for
     // the one on the right, 0 for a part without a partner.
     int32_t side = 0;
-    int32_t share = -1;           // its pair's index (the stepper's shares_)
-    int32_t own_begin = 0, own_end = 0;  // the blocks it always takes
-    int32_t own_region = 0;       // where their forces go, in regions
+    int32_t share = -1;                      // its pair's index (the stepper's shares_)
+    int32_t own_begin = 0, own_end = 0;      // the blocks it always takes
+    int32_t own_region = 0;                  // where their forces go, in regions
     int32_t chunk_begin = 0, chunk_end = 0;  // its pair's middle chunks, in chunks
     // The parts whose nodes its own blocks read: [wait_lo, wait_hi].
     int32_t wait_lo = 0, wait_hi = -1;
@@ -69,11 +69,11 @@ struct StepPlan {
   // order: group_offset[group_begin[g] .. group_begin[g + 1]).
   std::vector<int32_t> group_begin;
   std::vector<int64_t> group_offset;
-  std::vector<int32_t> region_part;   // per region: the part whose own blocks fill it, or -1
-  std::vector<int32_t> region_pair;   // per region: the pair whose middle chunk fills it, or -1
-  std::vector<int32_t> wait_regions;  // per part, the regions its B nodes wait for
+  std::vector<int32_t> region_part;               // per region: the part whose own blocks fill it, or -1
+  std::vector<int32_t> region_pair;               // per region: the pair whose middle chunk fills it, or -1
+  std::vector<int32_t> wait_regions;              // per part, the regions its B nodes wait for
   std::vector<EssentialEntry> essential_entries;  // grouped by part, each part's in set order
-  int64_t force_slots = 0;  // the regions' arrays laid end to end [nodes]
+  int64_t force_slots = 0;                        // the regions' arrays laid end to end [nodes]
 };
 
 // The model's parts when `parallel` (a pool of two threads or more runs

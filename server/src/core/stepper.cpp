@@ -113,8 +113,10 @@ State<Real> Stepper<Real>::make_state() const {
 
 template <class Real>
 void Stepper<Real>::run_parts(void (*fn)(void*, int32_t), void* ctx) {
-  if (n_parts_ == 1) fn(ctx, 0);
-  else parallel_->run(n_parts_, fn, ctx);
+  if (n_parts_ == 1)
+    fn(ctx, 0);
+  else
+    parallel_->run(n_parts_, fn, ctx);
 }
 
 template <class Real>
@@ -183,7 +185,8 @@ void Stepper<Real>::elastic_part(void* ctx, int32_t p) {
   if (!self->fused_correct_) return;
   self->ensure_region(part.own_region);
   const CorrectSums a = self->correct_range(part.a_begin, part.a_end);
-  for (size_t k = part.wait_region_begin; k < part.wait_region_end; ++k) self->ensure_region(self->plan_.wait_regions[k]);
+  for (size_t k = part.wait_region_begin; k < part.wait_region_end; ++k)
+    self->ensure_region(self->plan_.wait_regions[k]);
   const CorrectSums b = self->correct_range(part.b_begin, part.b_end);
   self->correct_sums_[size_t(p)] = {a.abs_a + b.abs_a, a.mv2 + b.mv2, a.mgu + b.mgu, a.ma2 + b.ma2};
 }
@@ -224,8 +227,10 @@ template <class Real>
 void Stepper<Real>::ensure_region(int32_t r) {
   const RegionDone& done = region_done_[size_t(r)];
   if (done.done(epoch_)) return;
-  if (plan_.region_part[size_t(r)] >= 0) ensure_own(plan_.region_part[size_t(r)]);
-  else if (plan_.region_pair[size_t(r)] >= 0) claim_chunks(plan_.region_pair[size_t(r)], 1);
+  if (plan_.region_part[size_t(r)] >= 0)
+    ensure_own(plan_.region_part[size_t(r)]);
+  else if (plan_.region_pair[size_t(r)] >= 0)
+    claim_chunks(plan_.region_pair[size_t(r)], 1);
   done.wait(epoch_);  // claimed: a thread is at it
 }
 
@@ -398,8 +403,8 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   cur_t1_ = s.t + dt;
   open_energy_account(s, dt);
   keep_work_positions(s);
-  predict_and_add_elastic_forces(s);  // eq. (7), essential positions, R(u_{n+1})
-  correct(s);                         // F_{n+1}, eqs. (8)-(10), then (9)
+  predict_and_add_elastic_forces(s);                 // eq. (7), essential positions, R(u_{n+1})
+  correct(s);                                        // F_{n+1}, eqs. (8)-(10), then (9)
   const ContactSums contact = apply_contact(s, dt);  // section 5.1
   essential_mv2_delta_ = essential_ma2_delta_ = 0;
   if (!model_.essential.empty()) {
@@ -426,7 +431,8 @@ void Stepper<Real>::open_energy_account(State<Real>& s, double dt) {
   size_t c = 0;  // loads at t_n for the work trapezoid
   for (const LoadSet& load : model_.loads) {
     const double scale = load.spec.scale ? compute_profile(*load.spec.scale, s.t).s : 1.0;
-    for (size_t k = 0; k < load.nodes.size(); ++k, ++c) s.energy.load_force[c] = load.spec.force * (scale * load.weight[k]);
+    for (size_t k = 0; k < load.nodes.size(); ++k, ++c)
+      s.energy.load_force[c] = load.spec.force * (scale * load.weight[k]);
   }
   apply_initial_acceleration(s);
   contact_.start(s);
@@ -548,15 +554,13 @@ Fault Stepper<Real>::check_step(State<Real>& s) {
   } else if (el.inverted > 0) {
     std::vector<int32_t> ids = find_inverted_elements(s);
     // The message first: an argument std::move(ids) may be evaluated before list_ids(ids).
-    std::string msg = std::to_string(el.inverted) +
-                      " element(s) inverted (det F <= 0), which their material (" +
+    std::string msg = std::to_string(el.inverted) + " element(s) inverted (det F <= 0), which their material (" +
                       std::string(ids.empty() ? "stvk" : to_string(model_.tet_model[size_t(ids.front())])) +
-                      ") cannot recover from: ids " +
-                      list_ids(ids);
+                      ") cannot recover from: ids " + list_ids(ids);
     fault = make_fault(Fault::Kind::Inverted, s, std::move(msg), std::move(ids));
   } else {
-    const EnergyCheck check = check_energy_account(s, model_.integrator.energy_tolerance, energy_floor_,
-                                                   model_.integrator.energy_window);
+    const EnergyCheck check =
+        check_energy_account(s, model_.integrator.energy_tolerance, energy_floor_, model_.integrator.energy_window);
     if (check.verdict != EnergyCheck::Verdict::Ok) {
       std::vector<int32_t> ids = find_top_energy_elements(s, 10);
       std::ostringstream msg;
@@ -575,8 +579,7 @@ Fault Stepper<Real>::check_step(State<Real>& s) {
 }
 
 template <class Real>
-Fault Stepper<Real>::make_fault(Fault::Kind kind, State<Real>& s, std::string message,
-                                std::vector<int32_t> elements) {
+Fault Stepper<Real>::make_fault(Fault::Kind kind, State<Real>& s, std::string message, std::vector<int32_t> elements) {
   s.fault.kind = kind;
   s.fault.step = s.step;
   s.fault.t = s.t;
@@ -664,8 +667,8 @@ std::vector<double> Stepper<Real>::compute_element_energy(const State<Real>& s) 
   std::vector<double> lane(size_t(kLanes<Real>));
   for (const ElementGroup& g : model_.groups) {
     for (int32_t b = g.begin; b < g.end; ++b) {
-      kernels_.energy[int(g.model)](model_.blocks.data(), b, b + 1, Real(g.lambda), Real(g.mu), s.u.data(),
-                                    lane.data(), nullptr);
+      kernels_.energy[int(g.model)](model_.blocks.data(), b, b + 1, Real(g.lambda), Real(g.mu), s.u.data(), lane.data(),
+                                    nullptr);
       for (int l = 0; l < kLanes<Real>; ++l) {
         const int32_t e = model_.lane_tet[size_t(b) * kLanes<Real> + size_t(l)];
         if (e >= 0) out[size_t(e)] = lane[size_t(l)];

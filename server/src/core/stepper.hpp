@@ -29,8 +29,8 @@
 #include "core/critical_step.hpp"
 #include "core/energy_ledger.hpp"
 #include "core/model.hpp"
-#include "core/step_plan.hpp"
 #include "core/state.hpp"
+#include "core/step_plan.hpp"
 #include "core/step_sync.hpp"
 
 namespace tactile {
@@ -60,9 +60,9 @@ class StepProbe {
 
 struct AdvanceReport {
   int32_t substeps = 0;
-  double dt = 0;           // sub-step used [s]
-  double dt_critical = 0;  // estimate for the current configuration [s]
-  bool subdivided = false; // a fixed dt above the estimate was split
+  double dt = 0;            // sub-step used [s]
+  double dt_critical = 0;   // estimate for the current configuration [s]
+  bool subdivided = false;  // a fixed dt above the estimate was split
   Fault fault;
 };
 
@@ -174,20 +174,20 @@ class Stepper {
   // Workspace, sized once.
   std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> u4_;  // u for the element pass [m] (n_nodes)
   std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> f_;   // the regions' force arrays [N]
-  std::unique_ptr<PairShare[]> shares_;  // per pair of parts
-  std::vector<ElasticSums> elastic_;     // per region, whichever thread filled it
-  std::vector<CorrectSums> correct_sums_;  // per part
-  std::vector<Vec3> u_before_;           // constrained and loaded nodes' u at t_n [m]
-  std::vector<Real> a_prescribed_;       // prescribed accelerations (n_constrained x 3)
-  std::vector<Real> v_prescribed_;       // prescribed velocities (n_constrained x 3)
-  std::vector<int32_t> loaded_;          // loaded node ids, flattened over loads
+  std::unique_ptr<PairShare[]> shares_;                              // per pair of parts
+  std::vector<ElasticSums> elastic_;                                 // per region, whichever thread filled it
+  std::vector<CorrectSums> correct_sums_;                            // per part
+  std::vector<Vec3> u_before_;                                       // constrained and loaded nodes' u at t_n [m]
+  std::vector<Real> a_prescribed_;                                   // prescribed accelerations (n_constrained x 3)
+  std::vector<Real> v_prescribed_;                                   // prescribed velocities (n_constrained x 3)
+  std::vector<int32_t> loaded_;                                      // loaded node ids, flattened over loads
   // The split step's hand-offs (core/step_sync.hpp).
-  std::unique_ptr<OnceClaim[]> predicted_;    // per part: its nodes predicted, its essential positions set
-  std::unique_ptr<OnceClaim[]> own_claim_;    // per part: its own blocks
+  std::unique_ptr<OnceClaim[]> predicted_;     // per part: its nodes predicted, its essential positions set
+  std::unique_ptr<OnceClaim[]> own_claim_;     // per part: its own blocks
   std::unique_ptr<RegionDone[]> region_done_;  // per region
-  uint32_t epoch_ = 0;                   // steps that predicted inside the element pass
-  bool fused_ = false;                   // the element pass predicts first (see elastic_part)
-  bool fused_correct_ = false;           // and corrects last
+  uint32_t epoch_ = 0;                         // steps that predicted inside the element pass
+  bool fused_ = false;                         // the element pass predicts first (see elastic_part)
+  bool fused_correct_ = false;                 // and corrects last
 
   // Per-step context for the part functions.
   State<Real>* cur_ = nullptr;
@@ -201,7 +201,7 @@ class Stepper {
   StepSums step_sums_;              // the passes' sums of the latest step, for its guard
   double essential_mv2_delta_ = 0;  // constrained nodes' change of m |v|^2 in this step
   double essential_ma2_delta_ = 0;  // and of m |a|^2
-  double energy_floor_ = 0;  // the balance's resolution in Real (energy_floor) [J]
+  double energy_floor_ = 0;         // the balance's resolution in Real (energy_floor) [J]
 };
 
 }  // namespace tactile

@@ -113,7 +113,8 @@ bool DevicePath::add(double device_s, const Pose& pose, double t) {
   } else if (t > drift_t_) {
     const double w = 1.0 - std::exp(-(t - drift_t_) / kDriftMemory);
     const double most = 0.5 * kLeadSlew;  // (leaving the lead room to close on it)
-    target_rate_ = std::clamp(target_rate_ + w * ((target - drift_target_) / (t - drift_t_) - target_rate_), -most, most);
+    target_rate_ =
+        std::clamp(target_rate_ + w * ((target - drift_target_) / (t - drift_t_) - target_rate_), -most, most);
     drift_t_ = t;
     drift_target_ = target;
   }

@@ -39,9 +39,9 @@ namespace tactile {
 
 class DevicePath {
  public:
-  static constexpr double kMaxDelay = 0.003;          // the playout delay at most [s]
-  static constexpr double kMaxExtrapolation = 0.01;   // past the newest input, at its velocity [s]
-  static constexpr double kPause = 0.1;               // inputs this far apart start a new path [s]
+  static constexpr double kMaxDelay = 0.003;         // the playout delay at most [s]
+  static constexpr double kMaxExtrapolation = 0.01;  // past the newest input, at its velocity [s]
+  static constexpr double kPause = 0.1;              // inputs this far apart start a new path [s]
   // How fast the playout's lead may change [s/s]: a loop at half the
   // device's pace at the most (the playout then runs at 1.5 times the loop's).
   static constexpr double kLeadSlew = 0.5;
@@ -74,11 +74,11 @@ class DevicePath {
     double lead, rate;
   };
   Lead lead(double t) const;
-  double offset_ = 0;  // loop time minus device time, the smallest lately [s]
-  double jitter_ = 0;  // how much later than that inputs come [s]
+  double offset_ = 0;                                        // loop time minus device time, the smallest lately [s]
+  double jitter_ = 0;                                        // how much later than that inputs come [s]
   double anchor_t_ = 0, anchor_lead_ = 0, anchor_rate_ = 0;  // the lead at the latest input [s], [s/s]
-  double target_rate_ = 0;                 // the target's drift, smoothed [s/s]
-  double drift_t_ = 0, drift_target_ = 0;  // the target when the drift was last taken [s]
+  double target_rate_ = 0;                                   // the target's drift, smoothed [s/s]
+  double drift_t_ = 0, drift_target_ = 0;                    // the target when the drift was last taken [s]
 };
 
 }  // namespace tactile

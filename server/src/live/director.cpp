@@ -47,7 +47,8 @@ LiveScene::LiveScene(Scene scene, uint32_t id, const LiveOptions& options)
     : scene_(std::move(scene)),
       id_(id),
       sim_(scene_.spec),
-      frames_(sim_, scene_.name, id_, step_for(scene_, sim_, options), window_for(step_for(scene_, sim_, options), options)),
+      frames_(sim_, scene_.name, id_, step_for(scene_, sim_, options),
+              window_for(step_for(scene_, sim_, options), options)),
       loop_(sim_, frames_, loop_options(step_for(scene_, sim_, options), options)) {
   const double dt = loop_.dt(), rate = double(sim_.n_tets()) / dt;
   if (rate > kMaxLiveTetStepsPerSecond) {
@@ -104,8 +105,8 @@ std::string Director::request(const Change& change, Built built, bool* busy) {
     if (std::find(scenes_.begin(), scenes_.end(), change.scene) == scenes_.end()) {
       std::string known;
       for (const std::string& n : scenes_) known += (known.empty() ? "" : ", ") + n;
-      return "no scene '" + change.scene + "' on this server; it has: " +
-             (known.empty() ? "none (no scene folder)" : known);
+      return "no scene '" + change.scene +
+             "' on this server; it has: " + (known.empty() ? "none (no scene folder)" : known);
     }
     load_path = (std::filesystem::path(scenes_dir_) / change.scene).string();
   } else if (change.kind == Change::Kind::Parameter) {
@@ -122,19 +123,19 @@ std::string Director::request(const Change& change, Built built, bool* busy) {
   if (id == next_id_) ++next_id_;
   finish_building();
   building_.store(true);
-  builder_ = std::thread([this, scene = std::move(scene), load_path, id, carry, built = std::move(built),
-                          options = options_]() mutable {
-    std::shared_ptr<LiveScene> live;
-    std::string error;
-    try {
-      if (!load_path.empty()) scene = load_scene(load_path).front();
-      live = std::make_shared<LiveScene>(std::move(scene), id, options);
-    } catch (const std::exception& e) {
-      error = e.what();
-    }
-    building_.store(false);
-    built(std::move(live), carry, error);
-  });
+  builder_ = std::thread(
+      [this, scene = std::move(scene), load_path, id, carry, built = std::move(built), options = options_]() mutable {
+        std::shared_ptr<LiveScene> live;
+        std::string error;
+        try {
+          if (!load_path.empty()) scene = load_scene(load_path).front();
+          live = std::make_shared<LiveScene>(std::move(scene), id, options);
+        } catch (const std::exception& e) {
+          error = e.what();
+        }
+        building_.store(false);
+        built(std::move(live), carry, error);
+      });
   return "";
 }
 
@@ -170,7 +171,9 @@ void Director::run(const std::atomic<bool>& stop, double duration) {
       if (ran >= duration - 1e-12) return;
       if (!st.fault.empty()) {
         faulted_.store(true);
-        std::fprintf(stderr, "tactile-server: the simulation stopped at t = %.6f s on a fault: %s (a reset or a scene load starts it again)\n",
+        std::fprintf(stderr,
+                     "tactile-server: the simulation stopped at t = %.6f s on a fault: %s (a reset or a scene load "
+                     "starts it again)\n",
                      scene->sim().time(), st.fault.c_str());
         if (duration < std::numeric_limits<double>::infinity()) return;
       }

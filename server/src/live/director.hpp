@@ -19,10 +19,10 @@
 #include <thread>
 #include <vector>
 
-#include "sim/simulation.hpp"
 #include "live/frames.hpp"
 #include "live/realtime.hpp"
 #include "scene/scene.hpp"
+#include "sim/simulation.hpp"
 
 namespace tactile {
 

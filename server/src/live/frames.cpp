@@ -125,10 +125,10 @@ std::span<const uint8_t> FrameEncoder::scene_description(std::span<const Paramet
     params.push_back(wire::CreateParameterDirect(b, p.name.c_str(), p.value, p.min, p.max, p.unit.c_str()));
   std::vector<fb::Offset<fb::String>> names;
   for (const std::string& s : scenes) names.push_back(b.CreateString(s));
-  return seal(b, wire::Message::SceneDescription,
-              wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
-                                                 &surface_.nodes, "displacement_m", &proxies, &devices, &params,
-                                                 &names));
+  return seal(
+      b, wire::Message::SceneDescription,
+      wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
+                                         &surface_.nodes, "displacement_m", &proxies, &devices, &params, &names));
 }
 
 std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
@@ -237,16 +237,16 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
       // (Free: untouched for kFreeAfter, as a resting proxy is pushed only
       // every other step or so.)
       const DeviceReport& r = dr[d];
-      const bool gliding =
-          d < device_offsets.size() && glm::dot(device_offsets[d], device_offsets[d]) > kMaxOffsetForStiffness * kMaxOffsetForStiffness;
+      const bool gliding = d < device_offsets.size() && glm::dot(device_offsets[d], device_offsets[d]) >
+                                                            kMaxOffsetForStiffness * kMaxOffsetForStiffness;
       const bool free = sim_.time() - touched_[d] > kFreeAfter;
-      device_haptics_[d] = wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque),
-                                               to_wire(gliding || free ? glm::dmat3(0.0) : r.stiffness),
-                                               uint32_t(contacts_device_[d]));
+      device_haptics_[d] =
+          wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque),
+                              to_wire(gliding || free ? glm::dmat3(0.0) : r.stiffness), uint32_t(contacts_device_[d]));
       device_poses_[d] = wire::ProxyPose(to_wire(r.target.position), to_wire(r.target.orientation));
-      device_couplings_[d] = wire::DeviceCoupling(wire::ProxyPose(to_wire(r.body.position), to_wire(r.body.orientation)),
-                                                  float(r.coupling_stiffness), float(r.max_force), float(r.max_torque),
-                                                  true, r.saturated);
+      device_couplings_[d] =
+          wire::DeviceCoupling(wire::ProxyPose(to_wire(r.body.position), to_wire(r.body.orientation)),
+                               float(r.coupling_stiffness), float(r.max_force), float(r.max_torque), true, r.saturated);
       continue;
     }
     device_couplings_[d] = wire::DeviceCoupling();

@@ -15,8 +15,8 @@
 
 #include <flatbuffers/flatbuffers.h>
 
-#include "sim/simulation.hpp"
 #include "scene/parameters.hpp"
+#include "sim/simulation.hpp"
 #include "tactile_generated.h"
 
 namespace tactile {
@@ -39,8 +39,7 @@ class FrameEncoder {
   // dt: the simulation step the frames come at [s] (0: 0.7 x the critical
   // step at rest, the live loop's default); force_window: what the haptic
   // frames' forces are averaged over [s] (an even number of steps, at least two).
-  FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt,
-               double force_window = 1e-3);
+  FrameEncoder(const Simulation& sim, std::string scene_name, uint32_t scene_id, double dt, double force_window = 1e-3);
 
   const Surface& surface() const { return surface_; }
   // What the haptic frames' forces are averaged over, in steps.
@@ -77,9 +76,9 @@ class FrameEncoder {
   std::vector<proto::Vec3f> forces_;
   std::vector<proto::ProxyHaptics> proxy_haptics_;
   std::vector<proto::DeviceHaptics> device_haptics_;
-  std::vector<proto::ProxyPose> device_poses_;  // per device channel, staged for the builder
-  std::vector<uint64_t> input_sequences_;       // per device channel
-  std::vector<proto::DeviceCoupling> device_couplings_;  // per device channel
+  std::vector<proto::ProxyPose> device_poses_;             // per device channel, staged for the builder
+  std::vector<uint64_t> input_sequences_;                  // per device channel
+  std::vector<proto::DeviceCoupling> device_couplings_;    // per device channel
   std::vector<int32_t> contacts_proxy_, contacts_device_;  // the most contacts of a step since the last haptic frame
   std::vector<double> touched_;  // per device channel, the time its proxy last touched the body [s]
   // What each device channel's pose is: its hand (>= 0), else its first proxy.

@@ -25,14 +25,14 @@ constexpr double kMaxBacklog = 0.05;  // [s]
 constexpr double kSpinWindow = 60e-6;  // [s]
 // How fast a proxy's pose glides onto its device's path when the path
 // starts away from it (DevicePath::add).
-constexpr double kApproachSpeed = 0.25;   // [m/s]
+constexpr double kApproachSpeed = 0.25;  // [m/s]
 // A device's motion as the simulation takes it is no faster than this
 // (a hand's fastest strike): an input that jumps (a glitch, a device
 // re-homed, a stranger's input) is taken up by the approach, as a new path
 // is, instead of sweeping a kinematic proxy through the body in one step or
 // flinging a coupled one across the workspace at its coupling's limit.
-constexpr double kMaxDeviceSpeed = 3.0;   // [m/s]
-constexpr double kMaxJump = 0.5e-3;       // [m]
+constexpr double kMaxDeviceSpeed = 3.0;  // [m/s]
+constexpr double kMaxJump = 0.5e-3;      // [m]
 // The workspace: the body's rest bounds, widened on every side by its
 // largest extent and at least this much.
 constexpr double kWorkspaceMargin = 0.5;  // [m]
@@ -61,9 +61,11 @@ DeviceSample device_sample(const proto::DeviceInput& in, int32_t device, const D
 }
 
 int format_applied(const AppliedInput& a, char* buf, size_t size) {
-  int n = std::snprintf(buf, size, R"({"loop_step":%lld,"device":%d,"sequence":%llu)",
-                        static_cast<long long>(a.loop_step), int(a.device), static_cast<unsigned long long>(a.sequence));
-  if (a.drive.direct) n += std::snprintf(buf + n, size - size_t(n), R"(,"direct":true)");
+  int n =
+      std::snprintf(buf, size, R"({"loop_step":%lld,"device":%d,"sequence":%llu)", static_cast<long long>(a.loop_step),
+                    int(a.device), static_cast<unsigned long long>(a.sequence));
+  if (a.drive.direct)
+    n += std::snprintf(buf + n, size - size_t(n), R"(,"direct":true)");
   else if (a.drive.has_limits)  // %.17g: the limits read back to the same bits
     n += std::snprintf(buf + n, size - size_t(n), R"(,"limits":[%.17g,%.17g,%.17g])", a.drive.limits.max_force,
                        a.drive.limits.max_torque, a.drive.limits.stiffness);
@@ -132,8 +134,10 @@ void RealtimeLoop::apply_inputs() {
   while (inputs_.pop(s)) {
     Driver& drv = drivers_[size_t(s.device)];
     if (!(s.drive == drv.drive)) {  // a device with its own limits, or one that drives directly
-      if (s.drive.direct) sim_.release_device(s.device);
-      else sim_.couple_device(s.device, s.drive.has_limits ? &s.drive.limits : nullptr);
+      if (s.drive.direct)
+        sim_.release_device(s.device);
+      else
+        sim_.couple_device(s.device, s.drive.has_limits ? &s.drive.limits : nullptr);
       drv.drive = s.drive;
     }
     // An input outside the workspace is held at its edge (the server says so
@@ -240,12 +244,14 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
     }
     // The step to t + dt may start once the wall clock has reached t + dt.
     const double target = sim_.time() + dt_ - anchor_sim;
-    const Clock::time_point due = anchor + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(target));
+    const Clock::time_point due =
+        anchor + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(target));
     Clock::time_point now = Clock::now();
     if (now < due) {
       const double wait = seconds(due - now);
       if (wait > kSpinWindow)
-        std::this_thread::sleep_until(due - std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kSpinWindow)));
+        std::this_thread::sleep_until(
+            due - std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kSpinWindow)));
       while ((now = Clock::now()) < due) _mm_pause();
     } else {
       const double late = seconds(now - due);

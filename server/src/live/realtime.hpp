@@ -24,17 +24,17 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
-#include <span>
 #include <functional>
 #include <limits>
 #include <mutex>
+#include <span>
 #include <string>
 #include <vector>
 
-#include "sim/simulation.hpp"
 #include "live/device_path.hpp"
 #include "live/frames.hpp"
 #include "live/spsc_ring.hpp"
+#include "sim/simulation.hpp"
 
 namespace tactile {
 
@@ -44,7 +44,7 @@ namespace tactile {
 struct DeviceDrive {
   bool direct = false;
   bool has_limits = false;
-  DeviceLimits limits;       // when has_limits
+  DeviceLimits limits;  // when has_limits
   bool operator==(const DeviceDrive& o) const {
     return direct == o.direct && has_limits == o.has_limits && limits.max_force == o.limits.max_force &&
            limits.max_torque == o.limits.max_torque && limits.stiffness == o.limits.stiffness;
@@ -52,12 +52,12 @@ struct DeviceDrive {
 };
 
 struct DeviceSample {
-  int32_t device = -1;       // index into Simulation::devices()
-  uint64_t sequence = 0;     // increasing per device
+  int32_t device = -1;         // index into Simulation::devices()
+  uint64_t sequence = 0;       // increasing per device
   int64_t device_time_ns = 0;  // the bridge's clock
-  Pose pose;                 // scene frame
+  Pose pose;                   // scene frame
   uint32_t buttons = 0;
-  DeviceDrive drive;         // its device's, from its Hello
+  DeviceDrive drive;  // its device's, from its Hello
 };
 
 // The sample a checked DeviceInput (net/inbound.cpp) becomes: the one
@@ -69,10 +69,10 @@ DeviceSample device_sample(const proto::DeviceInput& in, int32_t device, const D
 // recording keeps these, so that a re-simulation applies the same inputs at
 // the same steps).
 struct AppliedInput {
-  int64_t loop_step;       // steps this loop had taken when it applied the input
+  int64_t loop_step;  // steps this loop had taken when it applied the input
   int32_t device;
   uint64_t sequence;
-  DeviceDrive drive;       // how its device drove the channel
+  DeviceDrive drive;  // how its device drove the channel
 };
 
 // The recording's /applied message for an input (proto/RECORDING.md), JSON,
@@ -85,7 +85,7 @@ struct RealtimeOptions {
   // own limit (safety 0.9 x the current critical step, which stiffening
   // lowers) with room to spare, so that a step is one sub-step, not two.
   double dt = 0;
-  double state_rate_hz = 30;     // state frames per simulated second
+  double state_rate_hz = 30;  // state frames per simulated second
   // Haptic frames per simulated second at most: one every ceil(1 / (rate x
   // dt)) steps; 0: after every step. Every step's force still counts: the
   // encoder's force window spans at least the interval between frames.
@@ -95,22 +95,22 @@ struct RealtimeOptions {
 
 struct RealtimeStats {
   int64_t steps = 0;
-  double sim_time = 0;            // [s] since the loop started
-  double clock = 0;               // the simulation's own time [s] (goes on across a parameter change)
-  double wall_time = 0;           // [s] since the loop started
-  double real_time_factor = 0;    // over the latest second of wall time
-  double step_mean_us = 0;        // step cost over the latest second
+  double sim_time = 0;          // [s] since the loop started
+  double clock = 0;             // the simulation's own time [s] (goes on across a parameter change)
+  double wall_time = 0;         // [s] since the loop started
+  double real_time_factor = 0;  // over the latest second of wall time
+  double step_mean_us = 0;      // step cost over the latest second
   double step_max_us = 0;
-  int64_t missed_deadlines = 0;   // steps started over one step late
-  int64_t reanchors = 0;          // stalls the loop gave up catching up on
+  int64_t missed_deadlines = 0;  // steps started over one step late
+  int64_t reanchors = 0;         // stalls the loop gave up catching up on
   int64_t inputs_applied = 0;
-  int64_t inputs_dropped = 0;     // queue full
+  int64_t inputs_dropped = 0;  // queue full
   int64_t state_frames = 0;
   int64_t haptic_frames = 0;
   // Mean time per step in each pass of the stepper over the latest second
   // [ns]: the cost of each effect (a pass the scene does not ask for is 0).
   std::array<double, kPassCount> pass_ns{};
-  std::string fault;              // the fault that stopped the loop, if any
+  std::string fault;  // the fault that stopped the loop, if any
 };
 
 class RealtimeLoop {
@@ -166,13 +166,13 @@ class RealtimeLoop {
   bool paused() const { return paused_.load(std::memory_order_relaxed); }
 
  private:
-  struct Driver {             // what one device channel moves
-    int32_t hand = -1;        // the hand it drives, or -1
+  struct Driver {                  // what one device channel moves
+    int32_t hand = -1;             // the hand it drives, or -1
     std::vector<int32_t> proxies;  // else the proxies it drives alone
-    ProxyMotion motion;       // its motion over the latest step
-    DevicePath path;          // its device's pose, from its inputs
-    Vec3 approach{0.0};       // how far the motion still stands off the path [m]
-    DeviceDrive drive;        // as the simulation has it
+    ProxyMotion motion;            // its motion over the latest step
+    DevicePath path;               // its device's pose, from its inputs
+    Vec3 approach{0.0};            // how far the motion still stands off the path [m]
+    DeviceDrive drive;             // as the simulation has it
   };
   Vec3 workspace_lo_{0.0}, workspace_hi_{0.0};
   // Per device: how far its motion stands off its device's path (the

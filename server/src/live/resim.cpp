@@ -37,7 +37,8 @@ double number(const mcap::Map& m, const std::string& key, const std::string& pat
   const std::string& text = field(m, key, path);
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
-  if (*end != '\0' || !std::isfinite(v)) throw ResimError("recording '" + path + "': metadata " + key + " is not a number");
+  if (*end != '\0' || !std::isfinite(v))
+    throw ResimError("recording '" + path + "': metadata " + key + " is not a number");
   return v;
 }
 
@@ -56,8 +57,9 @@ bool same_structs(const flatbuffers::Vector<const T*>* a, const flatbuffers::Vec
 
 // Field by field, the server's clock aside.
 bool same_state(const wire::StateFrame& a, const wire::StateFrame& b) {
-  const bool energies = (!a.energies() && !b.energies()) ||
-                        (a.energies() && b.energies() && std::memcmp(a.energies(), b.energies(), sizeof(wire::Energies)) == 0);
+  const bool energies =
+      (!a.energies() && !b.energies()) ||
+      (a.energies() && b.energies() && std::memcmp(a.energies(), b.energies(), sizeof(wire::Energies)) == 0);
   return a.scene_id() == b.scene_id() && a.step() == b.step() && a.sim_time() == b.sim_time() &&
          same_vector(a.positions(), b.positions()) && same_vector(a.scalar(), b.scalar()) &&
          same_structs(a.proxies(), b.proxies()) && same_structs(a.contact_forces(), b.contact_forces()) && energies;
@@ -135,8 +137,10 @@ ResimReport resimulate(const ResimOptions& o) {
     throw ResimError("recording '" + o.recording + "' starts at t = " + std::to_string(first_state) +
                      " s of its scene: a re-simulation starts from the scene's start (record with --record, "
                      "or from a load or reset)");
-  if (later_scene) report.note = "the recording goes on in a later scene (a load, reset or parameter change): "
-                                 "re-simulated up to it";
+  if (later_scene)
+    report.note =
+        "the recording goes on in a later scene (a load, reset or parameter change): "
+        "re-simulated up to it";
 
   // What the loop applied, and the inputs themselves.
   struct Applied {
@@ -255,7 +259,8 @@ ResimReport resimulate(const ResimOptions& o) {
         const wire::Vec3f& a = f->proxies()->Get(j)->force();
         const wire::Vec3f& b = r.proxies()->Get(j)->force();
         report.max_force_difference =
-            std::max(report.max_force_difference, std::hypot(double(a.x() - b.x()), double(a.y() - b.y()), double(a.z() - b.z())));
+            std::max(report.max_force_difference,
+                     std::hypot(double(a.x() - b.x()), double(a.y() - b.y()), double(a.z() - b.z())));
       }
   });
 
@@ -292,8 +297,8 @@ ResimReport resimulate(const ResimOptions& o) {
     loop.step(int64_t(std::llround((sim.time() + loop.dt()) * 1e9)));
     ++report.steps;
     if (const std::string fault = loop.stats().fault; !fault.empty()) {
-      report.note += std::string(report.note.empty() ? "" : "; ") + "the re-simulation stopped on a fault at t = " +
-                     std::to_string(sim.time()) + " s: " + fault;
+      report.note += std::string(report.note.empty() ? "" : "; ") +
+                     "the re-simulation stopped on a fault at t = " + std::to_string(sim.time()) + " s: " + fault;
       break;
     }
   }
@@ -304,7 +309,8 @@ ResimReport resimulate(const ResimOptions& o) {
   if (out) {
     out->stop();
     out->wait();
-    if (const std::string fault = out->stats().fault; !fault.empty()) throw ResimError("writing " + o.out + ": " + fault);
+    if (const std::string fault = out->stats().fault; !fault.empty())
+      throw ResimError("writing " + o.out + ": " + fault);
   }
   return report;
 }

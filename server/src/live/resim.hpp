@@ -26,15 +26,15 @@ struct ResimOptions {
 
 struct ResimReport {
   std::string scene_name;
-  int64_t steps = 0;                        // loop steps taken
-  int64_t inputs = 0;                       // inputs applied
-  int64_t states = 0, states_matched = 0;   // re-simulated states; those with a recorded one at the same time
-  int64_t states_identical = 0;             // of those, equal field by field (server times aside)
+  int64_t steps = 0;                       // loop steps taken
+  int64_t inputs = 0;                      // inputs applied
+  int64_t states = 0, states_matched = 0;  // re-simulated states; those with a recorded one at the same time
+  int64_t states_identical = 0;            // of those, equal field by field (server times aside)
   int64_t haptic = 0, haptic_matched = 0, haptic_identical = 0;
-  double max_position_difference = 0;       // over matched states [m]
-  double max_force_difference = 0;          // over matched haptic frames, any proxy [N]
-  double first_difference_time = -1;        // simulated time of the first state that differs [s], -1 if none
-  std::string note;                         // what was left out (later scenes of the recording...)
+  double max_position_difference = 0;  // over matched states [m]
+  double max_force_difference = 0;     // over matched haptic frames, any proxy [N]
+  double first_difference_time = -1;   // simulated time of the first state that differs [s], -1 if none
+  std::string note;                    // what was left out (later scenes of the recording...)
 };
 
 // Throws ResimError (or mcap::McapError, SceneError, ModelError) naming

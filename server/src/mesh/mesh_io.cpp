@@ -11,9 +11,9 @@
 #include <sstream>
 #include <string_view>
 
-#include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <assimp/Importer.hpp>
 
 #include "mesh/mesh_error.hpp"
 
@@ -172,11 +172,11 @@ SurfaceMesh read_with_assimp(const std::string& path, const std::string& format)
   Assimp::Importer importer;
   // Drop everything but positions, so JoinIdenticalVertices welds by position
   // alone (STL gives every corner its face's normal).
-  importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS,
-                              aiComponent_NORMALS | aiComponent_TANGENTS_AND_BITANGENTS | aiComponent_COLORS |
-                                  aiComponent_TEXCOORDS | aiComponent_BONEWEIGHTS | aiComponent_ANIMATIONS |
-                                  aiComponent_TEXTURES | aiComponent_LIGHTS | aiComponent_CAMERAS |
-                                  aiComponent_MATERIALS);
+  importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS, aiComponent_NORMALS | aiComponent_TANGENTS_AND_BITANGENTS |
+                                                          aiComponent_COLORS | aiComponent_TEXCOORDS |
+                                                          aiComponent_BONEWEIGHTS | aiComponent_ANIMATIONS |
+                                                          aiComponent_TEXTURES | aiComponent_LIGHTS |
+                                                          aiComponent_CAMERAS | aiComponent_MATERIALS);
   const unsigned flags = aiProcess_RemoveComponent | aiProcess_JoinIdenticalVertices | aiProcess_Triangulate |
                          aiProcess_PreTransformVertices | aiProcess_ValidateDataStructure;
   const aiScene* scene = importer.ReadFile(path, flags);
@@ -299,8 +299,8 @@ void read_ele_file(const std::string& path, const NodeFile& nodes, const std::st
                          " has nodes " + std::to_string(nodes.first) + ".." + std::to_string(nodes.first + nn - 1));
       t[k] = int32_t(node - nodes.first);
     }
-    if (compute_tet_volume(nodes.X[size_t(t[0])], nodes.X[size_t(t[1])], nodes.X[size_t(t[2])],
-                           nodes.X[size_t(t[3])]) < 0.0)
+    if (compute_tet_volume(nodes.X[size_t(t[0])], nodes.X[size_t(t[1])], nodes.X[size_t(t[2])], nodes.X[size_t(t[3])]) <
+        0.0)
       std::swap(t[1], t[2]);
     mesh.tets.push_back(t);
     if (n_attr > 0) {

@@ -145,8 +145,8 @@ TetMesh make_cylinder(double radius, double height, int n_around, int n_height, 
     throw MeshError("make_cylinder: radius and height must be finite and > 0, got " + std::to_string(radius) + ", " +
                     std::to_string(height));
   if (n_around < 3 || n_height < 1 || n_radial < 1)
-    throw MeshError("make_cylinder: need n_around >= 3, n_height >= 1, n_radial >= 1, got " +
-                    std::to_string(n_around) + ", " + std::to_string(n_height) + ", " + std::to_string(n_radial));
+    throw MeshError("make_cylinder: need n_around >= 3, n_height >= 1, n_radial >= 1, got " + std::to_string(n_around) +
+                    ", " + std::to_string(n_height) + ", " + std::to_string(n_radial));
 
   // Cross-section in the x-z plane: a centre node, then rings k = 1..n_radial
   // of m_k = max(3, ceil(n_around k / n_radial)) nodes at radius r k / n_radial,
@@ -191,8 +191,8 @@ TetMesh make_cylinder(double radius, double height, int n_around, int n_height, 
     const P2 &p = disc[size_t(t[0])], &q = disc[size_t(t[1])], &s = disc[size_t(t[2])];
     const double area2 = (q.x - p.x) * (s.z - p.z) - (q.z - p.z) * (s.x - p.x);
     if (!(area2 > 0.0))
-      throw MeshError("make_cylinder: n_radial = " + std::to_string(n_radial) + " is too large for n_around = " +
-                      std::to_string(n_around) + " (rings overlap)");
+      throw MeshError("make_cylinder: n_radial = " + std::to_string(n_radial) +
+                      " is too large for n_around = " + std::to_string(n_around) + " (rings overlap)");
   }
 
   TetMesh mesh;
@@ -229,12 +229,12 @@ TetMesh make_sphere(const Vec3& centre, double radius, int resolution) {
 
   // Icosahedron: vertices (0, +-1, +-phi) and their cyclic permutations.
   const double g = std::numbers::phi;
-  std::vector<Vec3> unit = {{-1, g, 0}, {1, g, 0}, {-1, -g, 0}, {1, -g, 0}, {0, -1, g}, {0, 1, g},
-                            {0, -1, -g}, {0, 1, -g}, {g, 0, -1}, {g, 0, 1}, {-g, 0, -1}, {-g, 0, 1}};
+  std::vector<Vec3> unit = {{-1, g, 0},  {1, g, 0},  {-1, -g, 0}, {1, -g, 0}, {0, -1, g},  {0, 1, g},
+                            {0, -1, -g}, {0, 1, -g}, {g, 0, -1},  {g, 0, 1},  {-g, 0, -1}, {-g, 0, 1}};
   for (Vec3& p : unit) p /= std::sqrt(1.0 + g * g);
-  std::vector<Tri> tris = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+  std::vector<Tri> tris = {{0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
                            {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-                           {3, 8, 9},  {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
+                           {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
   for (int level = 0; level < resolution; ++level) {
     std::map<std::pair<int32_t, int32_t>, int32_t> midpoint;
     auto mid = [&](int32_t a, int32_t b) {

@@ -94,8 +94,8 @@ MeshQuality compute_quality(const TetMesh& mesh, const QualityThresholds& t) {
     min_dihedral = std::min(min_dihedral, tet_min);
     max_dihedral = std::max(max_dihedral, tet_max);
     max_aspect = std::max(max_aspect, aspect);
-    if (V > 0.0 && (tet_min < t.poor_min_dihedral_deg || tet_max > t.poor_max_dihedral_deg ||
-                    aspect > t.poor_aspect_ratio))
+    if (V > 0.0 &&
+        (tet_min < t.poor_min_dihedral_deg || tet_max > t.poor_max_dihedral_deg || aspect > t.poor_aspect_ratio))
       q.poor.push_back(e);
   }
 

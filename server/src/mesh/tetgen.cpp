@@ -48,8 +48,8 @@ void check_surface(const SurfaceMesh& s) {
                         ", outside 0.." + std::to_string(n - 1));
     }
     if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0])
-      throw MeshError("tetrahedralize: triangle " + std::to_string(f) + " repeats a vertex (" +
-                      std::to_string(t[0]) + ", " + std::to_string(t[1]) + ", " + std::to_string(t[2]) + ")");
+      throw MeshError("tetrahedralize: triangle " + std::to_string(f) + " repeats a vertex (" + std::to_string(t[0]) +
+                      ", " + std::to_string(t[1]) + ", " + std::to_string(t[2]) + ")");
   }
   // Closed: every edge in exactly two triangles. The first bad edge in
   // triangle order is named, with its coordinates, to find it in a viewer.

@@ -45,7 +45,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       if (ec) return;  // gone already
       if (!server_->make_room(peer.to_string()))
         return respond(req, http::status::service_unavailable, "too many connections\n");
-      auto session = std::make_shared<WsSession>(server_, stream_.release_socket(), peer.is_loopback(), peer.to_string());
+      auto session =
+          std::make_shared<WsSession>(server_, stream_.release_socket(), peer.is_loopback(), peer.to_string());
       session->start(std::move(req));
       return;
     }
@@ -55,8 +56,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     const std::string host(req[http::field::host]);
     if (!server_->host_allowed(host))
       return respond(req, http::status::misdirected_request,
-                     "Host '" + utf8_text(host) + "' is not a name of this server: loopback names, the bound "
-                     "address, or a host of --allow-origin\n");
+                     "Host '" + utf8_text(host) +
+                         "' is not a name of this server: loopback names, the bound "
+                         "address, or a host of --allow-origin\n");
     if (req.method() != http::verb::get && req.method() != http::verb::head)
       return respond(req, http::status::method_not_allowed, "only GET and HEAD\n");
     const std::string full(req.target());
@@ -98,12 +100,13 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       std::sort(files.begin(), files.end());
       std::string body = "[";
       for (const auto& [n, size] : files)
-        body += std::string(body.size() > 1 ? "," : "") + "{\"name\":\"" + n + "\",\"bytes\":" + std::to_string(size) + "}";
+        body +=
+            std::string(body.size() > 1 ? "," : "") + "{\"name\":\"" + n + "\",\"bytes\":" + std::to_string(size) + "}";
       return respond(req, http::status::ok, body + "]\n", "application/json");
     }
     const bool plain = name[0] != '.' && std::all_of(name.begin(), name.end(), [](char ch) {
-      return std::isalnum(static_cast<unsigned char>(ch)) || ch == '.' || ch == '_' || ch == '-';
-    });
+                         return std::isalnum(static_cast<unsigned char>(ch)) || ch == '.' || ch == '_' || ch == '-';
+                       });
     if (!plain || !name.ends_with(".mcap")) return respond(req, http::status::bad_request, "not a recording's name\n");
     std::ifstream in(std::filesystem::path(dir) / name, std::ios::binary);
     if (!in) return respond(req, http::status::not_found, "no recording '" + name + "'\n");

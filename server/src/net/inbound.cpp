@@ -36,10 +36,12 @@ Inbound read_inbound(const uint8_t* data, size_t size) {
 std::string check_device_input(const proto::DeviceInput& in) {
   if (!in.position() || !in.orientation()) return "DeviceInput without position or orientation";
   const proto::Vec3d& p = *in.position();
-  if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) return "DeviceInput with a non-finite position";
+  if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z()))
+    return "DeviceInput with a non-finite position";
   const proto::Quatd& q = *in.orientation();
   const double n = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
-  if (!(n > 0.5 && n < 2.0)) return "DeviceInput with an orientation that is not a unit quaternion (|q| = " + std::to_string(n) + ")";
+  if (!(n > 0.5 && n < 2.0))
+    return "DeviceInput with an orientation that is not a unit quaternion (|q| = " + std::to_string(n) + ")";
   return "";
 }
 
@@ -52,8 +54,9 @@ std::string check_device_limits(const proto::Hello& h) {
   for (uint32_t i = 0; i < h.device_limits()->size(); ++i) {
     const proto::DeviceLimits* l = h.device_limits()->Get(i);
     if (!l) return "Hello.device_limits[" + std::to_string(i) + "] is missing";
-    const std::pair<const char*, float> fields[] = {
-        {"max_force_N", l->max_force_N()}, {"max_torque_Nm", l->max_torque_Nm()}, {"stiffness_N_per_m", l->stiffness_N_per_m()}};
+    const std::pair<const char*, float> fields[] = {{"max_force_N", l->max_force_N()},
+                                                    {"max_torque_Nm", l->max_torque_Nm()},
+                                                    {"stiffness_N_per_m", l->stiffness_N_per_m()}};
     for (const auto& [name, value] : fields)
       if (!std::isfinite(value) || value < 0)
         return "Hello.device_limits[" + std::to_string(i) + "]." + name + " must be a finite number >= 0, got " +
@@ -101,13 +104,16 @@ std::string check_device_status(const proto::DeviceStatus& st) {
            " bytes";
   const std::string mode = st.mode() ? st.mode()->str() : "";
   if (mode != "coupled" && mode != "delay" && mode != "hold" && mode != "extrapolate")
-    return "DeviceStatus with mode '" + (st.mode() && is_utf8(*st.mode()) && mode.size() <= 32 ? mode : std::string("?")) +
+    return "DeviceStatus with mode '" +
+           (st.mode() && is_utf8(*st.mode()) && mode.size() <= 32 ? mode : std::string("?")) +
            "' (coupled, delay, hold or extrapolate)";
-  const std::pair<const char*, float> figures[] = {
-      {"tick_rate_hz", st.tick_rate_hz()},         {"lateness_p99_us", st.lateness_p99_us()},
-      {"lateness_max_us", st.lateness_max_us()},   {"display_delay_ms", st.display_delay_ms()},
-      {"state_interval_ms", st.state_interval_ms()}, {"jitter_allowance_ms", st.jitter_allowance_ms()},
-      {"force_N", st.force_N()}};
+  const std::pair<const char*, float> figures[] = {{"tick_rate_hz", st.tick_rate_hz()},
+                                                   {"lateness_p99_us", st.lateness_p99_us()},
+                                                   {"lateness_max_us", st.lateness_max_us()},
+                                                   {"display_delay_ms", st.display_delay_ms()},
+                                                   {"state_interval_ms", st.state_interval_ms()},
+                                                   {"jitter_allowance_ms", st.jitter_allowance_ms()},
+                                                   {"force_N", st.force_N()}};
   for (const auto& [name, value] : figures)
     if (!std::isfinite(value) || value < 0)
       return std::string("DeviceStatus with ") + name + " = " + std::to_string(value) + ": finite and >= 0";

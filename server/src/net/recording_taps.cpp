@@ -42,9 +42,9 @@ void Server::Impl::drain_tap(Feed& f) {
   const int64_t lost_s = f.tap->states.dropped() - f.tap->states_dropped;
   const int64_t lost_a = f.tap->applied.dropped() - f.tap->applied_dropped;
   if (lost_h > 0 || lost_s > 0 || lost_a > 0)
-    recorder->fail("the simulation published frames faster than the recording took them (" +
-                   std::to_string(lost_h) + " haptic and " + std::to_string(lost_s) + " state frames, " +
-                   std::to_string(lost_a) + " applied inputs had no room): stopped, what was written stays readable");
+    recorder->fail("the simulation published frames faster than the recording took them (" + std::to_string(lost_h) +
+                   " haptic and " + std::to_string(lost_s) + " state frames, " + std::to_string(lost_a) +
+                   " applied inputs had no room): stopped, what was written stays readable");
 }
 
 namespace {
@@ -76,8 +76,7 @@ std::string Server::Impl::start_recording(const std::string& name, bool any_path
       std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", std::gmtime(&t));
       file = std::string("session-") + stamp + ".mcap";
     }
-    const bool plain = file.size() <= 128 && file[0] != '.' &&
-                       std::all_of(file.begin(), file.end(), [](char ch) {
+    const bool plain = file.size() <= 128 && file[0] != '.' && std::all_of(file.begin(), file.end(), [](char ch) {
                          return std::isalnum(static_cast<unsigned char>(ch)) || ch == '.' || ch == '_' || ch == '-';
                        });
     if (!plain)

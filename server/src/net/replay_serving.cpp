@@ -70,10 +70,10 @@ void Server::Impl::show_replay_position() {
 Bytes Server::Impl::replay_status() {
   fb::FlatBufferBuilder b;
   const auto now = Replay::Clock::now();
-  return seal(b, wire::Message::ReplayStatus,
-              wire::CreateReplayStatusDirect(b, std::filesystem::path(replay->path()).filename().string().c_str(),
-                                             replay->duration(), replay->position(now), replay->speed(),
-                                             replay->paused()));
+  return seal(
+      b, wire::Message::ReplayStatus,
+      wire::CreateReplayStatusDirect(b, std::filesystem::path(replay->path()).filename().string().c_str(),
+                                     replay->duration(), replay->position(now), replay->speed(), replay->paused()));
 }
 
 void Server::Impl::replay_control(const wire::Control& c, WsSession& from) {

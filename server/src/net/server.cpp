@@ -60,16 +60,17 @@ void Server::Impl::live_control(const wire::Control& c, WsSession& from) {
     case wire::ControlCommand::StartRecording: {
       const wire::StartRecording* r = c.command_as_StartRecording();
       if (const std::string bad = start_recording(r && r->path() ? r->path()->str() : ""); !bad.empty())
-        return from.send(make_error(bad.starts_with("a recording") ? wire::ErrorCode::Busy : wire::ErrorCode::BadRequest,
-                                    bad, c.request_id()),
-                         OutKind::Control);
+        return from.send(
+            make_error(bad.starts_with("a recording") ? wire::ErrorCode::Busy : wire::ErrorCode::BadRequest, bad,
+                       c.request_id()),
+            OutKind::Control);
       return;
     }
     case wire::ControlCommand::StopRecording:
       if (!recorder)
-        return from.send(make_error(wire::ErrorCode::BadRequest, "StopRecording: no recording is under way",
-                                    c.request_id()),
-                         OutKind::Control);
+        return from.send(
+            make_error(wire::ErrorCode::BadRequest, "StopRecording: no recording is under way", c.request_id()),
+            OutKind::Control);
       return stop_recording();
     default:
       return from.send(make_error(wire::ErrorCode::BadRequest,
@@ -95,16 +96,20 @@ bool Server::Impl::make_room(const std::string& address) {
     if (!oldest_here || s->core().id() < oldest_here->core().id()) oldest_here = s;
   }
   if (greeted >= options.max_connections) return false;
-  if (waiting_here >= options.max_waiting_per_address) oldest_here->drop();
-  else if (waiting >= options.max_waiting) oldest->drop();
+  if (waiting_here >= options.max_waiting_per_address)
+    oldest_here->drop();
+  else if (waiting >= options.max_waiting)
+    oldest->drop();
   return true;
 }
 
 bool Server::Impl::host_allowed(std::string_view host) const {
   // The name without its port ("[::1]:8765", "localhost:8765", "example.org").
   std::string_view name = host;
-  if (name.starts_with('[')) name = name.substr(0, name.find(']') + 1);
-  else if (const size_t colon = name.rfind(':'); colon != std::string_view::npos) name = name.substr(0, colon);
+  if (name.starts_with('['))
+    name = name.substr(0, name.find(']') + 1);
+  else if (const size_t colon = name.rfind(':'); colon != std::string_view::npos)
+    name = name.substr(0, colon);
   std::string lower(name);
   for (char& c : lower) c = char(std::tolower(uint8_t(c)));
   if (lower.empty()) return false;
@@ -114,8 +119,10 @@ bool Server::Impl::host_allowed(std::string_view host) const {
   for (const std::string& origin : options.allowed_origins) {  // "scheme://name[:port]"
     std::string_view o = origin;
     if (const size_t scheme = o.find("://"); scheme != std::string_view::npos) o = o.substr(scheme + 3);
-    if (o.starts_with('[')) o = o.substr(0, o.find(']') + 1);
-    else o = o.substr(0, o.find(':'));
+    if (o.starts_with('['))
+      o = o.substr(0, o.find(']') + 1);
+    else
+      o = o.substr(0, o.find(':'));
     std::string allowed(o);
     for (char& c : allowed) c = char(std::tolower(uint8_t(c)));
     if (allowed == lower) return true;
@@ -142,7 +149,8 @@ void Server::Impl::listen() {
   acceptor.open(endpoint.protocol());
   acceptor.set_option(asio::socket_base::reuse_address(true));
   acceptor.bind(endpoint, ec);
-  if (ec) throw ServerError("cannot listen on " + options.bind + ":" + std::to_string(options.port) + ": " + ec.message());
+  if (ec)
+    throw ServerError("cannot listen on " + options.bind + ":" + std::to_string(options.port) + ": " + ec.message());
   acceptor.listen(asio::socket_base::max_listen_connections);
 }
 
@@ -189,9 +197,12 @@ Bytes Server::Impl::telemetry_message(const std::string& extra_fault) {
   uint32_t viewers = 0, devices = 0, controllers = 0;
   for (WsSession* s : sessions) {
     if (!s->core().greeted()) continue;
-    if (s->core().role() == wire::Role::Viewer) ++viewers;
-    else if (s->core().role() == wire::Role::Device) ++devices;
-    else ++controllers;
+    if (s->core().role() == wire::Role::Viewer)
+      ++viewers;
+    else if (s->core().role() == wire::Role::Device)
+      ++devices;
+    else
+      ++controllers;
   }
   fb::FlatBufferBuilder b;
   std::vector<fb::Offset<fb::String>> faults;
@@ -205,10 +216,9 @@ Bytes Server::Impl::telemetry_message(const std::string& extra_fault) {
   return seal(b, wire::Message::Telemetry,
               wire::CreateTelemetryDirect(b, now_ns(), uint64_t(st.steps), st.clock, float(st.step_mean_us),
                                           float(st.step_max_us), float(st.real_time_factor),
-                                          uint64_t(st.missed_deadlines), &costs, viewers, devices, controllers,
-                                          &faults, loop.paused(),
-                                          std::filesystem::path(rec.path).filename().string().c_str(), rec.messages,
-                                          rec.bytes, fault_resets));
+                                          uint64_t(st.missed_deadlines), &costs, viewers, devices, controllers, &faults,
+                                          loop.paused(), std::filesystem::path(rec.path).filename().string().c_str(),
+                                          rec.messages, rec.bytes, fault_resets));
 }
 
 void Server::Impl::tick_telemetry() {
@@ -248,8 +258,8 @@ void Server::Impl::send_to_controller(const Bytes& message) {
 void Server::Impl::change(Director::Change::Kind kind, const wire::Control* c) {
   const uint32_t request = c ? c->request_id() : 0;
   if (changing)
-    return send_to_controller(make_error(wire::ErrorCode::Busy,
-                                         "a scene change is under way: wait for its SceneDescription", request));
+    return send_to_controller(
+        make_error(wire::ErrorCode::Busy, "a scene change is under way: wait for its SceneDescription", request));
   Director::Change ask;
   ask.kind = kind;
   if (const wire::LoadScene* l = c ? c->command_as_LoadScene() : nullptr; l && l->path()) ask.scene = l->path()->str();
@@ -311,7 +321,8 @@ Server::Server(asio::io_context& ioc, Director& director, ServerOptions options)
     : impl_(std::make_shared<Impl>(ioc, &director, nullptr, std::move(options))) {
   impl_->listen();
   if (!impl_->options.record.empty())
-    if (const std::string bad = impl_->start_recording(impl_->options.record, true); !bad.empty()) throw ServerError(bad);
+    if (const std::string bad = impl_->start_recording(impl_->options.record, true); !bad.empty())
+      throw ServerError(bad);
   director.on_installed([weak = std::weak_ptr<Impl>(impl_), &ioc](const std::shared_ptr<LiveScene>& live) {
     asio::post(ioc, [weak, live] {
       if (auto self = weak.lock()) self->installed(live);
@@ -342,4 +353,3 @@ void Server::stop() {
 }
 
 }  // namespace tactile
-

@@ -41,28 +41,28 @@ namespace tactile {
 
 struct ServerOptions {
   std::string bind = "127.0.0.1";
-  uint16_t port = 8765;                       // 0: any free port
-  std::string token;                          // needed by devices and controllers (by all roles off loopback)
-  std::vector<std::string> allowed_origins;   // extra browser Origins (its own http://host:port always allowed)
-  std::string static_dir;                     // served over HTTP (client-web); "" for none
-  double viewer_rate_hz = 30;                 // state frames per second per viewer at most
-  size_t max_connections = 256;               // greeted WebSocket sessions
-  size_t max_waiting = 64;                    // upgraded, no Hello yet: the oldest makes room for a newer one
-  size_t max_waiting_per_address = 8;         // of those, from one IP address
-  size_t max_message_bytes = 64 * 1024;       // inbound
-  double max_messages_per_s = 5000;           // inbound per connection (burst: a second's worth)
-  size_t device_queue = 256;                  // haptic frames queued per device before the oldest drop
-  double max_safety_events_per_s = 100;       // relayed per device connection (burst: a second's worth); more drop
-  size_t event_queue = 256;                   // safety events queued per reader before the oldest drop
-  size_t control_queue = 1024;                // control messages (replies, telemetry) unread: disconnected
+  uint16_t port = 8765;                      // 0: any free port
+  std::string token;                         // needed by devices and controllers (by all roles off loopback)
+  std::vector<std::string> allowed_origins;  // extra browser Origins (its own http://host:port always allowed)
+  std::string static_dir;                    // served over HTTP (client-web); "" for none
+  double viewer_rate_hz = 30;                // state frames per second per viewer at most
+  size_t max_connections = 256;              // greeted WebSocket sessions
+  size_t max_waiting = 64;                   // upgraded, no Hello yet: the oldest makes room for a newer one
+  size_t max_waiting_per_address = 8;        // of those, from one IP address
+  size_t max_message_bytes = 64 * 1024;      // inbound
+  double max_messages_per_s = 5000;          // inbound per connection (burst: a second's worth)
+  size_t device_queue = 256;                 // haptic frames queued per device before the oldest drop
+  double max_safety_events_per_s = 100;      // relayed per device connection (burst: a second's worth); more drop
+  size_t event_queue = 256;                  // safety events queued per reader before the oldest drop
+  size_t control_queue = 1024;               // control messages (replies, telemetry) unread: disconnected
   double hello_timeout_s = 5;
   double idle_timeout_s = 30;
   std::string server_name = "tactile";
-  std::string scenes_dir;                     // where LoadScene finds scenes ("" for none)
-  std::string recordings_dir;                 // where StartRecording writes ("" refuses it)
-  std::string record;                         // a recording to start with the server (any path), "" for none
-  LiveOptions live;                           // how loaded and reset scenes run
-  bool reset_on_fault = false;                // a fault resets the scene (once a telemetry has named it)
+  std::string scenes_dir;       // where LoadScene finds scenes ("" for none)
+  std::string recordings_dir;   // where StartRecording writes ("" refuses it)
+  std::string record;           // a recording to start with the server (any path), "" for none
+  LiveOptions live;             // how loaded and reset scenes run
+  bool reset_on_fault = false;  // a fault resets the scene (once a telemetry has named it)
 };
 
 // What the server refuses to start with (a bind off loopback without a

@@ -8,11 +8,11 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cmath>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <ctime>
-#include <cstdio>
 #include <deque>
 #include <filesystem>
 #include <fstream>
@@ -74,8 +74,8 @@ struct RecordTap {
   FrameRing states, haptics, applied;
   int64_t states_dropped = 0, haptics_dropped = 0, applied_dropped = 0;  // by the rings when the recording started
   RecordTap(size_t state_bytes, size_t haptic_bytes)
-      : states(64, state_bytes),         // two seconds of states at 30 Hz
-        haptics(16384, haptic_bytes),    // 1.6 s of haptic frames at 10 kHz
+      : states(64, state_bytes),                 // two seconds of states at 30 Hz
+        haptics(16384, haptic_bytes),            // 1.6 s of haptic frames at 10 kHz
         applied(16384, sizeof(AppliedInput)) {}  // of inputs at 10 kHz
 };
 
@@ -88,8 +88,8 @@ struct Feed {
   LatestBox states;
   Bytes description;
   std::string scene_name;
-  std::vector<std::string> devices;   // channels, in the order haptic frames list them
-  std::unique_ptr<RecordTap> tap;     // set before `recording` turns true, kept after
+  std::vector<std::string> devices;  // channels, in the order haptic frames list them
+  std::unique_ptr<RecordTap> tap;    // set before `recording` turns true, kept after
   std::atomic<bool> recording{false};
 
   Feed(std::shared_ptr<LiveScene> l, const std::vector<std::string>& scenes)
@@ -172,7 +172,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
   void replay_control(const wire::Control& c, WsSession& from);
   void live_control(const wire::Control& c, WsSession& from);
 
-  std::unique_ptr<Recorder> recorder;               // the recording under way
+  std::unique_ptr<Recorder> recorder;                // the recording under way
   std::vector<std::unique_ptr<Recorder>> finishing;  // stopped, closing their files
 
   Impl(asio::io_context& io, Director* d, Replay* r, ServerOptions o)
@@ -275,8 +275,10 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   }
 
   static SessionLimits limits(const ServerOptions& o) {
-    return {o.token,        o.server_name,   o.viewer_rate_hz, o.max_messages_per_s, o.device_queue,
-            o.max_safety_events_per_s, o.event_queue, o.control_queue};
+    return {o.token,          o.server_name,
+            o.viewer_rate_hz, o.max_messages_per_s,
+            o.device_queue,   o.max_safety_events_per_s,
+            o.event_queue,    o.control_queue};
   }
 
   void start(http::request<http::string_body> req) {

@@ -77,8 +77,9 @@ void Session::dispatch(const wire::Envelope& e, std::span<const uint8_t> raw, Se
       const wire::Ping& p = *e.message_as_Ping();
       const int64_t received = host_.now_ns();
       fb::FlatBufferBuilder b;
-      return send(seal(b, wire::Message::Pong, wire::CreatePong(b, p.id(), p.client_time_ns(), received, host_.now_ns())),
-                  OutKind::Control, now);
+      return send(
+          seal(b, wire::Message::Pong, wire::CreatePong(b, p.id(), p.client_time_ns(), received, host_.now_ns())),
+          OutKind::Control, now);
     }
     case wire::Message::DeviceInput: return on_input(*e.message_as_DeviceInput(), raw);
     case wire::Message::Control: return on_control(*e.message_as_Control(), raw);
@@ -98,15 +99,16 @@ void Session::on_hello(const wire::Hello& h) {
                                                         "." + std::to_string(h.protocol_minor()) + ", this server " +
                                                         std::to_string(major) + "." + std::to_string(minor));
   if (h.role() > wire::Role::MAX)
-    return refuse(wire::ErrorCode::BadRequest, "Hello.role " + std::to_string(int(h.role())) +
-                                                   " is not a role (0 viewer, 1 device, 2 controller)");
+    return refuse(wire::ErrorCode::BadRequest,
+                  "Hello.role " + std::to_string(int(h.role())) + " is not a role (0 viewer, 1 device, 2 controller)");
   const std::string token = h.token() ? h.token()->str() : "";
   const bool needs_token = h.role() != wire::Role::Viewer || !loopback_;
   if (needs_token && (limits_.token.empty() || token != limits_.token))
     return refuse(wire::ErrorCode::Unauthorized,
                   std::string(limits_.token.empty() ? "this server has no token set: the "
                                                     : "a wrong or missing token for the ") +
-                      wire::EnumNameRole(h.role()) + " role" + (loopback_ ? "" : " (off loopback every role needs it)"));
+                      wire::EnumNameRole(h.role()) + " role" +
+                      (loopback_ ? "" : " (off loopback every role needs it)"));
   if (h.role() == wire::Role::Device) {
     if (const std::string bad = check_device_limits(h); !bad.empty()) return refuse(wire::ErrorCode::BadRequest, bad);
     const std::vector<std::string>& names = host_.devices();
@@ -197,8 +199,9 @@ void Session::on_input(const wire::DeviceInput& in, std::span<const uint8_t> raw
 
 void Session::on_safety_event(const wire::SafetyEvent& ev, SessionClock::time_point now) {
   if (role_ != wire::Role::Device)
-    return reply(wire::ErrorCode::WrongRole, std::string("SafetyEvent needs the Device role; this connection has the ") +
-                                                 wire::EnumNameRole(role_) + " role");
+    return reply(wire::ErrorCode::WrongRole,
+                 std::string("SafetyEvent needs the Device role; this connection has the ") +
+                     wire::EnumNameRole(role_) + " role");
   if (const std::string bad = check_safety_event(ev); !bad.empty()) return reply(wire::ErrorCode::BadRequest, bad);
   const std::string name = ev.device()->str();  // UTF-8 and bounded: checked
   if (!named(name))
@@ -218,9 +221,9 @@ void Session::on_safety_event(const wire::SafetyEvent& ev, SessionClock::time_po
   fb::FlatBufferBuilder b(128 + name.size() + (ev.message() ? ev.message()->size() : 0));
   const auto device = b.CreateString(ev.device());
   const auto message = b.CreateString(ev.message());
-  const Bytes relayed = seal(b, wire::Message::SafetyEvent,
-                             wire::CreateSafetyEvent(b, device, ev.device_time_ns(), host_.now_ns(), ev.kind(), message,
-                                                     ev.force_N()));
+  const Bytes relayed =
+      seal(b, wire::Message::SafetyEvent,
+           wire::CreateSafetyEvent(b, device, ev.device_time_ns(), host_.now_ns(), ev.kind(), message, ev.force_N()));
   std::fprintf(stderr, "safety: %s %s %s (%.3f N)\n", printable(ev.device()).c_str(),
                wire::EnumNameSafetyKind(ev.kind()), printable(ev.message()).c_str(), double(ev.force_N()));
   host_.relay(relayed, OutKind::Event);
@@ -229,8 +232,9 @@ void Session::on_safety_event(const wire::SafetyEvent& ev, SessionClock::time_po
 
 void Session::on_device_status(const wire::DeviceStatus& st, SessionClock::time_point now) {
   if (role_ != wire::Role::Device)
-    return reply(wire::ErrorCode::WrongRole, std::string("DeviceStatus needs the Device role; this connection has the ") +
-                                                 wire::EnumNameRole(role_) + " role");
+    return reply(wire::ErrorCode::WrongRole,
+                 std::string("DeviceStatus needs the Device role; this connection has the ") +
+                     wire::EnumNameRole(role_) + " role");
   if (const std::string bad = check_device_status(st); !bad.empty()) return reply(wire::ErrorCode::BadRequest, bad);
   const std::string name = st.device()->str();
   if (!named(name))
@@ -240,12 +244,11 @@ void Session::on_device_status(const wire::DeviceStatus& st, SessionClock::time_
   fb::FlatBufferBuilder b(256 + name.size());
   const auto device = b.CreateString(st.device());
   const auto mode = b.CreateString(st.mode());
-  const Bytes relayed =
-      seal(b, wire::Message::DeviceStatus,
-           wire::CreateDeviceStatus(b, device, st.device_time_ns(), host_.now_ns(), st.tick_rate_hz(),
-                                    st.lateness_p99_us(), st.lateness_max_us(), st.missed_ticks(),
-                                    st.display_delay_ms(), st.state_interval_ms(), st.jitter_allowance_ms(), mode,
-                                    st.force_N()));
+  const Bytes relayed = seal(
+      b, wire::Message::DeviceStatus,
+      wire::CreateDeviceStatus(b, device, st.device_time_ns(), host_.now_ns(), st.tick_rate_hz(), st.lateness_p99_us(),
+                               st.lateness_max_us(), st.missed_ticks(), st.display_delay_ms(), st.state_interval_ms(),
+                               st.jitter_allowance_ms(), mode, st.force_N()));
   host_.relay(relayed, OutKind::Status);
   host_.record(Topic::DeviceStatus, *relayed, host_.now_ns());
 }
@@ -286,8 +289,8 @@ void Session::send(const Bytes& message, OutKind kind, SessionClock::time_point 
     // the next one's due time a period on, and a state a little early (a
     // quarter period: the simulation's publishing jitters) still passes,
     // or states made at exactly the viewer's rate would lose every other one.
-    const auto period = std::chrono::duration_cast<SessionClock::duration>(
-        std::chrono::duration<double>(1.0 / limits_.viewer_rate_hz));
+    const auto period =
+        std::chrono::duration_cast<SessionClock::duration>(std::chrono::duration<double>(1.0 / limits_.viewer_rate_hz));
     if (now + period / 4 < next_state_due_) return;
     if (pending_state_) {
       pending_state_ = message;  // replaces the one not yet sent

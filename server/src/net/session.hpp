@@ -56,7 +56,7 @@ enum class OutKind { Control, State, Haptic, Event, Status };
 
 // The bounds the rules hold a connection to (ServerOptions' share).
 struct SessionLimits {
-  std::string token;                     // "" : no token set, so only loopback viewers are let in
+  std::string token;  // "" : no token set, so only loopback viewers are let in
   std::string server_name = "tactile";
   double viewer_rate_hz = 30;            // states per second at most
   double max_messages_per_s = 5000;      // inbound (a second's burst)

@@ -15,7 +15,9 @@ json time_of(int64_t ns) { return {{"sec", ns / 1'000'000'000}, {"nsec", ns % 1'
 // 17 digits) and no eye tells the difference.
 double micrometres(double x) { return std::round(x * 1e6) * 1e-6; }
 
-json point(double x, double y, double z) { return {{"x", micrometres(x)}, {"y", micrometres(y)}, {"z", micrometres(z)}}; }
+json point(double x, double y, double z) {
+  return {{"x", micrometres(x)}, {"y", micrometres(y)}, {"z", micrometres(z)}};
+}
 
 json pose(const proto::ProxyPose* p) {
   if (!p) return {{"position", point(0, 0, 0)}, {"orientation", {{"x", 0}, {"y", 0}, {"z", 0}, {"w", 1}}}};
@@ -109,22 +111,22 @@ std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64
 std::string FoxgloveViews::log(const proto::SafetyEvent& e, int64_t log_ns) {
   // Forces stopped or limited are warnings; a fault is an error.
   const proto::SafetyKind k = e.kind();
-  const int level = k == proto::SafetyKind::Engaged ? 2 : k == proto::SafetyKind::ServerFault ||
-                                                                   k == proto::SafetyKind::NonFinite
-                                                               ? 4
-                                                               : 3;
+  const int level = k == proto::SafetyKind::Engaged                                            ? 2
+                    : k == proto::SafetyKind::ServerFault || k == proto::SafetyKind::NonFinite ? 4
+                                                                                               : 3;
   const std::string device = e.device() ? e.device()->str() : "";
   const std::string text = std::string(proto::EnumNameSafetyKind(k)) + (e.message() ? ": " + e.message()->str() : "") +
                            " (" + std::to_string(e.force_N()) + " N)";
   return json{{"timestamp", time_of(log_ns)}, {"level", level}, {"message", text},
-              {"name", "bridge/" + device},       {"file", ""},     {"line", 0}}
+              {"name", "bridge/" + device},   {"file", ""},     {"line", 0}}
       .dump();
 }
 
 std::string FoxgloveViews::log(const proto::Error& e, int64_t log_ns) {
-  const std::string text = std::string(proto::EnumNameErrorCode(e.code())) + (e.message() ? ": " + e.message()->str() : "");
-  return json{{"timestamp", time_of(log_ns)}, {"level", 4}, {"message", text}, {"name", "server"}, {"file", ""},
-              {"line", 0}}
+  const std::string text =
+      std::string(proto::EnumNameErrorCode(e.code())) + (e.message() ? ": " + e.message()->str() : "");
+  return json{
+      {"timestamp", time_of(log_ns)}, {"level", 4}, {"message", text}, {"name", "server"}, {"file", ""}, {"line", 0}}
       .dump();
 }
 

@@ -208,9 +208,9 @@ void Writer::close_chunk() {
   const size_t r = o.begin_record(kChunk);
   o.u64(chunk_start_);
   o.u64(chunk_end_);
-  o.u64(chunk_.size());                             // uncompressed size
-  o.u32(crc32_of(chunk_.data(), chunk_.size()));    // uncompressed CRC
-  o.str("");                                        // no compression
+  o.u64(chunk_.size());                           // uncompressed size
+  o.u32(crc32_of(chunk_.data(), chunk_.size()));  // uncompressed CRC
+  o.str("");                                      // no compression
   o.u64(chunk_.size());
   o.bytes(chunk_);
   o.end_record(r);
@@ -473,8 +473,8 @@ uint16_t Recording::channel_of(const std::string& topic) const {
 Recording read_file(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec))
-    throw McapError("cannot read recording '" + path + "': " +
-                    (std::filesystem::exists(path, ec) ? "not a file" : "no such file"));
+    throw McapError("cannot read recording '" + path +
+                    "': " + (std::filesystem::exists(path, ec) ? "not a file" : "no such file"));
   std::ifstream f(path, std::ios::binary);
   if (!f) throw McapError("cannot read recording '" + path + "'");
   const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());

@@ -54,8 +54,8 @@ std::string to_base64(std::span<const uint8_t> bytes) {
   out.reserve((bytes.size() + 2) / 3 * 4);
   for (size_t i = 0; i < bytes.size(); i += 3) {
     const size_t n = std::min<size_t>(3, bytes.size() - i);
-    const uint32_t v = uint32_t(bytes[i]) << 16 | (n > 1 ? uint32_t(bytes[i + 1]) << 8 : 0u) |
-                       (n > 2 ? uint32_t(bytes[i + 2]) : 0u);
+    const uint32_t v =
+        uint32_t(bytes[i]) << 16 | (n > 1 ? uint32_t(bytes[i + 1]) << 8 : 0u) | (n > 2 ? uint32_t(bytes[i + 2]) : 0u);
     for (size_t k = 0; k < 4; ++k) out += k <= n ? kBase64[(v >> (18 - 6 * k)) & 63] : '=';
   }
   return out;
@@ -94,8 +94,7 @@ void restore_envelopes(mcap::Recording& rec) {
     if (const auto it = channel.metadata.find("envelope_offset"); it != channel.metadata.end()) {
       const size_t at = size_t(std::stoul(it->second));
       for (mcap::Message& m : rec.messages)
-        if (m.channel == id)
-          m.data.erase(m.data.begin(), m.data.begin() + std::ptrdiff_t(std::min(at, m.data.size())));
+        if (m.channel == id) m.data.erase(m.data.begin(), m.data.begin() + std::ptrdiff_t(std::min(at, m.data.size())));
     } else if (const auto f = channel.metadata.find("envelope_field"); f != channel.metadata.end()) {
       for (mcap::Message& m : rec.messages) {
         if (m.channel != id) continue;
@@ -141,7 +140,9 @@ int64_t unix_now_ns() {
 }  // namespace
 
 Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderOptions options)
-    : path_(path), options_(options), writer_(path, "", "tactile-server"),
+    : path_(path),
+      options_(options),
+      writer_(path, "", "tactile-server"),
       epoch_offset_ns_(unix_now_ns() - steady_now_ns()) {
   static constexpr char kAppliedSchema[] =
       R"({"title":"tactile.AppliedInput","type":"object","properties":{)"
@@ -184,9 +185,8 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
   body_channel_ = writer_.add_channel(
       writer_.add_schema("foxglove.SceneUpdate", "jsonschema", bytes_of(scene_update_json_schema())), "/foxglove/body",
       "json");
-  log_channel_ =
-      writer_.add_channel(writer_.add_schema("foxglove.Log", "jsonschema", bytes_of(log_json_schema())), "/foxglove/log",
-                          "json");
+  log_channel_ = writer_.add_channel(writer_.add_schema("foxglove.Log", "jsonschema", bytes_of(log_json_schema())),
+                                     "/foxglove/log", "json");
   mcap::Map meta = metadata;
   meta["started_unix_ns"] = std::to_string(unix_now_ns());
   writer_.add_metadata("tactile", meta);
@@ -202,7 +202,8 @@ Recorder::~Recorder() {
 bool Recorder::post(Topic topic, int64_t steady_ns, int64_t publish_ns, std::span<const uint8_t> bytes) {
   std::unique_lock<std::mutex> lock(mutex_);
   if (options_.wait_for_room)
-    room_.wait(lock, [&] { return stopping_ || queued_bytes_ == 0 || queued_bytes_ + bytes.size() <= options_.queue_bytes; });
+    room_.wait(lock,
+               [&] { return stopping_ || queued_bytes_ == 0 || queued_bytes_ + bytes.size() <= options_.queue_bytes; });
   if (stopping_) return false;
   if (queued_bytes_ + bytes.size() > options_.queue_bytes) {
     stats_.fault = "the recording could not keep up with the session (" + std::to_string(queued_bytes_ >> 20) +
@@ -265,13 +266,15 @@ void Recorder::run() {
       // the moment the earliest waiting message may go.
       Clock::time_point until = Clock::time_point::max();
       if (!writer_.chunk_empty())
-        until = chunk_opened + std::chrono::duration_cast<Clock::duration>(
-                                   std::chrono::duration<double>(options_.chunk_seconds));
+        until = chunk_opened +
+                std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options_.chunk_seconds));
       if (!waiting.empty() && !options_.wait_for_room)
-        until = std::min(until, Clock::now() + std::chrono::nanoseconds(
-                                                   std::max<int64_t>(0, waiting.begin()->first + hold_ns - log_now_ns())));
-      if (until == Clock::time_point::max()) wake_.wait(lock, ready);
-      else wake_.wait_until(lock, until, ready);
+        until = std::min(until, Clock::now() + std::chrono::nanoseconds(std::max<int64_t>(
+                                                   0, waiting.begin()->first + hold_ns - log_now_ns())));
+      if (until == Clock::time_point::max())
+        wake_.wait(lock, ready);
+      else
+        wake_.wait_until(lock, until, ready);
       batch.swap(queue_);
       queued_bytes_ = 0;
       stopping = stopping_;
@@ -334,9 +337,8 @@ void Recorder::run() {
           // Control's fields as flatbuffers' text generator writes them, and
           // its Envelope for replay.
           flatbuffers::Verifier v(item.bytes.data(), item.bytes.size());
-          const proto::Control* c = proto::VerifyEnvelopeBuffer(v)
-                                        ? proto::GetEnvelope(item.bytes.data())->message_as_Control()
-                                        : nullptr;
+          const proto::Control* c =
+              proto::VerifyEnvelopeBuffer(v) ? proto::GetEnvelope(item.bytes.data())->message_as_Control() : nullptr;
           std::string text;
           nlohmann::json j;
           if (c && flatbuffers::GenerateTextFromTable(*schema_, c, "tactile.proto.Control", &text))
@@ -355,7 +357,8 @@ void Recorder::run() {
         waiting.erase(waiting.begin());
         if (writer_.chunk_bytes() >= options_.chunk_bytes) writer_.close_chunk();
       }
-      if (!writer_.chunk_empty() && Clock::now() - chunk_opened >= std::chrono::duration<double>(options_.chunk_seconds))
+      if (!writer_.chunk_empty() &&
+          Clock::now() - chunk_opened >= std::chrono::duration<double>(options_.chunk_seconds))
         writer_.close_chunk();
     } catch (const mcap::McapError& e) {
       error = e.what();

@@ -66,8 +66,8 @@ struct RecorderStats {
   // its own stamp), so that the file stays in log-time order.
   uint64_t late = 0;
   uint64_t unreadable = 0;  // Envelopes that did not verify: left out
-  std::string fault;      // what stopped it early, "" if nothing
-  bool finished = false;  // the file is closed
+  std::string fault;        // what stopped it early, "" if nothing
+  bool finished = false;    // the file is closed
 };
 
 class Recorder {

@@ -50,8 +50,7 @@ Replay::Replay(const std::string& path) : path_(path) {
     }
     items_.push_back({it->second, int64_t(m.log_time - first), std::move(m.data)});
   }
-  if (bad > 0)
-    problems_.push_back(std::to_string(bad) + " messages are not what their topic carries: left out");
+  if (bad > 0) problems_.push_back(std::to_string(bad) + " messages are not what their topic carries: left out");
   // In log-time order already, but in recordings made before the recorder
   // merged its two sources (frames stamped when made, network messages when
   // they came), which interleave slightly out of order.
@@ -90,8 +89,9 @@ void Replay::seek(double t, Clock::time_point now) {
   base_ = std::clamp(t, 0.0, duration());
   since_ = now;
   const int64_t at = int64_t(base_ * 1e9);
-  next_ = size_t(std::lower_bound(items_.begin(), items_.end(), at, [](const Item& i, int64_t v) { return i.t_ns < v; }) -
-                 items_.begin());
+  next_ =
+      size_t(std::lower_bound(items_.begin(), items_.end(), at, [](const Item& i, int64_t v) { return i.t_ns < v; }) -
+             items_.begin());
 }
 
 const Replay::Item& Replay::first_scene() const {

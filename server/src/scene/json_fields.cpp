@@ -81,12 +81,8 @@ int64_t Fields::integer(std::string_view key, int64_t lo, int64_t hi) const {
 Vec3 Fields::vec3(std::string_view key) const { return read_vec3(at(key), path(key), origin_); }
 std::string Fields::string(std::string_view key) const { return read_string(at(key), path(key), origin_); }
 
-double Fields::number_or(std::string_view key, double fallback) const {
-  return has(key) ? number(key) : fallback;
-}
-double Fields::positive_or(std::string_view key, double fallback) const {
-  return has(key) ? positive(key) : fallback;
-}
+double Fields::number_or(std::string_view key, double fallback) const { return has(key) ? number(key) : fallback; }
+double Fields::positive_or(std::string_view key, double fallback) const { return has(key) ? positive(key) : fallback; }
 double Fields::non_negative_or(std::string_view key, double fallback) const {
   return has(key) ? non_negative(key) : fallback;
 }
@@ -125,8 +121,7 @@ int64_t read_integer(const Json& v, const std::string& path, const Origin& o, in
   // JSON Schema counts 3.0 as an integer; so do we.
   if (!is_number(v)) o.fail(path, "must be an integer " + range + ", got " + describe(v));
   const double x = v.get<double>();
-  if (!(std::isfinite(x) && x == std::floor(x)))
-    o.fail(path, "must be an integer " + range + ", got " + describe(v));
+  if (!(std::isfinite(x) && x == std::floor(x))) o.fail(path, "must be an integer " + range + ", got " + describe(v));
   if (x < double(lo) || x > double(hi)) o.fail(path, "must be an integer " + range + ", got " + describe(v));
   return v.is_number_float() ? int64_t(x) : v.get<int64_t>();
 }
@@ -157,8 +152,10 @@ std::string read_name(const Json& v, const std::string& path, const Origin& o) {
     ok = ok && ((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' || c == '-' ||
                 c == '.');
   if (!ok)
-    o.fail(path, "must be 1 to 64 letters, digits, '_', '-' or '.', not starting with '.' or '-' (it names a "
-                 "folder), got " + describe(v));
+    o.fail(path,
+           "must be 1 to 64 letters, digits, '_', '-' or '.', not starting with '.' or '-' (it names a "
+           "folder), got " +
+               describe(v));
   return s;
 }
 

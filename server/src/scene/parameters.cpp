@@ -85,7 +85,9 @@ std::string known(const ModelSpec& spec) {
 
 std::vector<Parameter> list_parameters(const ModelSpec& spec) {
   std::vector<Parameter> out;
-  auto add = [&](std::string name, double value, const Range& r) { out.push_back({std::move(name), value, r.min, r.max, r.unit}); };
+  auto add = [&](std::string name, double value, const Range& r) {
+    out.push_back({std::move(name), value, r.min, r.max, r.unit});
+  };
   if (spec.materials.size() == 1) {
     add("material.E", spec.materials[0].E, kE);
     add("material.nu", spec.materials[0].nu, kNu);
@@ -122,7 +124,8 @@ void apply_parameter(ModelSpec& spec, const std::string& name, double value) {
     for (MaterialSpec& m : spec.materials) set_material(m, name, std::string_view(name).substr(9), value);
   } else if (indexed(name, "materials", &i, &rest)) {
     if (i >= spec.materials.size())
-      fail(name, "no material " + std::to_string(i) + " (this scene has " + std::to_string(spec.materials.size()) + ")");
+      fail(name,
+           "no material " + std::to_string(i) + " (this scene has " + std::to_string(spec.materials.size()) + ")");
     set_material(spec.materials[i], name, rest, value);
   } else if (name == "damping.alpha") {
     check(name, value, kAlpha);

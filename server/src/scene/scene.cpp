@@ -139,7 +139,8 @@ EssentialBc read_boundary(const Json& j, const std::string& path, const Origin& 
   const bool moving = f.has("rotate") || f.has("spin") || f.has("translate");
   if (const Json* fixed = f.find("fixed")) {
     if (!fixed->is_boolean() || !fixed->get<bool>())
-      o.fail(f.path("fixed"), "must be true (leave it out for a moving condition), got " + scene_json::describe(*fixed));
+      o.fail(f.path("fixed"),
+             "must be true (leave it out for a moving condition), got " + scene_json::describe(*fixed));
     if (moving) o.fail(f.path("fixed"), "cannot be combined with rotate, spin or translate");
     return bc;
   }
@@ -232,12 +233,13 @@ PoseScript read_script(const Json& j, const std::string& path, const Origin& o, 
     key.t = k.non_negative("t");
     if (i > 0 && !(key.t > script.keys.back().t)) {
       char buf[96];
-      std::snprintf(buf, sizeof buf, "must be greater than the previous keyframe's (%g s), got %g", script.keys.back().t,
-                    key.t);
+      std::snprintf(buf, sizeof buf, "must be greater than the previous keyframe's (%g s), got %g",
+                    script.keys.back().t, key.t);
       o.fail(k.path("t"), buf);
     }
     key.pose.position = k.vec3("position");
-    key.pose.orientation = k.has("orientation") ? read_quaternion(k.at("orientation"), k.path("orientation"), o) : previous;
+    key.pose.orientation =
+        k.has("orientation") ? read_quaternion(k.at("orientation"), k.path("orientation"), o) : previous;
     previous = key.pose.orientation;
     script.keys.push_back(key);
   }
@@ -256,8 +258,8 @@ Pose read_start_pose(const Fields& f, const Origin& o, std::optional<PoseScript>
   script = read_script(f.at("script"), f.path("script"), o, pose.orientation);
   const Pose start = script->at(0.0);
   if (f.has("position") && glm::length(f.vec3("position") - start.position) > 1e-9)
-    o.fail(f.path("position"), "differs from where the script starts, " + format_vec(start.position) +
-                                   "; leave it out or make them agree");
+    o.fail(f.path("position"),
+           "differs from where the script starts, " + format_vec(start.position) + "; leave it out or make them agree");
   if (f.has("orientation") && !same_rotation(pose.orientation, start.orientation))
     o.fail(f.path("orientation"), "differs from the script's orientation at t = 0; leave it out or make them agree");
   return start;
@@ -266,9 +268,9 @@ Pose read_start_pose(const Fields& f, const Origin& o, std::optional<PoseScript>
 // {"stiffness", "damping", "max_force", "angular_stiffness", "angular_damping",
 // "max_torque", "mass", "inertia"}: each optional, each > 0 (core/coupling.hpp).
 CouplingSpec read_coupling(const Json& j, const std::string& path, const Origin& o) {
-  const Fields f(j, path, o,
-                 {"stiffness", "damping", "max_force", "angular_stiffness", "angular_damping", "max_torque", "mass",
-                  "inertia"});
+  const Fields f(
+      j, path, o,
+      {"stiffness", "damping", "max_force", "angular_stiffness", "angular_damping", "max_torque", "mass", "inertia"});
   CouplingSpec c;
   const auto get = [&](const char* key, double& out) {
     if (f.has(key)) out = f.positive(key);
@@ -304,7 +306,8 @@ void read_hands(const Json& j, const Origin& o, Scene& scene) {
 
 // Shape fields: what each shape needs, and nothing it does not use.
 void read_geometry(const Fields& f, const Origin& o, ProxyGeometry& g) {
-  const std::string shape = scene_json::read_choice(f.at("shape"), f.path("shape"), o, {"sphere", "capsule", "box", "plane"});
+  const std::string shape =
+      scene_json::read_choice(f.at("shape"), f.path("shape"), o, {"sphere", "capsule", "box", "plane"});
   auto refuse = [&](const char* key, const char* used_by) {
     if (f.has(key)) o.fail(f.path(key), std::string("is for ") + used_by + " only (shape is \"" + shape + "\")");
   };
@@ -371,7 +374,8 @@ void read_proxies(const Json& j, const Origin& o, Scene& scene) {
       // The core fills the device in from the hand; the spec keeps it empty.
     } else {
       if (!f.has("device"))
-        o.fail(f.path("device"), "required field missing (the device channel that drives the proxy; or give a \"hand\")");
+        o.fail(f.path("device"),
+               "required field missing (the device channel that drives the proxy; or give a \"hand\")");
       proxy.device = read_label(f.at("device"), f.path("device"), o);
     }
     std::optional<PoseScript> script;
@@ -382,7 +386,8 @@ void read_proxies(const Json& j, const Origin& o, Scene& scene) {
   }
   for (size_t h = 0; h < scene.spec.hands.size(); ++h) {
     const std::string& name = scene.spec.hands[h].name;
-    if (std::none_of(scene.spec.proxies.begin(), scene.spec.proxies.end(), [&](const ProxySpec& p) { return p.hand == name; }))
+    if (std::none_of(scene.spec.proxies.begin(), scene.spec.proxies.end(),
+                     [&](const ProxySpec& p) { return p.hand == name; }))
       o.fail(join("hands", h), "no proxy belongs to hand '" + name + "' (give proxies \"hand\": \"" + name + "\")");
   }
 }
@@ -419,8 +424,8 @@ Effects read_effects(const Json& j, const Origin& o) {
 }
 
 IntegratorSpec read_integrator(const Json& j, const Origin& o) {
-  const Fields f(j, "integrator", o, {"precision", "dt", "safety", "unstable", "threads", "energy_tolerance",
-                                           "energy_window"});
+  const Fields f(j, "integrator", o,
+                 {"precision", "dt", "safety", "unstable", "threads", "energy_tolerance", "energy_window"});
   IntegratorSpec s;
   if (const Json* p = f.find("precision"))
     s.precision = scene_json::read_choice(*p, f.path("precision"), o, {"float", "double"}) == "float"
@@ -464,8 +469,8 @@ void read_run(const Json& j, const Origin& o, const TetMesh& mesh, Scene& scene)
   r.duration = f.positive("duration");
   r.frame_rate = f.positive_or("frame_rate", r.frame_rate);
   if (r.duration * r.frame_rate > 1e6)
-    o.fail(f.path("frame_rate"), "asks for " + std::to_string(std::llround(r.duration * r.frame_rate)) +
-                                     " frames; the limit is 1000000");
+    o.fail(f.path("frame_rate"),
+           "asks for " + std::to_string(std::llround(r.duration * r.frame_rate)) + " frames; the limit is 1000000");
   r.vtu_every = int32_t(f.integer_or("vtu_every", 1, std::numeric_limits<int32_t>::max(), 1));
   if (const Json* v = f.find("vtu_fields")) {
     const Json& arr = scene_json::read_array(*v, f.path("vtu_fields"), o, 0);
@@ -543,7 +548,8 @@ void apply_regions(const Json& j, const Origin& o, size_t n_materials, TetMesh& 
 
 Json merge(Json base, const Json& patch) {
   if (!base.is_object() || !patch.is_object()) return patch;
-  for (const auto& item : patch.items()) base[item.key()] = merge(base.contains(item.key()) ? base[item.key()] : Json(), item.value());
+  for (const auto& item : patch.items())
+    base[item.key()] = merge(base.contains(item.key()) ? base[item.key()] : Json(), item.value());
   return base;
 }
 
@@ -588,10 +594,12 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   for (int32_t e = 0; e < mesh.n_tets(); ++e) {
     const int32_t r = mesh.region_of(e);
     if (r < 0 || size_t(r) >= scene.spec.materials.size())
-      o.fail(root.has("regions") ? "regions" : "mesh",
-             "tet " + std::to_string(e) + " is in region " + std::to_string(r) + " but there " +
-                 (scene.spec.materials.size() == 1 ? "is 1 material" : "are " + std::to_string(scene.spec.materials.size()) + " materials") +
-                 " (indices from 0); give more \"materials\" or assign \"regions\"");
+      o.fail(
+          root.has("regions") ? "regions" : "mesh",
+          "tet " + std::to_string(e) + " is in region " + std::to_string(r) + " but there " +
+              (scene.spec.materials.size() == 1 ? "is 1 material"
+                                                : "are " + std::to_string(scene.spec.materials.size()) + " materials") +
+              " (indices from 0); give more \"materials\" or assign \"regions\"");
   }
 
   std::vector<int32_t> held_by(size_t(mesh.n_nodes()), -1);
@@ -601,9 +609,9 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
       EssentialBc bc = read_boundary(arr[i], join("boundary", i), o, mesh);
       for (int32_t n : select_nodes(mesh, bc.where)) {
         if (held_by[size_t(n)] >= 0)
-          o.fail(join(join("boundary", i), "select"),
-                 "node " + std::to_string(n) + " is also held by boundary[" + std::to_string(held_by[size_t(n)]) +
-                     "]; a node may follow one essential condition only");
+          o.fail(join(join("boundary", i), "select"), "node " + std::to_string(n) + " is also held by boundary[" +
+                                                          std::to_string(held_by[size_t(n)]) +
+                                                          "]; a node may follow one essential condition only");
         held_by[size_t(n)] = int32_t(i);
       }
       scene.spec.essential.push_back(std::move(bc));
@@ -633,7 +641,8 @@ Pose PoseScript::at(double t) const {
   const Keyframe& b = *next;
   const double tau = (t - a.t) / (b.t - a.t);
   // Cycloidal: s' = 1 - cos(2 pi tau) vanishes at both ends, as the boundary ramps do (core/spec.hpp).
-  const double s = easing == Easing::Linear ? tau : tau - std::sin(2.0 * std::numbers::pi * tau) / (2.0 * std::numbers::pi);
+  const double s =
+      easing == Easing::Linear ? tau : tau - std::sin(2.0 * std::numbers::pi * tau) / (2.0 * std::numbers::pi);
   Pose p;
   p.position = a.pose.position + s * (b.pose.position - a.pose.position);
   Quat q = b.pose.orientation;
@@ -667,7 +676,8 @@ std::vector<Scene> parse_scene(const Json& j, const std::string& path) {
   std::vector<std::string> names;
   for (size_t i = 0; i < arr.size(); ++i) {
     const std::string vpath = join("variants", i);
-    const Fields f(arr[i], vpath, ctx.origin, {"name", "description", "material", "materials", "effects", "integrator", "mesh"});
+    const Fields f(arr[i], vpath, ctx.origin,
+                   {"name", "description", "material", "materials", "effects", "integrator", "mesh"});
     const std::string name = scene_json::read_name(f.at("name"), f.path("name"), ctx.origin);
     if (std::find(names.begin(), names.end(), name) != names.end())
       ctx.origin.fail(f.path("name"), "'" + name + "' names two variants");

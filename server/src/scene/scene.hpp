@@ -31,9 +31,9 @@ struct SceneError : std::runtime_error {
 // A point whose motion a run reports: the mesh node nearest to `point`.
 struct TrackedPoint {
   std::string name;
-  Vec3 point{0.0};   // as asked [m]
-  int32_t node = -1; // nearest node id
-  Vec3 X{0.0};       // rest position of that node [m]
+  Vec3 point{0.0};    // as asked [m]
+  int32_t node = -1;  // nearest node id
+  Vec3 X{0.0};        // rest position of that node [m]
 };
 
 // A plane through the body at rest; a run reports the area of the deformed
@@ -79,8 +79,8 @@ struct RunSettings {
 
 struct Scene {
   std::string name, description;
-  std::string path;       // the scene file, as given
-  ModelSpec spec;         // what the core builds
+  std::string path;  // the scene file, as given
+  ModelSpec spec;    // what the core builds
   // Scripted motions, by index into spec.proxies and spec.hands; a proxy or
   // hand with none holds its pose. A scripted one's pose at t = 0 in spec is
   // its script's.
@@ -88,8 +88,8 @@ struct Scene {
   std::vector<std::optional<PoseScript>> hand_script;   // (n_hands)
   RunSettings run;
   std::vector<TrackedPoint> track;
-  std::string variant;    // "" when the scene has no variants
-  MeshQuality quality;    // of spec.mesh; poor tets are allowed and listed here
+  std::string variant;  // "" when the scene has no variants
+  MeshQuality quality;  // of spec.mesh; poor tets are allowed and listed here
 };
 
 // Reads and checks a scene file; one entry per variant (one when it has none).

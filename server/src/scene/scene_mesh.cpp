@@ -86,9 +86,12 @@ double available_bytes() {
 
 std::string format_count(double n) {
   char text[32];
-  if (n >= 1e6) std::snprintf(text, sizeof text, "%.1f M", n / 1e6);
-  else if (n >= 1e3) std::snprintf(text, sizeof text, "%.0f k", n / 1e3);
-  else std::snprintf(text, sizeof text, "%.0f", n);
+  if (n >= 1e6)
+    std::snprintf(text, sizeof text, "%.1f M", n / 1e6);
+  else if (n >= 1e3)
+    std::snprintf(text, sizeof text, "%.0f k", n / 1e3);
+  else
+    std::snprintf(text, sizeof text, "%.0f", n);
   return text;
 }
 
@@ -102,8 +105,10 @@ void check_size(const Origin& origin, const std::string& field, double tets, boo
   const double bytes = tets * kBytesPerTet, free = available_bytes();
   if (bytes > free) {
     char text[200];
-    std::snprintf(text, sizeof text, "makes %s, which need about %.1f GB to mesh and simulate; this machine has "
-                  "%.1f GB free", count.c_str(), bytes / 1e9, free / 1e9);
+    std::snprintf(text, sizeof text,
+                  "makes %s, which need about %.1f GB to mesh and simulate; this machine has "
+                  "%.1f GB free",
+                  count.c_str(), bytes / 1e9, free / 1e9);
     origin.fail(field, text);
   }
 }
@@ -134,9 +139,9 @@ TetMesh build_box(const Fields& f) {
     n[d] = int(scene_json::read_integer(cells[d], scene_json::join(cells_path, d), f.origin(), 1, 10000));
     count *= n[d];
   }
-  const std::string split = f.has("split") ? scene_json::read_choice(f.at("split"), f.path("split"), f.origin(),
-                                                                      {"kuhn6", "centred24"})
-                                           : "kuhn6";
+  const std::string split =
+      f.has("split") ? scene_json::read_choice(f.at("split"), f.path("split"), f.origin(), {"kuhn6", "centred24"})
+                     : "kuhn6";
   const BoxSplit how = split == "kuhn6" ? BoxSplit::kuhn6 : BoxSplit::centred24;
   count *= how == BoxSplit::kuhn6 ? 6 : 24;
   check_size(f.origin(), cells_path, double(count), false);
@@ -258,7 +263,8 @@ SceneMesh build_scene_mesh(const Json& j, const std::string& path, const Origin&
         out.mesh = build_box(f);
         apply_transform(f, out.mesh);
       } else if (kind == "cylinder") {
-        const Fields f(j, path, origin, {"primitive", "radius", "height", "around", "layers", "rings", "scale", "translate"});
+        const Fields f(j, path, origin,
+                       {"primitive", "radius", "height", "around", "layers", "rings", "scale", "translate"});
         out.mesh = build_cylinder(f);
         apply_transform(f, out.mesh);
       } else {

@@ -101,7 +101,8 @@ class EngineOf final : public Simulation::Engine {
     return c;
   }
   void carry_in(const Carry& c) override {
-    if (c.u.size() != state_.u.size() || c.proxy.size() != model_->proxies.size() || c.hand.size() != model_->hands.size())
+    if (c.u.size() != state_.u.size() || c.proxy.size() != model_->proxies.size() ||
+        c.hand.size() != model_->hands.size())
       throw std::invalid_argument("continue_from: the other simulation has " + std::to_string(c.u.size() / 3) +
                                   " nodes, " + std::to_string(c.proxy.size()) + " proxies and " +
                                   std::to_string(c.hand.size()) + " hands; this one " +
@@ -196,7 +197,9 @@ class EngineOf final : public Simulation::Engine {
   const std::vector<HandSpec>& hands() const override { return model_->hands; }
   const std::vector<std::string>& devices() const override { return model_->devices; }
   const std::vector<int32_t>& proxy_device() const override { return model_->proxy_device; }
-  void set_proxy_motion(int32_t proxy, const ProxyMotion& m) override { stepper_.contact().set_motion(state_, proxy, m); }
+  void set_proxy_motion(int32_t proxy, const ProxyMotion& m) override {
+    stepper_.contact().set_motion(state_, proxy, m);
+  }
   void set_hand_motion(int32_t hand, const ProxyMotion& m) override {
     stepper_.contact().set_hand_motion(state_, hand, m);
   }
@@ -226,8 +229,8 @@ class EngineOf final : public Simulation::Engine {
   std::unique_ptr<Model<Real>> model_;  // the stepper keeps a reference: the model must not move
   Stepper<Real> stepper_;
   State<Real> state_;
-  std::vector<int32_t> node_model_;     // the model's id of each mesh node
-  std::vector<double> impulses_;        // take_contact_impulses' model-ordered scratch
+  std::vector<int32_t> node_model_;  // the model's id of each mesh node
+  std::vector<double> impulses_;     // take_contact_impulses' model-ordered scratch
 };
 
 }  // namespace

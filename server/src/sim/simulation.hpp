@@ -37,20 +37,20 @@ class Simulation {
   const TetMesh& mesh() const;  // the spec's rest mesh
   int32_t n_nodes() const;
   int32_t n_tets() const;
-  double total_mass() const;                    // [kg]
+  double total_mass() const;                      // [kg]
   const std::vector<double>& tet_volume() const;  // rest volumes [m^3] (n_tets)
-  double dt_rest() const;                       // critical step at rest [s]
-  int32_t parts() const;                        // ways each pass is split (threads in use)
+  double dt_rest() const;                         // critical step at rest [s]
+  int32_t parts() const;                          // ways each pass is split (threads in use)
 
-  double time() const;     // simulated [s]
+  double time() const;  // simulated [s]
   int64_t steps() const;
 
   // Covers frame_dt [s] with as many sub-steps as stability needs (Stepper::advance).
   AdvanceReport advance(double frame_dt);
   double compute_critical_dt() const;  // of the current configuration [s]
 
-  const Energy& energy() const;               // as of the latest step
-  Energy compute_energy() const;              // full pass
+  const Energy& energy() const;                        // as of the latest step
+  Energy compute_energy() const;                       // full pass
   std::vector<double> compute_element_energy() const;  // V psi per tet [J] (n_tets)
   // Stress and strain per tet, only those asked for (core/fields.hpp).
   ElementFields compute_element_fields(const ElementFieldRequest& ask) const;

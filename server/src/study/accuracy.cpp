@@ -12,11 +12,11 @@
 #include <nlohmann/json.hpp>
 
 #include "app/section.hpp"
-#include "sim/simulation.hpp"
-#include "study/beam_theory.hpp"
 #include "core/spec.hpp"
 #include "mesh/primitives.hpp"
 #include "scene/scene.hpp"
+#include "sim/simulation.hpp"
+#include "study/beam_theory.hpp"
 
 namespace tactile::study {
 
@@ -142,7 +142,9 @@ AccuracyRecord cantilever_frequency(MaterialModel m, int n, Precision p, double 
   const double bL = 1.8751040687, sigma = (std::cosh(bL) + std::cos(bL)) / (std::sinh(bL) + std::sin(bL));
   const double k = bL / beam.L;
   auto w = [&](double x) { return std::cosh(k * x) - std::cos(k * x) - sigma * (std::sinh(k * x) - std::sin(k * x)); };
-  auto dw = [&](double x) { return k * (std::sinh(k * x) + std::sin(k * x) - sigma * (std::cosh(k * x) - std::cos(k * x))); };
+  auto dw = [&](double x) {
+    return k * (std::sinh(k * x) + std::sin(k * x) - sigma * (std::cosh(k * x) - std::cos(k * x)));
+  };
   const double amplitude = 1e-3 * beam.L / w(beam.L);
   std::vector<double> u(3 * size_t(sim.n_nodes()), 0.0), v(u.size(), 0.0);
   for (int32_t i = 0; i < sim.n_nodes(); ++i) {
@@ -252,7 +254,8 @@ Fig3Run fig3(const std::string& scenes, MaterialModel m, int n, Precision p) {
   const Stepped s = step_for(sim, 2.0, 0.01);
   int32_t tip = 0;
   for (int32_t i = 0; i < sim.n_nodes(); ++i)
-    if (glm::length(sim.mesh().X[size_t(i)] - Vec3(1.0, 0.5, 0)) < glm::length(sim.mesh().X[size_t(tip)] - Vec3(1.0, 0.5, 0)))
+    if (glm::length(sim.mesh().X[size_t(i)] - Vec3(1.0, 0.5, 0)) <
+        glm::length(sim.mesh().X[size_t(tip)] - Vec3(1.0, 0.5, 0)))
       tip = i;
   Fig3Run out{make_record("fig3_tip", m, n, sim, sc.spec.integrator.safety, p, s), sim.displacement(tip)};
   out.record.value = out.tip.y;
@@ -383,7 +386,8 @@ AccuracyResults run_accuracy_study(const AccuracyOptions& o) {
   const std::vector<int> figure_levels = q ? std::vector<int>{1, 2} : std::vector<int>{1, 2, 3};
   const int reference_level = q ? 3 : 5;
   auto label = [](const char* problem, MaterialModel m, int n, Precision p, double safety = 0) {
-    std::string s = std::string(problem) + " " + std::string(to_string(m)) + " level " + std::to_string(n) + " " + name_of(p);
+    std::string s =
+        std::string(problem) + " " + std::string(to_string(m)) + " level " + std::to_string(n) + " " + name_of(p);
     if (safety > 0) s += " dt " + std::to_string(safety).substr(0, 3);
     return s;
   };
@@ -393,7 +397,8 @@ AccuracyResults run_accuracy_study(const AccuracyOptions& o) {
     for (Precision p : kPrecisions) {
       if (wants("cantilever_deflection"))
         for (int n : static_levels)
-          jobs.emplace_back(label("cantilever_deflection", m, n, p), [=, &add] { add(cantilever_deflection(m, n, p)); });
+          jobs.emplace_back(label("cantilever_deflection", m, n, p),
+                            [=, &add] { add(cantilever_deflection(m, n, p)); });
       for (double safety : safeties) {
         if (wants("cantilever_frequency"))
           for (int n : dynamic_levels)
@@ -429,8 +434,10 @@ AccuracyResults run_accuracy_study(const AccuracyOptions& o) {
           });
   }
   if (wants("fig2_area")) {
-    jobs.emplace_back(label("fig2_area reference", MaterialModel::StVK, reference_level - 1, Precision::Double),
-                      [=, &o] { *fig2_reference = fig2(o.scenes, MaterialModel::StVK, reference_level - 1, Precision::Double).value; });
+    jobs.emplace_back(
+        label("fig2_area reference", MaterialModel::StVK, reference_level - 1, Precision::Double), [=, &o] {
+          *fig2_reference = fig2(o.scenes, MaterialModel::StVK, reference_level - 1, Precision::Double).value;
+        });
     for (MaterialModel m : kModels)
       for (Precision p : kPrecisions)
         for (int n : figure_levels)

@@ -29,20 +29,20 @@ namespace tactile::study {
 struct AccuracyRecord {
   std::string problem;
   std::string material;
-  int32_t level = 0;         // mesh resolution (1 coarsest)
+  int32_t level = 0;  // mesh resolution (1 coarsest)
   int32_t tets = 0;
-  double safety = 0.9;       // time step as a fraction of the critical step
-  std::string precision;     // "float" or "double"
-  double value = 0;          // what was measured (the problem's own unit)
-  double reference = 0;      // what it should be
-  double error = 0;          // relative to the reference's scale (signed where it has a sign)
-  std::string unit;          // of value and reference
+  double safety = 0.9;    // time step as a fraction of the critical step
+  std::string precision;  // "float" or "double"
+  double value = 0;       // what was measured (the problem's own unit)
+  double reference = 0;   // what it should be
+  double error = 0;       // relative to the reference's scale (signed where it has a sign)
+  std::string unit;       // of value and reference
   int64_t steps = 0;
-  double sim_time = 0;       // [s]
-  double wall_s = 0;         // stepping only [s]
+  double sim_time = 0;  // [s]
+  double wall_s = 0;    // stepping only [s]
   double us_per_step = 0;
   double tet_steps_per_s = 0;
-  std::string fault;         // a fault that stopped the run, if any
+  std::string fault;  // a fault that stopped the run, if any
 };
 
 struct RealtimeRecord {
@@ -56,9 +56,9 @@ struct RealtimeRecord {
 };
 
 struct AccuracyOptions {
-  bool quick = false;              // coarser levels and fewer variations: seconds, for the test suite
+  bool quick = false;                    // coarser levels and fewer variations: seconds, for the test suite
   std::string scenes = "server/scenes";  // where fig2_twist.json and fig3_cantilever.json are
-  std::string only;                // a problem name, or empty for all
+  std::string only;                      // a problem name, or empty for all
   // Told before each run: how many done, how many in all, what runs next.
   std::function<void(size_t done, size_t total, const std::string& what)> progress;
 };

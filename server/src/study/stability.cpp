@@ -1,6 +1,7 @@
 #include "study/stability.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -8,7 +9,6 @@
 #include <limits>
 #include <map>
 #include <memory>
-#include <array>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -17,11 +17,11 @@
 
 #include <glm/gtc/quaternion.hpp>
 
-#include "sim/simulation.hpp"
 #include "core/spec.hpp"
 #include "mesh/primitives.hpp"
 #include "mesh/quality.hpp"
 #include "mesh/tetgen.hpp"
+#include "sim/simulation.hpp"
 
 namespace tactile::study {
 
@@ -248,7 +248,8 @@ CaseOutcome run_scenario(Scenario sc, CaseOutcome out) {
   if (fault) {
     if (fault.message.empty()) fail("a fault with no message");
     const bool names_elements = fault.kind == Fault::Kind::Inverted || fault.kind == Fault::Kind::NonFinite;
-    if (names_elements && fault.elements.empty()) fail("an " + std::string(to_string(fault.kind)) + " fault naming no element");
+    if (names_elements && fault.elements.empty())
+      fail("an " + std::string(to_string(fault.kind)) + " fault naming no element");
     // Stopped for good: the next interval gives the fault again and takes no step.
     const int64_t steps = sim.steps();
     const AdvanceReport again = sim.advance(sc.interval);
@@ -262,14 +263,14 @@ CaseOutcome run_scenario(Scenario sc, CaseOutcome out) {
   } else if (sc.expect == Expect::Caught && !subdivided) {
     fail("a step above the critical one ran unsubdivided");
   }
-  if (out.size_ratio > sc.size_limit)
-    fail("the body grew to " + fmt("%.2f", out.size_ratio) + " times its rest size");
+  if (out.size_ratio > sc.size_limit) fail("the body grew to " + fmt("%.2f", out.size_ratio) + " times its rest size");
   if (sc.conservative && energy_started) {
     out.energy_drift = in_play > 0 ? drift / in_play : 0;
     if (out.energy_drift > 0.10) fail("energy drifted by " + fmt("%.1f %%", 100 * out.energy_drift));
   }
   if (watch.tunnelled() > 0)
-    fail(std::to_string(watch.tunnelled()) + " times a surface node went deep into a proxy and came out on the side "
+    fail(std::to_string(watch.tunnelled()) +
+         " times a surface node went deep into a proxy and came out on the side "
          "opposite the one it went in by (tunnelled)");
   if (!fault && sc.final_check) {
     const std::string bad = sc.final_check(sim);
@@ -358,8 +359,10 @@ TetMesh plate(Level l) {
 // Its four edges, fixed.
 std::vector<EssentialBc> plate_edges() {
   const double h = kPlateW / 2, t = kPlateT, in = h - 1e-6;  // the z edges stop short of the x edges' corners
-  return {fixed_bc("x-", box_of(Vec3(-h, -t, -h), Vec3(-h, 0, h))), fixed_bc("x+", box_of(Vec3(h, -t, -h), Vec3(h, 0, h))),
-          fixed_bc("z-", box_of(Vec3(-in, -t, -h), Vec3(in, 0, -h))), fixed_bc("z+", box_of(Vec3(-in, -t, h), Vec3(in, 0, h)))};
+  return {fixed_bc("x-", box_of(Vec3(-h, -t, -h), Vec3(-h, 0, h))),
+          fixed_bc("x+", box_of(Vec3(h, -t, -h), Vec3(h, 0, h))),
+          fixed_bc("z-", box_of(Vec3(-in, -t, -h), Vec3(in, 0, -h))),
+          fixed_bc("z+", box_of(Vec3(-in, -t, h), Vec3(in, 0, h)))};
 }
 
 ProxySpec sphere_proxy(std::string name, double radius, Vec3 at) {
@@ -419,7 +422,8 @@ std::string check_back_at_rest(const Simulation& sim, double size, double share,
   double worst = 0;
   for (size_t i = 0; i < u.size(); i += 3) worst = std::max(worst, std::hypot(u[i], u[i + 1], u[i + 2]));
   if (worst > share * size)
-    return std::string(what) + " did not come back to its rest shape (a node " + fmt("%.2f %% of its size away)", 100 * worst / size);
+    return std::string(what) + " did not come back to its rest shape (a node " +
+           fmt("%.2f %% of its size away)", 100 * worst / size);
   return "";
 }
 
@@ -440,7 +444,6 @@ Scenario damped_plate(MaterialModel m, Level l, double E, double alpha) {
 }
 
 // ---- the cases -------------------------------------------------------------------------------------------
-
 
 // The column, base fixed, damped, its lid turned about the column's axis as `angle` says.
 Scenario turned_column(MaterialModel m, Level l, MotionProfile angle, double duration) {
@@ -551,8 +554,9 @@ Scenario impact(MaterialModel m, Level l, bool) {
     // No tunnelling: the plate's centre is under the ball, not back at rest above it.
     const double y = sim.mesh().X[size_t(centre)].y + sim.displacement(centre).y;
     const double bottom = sim.proxy_pose(0).position.y - r;
-    if (y > bottom + 0.5e-3) return "the ball went through the plate (its centre at " + fmt("%.4f m", y) +
-                                    ", the ball's bottom at " + fmt("%.4f m)", bottom);
+    if (y > bottom + 0.5e-3)
+      return "the ball went through the plate (its centre at " + fmt("%.4f m", y) + ", the ball's bottom at " +
+             fmt("%.4f m)", bottom);
     return "";
   };
   return sc;
@@ -617,7 +621,8 @@ TetMesh sliver_mesh(Level l) {
   for (int i = 0; i < n_major; ++i)
     for (int j = 0; j < n_minor; ++j) {
       const double a = 2 * kPi * i / n_major, b = 2 * kPi * j / n_minor;
-      s.vertices.push_back(Vec3((R + r * std::cos(b)) * std::cos(a), r * std::sin(b) + r, (R + r * std::cos(b)) * std::sin(a)));
+      s.vertices.push_back(
+          Vec3((R + r * std::cos(b)) * std::cos(a), r * std::sin(b) + r, (R + r * std::cos(b)) * std::sin(a)));
     }
   auto id = [&](int i, int j) { return int32_t(((i + n_major) % n_major) * n_minor + (j + n_minor) % n_minor); };
   for (int i = 0; i < n_major; ++i)
@@ -641,7 +646,8 @@ Scenario slivers(MaterialModel m, Level l, bool) {
   const Vec3 above(0.03, 2 * 0.012 + r + 0.001, 0);
   sc.spec.proxies.push_back(sphere_proxy("ball", r, above));
   sc.drive = [=](Simulation& sim, double, double t1) {
-    follow(sim, 0, sim.time(), t1, [&](double t) { return above - Vec3(0, 0.008 * (ease(t, 0, 0.15) - ease(t, 0.2, 0.35)), 0); });
+    follow(sim, 0, sim.time(), t1,
+           [&](double t) { return above - Vec3(0, 0.008 * (ease(t, 0, 0.15) - ease(t, 0.2, 0.35)), 0); });
   };
   sc.duration = 0.4;
   return sc;

@@ -38,28 +38,28 @@ enum class Expect : uint8_t {
 const char* to_string(Expect e);
 
 struct CaseOutcome {
-  std::string name;      // "group/material/mesh"
+  std::string name;  // "group/material/mesh"
   std::string group, material, mesh;
   Expect expect = Expect::Runs;
   bool pass = false;
-  std::string outcome;   // what happened, in words ("ran", "fault: inverted at t = ...", "subdivided x4")
-  std::string why;       // the first check that failed; empty on a pass
+  std::string outcome;  // what happened, in words ("ran", "fault: inverted at t = ...", "subdivided x4")
+  std::string why;      // the first check that failed; empty on a pass
   int32_t tets = 0;
   int64_t steps = 0;
-  double sim_time = 0;   // [s]
-  double wall_s = 0;     // [s]
-  double size_ratio = 0;       // largest bounding-box diagonal over the rest one
-  double size_limit = 2.0;     // what the case allows
-  double energy_drift = -1;    // |balance change| / energy in play; -1 when the run is not conservative
-  double penetration_mm = 0;   // deepest surface node inside a proxy at a control instant [mm]
-  double peak_force_N = -1;    // largest mean force on a device over a control interval; -1 without proxies
-  int32_t substeps_max = 0;    // most sub-steps in one control interval
+  double sim_time = 0;        // [s]
+  double wall_s = 0;          // [s]
+  double size_ratio = 0;      // largest bounding-box diagonal over the rest one
+  double size_limit = 2.0;    // what the case allows
+  double energy_drift = -1;   // |balance change| / energy in play; -1 when the run is not conservative
+  double penetration_mm = 0;  // deepest surface node inside a proxy at a control instant [mm]
+  double peak_force_N = -1;   // largest mean force on a device over a control interval; -1 without proxies
+  int32_t substeps_max = 0;   // most sub-steps in one control interval
 };
 
 struct SuiteOptions {
-  bool quick = false;       // the short version: the coarse meshes and shorter runs
-  std::string filter;       // run only cases whose name contains this
-  uint64_t seed = 1;        // random velocities and device input
+  bool quick = false;  // the short version: the coarse meshes and shorter runs
+  std::string filter;  // run only cases whose name contains this
+  uint64_t seed = 1;   // random velocities and device input
 };
 
 struct StabilityCase {

@@ -38,7 +38,8 @@ std::string beam_scene(const std::string& integrator) {
     "material": { "model": "stvk", "E": 1e5, "nu": 0.3, "rho": 1000 },
     "boundary": [ { "name": "clamp", "select": { "box": { "lo": [0, 0, 0], "hi": [0, 0.1, 0.1] } }, "fixed": true } ],
     "effects": { "gravity": [0, -9.81, 0] },
-    "integrator": )" + integrator + R"(,
+    "integrator": )" +
+         integrator + R"(,
     "run": { "duration": 0.05, "frame_rate": 100, "track": [ { "name": "tip", "point": [0.4, 0.05, 0.05] } ] },
     "variants": [ { "name": "lin", "material": { "model": "linear" } }, { "name": "nh", "material": { "model": "neohookean" } } ]
   })";

@@ -11,9 +11,9 @@
 #include <nlohmann/json.hpp>
 
 #include "app/headless.hpp"
-#include "sim/simulation.hpp"
 #include "app_fixtures.hpp"
 #include "scene/scene.hpp"
+#include "sim/simulation.hpp"
 
 namespace tactile {
 namespace {
@@ -118,7 +118,8 @@ TEST(Headless, VtuFilesAreXmlWithThePointsAndCellsOfTheState) {
     const auto conn = test::decode_vtk_array<int32_t>(test::find_array(piece.child("Cells"), "connectivity"));
     const auto offsets = test::decode_vtk_array<int32_t>(test::find_array(piece.child("Cells"), "offsets"));
     const auto types = test::decode_vtk_array<uint8_t>(test::find_array(piece.child("Cells"), "types"));
-    const auto density = test::decode_vtk_array<double>(test::find_array(piece.child("CellData"), "strain_energy_density"));
+    const auto density =
+        test::decode_vtk_array<double>(test::find_array(piece.child("CellData"), "strain_energy_density"));
     const auto material = test::decode_vtk_array<int32_t>(test::find_array(piece.child("CellData"), "material"));
     ASSERT_EQ(points.size(), 3 * size_t(mesh.n_nodes()));
     ASSERT_EQ(disp.size(), points.size());
@@ -310,7 +311,8 @@ std::vector<TraceRow> read_trace(const std::string& path, int names) {
   return rows;
 }
 
-constexpr const char* kForcesHeader = "sim_time_s,proxy,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts,px_m,py_m,pz_m";
+constexpr const char* kForcesHeader =
+    "sim_time_s,proxy,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts,px_m,py_m,pz_m";
 constexpr const char* kDevicesHeader = "sim_time_s,device,fx_N,fy_N,fz_N,tx_Nm,ty_Nm,tz_Nm,contacts";
 
 TEST(HeadlessProxies, PokeForcePushesTheSphereOutOfTheBlockAndIsZeroBeforeContact) {
@@ -431,7 +433,8 @@ TEST(HeadlessProxies, AHandsDeviceFeelsTheSumOfItsProxiesAndAnUnscriptedProxyHol
     ASSERT_EQ(other.device, "other");
     // The hand's device: the sum of its proxies' forces and contacts (up to the files' 9 digits).
     for (size_t k = 1; k <= 3; ++k)
-      EXPECT_NEAR(glove.x[k], a.x[k] + b.x[k], 1e-8 * (std::fabs(a.x[k]) + std::fabs(b.x[k]) + std::fabs(glove.x[k])) + 1e-15);
+      EXPECT_NEAR(glove.x[k], a.x[k] + b.x[k],
+                  1e-8 * (std::fabs(a.x[k]) + std::fabs(b.x[k]) + std::fabs(glove.x[k])) + 1e-15);
     EXPECT_EQ(glove.x[7], a.x[7] + b.x[7]);
     // The other device feels nothing, and its proxy stays where it was put.
     for (size_t k = 1; k <= 7; ++k) EXPECT_EQ(other.x[k], 0.0);

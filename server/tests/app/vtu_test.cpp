@@ -14,8 +14,12 @@ namespace {
 
 TEST(Vtu, Base64MatchesTheRfcVectors) {
   // RFC 4648, section 10.
-  const std::pair<const char*, const char*> vectors[] = {{"", ""},         {"f", "Zg=="},         {"fo", "Zm8="},
-                                                         {"foo", "Zm9v"}, {"foob", "Zm9vYg=="}, {"fooba", "Zm9vYmE="},
+  const std::pair<const char*, const char*> vectors[] = {{"", ""},
+                                                         {"f", "Zg=="},
+                                                         {"fo", "Zm8="},
+                                                         {"foo", "Zm9v"},
+                                                         {"foob", "Zm9vYg=="},
+                                                         {"fooba", "Zm9vYmE="},
                                                          {"foobar", "Zm9vYmFy"}};
   for (const auto& [in, out] : vectors) EXPECT_EQ(encode_base64(in, std::strlen(in)), out) << in;
   std::vector<uint8_t> all(256);
@@ -51,7 +55,8 @@ TEST(Vtu, FrameRoundTrips) {
   EXPECT_EQ(test::decode_vtk_array<double>(test::find_array(piece.child("PointData"), "velocity")), v);
   EXPECT_EQ(test::decode_vtk_array<uint8_t>(test::find_array(piece.child("PointData"), "fixed")), fixed);
   EXPECT_EQ(test::decode_vtk_array<double>(test::find_array(piece.child("PointData"), "contact_force")), force);
-  EXPECT_EQ(test::decode_vtk_array<double>(test::find_array(piece.child("CellData"), "strain_energy_density")), density);
+  EXPECT_EQ(test::decode_vtk_array<double>(test::find_array(piece.child("CellData"), "strain_energy_density")),
+            density);
   EXPECT_EQ(test::decode_vtk_array<double>(test::find_array(piece.child("CellData"), "von_mises")), fields.von_mises);
   EXPECT_EQ(test::decode_vtk_array<double>(test::find_array(piece.child("CellData"), "green_strain")),
             fields.green_strain);
@@ -96,7 +101,9 @@ TEST(Vtu, ProxySurfacesLieOnTheShapeFacingOut) {
   };
   for (const Case& c : cases) {
     const ProxySurface s = make_proxy_surface(c.g, pose, 1.0, 16);
-    auto point = [&](int32_t k) { return Vec3(s.points[3 * size_t(k)], s.points[3 * size_t(k) + 1], s.points[3 * size_t(k) + 2]); };
+    auto point = [&](int32_t k) {
+      return Vec3(s.points[3 * size_t(k)], s.points[3 * size_t(k) + 1], s.points[3 * size_t(k) + 2]);
+    };
     for (size_t k = 0; k < s.points.size() / 3; ++k)
       EXPECT_NEAR(locate(c.g, pose.to_local(point(int32_t(k)))).phi, 0.0, 1e-12) << to_string(c.g.shape) << " " << k;
     double volume = 0;

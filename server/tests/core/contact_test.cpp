@@ -177,7 +177,8 @@ Vec3 momentum(const Model<Real>& model, const State<Real>& s) {
 
 // Moves a proxy at constant velocity over the coming step.
 template <class Real>
-void move_proxy(Stepper<Real>& stepper, State<Real>& s, int32_t proxy, const Pose& from, const Vec3& velocity, double t, double dt) {
+void move_proxy(Stepper<Real>& stepper, State<Real>& s, int32_t proxy, const Pose& from, const Vec3& velocity, double t,
+                double dt) {
   ProxyMotion m;
   m.t0 = t;
   m.t1 = t + dt;
@@ -367,7 +368,7 @@ TEST(Contact, FrictionSticksBelowMuTimesTheNormalLoadAndSlidesAbove) {
   EXPECT_LT(creep, 2e-4) << "held at half the friction limit, it crept " << creep << " m in 0.1 s";
   EXPECT_LT(std::fabs(a_stick), 0.05);
   const double a_slide = slide_acceleration(2.0, &creep);  // pulled at twice the limit
-  const double expected = (2.0 - 1.0) * 0.4 * 9.81;       // (F - mu m g) / m
+  const double expected = (2.0 - 1.0) * 0.4 * 9.81;        // (F - mu m g) / m
   EXPECT_NEAR(a_slide, expected, 0.1 * expected);
 }
 
@@ -438,10 +439,11 @@ TEST(Contact, NeverAddsEnergy) {
     return Run{e.kinetic + e.elastic, s.contact.reports[0].work, s.work_contact, faces};
   };
   const Run coarse = press(1), fine = press(2);
-  std::printf("  body %.6e J, proxy's work %.6e J (excess %+.2e), balance's contact work %.6e J; dt/2: "
-              "excess %+.2e, balance %+.2e; up to %d face points\n",
-              coarse.body, coarse.by_proxy, coarse.body / coarse.by_proxy - 1, coarse.balance,
-              fine.body / fine.by_proxy - 1, fine.balance / fine.by_proxy - 1, coarse.face_contacts);
+  std::printf(
+      "  body %.6e J, proxy's work %.6e J (excess %+.2e), balance's contact work %.6e J; dt/2: "
+      "excess %+.2e, balance %+.2e; up to %d face points\n",
+      coarse.body, coarse.by_proxy, coarse.body / coarse.by_proxy - 1, coarse.balance, fine.body / fine.by_proxy - 1,
+      fine.balance / fine.by_proxy - 1, coarse.face_contacts);
   EXPECT_GT(coarse.face_contacts, 0);  // the faces took part
   for (const Run& r : {coarse, fine}) {
     EXPECT_GT(r.by_proxy, 0.0);
@@ -501,9 +503,10 @@ TEST(Contact, FacesHoldABallThatFitsBetweenNodes) {
   ASSERT_EQ(n_corners, 4);
   corners /= n_corners;
   const double bottom = pose.position.y - r;
-  std::printf("  ball r = %.0f mm: first force at %.3f mm deep, %.4f N at 1 mm, up to %d face points; "
-              "the cell's corners at %.2f mm, the ball's bottom at %.2f mm\n",
-              r * 1e3, first_force_depth * 1e3, force_at_1mm, faces_seen, corners * 1e3, bottom * 1e3);
+  std::printf(
+      "  ball r = %.0f mm: first force at %.3f mm deep, %.4f N at 1 mm, up to %d face points; "
+      "the cell's corners at %.2f mm, the ball's bottom at %.2f mm\n",
+      r * 1e3, first_force_depth * 1e3, force_at_1mm, faces_seen, corners * 1e3, bottom * 1e3);
   EXPECT_LT(corners, cell_centre.y - 0.001);
   EXPECT_LT(corners, bottom + 0.001);
   EXPECT_GT(faces_seen, 0);
@@ -667,8 +670,8 @@ TEST(Contact, SpherePressedIntoABlockAgreesWithHertz) {
   double k = 0;
   for (int cells : {12, 16, 24}) {
     F.push_back(settled_sphere_force(cells, R, delta, &k));
-    std::printf("  cells %2d: F = %.4f N (Hertz %.4f N, %+.1f %%), dFy/dy at mid-ramp %.1f N/m\n", cells,
-                F.back(), hertz, 100 * (F.back() / hertz - 1), k);
+    std::printf("  cells %2d: F = %.4f N (Hertz %.4f N, %+.1f %%), dFy/dy at mid-ramp %.1f N/m\n", cells, F.back(),
+                hertz, 100 * (F.back() / hertz - 1), k);
   }
   EXPECT_LT(std::fabs(F[2] - F[1]), std::fabs(F[1] - F[0]));  // converging
   EXPECT_NEAR(F[2], hertz, 0.2 * hertz);
@@ -709,7 +712,8 @@ Fault run_hard_case(ModelSpec spec, const std::vector<Vec3>& velocity, int move_
     // Bounded deformation: no node far from where the body as a whole went
     // (a free body may be pushed away whole).
     Vec3 mean(0.0);
-    for (int32_t i = 0; i < model.n_nodes; ++i) mean += Vec3(s.u[3 * size_t(i)], s.u[3 * size_t(i) + 1], s.u[3 * size_t(i) + 2]);
+    for (int32_t i = 0; i < model.n_nodes; ++i)
+      mean += Vec3(s.u[3 * size_t(i)], s.u[3 * size_t(i) + 1], s.u[3 * size_t(i) + 2]);
     mean /= double(model.n_nodes);
     for (int32_t i = 0; i < model.n_nodes; ++i) {
       const Vec3 u(s.u[3 * size_t(i)], s.u[3 * size_t(i) + 1], s.u[3 * size_t(i) + 2]);
@@ -748,8 +752,7 @@ TEST(ContactHardCases, ProxyCrushesAThinPlateOnAFloor) {
       EXPECT_FALSE(f.message.empty());
       EXPECT_FALSE(f.kind == Fault::Kind::NonFinite) << to_string(mm) << ": " << f.message;  // caught before NaN
       std::printf("  %-12s crushed: fault after step %lld: %s\n", std::string(to_string(mm)).c_str(),
-                  static_cast<long long>(f.step),
-                  f.message.substr(0, 90).c_str());
+                  static_cast<long long>(f.step), f.message.substr(0, 90).c_str());
     } else {
       EXPECT_NE(mm, MaterialModel::StVK) << "StVK crushed flat without a fault";
       std::printf("  %-12s crushed: finite%s throughout\n", std::string(to_string(mm)).c_str(),
@@ -860,7 +863,8 @@ TEST(Contact, TorqueIsAboutTheProxyCentre) {
     Vec3 F(0.0), T(0.0);
     int samples = 0;
     for (int k = 0; k < 2400; ++k) {
-      const Vec3 v = k < 800 ? Vec3(0.0, -0.002 / (800 * dt), 0.0) : Vec3(0.01 / (1600 * dt), 0.0, 0.0);  // 2 mm in, 1 cm along x
+      const Vec3 v =
+          k < 800 ? Vec3(0.0, -0.002 / (800 * dt), 0.0) : Vec3(0.01 / (1600 * dt), 0.0, 0.0);  // 2 mm in, 1 cm along x
       move_proxy(stepper, s, 0, pose, v, s.t, dt);
       ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
       pose.position += v * dt;

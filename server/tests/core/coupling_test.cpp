@@ -87,8 +87,8 @@ TEST(Coupling, TakesTheSmallerOfTheScenesAndTheDevicesBounds) {
   device.max_force = 6.0;
   device.stiffness = 1500.0;
   Coupling c = resolve_coupling(scene, &device, 0.02);
-  EXPECT_EQ(c.max_force, 4.0);      // the scene lowers the device's
-  EXPECT_EQ(c.stiffness, 1500.0);   // the device's, where the scene says nothing
+  EXPECT_EQ(c.max_force, 4.0);                   // the scene lowers the device's
+  EXPECT_EQ(c.stiffness, 1500.0);                // the device's, where the scene says nothing
   EXPECT_NEAR(c.max_torque, 4.0 * 0.02, 1e-15);  // no torque given: the force at the body's radius
   EXPECT_NEAR(c.angular_stiffness, 1500.0 * 0.02 * 0.02, 1e-12);
   EXPECT_NEAR(c.damping, 2 * kCouplingDampingRatio * std::sqrt(c.stiffness * c.mass), 1e-12);
@@ -101,8 +101,8 @@ TEST(Coupling, TakesTheSmallerOfTheScenesAndTheDevicesBounds) {
   EXPECT_EQ(c.mass, kDefaultProxyMass);
   // A step too long for the spring raises the mass (and inertia) to omega dt = 1.
   const Coupling fitted = fit_to_step(c, 0.1);
-  const double omega = std::max(std::sqrt(fitted.stiffness / fitted.mass),
-                                std::sqrt(fitted.angular_stiffness / fitted.inertia));
+  const double omega =
+      std::max(std::sqrt(fitted.stiffness / fitted.mass), std::sqrt(fitted.angular_stiffness / fitted.inertia));
   EXPECT_NEAR(omega * 0.1, 1.0, 1e-12);
   EXPECT_NEAR(fitted.inertia / fitted.mass, c.inertia / c.mass, 1e-15);
   EXPECT_EQ(fit_to_step(c, 1e-4).mass, c.mass);
@@ -187,13 +187,13 @@ TEST(Coupling, ADevicePushedThroughTheBodyLeavesItsProxyAtTheSurface) {
 // on the stiff block only: on the soft one the limit's 6 N alone, held
 // still, squashes its elements past the 42 % it can take (issue 23).
 TEST(Coupling, AFastStrikeDoesNotFaultAnyMaterial) {
-  for (MaterialModel m : {MaterialModel::Linear, MaterialModel::StVK, MaterialModel::Corotational,
-                          MaterialModel::NeoHookean})
+  for (MaterialModel m :
+       {MaterialModel::Linear, MaterialModel::StVK, MaterialModel::Corotational, MaterialModel::NeoHookean})
     for (Precision p : {Precision::Double, Precision::Float})
       for (double E : {3e4, 1e6}) {
         if (m == MaterialModel::StVK && E < 1e5) continue;
-        const std::string what = std::string(to_string(m)) + (p == Precision::Float ? " float" : " double") +
-                                 " E " + std::to_string(E);
+        const std::string what =
+            std::string(to_string(m)) + (p == Precision::Float ? " float" : " double") + " E " + std::to_string(E);
         ModelSpec spec = poked_block(m, E, false, p);
         spec.mesh = make_box(Vec3(-0.04, 0.0, -0.04), Vec3(0.04, 0.04, 0.04), {10, 5, 10});
         spec.essential[0].where.lo = Vec3(-0.04, 0.0, -0.04);
@@ -220,8 +220,10 @@ TEST(Coupling, AFastStrikeDoesNotFaultAnyMaterial) {
           EXPECT_LE(peak, 6.0 * (1 + 1e-6)) << what;
           EXPECT_GT(peak, 5.9) << what << ": the coupling never reached its limit";
         };
-        if (p == Precision::Float) run(float{});
-        else run(double{});
+        if (p == Precision::Float)
+          run(float{});
+        else
+          run(double{});
       }
 }
 
@@ -269,8 +271,10 @@ TEST(Coupling, APressingDeviceIsToldTheStiffnessItFeelsAtEveryStep) {
       syf += y * d.force.y;
     });
     const double n = intervals, slope = -(n * syf - sy * sf) / (n * syy - sy * sy), mean_told = told_sum / n;
-    std::printf("  E %.0e Pa: felt %.0f N/m over the press, told %.0f (mean), at %d of %d intervals; coupling %.0f, "
-                "block %.0f\n", E, slope, mean_told, told, intervals, kc, k_body);
+    std::printf(
+        "  E %.0e Pa: felt %.0f N/m over the press, told %.0f (mean), at %d of %d intervals; coupling %.0f, "
+        "block %.0f\n",
+        E, slope, mean_told, told, intervals, kc, k_body);
     EXPECT_EQ(told, intervals) << "E " << E;
     EXPECT_NEAR(mean_told, slope, 0.15 * slope) << "E " << E;
     EXPECT_LT(slope, std::min(kc, k_body)) << "E " << E;

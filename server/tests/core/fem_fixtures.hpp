@@ -21,10 +21,10 @@
 namespace tactile::test {
 
 inline constexpr MaterialModel kAllModels[] = {MaterialModel::Linear, MaterialModel::StVK, MaterialModel::Corotational,
-                                              MaterialModel::NeoHookean, MaterialModel::InvertibleStVK};
+                                               MaterialModel::NeoHookean, MaterialModel::InvertibleStVK};
 // The models invariant under rotation: the paper's claim is that these do not distort.
 inline constexpr MaterialModel kRotationInvariantModels[] = {MaterialModel::StVK, MaterialModel::Corotational,
-                                                            MaterialModel::NeoHookean, MaterialModel::InvertibleStVK};
+                                                             MaterialModel::NeoHookean, MaterialModel::InvertibleStVK};
 
 // Rotation by `angle` [rad] about `axis` (any length), Rodrigues' formula (glm: column-major).
 inline glm::dmat3 make_rotation(Vec3 axis, double angle) {

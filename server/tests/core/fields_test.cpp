@@ -94,7 +94,8 @@ void check_homogeneous_deformation() {
   const Model<Real> model = build_model<Real>(spec);
   State<Real> s;
   s.u.assign(3 * size_t(model.n_nodes), Real(0));
-  const glm::dmat3 G = test::make_rotation(Vec3(0, 0, 1), 0.4) * glm::dmat3(1.2, 0.05, 0.0, 0.0, 0.9, 0.1, 0.0, 0.0, 1.0);
+  const glm::dmat3 G =
+      test::make_rotation(Vec3(0, 0, 1), 0.4) * glm::dmat3(1.2, 0.05, 0.0, 0.0, 0.9, 0.1, 0.0, 0.0, 1.0);
   for (int32_t i = 0; i < model.n_nodes; ++i) {
     const Vec3 X = model.mesh.X[size_t(i)];
     const Vec3 u = G * X - X;

@@ -125,8 +125,9 @@ Forces compute_kernel(const KernelTable<Real>& k, const Model<Real>& model, cons
     u4[size_t(model.node_model[i])] = Node4<Real>{{Real(u[3 * i]), Real(u[3 * i + 1]), Real(u[3 * i + 2]), 0}};
   Forces out;
   for (const ElementGroup& g : model.groups)
-    out.energy += k.forces[int(g.model)](model.blocks.data(), g.begin, g.end, Real(g.lambda), Real(g.mu), u4.data(),
-                                         f4.data()).energy;
+    out.energy +=
+        k.forces[int(g.model)](model.blocks.data(), g.begin, g.end, Real(g.lambda), Real(g.mu), u4.data(), f4.data())
+            .energy;
   out.f.resize(3 * u4.size());
   for (size_t i = 0; i < f4.size(); ++i) {
     const Node4<Real>& fi = f4[size_t(model.node_model[i])];
@@ -167,8 +168,7 @@ void check_forces_against_reference() {
       const double scale = max_abs(ref.f);
       EXPECT_LE(max_abs_diff(got.f, ref.f), kRoundOff<Real> * scale)
           << to_string(model) << " " << isa << " " << (sizeof(Real) == 4 ? "float" : "double");
-      EXPECT_NEAR(got.energy, ref.energy, kRoundOff<Real> * std::fabs(ref.energy))
-          << to_string(model) << " " << isa;
+      EXPECT_NEAR(got.energy, ref.energy, kRoundOff<Real> * std::fabs(ref.energy)) << to_string(model) << " " << isa;
     }
   }
 }
@@ -285,7 +285,8 @@ void check_padding() {
       std::vector<Real> J(energy.size());
       for (const ElementGroup& g : m.groups)
         k->energy[int(g.model)](m.blocks.data(), g.begin, g.end, Real(g.lambda), Real(g.mu), u.data(),
-                                energy.data() + size_t(g.begin) * kLanes<Real>, J.data() + size_t(g.begin) * kLanes<Real>);
+                                energy.data() + size_t(g.begin) * kLanes<Real>,
+                                J.data() + size_t(g.begin) * kLanes<Real>);
       int padding = 0;
       for (size_t lane = 0; lane < energy.size(); ++lane) {
         if (m.lane_tet[lane] >= 0) continue;
@@ -304,7 +305,8 @@ void check_padding() {
       double e = 0;
       for (const ElementGroup& g : m.groups)
         e += k->forces[int(g.model)](only_padding.data(), g.begin, g.end, Real(g.lambda), Real(g.mu), u4.data(),
-                                     f4.data()).energy;
+                                     f4.data())
+                 .energy;
       EXPECT_EQ(e, 0.0);
       for (size_t i = 0; i < f4.size(); ++i)
         for (int c = 0; c < 4; ++c) EXPECT_EQ(f4[i].v[c], Real(0)) << to_string(model) << " " << isa << " node " << i;
@@ -331,10 +333,9 @@ double reference_critical_dt(const ModelSpec& spec, const std::vector<double>& t
   }
   auto altitude = [](const Vec3* p) {
     const double V6 = std::fabs(glm::determinant(glm::dmat3(p[1] - p[0], p[2] - p[0], p[3] - p[0])));
-    const double amax = std::max({glm::length(glm::cross(p[2] - p[1], p[3] - p[1])),
-                                  glm::length(glm::cross(p[2] - p[0], p[3] - p[0])),
-                                  glm::length(glm::cross(p[1] - p[0], p[3] - p[0])),
-                                  glm::length(glm::cross(p[1] - p[0], p[2] - p[0]))});
+    const double amax = std::max(
+        {glm::length(glm::cross(p[2] - p[1], p[3] - p[1])), glm::length(glm::cross(p[2] - p[0], p[3] - p[0])),
+         glm::length(glm::cross(p[1] - p[0], p[3] - p[0])), glm::length(glm::cross(p[1] - p[0], p[2] - p[0]))});
     return V6 / amax;
   };
   const double ratio = std::clamp(altitude(x) / altitude(X), 0.05, 1.0);
@@ -355,7 +356,7 @@ void check_critical_dt() {
     int squashed = 0, inverted = 0;
     for (double amplitude : {0.002, 0.05}) {
       const std::vector<double> u = make_random_u(m.n_nodes, amplitude, 23);  // the mesh's numbering
-      std::vector<Real> u_real(u.size());                                       // the model's
+      std::vector<Real> u_real(u.size());                                     // the model's
       for (size_t i = 0; i < size_t(m.n_nodes); ++i)
         for (size_t c = 0; c < 3; ++c) u_real[3 * size_t(m.node_model[i]) + c] = Real(u[3 * i + c]);
       for (const char* isa : kIsas) {
@@ -384,8 +385,8 @@ void check_critical_dt() {
         std::vector<double> energy(J.size());
         for (const ElementGroup& g : m.groups)
           kernels<Real>().energy[int(g.model)](m.blocks.data(), g.begin, g.end, Real(g.lambda), Real(g.mu),
-                                                u_real.data(), energy.data() + size_t(g.begin) * kLanes<Real>,
-                                                J.data() + size_t(g.begin) * kLanes<Real>);
+                                               u_real.data(), energy.data() + size_t(g.begin) * kLanes<Real>,
+                                               J.data() + size_t(g.begin) * kLanes<Real>);
         for (size_t l = 0; l < J.size(); ++l) inverted += m.lane_tet[l] >= 0 && J[l] <= 0;
       }
     }
@@ -397,8 +398,8 @@ void check_critical_dt() {
     std::vector<Real> u_nan(3 * size_t(m.n_nodes), Real(0));
     u_nan[0] = std::numeric_limits<Real>::quiet_NaN();
     for (const ElementGroup& g : m.groups) {
-      const double got = kernels<Real>().critical[int(g.model)](m.blocks.data(), g.begin, g.end, u_nan.data(),
-                                                                m.lane_dt.data());
+      const double got =
+          kernels<Real>().critical[int(g.model)](m.blocks.data(), g.begin, g.end, u_nan.data(), m.lane_dt.data());
       EXPECT_FALSE(std::isnan(got)) << to_string(model);
       if (model != MaterialModel::Linear) {
         EXPECT_GT(got, 0.0) << to_string(model);

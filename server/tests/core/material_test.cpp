@@ -174,8 +174,8 @@ TEST(Material, StressIsTheDerivativeOfEnergy) {
         const Mat P_fd = compute_stress_by_differences(m, F, 1e-6);
         // Differences of psi ~ E carry round-off ~ 1e-16 E / 1e-6 = 1e-10 E.
         for (size_t k = 0; k < 9; ++k)
-          EXPECT_NEAR(P[k], P_fd[k], 1e-7 * kE) << to_string(m) << (flip ? " inverted" : "") << " trial " << trial
-                                               << " k=" << k;
+          EXPECT_NEAR(P[k], P_fd[k], 1e-7 * kE)
+              << to_string(m) << (flip ? " inverted" : "") << " trial " << trial << " k=" << k;
       }
     }
   }

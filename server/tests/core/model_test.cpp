@@ -34,8 +34,8 @@ TetMesh make_two_region_box() {
   mesh.region.resize(mesh.tets.size());
   for (size_t e = 0; e < mesh.tets.size(); ++e) {
     const Tet& t = mesh.tets[e];
-    const double cx = 0.25 * (mesh.X[size_t(t[0])].x + mesh.X[size_t(t[1])].x + mesh.X[size_t(t[2])].x +
-                              mesh.X[size_t(t[3])].x);
+    const double cx =
+        0.25 * (mesh.X[size_t(t[0])].x + mesh.X[size_t(t[1])].x + mesh.X[size_t(t[2])].x + mesh.X[size_t(t[3])].x);
     mesh.region[e] = cx < 0.5 ? 0 : 1;
   }
   return mesh;
@@ -66,10 +66,10 @@ TEST(BuildModel, RefusesBadMaterialsNamingTheField) {
     double E, nu, rho;
     const char* field;
   };
-  const Case cases[] = {{0.0, 0.3, 1000, "materials[1].E"},     {-1e5, 0.3, 1000, "materials[1].E"},
-                        {NAN, 0.3, 1000, "materials[1].E"},     {1e5, 0.5, 1000, "materials[1].nu"},
-                        {1e5, 0.7, 1000, "materials[1].nu"},    {1e5, -1.0, 1000, "materials[1].nu"},
-                        {1e5, 0.3, 0.0, "materials[1].rho"},    {1e5, 0.3, INFINITY, "materials[1].rho"}};
+  const Case cases[] = {{0.0, 0.3, 1000, "materials[1].E"},  {-1e5, 0.3, 1000, "materials[1].E"},
+                        {NAN, 0.3, 1000, "materials[1].E"},  {1e5, 0.5, 1000, "materials[1].nu"},
+                        {1e5, 0.7, 1000, "materials[1].nu"}, {1e5, -1.0, 1000, "materials[1].nu"},
+                        {1e5, 0.3, 0.0, "materials[1].rho"}, {1e5, 0.3, INFINITY, "materials[1].rho"}};
   for (const Case& c : cases) {
     ModelSpec spec = make_spec(make_two_region_box(), MaterialModel::StVK);
     spec.materials.push_back(MaterialSpec{MaterialModel::StVK, c.E, c.nu, c.rho});
@@ -127,8 +127,8 @@ TEST(BuildModel, LumpedMassesSumToTheTotalMass) {
   for (size_t e = 0; e < spec.mesh.tets.size(); ++e) {
     const Tet& t = spec.mesh.tets[e];
     const double rho = spec.materials[size_t(spec.mesh.region[e])].rho;
-    const double V = compute_tet_volume(spec.mesh.X[size_t(t[0])], spec.mesh.X[size_t(t[1])],
-                                        spec.mesh.X[size_t(t[2])], spec.mesh.X[size_t(t[3])]);
+    const double V = compute_tet_volume(spec.mesh.X[size_t(t[0])], spec.mesh.X[size_t(t[1])], spec.mesh.X[size_t(t[2])],
+                                        spec.mesh.X[size_t(t[3])]);
     for (int32_t i : t) m[size_t(i)] += rho * V / 4;
   }
   for (size_t i = 0; i < m.size(); ++i) {  // i as the mesh numbers it
@@ -312,9 +312,9 @@ TEST(CriticalStep, ModelRestStepIsTheSmallestElementStep) {
   double smallest = INFINITY;
   for (size_t e = 0; e < size_t(model.n_tets); ++e) {
     const Tet& t = model.mesh.tets[e];
-    const double dt = compute_element_critical_dt(model.mesh.X[size_t(t[0])], model.mesh.X[size_t(t[1])],
-                                                  model.mesh.X[size_t(t[2])], model.mesh.X[size_t(t[3])],
-                                                  model.tet_lambda[e], model.tet_mu[e], 1000);
+    const double dt =
+        compute_element_critical_dt(model.mesh.X[size_t(t[0])], model.mesh.X[size_t(t[1])], model.mesh.X[size_t(t[2])],
+                                    model.mesh.X[size_t(t[3])], model.tet_lambda[e], model.tet_mu[e], 1000);
     EXPECT_NEAR(model.tet_dt[e], dt, 1e-12 * dt);
     smallest = std::min(smallest, dt);
   }

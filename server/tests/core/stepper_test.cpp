@@ -284,8 +284,7 @@ RunOutcome run_at(const Model<Real>& model, double dt, int n_steps, double ampli
     out.fault = stepper.step(s, dt);
     if (out.fault) break;
     if (!all_finite(s.u) || !all_finite(s.v) || !all_finite(s.a)) out.nonfinite_state_without_fault = true;
-    out.max_energy_ratio =
-        std::max(out.max_energy_ratio, (s.energy.latest.kinetic + s.energy.latest.elastic) / E0);
+    out.max_energy_ratio = std::max(out.max_energy_ratio, (s.energy.latest.kinetic + s.energy.latest.elastic) / E0);
   }
   return out;
 }
@@ -510,14 +509,13 @@ TEST(Guards, InvertedStvkElementFaultsNamingIt) {
   mesh.X = {Vec3(0, 0, -1), Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.2, 0.2, 1)};
   mesh.tets = {{0, 1, 2, 3}, {4, 1, 3, 2}};
   for (Tet& t : mesh.tets)
-    if (compute_tet_volume(mesh.X[size_t(t[0])], mesh.X[size_t(t[1])], mesh.X[size_t(t[2])], mesh.X[size_t(t[3])]) <
-        0)
+    if (compute_tet_volume(mesh.X[size_t(t[0])], mesh.X[size_t(t[1])], mesh.X[size_t(t[2])], mesh.X[size_t(t[3])]) < 0)
       std::swap(t[1], t[2]);
   const Model<double> model = build_model<double>(make_spec(mesh, MaterialModel::StVK));
   Stepper<double> stepper(model);
   State<double> s = stepper.make_state();
   const auto node4 = size_t(model.node_model[4]);  // the state's numbering
-  s.v[3 * node4 + 2] = -200.0;  // [m/s], far past what the material can stop
+  s.v[3 * node4 + 2] = -200.0;                     // [m/s], far past what the material can stop
   Fault f;
   for (int k = 0; k < 1000 && !f; ++k) f = stepper.step(s, 0.5 * model.dt_rest);
   ASSERT_EQ(f.kind, Fault::Kind::Inverted) << f.message;
@@ -753,51 +751,53 @@ TEST(Stepper, PartsSetTheirEssentialPositionsWhicheverRunsFirst) {
 // first, and the same motion as one part.
 TEST(Stepper, PartsCorrectAfterTheLoadsWhicheverRunsFirst) {
   for (int threads : {2, 3, 4})
-  for (bool loaded : {false, true}) {
-    ModelSpec spec = make_spec(make_box(Vec3(0.0), Vec3(0.4, 0.1, 0.1), {48, 8, 8}), MaterialModel::StVK);
-    spec.integrator.threads = threads;
-    EssentialBc held;
-    held.where.kind = NodeSelector::Kind::Plane;
-    held.where.normal = Vec3(1.0, 0.0, 0.0);
-    spec.essential = {held};
-    if (loaded) {
-      NaturalLoad tip;
-      tip.where.kind = NodeSelector::Kind::Plane;
-      tip.where.point = Vec3(0.4, 0.0, 0.0);
-      tip.where.normal = Vec3(1.0, 0.0, 0.0);
-      tip.force = Vec3(0.0, -2.0, 1.0);  // [N]
-      spec.loads = {tip};
+    for (bool loaded : {false, true}) {
+      ModelSpec spec = make_spec(make_box(Vec3(0.0), Vec3(0.4, 0.1, 0.1), {48, 8, 8}), MaterialModel::StVK);
+      spec.integrator.threads = threads;
+      EssentialBc held;
+      held.where.kind = NodeSelector::Kind::Plane;
+      held.where.normal = Vec3(1.0, 0.0, 0.0);
+      spec.essential = {held};
+      if (loaded) {
+        NaturalLoad tip;
+        tip.where.kind = NodeSelector::Kind::Plane;
+        tip.where.point = Vec3(0.4, 0.0, 0.0);
+        tip.where.normal = Vec3(1.0, 0.0, 0.0);
+        tip.force = Vec3(0.0, -2.0, 1.0);  // [N]
+        spec.loads = {tip};
+      }
+      const Model<double> model = build_model<double>(spec);
+      ASSERT_EQ(model.parts.size(), size_t(threads));
+      using Order = OneAfterTheOther::Order;
+      OneAfterTheOther forward(Order::Forward), backward(Order::Backward);
+      Stepper<double> one(model), left(model, &forward), right(model, &backward);
+      State<double> a = one.make_state();
+      set_random_velocities(a, 0.2, 3);
+      State<double> b = a, c = a;
+      const double dt = 0.5 * model.dt_rest;
+      for (int k = 0; k < 60; ++k) {
+        ASSERT_FALSE(one.step(a, dt));
+        ASSERT_FALSE(left.step(b, dt));
+        ASSERT_FALSE(right.step(c, dt));
+      }
+      double worst = 0, scale = 0;
+      for (size_t j = 0; j < a.u.size(); ++j) {
+        worst = std::max(worst, std::fabs(a.u[j] - b.u[j]));
+        scale = std::max(scale, std::fabs(a.u[j]));
+      }
+      EXPECT_GT(scale, 1e-4) << threads << " parts, loaded " << loaded;
+      EXPECT_LE(worst, 1e-9 * scale) << threads << " parts, loaded " << loaded;
+      EXPECT_EQ(b.u, c.u) << threads << " parts, loaded " << loaded;
+      EXPECT_EQ(b.v, c.v) << threads << " parts, loaded " << loaded;
+      EXPECT_EQ(b.a, c.a) << threads << " parts, loaded " << loaded;
+      EXPECT_NEAR(b.energy.latest.kinetic, a.energy.latest.kinetic, 1e-9 * a.energy.latest.kinetic)
+          << threads << " parts, loaded " << loaded;
+      EXPECT_NEAR(b.work_loads, a.work_loads, 1e-9 * std::fabs(a.work_loads) + 1e-15)
+          << threads << " parts, loaded " << loaded;
+      if (loaded) {
+        EXPECT_GT(std::fabs(a.work_loads), 1e-6);
+      }
     }
-    const Model<double> model = build_model<double>(spec);
-    ASSERT_EQ(model.parts.size(), size_t(threads));
-    using Order = OneAfterTheOther::Order;
-    OneAfterTheOther forward(Order::Forward), backward(Order::Backward);
-    Stepper<double> one(model), left(model, &forward), right(model, &backward);
-    State<double> a = one.make_state();
-    set_random_velocities(a, 0.2, 3);
-    State<double> b = a, c = a;
-    const double dt = 0.5 * model.dt_rest;
-    for (int k = 0; k < 60; ++k) {
-      ASSERT_FALSE(one.step(a, dt));
-      ASSERT_FALSE(left.step(b, dt));
-      ASSERT_FALSE(right.step(c, dt));
-    }
-    double worst = 0, scale = 0;
-    for (size_t j = 0; j < a.u.size(); ++j) {
-      worst = std::max(worst, std::fabs(a.u[j] - b.u[j]));
-      scale = std::max(scale, std::fabs(a.u[j]));
-    }
-    EXPECT_GT(scale, 1e-4) << threads << " parts, loaded " << loaded;
-    EXPECT_LE(worst, 1e-9 * scale) << threads << " parts, loaded " << loaded;
-    EXPECT_EQ(b.u, c.u) << threads << " parts, loaded " << loaded;
-    EXPECT_EQ(b.v, c.v) << threads << " parts, loaded " << loaded;
-    EXPECT_EQ(b.a, c.a) << threads << " parts, loaded " << loaded;
-    EXPECT_NEAR(b.energy.latest.kinetic, a.energy.latest.kinetic, 1e-9 * a.energy.latest.kinetic) << threads << " parts, loaded " << loaded;
-    EXPECT_NEAR(b.work_loads, a.work_loads, 1e-9 * std::fabs(a.work_loads) + 1e-15) << threads << " parts, loaded " << loaded;
-    if (loaded) {
-      EXPECT_GT(std::fabs(a.work_loads), 1e-6);
-    }
-  }
 }
 
 }  // namespace

@@ -32,7 +32,7 @@ TEST(DevicePath, LateInputsNeitherStallNorJumpThePath) {
   double pending_t = 0, pending_s = 0;
   int k = 0;
   for (double t = 0.0; t < 0.3; t += 1e-4) {  // the loop's steps
-    while (pending_t <= t) {  // every input whose arrival has come
+    while (pending_t <= t) {                  // every input whose arrival has come
       if (k > 0) {
         const bool first = path.add(pending_s, at_x(v * pending_s), pending_t);
         EXPECT_EQ(first, !started) << "input " << k;

@@ -137,7 +137,8 @@ TEST(Director, ChangesAreCheckedThenBuiltOffTheCallersThread) {
   Director director(first);
   director.set_library(TACTILE_SCENE_DIR, options);
   EXPECT_NE(std::find(director.scenes().begin(), director.scenes().end(), "poke.json"), director.scenes().end());
-  EXPECT_EQ(std::find(director.scenes().begin(), director.scenes().end(), "scene.schema.json"), director.scenes().end());
+  EXPECT_EQ(std::find(director.scenes().begin(), director.scenes().end(), "scene.schema.json"),
+            director.scenes().end());
 
   struct Result {
     std::mutex mutex;

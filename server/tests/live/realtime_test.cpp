@@ -6,10 +6,10 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <cstddef>
-#include <cstdio>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
+#include <cstdio>
 #include <span>
 #include <string>
 #include <thread>
@@ -82,8 +82,10 @@ TEST(RealtimeLoop, NeverAheadOfTheClockAndPublishesEveryStep) {
   });
   loop.on_state([&](std::span<const uint8_t> m) {
     const proto::Envelope* e = envelope(m);
-    if (!e || !e->message_as_StateFrame()) ++bad;
-    else if (e->message_as_StateFrame()->positions()->size() != 3 * frames.surface().nodes.size()) ++bad;
+    if (!e || !e->message_as_StateFrame())
+      ++bad;
+    else if (e->message_as_StateFrame()->positions()->size() != 3 * frames.surface().nodes.size())
+      ++bad;
     ++states;
   });
   std::atomic<bool> stop{false};
@@ -92,11 +94,11 @@ TEST(RealtimeLoop, NeverAheadOfTheClockAndPublishesEveryStep) {
   const RealtimeStats s = loop.stats();
   EXPECT_EQ(bad, 0);
   EXPECT_NEAR(s.sim_time, 0.3, options.dt);
-  EXPECT_EQ(haptics, s.steps);            // one haptic frame per step
+  EXPECT_EQ(haptics, s.steps);  // one haptic frame per step
   EXPECT_EQ(haptics, s.haptic_frames);
   EXPECT_NEAR(double(states), 1 + 0.3 * 30, 1.0);  // at 30 Hz of simulated time, plus the first
-  EXPECT_LE(worst_lead, 1e-4);            // never ahead (clock reads are microseconds apart)
-  EXPECT_GE(s.wall_time, 0.3 - 1e-3);     // paced: 0.3 s simulated took 0.3 s of wall time or more
+  EXPECT_LE(worst_lead, 1e-4);                     // never ahead (clock reads are microseconds apart)
+  EXPECT_GE(s.wall_time, 0.3 - 1e-3);              // paced: 0.3 s simulated took 0.3 s of wall time or more
   EXPECT_GT(s.real_time_factor, 0.0);
   EXPECT_TRUE(s.fault.empty()) << s.fault;
 }
@@ -343,7 +345,7 @@ TEST(FrameEncoder, HapticFramesCarryEachChannelsPoseAndNewestInput) {
   ASSERT_EQ(h->device_poses()->size(), 2u);
   expect_pose(*h->device_poses()->Get(0), sim.hand_pose(0));
   expect_pose(*h->device_poses()->Get(1), sim.proxy_pose(1));
-  EXPECT_NE(sim.hand_pose(0).position, sim.proxy_pose(0).position);  // the hand, not its first tip
+  EXPECT_NE(sim.hand_pose(0).position, sim.proxy_pose(0).position);        // the hand, not its first tip
   EXPECT_GT(glm::length(sim.proxy_pose(1).position - stylus_from), 1e-4);  // it did move
   ASSERT_EQ(h->device_input_sequences()->size(), 2u);
   EXPECT_EQ(h->device_input_sequences()->Get(0), 7u);
@@ -437,8 +439,10 @@ TEST(FrameEncoder, AFreeCoupledProxyTellsItsDeviceNoStiffness) {
     m.t0 = sim.time();
     m.t1 = m.t0 + dt;
     m.from = device;
-    if (k < 500) device.position.y -= 0.006 / 500;
-    else if (k >= 1000) device.position.y += 0.012 / 500;
+    if (k < 500)
+      device.position.y -= 0.006 / 500;
+    else if (k >= 1000)
+      device.position.y += 0.012 / 500;
     m.to = device;
     sim.set_proxy_motion(0, m);
     ASSERT_FALSE(sim.advance(dt).fault) << "step " << k;

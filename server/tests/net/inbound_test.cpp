@@ -111,13 +111,13 @@ TEST(Inbound, TextQuotedBackIsValidUtf8) {
   EXPECT_EQ(utf8_text("stylus"), "stylus");
   EXPECT_EQ(utf8_text("caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x96\x90"), "caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x96\x90");
   EXPECT_EQ(utf8_text("two\nlines\tand a tab"), "two\nlines\tand a tab");
-  EXPECT_EQ(utf8_text(std::string("a\0b", 3)), "a\\x00b");              // NUL: would cut the text
-  EXPECT_EQ(utf8_text("\xff\xfe"), "\\xff\\xfe");                     // never valid
-  EXPECT_EQ(utf8_text("\xc0\xaf"), "\\xc0\\xaf");                     // overlong '/'
-  EXPECT_EQ(utf8_text("\xed\xa0\x80"), "\\xed\\xa0\\x80");         // a UTF-16 surrogate
-  EXPECT_EQ(utf8_text("ok\xe2\x82"), "ok\\xe2\\x82");                 // cut short at the end
+  EXPECT_EQ(utf8_text(std::string("a\0b", 3)), "a\\x00b");           // NUL: would cut the text
+  EXPECT_EQ(utf8_text("\xff\xfe"), "\\xff\\xfe");                    // never valid
+  EXPECT_EQ(utf8_text("\xc0\xaf"), "\\xc0\\xaf");                    // overlong '/'
+  EXPECT_EQ(utf8_text("\xed\xa0\x80"), "\\xed\\xa0\\x80");           // a UTF-16 surrogate
+  EXPECT_EQ(utf8_text("ok\xe2\x82"), "ok\\xe2\\x82");                // cut short at the end
   EXPECT_EQ(utf8_text("\xf4\x90\x80\x80"), "\\xf4\\x90\\x80\\x80");  // past U+10FFFF
-  EXPECT_EQ(utf8_text("\x1b[31m"), "\\x1b[31m");                         // a terminal escape
+  EXPECT_EQ(utf8_text("\x1b[31m"), "\\x1b[31m");                     // a terminal escape
 }
 
 }  // namespace

@@ -32,7 +32,7 @@ struct FakeHost : SessionHost {
   std::vector<std::string> channels{"stylus", "mouse"};
   std::string name = "plate";
   bool live = true;
-  uint64_t other_driver = 0;    // a connection that drives every channel, 0 for none
+  uint64_t other_driver = 0;  // a connection that drives every channel, 0 for none
   Session* controller = nullptr;
   std::vector<DeviceSample> inputs;
   std::vector<std::pair<Bytes, OutKind>> relayed;
@@ -91,8 +91,8 @@ std::vector<uint8_t> hello(const HelloFields& f) {
     limits.push_back(proto::CreateDeviceLimits(b, f.max_force_N, 0.0f, 1000.0f));
   }
   return wrap(b, Message::Hello,
-              proto::CreateHelloDirect(b, f.major, f.minor, f.role, f.token, "test", f.devices.empty() ? nullptr : &names,
-                                       f.devices.empty() ? nullptr : &limits));
+              proto::CreateHelloDirect(b, f.major, f.minor, f.role, f.token, "test",
+                                       f.devices.empty() ? nullptr : &names, f.devices.empty() ? nullptr : &limits));
 }
 
 std::vector<uint8_t> input(const char* channel, double x = 0.1) {
@@ -360,7 +360,7 @@ TEST(SessionInbound, AnInputOutsideTheWorkspaceIsSaidOncePerExcursion) {
   EXPECT_TRUE(d.drain().empty());  // still out: not said again
   d.receive(input("mouse", 0.0));
   d.receive(input("mouse", 5.0));
-  EXPECT_EQ(d.drain().size(), 1u);  // out again
+  EXPECT_EQ(d.drain().size(), 1u);      // out again
   EXPECT_EQ(d.host.inputs.size(), 4u);  // every one posted: the loop holds the proxy at the edge
 }
 

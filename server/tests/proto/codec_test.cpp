@@ -58,8 +58,8 @@ TEST(ProtoCodec, SceneDescriptionArraysReadInPlace) {
   std::vector<flatbuffers::Offset<ProxyInfo>> proxies = {
       CreateProxyInfoDirect(b, "tip", "stylus", "", ProxyShape::Sphere, 0.01f, 0.0f, &half, 0.3f)};
   const std::vector<flatbuffers::Offset<flatbuffers::String>> devs = {b.CreateString("stylus")};
-  const auto scene = CreateSceneDescriptionDirect(b, "poke", 42, 1e-4, &rest, &tris, &nodes, "displacement_m",
-                                                  &proxies, &devs);
+  const auto scene =
+      CreateSceneDescriptionDirect(b, "poke", 42, 1e-4, &rest, &tris, &nodes, "displacement_m", &proxies, &devs);
   const std::vector<uint8_t> bytes = seal(b, Message::SceneDescription, scene);
   const SceneDescription* s = open(bytes)->message_as_SceneDescription();
   ASSERT_NE(s, nullptr);
@@ -90,8 +90,8 @@ TEST(ProtoCodec, StateAndHapticFramesRoundTrip) {
   for (float& x : scalar) x = unit(rng);
   const std::vector<ProxyPose> poses = {ProxyPose(Vec3f(0.1f, 0.2f, 0.3f), Quatf(1, 0, 0, 0))};
   const std::vector<Vec3f> forces = {Vec3f(0.0f, 1.5f, 0.0f)};
-  const auto state = CreateStateFrameDirect(b, 7, 123456789ull, 12.3456, 987654321012ll, &positions, &scalar, &poses,
-                                            &forces);
+  const auto state =
+      CreateStateFrameDirect(b, 7, 123456789ull, 12.3456, 987654321012ll, &positions, &scalar, &poses, &forces);
   const std::vector<uint8_t> bytes = seal(b, Message::StateFrame, state);
   const StateFrame* s = open(bytes)->message_as_StateFrame();
   ASSERT_NE(s, nullptr);
@@ -134,10 +134,9 @@ TEST(ProtoCodec, StateAndHapticFramesRoundTrip) {
 
 TEST(ProtoCodec, DeviceStatusRoundTrips) {
   FlatBufferBuilder b;
-  const std::vector<uint8_t> bytes =
-      seal(b, Message::DeviceStatus,
-           CreateDeviceStatusDirect(b, "stylus", 7000123456ll, 0, 1000.0f, 42.5f, 310.0f, 3, 1.25f, 0.5f, 0.75f,
-                                    "delay", 0.875f));
+  const std::vector<uint8_t> bytes = seal(b, Message::DeviceStatus,
+                                          CreateDeviceStatusDirect(b, "stylus", 7000123456ll, 0, 1000.0f, 42.5f, 310.0f,
+                                                                   3, 1.25f, 0.5f, 0.75f, "delay", 0.875f));
   const DeviceStatus* st = open(bytes)->message_as_DeviceStatus();
   ASSERT_NE(st, nullptr);
   EXPECT_STREQ(st->device()->c_str(), "stylus");
@@ -154,10 +153,9 @@ TEST(ProtoCodec, DeviceStatusRoundTrips) {
 
 TEST(ProtoCodec, SafetyEventRoundTrips) {
   FlatBufferBuilder b;
-  const std::vector<uint8_t> bytes =
-      seal(b, Message::SafetyEvent,
-           CreateSafetyEventDirect(b, "stylus", 5000250123ll, 0, SafetyKind::Stale, "no state for 12 ms: fading",
-                                   1.25f));
+  const std::vector<uint8_t> bytes = seal(
+      b, Message::SafetyEvent,
+      CreateSafetyEventDirect(b, "stylus", 5000250123ll, 0, SafetyKind::Stale, "no state for 12 ms: fading", 1.25f));
   const SafetyEvent* ev = open(bytes)->message_as_SafetyEvent();
   ASSERT_NE(ev, nullptr);
   EXPECT_STREQ(ev->device()->c_str(), "stylus");

@@ -39,8 +39,8 @@ TEST(FuzzCorpus, EveryInputIsRefusedWithAReasonOrRead) {
       fuzz::walk_inbound(bytes.data(), bytes.size());
     }
   }
-  EXPECT_GE(read, 18);   // the golden vectors at least
-  EXPECT_GE(refused, 3); // the malformed seeds at least
+  EXPECT_GE(read, 18);    // the golden vectors at least
+  EXPECT_GE(refused, 3);  // the malformed seeds at least
 }
 
 TEST(FuzzCorpus, DeviceInputValuesAreChecked) {

@@ -71,7 +71,8 @@ TEST(ProtoGolden, EveryMessageTypeHasAVector) {
   for (int c = int(ControlCommand::MIN) + 1; c <= int(ControlCommand::MAX); ++c) {
     const std::string name = EnumNameControlCommand(ControlCommand(c));
     bool found = false;
-    for (const fs::path& p : vector_files()) found |= read_file(p).find("\"command_type\": \"" + name + "\"") != std::string::npos;
+    for (const fs::path& p : vector_files())
+      found |= read_file(p).find("\"command_type\": \"" + name + "\"") != std::string::npos;
     EXPECT_TRUE(found) << "no golden vector for control command " << name;
   }
 }

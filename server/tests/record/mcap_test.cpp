@@ -289,8 +289,10 @@ TEST(Recorder, AQueueOverItsBoundIsAFaultAndTheFileStaysReadable) {
   const std::vector<uint8_t> big = envelope(Topic::State, 0, 4 << 10);
   int accepted = 0;
   for (int i = 0; i < 1000; ++i)
-    if (rec.post(Topic::State, i, 0, big)) ++accepted;
-    else break;
+    if (rec.post(Topic::State, i, 0, big))
+      ++accepted;
+    else
+      break;
   rec.wait();
   const RecorderStats st = rec.stats();
   EXPECT_LT(accepted, 1000);
@@ -309,8 +311,12 @@ namespace {
 
 // RFC 4648's test vectors, both ways; text that is not base64 gives nothing.
 TEST(Base64, RoundTripsTheRfcVectorsAndRefusesWhatIsNotBase64) {
-  const std::pair<std::string, std::string> vectors[] = {{"", ""},          {"f", "Zg=="},     {"fo", "Zm8="},
-                                                         {"foo", "Zm9v"},   {"foob", "Zm9vYg=="}, {"fooba", "Zm9vYmE="},
+  const std::pair<std::string, std::string> vectors[] = {{"", ""},
+                                                         {"f", "Zg=="},
+                                                         {"fo", "Zm8="},
+                                                         {"foo", "Zm9v"},
+                                                         {"foob", "Zm9vYg=="},
+                                                         {"fooba", "Zm9vYmE="},
                                                          {"foobar", "Zm9vYmFy"}};
   for (const auto& [plain, coded] : vectors) {
     const std::vector<uint8_t> bytes(plain.begin(), plain.end());
@@ -320,9 +326,9 @@ TEST(Base64, RoundTripsTheRfcVectorsAndRefusesWhatIsNotBase64) {
   std::vector<uint8_t> all(256);
   for (size_t k = 0; k < all.size(); ++k) all[k] = uint8_t(k);
   EXPECT_EQ(from_base64(to_base64(all)), all);
-  EXPECT_TRUE(from_base64("Zm9").empty());    // not a multiple of 4
-  EXPECT_TRUE(from_base64("Zm9*").empty());   // not in the alphabet
-  EXPECT_TRUE(from_base64("Z=9v").empty());   // padding inside
+  EXPECT_TRUE(from_base64("Zm9").empty());   // not a multiple of 4
+  EXPECT_TRUE(from_base64("Zm9*").empty());  // not in the alphabet
+  EXPECT_TRUE(from_base64("Z=9v").empty());  // padding inside
 }
 
 }  // namespace

@@ -15,7 +15,8 @@ namespace {
 
 ModelSpec two_materials_one_proxy() {
   ModelSpec s;
-  s.materials = {MaterialSpec{MaterialModel::StVK, 1e5, 0.3, 1000}, MaterialSpec{MaterialModel::NeoHookean, 2e5, 0.4, 900}};
+  s.materials = {MaterialSpec{MaterialModel::StVK, 1e5, 0.3, 1000},
+                 MaterialSpec{MaterialModel::NeoHookean, 2e5, 0.4, 900}};
   ProxySpec p;
   p.name = "tip";
   p.device = "stylus";

@@ -46,7 +46,8 @@ inline void expect_scene_error(const SceneDir& dir, const std::string& file_name
   } catch (const SceneError& e) {
     const std::string msg = e.what();
     EXPECT_EQ(msg.rfind(path + ": ", 0), 0u) << "message does not start with the file: " << msg;
-    for (const std::string& part : parts) EXPECT_NE(msg.find(part), std::string::npos) << "'" << part << "' not in: " << msg;
+    for (const std::string& part : parts)
+      EXPECT_NE(msg.find(part), std::string::npos) << "'" << part << "' not in: " << msg;
   }
 }
 

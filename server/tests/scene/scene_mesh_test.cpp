@@ -22,7 +22,8 @@ using test::SceneDir;
 
 double total_volume(const TetMesh& m) {
   double v = 0;
-  for (const Tet& t : m.tets) v += compute_tet_volume(m.X[size_t(t[0])], m.X[size_t(t[1])], m.X[size_t(t[2])], m.X[size_t(t[3])]);
+  for (const Tet& t : m.tets)
+    v += compute_tet_volume(m.X[size_t(t[0])], m.X[size_t(t[1])], m.X[size_t(t[2])], m.X[size_t(t[3])]);
   return v;
 }
 
@@ -76,7 +77,8 @@ TEST(SceneMesh, NodeEleWithAnInvertedTetIsRefusedByTetId) {
   write_tetgen(m, dir.file("pushed"));
   std::string ids;
   for (size_t i = 0; i < inverted.size(); ++i) ids += (i ? ", " : "") + std::to_string(inverted[i]);
-  const std::string what = inverted.size() == 1 ? "1 inverted tet (id " : std::to_string(inverted.size()) + " inverted tets (ids ";
+  const std::string what =
+      inverted.size() == 1 ? "1 inverted tet (id " : std::to_string(inverted.size()) + " inverted tets (ids ";
   expect_scene_error(dir, "s.json", scene_with_mesh(json{{"file", "pushed.node"}}),
                      {"mesh: mesh refused: " + what + ids + ")"});
 }
@@ -95,9 +97,10 @@ TEST(SceneMesh, NodeEleFileLoads) {
 TEST(SceneMesh, SurfaceFileGoesThroughTetgen) {
   SceneDir dir;
   // The unit cube, outward-wound.
-  dir.write("cube.obj",
-            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
-            "f 1 4 3\nf 1 3 2\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n");
+  dir.write(
+      "cube.obj",
+      "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+      "f 1 4 3\nf 1 3 2\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n");
   json mesh{{"file", "cube.obj"}, {"tetgen", {{"max_volume", 0.01}}}, {"scale", 0.5}, {"translate", {1, 2, 3}}};
   const Scene s = load_scene(dir.write_json("s.json", scene_with_mesh(mesh))).at(0);
   EXPECT_GE(s.spec.mesh.n_tets(), 13);  // no tet above 0.01 m^3 before scaling
@@ -111,24 +114,42 @@ TEST(SceneMesh, SurfaceFileGoesThroughTetgen) {
 
 TEST(SceneMesh, PrimitivesHaveTheirVolumes) {
   SceneDir dir;
-  const Scene box = load_scene(dir.write_json("b.json", scene_with_mesh(json::parse(
-      R"({ "primitive": "box", "lo": [0, 0, 0], "hi": [1, 2, 3], "cells": [1, 2, 3], "split": "centred24", "scale": [2, 1, 0.5] })")))).at(0);
+  const Scene box =
+      load_scene(
+          dir.write_json(
+              "b.json",
+              scene_with_mesh(json::parse(
+                  R"({ "primitive": "box", "lo": [0, 0, 0], "hi": [1, 2, 3], "cells": [1, 2, 3], "split": "centred24", "scale": [2, 1, 0.5] })"))))
+          .at(0);
   EXPECT_EQ(box.spec.mesh.n_tets(), 6 * 24);
   EXPECT_NEAR(total_volume(box.spec.mesh), 6.0, 1e-12);  // scaled by 2 * 1 * 0.5
-  const Scene cyl = load_scene(dir.write_json("c.json", scene_with_mesh(json::parse(
-      R"({ "primitive": "cylinder", "radius": 0.1, "height": 0.3, "around": 16, "layers": 3, "rings": 2 })")))).at(0);
+  const Scene cyl =
+      load_scene(
+          dir.write_json(
+              "c.json",
+              scene_with_mesh(json::parse(
+                  R"({ "primitive": "cylinder", "radius": 0.1, "height": 0.3, "around": 16, "layers": 3, "rings": 2 })"))))
+          .at(0);
   EXPECT_NEAR(total_volume(cyl.spec.mesh), 8.0 * 0.01 * std::sin(2 * std::numbers::pi / 16) * 0.3, 1e-12);
-  const Scene ball = load_scene(dir.write_json("s.json", scene_with_mesh(json::parse(
-      R"({ "primitive": "sphere", "centre": [0, 1, 0], "radius": 0.2, "resolution": 2 })")))).at(0);
+  const Scene ball =
+      load_scene(
+          dir.write_json("s.json",
+                         scene_with_mesh(json::parse(
+                             R"({ "primitive": "sphere", "centre": [0, 1, 0], "radius": 0.2, "resolution": 2 })"))))
+          .at(0);
   const double v = total_volume(ball.spec.mesh), exact = 4.0 / 3.0 * std::numbers::pi * 0.008;
   EXPECT_LT(v, exact);  // inscribed polyhedron
   EXPECT_GT(v, 0.9 * exact);
   expect_scene_error(dir, "e.json", scene_with_mesh(json::parse(R"({ "primitive": "cone", "radius": 1 })")),
                      {"mesh.primitive: must be one of \"box\", \"cylinder\", \"sphere\", got \"cone\""});
-  expect_scene_error(dir, "e.json", scene_with_mesh(json::parse(
-      R"({ "primitive": "sphere", "centre": [0, 0, 0], "radius": 1, "resolution": 9 })")), {"mesh.resolution: must be an integer in 0..6"});
-  expect_scene_error(dir, "e.json", scene_with_mesh(json::parse(
-      R"({ "primitive": "box", "lo": [0, 0, 0], "hi": [1, 0, 1], "cells": [1, 1, 1] })")), {"mesh.hi: must exceed lo in every axis"});
+  expect_scene_error(
+      dir, "e.json",
+      scene_with_mesh(json::parse(R"({ "primitive": "sphere", "centre": [0, 0, 0], "radius": 1, "resolution": 9 })")),
+      {"mesh.resolution: must be an integer in 0..6"});
+  expect_scene_error(
+      dir, "e.json",
+      scene_with_mesh(json::parse(R"({ "primitive": "box", "lo": [0, 0, 0], "hi": [1, 0, 1], "cells": [1, 1, 1] })")),
+      {"mesh.hi: must exceed lo in every axis"});
 }
 
 }  // namespace

@@ -79,7 +79,8 @@ TEST(SceneMapping, FieldsBecomeTheCoreSpec) {
     "name": "twist", "select": { "plane": { "point": [0.4, 0, 0], "normal": [2, 0, 0] } },
     "rotate": { "centre": [0.4, 0.05, 0.05], "axis": [3, 0, 0], "angle_deg": 90, "duration": 1.5, "start": 0.25 },
     "translate": { "direction": [0, 0, -2], "distance": 0.01, "duration": 0.5 } })"));
-  j["loads"] = json::parse(R"([{ "name": "push", "select": { "nodes": [1, 2] }, "force": [0, 1, 0], "ramp": { "duration": 0.2 } }])");
+  j["loads"] = json::parse(
+      R"([{ "name": "push", "select": { "nodes": [1, 2] }, "force": [0, 1, 0], "ramp": { "duration": 0.2 } }])");
   j["effects"] = json::parse(R"({ "gravity": false, "damping": { "alpha": 1.5 } })");
   j["integrator"] = json::parse(
       R"({ "precision": "float", "dt": 1e-4, "safety": 0.5, "unstable": "refuse", "threads": 2, "energy_tolerance": 0.1 })");
@@ -310,7 +311,8 @@ TEST(SceneErrors, BadCouplingsAreRefusedByField) {
   expect_scene_error(dir, "s.json", j, {"proxies[1].coupling", "stifness"});
   j = make_proxy_scene();
   j["proxies"][3]["coupling"] = json{{"max_force", 2.0}};
-  expect_scene_error(dir, "s.json", j, {"proxies[3].coupling: a proxy in a hand moves with it; give the coupling to hand 'right'"});
+  expect_scene_error(dir, "s.json", j,
+                     {"proxies[3].coupling: a proxy in a hand moves with it; give the coupling to hand 'right'"});
 }
 
 TEST(SceneMapping, VariantsCanTurnFrictionOnAndOff) {
@@ -332,7 +334,8 @@ PoseScript two_keys(PoseScript::Easing easing) {
   s.easing = easing;
   s.keys.push_back({1.0, Pose{Vec3(0.0), Quat(1, 0, 0, 0)}});
   // A quarter turn about y and 2 m along x.
-  s.keys.push_back({3.0, Pose{Vec3(2.0, 0, 0), Quat(std::cos(std::numbers::pi / 4), 0, std::sin(std::numbers::pi / 4), 0)}});
+  s.keys.push_back(
+      {3.0, Pose{Vec3(2.0, 0, 0), Quat(std::cos(std::numbers::pi / 4), 0, std::sin(std::numbers::pi / 4), 0)}});
   return s;
 }
 
@@ -354,7 +357,9 @@ TEST(PoseScript, HoldsBeforeTheFirstKeyframeAndAfterTheLast) {
 
 TEST(PoseScript, SmoothStartsAndStopsAtRestLinearKeepsOneSpeed) {
   const double h = 1e-6;
-  auto speed = [&](const PoseScript& s, double t) { return (s.at(t + h).position.x - s.at(t - h).position.x) / (2 * h); };
+  auto speed = [&](const PoseScript& s, double t) {
+    return (s.at(t + h).position.x - s.at(t - h).position.x) / (2 * h);
+  };
   const PoseScript smooth = two_keys(PoseScript::Easing::Smooth);
   const PoseScript linear = two_keys(PoseScript::Easing::Linear);
   EXPECT_NEAR(speed(smooth, 1.0 + 2 * h), 0.0, 1e-4);
@@ -379,7 +384,8 @@ TEST(SceneErrors, UnknownField) {
   expect_scene_error(dir, "s.json", j, {"materal: unknown field"});
   j = make_beam_scene();
   j["material"]["young"] = 1;
-  expect_scene_error(dir, "s.json", j, {"material.young: unknown field", "allowed here: model, invertible, E, nu, rho"});
+  expect_scene_error(dir, "s.json", j,
+                     {"material.young: unknown field", "allowed here: model, invertible, E, nu, rho"});
   j = make_beam_scene();
   j["boundary"][0]["select"]["box"]["size"] = 1;
   expect_scene_error(dir, "s.json", j, {"boundary[0].select.box.size: unknown field"});
@@ -428,17 +434,20 @@ TEST(SceneErrors, UnknownMaterialModel) {
   SceneDir dir;
   json j = make_beam_scene();
   j["material"]["model"] = "rubber";
-  expect_scene_error(dir, "s.json", j,
-                     {"material.model: must be one of \"linear\", \"stvk\", \"corotational\", \"neohookean\", got \"rubber\""});
+  expect_scene_error(
+      dir, "s.json", j,
+      {"material.model: must be one of \"linear\", \"stvk\", \"corotational\", \"neohookean\", got \"rubber\""});
 }
 
 TEST(SceneErrors, SelectorThatSelectsNoNode) {
   SceneDir dir;
   json j = make_beam_scene();
   j["boundary"][0]["select"]["box"] = json{{"lo", {1, 1, 1}}, {"hi", {2, 2, 2}}};
-  expect_scene_error(dir, "s.json", j, {"boundary[0].select: selects no node", "the mesh spans [0, 0, 0] to [0.4, 0.1, 0.1]"});
+  expect_scene_error(dir, "s.json", j,
+                     {"boundary[0].select: selects no node", "the mesh spans [0, 0, 0] to [0.4, 0.1, 0.1]"});
   j = make_beam_scene();
-  j["loads"] = json::parse(R"([{ "select": { "plane": { "point": [0, 5, 0], "normal": [0, 1, 0] } }, "force": [0, 1, 0] }])");
+  j["loads"] =
+      json::parse(R"([{ "select": { "plane": { "point": [0, 5, 0], "normal": [0, 1, 0] } }, "force": [0, 1, 0] }])");
   expect_scene_error(dir, "s.json", j, {"loads[0].select: selects no node"});
   j = make_beam_scene();
   j["boundary"][0]["select"] = json{{"nodes", {0, 100000}}};
@@ -543,7 +552,8 @@ TEST(SceneErrors, MisplacedAndConflictingFields) {
   j["materials"] = json::array({j["material"]});
   expect_scene_error(dir, "s.json", j, {"materials: give \"material\" or \"materials\", not both"});
   j = make_beam_scene();
-  j["boundary"][0]["rotate"] = json::parse(R"({ "centre": [0, 0, 0], "axis": [1, 0, 0], "angle_deg": 10, "duration": 1 })");
+  j["boundary"][0]["rotate"] =
+      json::parse(R"({ "centre": [0, 0, 0], "axis": [1, 0, 0], "angle_deg": 10, "duration": 1 })");
   expect_scene_error(dir, "s.json", j, {"boundary[0].fixed: cannot be combined"});
   j = make_beam_scene();
   j["boundary"].push_back(j["boundary"][0]);
@@ -558,12 +568,14 @@ TEST(SceneErrors, MisplacedAndConflictingFields) {
   j["run"]["sections"] = json::parse(R"([{ "name": "off", "point": [0, 3, 0], "normal": [0, 1, 0] }])");
   expect_scene_error(dir, "s.json", j, {"run.sections[0]: the plane cuts no tet"});
   j = make_beam_scene();
-  j["boundary"][0]["rotate"] = json::parse(R"({ "centre": [0, 0, 0], "axis": [0, 0, 0], "angle_deg": 10, "duration": 1 })");
+  j["boundary"][0]["rotate"] =
+      json::parse(R"({ "centre": [0, 0, 0], "axis": [0, 0, 0], "angle_deg": 10, "duration": 1 })");
   j["boundary"][0].erase("fixed");
   expect_scene_error(dir, "s.json", j, {"boundary[0].rotate.axis: must be a nonzero vector"});
   // A spin eases in: its spin-up cannot be zero (a velocity jump, an impulse no step resolves).
   j = make_beam_scene();
-  j["boundary"][0]["spin"] = json::parse(R"({ "centre": [0, 0, 0], "axis": [1, 0, 0], "rate_deg_s": 90, "spin_up": 0 })");
+  j["boundary"][0]["spin"] =
+      json::parse(R"({ "centre": [0, 0, 0], "axis": [1, 0, 0], "rate_deg_s": 90, "spin_up": 0 })");
   j["boundary"][0].erase("fixed");
   expect_scene_error(dir, "s.json", j, {"boundary[0].spin.spin_up"});
 }
@@ -606,16 +618,25 @@ TEST(SceneErrors, ProxyFields) {
           {"proxies[0].shape: must be one of \"sphere\", \"capsule\", \"box\", \"plane\", got \"cone\""});
   refused([](json& j) { j["proxies"][0]["radius"] = -0.01; }, {"proxies[0].radius: must be a number > 0, got -0.01"});
   refused([](json& j) { j["proxies"][3]["half_length"] = 0; }, {"proxies[3].half_length: must be a number > 0, got 0"});
-  refused([](json& j) { j["proxies"][1]["half_extents"][2] = -1; }, {"proxies[1].half_extents[2]: must be a number > 0"});
+  refused([](json& j) { j["proxies"][1]["half_extents"][2] = -1; },
+          {"proxies[1].half_extents[2]: must be a number > 0"});
   refused([](json& j) { j["proxies"][1]["radius"] = -1; }, {"proxies[1].radius: must be a number >= 0, got -1"});
-  refused([](json& j) { j["proxies"][0]["half_length"] = 0.1; }, {"proxies[0].half_length: is for a capsule only (shape is \"sphere\")"});
-  refused([](json& j) { j["proxies"][2]["radius"] = 0.1; }, {"proxies[2].radius: is for a sphere, capsule or box only"});
+  refused([](json& j) { j["proxies"][0]["half_length"] = 0.1; },
+          {"proxies[0].half_length: is for a capsule only (shape is \"sphere\")"});
+  refused([](json& j) { j["proxies"][2]["radius"] = 0.1; },
+          {"proxies[2].radius: is for a sphere, capsule or box only"});
   refused([](json& j) { j["proxies"][0]["colour"] = "red"; }, {"proxies[0].colour: unknown field"});
   refused([](json& j) { j["proxies"][0]["friction"] = -0.1; }, {"proxies[0].friction: must be a number >= 0"});
-  refused([](json& j) { j["proxies"][1]["orientation"] = json::array({0, 0, 0, 0}); },
-          {"proxies[1].orientation: must be a nonzero quaternion"});
-  refused([](json& j) { j["proxies"][1]["orientation"] = json::array({1, 0, 0}); },
-          {"proxies[1].orientation: must be a quaternion [w, x, y, z] (4 numbers)"});
+  refused(
+      [](json& j) {
+        j["proxies"][1]["orientation"] = json::array({0, 0, 0, 0});
+      },
+      {"proxies[1].orientation: must be a nonzero quaternion"});
+  refused(
+      [](json& j) {
+        j["proxies"][1]["orientation"] = json::array({1, 0, 0});
+      },
+      {"proxies[1].orientation: must be a quaternion [w, x, y, z] (4 numbers)"});
   refused([](json& j) { j["proxies"][1].erase("position"); }, {"proxies[1].position: required field missing"});
   refused([](json& j) { j["proxies"][1].erase("device"); }, {"proxies[1].device: required field missing"});
   refused([](json& j) { j["proxies"][1]["device"] = "a,b"; }, {"proxies[1].device: must be 1 to 64 letters"});
@@ -641,18 +662,24 @@ TEST(SceneErrors, ProxyScripts) {
           {"proxies[0].script.keyframes: must have at least 1 entry"});
   refused([](json& j) { j["proxies"][0]["script"]["easing"] = "bouncy"; },
           {"proxies[0].script.easing: must be one of \"smooth\", \"linear\", got \"bouncy\""});
-  refused([](json& j) { j["proxies"][0]["script"]["keyframes"][0]["velocity"] = json::array({0, 0, 0}); },
-          {"proxies[0].script.keyframes[0].velocity: unknown field"});
+  refused(
+      [](json& j) {
+        j["proxies"][0]["script"]["keyframes"][0]["velocity"] = json::array({0, 0, 0});
+      },
+      {"proxies[0].script.keyframes[0].velocity: unknown field"});
   refused([](json& j) { j["proxies"][0]["script"]["keyframes"][0].erase("position"); },
           {"proxies[0].script.keyframes[0].position: required field missing"});
-  refused([](json& j) { j["proxies"][0]["position"] = json::array({0, 0, 0}); },
-          {"proxies[0].position: differs from where the script starts, [0.3, 0.12, 0.05]"});
+  refused(
+      [](json& j) {
+        j["proxies"][0]["position"] = json::array({0, 0, 0});
+      },
+      {"proxies[0].position: differs from where the script starts, [0.3, 0.12, 0.05]"});
   refused(
       [](json& j) {
         j["hands"][0]["orientation"] = json::array({0, 1, 0, 0});
         j["hands"][0]["script"]["keyframes"][0]["orientation"] = json::array({1, 0, 0, 0});
       },
-          {"hands[0].orientation: differs from the script's orientation at t = 0"});
+      {"hands[0].orientation: differs from the script's orientation at t = 0"});
 }
 
 TEST(SceneErrors, HandsAndTheirProxies) {
@@ -664,19 +691,30 @@ TEST(SceneErrors, HandsAndTheirProxies) {
   };
   refused([](json& j) { j["proxies"][3]["hand"] = "left"; },
           {"proxies[3].hand: 'left' is not among the hands (they are 'right')"});
-  refused([](json& j) { j.erase("hands"); j["proxies"][3]["hand"] = "right"; },
-          {"proxies[3].hand: 'right' is not among the hands (the scene has none)"});
+  refused(
+      [](json& j) {
+        j.erase("hands");
+        j["proxies"][3]["hand"] = "right";
+      },
+      {"proxies[3].hand: 'right' is not among the hands (the scene has none)"});
   refused([](json& j) { j["proxies"][4]["device"] = "stylus"; },
           {"proxies[4].device: 'stylus' differs from the device of hand 'right' ('glove')"});
   refused([](json& j) { j["proxies"][3]["script"] = j["proxies"][0]["script"]; },
           {"proxies[3].script: a proxy in a hand moves with it; give the script to hand 'right'"});
-  refused([](json& j) { j["hands"].push_back(json::parse(R"({ "name": "left", "device": "g2", "position": [0, 0, 0] })")); },
-          {"hands[1]: no proxy belongs to hand 'left'"});
+  refused(
+      [](json& j) {
+        j["hands"].push_back(json::parse(R"({ "name": "left", "device": "g2", "position": [0, 0, 0] })"));
+      },
+      {"hands[1]: no proxy belongs to hand 'left'"});
   refused([](json& j) { j["hands"].push_back(j["hands"][0]); }, {"hands[1].name: 'right' names two hands"});
   refused([](json& j) { j["hands"][0].erase("device"); }, {"hands[0].device: required field missing"});
   refused([](json& j) { j["hands"][0]["fingers"] = 5; }, {"hands[0].fingers: unknown field"});
-  refused([](json& j) { j["hands"][0].erase("script"); j["hands"][0].erase("position"); },
-          {"hands[0].position: required field missing"});
+  refused(
+      [](json& j) {
+        j["hands"][0].erase("script");
+        j["hands"][0].erase("position");
+      },
+      {"hands[0].position: required field missing"});
   refused([](json& j) { j["variants"] = json::parse(R"([{ "name": "v", "proxies": [] }])"); },
           {"variants[0].proxies: unknown field"});
 }
@@ -698,10 +736,12 @@ TEST(SceneErrors, NotJson) {
   const std::string comma = error("broken.json", "{ \"name\": \"x\", }");
   EXPECT_NE(comma.find(dir.file("broken.json") + ":1:"), std::string::npos) << comma;
   EXPECT_NE(comma.find("not valid JSON"), std::string::npos) << comma;
-  const std::string huge = error("huge.json", "{\n  \"name\": \"x\",\n  \"material\": { \"model\": \"stvk\", \"E\": 1e999 }\n}");
+  const std::string huge =
+      error("huge.json", "{\n  \"name\": \"x\",\n  \"material\": { \"model\": \"stvk\", \"E\": 1e999 }\n}");
   EXPECT_NE(huge.find(dir.file("huge.json") + ":3:"), std::string::npos) << huge;
   EXPECT_NE(huge.find("at material.E: 1e999 is out of range"), std::string::npos) << huge;
-  const std::string listed = error("list.json", "{ \"proxies\": [ {}, { \"radius\": 0.01, \"position\": [0, 1, nope] } ] }");
+  const std::string listed =
+      error("list.json", "{ \"proxies\": [ {}, { \"radius\": 0.01, \"position\": [0, 1, nope] } ] }");
   EXPECT_NE(listed.find("at proxies[1].position[2]"), std::string::npos) << listed;
   EXPECT_THROW(load_scene(dir.file("absent.json")), SceneError);
 }

@@ -6,19 +6,19 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <string>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <nlohmann/json.hpp>
 
-#include "sim/simulation.hpp"
 #include "core/coupling.hpp"
 #include "mesh/primitives.hpp"
 #include "scene/parameters.hpp"
 #include "scene/scene.hpp"
+#include "sim/simulation.hpp"
 
 namespace tactile {
 namespace {
@@ -69,7 +69,8 @@ TEST(Simulation, FloatAndDoubleAgree) {
   std::vector<double> x, u;
   d.copy_positions(x);
   d.copy_displacement(u);
-  for (size_t d3 = 0; d3 < 3; ++d3) EXPECT_EQ(x[3 * size_t(tip) + d3], d.mesh().X[size_t(tip)][int(d3)] + u[3 * size_t(tip) + d3]);
+  for (size_t d3 = 0; d3 < 3; ++d3)
+    EXPECT_EQ(x[3 * size_t(tip) + d3], d.mesh().X[size_t(tip)][int(d3)] + u[3 * size_t(tip) + d3]);
 }
 
 // Two parts (a beam of 12 k tets): the threads share the middle chunks of
@@ -98,7 +99,7 @@ TEST(Simulation, ThreadsLeaveTheMotionAsItIs) {
     worst = std::max(worst, std::fabs(a[k] - b[k]));
     scale = std::max(scale, std::fabs(a[k]));
   }
-  EXPECT_GT(scale, 1e-3);  // it sags
+  EXPECT_GT(scale, 1e-3);          // it sags
   EXPECT_LE(worst, 1e-9 * scale);  // only the order of the force sums may differ
 }
 
@@ -174,8 +175,10 @@ TEST(Simulation, ContinueFromCarriesTheBodyOver) {
   ModelSpec other = spec;
   other.mesh = parse_scene(nlohmann::json::parse(R"({
     "mesh": { "primitive": "box", "lo": [0, 0, 0], "hi": [0.4, 0.1, 0.1], "cells": [8, 2, 2] },
-    "material": { "model": "stvk", "E": 1e5, "nu": 0.3, "rho": 1000 }, "run": { "duration": 0.1 } })"), "b.json")
-                   .at(0).spec.mesh;
+    "material": { "model": "stvk", "E": 1e5, "nu": 0.3, "rho": 1000 }, "run": { "duration": 0.1 } })"),
+                           "b.json")
+                   .at(0)
+                   .spec.mesh;
   Simulation c(other);
   EXPECT_THROW(c.continue_from(a), std::invalid_argument);
 }
@@ -226,8 +229,10 @@ TEST(Simulation, EveryShippedSceneTakesACoupledStrikeWithoutAFault) {
           m.t1 = sim.time() + 1e-3;
           m.from = device;
           m.to = next;
-          if (hand >= 0) sim.set_hand_motion(hand, m);
-          else sim.set_proxy_motion(proxy, m);
+          if (hand >= 0)
+            sim.set_hand_motion(hand, m);
+          else
+            sim.set_proxy_motion(proxy, m);
           device = next;
           const AdvanceReport r = sim.advance(1e-3);
           ASSERT_FALSE(r.fault) << what << " at " << k << " ms: " << r.fault.message;

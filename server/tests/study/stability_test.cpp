@@ -49,8 +49,8 @@ TEST_P(Stability, StaysFiniteBoundedAndReportsWhatItCannotDo) {
       GTEST_SKIP() << "known failure, open: " << known->second << " (this run: " << r.why << ")";
     }
     EXPECT_TRUE(r.pass) << r.name << " (expects: " << to_string(r.expect) << "): " << r.outcome << " -- " << r.why
-                        << "; size x" << r.size_ratio << ", drift " << r.energy_drift << ", depth "
-                        << r.penetration_mm << " mm, " << r.steps << " steps";
+                        << "; size x" << r.size_ratio << ", drift " << r.energy_drift << ", depth " << r.penetration_mm
+                        << " mm, " << r.steps << " steps";
     EXPECT_FALSE(r.outcome.empty()) << r.name;
   }
 }

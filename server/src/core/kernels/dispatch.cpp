@@ -83,10 +83,14 @@ std::string_view kernel_isa() {
 
 bool select_isa(std::string_view name) {
   Isa isa;
-  if (name == "baseline" || name == "v2") isa = kBaseline;
-  else if (name == "v3") isa = kV3;
-  else if (name == "v4") isa = kV4;
-  else return false;
+  if (name == "baseline" || name == "v2")
+    isa = kBaseline;
+  else if (name == "v3")
+    isa = kV3;
+  else if (name == "v4")
+    isa = kV4;
+  else
+    return false;
   if (!cpu_has(isa)) return false;
   current().store(isa, std::memory_order_relaxed);
   return true;

@@ -30,8 +30,8 @@ struct alignas(64) ElementBlock {
   // adds. An int32 holds 4 x id for up to 2^29 nodes, far more than memory
   // holds.) Padding lanes: lane 0's corner 0, all four. (n_blocks x 4 x W)
   int32_t node4[4][W];
-  Real Dinv[9][W];     // inverse rest edge matrix Dm^-1, row-major, Dm = [X1-X0 X2-X0 X3-X0]
-  Real V[W];           // rest volume [m^3]; 0 in padding lanes (a block's Lame parameters are its group's)
+  Real Dinv[9][W];  // inverse rest edge matrix Dm^-1, row-major, Dm = [X1-X0 X2-X0 X3-X0]
+  Real V[W];        // rest volume [m^3]; 0 in padding lanes (a block's Lame parameters are its group's)
 };
 
 // One node's vector padded to four entries (x, y, z, 0), aligned to its size
@@ -108,22 +108,22 @@ template <class Real>
 struct CorrectArgs {
   int32_t begin, end;
   Real dt;
-  Node4<Real>* f;                // the force arrays [N]
-  const int32_t* group_begin;    // per 16 nodes, into group_offset
-  const int64_t* group_offset;   // offsets into f of the arrays that hold them
-  const Real* inv_m;  // 1/m per node [1/kg] (n)
-  const Real* m;      // m per node [kg] (n)
-  Real g[3];          // [m/s^2]
-  Real alpha;         // [1/s]
-  const Real* u;      // for the gravity potential
+  Node4<Real>* f;               // the force arrays [N]
+  const int32_t* group_begin;   // per 16 nodes, into group_offset
+  const int64_t* group_offset;  // offsets into f of the arrays that hold them
+  const Real* inv_m;            // 1/m per node [1/kg] (n)
+  const Real* m;                // m per node [kg] (n)
+  Real g[3];                    // [m/s^2]
+  Real alpha;                   // [1/s]
+  const Real* u;                // for the gravity potential
   Real* v;
   Real* a;
 };
 struct CorrectSums {
-  double abs_a = 0;   // sum |a|: non-finite when any value is
-  double mv2 = 0;     // sum m |v|^2 = 2 x kinetic energy [J]
-  double mgu = 0;     // sum m g.u [J], with gravity only
-  double ma2 = 0;     // sum m |a|^2, for the central-difference energy
+  double abs_a = 0;  // sum |a|: non-finite when any value is
+  double mv2 = 0;    // sum m |v|^2 = 2 x kinetic energy [J]
+  double mgu = 0;    // sum m g.u [J], with gravity only
+  double ma2 = 0;    // sum m |a|^2, for the central-difference energy
 };
 template <class Real>
 using CorrectFn = CorrectSums (*)(const CorrectArgs<Real>& args);

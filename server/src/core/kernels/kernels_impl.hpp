@@ -88,7 +88,7 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
   [[maybe_unused]] constexpr int W = kLanes<Real>;
   // u0 + id[l]: corner c of lane l (id is 4 x its node, see ElementBlock).
   const Real* u0 = u[0].v;
-  #pragma GCC unroll 4
+#pragma GCC unroll 4
   for (int c = 0; c < 4; ++c) {
     const int32_t* id = B.node4[c];
 #if defined(__AVX512F__)
@@ -97,12 +97,12 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
       // Each half of r[j] is built in 256 bits and the halves joined: one
       // 512-bit insert instead of three (fem_bench --only=isas; docs/perf.md).
       __m512 r[4];
-      #pragma GCC unroll 4
+#pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
-        const __m256 lo = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u0 + id[j])),
-                                               _mm_load_ps(u0 + id[4 + j]), 1);
-        const __m256 hi = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u0 + id[8 + j])),
-                                               _mm_load_ps(u0 + id[12 + j]), 1);
+        const __m256 lo =
+            _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u0 + id[j])), _mm_load_ps(u0 + id[4 + j]), 1);
+        const __m256 hi =
+            _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u0 + id[8 + j])), _mm_load_ps(u0 + id[12 + j]), 1);
         r[j] = _mm512_insertf32x8(_mm512_castps256_ps512(lo), hi, 1);
       }
       const __m512d t0 = _mm512_castps_pd(_mm512_unpacklo_ps(r[0], r[1]));  // x0 x1 y0 y1 per chunk
@@ -115,10 +115,10 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
     } else {
       // r[j] holds lane j in its low half and lane j + 4 in its high half.
       __m512d r[4];
-      #pragma GCC unroll 4
+#pragma GCC unroll 4
       for (int j = 0; j < 4; ++j)
-        r[j] = _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_load_pd(u0 + id[j])), _mm256_load_pd(u0 + id[4 + j]),
-                                  1);
+        r[j] =
+            _mm512_insertf64x4(_mm512_castpd256_pd512(_mm256_load_pd(u0 + id[j])), _mm256_load_pd(u0 + id[4 + j]), 1);
       const __m512d t0 = _mm512_unpacklo_pd(r[0], r[1]);  // pairs: x0 x1 | z0 z1 | x4 x5 | z4 z5
       const __m512d t1 = _mm512_unpackhi_pd(r[0], r[1]);  // y0 y1 | 0 0 | y4 y5 | 0 0
       const __m512d t2 = _mm512_unpacklo_pd(r[2], r[3]);  // x2 x3 | z2 z3 | x6 x7 | z6 z7
@@ -131,13 +131,13 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
     }
 #elif defined(__AVX2__)
     if constexpr (sizeof(Real) == 4) {
-      #pragma GCC unroll 2
+#pragma GCC unroll 2
       for (int h = 0; h < W; h += 8) {
         __m256 r[4];  // lane h + j in the low chunk, h + 4 + j in the high one
-        #pragma GCC unroll 4
+#pragma GCC unroll 4
         for (int j = 0; j < 4; ++j)
-          r[j] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u0 + id[h + j])), _mm_load_ps(u0 + id[h + 4 + j]),
-                                      1);
+          r[j] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_load_ps(u0 + id[h + j])),
+                                      _mm_load_ps(u0 + id[h + 4 + j]), 1);
         const __m256d t0 = _mm256_castps_pd(_mm256_unpacklo_ps(r[0], r[1]));
         const __m256d t1 = _mm256_castps_pd(_mm256_unpackhi_ps(r[0], r[1]));
         const __m256d t2 = _mm256_castps_pd(_mm256_unpacklo_ps(r[2], r[3]));
@@ -147,7 +147,7 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
         _mm256_store_ps(x[3 * c + 2] + h, _mm256_castpd_ps(_mm256_unpacklo_pd(t1, t3)));
       }
     } else {
-      #pragma GCC unroll 2
+#pragma GCC unroll 2
       for (int h = 0; h < W; h += 4) {
         const __m256d r0 = _mm256_load_pd(u0 + id[h]), r1 = _mm256_load_pd(u0 + id[h + 1]);
         const __m256d r2 = _mm256_load_pd(u0 + id[h + 2]), r3 = _mm256_load_pd(u0 + id[h + 3]);
@@ -175,7 +175,7 @@ template <class Real>
 TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*fc)[kLanes<Real>], Node4<Real>* f) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
   Real* f0 = f[0].v;  // f0 + id[l]: corner c of lane l
-  #pragma GCC unroll 4
+#pragma GCC unroll 4
   for (int c = 0; c < 4; ++c) {
     const int32_t* id = B.node4[c];
 #if defined(__AVX512F__)
@@ -193,7 +193,7 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
         float* p = f0 + id[l];
         _mm_store_ps(p, _mm_add_ps(_mm_load_ps(p), v));
       };
-      #pragma GCC unroll 4
+#pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
         add(j, _mm512_castps512_ps128(q[j]));
         add(4 + j, _mm512_extractf32x4_ps(q[j], 1));
@@ -215,7 +215,7 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
         double* p = f0 + id[l];
         _mm256_store_pd(p, _mm256_add_pd(_mm256_load_pd(p), v));
       };
-      #pragma GCC unroll 4
+#pragma GCC unroll 4
       for (int j = 0; j < 4; ++j) {
         const int l = (j & 1) + 4 * (j >> 1);
         add(l, _mm512_castpd512_pd256(q[j]));
@@ -224,7 +224,7 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
     }
 #elif defined(__AVX2__)
     if constexpr (sizeof(Real) == 4) {
-      #pragma GCC unroll 2
+#pragma GCC unroll 2
       for (int h = 0; h < W; h += 8) {
         const __m256 fx = _mm256_load_ps(fc[3 * c] + h), fy = _mm256_load_ps(fc[3 * c + 1] + h);
         const __m256 fz = _mm256_load_ps(fc[3 * c + 2] + h), zero = _mm256_setzero_ps();
@@ -233,19 +233,20 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
         const __m256d t2 = _mm256_castps_pd(_mm256_unpacklo_ps(fz, zero));
         const __m256d t3 = _mm256_castps_pd(_mm256_unpackhi_ps(fz, zero));
         const __m256 q[4] = {_mm256_castpd_ps(_mm256_unpacklo_pd(t0, t2)), _mm256_castpd_ps(_mm256_unpackhi_pd(t0, t2)),
-                             _mm256_castpd_ps(_mm256_unpacklo_pd(t1, t3)), _mm256_castpd_ps(_mm256_unpackhi_pd(t1, t3))};
+                             _mm256_castpd_ps(_mm256_unpacklo_pd(t1, t3)),
+                             _mm256_castpd_ps(_mm256_unpackhi_pd(t1, t3))};
         auto add = [&](int l, __m128 v) {
           float* p = f0 + id[h + l];
           _mm_store_ps(p, _mm_add_ps(_mm_load_ps(p), v));
         };
-        #pragma GCC unroll 4
+#pragma GCC unroll 4
         for (int j = 0; j < 4; ++j) {
           add(j, _mm256_castps256_ps128(q[j]));
           add(4 + j, _mm256_extractf128_ps(q[j], 1));
         }
       }
     } else {
-      #pragma GCC unroll 2
+#pragma GCC unroll 2
       for (int h = 0; h < W; h += 4) {
         const __m256d fx = _mm256_load_pd(fc[3 * c] + h), fy = _mm256_load_pd(fc[3 * c + 1] + h);
         const __m256d fz = _mm256_load_pd(fc[3 * c + 2] + h), zero = _mm256_setzero_pd();
@@ -299,13 +300,13 @@ struct LaneVectors<double> {
 template <class Real>
 TACTILE_INLINE void deformation_gradient(const ElementBlock<Real>& B, int l, const Real (*x)[kLanes<Real>], Real* F) {
   Real du[3][3];  // du[c][i] = u_{c+1,i} - u_{0,i}
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int c = 0; c < 3; ++c)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int i = 0; i < 3; ++i) du[c][i] = x[3 * (c + 1) + i][l] - x[i][l];
-  #pragma GCC unroll 16
+#pragma GCC unroll 16
   for (int i = 0; i < 3; ++i)
-    #pragma GCC unroll 16
+#pragma GCC unroll 16
     for (int j = 0; j < 3; ++j)
       F[3 * i + j] = (i == j ? Real(1) : Real(0)) + du[0][i] * B.Dinv[j][l] + du[1][i] * B.Dinv[3 + j][l] +
                      du[2][i] * B.Dinv[6 + j][l];
@@ -430,19 +431,19 @@ template <class Real, MaterialModel M>
 __attribute__((noinline)) void svd_lanes_of_block(const ElementBlock<Real>& B, Real lambda, Real mu,
                                                   BlockStress<Real>& s) {
   constexpr int W = kLanes<Real>;
-  #pragma GCC unroll 1
+#pragma GCC unroll 1
   for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
-  for (int l = h; l < h + kMathLanes<Real>; ++l) {
-    Real Fl[9], Pl[9];
-    #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
-    const Real psi = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
-    const bool take = s.near[l] != Real(0);
-    s.psiV[l] = take ? psi : s.psiV[l];
-    #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) s.P[k][l] = take ? Pl[k] : s.P[k][l];
-  }
+    for (int l = h; l < h + kMathLanes<Real>; ++l) {
+      Real Fl[9], Pl[9];
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
+      const Real psi = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+      const bool take = s.near[l] != Real(0);
+      s.psiV[l] = take ? psi : s.psiV[l];
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) s.P[k][l] = take ? Pl[k] : s.P[k][l];
+    }
 }
 
 // Two blocks' lanes through the SVD at once, lane l of each in one Pair.
@@ -452,24 +453,24 @@ __attribute__((noinline)) void svd_lanes_of_pair(const ElementBlock<Real>& A, Bl
                                                  Real mu) {
   using Two = material::Pair<Real>;
   constexpr int W = kLanes<Real>;
-  #pragma GCC unroll 1
+#pragma GCC unroll 1
   for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
-  for (int l = h; l < h + kMathLanes<Real>; ++l) {
-    Two Fl[9], Pl[9];
-    #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) Fl[k] = Two(s.F[k][l], t.F[k][l]);
-    const Two psi = material::stress<M>(Fl, Two(lambda * A.V[l], lambda * B.V[l]), Two(mu * A.V[l], mu * B.V[l]), Pl);
-    const bool take_a = s.near[l] != Real(0);
-    const bool take_b = t.near[l] != Real(0);
-    s.psiV[l] = take_a ? psi.a : s.psiV[l];
-    t.psiV[l] = take_b ? psi.b : t.psiV[l];
-    #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) {
-      s.P[k][l] = take_a ? Pl[k].a : s.P[k][l];
-      t.P[k][l] = take_b ? Pl[k].b : t.P[k][l];
+    for (int l = h; l < h + kMathLanes<Real>; ++l) {
+      Two Fl[9], Pl[9];
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) Fl[k] = Two(s.F[k][l], t.F[k][l]);
+      const Two psi = material::stress<M>(Fl, Two(lambda * A.V[l], lambda * B.V[l]), Two(mu * A.V[l], mu * B.V[l]), Pl);
+      const bool take_a = s.near[l] != Real(0);
+      const bool take_b = t.near[l] != Real(0);
+      s.psiV[l] = take_a ? psi.a : s.psiV[l];
+      t.psiV[l] = take_b ? psi.b : t.psiV[l];
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) {
+        s.P[k][l] = take_a ? Pl[k].a : s.P[k][l];
+        t.P[k][l] = take_b ? Pl[k].b : t.P[k][l];
+      }
     }
-  }
 }
 
 // Corotational on lanes away from the floor: R by Newton's polar iteration
@@ -484,48 +485,48 @@ TACTILE_INLINE void corotational_stresses(const ElementBlock<Real>& B, Real lamb
   constexpr int W = kLanes<Real>;
   alignas(64) Real X[9][W];    // the iterate, per lane
   alignas(64) Real change[W];  // |X_new - X|^2 of the last step, per lane
-  #pragma GCC unroll 1
+#pragma GCC unroll 1
   for (int h = 0; h < W; h += kMathLanes<Real>)
-#pragma GCC ivdep
-  for (int l = h; l < h + kMathLanes<Real>; ++l) {
-    Real Fl[9];
-    #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
-    const Real near = material::may_reach_floor(Fl);
-    s.near[l] = near;
-    #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) X[k][l] = near != Real(0) ? (k % 4 == 0 ? Real(1) : Real(0)) : Fl[k];
-  }
-  constexpr Real kConverged = std::numeric_limits<Real>::epsilon();
-  for (int step = 0; step < kPolarSteps<Real>; ++step) {
-    #pragma GCC unroll 1
-    for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
     for (int l = h; l < h + kMathLanes<Real>; ++l) {
-      Real Xl[9];
-      #pragma GCC unroll 16
-      for (int k = 0; k < 9; ++k) Xl[k] = X[k][l];
-      change[l] = material::polar_newton_step(Xl);
-      #pragma GCC unroll 16
-      for (int k = 0; k < 9; ++k) X[k][l] = Xl[k];
+      Real Fl[9];
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
+      const Real near = material::may_reach_floor(Fl);
+      s.near[l] = near;
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) X[k][l] = near != Real(0) ? (k % 4 == 0 ? Real(1) : Real(0)) : Fl[k];
     }
+  constexpr Real kConverged = std::numeric_limits<Real>::epsilon();
+  for (int step = 0; step < kPolarSteps<Real>; ++step) {
+#pragma GCC unroll 1
+    for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+      for (int l = h; l < h + kMathLanes<Real>; ++l) {
+        Real Xl[9];
+#pragma GCC unroll 16
+        for (int k = 0; k < 9; ++k) Xl[k] = X[k][l];
+        change[l] = material::polar_newton_step(Xl);
+#pragma GCC unroll 16
+        for (int k = 0; k < 9; ++k) X[k][l] = Xl[k];
+      }
     if (!any_above(change, kConverged)) break;
   }
-  #pragma GCC unroll 1
+#pragma GCC unroll 1
   for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
-  for (int l = h; l < h + kMathLanes<Real>; ++l) {
-    Real Fl[9], Rl[9], Pl[9];
-    #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) {
-      Fl[k] = s.F[k][l];
-      Rl[k] = X[k][l];
+    for (int l = h; l < h + kMathLanes<Real>; ++l) {
+      Real Fl[9], Rl[9], Pl[9];
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) {
+        Fl[k] = s.F[k][l];
+        Rl[k] = X[k][l];
+      }
+      s.psiV[l] = material::stress_corotational_of(Fl, Rl, lambda * B.V[l], mu * B.V[l], Pl);
+      s.near[l] = change[l] > kConverged ? Real(1) : s.near[l];
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
     }
-    s.psiV[l] = material::stress_corotational_of(Fl, Rl, lambda * B.V[l], mu * B.V[l], Pl);
-    s.near[l] = change[l] > kConverged ? Real(1) : s.near[l];
-    #pragma GCC unroll 16
-    for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
-  }
 }
 
 // [f1 f2 f3] = -V P Dm^-T, f0 = -(f1 + f2 + f3): the corner forces [N] of a
@@ -533,24 +534,24 @@ TACTILE_INLINE void corotational_stresses(const ElementBlock<Real>& B, Real lamb
 template <class Real>
 TACTILE_INLINE void corner_forces(const ElementBlock<Real>& B, const Real (*P)[kLanes<Real>], Real (*g)[kLanes<Real>]) {
   constexpr int W = kLanes<Real>;
-  #pragma GCC unroll 1
+#pragma GCC unroll 1
   for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
-  for (int l = h; l < h + kMathLanes<Real>; ++l) {
-    // (Negated products: fused negating multiply-adds, no negation of their own.)
-    #pragma GCC unroll 16
-    for (int i = 0; i < 3; ++i) {
-      Real sum = 0;
-      #pragma GCC unroll 16
-      for (int c = 0; c < 3; ++c) {
-        const Real fa = -(P[3 * i][l] * B.Dinv[3 * c][l]) - P[3 * i + 1][l] * B.Dinv[3 * c + 1][l] -
-                       P[3 * i + 2][l] * B.Dinv[3 * c + 2][l];
-        g[3 * (c + 1) + i][l] = fa;
-        sum = c == 0 ? fa : sum + fa;
+    for (int l = h; l < h + kMathLanes<Real>; ++l) {
+// (Negated products: fused negating multiply-adds, no negation of their own.)
+#pragma GCC unroll 16
+      for (int i = 0; i < 3; ++i) {
+        Real sum = 0;
+#pragma GCC unroll 16
+        for (int c = 0; c < 3; ++c) {
+          const Real fa = -(P[3 * i][l] * B.Dinv[3 * c][l]) - P[3 * i + 1][l] * B.Dinv[3 * c + 1][l] -
+                          P[3 * i + 2][l] * B.Dinv[3 * c + 2][l];
+          g[3 * (c + 1) + i][l] = fa;
+          sum = c == 0 ? fa : sum + fa;
+        }
+        g[i][l] = -sum;
       }
-      g[i][l] = -sum;
     }
-  }
 }
 
 template <class Real, MaterialModel M>
@@ -611,47 +612,47 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
     // Guarded by fem_bench --large --only=passes (docs/perf.md).
     if (b + kPrefetchBlocks < end) {
       const char* next = reinterpret_cast<const char*>(blocks + b + kPrefetchBlocks);
-      #pragma GCC unroll 16
+#pragma GCC unroll 16
       for (size_t o = 0; o < sizeof(ElementBlock<Real>); o += 64) __builtin_prefetch(next + o, 0, 0);
     }
     alignas(64) Real x[12][W];  // corner displacements [m]: x[3c + i][lane]
     alignas(64) Real J[W];      // det F per lane
     load_corners(B, u, x);
-    // Per-lane outputs and no OpenMP pragma: GCC's `omp simd` would keep F and
-    // P in memory as per-lane arrays; its plain vectoriser does far better.
-    #pragma GCC unroll 1
+// Per-lane outputs and no OpenMP pragma: GCC's `omp simd` would keep F and
+// P in memory as per-lane arrays; its plain vectoriser does far better.
+#pragma GCC unroll 1
     for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
-    for (int l = h; l < h + kMathLanes<Real>; ++l) {
-      Real Fl[9];
-      deformation_gradient(B, l, x, Fl);
-      if constexpr (!can_invert(M)) J[l] = material::det(Fl);
-      #pragma GCC unroll 16
-      for (int k = 0; k < 9; ++k) s.F[k][l] = Fl[k];
-    }
+      for (int l = h; l < h + kMathLanes<Real>; ++l) {
+        Real Fl[9];
+        deformation_gradient(B, l, x, Fl);
+        if constexpr (!can_invert(M)) J[l] = material::det(Fl);
+#pragma GCC unroll 16
+        for (int k = 0; k < 9; ++k) s.F[k][l] = Fl[k];
+      }
     if (kAddsAfterF && queued >= 0) add_corner_forces(blocks[queued], fc[queued & 1], f);
     if constexpr (M == MaterialModel::Corotational) {
       corotational_stresses(B, lambda, mu, s);
     } else {
-      #pragma GCC unroll 1
+#pragma GCC unroll 1
       for (int h = 0; h < W; h += kMathLanes<Real>)
 #pragma GCC ivdep
-      for (int l = h; l < h + kMathLanes<Real>; ++l) {
-        Real Fl[9], Pl[9];
-        #pragma GCC unroll 16
-        for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
-        // P and psi are linear in (lambda, mu) at a fixed ratio, so passing
-        // (lambda V, mu V) gives V P and V psi. (One volume a lane and the
-        // group's lambda and mu, rather than lambda V and mu V a lane: 4 bytes
-        // a tet less to stream, and a load fewer; fem_bench --only=passes.)
-        if constexpr (M == MaterialModel::InvertibleStVK) {
-          s.psiV[l] = material::stress_stvk_near(Fl, lambda * B.V[l], mu * B.V[l], Pl, s.near[l]);
-        } else {
-          s.psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+        for (int l = h; l < h + kMathLanes<Real>; ++l) {
+          Real Fl[9], Pl[9];
+#pragma GCC unroll 16
+          for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
+          // P and psi are linear in (lambda, mu) at a fixed ratio, so passing
+          // (lambda V, mu V) gives V P and V psi. (One volume a lane and the
+          // group's lambda and mu, rather than lambda V and mu V a lane: 4 bytes
+          // a tet less to stream, and a load fewer; fem_bench --only=passes.)
+          if constexpr (M == MaterialModel::InvertibleStVK) {
+            s.psiV[l] = material::stress_stvk_near(Fl, lambda * B.V[l], mu * B.V[l], Pl, s.near[l]);
+          } else {
+            s.psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+          }
+#pragma GCC unroll 16
+          for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
         }
-        #pragma GCC unroll 16
-        for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
-      }
     }
     if constexpr (uses_svd(M)) {
       if (any_above(s.near, Real(0))) {
@@ -708,8 +709,8 @@ void energy(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real l
       deformation_gradient(B, l, x, F);
       // (Invertible StVK: the SVD only where F reaches the floor, as in forces().)
       constexpr MaterialModel kFast = M == MaterialModel::InvertibleStVK ? MaterialModel::StVK : M;
-      const bool svd = M == MaterialModel::Corotational ||
-                       (M == MaterialModel::InvertibleStVK && material::reaches_floor(F));
+      const bool svd =
+          M == MaterialModel::Corotational || (M == MaterialModel::InvertibleStVK && material::reaches_floor(F));
       if (svd) flush.engage();
       out[static_cast<int64_t>(b - begin) * W + l] = svd ? material::stress<M>(F, lambda * B.V[l], mu * B.V[l], P)
                                                          : material::stress<kFast>(F, lambda * B.V[l], mu * B.V[l], P);
@@ -731,14 +732,14 @@ TACTILE_INLINE T critical_factor(const T* F, const T (*g)[3]) {
   material::cofactor(F, C);
   const T J = F[0] * C[0] + F[1] * C[1] + F[2] * C[2];
   T cg[4][3];
-  #pragma GCC unroll 4
+#pragma GCC unroll 4
   for (int f = 1; f < 4; ++f)
-    #pragma GCC unroll 3
+#pragma GCC unroll 3
     for (int i = 0; i < 3; ++i) cg[f][i] = C[3 * i] * g[f][0] + C[3 * i + 1] * g[f][1] + C[3 * i + 2] * g[f][2];
-  #pragma GCC unroll 3
+#pragma GCC unroll 3
   for (int i = 0; i < 3; ++i) cg[0][i] = -(cg[1][i] + cg[2][i] + cg[3][i]);
   T rest2 = 0, now2 = 0;  // max |g|^2, max |cof(F) g|^2
-  #pragma GCC unroll 4
+#pragma GCC unroll 4
   for (int f = 0; f < 4; ++f) {
     const T r = g[f][0] * g[f][0] + g[f][1] * g[f][1] + g[f][2] * g[f][2];
     const T n = cg[f][0] * cg[f][0] + cg[f][1] * cg[f][1] + cg[f][2] * cg[f][2];
@@ -838,7 +839,8 @@ struct NodeVectors {
   // A constant mask vector, lane e = f(e).
   template <class F>
   static TACTILE_INLINE M mask(F f) {
-    return [&]<size_t... E>(std::index_sequence<E...>) { return M{f(int(E))...}; }(std::make_index_sequence<W>{});
+    return [&]<size_t... E>(std::index_sequence<E...>) { return M{f(int(E))...}; }
+    (std::make_index_sequence<W>{});
   }
   // Component vector r, lane e: entry (r W + e) % 3 of node (r W + e) / 3.
   // Its Node4 lanes lie in Node4 vectors first4(r) and first4(r) + 1.
@@ -905,7 +907,7 @@ void predict(int32_t begin, int32_t end, Real dt, Real* u, Real* v, const Real* 
     VU* vi = reinterpret_cast<VU*>(v + 3 * i);
     const VU* ai = reinterpret_cast<const VU*>(a + 3 * i);
     V c[3];
-    #pragma GCC unroll 3
+#pragma GCC unroll 3
     for (int r = 0; r < 3; ++r) {
       c[r] = ui[r] + dt * vi[r] + half_dt2 * ai[r];  // eq. (7)
       ui[r] = c[r];
@@ -965,7 +967,7 @@ CorrectSums correct(const CorrectArgs<Real>& A) {
     const int64_t g = i / 16;  // W divides 16
     for (int32_t r = A.group_begin[g]; r < A.group_begin[g + 1]; ++r) {
       VU* fp = reinterpret_cast<VU*>(A.f[A.group_offset[r] + i].v);
-      #pragma GCC unroll 4
+#pragma GCC unroll 4
       for (int k = 0; k < 4; ++k) {
         q[k] += fp[k];
         fp[k] = V{};  // cleared for the next element pass
