@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
-# Sets everything up, then runs all the tests: the C++ suites (ctest), the
+# Sets everything up, then runs the formatters and linters (clang-format, ruff,
+# mypy) and all the tests: the C++ suites (ctest), the
 # JavaScript codec's (node --test), the browser view's (tsc --checkJs, then node --test, with an
 # end-to-end test in Chromium), the device bridge's (pytest) and the cross-piece tests in tests/ (pytest).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 scripts/setup.sh
+echo "test: C++ format (clang-format, scripts/check-format.sh)"
+scripts/check-format.sh
 echo "test: Python lint and types (ruff, mypy)"
 .venv/bin/ruff check device-bridge proto/python tests server/bench
 .venv/bin/mypy
