@@ -80,8 +80,20 @@ fi
 
 # --- C++ build -------------------------------------------------------------
 build="${TACTILE_BUILD:-build/release}"
-if [ ! -f "$build/build.ninja" ]; then
-  cmake -S server -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
-fi
+# Configured every time (seconds; an unchanged cache rebuilds nothing) so that
+# the Python module finds .venv's pybind11 and interpreter in an older build folder too.
+cmake -S server -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release -DPython_EXECUTABLE="$root/.venv/bin/python" \
+  -Dpybind11_DIR="$(.venv/bin/python -m pybind11 --cmakedir)" >/dev/null
 echo "setup: building the server (C++) in $build"
 cmake --build "$build" -j"$(nproc)"
+
+# --- Python (the core's module, import tactile: server/pyproject.toml) --------
+# scikit-build-core builds it in build/release (done above) and installs it
+# into .venv; again only when the module or the package's files changed.
+site="$(.venv/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["platlib"])')"
+module="$(find "$build" -maxdepth 1 -name '_core*.so' -print -quit)"
+if [ ! -d "$site/tactile" ] || ! cmp -s "$module" "$site/tactile/$(basename "$module")" ||
+   ! diff -rq -x '__pycache__' -x '_core*.so' server/python/tactile "$site/tactile" >/dev/null 2>&1; then
+  echo "setup: installing the Python module (import tactile) into .venv"
+  .venv/bin/python -m pip install -q --no-build-isolation --no-deps ./server
+fi

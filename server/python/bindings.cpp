@@ -1,0 +1,475 @@
+// The core from Python (import tactile): scenes loaded by the same loader as
+// the CLIs (the same schema and the same errors naming the field), a
+// Simulation stepped by the same code, and its node arrays as read-only NumPy
+// views in the mesh's numbering. pybind11; built by scikit-build-core from
+// server/CMakeLists.txt (server/pyproject.toml).
+//
+// The views: the model keeps its nodes in its own order (core/model.hpp), so
+// the Simulation's per-node arrays in the mesh's order are gathered once per
+// advance() into arrays this object owns, and only for the arrays a caller
+// has asked for (the first read of .positions turns it on). A view is made
+// once and reflects every later step without a new call; reading it copies
+// nothing.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "app/vtu.hpp"
+#include "core/model.hpp"
+#include "mesh/mesh_error.hpp"
+#include "scene/scene.hpp"
+#include "sim/simulation.hpp"
+
+namespace py = pybind11;
+
+namespace tactile {
+namespace {
+
+using PoseTuple = std::pair<std::array<double, 3>, std::array<double, 4>>;  // position, quaternion (w, x, y, z)
+
+Pose to_pose(const std::array<double, 3>& position, const std::optional<std::array<double, 4>>& orientation) {
+  Pose p;
+  p.position = Vec3(position[0], position[1], position[2]);
+  if (orientation) {
+    const auto& q = *orientation;
+    const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if (!(n > 0) || !std::isfinite(n)) throw py::value_error("orientation: not a quaternion (w, x, y, z) of norm > 0");
+    p.orientation = Quat(q[0] / n, q[1] / n, q[2] / n, q[3] / n);
+  }
+  for (int c = 0; c < 3; ++c)
+    if (!std::isfinite(p.position[c])) throw py::value_error("position: must be finite");
+  return p;
+}
+
+PoseTuple from_pose(const Pose& p) {
+  return {{p.position.x, p.position.y, p.position.z},
+          {p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z}};
+}
+
+std::vector<Scene> pick(std::vector<Scene> scenes, const std::optional<std::string>& variant) {
+  if (!variant) return scenes;
+  for (Scene& s : scenes)
+    if (s.variant == *variant) return {std::move(s)};
+  std::string names;
+  for (const Scene& s : scenes) names += (names.empty() ? "" : ", ") + (s.variant.empty() ? "(none)" : s.variant);
+  throw SceneError(scenes.empty() ? "no scene"
+                                  : scenes.front().path + ": no variant '" + *variant + "' (has " + names + ")");
+}
+
+// A read-only (rows x cols) float64 view of `data`, kept alive by `owner`.
+py::array view(const double* data, size_t rows, size_t cols, py::handle owner) {
+  py::array a(py::dtype::of<double>(), {rows, cols}, {cols * sizeof(double), sizeof(double)}, data, owner);
+  a.attr("setflags")(py::arg("write") = false);
+  return a;
+}
+
+py::dict energy_dict(const Energy& e) {
+  py::dict d;
+  d["kinetic"] = e.kinetic;
+  d["elastic"] = e.elastic;
+  d["gravity"] = e.gravity;
+  d["work_loads"] = e.work_loads;
+  d["work_essential"] = e.work_essential;
+  d["work_contact"] = e.work_contact;
+  d["dissipated"] = e.dissipated;
+  d["discrete"] = e.discrete;
+  d["restated"] = e.restated;
+  d["balance"] = e.balance();
+  return d;
+}
+
+py::object fault_object(const Fault& f) {
+  if (!f) return py::none();
+  py::dict d;
+  d["kind"] = to_string(f.kind);
+  d["message"] = f.message;
+  d["step"] = f.step;
+  d["t"] = f.t;
+  d["elements"] = f.elements;
+  return d;
+}
+
+py::dict report_dict(const AdvanceReport& r) {
+  py::dict d;
+  d["substeps"] = r.substeps;
+  d["dt"] = r.dt;
+  d["dt_critical"] = r.dt_critical;
+  d["subdivided"] = r.subdivided;
+  d["fault"] = fault_object(r.fault);
+  return d;
+}
+
+// The Python face of a Simulation: the simulation, and the mesh-ordered
+// arrays its views show.
+class PySimulation {
+ public:
+  explicit PySimulation(const Scene& scene) : scene_(scene), sim_(scene.spec) {
+    const size_t n = 3 * size_t(sim_.n_nodes());
+    positions_.resize(n);
+    displacements_.resize(n);
+    velocities_.resize(n);
+    // The rest state's arrays, for a view taken before the first step.
+    sim_.copy_positions(positions_);
+    sim_.copy_displacement(displacements_);
+    sim_.copy_velocity(velocities_);
+    tets_.reserve(4 * size_t(sim_.n_tets()));
+    for (const Tet& t : sim_.mesh().tets) tets_.insert(tets_.end(), t.begin(), t.end());
+  }
+
+  py::dict advance(double seconds) {
+    if (!(seconds > 0) || !std::isfinite(seconds))
+      throw py::value_error("advance: seconds must be finite and > 0, got " + std::to_string(seconds));
+    AdvanceReport r;
+    {
+      py::gil_scoped_release release;
+      r = sim_.advance(seconds);
+      refresh();
+    }
+    return report_dict(r);
+  }
+
+  // advance(seconds), `count` times in a loop in C++: the wall time of each
+  // call [s], for comparing a loop of advance() from Python with the core's own
+  // (server/bench/python_api_bench.py).
+  py::array_t<double> time_advance(double seconds, int32_t count) {
+    if (!(seconds > 0) || !std::isfinite(seconds) || count < 1)
+      throw py::value_error("time_advance: seconds must be finite and > 0 and count >= 1");
+    py::array_t<double> out(count);
+    double* w = out.mutable_data();
+    {
+      py::gil_scoped_release release;
+      for (int32_t k = 0; k < count; ++k) {
+        const auto t0 = std::chrono::steady_clock::now();
+        sim_.advance(seconds);
+        refresh();
+        w[k] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      }
+    }
+    return out;
+  }
+
+  // One step of dt (default: the scene's fixed step, else the auto step at
+  // the current critical step): advance(dt) covers it with one step unless
+  // stability asks for more.
+  py::dict step(std::optional<double> dt) {
+    const double fixed = scene_.spec.integrator.dt;
+    const double d = dt ? *dt : fixed > 0 ? fixed : scene_.spec.integrator.safety * sim_.compute_critical_dt();
+    return advance(d);
+  }
+
+  void refresh() {
+    // Only the arrays a caller reads: gathering costs a pass over the nodes.
+    if (want_positions_) sim_.copy_positions(positions_);
+    if (want_displacements_) sim_.copy_displacement(displacements_);
+    if (want_velocities_) sim_.copy_velocity(velocities_);
+  }
+
+  py::array positions(py::object self) {
+    if (!want_positions_) sim_.copy_positions(positions_);
+    want_positions_ = true;
+    return view(positions_.data(), positions_.size() / 3, 3, self);
+  }
+  py::array displacements(py::object self) {
+    if (!want_displacements_) sim_.copy_displacement(displacements_);
+    want_displacements_ = true;
+    return view(displacements_.data(), displacements_.size() / 3, 3, self);
+  }
+  py::array velocities(py::object self) {
+    if (!want_velocities_) sim_.copy_velocity(velocities_);
+    want_velocities_ = true;
+    return view(velocities_.data(), velocities_.size() / 3, 3, self);
+  }
+  py::array rest_positions(py::object self) {
+    static_assert(sizeof(Vec3) == 3 * sizeof(double));
+    const std::vector<Vec3>& X = sim_.mesh().X;
+    return view(&X.data()->x, X.size(), 3, self);
+  }
+  py::array tets(py::object self) {
+    py::array a(py::dtype::of<int32_t>(), {tets_.size() / 4, size_t(4)}, {4 * sizeof(int32_t), sizeof(int32_t)},
+                tets_.data(), self);
+    a.attr("setflags")(py::arg("write") = false);
+    return a;
+  }
+
+  // Per proxy or device: (n, 3) arrays of what each felt in the latest step
+  // and the mean over the steps since clear_impulses().
+  template <class Report>
+  py::dict reports(const std::vector<Report>& rs) const {
+    py::array_t<double> force({rs.size(), size_t(3)}), torque({rs.size(), size_t(3)}),
+        mean_force({rs.size(), size_t(3)}), mean_torque({rs.size(), size_t(3)});
+    py::array_t<int32_t> contacts(rs.size());
+    auto f = force.mutable_unchecked<2>(), t = torque.mutable_unchecked<2>(), mf = mean_force.mutable_unchecked<2>(),
+         mt = mean_torque.mutable_unchecked<2>();
+    auto c = contacts.mutable_unchecked<1>();
+    for (size_t k = 0; k < rs.size(); ++k) {
+      const Report& r = rs[k];
+      for (int d = 0; d < 3; ++d) {
+        f(k, d) = r.force[d];
+        t(k, d) = r.torque[d];
+        mf(k, d) = r.elapsed > 0 ? r.impulse[d] / r.elapsed : 0.0;
+        mt(k, d) = r.elapsed > 0 ? r.angular_impulse[d] / r.elapsed : 0.0;
+      }
+      c(k) = r.contacts;
+    }
+    py::dict out;
+    out["force"] = force;
+    out["torque"] = torque;
+    out["mean_force"] = mean_force;
+    out["mean_torque"] = mean_torque;
+    out["contacts"] = contacts;
+    return out;
+  }
+
+  void set_proxy_motion(int32_t proxy, const PoseTuple& from, const PoseTuple& to, double t0, double t1) {
+    check_index("proxy", proxy, sim_.proxies().size());
+    sim_.set_proxy_motion(proxy, motion(from, to, t0, t1));
+  }
+  void set_hand_motion(int32_t hand, const PoseTuple& from, const PoseTuple& to, double t0, double t1) {
+    check_index("hand", hand, sim_.hands().size());
+    sim_.set_hand_motion(hand, motion(from, to, t0, t1));
+  }
+  // Glides proxy `proxy` from where it is now to `position` (and
+  // `orientation`) over the next `duration` seconds.
+  void move_proxy(int32_t proxy, const std::array<double, 3>& position,
+                  const std::optional<std::array<double, 4>>& orientation, double duration) {
+    check_index("proxy", proxy, sim_.proxies().size());
+    if (!(duration > 0) || !std::isfinite(duration)) throw py::value_error("duration: must be finite and > 0");
+    const Pose from = sim_.proxy_pose(proxy);
+    Pose to = to_pose(position, orientation);
+    if (!orientation) to.orientation = from.orientation;
+    sim_.set_proxy_motion(proxy, ProxyMotion{sim_.time(), sim_.time() + duration, from, to});
+  }
+  // The scene's scripted motions over [t0, t1], as a headless run sets them
+  // before each control interval, and the impulse sums started again.
+  void drive_scripts(double t0, double t1) {
+    for (size_t j = 0; j < scene_.proxy_script.size(); ++j)
+      if (scene_.proxy_script[j]) sim_.set_proxy_motion(int32_t(j), scene_.proxy_script[j]->motion(t0, t1));
+    for (size_t h = 0; h < scene_.hand_script.size(); ++h)
+      if (scene_.hand_script[h]) sim_.set_hand_motion(int32_t(h), scene_.hand_script[h]->motion(t0, t1));
+    sim_.clear_impulses();
+  }
+
+  void write_vtu(const std::string& path, const std::vector<std::string>& cell_fields) {
+    ElementFieldRequest ask;
+    for (const std::string& f : cell_fields) {
+      if (f == "cauchy_stress")
+        ask.cauchy_stress = true;
+      else if (f == "green_strain")
+        ask.green_strain = true;
+      else if (f == "von_mises")
+        ask.von_mises = true;
+      else
+        throw py::value_error("fields: must be cauchy_stress, green_strain or von_mises, got " + f);
+    }
+    std::vector<double> u, v, density = sim_.compute_element_energy();
+    sim_.copy_displacement(u);
+    sim_.copy_velocity(v);
+    for (size_t t = 0; t < density.size(); ++t) density[t] /= sim_.tet_volume()[t];
+    const std::vector<uint8_t> fixed = sim_.node_constraint();
+    const ElementFields fields = sim_.compute_element_fields(ask);
+    tactile::write_vtu(path, VtuFrame{&sim_.mesh(), &u, &v, &fixed, nullptr, &density, &fields});
+  }
+
+  Simulation& sim() { return sim_; }
+  const Scene& scene() const { return scene_; }
+
+ private:
+  static void check_index(const char* what, int32_t i, size_t n) {
+    if (i < 0 || size_t(i) >= n)
+      throw py::index_error(std::string(what) + " " + std::to_string(i) + ": the scene has " + std::to_string(n));
+  }
+  static ProxyMotion motion(const PoseTuple& from, const PoseTuple& to, double t0, double t1) {
+    if (!(t1 > t0) || !std::isfinite(t0) || !std::isfinite(t1)) throw py::value_error("t1 must be finite and > t0");
+    return ProxyMotion{t0, t1, to_pose(from.first, from.second), to_pose(to.first, to.second)};
+  }
+
+  Scene scene_;
+  Simulation sim_;
+  std::vector<double> positions_, displacements_, velocities_;  // mesh order (n_nodes x 3)
+  std::vector<int32_t> tets_;                                   // (n_tets x 4)
+  bool want_positions_ = false, want_displacements_ = false, want_velocities_ = false;
+};
+
+}  // namespace
+}  // namespace tactile
+
+PYBIND11_MODULE(_core, m) {
+  using namespace tactile;
+  m.doc() = "The tactile simulation core: scenes, simulations and their arrays (see the tactile package).";
+
+  static py::exception<SceneError> scene_error(m, "SceneError", PyExc_ValueError);
+  static py::exception<ModelError> model_error(m, "ModelError", PyExc_ValueError);
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const SceneError& e) {
+      py::set_error(scene_error, e.what());
+    } catch (const MeshError& e) {
+      py::set_error(scene_error, e.what());
+    } catch (const ModelError& e) {
+      py::set_error(model_error, e.what());
+    }
+  });
+
+  py::class_<Scene>(m, "Scene", "A scene as the loader checked it (one variant).")
+      .def_readonly("name", &Scene::name)
+      .def_readonly("variant", &Scene::variant)
+      .def_readonly("path", &Scene::path)
+      .def_property_readonly("duration", [](const Scene& s) { return s.run.duration; })
+      .def_property_readonly("frame_rate", [](const Scene& s) { return s.run.frame_rate; })
+      .def_property_readonly("n_nodes", [](const Scene& s) { return s.spec.mesh.n_nodes(); })
+      .def_property_readonly("n_tets", [](const Scene& s) { return int32_t(s.spec.mesh.tets.size()); })
+      .def_property_readonly("proxies",
+                             [](const Scene& s) {
+                               std::vector<std::string> out;
+                               for (const ProxySpec& p : s.spec.proxies) out.push_back(p.name);
+                               return out;
+                             })
+      .def_property_readonly("tracked",
+                             [](const Scene& s) {
+                               std::vector<std::pair<std::string, int32_t>> out;
+                               for (const TrackedPoint& p : s.track) out.emplace_back(p.name, p.node);
+                               return out;
+                             })
+      .def_property_readonly("scripted", [](const Scene& s) {
+        for (const auto& p : s.proxy_script)
+          if (p) return true;
+        for (const auto& h : s.hand_script)
+          if (h) return true;
+        return false;
+      });
+
+  m.def(
+      "load_scene",
+      [](const std::string& path, std::optional<std::string> variant) { return pick(load_scene(path), variant); },
+      py::arg("path"), py::arg("variant") = py::none(),
+      "Reads and checks a scene file: one Scene per variant (the named one only with `variant`). Raises SceneError "
+      "naming the file and the field at fault.");
+  m.def(
+      "parse_scene",
+      [](const std::string& text, const std::string& path, std::optional<std::string> variant) {
+        nlohmann::json j;
+        try {
+          j = nlohmann::json::parse(text);
+        } catch (const nlohmann::json::parse_error& e) {
+          throw SceneError(path + ": not JSON: " + e.what());
+        }
+        return pick(parse_scene(j, path), variant);
+      },
+      py::arg("text"), py::arg("path"), py::arg("variant") = py::none(),
+      "The same from JSON text; `path` names the scene in messages and anchors relative mesh paths.");
+
+  py::class_<PySimulation>(m, "Simulation", "One body in motion: a scene's model, stepper and state.")
+      .def(py::init<const Scene&>(), py::arg("scene"))
+      .def("advance", &PySimulation::advance, py::arg("seconds"),
+           "Covers `seconds` with as many steps as stability needs; returns the report (substeps, dt, dt_critical, "
+           "subdivided, fault).")
+      .def("step", &PySimulation::step, py::arg("dt") = py::none(),
+           "One step of dt [s] (default: the scene's fixed step, else safety x the current critical step).")
+      .def("time_advance", &PySimulation::time_advance, py::arg("seconds"), py::arg("count"),
+           "advance(seconds) `count` times in a loop in C++; the wall time of each call [s] (a benchmark's "
+           "reference for the same loop from Python).")
+      .def_property_readonly("time", [](PySimulation& s) { return s.sim().time(); })
+      .def_property_readonly("steps", [](PySimulation& s) { return s.sim().steps(); })
+      .def_property_readonly("n_nodes", [](PySimulation& s) { return s.sim().n_nodes(); })
+      .def_property_readonly("n_tets", [](PySimulation& s) { return s.sim().n_tets(); })
+      .def_property_readonly("dt_rest", [](PySimulation& s) { return s.sim().dt_rest(); })
+      .def_property_readonly(
+          "precision", [](PySimulation& s) { return s.sim().precision() == Precision::Float ? "float" : "double"; })
+      .def("critical_dt", [](PySimulation& s) { return s.sim().compute_critical_dt(); })
+      .def_property_readonly(
+          "positions", [](py::object self) { return self.cast<PySimulation&>().positions(self); },
+          "X + u [m] (n_nodes x 3), a read-only view that follows the simulation")
+      .def_property_readonly(
+          "displacements", [](py::object self) { return self.cast<PySimulation&>().displacements(self); },
+          "u [m] (n_nodes x 3), a read-only view that follows the simulation")
+      .def_property_readonly(
+          "velocities", [](py::object self) { return self.cast<PySimulation&>().velocities(self); },
+          "v [m/s] (n_nodes x 3), a read-only view that follows the simulation")
+      .def_property_readonly(
+          "rest_positions", [](py::object self) { return self.cast<PySimulation&>().rest_positions(self); },
+          "X [m] (n_nodes x 3), read-only")
+      .def_property_readonly(
+          "tets", [](py::object self) { return self.cast<PySimulation&>().tets(self); },
+          "node ids of each tet (n_tets x 4), read-only")
+      .def_property_readonly("energy", [](PySimulation& s) { return energy_dict(s.sim().energy()); })
+      .def("compute_energy", [](PySimulation& s) { return energy_dict(s.sim().compute_energy()); })
+      .def_property_readonly("fault", [](PySimulation& s) { return fault_object(s.sim().fault()); })
+      .def("element_energy",
+           [](PySimulation& s) {
+             const std::vector<double> e = s.sim().compute_element_energy();
+             return py::array_t<double>(py::ssize_t(e.size()), e.data());
+           })
+      .def(
+          "element_fields",
+          [](PySimulation& s, bool cauchy_stress, bool green_strain, bool von_mises) {
+            const ElementFields f = s.sim().compute_element_fields({cauchy_stress, green_strain, von_mises});
+            py::dict out;
+            const auto n = size_t(s.sim().n_tets());
+            if (cauchy_stress)
+              out["cauchy_stress"] = py::array_t<double>({n, size_t(3), size_t(3)}, f.cauchy_stress.data());
+            if (green_strain)
+              out["green_strain"] = py::array_t<double>({n, size_t(3), size_t(3)}, f.green_strain.data());
+            if (von_mises) out["von_mises"] = py::array_t<double>(py::ssize_t(n), f.von_mises.data());
+            return out;
+          },
+          py::arg("cauchy_stress") = false, py::arg("green_strain") = false, py::arg("von_mises") = false)
+      .def_property_readonly("proxy_names",
+                             [](PySimulation& s) {
+                               std::vector<std::string> out;
+                               for (const ProxySpec& p : s.sim().proxies()) out.push_back(p.name);
+                               return out;
+                             })
+      .def_property_readonly("devices", [](PySimulation& s) { return s.sim().devices(); })
+      .def_property_readonly("proxy_reports", [](PySimulation& s) { return s.reports(s.sim().proxy_reports()); })
+      .def_property_readonly("device_reports", [](PySimulation& s) { return s.reports(s.sim().device_reports()); })
+      .def_property_readonly("proxy_forces",
+                             [](PySimulation& s) { return s.reports(s.sim().proxy_reports())["force"]; })
+      .def("clear_impulses", [](PySimulation& s) { s.sim().clear_impulses(); })
+      .def(
+          "proxy_pose", [](PySimulation& s, int32_t j) { return from_pose(s.sim().proxy_pose(j)); }, py::arg("proxy"))
+      .def(
+          "hand_pose", [](PySimulation& s, int32_t h) { return from_pose(s.sim().hand_pose(h)); }, py::arg("hand"))
+      .def("set_proxy_motion", &PySimulation::set_proxy_motion, py::arg("proxy"), py::arg("pose_from"),
+           py::arg("pose_to"), py::arg("t0"), py::arg("t1"))
+      .def("set_hand_motion", &PySimulation::set_hand_motion, py::arg("hand"), py::arg("pose_from"), py::arg("pose_to"),
+           py::arg("t0"), py::arg("t1"))
+      .def("move_proxy", &PySimulation::move_proxy, py::arg("proxy"), py::arg("position"),
+           py::arg("orientation") = py::none(), py::kw_only(), py::arg("duration"),
+           "Glides the proxy from where it is to `position` (and `orientation`) over the next `duration` seconds.")
+      .def("drive_scripts", &PySimulation::drive_scripts, py::arg("t0"), py::arg("t1"))
+      .def(
+          "couple_device",
+          [](PySimulation& s, int32_t device, std::optional<std::array<double, 3>> limits) {
+            if (device < 0 || size_t(device) >= s.sim().devices().size())
+              throw py::index_error("device " + std::to_string(device) + ": the scene has " +
+                                    std::to_string(s.sim().devices().size()));
+            if (!limits) return s.sim().couple_device(device, nullptr);
+            const DeviceLimits l{(*limits)[0], (*limits)[1], (*limits)[2]};
+            s.sim().couple_device(device, &l);
+          },
+          py::arg("device"), py::arg("limits") = py::none(),
+          "Couples a device channel's proxies (limits: max force [N], max torque [N m], stiffness [N/m]).")
+      .def("release_device",
+           [](PySimulation& s, int32_t device) {
+             if (device < 0 || size_t(device) >= s.sim().devices().size())
+               throw py::index_error("device " + std::to_string(device) + ": the scene has " +
+                                     std::to_string(s.sim().devices().size()));
+             s.sim().release_device(device);
+           })
+      .def("write_vtu", &PySimulation::write_vtu, py::arg("path"), py::arg("fields") = std::vector<std::string>{},
+           "Writes the body as it is now (VTK XML, .vtu): displacement, velocity, constraint and energy density, and "
+           "the cell fields named (cauchy_stress, green_strain, von_mises).");
+}

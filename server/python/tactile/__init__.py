@@ -1,0 +1,50 @@
+"""The tactile simulation core from Python.
+
+Load a scene (a file, or a dict in the same schema: the same loader as the CLIs, the same errors naming the
+field), build a :class:`Simulation` from it, ``advance(seconds)`` or ``step()``, move proxies and hands, and read
+positions, velocities, forces, energies and faults as NumPy arrays. Node arrays are read-only views in the node
+numbering of the scene's mesh that follow the simulation: take ``sim.positions`` once and it shows every later
+step, with no copy on reading.
+
+    >>> import tactile
+    >>> sim = tactile.Simulation(tactile.load_scene("server/scenes/cantilever.json"))
+    >>> x = sim.positions
+    >>> report = sim.advance(0.05)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any
+
+from tactile._core import ModelError, Scene, SceneError, Simulation
+from tactile._core import load_scene as _load_scene
+from tactile._core import parse_scene as _parse_scene
+
+__all__ = ["ModelError", "Scene", "SceneError", "Simulation", "load_scene", "load_scenes", "parse_scene"]
+
+
+def _one(scenes: list[Scene], where: str) -> Scene:
+    if len(scenes) != 1:
+        names = ", ".join(s.variant for s in scenes)
+        raise SceneError(f"{where}: the scene has variants {names}; name one with variant=")
+    return scenes[0]
+
+
+def load_scenes(path: str | os.PathLike[str]) -> list[Scene]:
+    """Every variant of a scene file (one Scene when it has none). Raises SceneError naming the field at fault."""
+    return _load_scene(os.fspath(path))
+
+
+def load_scene(path: str | os.PathLike[str], variant: str | None = None) -> Scene:
+    """One scene of a file: its only one, or the variant named. Raises SceneError naming the field at fault."""
+    return _one(_load_scene(os.fspath(path), variant), os.fspath(path))
+
+
+def parse_scene(data: dict[str, Any] | str, path: str | os.PathLike[str] = "scene.json",
+                variant: str | None = None) -> Scene:
+    """A scene from a dict (or JSON text) in the scene schema. `path` names it in messages and anchors the
+    relative paths in it (a mesh file's): a dict read from a file should pass that file's path."""
+    text = data if isinstance(data, str) else json.dumps(data)
+    return _one(_parse_scene(text, os.fspath(path), variant), os.fspath(path))

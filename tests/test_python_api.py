@@ -1,0 +1,210 @@
+"""The core from Python (import tactile; server/python/bindings.cpp): the same code as the CLIs, so a run driven
+from Python ends bit for bit where `tactile-sim run` ends; node arrays are read-only views in the mesh's numbering
+that follow the simulation; a bad scene raises naming the field; the type stubs name what the module has."""
+
+from __future__ import annotations
+
+import ast
+import copy
+import json
+import math
+import pathlib
+import subprocess
+import sys
+from typing import Any
+
+import numpy as np
+import pytest
+
+import tactile
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+BUILD = ROOT / "build" / "release"
+SCENES = ROOT / "server" / "scenes"
+
+
+def scene_json(name: str, **run: Any) -> dict[str, Any]:
+    data: dict[str, Any] = json.loads((SCENES / f"{name}.json").read_text())
+    data.pop("$schema", None)
+    data["run"].update(run)
+    return data
+
+
+def cli_summary(tmp: pathlib.Path, data: dict[str, Any], variant: str | None = None) -> dict[str, Any]:
+    """`tactile-sim run` on the scene `data`; its summary.json."""
+    path = tmp / f"{data['name']}.json"
+    path.write_text(json.dumps(data))
+    cmd = [str(BUILD / "tactile-sim"), "run", str(path), "--out", str(tmp / "out"), "--no-vtu", "--quiet"]
+    if variant:
+        cmd += ["--variant", variant]
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    summary_path = tmp / "out" / data["name"] / (variant or "run") / "summary.json"
+    summary: dict[str, Any] = json.loads(summary_path.read_text())
+    return summary
+
+
+def frames(scene: tactile.Scene) -> tuple[int, float]:
+    """A headless run's frames: as many as duration x frame rate (at least one), of equal length."""
+    n = max(1, round(scene.duration * scene.frame_rate))
+    return n, scene.duration / n
+
+
+def test_a_run_driven_from_python_ends_bit_for_bit_where_the_cli_run_ends(tmp_path: pathlib.Path) -> None:
+    data = scene_json("fig3_cantilever", duration=0.2)
+    summary = cli_summary(tmp_path, data, "stvk")
+    scene = tactile.parse_scene(data, tmp_path / "fig3_cantilever.json", variant="stvk")
+    sim = tactile.Simulation(scene)
+    n, frame_dt = frames(scene)
+    for _ in range(n):
+        assert sim.advance(frame_dt)["fault"] is None
+    assert sim.steps == summary["run"]["steps"]
+    assert sim.time == summary["run"]["t_end_s"]
+    energy = sim.energy
+    for key in ("kinetic", "elastic", "gravity", "dissipated"):
+        assert energy[key] == summary["energy"][f"{key}_J"], key
+    u = sim.displacements
+    for (name, node), tracked in zip(scene.tracked, summary["tracked"], strict=True):
+        assert tracked["name"] == name and tracked["node"] == node
+        assert list(u[node]) == tracked["displacement_m"], name
+    assert abs(u[scene.tracked[0][1], 1]) > 1e-3, "the tip did not sag: the comparison shows nothing"
+
+
+def test_a_scripted_poke_driven_from_python_feels_what_the_cli_run_felt(tmp_path: pathlib.Path) -> None:
+    data = scene_json("poke", duration=0.4, vtu_fields=[])
+    summary = cli_summary(tmp_path, data)
+    scene = tactile.parse_scene(data, tmp_path / "poke.json")
+    assert scene.scripted
+    sim = tactile.Simulation(scene)
+    n, frame_dt = frames(scene)
+    per_frame = max(1, math.ceil(frame_dt / 1e-3 * (1 - 1e-12)))  # the CLI's control intervals of at most 1 ms
+    interval = frame_dt / per_frame
+    peak = 0.0
+    for _ in range(n):
+        for _ in range(per_frame):
+            t0 = sim.time
+            sim.drive_scripts(t0, t0 + interval)
+            assert sim.advance(interval)["fault"] is None
+            peak = max(peak, float(np.linalg.norm(sim.proxy_reports["mean_force"][0])))
+    assert sim.steps == summary["run"]["steps"]
+    proxy = summary["proxies"][0]
+    assert list(sim.proxy_reports["mean_force"][0]) == proxy["force_N"]
+    assert list(sim.proxy_pose(0)[0]) == proxy["position_m"]
+    assert peak == proxy["peak_force_N"]
+    assert peak > 0.1, "the sphere never pressed: the comparison shows nothing"
+
+
+def test_a_view_follows_the_next_step_and_cannot_be_written() -> None:
+    sim = tactile.Simulation(tactile.load_scene(SCENES / "fig3_cantilever.json", variant="stvk"))
+    x, u, v = sim.positions, sim.displacements, sim.velocities
+    assert x.shape == (sim.n_nodes, 3) and x.dtype == np.float64
+    at_rest = x.copy()
+    np.testing.assert_array_equal(x, sim.rest_positions)
+    sim.advance(0.05)
+    assert not np.array_equal(x, at_rest), "the view did not follow the step"
+    np.testing.assert_array_equal(x, sim.rest_positions + u)  # the same numbering: the mesh's
+    assert np.abs(v).max() > 0
+    assert np.shares_memory(x, sim.positions)
+    for view in (x, u, v, sim.rest_positions, sim.tets):
+        assert not view.flags.writeable
+        with pytest.raises(ValueError):
+            view[0, 0] = 1.0
+    assert sim.tets.shape == (sim.n_tets, 4) and sim.tets.max() == sim.n_nodes - 1
+
+
+def test_the_views_are_in_the_meshs_numbering_whatever_the_precision() -> None:
+    scene_d = tactile.load_scene(SCENES / "fig3_cantilever.json", variant="stvk")
+    data = json.loads((SCENES / "fig3_cantilever.json").read_text())
+    data["integrator"]["precision"] = "float"
+    scene_f = tactile.parse_scene(data, SCENES / "fig3_cantilever.json", variant="stvk")
+    d, f = tactile.Simulation(scene_d), tactile.Simulation(scene_f)
+    assert f.precision == "float"
+    np.testing.assert_array_equal(d.rest_positions, f.rest_positions)
+    np.testing.assert_array_equal(d.tets, f.tets)
+    d.advance(0.1)
+    f.advance(0.1)
+    tip = scene_d.tracked[0][1]
+    assert d.displacements[tip, 1] < -1e-3
+    assert f.displacements[tip, 1] == pytest.approx(d.displacements[tip, 1], rel=1e-3)
+
+
+def test_a_bad_scene_raises_naming_the_field() -> None:
+    data = scene_json("poke")
+    bad = copy.deepcopy(data)
+    bad["material"]["young"] = bad["material"].pop("E")
+    with pytest.raises(tactile.SceneError, match=r"material\.young: unknown field"):
+        tactile.parse_scene(bad)
+    bad = copy.deepcopy(data)
+    bad["integrator"]["dt"] = -1
+    with pytest.raises(tactile.SceneError, match=r"integrator\.dt: must be"):
+        tactile.parse_scene(bad)
+    with pytest.raises(tactile.SceneError, match="not JSON"):
+        tactile.parse_scene("{ nope")
+    with pytest.raises(tactile.SceneError, match="variants linear, stvk"):
+        tactile.load_scene(SCENES / "fig3_cantilever.json")
+    assert isinstance(tactile.SceneError("x"), ValueError)
+
+
+def test_bad_calls_raise_and_the_simulation_goes_on() -> None:
+    sim = tactile.Simulation(tactile.load_scene(SCENES / "poke.json"))
+    with pytest.raises(ValueError, match="seconds must be finite"):
+        sim.advance(float("nan"))
+    with pytest.raises(IndexError, match="proxy 3: the scene has 1"):
+        sim.move_proxy(3, (0, 0.05, 0), duration=0.1)
+    with pytest.raises(ValueError, match="orientation"):
+        sim.move_proxy(0, (0, 0.05, 0), (0, 0, 0, 0), duration=0.1)
+    with pytest.raises(ValueError, match="fields: must be"):
+        sim.write_vtu("/tmp/never.vtu", ["strain"])
+    assert sim.advance(0.01)["fault"] is None
+
+
+def test_a_proxy_moved_from_python_presses_and_the_force_points_out_of_the_body(tmp_path: pathlib.Path) -> None:
+    sim = tactile.Simulation(tactile.load_scene(SCENES / "poke.json"))
+    sim.move_proxy(0, (0, 0.047, 0), duration=0.2)  # 5 mm into the block's top at y = 0.04 (radius 12 mm)
+    sim.advance(0.25)
+    sim.clear_impulses()
+    sim.advance(0.05)  # held: the mean over it, as a device would be sent
+    force = sim.proxy_reports["mean_force"][0]
+    assert force[1] > 0.1 and abs(force[0]) < 0.1 * force[1] and abs(force[2]) < 0.1 * force[1]
+    assert sim.proxy_reports["contacts"][0] > 0
+    sim.write_vtu(str(tmp_path / "poke.vtu"), ["von_mises"])
+    import meshio  # the VTU opens in a reader that is not ours
+
+    mesh = meshio.read(tmp_path / "poke.vtu")
+    assert mesh.points.shape == (sim.n_nodes, 3)
+    np.testing.assert_allclose(mesh.point_data["displacement"], sim.displacements, rtol=0, atol=1e-12)
+    assert mesh.cell_data["von_mises"][0].max() > 0
+
+
+def public(node: ast.ClassDef | ast.Module) -> set[str]:
+    names = set()
+    for item in node.body:
+        if isinstance(item, (ast.FunctionDef, ast.ClassDef)) and not item.name.startswith("_"):
+            names.add(item.name)
+    return names
+
+
+def test_the_stubs_name_what_the_module_has() -> None:
+    stub = ast.parse((ROOT / "server" / "python" / "tactile" / "_core.pyi").read_text())
+    core = tactile._core
+    module_names = {n for n in dir(core) if not n.startswith("_")}
+    assert public(stub) == module_names
+    for node in stub.body:
+        if isinstance(node, ast.ClassDef) and not issubclass(getattr(core, node.name), Exception):
+            cls = getattr(core, node.name)
+            assert public(node) == {n for n in dir(cls) if not n.startswith("_")}, node.name
+
+
+def test_the_fig3_example_bends_stvk_and_stretches_linear_strain(tmp_path: pathlib.Path) -> None:
+    """docs/examples/fig3_cantilever.py: the paper's Fig. 3 in a few lines of the Python API."""
+    out = tmp_path / "fig3.png"
+    run = subprocess.run([sys.executable, str(ROOT / "docs" / "examples" / "fig3_cantilever.py"), "--seconds", "1",
+                          "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    lengths = {}
+    for line in run.stdout.splitlines():
+        if "centre line" in line:
+            lengths[line.split(":")[0].strip()] = float(line.split("centre line ")[1].split(" m")[0])
+    assert lengths["stvk"] == pytest.approx(1.0, abs=0.01)  # bent, not stretched
+    assert lengths["linear"] > lengths["stvk"] + 0.02       # linear strain stretches the rotated beam
+    assert out.stat().st_size > 10_000
