@@ -26,6 +26,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "app/headless.hpp"
 #include "app/vtu.hpp"
 #include "core/model.hpp"
 #include "mesh/mesh_error.hpp"
@@ -370,6 +371,25 @@ PYBIND11_MODULE(_core, m) {
       },
       py::arg("text"), py::arg("path"), py::arg("variant") = py::none(),
       "The same from JSON text; `path` names the scene in messages and anchors relative mesh paths.");
+
+  m.def(
+      "run_headless",
+      [](const Scene& scene, const std::string& out_dir, bool vtu) {
+        HeadlessOptions h;
+        h.out_dir = out_dir;
+        h.write_vtu = vtu;
+        h.progress = false;
+        HeadlessResult r;
+        {
+          py::gil_scoped_release release;
+          r = run_headless(scene, h);
+        }
+        return r.dir;
+      },
+      py::arg("scene"), py::arg("out_dir"), py::arg("vtu") = false,
+      "Runs the scene headless as `tactile-sim run` does (the same code), writing OUT_DIR/<scene>/<variant or "
+      "run>/ (summary.json, frames.csv, and VTU frames with vtu=True); returns that folder. A fault ends the run "
+      "and is in summary.json; a spec the core refuses raises ModelError.");
 
   py::class_<PySimulation>(m, "Simulation", "One body in motion: a scene's model, stepper and state.")
       .def(py::init<const Scene&>(), py::arg("scene"))

@@ -1,0 +1,294 @@
+"""tactile-batch: a sweep of headless runs, each one task on a Dask cluster, into one table.
+
+A sweep file (JSON) names a scene and the overrides to run it with:
+
+    {
+      "name": "beam_E",
+      "scene": "../scenes/fig3_cantilever.json",      relative to the sweep file
+      "variant": "stvk",                              optional: one variant of the scene
+      "set": {"run.duration": 0.2},                   optional: applied to every run
+      "grid": {"material.E": [1e6, 3e6],              optional: every combination ...
+               "integrator.precision": ["float", "double"]},
+      "runs": [{"integrator.safety": 0.5}, {}]        optional: ... times each of these
+    }
+
+An override is a dotted path into the scene's JSON (`material.E`, `mesh.cells`, `integrator.safety` for the step
+as a fraction of the critical step, `effects.damping.alpha`, ...); the scene loader checks every run's scene as
+`tactile-sim` does, and a run it refuses is a row with its error, not a stopped sweep. Each run is
+`tactile.run_headless` (the same code as `tactile-sim run`) on a worker; its row holds the parameters, the
+figures of its summary.json, its wall time and the build that made it (a hash of the compiled module).
+
+    tactile-batch SWEEP.json [--table results/beam_E.parquet] [--workers N | --scheduler tcp://HOST:8786 | --serial]
+
+The table is written as Parquet and CSV side by side, after every few runs and at the end, in the sweep's
+order whatever order the runs finish in. Runs already in the table (same scene file contents, variant and
+overrides) are skipped on a rerun. By default the runs go to an embedded Dask LocalCluster of one single-threaded
+worker process per core; --scheduler sends them to a running `dask scheduler` with its `dask worker`s (every
+worker needs this package and the scene's files at the same paths).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import itertools
+import json
+import os
+import pathlib
+import socket
+import sys
+import tempfile
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import tactile
+
+SWEEP_FIELDS = {"name", "scene", "variant", "set", "grid", "runs", "description"}
+# Columns that depend on the machine and the moment, not on the run: left out when two tables are compared.
+VOLATILE = ("wall_s", "steps_per_s", "real_time_factor", "worker", "finished_at")
+
+
+class SweepError(ValueError):
+    """A sweep file that cannot be run; the message names the file and the field."""
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run of a sweep: the scene, as JSON with the overrides applied, and its identity."""
+
+    index: int  # its place in the sweep
+    run_id: str  # hash of the scene file's contents, the variant and the overrides
+    sweep: str
+    scene_path: str
+    variant: str | None
+    overrides: tuple[tuple[str, str], ...]  # (dotted path, JSON value), in the sweep's order
+    scene_json: str  # the scene with the overrides applied
+
+    def params(self) -> dict[str, Any]:
+        return {f"param.{k}": _param_value(json.loads(v)) for k, v in self.overrides}
+
+
+def _param_value(v: Any) -> Any:
+    # A column holds scalars: a list (mesh.cells) or an object is written as its JSON text.
+    return v if isinstance(v, (int, float, str, bool)) or v is None else json.dumps(v)
+
+
+def apply_override(scene: dict[str, Any], path: str, value: Any) -> None:
+    """Sets the dotted `path` of `scene` to `value`, making the objects on the way."""
+    keys = path.split(".")
+    node = scene
+    for i, k in enumerate(keys[:-1]):
+        nxt = node.get(k)
+        if nxt is None:
+            nxt = node[k] = {}
+        if not isinstance(nxt, dict):
+            raise SweepError(f"{path}: {'.'.join(keys[: i + 1])} is not an object in the scene")
+        node = nxt
+    node[keys[-1]] = value
+
+
+def load_sweep(path: str | os.PathLike[str]) -> list[Run]:
+    """Reads and checks a sweep file; its runs in order. Raises SweepError naming the field at fault."""
+    path = pathlib.Path(path)
+    where = str(path)
+    try:
+        spec = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise SweepError(f"{where}: {e}") from e
+    if not isinstance(spec, dict):
+        raise SweepError(f"{where}: must be a JSON object")
+    for k in spec:
+        if k not in SWEEP_FIELDS:
+            raise SweepError(f"{where}: {k}: unknown field (allowed: {', '.join(sorted(SWEEP_FIELDS))})")
+    if not isinstance(spec.get("scene"), str):
+        raise SweepError(f"{where}: scene: required, the path of a scene file")
+    scene_path = (path.parent / spec["scene"]).resolve()
+    try:
+        scene_text = scene_path.read_text()
+        json.loads(scene_text)
+    except (OSError, json.JSONDecodeError) as e:
+        raise SweepError(f"{where}: scene: {e}") from e
+    name = spec.get("name", path.stem)
+    variant = spec.get("variant")
+    if variant is not None and not isinstance(variant, str):
+        raise SweepError(f"{where}: variant: must be a string")
+    common = spec.get("set", {})
+    grid = spec.get("grid", {})
+    runs = spec.get("runs", [{}])
+    if not isinstance(common, dict):
+        raise SweepError(f"{where}: set: must be an object of dotted paths to values")
+    if not isinstance(grid, dict) or any(not isinstance(v, list) or not v for v in grid.values()):
+        raise SweepError(f"{where}: grid: must be an object of dotted paths to non-empty lists of values")
+    if not isinstance(runs, list) or not runs or any(not isinstance(r, dict) for r in runs):
+        raise SweepError(f"{where}: runs: must be a non-empty list of objects of dotted paths to values")
+    scene_hash = hashlib.sha256(scene_text.encode()).hexdigest()
+    out: list[Run] = []
+    keys = list(grid)
+    for combo, extra in itertools.product(itertools.product(*(grid[k] for k in keys)), runs):
+        overrides = list(common.items()) + list(zip(keys, combo, strict=True)) + list(extra.items())
+        scene = json.loads(scene_text)
+        for k, v in overrides:
+            apply_override(scene, k, v)
+        encoded = tuple((k, json.dumps(v, sort_keys=True)) for k, v in overrides)
+        key = json.dumps({"scene": scene_hash, "variant": variant, "overrides": encoded})
+        out.append(Run(len(out), hashlib.sha256(key.encode()).hexdigest()[:16], name, str(scene_path), variant,
+                       encoded, json.dumps(scene)))
+    ids = [r.run_id for r in out]
+    if len(set(ids)) != len(ids):
+        raise SweepError(f"{where}: the same run is listed twice (grid and runs give equal overrides)")
+    return out
+
+
+def build_id() -> str:
+    """The build that makes the runs: a hash of the compiled module's bytes."""
+    module = pathlib.Path(tactile._core.__file__)
+    return f"{tactile.__version__}+{hashlib.sha256(module.read_bytes()).hexdigest()[:12]}"
+
+
+def summary_row(summary: dict[str, Any]) -> dict[str, Any]:
+    """The figures of a run's summary.json, one column each."""
+    row: dict[str, Any] = {
+        "status": summary["status"],
+        "nodes": summary["mesh"]["nodes"],
+        "tets": summary["mesh"]["tets"],
+        "precision": summary["integrator"]["precision"],
+        "dt_critical_rest_s": summary["integrator"]["dt_critical_rest_s"],
+        "steps": summary["run"]["steps"],
+        "t_end_s": summary["run"]["t_end_s"],
+        "wall_s": summary["performance"]["wall_s"],
+        "steps_per_s": summary["performance"]["steps_per_s"],
+        "real_time_factor": summary["performance"]["real_time_factor"],
+    }
+    for k, v in summary["energy"].items():
+        row[f"energy.{k}"] = v
+    for t in summary["tracked"]:
+        for axis, u in zip("xyz", t["displacement_m"], strict=True):
+            row[f"tracked.{t['name']}.u{axis}_m"] = u
+    for s in summary["sections"]:
+        row[f"section.{s['name']}.ratio"] = s["ratio"]
+    for p in summary["proxies"]:
+        row[f"proxy.{p['name']}.peak_force_N"] = p["peak_force_N"]
+    fault = summary.get("fault")
+    row["fault"] = None if not fault else f"{fault.get('kind')}: {fault.get('message')}"
+    return row
+
+
+def execute(run: Run) -> dict[str, Any]:
+    """One run, on whichever worker: its row of the table."""
+    row: dict[str, Any] = {"index": run.index, "run_id": run.run_id, "sweep": run.sweep, "scene": run.scene_path,
+                           "variant": run.variant, **run.params()}
+    try:
+        scene = tactile.parse_scene(run.scene_json, run.scene_path, run.variant)
+        with tempfile.TemporaryDirectory(prefix="tactile-batch-") as out:
+            folder = tactile.run_headless(scene, out)
+            row.update(summary_row(json.loads((pathlib.Path(folder) / "summary.json").read_text())))
+        row["error"] = None
+    except (tactile.SceneError, tactile.ModelError) as e:
+        row.update(status="error", error=str(e))
+    row.update(build=build_id(), worker=f"{socket.gethostname()}:{os.getpid()}", finished_at=time.time())
+    return row
+
+
+class Table:
+    """The sweep's results: Parquet and CSV side by side, rewritten whole (to a temporary file, then renamed)."""
+
+    def __init__(self, path: pathlib.Path) -> None:
+        self.parquet = path.with_suffix(".parquet")
+        self.csv = path.with_suffix(".csv")
+        self.rows: dict[str, dict[str, Any]] = {}
+        if self.parquet.exists():
+            import pandas as pd
+
+            for row in pd.read_parquet(self.parquet).to_dict("records"):
+                self.rows[str(row["run_id"])] = {str(k): v for k, v in row.items()}
+
+    def add(self, row: dict[str, Any]) -> None:
+        self.rows[row["run_id"]] = row
+
+    def write(self, order: list[str]) -> None:
+        import pandas as pd
+
+        rank = {rid: i for i, rid in enumerate(order)}
+        rows = sorted(self.rows.values(), key=lambda r: (rank.get(str(r["run_id"]), len(rank)), str(r["run_id"])))
+        frame = pd.DataFrame(rows)
+        self.parquet.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.parquet.with_name(f".{self.parquet.name}.tmp")
+        frame.to_parquet(tmp, index=False)
+        os.replace(tmp, self.parquet)
+        tmp = self.csv.with_name(f".{self.csv.name}.tmp")
+        frame.to_csv(tmp, index=False)
+        os.replace(tmp, self.csv)
+
+
+def run_serial(runs: Iterable[Run]) -> Iterator[dict[str, Any]]:
+    for r in runs:
+        yield execute(r)
+
+
+def run_on_dask(runs: list[Run], scheduler: str | None, workers: int) -> Iterator[dict[str, Any]]:
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        # pure=False: a run is a task of its own even when another sweep lists the same one.
+        futures = [client.submit(execute, r, key=f"tactile-run-{r.run_id}", pure=False) for r in runs]
+        for future in as_completed(futures):
+            yield future.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="tactile-batch", description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("sweep", help="the sweep file (JSON)")
+    ap.add_argument("--table", type=pathlib.Path, help="results table; .parquet and .csv are written "
+                    "(default: results/<sweep name>.parquet)")
+    where = ap.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", help="a running Dask scheduler, tcp://HOST:8786")
+    where.add_argument("--workers", type=int, help="worker processes of the embedded LocalCluster (default: cores)")
+    where.add_argument("--serial", action="store_true", help="run here one by one, without Dask")
+    ap.add_argument("--rerun", action="store_true", help="run again the runs the table already holds")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = ap.parse_args(argv)
+    try:
+        runs = load_sweep(args.sweep)
+    except SweepError as e:
+        print(f"tactile-batch: {e}", file=sys.stderr)
+        return 2
+    table = Table(args.table or pathlib.Path("results") / f"{runs[0].sweep}.parquet")
+    todo = [r for r in runs if args.rerun or r.run_id not in table.rows]
+    order = [r.run_id for r in runs]
+    print(f"tactile-batch: {len(runs)} runs in {runs[0].sweep}, {len(runs) - len(todo)} already in "
+          f"{table.parquet}; running {len(todo)}", file=sys.stderr)
+    if todo:
+        from tqdm import tqdm
+
+        workers = args.workers or os.cpu_count() or 1
+        results = run_serial(todo) if args.serial else run_on_dask(todo, args.scheduler, workers)
+        last_write = time.monotonic()
+        with tqdm(total=len(todo), disable=args.quiet, unit="run", file=sys.stderr) as bar:
+            for row in results:
+                table.add(row)
+                bar.update()
+                if time.monotonic() - last_write > 10:  # what is done is kept if the sweep is stopped
+                    table.write(order)
+                    last_write = time.monotonic()
+    table.write(order)
+    failed = sum(1 for rid in order if table.rows[rid]["status"] != "ok")
+    print(f"tactile-batch: wrote {table.parquet} and {table.csv} ({len(table.rows)} rows, {failed} not ok)",
+          file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

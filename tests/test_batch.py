@@ -1,0 +1,162 @@
+"""tactile-batch on a real Dask cluster: a `dask scheduler` and two `dask worker` processes on loopback, started
+here. A sweep gives the table that running its runs one by one gives; a worker killed mid-sweep is replaced by its
+nanny and the table is still complete and the same; a rerun skips every finished run; a bad sweep or override is
+named."""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pandas as pd
+import psutil
+import pytest
+
+from tactile import batch
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+VENV_BIN = pathlib.Path(sys.executable).parent
+CANTILEVER = ROOT / "server" / "scenes" / "fig3_cantilever.json"
+
+
+def write_sweep(tmp: pathlib.Path, duration: float = 0.05, **extra: Any) -> pathlib.Path:
+    """Eight small runs of the Fig. 3 beam: two stiffnesses x two precisions x two step fractions."""
+    sweep = {
+        "name": "beam",
+        "scene": os.path.relpath(CANTILEVER, tmp),
+        "variant": "stvk",
+        "set": {"run.duration": duration, "mesh.cells": [12, 2, 2]},
+        "grid": {"material.E": [1e6, 3e6], "integrator.precision": ["float", "double"],
+                 "integrator.safety": [0.5, 0.9]},
+        **extra,
+    }
+    path = tmp / "beam.json"
+    path.write_text(json.dumps(sweep))
+    return path
+
+
+def tactile_batch(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    run = subprocess.run([str(VENV_BIN / "tactile-batch"), *args, "--quiet"], capture_output=True, text=True,
+                         timeout=timeout)
+    assert run.returncode == 0, run.stderr
+    return run
+
+
+def stable(table: pathlib.Path) -> pd.DataFrame:
+    """The table without the columns that depend on the machine and the moment."""
+    frame = pd.read_parquet(table)
+    return frame.drop(columns=[c for c in batch.VOLATILE if c in frame.columns])
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, list[subprocess.Popen[bytes]]]]:
+    """A scheduler and two single-threaded workers (each under its nanny) on loopback."""
+    tmp = tmp_path_factory.mktemp("dask")
+    scheduler_file = tmp / "scheduler.json"
+    procs = [subprocess.Popen([str(VENV_BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--no-dashboard", "--scheduler-file", str(scheduler_file)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists():
+            assert time.monotonic() < deadline, "the scheduler did not start"
+            time.sleep(0.1)
+        address = json.loads(scheduler_file.read_text())["address"]
+        workers = [subprocess.Popen([str(VENV_BIN / "dask"), "worker", "--scheduler-file", str(scheduler_file),
+                                     "--nthreads", "1", "--no-dashboard", "--host", "127.0.0.1"],
+                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for _ in range(2)]
+        procs += workers
+        from dask.distributed import Client
+
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(2, timeout=60)
+        yield address, workers
+    finally:
+        for p in reversed(procs):
+            p.send_signal(signal.SIGTERM)
+        for p in procs:
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+def test_a_sweep_on_the_cluster_gives_the_table_of_its_runs_one_by_one(
+        tmp_path: pathlib.Path, cluster: tuple[str, list[subprocess.Popen[bytes]]]) -> None:
+    sweep = write_sweep(tmp_path)
+    tactile_batch(str(sweep), "--scheduler", cluster[0], "--table", str(tmp_path / "dask.parquet"))
+    tactile_batch(str(sweep), "--serial", "--table", str(tmp_path / "serial.parquet"))
+    on_dask, serial = stable(tmp_path / "dask.parquet"), stable(tmp_path / "serial.parquet")
+    assert len(serial) == 8 and (serial["status"] == "ok").all()
+    pd.testing.assert_frame_equal(on_dask, serial)
+    workers = set(pd.read_parquet(tmp_path / "dask.parquet")["worker"])
+    assert len(workers) == 2, f"the runs went to {workers}, not to both workers"
+    # The figures differ with the parameters: the table shows the sweep, not one run eight times.
+    assert serial["tracked.tip.uy_m"].nunique() >= 4
+    csv = pd.read_csv(tmp_path / "serial.csv")
+    assert list(csv["run_id"]) == list(serial["run_id"])
+
+
+def test_a_worker_killed_mid_sweep_is_replaced_and_the_table_is_complete(
+        tmp_path: pathlib.Path, cluster: tuple[str, list[subprocess.Popen[bytes]]]) -> None:
+    sweep = write_sweep(tmp_path, duration=0.6)  # runs of a second or so: a kill lands in the middle
+    proc = subprocess.Popen([str(VENV_BIN / "tactile-batch"), str(sweep), "--scheduler", cluster[0], "--table",
+                             str(tmp_path / "dask.parquet"), "--quiet"], stderr=subprocess.PIPE, text=True)
+    nanny = psutil.Process(cluster[1][0].pid)
+    deadline = time.monotonic() + 60
+    busy: list[psutil.Process] = []
+    while not busy:  # the worker process (the nanny has other children: multiprocessing's resource tracker)
+        assert time.monotonic() < deadline, "the worker never got to work"
+        busy = [c for c in nanny.children(recursive=True) if c.cpu_percent(interval=0.2) > 50]
+    victim = busy[0]
+    children_before = nanny.children(recursive=True)
+    victim.kill()  # the nanny starts another
+    _, err = proc.communicate(timeout=600)
+    assert proc.returncode == 0, err
+    deadline = time.monotonic() + 60
+    before = {c.pid for c in children_before}
+    while not [c for c in nanny.children(recursive=True) if c.pid not in before]:
+        assert time.monotonic() < deadline, "the nanny did not start a new worker"
+        time.sleep(0.2)
+    tactile_batch(str(sweep), "--serial", "--table", str(tmp_path / "serial.parquet"))
+    on_dask = stable(tmp_path / "dask.parquet")
+    assert len(on_dask) == 8 and (on_dask["status"] == "ok").all()
+    pd.testing.assert_frame_equal(on_dask, stable(tmp_path / "serial.parquet"))
+
+
+def test_a_rerun_skips_every_finished_run(tmp_path: pathlib.Path) -> None:
+    sweep = write_sweep(tmp_path)
+    table = tmp_path / "t.parquet"
+    tactile_batch(str(sweep), "--serial", "--table", str(table))
+    first = pd.read_parquet(table)
+    again = tactile_batch(str(sweep), "--serial", "--table", str(table))
+    assert "8 already in" in again.stderr and "running 0" in again.stderr
+    pd.testing.assert_frame_equal(pd.read_parquet(table), first)  # finished_at too: nothing ran again
+    # One more stiffness: only its four runs are new.
+    write_sweep(tmp_path, grid={"material.E": [1e6, 3e6, 5e6], "integrator.precision": ["float", "double"],
+                                "integrator.safety": [0.5, 0.9]})
+    more = tactile_batch(str(sweep), "--serial", "--table", str(table))
+    assert "8 already in" in more.stderr and "running 4" in more.stderr
+    assert len(pd.read_parquet(table)) == 12
+
+
+def test_a_bad_sweep_is_named_and_a_bad_override_is_a_row_with_its_error(tmp_path: pathlib.Path) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"scene": str(CANTILEVER), "grid": {"material.E": []}}))
+    with pytest.raises(batch.SweepError, match="grid: must be"):
+        batch.load_sweep(bad)
+    bad.write_text(json.dumps({"scene": str(CANTILEVER), "grids": {}}))
+    with pytest.raises(batch.SweepError, match="grids: unknown field"):
+        batch.load_sweep(bad)
+    sweep = write_sweep(tmp_path, runs=[{"material.nu": 0.7}])
+    tactile_batch(str(sweep), "--serial", "--table", str(tmp_path / "t.parquet"))
+    frame = pd.read_parquet(tmp_path / "t.parquet")
+    assert (frame["status"] == "error").all()
+    assert frame["error"].str.contains("material.nu").all()
