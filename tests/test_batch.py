@@ -91,8 +91,8 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, lis
 def test_a_sweep_on_the_cluster_gives_the_table_of_its_runs_one_by_one(
         tmp_path: pathlib.Path, cluster: tuple[str, list[subprocess.Popen[bytes]]]) -> None:
     sweep = write_sweep(tmp_path)
-    tactile_batch(str(sweep), "--scheduler", cluster[0], "--table", str(tmp_path / "dask.parquet"))
-    tactile_batch(str(sweep), "--serial", "--table", str(tmp_path / "serial.parquet"))
+    tactile_batch("sweep", str(sweep), "--scheduler", cluster[0], "--table", str(tmp_path / "dask.parquet"))
+    tactile_batch("sweep", str(sweep), "--serial", "--table", str(tmp_path / "serial.parquet"))
     on_dask, serial = stable(tmp_path / "dask.parquet"), stable(tmp_path / "serial.parquet")
     assert len(serial) == 8 and (serial["status"] == "ok").all()
     pd.testing.assert_frame_equal(on_dask, serial)
@@ -107,7 +107,7 @@ def test_a_sweep_on_the_cluster_gives_the_table_of_its_runs_one_by_one(
 def test_a_worker_killed_mid_sweep_is_replaced_and_the_table_is_complete(
         tmp_path: pathlib.Path, cluster: tuple[str, list[subprocess.Popen[bytes]]]) -> None:
     sweep = write_sweep(tmp_path, duration=0.6)  # runs of a second or so: a kill lands in the middle
-    proc = subprocess.Popen([str(VENV_BIN / "tactile-batch"), str(sweep), "--scheduler", cluster[0], "--table",
+    proc = subprocess.Popen([str(VENV_BIN / "tactile-batch"), "sweep", str(sweep), "--scheduler", cluster[0], "--table",
                              str(tmp_path / "dask.parquet"), "--quiet"], stderr=subprocess.PIPE, text=True)
     nanny = psutil.Process(cluster[1][0].pid)
     deadline = time.monotonic() + 60
@@ -125,7 +125,7 @@ def test_a_worker_killed_mid_sweep_is_replaced_and_the_table_is_complete(
     while not [c for c in nanny.children(recursive=True) if c.pid not in before]:
         assert time.monotonic() < deadline, "the nanny did not start a new worker"
         time.sleep(0.2)
-    tactile_batch(str(sweep), "--serial", "--table", str(tmp_path / "serial.parquet"))
+    tactile_batch("sweep", str(sweep), "--serial", "--table", str(tmp_path / "serial.parquet"))
     on_dask = stable(tmp_path / "dask.parquet")
     assert len(on_dask) == 8 and (on_dask["status"] == "ok").all()
     pd.testing.assert_frame_equal(on_dask, stable(tmp_path / "serial.parquet"))
@@ -134,15 +134,15 @@ def test_a_worker_killed_mid_sweep_is_replaced_and_the_table_is_complete(
 def test_a_rerun_skips_every_finished_run(tmp_path: pathlib.Path) -> None:
     sweep = write_sweep(tmp_path)
     table = tmp_path / "t.parquet"
-    tactile_batch(str(sweep), "--serial", "--table", str(table))
+    tactile_batch("sweep", str(sweep), "--serial", "--table", str(table))
     first = pd.read_parquet(table)
-    again = tactile_batch(str(sweep), "--serial", "--table", str(table))
+    again = tactile_batch("sweep", str(sweep), "--serial", "--table", str(table))
     assert "8 already in" in again.stderr and "running 0" in again.stderr
     pd.testing.assert_frame_equal(pd.read_parquet(table), first)  # finished_at too: nothing ran again
     # One more stiffness: only its four runs are new.
     write_sweep(tmp_path, grid={"material.E": [1e6, 3e6, 5e6], "integrator.precision": ["float", "double"],
                                 "integrator.safety": [0.5, 0.9]})
-    more = tactile_batch(str(sweep), "--serial", "--table", str(table))
+    more = tactile_batch("sweep", str(sweep), "--serial", "--table", str(table))
     assert "8 already in" in more.stderr and "running 4" in more.stderr
     assert len(pd.read_parquet(table)) == 12
 
@@ -156,7 +156,30 @@ def test_a_bad_sweep_is_named_and_a_bad_override_is_a_row_with_its_error(tmp_pat
     with pytest.raises(batch.SweepError, match="grids: unknown field"):
         batch.load_sweep(bad)
     sweep = write_sweep(tmp_path, runs=[{"material.nu": 0.7}])
-    tactile_batch(str(sweep), "--serial", "--table", str(tmp_path / "t.parquet"))
+    tactile_batch("sweep", str(sweep), "--serial", "--table", str(tmp_path / "t.parquet"))
     frame = pd.read_parquet(tmp_path / "t.parquet")
     assert (frame["status"] == "error").all()
     assert frame["error"].str.contains("material.nu").all()
+
+
+def test_the_accuracy_study_on_the_cluster_gives_tactile_accuracys_records(
+        tmp_path: pathlib.Path, cluster: tuple[str, list[subprocess.Popen[bytes]]]) -> None:
+    """Its runs as tasks, their results gathered and finished (the Fig. 3 errors against the reference run,
+    itself a task) into the accuracy.json the study's own loop writes: equal but for the wall times."""
+    cli = subprocess.run([str(ROOT / "build" / "release" / "tactile-accuracy"), "--quick", "--only", "fig3_tip",
+                          "--quiet", "--out", str(tmp_path / "cli.json"), "--scenes", str(ROOT / "server" / "scenes")],
+                         capture_output=True, text=True, timeout=600)
+    assert cli.returncode == 0, cli.stderr
+    tactile_batch("accuracy", "--quick", "--only", "fig3_tip", "--scheduler", cluster[0], "--out",
+                  str(tmp_path / "dask.json"), "--scenes", str(ROOT / "server" / "scenes"))
+    timing = {"wall_s", "us_per_step", "tet_steps_per_s"}
+
+    def records(path: pathlib.Path) -> list[dict[str, Any]]:
+        data = json.loads(path.read_text())
+        return [{k: v for k, v in r.items() if k not in timing} for r in data["records"]]
+
+    on_dask, own = records(tmp_path / "dask.json"), records(tmp_path / "cli.json")
+    assert len(own) == 20 and all(r["problem"] == "fig3_tip" and r["error"] > 0 for r in own)
+    assert on_dask == own
+    runs = pd.read_parquet(tmp_path / "dask-runs.parquet")
+    assert len(runs) == 21 and runs["worker"].nunique() == 2  # 20 runs and the reference, on both workers

@@ -4,10 +4,15 @@
   .venv/bin/python server/bench/accuracy_report.py --quick --out out/accuracy   # coarse, for the test suite
   .venv/bin/python server/bench/accuracy_report.py --from out/accuracy --out docs/accuracy   # re-plot only
 
+  .venv/bin/python server/bench/accuracy_report.py --scheduler tcp://HOST:8786 --out docs/accuracy   # on a cluster
+
 It runs, each printing its progress:
-  build/release/tactile-accuracy      the FEM's error against references, and its cost, per material model, mesh
+  tactile-batch accuracy              the FEM's error against references, and its cost, per material model, mesh
                                       level, time step (fraction of the critical one) and precision; and the
-                                      largest block that keeps 1 kHz real time (server/src/study/accuracy.hpp)
+                                      largest block that keeps 1 kHz real time (server/src/study/accuracy.hpp):
+                                      the runs of `tactile-accuracy`, each a task on Dask (an embedded cluster
+                                      of one worker per core, --workers N, or --scheduler's), into the same
+                                      accuracy.json
   device-bridge/bench/bridge_bench.py modes   the bridge's rendering modes against a 1 kHz truth, soft and stiff
   build/release/fem_bench --only=effects,passes   what each effect costs, and the passes a bare step runs
 and keeps their outputs (accuracy.json, modes_*.json, effects.md) beside REPORT.md, so a report can be re-plotted
@@ -56,11 +61,13 @@ def built(name: str) -> str:
 
 # ---- running ---------------------------------------------------------------------------------------------------
 
-def run_all(out: pathlib.Path, quick: bool, haptic_seconds: float) -> None:
+def run_all(out: pathlib.Path, quick: bool, haptic_seconds: float, where: list[str]) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    print("accuracy-cost study: tactile-accuracy" + (" --quick" if quick else ""), flush=True)
-    subprocess.run([built("tactile-accuracy"), "--out", str(out / "accuracy.json"),
-                    "--scenes", str(ROOT / "server" / "scenes"), *(["--quick"] if quick else [])], check=True)
+    batch = [str(pathlib.Path(sys.executable).parent / "tactile-batch"), "accuracy",
+             "--out", str(out / "accuracy.json"), "--scenes", str(ROOT / "server" / "scenes"),
+             *(["--quick"] if quick else []), *where]
+    print("accuracy-cost study: " + " ".join(batch[1:]), flush=True)
+    subprocess.run(batch, check=True)
     if haptic_seconds > 0:
         for obj in ("soft", "stiff"):
             print(f"haptic modes, {obj} block: bridge_bench.py modes --seconds {haptic_seconds:g}", flush=True)
@@ -425,6 +432,9 @@ def main() -> None:
     ap.add_argument("--haptic-seconds", type=float, default=None,
                     help="seconds per bridge mode run (default 12, quick 0: skipped)")
     ap.add_argument("--from", dest="source", help="re-plot the figures kept in this folder instead of running")
+    where = ap.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, help="the study's Dask workers on this machine (default: one per core)")
+    where.add_argument("--scheduler", help="run the study's runs on this Dask scheduler, tcp://HOST:8786")
     args = ap.parse_args()
     out = pathlib.Path(args.out)
     if args.source:
@@ -437,7 +447,9 @@ def main() -> None:
                 (out / "effects.md").write_text((src / "effects.md").read_text())
     else:
         seconds = args.haptic_seconds if args.haptic_seconds is not None else (0.0 if args.quick else 12.0)
-        run_all(out, args.quick, seconds)
+        where = (["--workers", str(args.workers)] if args.workers else []) + \
+            (["--scheduler", args.scheduler] if args.scheduler else [])
+        run_all(out, args.quick, seconds, where)
     print(f"report: {write_report(out)}")
 
 

@@ -8,8 +8,6 @@
 #include <optional>
 #include <string>
 
-#include <nlohmann/json.hpp>
-
 #include "app/command_line.hpp"
 #include "app/progress.hpp"
 #include "study/accuracy.hpp"
@@ -48,34 +46,8 @@ int main(int argc, char** argv) {
     return 1;
   }
   bar.finish();
-  nlohmann::json records = nlohmann::json::array(), realtime = nlohmann::json::array();
-  for (const AccuracyRecord& r : results.records)
-    records.push_back({{"problem", r.problem},
-                       {"material", r.material},
-                       {"level", r.level},
-                       {"tets", r.tets},
-                       {"safety", r.safety},
-                       {"precision", r.precision},
-                       {"value", r.value},
-                       {"reference", r.reference},
-                       {"error", r.error},
-                       {"unit", r.unit},
-                       {"steps", r.steps},
-                       {"sim_time_s", r.sim_time},
-                       {"wall_s", r.wall_s},
-                       {"us_per_step", r.us_per_step},
-                       {"tet_steps_per_s", r.tet_steps_per_s},
-                       {"fault", r.fault}});
-  for (const RealtimeRecord& r : results.realtime)
-    realtime.push_back({{"material", r.material},
-                        {"precision", r.precision},
-                        {"tets", r.tets},
-                        {"interval_ms", r.interval_ms},
-                        {"substeps", r.substeps},
-                        {"largest_realtime_tets", r.largest_realtime_tets},
-                        {"estimated_max_tets", r.estimated_max_tets}});
   std::ofstream f(out_path);
-  f << nlohmann::json{{"quick", options.quick}, {"records", records}, {"realtime", realtime}}.dump(1) << "\n";
+  f << accuracy_json(results, options.quick);
   if (!f) {
     std::fprintf(stderr, "tactile-accuracy: could not write %s\n", out_path.c_str());
     return 2;

@@ -32,6 +32,7 @@
 #include "mesh/mesh_error.hpp"
 #include "scene/scene.hpp"
 #include "sim/simulation.hpp"
+#include "study/accuracy.hpp"
 
 namespace py = pybind11;
 
@@ -390,6 +391,59 @@ PYBIND11_MODULE(_core, m) {
       "Runs the scene headless as `tactile-sim run` does (the same code), writing OUT_DIR/<scene>/<variant or "
       "run>/ (summary.json, frames.csv, and VTU frames with vtu=True); returns that folder. A fault ends the run "
       "and is in summary.json; a spec the core refuses raises ModelError.");
+
+  // The accuracy-cost study one run at a time (study/accuracy.hpp), for tactile-batch.
+  m.def(
+      "accuracy_cases",
+      [](bool quick, const std::string& only) {
+        study::AccuracyOptions o;
+        o.quick = quick;
+        o.only = only;
+        py::list out;
+        for (const study::AccuracyCase& c : study::list_accuracy_cases(o)) {
+          py::dict d;
+          d["label"] = c.label;
+          d["problem"] = c.problem;
+          d["material"] = c.material;
+          d["level"] = c.level;
+          d["precision"] = c.precision;
+          d["safety"] = c.safety;
+          d["quick"] = c.quick;
+          out.append(d);
+        }
+        return out;
+      },
+      py::arg("quick") = false, py::arg("only") = "",
+      "The accuracy study's runs (as dicts), in the order tactile-accuracy runs them.");
+  m.def(
+      "run_accuracy_case",
+      [](const py::dict& d, const std::string& scenes) {
+        study::AccuracyCase c;
+        c.label = d["label"].cast<std::string>();
+        c.problem = d["problem"].cast<std::string>();
+        c.material = d["material"].cast<std::string>();
+        c.level = d["level"].cast<int32_t>();
+        c.precision = d["precision"].cast<std::string>();
+        c.safety = d["safety"].cast<double>();
+        c.quick = d["quick"].cast<bool>();
+        py::gil_scoped_release release;
+        return study::accuracy_json(study::run_accuracy_case(c, scenes), c.quick);
+      },
+      py::arg("case"), py::arg("scenes"), "One run of the study; its results as JSON.");
+  m.def(
+      "finish_accuracy",
+      [](const std::vector<std::string>& parts, bool quick) {
+        study::AccuracyResults all;
+        for (const std::string& text : parts) {
+          study::AccuracyResults one = study::accuracy_from_json(text);
+          all.records.insert(all.records.end(), one.records.begin(), one.records.end());
+          all.realtime.insert(all.realtime.end(), one.realtime.begin(), one.realtime.end());
+        }
+        study::finish_accuracy(all);
+        return study::accuracy_json(all, quick);
+      },
+      py::arg("parts"), py::arg("quick"),
+      "The study's accuracy.json (as tactile-accuracy writes it) from its runs' results, in list order.");
 
   py::class_<PySimulation>(m, "Simulation", "One body in motion: a scene's model, stepper and state.")
       .def(py::init<const Scene&>(), py::arg("scene"))

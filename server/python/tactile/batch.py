@@ -18,7 +18,13 @@ as a fraction of the critical step, `effects.damping.alpha`, ...); the scene loa
 `tactile.run_headless` (the same code as `tactile-sim run`) on a worker; its row holds the parameters, the
 figures of its summary.json, its wall time and the build that made it (a hash of the compiled module).
 
-    tactile-batch SWEEP.json [--table results/beam_E.parquet] [--workers N | --scheduler tcp://HOST:8786 | --serial]
+    tactile-batch sweep SWEEP.json [--table results/beam_E.parquet]
+                                   [--workers N | --scheduler tcp://HOST:8786 | --serial]
+
+The accuracy-cost study (server/src/study/accuracy.hpp) runs the same way, each of its runs a task, into the
+accuracy.json that `tactile-accuracy` writes (server/bench/accuracy_report.py runs it so):
+
+    tactile-batch accuracy --out accuracy.json [--quick] [--only PROBLEM] [--workers N | --scheduler ... | --serial]
 
 The table is written as Parquet and CSV side by side, after every few runs and at the end, in the sweep's
 order whatever order the runs finish in. Runs already in the table (same scene file contents, variant and
@@ -39,7 +45,7 @@ import socket
 import sys
 import tempfile
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -222,12 +228,22 @@ class Table:
         os.replace(tmp, self.csv)
 
 
-def run_serial(runs: Iterable[Run]) -> Iterator[dict[str, Any]]:
-    for r in runs:
-        yield execute(r)
+@dataclass(frozen=True)
+class Task:
+    """A unit of work for a worker: fn(arg) gives the row of the table under `key`."""
+
+    key: str
+    fn: Callable[[Any], dict[str, Any]]
+    arg: Any
 
 
-def run_on_dask(runs: list[Run], scheduler: str | None, workers: int) -> Iterator[dict[str, Any]]:
+def run_tasks(tasks: list[Task], mode: str, scheduler: str | None, workers: int) -> Iterator[dict[str, Any]]:
+    """The tasks' rows as they finish: here one by one (mode "serial"), on an embedded LocalCluster of `workers`
+    single-threaded processes, or on the cluster of `scheduler`."""
+    if mode == "serial":
+        for t in tasks:
+            yield t.fn(t.arg)
+        return
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None
@@ -238,7 +254,7 @@ def run_on_dask(runs: list[Run], scheduler: str | None, workers: int) -> Iterato
         client = Client(scheduler)
     try:
         # pure=False: a run is a task of its own even when another sweep lists the same one.
-        futures = [client.submit(execute, r, key=f"tactile-run-{r.run_id}", pure=False) for r in runs]
+        futures = [client.submit(t.fn, t.arg, key=f"tactile-{t.key}", pure=False) for t in tasks]
         for future in as_completed(futures):
             yield future.result()
     finally:
@@ -247,47 +263,107 @@ def run_on_dask(runs: list[Run], scheduler: str | None, workers: int) -> Iterato
             cluster.close()
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="tactile-batch", description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("sweep", help="the sweep file (JSON)")
-    ap.add_argument("--table", type=pathlib.Path, help="results table; .parquet and .csv are written "
-                    "(default: results/<sweep name>.parquet)")
+def fill(table: Table, tasks: list[Task], order: list[str], args: argparse.Namespace) -> None:
+    """Runs the tasks the table lacks (all with --rerun), adding their rows as they come."""
+    todo = [t for t in tasks if args.rerun or t.key not in table.rows]
+    print(f"tactile-batch: {len(tasks)} runs, {len(tasks) - len(todo)} already in {table.parquet}; "
+          f"running {len(todo)}", file=sys.stderr)
+    if not todo:
+        return
+    from tqdm import tqdm
+
+    mode = "serial" if args.serial else "dask"
+    results = run_tasks(todo, mode, args.scheduler, args.workers or os.cpu_count() or 1)
+    last_write = time.monotonic()
+    with tqdm(total=len(todo), disable=args.quiet, unit="run", file=sys.stderr) as bar:
+        for row in results:
+            table.add(row)
+            bar.update()
+            if time.monotonic() - last_write > 10:  # what is done is kept if the sweep is stopped
+                table.write(order)
+                last_write = time.monotonic()
+
+
+def accuracy_case_key(case: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(case, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def execute_accuracy(job: tuple[int, dict[str, Any], str]) -> dict[str, Any]:
+    """One run of the accuracy study, on whichever worker: its row, with its results as JSON."""
+    index, case, scenes = job
+    t0 = time.perf_counter()
+    result = tactile._core.run_accuracy_case(case, scenes)
+    return {"index": index, "run_id": accuracy_case_key(case), **{f"case.{k}": v for k, v in case.items()},
+            "result": result, "wall_s": time.perf_counter() - t0, "build": build_id(),
+            "worker": f"{socket.gethostname()}:{os.getpid()}", "finished_at": time.time()}
+
+
+def add_where(ap: argparse.ArgumentParser) -> None:
     where = ap.add_mutually_exclusive_group()
     where.add_argument("--scheduler", help="a running Dask scheduler, tcp://HOST:8786")
     where.add_argument("--workers", type=int, help="worker processes of the embedded LocalCluster (default: cores)")
     where.add_argument("--serial", action="store_true", help="run here one by one, without Dask")
     ap.add_argument("--rerun", action="store_true", help="run again the runs the table already holds")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    args = ap.parse_args(argv)
+
+
+def sweep_command(args: argparse.Namespace) -> int:
     try:
         runs = load_sweep(args.sweep)
     except SweepError as e:
         print(f"tactile-batch: {e}", file=sys.stderr)
         return 2
     table = Table(args.table or pathlib.Path("results") / f"{runs[0].sweep}.parquet")
-    todo = [r for r in runs if args.rerun or r.run_id not in table.rows]
     order = [r.run_id for r in runs]
-    print(f"tactile-batch: {len(runs)} runs in {runs[0].sweep}, {len(runs) - len(todo)} already in "
-          f"{table.parquet}; running {len(todo)}", file=sys.stderr)
-    if todo:
-        from tqdm import tqdm
-
-        workers = args.workers or os.cpu_count() or 1
-        results = run_serial(todo) if args.serial else run_on_dask(todo, args.scheduler, workers)
-        last_write = time.monotonic()
-        with tqdm(total=len(todo), disable=args.quiet, unit="run", file=sys.stderr) as bar:
-            for row in results:
-                table.add(row)
-                bar.update()
-                if time.monotonic() - last_write > 10:  # what is done is kept if the sweep is stopped
-                    table.write(order)
-                    last_write = time.monotonic()
+    fill(table, [Task(r.run_id, execute, r) for r in runs], order, args)
     table.write(order)
     failed = sum(1 for rid in order if table.rows[rid]["status"] != "ok")
     print(f"tactile-batch: wrote {table.parquet} and {table.csv} ({len(table.rows)} rows, {failed} not ok)",
           file=sys.stderr)
     return 0
+
+
+def accuracy_command(args: argparse.Namespace) -> int:
+    cases = tactile._core.accuracy_cases(args.quick, args.only or "")
+    if not cases:
+        print(f"tactile-batch: accuracy: no problem {args.only!r}", file=sys.stderr)
+        return 2
+    scenes = str(pathlib.Path(args.scenes).resolve())
+    table = Table(args.table or args.out.with_name(args.out.stem + "-runs.parquet"))
+    order = [accuracy_case_key(c) for c in cases]
+    tasks = [Task(key, execute_accuracy, (i, c, scenes)) for i, (key, c) in enumerate(zip(order, cases, strict=True))]
+    started = time.perf_counter()
+    fill(table, tasks, order, args)
+    table.write(order)
+    text = tactile._core.finish_accuracy([str(table.rows[k]["result"]) for k in order], args.quick)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
+    print(f"tactile-batch: wrote {args.out} ({len(cases)} runs; {time.perf_counter() - started:.1f} s) and "
+          f"{table.parquet}", file=sys.stderr)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="tactile-batch", description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="command", required=True)
+    sweep = sub.add_parser("sweep", help="a sweep file's runs into a table")
+    sweep.add_argument("sweep", help="the sweep file (JSON)")
+    sweep.add_argument("--table", type=pathlib.Path, help="results table; .parquet and .csv are written "
+                       "(default: results/<sweep name>.parquet)")
+    add_where(sweep)
+    accuracy = sub.add_parser("accuracy", help="the accuracy-cost study into accuracy.json")
+    accuracy.add_argument("--out", type=pathlib.Path, required=True,
+                          help="accuracy.json, as tactile-accuracy writes it")
+    accuracy.add_argument("--quick", action="store_true", help="coarse levels and fewer variations")
+    accuracy.add_argument("--only", help="one problem (tactile-accuracy --help lists them)")
+    accuracy.add_argument("--scenes", default="server/scenes",
+                          help="the shipped scenes (fig2_twist.json, fig3_cantilever.json)")
+    accuracy.add_argument("--table", type=pathlib.Path, help="the runs' table (default: beside --out, "
+                          "<name>-runs.parquet); runs in it are not run again")
+    add_where(accuracy)
+    args = ap.parse_args(argv)
+    return sweep_command(args) if args.command == "sweep" else accuracy_command(args)
 
 
 if __name__ == "__main__":

@@ -375,9 +375,24 @@ RealtimeRecord realtime(MaterialModel m, Precision p, bool quick) {
 
 }  // namespace
 
-AccuracyResults run_accuracy_study(const AccuracyOptions& o) {
-  AccuracyResults results;
-  std::vector<std::pair<std::string, std::function<void()>>> jobs;
+namespace {
+
+MaterialModel material_named(const std::string& name) {
+  for (MaterialModel m : kModels)
+    if (name == to_string(m)) return m;
+  throw std::invalid_argument("accuracy case: no material model '" + name + "'");
+}
+
+Precision precision_named(const std::string& name) {
+  if (name == "float") return Precision::Float;
+  if (name == "double") return Precision::Double;
+  throw std::invalid_argument("accuracy case: precision must be float or double, got '" + name + "'");
+}
+
+}  // namespace
+
+std::vector<AccuracyCase> list_accuracy_cases(const AccuracyOptions& o) {
+  std::vector<AccuracyCase> cases;
   auto wants = [&](const char* problem) { return o.only.empty() || o.only == problem; };
   const bool q = o.quick;
   const std::vector<int> static_levels = q ? std::vector<int>{1, 2} : std::vector<int>{1, 2, 3, 4};
@@ -385,82 +400,197 @@ AccuracyResults run_accuracy_study(const AccuracyOptions& o) {
   const std::vector<double> safeties = q ? std::vector<double>{0.9, 0.3} : std::vector<double>{0.9, 0.6, 0.3};
   const std::vector<int> figure_levels = q ? std::vector<int>{1, 2} : std::vector<int>{1, 2, 3};
   const int reference_level = q ? 3 : 5;
-  auto label = [](const char* problem, MaterialModel m, int n, Precision p, double safety = 0) {
-    std::string s =
-        std::string(problem) + " " + std::string(to_string(m)) + " level " + std::to_string(n) + " " + name_of(p);
-    if (safety > 0) s += " dt " + std::to_string(safety).substr(0, 3);
-    return s;
+  auto add = [&](const char* problem, MaterialModel m, int n, Precision p, double safety = 0) {
+    AccuracyCase c;
+    c.problem = problem;
+    c.material = to_string(m);
+    c.level = n;
+    c.precision = name_of(p);
+    c.safety = safety;
+    c.quick = q;
+    c.label = c.problem + " " + c.material + " level " + std::to_string(n) + " " + c.precision;
+    if (safety > 0) c.label += " dt " + std::to_string(safety).substr(0, 3);
+    cases.push_back(std::move(c));
   };
-  auto add = [&](AccuracyRecord r) { results.records.push_back(std::move(r)); };
-
   for (MaterialModel m : kModels)
     for (Precision p : kPrecisions) {
       if (wants("cantilever_deflection"))
-        for (int n : static_levels)
-          jobs.emplace_back(label("cantilever_deflection", m, n, p),
-                            [=, &add] { add(cantilever_deflection(m, n, p)); });
+        for (int n : static_levels) add("cantilever_deflection", m, n, p);
       for (double safety : safeties) {
         if (wants("cantilever_frequency"))
-          for (int n : dynamic_levels)
-            jobs.emplace_back(label("cantilever_frequency", m, n, p, safety),
-                              [=, &add] { add(cantilever_frequency(m, n, p, safety)); });
+          for (int n : dynamic_levels) add("cantilever_frequency", m, n, p, safety);
         if (wants("wave_speed"))
-          for (int n : static_levels)
-            jobs.emplace_back(label("wave_speed", m, n, p, safety), [=, &add] { add(wave_speed(m, n, p, safety)); });
+          for (int n : static_levels) add("wave_speed", m, n, p, safety);
       }
       if (wants("rotation"))
-        for (int n : static_levels)
-          jobs.emplace_back(label("rotation", m, n, p), [=, &add] {
-            auto [e, v] = rotation(m, n, p);
-            add(e);
-            add(v);
-          });
+        for (int n : static_levels) add("rotation", m, n, p);
     }
-  // The figures: a converged StVK run in double first, then every choice against it.
-  auto fig3_reference = std::make_shared<Vec3>(0.0);
-  auto fig2_reference = std::make_shared<double>(1.0);
+  // The figures: a converged StVK run in double, then every choice measured against it.
   if (wants("fig3_tip")) {
-    jobs.emplace_back(label("fig3_tip reference", MaterialModel::StVK, reference_level, Precision::Double), [=, &o] {
-      *fig3_reference = fig3(o.scenes, MaterialModel::StVK, reference_level, Precision::Double).tip;
-    });
+    add("fig3_reference", MaterialModel::StVK, reference_level, Precision::Double);
     for (MaterialModel m : kModels)
       for (Precision p : kPrecisions)
-        for (int n : figure_levels)
-          jobs.emplace_back(label("fig3_tip", m, n, p), [=, &o, &add] {
-            Fig3Run run = fig3(o.scenes, m, n, p);
-            run.record.reference = fig3_reference->y;
-            run.record.error = glm::length(run.tip - *fig3_reference) / glm::length(*fig3_reference);
-            add(run.record);
-          });
+        for (int n : figure_levels) add("fig3_tip", m, n, p);
   }
   if (wants("fig2_area")) {
-    jobs.emplace_back(
-        label("fig2_area reference", MaterialModel::StVK, reference_level - 1, Precision::Double), [=, &o] {
-          *fig2_reference = fig2(o.scenes, MaterialModel::StVK, reference_level - 1, Precision::Double).value;
-        });
+    add("fig2_reference", MaterialModel::StVK, reference_level - 1, Precision::Double);
     for (MaterialModel m : kModels)
       for (Precision p : kPrecisions)
         for (int n : figure_levels)
-          if (n < reference_level - 1)
-            jobs.emplace_back(label("fig2_area", m, n, p), [=, &o, &add] {
-              AccuracyRecord r = fig2(o.scenes, m, n, p);
-              r.reference = *fig2_reference;
-              r.error = r.value - r.reference;
-              add(r);
-            });
+          if (n < reference_level - 1) add("fig2_area", m, n, p);
   }
   if (wants("realtime"))
     for (MaterialModel m : kModels)
-      for (Precision p : kPrecisions)
-        jobs.emplace_back(std::string("realtime ") + std::string(to_string(m)) + " " + name_of(p),
-                          [=, &results] { results.realtime.push_back(realtime(m, p, q)); });
+      for (Precision p : kPrecisions) {
+        add("realtime", m, 0, p);
+        cases.back().label = "realtime " + cases.back().material + " " + cases.back().precision;
+      }
+  return cases;
+}
 
-  for (size_t k = 0; k < jobs.size(); ++k) {
-    if (o.progress) o.progress(k, jobs.size(), jobs[k].first);
-    jobs[k].second();
+AccuracyResults run_accuracy_case(const AccuracyCase& c, const std::string& scenes) {
+  const MaterialModel m = material_named(c.material);
+  const Precision p = precision_named(c.precision);
+  const int n = c.level;
+  AccuracyResults out;
+  auto fig3_record = [&](const char* problem) {
+    Fig3Run run = fig3(scenes, m, n, p);
+    run.record.problem = problem;
+    run.record.tip = {run.tip.x, run.tip.y, run.tip.z};
+    out.records.push_back(run.record);
+  };
+  if (c.problem == "cantilever_deflection") {
+    out.records.push_back(cantilever_deflection(m, n, p));
+  } else if (c.problem == "cantilever_frequency") {
+    out.records.push_back(cantilever_frequency(m, n, p, c.safety));
+  } else if (c.problem == "wave_speed") {
+    out.records.push_back(wave_speed(m, n, p, c.safety));
+  } else if (c.problem == "rotation") {
+    auto [e, v] = rotation(m, n, p);
+    out.records.push_back(e);
+    out.records.push_back(v);
+  } else if (c.problem == "fig3_tip" || c.problem == "fig3_reference") {
+    fig3_record(c.problem == "fig3_tip" ? "fig3_tip" : "fig3_reference");
+  } else if (c.problem == "fig2_area" || c.problem == "fig2_reference") {
+    AccuracyRecord r = fig2(scenes, m, n, p);
+    r.problem = c.problem;
+    out.records.push_back(r);
+  } else if (c.problem == "realtime") {
+    out.realtime.push_back(realtime(m, p, c.quick));
+  } else {
+    throw std::invalid_argument("accuracy case: no problem '" + c.problem + "'");
   }
-  if (o.progress) o.progress(jobs.size(), jobs.size(), "");
+  return out;
+}
+
+void finish_accuracy(AccuracyResults& results) {
+  std::vector<AccuracyRecord>& rs = results.records;
+  const auto find = [&](const char* problem) {
+    return std::find_if(rs.begin(), rs.end(), [&](const AccuracyRecord& r) { return r.problem == problem; });
+  };
+  if (auto ref = find("fig3_reference"); ref != rs.end()) {
+    const Vec3 tip(ref->tip[0], ref->tip[1], ref->tip[2]);
+    for (AccuracyRecord& r : rs)
+      if (r.problem == "fig3_tip") {
+        r.reference = tip.y;
+        r.error = glm::length(Vec3(r.tip[0], r.tip[1], r.tip[2]) - tip) / glm::length(tip);
+      }
+  }
+  if (auto ref = find("fig2_reference"); ref != rs.end()) {
+    const double area = ref->value;
+    for (AccuracyRecord& r : rs)
+      if (r.problem == "fig2_area") {
+        r.reference = area;
+        r.error = r.value - area;
+      }
+  }
+  std::erase_if(rs,
+                [](const AccuracyRecord& r) { return r.problem == "fig3_reference" || r.problem == "fig2_reference"; });
+}
+
+AccuracyResults run_accuracy_study(const AccuracyOptions& o) {
+  const std::vector<AccuracyCase> cases = list_accuracy_cases(o);
+  AccuracyResults results;
+  for (size_t k = 0; k < cases.size(); ++k) {
+    if (o.progress) o.progress(k, cases.size(), cases[k].label);
+    AccuracyResults one = run_accuracy_case(cases[k], o.scenes);
+    results.records.insert(results.records.end(), one.records.begin(), one.records.end());
+    results.realtime.insert(results.realtime.end(), one.realtime.begin(), one.realtime.end());
+  }
+  if (o.progress) o.progress(cases.size(), cases.size(), "");
+  finish_accuracy(results);
   return results;
+}
+
+std::string accuracy_json(const AccuracyResults& results, bool quick) {
+  nlohmann::json records = nlohmann::json::array(), realtime = nlohmann::json::array();
+  for (const AccuracyRecord& r : results.records) {
+    nlohmann::json j = {{"problem", r.problem},
+                        {"material", r.material},
+                        {"level", r.level},
+                        {"tets", r.tets},
+                        {"safety", r.safety},
+                        {"precision", r.precision},
+                        {"value", r.value},
+                        {"reference", r.reference},
+                        {"error", r.error},
+                        {"unit", r.unit},
+                        {"steps", r.steps},
+                        {"sim_time_s", r.sim_time},
+                        {"wall_s", r.wall_s},
+                        {"us_per_step", r.us_per_step},
+                        {"tet_steps_per_s", r.tet_steps_per_s},
+                        {"fault", r.fault}};
+    if (r.problem == "fig3_tip" || r.problem == "fig3_reference") j["tip_m"] = r.tip;
+    records.push_back(std::move(j));
+  }
+  for (const RealtimeRecord& r : results.realtime)
+    realtime.push_back({{"material", r.material},
+                        {"precision", r.precision},
+                        {"tets", r.tets},
+                        {"interval_ms", r.interval_ms},
+                        {"substeps", r.substeps},
+                        {"largest_realtime_tets", r.largest_realtime_tets},
+                        {"estimated_max_tets", r.estimated_max_tets}});
+  return nlohmann::json{{"quick", quick}, {"records", records}, {"realtime", realtime}}.dump(1) + "\n";
+}
+
+AccuracyResults accuracy_from_json(const std::string& text) {
+  const nlohmann::json j = nlohmann::json::parse(text);
+  AccuracyResults out;
+  for (const nlohmann::json& r : j.at("records")) {
+    AccuracyRecord a;
+    a.problem = r.at("problem");
+    a.material = r.at("material");
+    a.level = r.at("level");
+    a.tets = r.at("tets");
+    a.safety = r.at("safety");
+    a.precision = r.at("precision");
+    a.value = r.at("value");
+    a.reference = r.at("reference");
+    a.error = r.at("error");
+    a.unit = r.at("unit");
+    a.steps = r.at("steps");
+    a.sim_time = r.at("sim_time_s");
+    a.wall_s = r.at("wall_s");
+    a.us_per_step = r.at("us_per_step");
+    a.tet_steps_per_s = r.at("tet_steps_per_s");
+    a.fault = r.at("fault");
+    if (r.contains("tip_m")) a.tip = r.at("tip_m");
+    out.records.push_back(std::move(a));
+  }
+  for (const nlohmann::json& r : j.at("realtime")) {
+    RealtimeRecord t;
+    t.material = r.at("material");
+    t.precision = r.at("precision");
+    t.tets = r.at("tets").get<std::vector<int32_t>>();
+    t.interval_ms = r.at("interval_ms").get<std::vector<double>>();
+    t.substeps = r.at("substeps").get<std::vector<int32_t>>();
+    t.largest_realtime_tets = r.at("largest_realtime_tets");
+    t.estimated_max_tets = r.at("estimated_max_tets");
+    out.realtime.push_back(std::move(t));
+  }
+  return out;
 }
 
 }  // namespace tactile::study

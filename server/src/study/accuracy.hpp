@@ -19,6 +19,7 @@
 // (server/bench/accuracy_report.py) plots them.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -43,6 +44,8 @@ struct AccuracyRecord {
   double us_per_step = 0;
   double tet_steps_per_s = 0;
   std::string fault;  // a fault that stopped the run, if any
+  // fig3_tip and its reference run: the tip's displacement [m], which the error is measured on.
+  std::array<double, 3> tip{};
 };
 
 struct RealtimeRecord {
@@ -68,6 +71,33 @@ struct AccuracyResults {
   std::vector<RealtimeRecord> realtime;
 };
 
+// The whole study, one run after the other.
 AccuracyResults run_accuracy_study(const AccuracyOptions& options);
+
+// One run of the study. run_accuracy_study runs them in order; tactile-batch
+// runs each as a task on a Dask cluster (server/python/tactile/batch.py).
+struct AccuracyCase {
+  std::string label;    // what a progress bar shows
+  std::string problem;  // a problem above, or "fig3_reference", "fig2_reference", "realtime"
+  std::string material;
+  int32_t level = 0;
+  std::string precision;
+  double safety = 0;  // the time step's fraction of the critical step; 0: the problem's own
+  bool quick = false;
+};
+
+// The study's runs for `options` (its scenes and progress aside), in the order it runs them.
+std::vector<AccuracyCase> list_accuracy_cases(const AccuracyOptions& options);
+// One run's results: its records (a reference run's, problem "fig3_reference" or "fig2_reference", too) or
+// its real-time record. Throws std::invalid_argument for a case list_accuracy_cases does not make.
+AccuracyResults run_accuracy_case(const AccuracyCase& c, const std::string& scenes);
+// The figures' references and errors from their reference runs' records, which it then drops: the runs'
+// results, gathered in list order, become the study's.
+void finish_accuracy(AccuracyResults& results);
+
+// The results as JSON: {"quick", "records", "realtime"}, tactile-accuracy's file (accuracy.json) that
+// server/bench/accuracy_report.py plots; and back (a run's results travel between processes so).
+std::string accuracy_json(const AccuracyResults& results, bool quick);
+AccuracyResults accuracy_from_json(const std::string& text);
 
 }  // namespace tactile::study
