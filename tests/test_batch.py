@@ -183,3 +183,22 @@ def test_the_accuracy_study_on_the_cluster_gives_tactile_accuracys_records(
     assert on_dask == own
     runs = pd.read_parquet(tmp_path / "dask-runs.parquet")
     assert len(runs) == 21 and runs["worker"].nunique() == 2  # 20 runs and the reference, on both workers
+
+
+def test_the_stability_suite_on_the_cluster_gives_tactile_stabilitys_outcomes(
+        tmp_path: pathlib.Path, cluster: tuple[str, list[subprocess.Popen[bytes]]]) -> None:
+    """Each case a task: the same outcomes, figures and order as the suite's own loop, but for the wall times."""
+    own = subprocess.run([str(ROOT / "build" / "release" / "tactile-stability"), "--quick", "--only", "slivers",
+                          "--quiet", "--json", str(tmp_path / "cli.json")], capture_output=True, text=True, timeout=600)
+    assert own.returncode == 0, own.stdout + own.stderr
+    run = tactile_batch("stability", "--quick", "--only", "slivers", "--scheduler", cluster[0], "--json",
+                        str(tmp_path / "dask.json"))
+    assert " failed; wrote " in run.stderr and ", 0 failed" in run.stderr
+
+    def outcomes(path: pathlib.Path) -> list[dict[str, Any]]:
+        return [{k: v for k, v in o.items() if k != "wall_s"} for o in json.loads(path.read_text())]
+
+    cli = outcomes(tmp_path / "cli.json")
+    assert len(cli) >= 4 and all(o["pass"] and o["name"].startswith("slivers/") for o in cli)
+    assert outcomes(tmp_path / "dask.json") == cli
+    assert pd.read_parquet(tmp_path / "dask-runs.parquet")["worker"].nunique() == 2

@@ -68,24 +68,7 @@ int main(int argc, char** argv) {
                 figure(r.peak_force_N, "%.2f").c_str(), r.substeps_max, r.wall_s, r.outcome.c_str(),
                 r.pass ? "" : " -- ", r.why.c_str());
     std::fflush(stdout);
-    all.push_back({{"name", r.name},
-                   {"group", r.group},
-                   {"material", r.material},
-                   {"mesh", r.mesh},
-                   {"expects", to_string(r.expect)},
-                   {"pass", r.pass},
-                   {"outcome", r.outcome},
-                   {"why", r.why},
-                   {"tets", r.tets},
-                   {"steps", r.steps},
-                   {"sim_time_s", r.sim_time},
-                   {"wall_s", r.wall_s},
-                   {"size_ratio", r.size_ratio},
-                   {"size_limit", r.size_limit},
-                   {"energy_drift", r.energy_drift < 0 ? nlohmann::json() : nlohmann::json(r.energy_drift)},
-                   {"penetration_mm", r.penetration_mm},
-                   {"peak_force_N", r.peak_force_N < 0 ? nlohmann::json() : nlohmann::json(r.peak_force_N)},
-                   {"substeps_max", r.substeps_max}});
+    all.push_back(nlohmann::json::parse(outcome_json(r)));
   }
   std::printf("\n%zu cases: %zu passed, %d failed\n", cases.size(), cases.size() - size_t(failed), failed);
   if (!json_path.empty()) {

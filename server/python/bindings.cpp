@@ -33,6 +33,7 @@
 #include "scene/scene.hpp"
 #include "sim/simulation.hpp"
 #include "study/accuracy.hpp"
+#include "study/stability.hpp"
 
 namespace py = pybind11;
 
@@ -444,6 +445,32 @@ PYBIND11_MODULE(_core, m) {
       },
       py::arg("parts"), py::arg("quick"),
       "The study's accuracy.json (as tactile-accuracy writes it) from its runs' results, in list order.");
+
+  // The stability suite one case at a time (study/stability.hpp), for tactile-batch.
+  m.def(
+      "stability_cases",
+      [](bool quick, const std::string& only, uint64_t seed) {
+        study::SuiteOptions o;
+        o.quick = quick;
+        o.filter = only;
+        o.seed = seed;
+        std::vector<std::string> names;
+        for (const study::StabilityCase& c : study::stability_cases(o)) names.push_back(c.name);
+        return names;
+      },
+      py::arg("quick") = false, py::arg("only") = "", py::arg("seed") = 1,
+      "The suite's case names (group/material/mesh), in tactile-stability's order; `only` keeps those containing it.");
+  m.def(
+      "run_stability_case",
+      [](const std::string& name, bool quick, uint64_t seed) {
+        study::SuiteOptions o;
+        o.quick = quick;
+        o.seed = seed;
+        py::gil_scoped_release release;
+        return study::outcome_json(study::run_stability_case(o, name));
+      },
+      py::arg("name"), py::arg("quick") = false, py::arg("seed") = 1,
+      "One case, run; its outcome as JSON (an entry of tactile-stability --json).");
 
   py::class_<PySimulation>(m, "Simulation", "One body in motion: a scene's model, stepper and state.")
       .def(py::init<const Scene&>(), py::arg("scene"))

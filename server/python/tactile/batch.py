@@ -21,10 +21,12 @@ figures of its summary.json, its wall time and the build that made it (a hash of
     tactile-batch sweep SWEEP.json [--table results/beam_E.parquet]
                                    [--workers N | --scheduler tcp://HOST:8786 | --serial]
 
-The accuracy-cost study (server/src/study/accuracy.hpp) runs the same way, each of its runs a task, into the
-accuracy.json that `tactile-accuracy` writes (server/bench/accuracy_report.py runs it so):
+The accuracy-cost study (server/src/study/accuracy.hpp) and the stability suite (study/stability.hpp) run the
+same way, each of their runs a task, into the files `tactile-accuracy` and `tactile-stability --json` write
+(server/bench/accuracy_report.py runs the study so):
 
     tactile-batch accuracy --out accuracy.json [--quick] [--only PROBLEM] [--workers N | --scheduler ... | --serial]
+    tactile-batch stability --json stability.json [--quick] [--only TEXT] [--seed N] [...]
 
 The table is written as Parquet and CSV side by side, after every few runs and at the end, in the sweep's
 order whatever order the runs finish in. Runs already in the table (same scene file contents, variant and
@@ -343,6 +345,40 @@ def accuracy_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def execute_stability(job: tuple[int, str, bool, int]) -> dict[str, Any]:
+    """One case of the stability suite, on whichever worker: its row, with its outcome as JSON."""
+    index, name, quick, seed = job
+    outcome = tactile._core.run_stability_case(name, quick, seed)
+    figures = json.loads(outcome)
+    return {"index": index, "run_id": hashlib.sha256(json.dumps([name, quick, seed]).encode()).hexdigest()[:16],
+            "name": name, "pass": figures["pass"], "outcome": figures["outcome"], "why": figures["why"],
+            "result": outcome, "wall_s": figures["wall_s"], "build": build_id(),
+            "worker": f"{socket.gethostname()}:{os.getpid()}", "finished_at": time.time()}
+
+
+def stability_command(args: argparse.Namespace) -> int:
+    names = tactile._core.stability_cases(args.quick, args.only or "", args.seed)
+    if not names:
+        print(f"tactile-batch: stability: no case matches {args.only!r}", file=sys.stderr)
+        return 2
+    out = args.json or pathlib.Path("results") / "stability.json"
+    table = Table(args.table or out.with_name(out.stem + "-runs.parquet"))
+    order = [hashlib.sha256(json.dumps([n, args.quick, args.seed]).encode()).hexdigest()[:16] for n in names]
+    tasks = [Task(key, execute_stability, (i, n, args.quick, args.seed))
+             for i, (key, n) in enumerate(zip(order, names, strict=True))]
+    fill(table, tasks, order, args)
+    table.write(order)
+    outcomes = [json.loads(str(table.rows[k]["result"])) for k in order]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(outcomes, indent=1) + "\n")
+    failed = [o for o in outcomes if not o["pass"]]
+    for o in failed:
+        print(f"FAIL {o['name']}: {o['outcome']} -- {o['why']}", file=sys.stderr)
+    print(f"tactile-batch: {len(outcomes)} cases: {len(outcomes) - len(failed)} passed, {len(failed)} failed; "
+          f"wrote {out} and {table.parquet}", file=sys.stderr)
+    return 1 if failed else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="tactile-batch", description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -362,8 +398,18 @@ def main(argv: list[str] | None = None) -> int:
     accuracy.add_argument("--table", type=pathlib.Path, help="the runs' table (default: beside --out, "
                           "<name>-runs.parquet); runs in it are not run again")
     add_where(accuracy)
+    stability = sub.add_parser("stability", help="the hard-case stability suite into stability.json")
+    stability.add_argument("--json", type=pathlib.Path, help="every case's figures, as tactile-stability --json "
+                           "writes them (default: results/stability.json)")
+    stability.add_argument("--quick", action="store_true", help="the short version (coarse meshes, shorter runs)")
+    stability.add_argument("--only", help="only the cases whose name (group/material/mesh) contains TEXT")
+    stability.add_argument("--seed", type=int, default=1, help="seed of the random velocities and device input")
+    stability.add_argument("--table", type=pathlib.Path, help="the runs' table (default: beside --json, "
+                           "<name>-runs.parquet); cases in it are not run again")
+    add_where(stability)
     args = ap.parse_args(argv)
-    return sweep_command(args) if args.command == "sweep" else accuracy_command(args)
+    commands = {"sweep": sweep_command, "accuracy": accuracy_command, "stability": stability_command}
+    return commands[args.command](args)
 
 
 if __name__ == "__main__":

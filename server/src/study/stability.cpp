@@ -13,9 +13,11 @@
 #include <optional>
 #include <random>
 #include <sstream>
+#include <stdexcept>
 #include <utility>
 
 #include <glm/gtc/quaternion.hpp>
+#include <nlohmann/json.hpp>
 
 #include "core/spec.hpp"
 #include "mesh/primitives.hpp"
@@ -770,6 +772,35 @@ std::vector<StabilityCase> stability_cases(const SuiteOptions& o) {
     }
   }
   return cases;
+}
+
+CaseOutcome run_stability_case(SuiteOptions options, const std::string& name) {
+  options.filter = name;
+  for (const StabilityCase& c : stability_cases(options))
+    if (c.name == name) return c.run();
+  throw std::invalid_argument("stability: no case named '" + name + "'");
+}
+
+std::string outcome_json(const CaseOutcome& r) {
+  const nlohmann::json j = {{"name", r.name},
+                            {"group", r.group},
+                            {"material", r.material},
+                            {"mesh", r.mesh},
+                            {"expects", to_string(r.expect)},
+                            {"pass", r.pass},
+                            {"outcome", r.outcome},
+                            {"why", r.why},
+                            {"tets", r.tets},
+                            {"steps", r.steps},
+                            {"sim_time_s", r.sim_time},
+                            {"wall_s", r.wall_s},
+                            {"size_ratio", r.size_ratio},
+                            {"size_limit", r.size_limit},
+                            {"energy_drift", r.energy_drift < 0 ? nlohmann::json() : nlohmann::json(r.energy_drift)},
+                            {"penetration_mm", r.penetration_mm},
+                            {"peak_force_N", r.peak_force_N < 0 ? nlohmann::json() : nlohmann::json(r.peak_force_N)},
+                            {"substeps_max", r.substeps_max}};
+  return j.dump();
 }
 
 }  // namespace tactile::study

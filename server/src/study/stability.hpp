@@ -71,4 +71,12 @@ struct StabilityCase {
 // when run).
 std::vector<StabilityCase> stability_cases(const SuiteOptions& options);
 
+// The case named `name` (options.filter aside), run; throws
+// std::invalid_argument when the suite has none of that name. tactile-batch
+// runs each case so, as a task on a Dask cluster.
+CaseOutcome run_stability_case(SuiteOptions options, const std::string& name);
+
+// A case's outcome as a JSON object (tactile-stability --json writes a list of them).
+std::string outcome_json(const CaseOutcome& r);
+
 }  // namespace tactile::study
