@@ -142,6 +142,8 @@ def test_a_bad_scene_raises_naming_the_field() -> None:
         tactile.parse_scene("{ nope")
     with pytest.raises(tactile.SceneError, match="variants linear, stvk"):
         tactile.load_scene(SCENES / "fig3_cantilever.json")
+    with pytest.raises(tactile.SceneError, match=r"no variant 'rubber' \(the scene has: linear, stvk\)"):
+        tactile.load_scene(SCENES / "fig3_cantilever.json", variant="rubber")
     assert isinstance(tactile.SceneError("x"), ValueError)
 
 

@@ -153,16 +153,7 @@ int run(const Options& o) {
   tactile::set_meshing_watch(&meshing);
   std::vector<Scene> scenes = load_scene(o.scene);
   tactile::set_meshing_watch(nullptr);
-  if (o.variant) {
-    std::vector<Scene> picked;
-    std::string names;
-    for (Scene& s : scenes) {
-      names += (names.empty() ? "" : ", ") + (s.variant.empty() ? std::string("(none)") : s.variant);
-      if (s.variant == *o.variant) picked.push_back(std::move(s));
-    }
-    if (picked.empty()) throw SceneError(o.scene + ": no variant '" + *o.variant + "' (the scene has: " + names + ")");
-    scenes = std::move(picked);
-  }
+  if (o.variant) scenes = {pick_variant(std::move(scenes), *o.variant, o.scene)};
   for (Scene& s : scenes) {
     if (o.duration) s.run.duration = *o.duration;
     if (o.precision) s.spec.integrator.precision = *o.precision;

@@ -61,14 +61,9 @@ PoseTuple from_pose(const Pose& p) {
           {p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z}};
 }
 
-std::vector<Scene> pick(std::vector<Scene> scenes, const std::optional<std::string>& variant) {
+std::vector<Scene> pick(std::vector<Scene> scenes, const std::optional<std::string>& variant, const std::string& path) {
   if (!variant) return scenes;
-  for (Scene& s : scenes)
-    if (s.variant == *variant) return {std::move(s)};
-  std::string names;
-  for (const Scene& s : scenes) names += (names.empty() ? "" : ", ") + (s.variant.empty() ? "(none)" : s.variant);
-  throw SceneError(scenes.empty() ? "no scene"
-                                  : scenes.front().path + ": no variant '" + *variant + "' (has " + names + ")");
+  return {pick_variant(std::move(scenes), *variant, path)};
 }
 
 // A read-only (rows x cols) float64 view of `data`, kept alive by `owner`.
@@ -356,7 +351,7 @@ PYBIND11_MODULE(_core, m) {
 
   m.def(
       "load_scene",
-      [](const std::string& path, std::optional<std::string> variant) { return pick(load_scene(path), variant); },
+      [](const std::string& path, std::optional<std::string> variant) { return pick(load_scene(path), variant, path); },
       py::arg("path"), py::arg("variant") = py::none(),
       "Reads and checks a scene file: one Scene per variant (the named one only with `variant`). Raises SceneError "
       "naming the file and the field at fault.");
@@ -369,7 +364,7 @@ PYBIND11_MODULE(_core, m) {
         } catch (const nlohmann::json::parse_error& e) {
           throw SceneError(path + ": not JSON: " + e.what());
         }
-        return pick(parse_scene(j, path), variant);
+        return pick(parse_scene(j, path), variant, path);
       },
       py::arg("text"), py::arg("path"), py::arg("variant") = py::none(),
       "The same from JSON text; `path` names the scene in messages and anchors relative mesh paths.");

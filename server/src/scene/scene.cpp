@@ -820,4 +820,13 @@ std::vector<Scene> load_scene(const std::string& path) {
   return parse_scene(j, path);
 }
 
+Scene pick_variant(std::vector<Scene> scenes, const std::string& variant, const std::string& path) {
+  std::string names;
+  for (Scene& s : scenes) {
+    if (s.variant == variant) return std::move(s);
+    names += (names.empty() ? "" : ", ") + (s.variant.empty() ? std::string("(none)") : s.variant);
+  }
+  throw SceneError(path + ": no variant '" + variant + "' (the scene has: " + names + ")");
+}
+
 }  // namespace tactile

@@ -100,4 +100,8 @@ std::vector<Scene> load_scene(const std::string& path);
 // relative mesh paths.
 std::vector<Scene> parse_scene(const nlohmann::json& j, const std::string& path);
 
+// The variant named `variant` of the scenes loaded from `path`. Throws
+// SceneError naming the variants there are.
+Scene pick_variant(std::vector<Scene> scenes, const std::string& variant, const std::string& path);
+
 }  // namespace tactile
