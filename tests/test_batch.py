@@ -106,22 +106,25 @@ def test_a_sweep_on_the_cluster_gives_the_table_of_its_runs_one_by_one(
 
 def test_a_worker_killed_mid_sweep_is_replaced_and_the_table_is_complete(
         tmp_path: pathlib.Path, cluster: tuple[str, list[subprocess.Popen[bytes]]]) -> None:
-    sweep = write_sweep(tmp_path, duration=0.6)  # runs of a second or so: a kill lands in the middle
+    sweep = write_sweep(tmp_path, duration=1.0)  # runs of a second or two: a kill lands in the middle
     proc = subprocess.Popen([str(VENV_BIN / "tactile-batch"), "sweep", str(sweep), "--scheduler", cluster[0], "--table",
                              str(tmp_path / "dask.parquet"), "--quiet"], stderr=subprocess.PIPE, text=True)
-    nanny = psutil.Process(cluster[1][0].pid)
+    # Whichever worker is at work first (the scheduler may give one worker every task): a nanny's child busy
+    # stepping (its other children, such as multiprocessing's resource tracker, sit idle).
+    nannies = [psutil.Process(w.pid) for w in cluster[1]]
     deadline = time.monotonic() + 60
-    busy: list[psutil.Process] = []
-    while not busy:  # the worker process (the nanny has other children: multiprocessing's resource tracker)
-        assert time.monotonic() < deadline, "the worker never got to work"
-        busy = [c for c in nanny.children(recursive=True) if c.cpu_percent(interval=0.2) > 50]
-    victim = busy[0]
-    children_before = nanny.children(recursive=True)
+    busy: list[tuple[psutil.Process, psutil.Process]] = []
+    while not busy:
+        assert proc.poll() is None, "the sweep ended before a worker was seen at work: nothing was killed"
+        assert time.monotonic() < deadline, "no worker got to work"
+        busy = [(n, c) for n in nannies for c in n.children(recursive=True) if c.cpu_percent(interval=0.1) > 50]
+    nanny, victim = busy[0]
+    before = {c.pid for c in nanny.children(recursive=True)}
     victim.kill()  # the nanny starts another
+    assert proc.poll() is None, "the sweep ended before the kill landed"
     _, err = proc.communicate(timeout=600)
     assert proc.returncode == 0, err
     deadline = time.monotonic() + 60
-    before = {c.pid for c in children_before}
     while not [c for c in nanny.children(recursive=True) if c.pid not in before]:
         assert time.monotonic() < deadline, "the nanny did not start a new worker"
         time.sleep(0.2)
