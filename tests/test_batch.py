@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import pathlib
+import shutil
 import signal
 import subprocess
 import sys
@@ -205,3 +206,59 @@ def test_the_stability_suite_on_the_cluster_gives_tactile_stabilitys_outcomes(
     assert len(cli) >= 4 and all(o["pass"] and o["name"].startswith("slivers/") for o in cli)
     assert outcomes(tmp_path / "dask.json") == cli
     assert pd.read_parquet(tmp_path / "dask-runs.parquet")["worker"].nunique() == 2
+
+
+def test_a_folder_of_recordings_is_resimulated_on_the_cluster_as_one_by_one(
+        tmp_path: pathlib.Path, cluster: tuple[str, list[subprocess.Popen[bytes]]]) -> None:
+    """Recorded presses fed to the simulator again as sweep runs: on their own scene bit for bit; on the scene
+    with its material swept, the recorded stiffness gives the recording back and a stiffer one pushes back harder
+    on the same hand motion."""
+    from test_recording import record_a_press
+
+    recordings = tmp_path / "recordings"
+    recordings.mkdir()
+    for name in ("one.mcap", "two.mcap"):
+        record_a_press(recordings, name)
+    shutil.move(recordings / "scene.json", tmp_path / "scene.json")  # the recorded scene, beside the folder
+    e0 = json.loads((tmp_path / "scene.json").read_text())["material"]["E"]
+    (tmp_path / "own.json").write_text(json.dumps({"name": "own", "recordings": "recordings"}))
+    tactile_batch("sweep", str(tmp_path / "own.json"), "--scheduler", cluster[0], "--table", str(tmp_path / "own"))
+    own = pd.read_parquet(tmp_path / "own.parquet")
+    assert list(own["recording"]) == [str(recordings / "one.mcap"), str(recordings / "two.mcap")]
+    assert (own["status"] == "ok").all() and own["identical"].all(), own.to_dict("records")
+    assert (own["inputs"] > 500).all() and (own["states_matched"] == own["states"]).all()
+    assert (own["peak_force_N"] == own["recorded_peak_force_N"]).all() and (own["peak_force_N"] > 0.1).all()
+
+    (tmp_path / "stiff.json").write_text(json.dumps({"name": "stiff", "recordings": "recordings",
+                                                     "scene": "scene.json", "grid": {"material.E": [e0, 2 * e0]}}))
+    tactile_batch("sweep", str(tmp_path / "stiff.json"), "--scheduler", cluster[0], "--table",
+                  str(tmp_path / "dask"))
+    tactile_batch("sweep", str(tmp_path / "stiff.json"), "--serial", "--table", str(tmp_path / "serial"))
+    on_dask = stable(tmp_path / "dask.parquet")
+    pd.testing.assert_frame_equal(on_dask, stable(tmp_path / "serial.parquet"))
+    assert len(on_dask) == 4 and (on_dask["status"] == "ok").all() and on_dask["identical"].isna().all()
+    same, stiffer = on_dask[on_dask["param.material.E"] == e0], on_dask[on_dask["param.material.E"] == 2 * e0]
+    assert (same["max_position_difference_m"] == 0).all() and (same["max_force_difference_N"] == 0).all()
+    assert (same["peak_force_N"] == same["recorded_peak_force_N"]).all()
+    assert (stiffer["max_position_difference_m"] > 1e-5).all()
+    assert (stiffer["peak_force_N"] > 1.1 * stiffer["recorded_peak_force_N"]).all(), stiffer.to_dict("records")
+
+
+def test_recordings_that_cannot_be_resimulated_are_named(tmp_path: pathlib.Path) -> None:
+    (tmp_path / "empty").mkdir()
+    sweep = tmp_path / "resim.json"
+    sweep.write_text(json.dumps({"recordings": "empty"}))
+    with pytest.raises(batch.SweepError, match="recordings: 'empty' holds no recording"):
+        batch.load_sweep(sweep)
+    sweep.write_text(json.dumps({"recordings": "elsewhere"}))
+    with pytest.raises(batch.SweepError, match="recordings: .*elsewhere: no such folder or file"):
+        batch.load_sweep(sweep)
+    (tmp_path / "empty" / "not.mcap").write_text("{}")
+    sweep.write_text(json.dumps({"recordings": "empty", "grid": {"material.E": [1e5]}}))
+    with pytest.raises(batch.SweepError, match="scene: required.*take no overrides"):
+        batch.load_sweep(sweep)
+    # A file that is no recording: a row with its error, and the sweep goes on.
+    sweep.write_text(json.dumps({"recordings": "empty"}))
+    tactile_batch("sweep", str(sweep), "--serial", "--table", str(tmp_path / "t"))
+    (row,) = pd.read_parquet(tmp_path / "t.parquet").to_dict("records")
+    assert row["status"] == "error" and "not.mcap" in row["error"], row

@@ -160,6 +160,27 @@ def test_bad_calls_raise_and_the_simulation_goes_on() -> None:
     assert sim.advance(0.01)["fault"] is None
 
 
+def test_a_recording_resimulated_from_python_comes_back_bit_for_bit_and_a_bad_one_is_named(
+        tmp_path: pathlib.Path) -> None:
+    from test_recording import record_a_press
+
+    recording = record_a_press(tmp_path)
+    report = tactile.resimulate(str(recording))
+    assert report["states_matched"] == report["states"] > 10 and report["states_identical"] == report["states"]
+    assert report["haptic_identical"] == report["haptic_matched"] > 100 and report["inputs"] > 500
+    # The same inputs on the scene's JSON with a stiffer material, anchored at the scene's file.
+    scene = json.loads((tmp_path / "scene.json").read_text())
+    scene["material"]["E"] *= 2
+    stiffer = tactile.resimulate(str(recording), str(tmp_path / "scene.json"), json.dumps(scene))
+    assert stiffer["states_identical"] == 0 and stiffer["peak_force_N"] > 1.1 * stiffer["recorded_peak_force_N"]
+    (tmp_path / "not.mcap").write_text("{}")
+    with pytest.raises(tactile.RecordingError, match="not.mcap"):
+        tactile.resimulate(str(tmp_path / "not.mcap"))
+    with pytest.raises(tactile.SceneError, match="material.nu"):
+        scene["material"]["nu"] = 0.7
+        tactile.resimulate(str(recording), str(tmp_path / "scene.json"), json.dumps(scene))
+
+
 def test_a_proxy_moved_from_python_presses_and_the_force_points_out_of_the_body(tmp_path: pathlib.Path) -> None:
     sim = tactile.Simulation(tactile.load_scene(SCENES / "poke.json"))
     sim.move_proxy(0, (0, 0.047, 0), duration=0.2)  # 5 mm into the block's top at y = 0.04 (radius 12 mm)

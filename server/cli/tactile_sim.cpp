@@ -144,6 +144,7 @@ int resim(const Options& o) {
     std::cout << "  " << rep.states_matched << " states and " << rep.haptic_matched
               << " haptic frames at the recorded times; largest differences: position " << rep.max_position_difference
               << " m, force " << rep.max_force_difference << " N\n";
+    std::cout << "  peak proxy force " << rep.peak_force << " N (recorded: " << rep.recorded_peak_force << " N)\n";
   }
   return 0;
 }

@@ -29,7 +29,9 @@
 #include "app/headless.hpp"
 #include "app/vtu.hpp"
 #include "core/model.hpp"
+#include "live/resim.hpp"
 #include "mesh/mesh_error.hpp"
+#include "record/mcap.hpp"
 #include "scene/scene.hpp"
 #include "sim/simulation.hpp"
 #include "study/accuracy.hpp"
@@ -309,15 +311,21 @@ PYBIND11_MODULE(_core, m) {
 
   static py::exception<SceneError> scene_error(m, "SceneError", PyExc_ValueError);
   static py::exception<ModelError> model_error(m, "ModelError", PyExc_ValueError);
+  static py::exception<ResimError> recording_error(m, "RecordingError", PyExc_ValueError);
+  // PyErr_SetString rather than py::set_error (pybind11 2.12): the batch image builds against Debian 12's 2.10.
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const SceneError& e) {
-      py::set_error(scene_error, e.what());
+      PyErr_SetString(scene_error.ptr(), e.what());
     } catch (const MeshError& e) {
-      py::set_error(scene_error, e.what());
+      PyErr_SetString(scene_error.ptr(), e.what());
     } catch (const ModelError& e) {
-      py::set_error(model_error, e.what());
+      PyErr_SetString(model_error.ptr(), e.what());
+    } catch (const ResimError& e) {
+      PyErr_SetString(recording_error.ptr(), e.what());
+    } catch (const mcap::McapError& e) {
+      PyErr_SetString(recording_error.ptr(), e.what());
     }
   });
 
@@ -387,6 +395,46 @@ PYBIND11_MODULE(_core, m) {
       "Runs the scene headless as `tactile-sim run` does (the same code), writing OUT_DIR/<scene>/<variant or "
       "run>/ (summary.json, frames.csv, and VTU frames with vtu=True); returns that folder. A fault ends the run "
       "and is in summary.json; a spec the core refuses raises ModelError.");
+
+  m.def(
+      "resimulate",
+      [](const std::string& recording, const std::string& scene, const std::string& scene_text,
+         const std::string& variant, const std::string& out) {
+        ResimOptions o;
+        o.recording = recording;
+        o.scene = scene;
+        o.scene_text = scene_text;
+        o.variant = variant;
+        o.out = out;
+        ResimReport r;
+        {
+          py::gil_scoped_release release;
+          r = resimulate(o);
+        }
+        py::dict d;
+        d["scene_name"] = r.scene_name;
+        d["steps"] = r.steps;
+        d["inputs"] = r.inputs;
+        d["states"] = r.states;
+        d["states_matched"] = r.states_matched;
+        d["states_identical"] = r.states_identical;
+        d["haptic"] = r.haptic;
+        d["haptic_matched"] = r.haptic_matched;
+        d["haptic_identical"] = r.haptic_identical;
+        d["max_position_difference_m"] = r.max_position_difference;
+        d["max_force_difference_N"] = r.max_force_difference;
+        d["first_difference_time_s"] = r.first_difference_time;
+        d["peak_force_N"] = r.peak_force;
+        d["recorded_peak_force_N"] = r.recorded_peak_force;
+        d["note"] = r.note;
+        return d;
+      },
+      py::arg("recording"), py::arg("scene") = "", py::arg("scene_text") = "", py::arg("variant") = "",
+      py::arg("out") = "",
+      "Feeds a recording's device inputs to the simulator again, as `tactile-sim resim` does (the same code): on "
+      "the recorded scene, or on `scene` (a file; with `scene_text`, that JSON instead of the file's, `scene` "
+      "anchoring its paths). Returns the report as a dict; with `out`, writes the re-simulation as a recording. "
+      "Raises RecordingError naming what is wrong with the recording.");
 
   // The accuracy-cost study one run at a time (study/accuracy.hpp), for tactile-batch.
   m.def(

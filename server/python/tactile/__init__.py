@@ -18,13 +18,13 @@ import json
 import os
 from typing import Any
 
-from tactile._core import ModelError, Scene, SceneError, Simulation, run_headless
+from tactile._core import ModelError, RecordingError, Scene, SceneError, Simulation, resimulate, run_headless
 from tactile._core import load_scene as _load_scene
 from tactile._core import parse_scene as _parse_scene
 
 __version__ = "0.1.0"
-__all__ = ["ModelError", "Scene", "SceneError", "Simulation", "load_scene", "load_scenes", "parse_scene",
-           "run_headless"]
+__all__ = ["ModelError", "RecordingError", "Scene", "SceneError", "Simulation", "load_scene", "load_scenes",
+           "parse_scene", "resimulate", "run_headless"]
 
 
 def _one(scenes: list[Scene], where: str) -> Scene:

@@ -12,6 +12,12 @@ A sweep file (JSON) names a scene and the overrides to run it with:
       "runs": [{"integrator.safety": 0.5}, {}]        optional: ... times each of these
     }
 
+A sweep may instead re-simulate recorded sessions: `"recordings"` names a folder of MCAP files (or a glob, or
+a list of files), relative to the sweep file, each recorded from its scene's start (`tactile-server --record`).
+Every recording is then fed to the simulator again (`tactile.resimulate`, the same code as `tactile-sim resim`)
+once per combination of overrides, on the sweep's scene, or without a scene on the recording's own (which must
+come out bit for bit): the recorded device inputs pressed into a new material, mesh or time step.
+
 An override is a dotted path into the scene's JSON (`material.E`, `mesh.cells`, `integrator.safety` for the step
 as a fraction of the critical step, `effects.damping.alpha`, ...); the scene loader checks every run's scene as
 `tactile-sim` does, and a run it refuses is a row with its error, not a stopped sweep. Each run is
@@ -31,8 +37,11 @@ same way, each of their runs a task, into the files `tactile-accuracy` and `tact
 The table is written as Parquet and CSV side by side, after every few runs and at the end, in the sweep's
 order whatever order the runs finish in. Runs already in the table (same scene file contents, variant and
 overrides) are skipped on a rerun. By default the runs go to an embedded Dask LocalCluster of one single-threaded
-worker process per core; --scheduler sends them to a running `dask scheduler` with its `dask worker`s (every
-worker needs this package and the scene's files at the same paths).
+worker process per core; --scheduler (or DASK_SCHEDULER_ADDRESS) sends them to a running `dask scheduler` with
+its `dask worker`s. Every worker needs this package, of the client's Dask version, and the scenes' and
+recordings' files at the same paths: the batch image, its compose profile and its Kubernetes manifests give
+both (README.md, "From one machine to a cluster"). Where pandas has no Parquet engine (that image, on Debian's
+packages) the table is CSV alone.
 """
 
 from __future__ import annotations
@@ -53,7 +62,7 @@ from typing import Any
 
 import tactile
 
-SWEEP_FIELDS = {"name", "scene", "variant", "set", "grid", "runs", "description"}
+SWEEP_FIELDS = {"name", "scene", "variant", "set", "grid", "runs", "recordings", "description"}
 # Columns that depend on the machine and the moment, not on the run: left out when two tables are compared.
 VOLATILE = ("wall_s", "steps_per_s", "real_time_factor", "worker", "finished_at")
 
@@ -72,7 +81,8 @@ class Run:
     scene_path: str
     variant: str | None
     overrides: tuple[tuple[str, str], ...]  # (dotted path, JSON value), in the sweep's order
-    scene_json: str  # the scene with the overrides applied
+    scene_json: str  # the scene with the overrides applied ("" for a recording's own scene)
+    recording: str | None = None  # a recording to re-simulate on that scene, or None for a headless run
 
     def params(self) -> dict[str, Any]:
         return {f"param.{k}": _param_value(json.loads(v)) for k, v in self.overrides}
@@ -110,14 +120,21 @@ def load_sweep(path: str | os.PathLike[str]) -> list[Run]:
     for k in spec:
         if k not in SWEEP_FIELDS:
             raise SweepError(f"{where}: {k}: unknown field (allowed: {', '.join(sorted(SWEEP_FIELDS))})")
-    if not isinstance(spec.get("scene"), str):
-        raise SweepError(f"{where}: scene: required, the path of a scene file")
-    scene_path = (path.parent / spec["scene"]).resolve()
-    try:
-        scene_text = scene_path.read_text()
-        json.loads(scene_text)
-    except (OSError, json.JSONDecodeError) as e:
-        raise SweepError(f"{where}: scene: {e}") from e
+    recordings = find_recordings(path, spec["recordings"]) if "recordings" in spec else [None]
+    overridden = any(spec.get(k) for k in ("set", "grid")) or any(spec.get("runs", [{}]))
+    if spec.get("scene") is None and "recordings" in spec and not overridden:
+        scene_path, scene_text = None, ""  # each recording on its own scene
+    elif not isinstance(spec.get("scene"), str):
+        raise SweepError(f"{where}: scene: required, the path of a scene file"
+                         + (" (without one, recordings run on their own scenes, and take no overrides)"
+                            if "recordings" in spec else ""))
+    else:
+        scene_path = (path.parent / spec["scene"]).resolve()
+        try:
+            scene_text = scene_path.read_text()
+            json.loads(scene_text)
+        except (OSError, json.JSONDecodeError) as e:
+            raise SweepError(f"{where}: scene: {e}") from e
     name = spec.get("name", path.stem)
     variant = spec.get("variant")
     if variant is not None and not isinstance(variant, str):
@@ -134,19 +151,59 @@ def load_sweep(path: str | os.PathLike[str]) -> list[Run]:
     scene_hash = hashlib.sha256(scene_text.encode()).hexdigest()
     out: list[Run] = []
     keys = list(grid)
-    for combo, extra in itertools.product(itertools.product(*(grid[k] for k in keys)), runs):
-        overrides = list(common.items()) + list(zip(keys, combo, strict=True)) + list(extra.items())
-        scene = json.loads(scene_text)
-        for k, v in overrides:
-            apply_override(scene, k, v)
-        encoded = tuple((k, json.dumps(v, sort_keys=True)) for k, v in overrides)
-        key = json.dumps({"scene": scene_hash, "variant": variant, "overrides": encoded})
-        out.append(Run(len(out), hashlib.sha256(key.encode()).hexdigest()[:16], name, str(scene_path), variant,
-                       encoded, json.dumps(scene)))
+    for recording in recordings:
+        recording_hash = None if recording is None else file_hash(recording)
+        for combo, extra in itertools.product(itertools.product(*(grid[k] for k in keys)), runs):
+            overrides = list(common.items()) + list(zip(keys, combo, strict=True)) + list(extra.items())
+            scene_json = ""
+            if scene_path is not None:
+                scene = json.loads(scene_text)
+                for k, v in overrides:
+                    apply_override(scene, k, v)
+                scene_json = json.dumps(scene)
+            encoded = tuple((k, json.dumps(v, sort_keys=True)) for k, v in overrides)
+            key = json.dumps({"scene": scene_hash, "variant": variant, "overrides": encoded}
+                             | ({} if recording is None else {"recording": recording_hash}))
+            out.append(Run(len(out), hashlib.sha256(key.encode()).hexdigest()[:16], name,
+                           "" if scene_path is None else str(scene_path), variant, encoded, scene_json,
+                           None if recording is None else str(recording)))
     ids = [r.run_id for r in out]
     if len(set(ids)) != len(ids):
         raise SweepError(f"{where}: the same run is listed twice (grid and runs give equal overrides)")
     return out
+
+
+def find_recordings(sweep: pathlib.Path, given: Any) -> list[pathlib.Path]:
+    """The recordings a sweep names: a folder (its *.mcap), a glob, or a list of files; relative to the sweep."""
+    where = f"{sweep}: recordings"
+    if isinstance(given, str):
+        base = sweep.parent / given
+        if base.is_dir():
+            found = sorted(base.glob("*.mcap"))
+        elif any(c in given for c in "*?["):
+            found = sorted(p for p in sweep.parent.glob(given) if p.is_file())
+        elif base.is_file():
+            found = [base]
+        else:
+            raise SweepError(f"{where}: {base}: no such folder or file")
+    elif isinstance(given, list) and given and all(isinstance(g, str) for g in given):
+        found = [sweep.parent / g for g in given]
+        for f in found:
+            if not f.is_file():
+                raise SweepError(f"{where}: {f}: no such file")
+    else:
+        raise SweepError(f"{where}: must be a folder, a glob or a non-empty list of MCAP files")
+    if not found:
+        raise SweepError(f"{where}: {given!r} holds no recording (*.mcap)")
+    return [f.resolve() for f in found]
+
+
+def file_hash(path: pathlib.Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def build_id() -> str:
@@ -183,34 +240,79 @@ def summary_row(summary: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+def resim_row(report: dict[str, Any], own_scene: bool) -> dict[str, Any]:
+    """The figures of a re-simulation: what was stepped and applied, and how far it went from the recording."""
+    row = {k: report[k] for k in ("steps", "inputs", "states", "states_matched", "haptic", "haptic_matched",
+                                  "peak_force_N", "recorded_peak_force_N", "max_position_difference_m",
+                                  "max_force_difference_N", "first_difference_time_s")}
+    row["resim_scene"] = report["scene_name"]
+    row["note"] = report["note"] or None
+    # On its own scene a recording must come back bit for bit; on another the differences are the result.
+    identical = (report["states_matched"] > 0 and report["states_identical"] == report["states_matched"]
+                 and report["haptic_identical"] == report["haptic_matched"])
+    row["identical"] = identical if own_scene else None
+    row["status"] = "ok" if identical or not own_scene else "differs"
+    return row
+
+
 def execute(run: Run) -> dict[str, Any]:
     """One run, on whichever worker: its row of the table."""
     row: dict[str, Any] = {"index": run.index, "run_id": run.run_id, "sweep": run.sweep, "scene": run.scene_path,
                            "variant": run.variant, **run.params()}
+    if run.recording is not None:
+        row["recording"] = run.recording
+    t0 = time.perf_counter()
     try:
-        scene = tactile.parse_scene(run.scene_json, run.scene_path, run.variant)
-        with tempfile.TemporaryDirectory(prefix="tactile-batch-") as out:
-            folder = tactile.run_headless(scene, out)
-            row.update(summary_row(json.loads((pathlib.Path(folder) / "summary.json").read_text())))
+        if run.recording is not None:
+            report = tactile.resimulate(run.recording, run.scene_path, run.scene_json, run.variant or "")
+            row.update(resim_row(report, own_scene=not run.scene_path), wall_s=time.perf_counter() - t0)
+        else:
+            scene = tactile.parse_scene(run.scene_json, run.scene_path, run.variant)
+            with tempfile.TemporaryDirectory(prefix="tactile-batch-") as out:
+                folder = tactile.run_headless(scene, out)
+                row.update(summary_row(json.loads((pathlib.Path(folder) / "summary.json").read_text())))
         row["error"] = None
-    except (tactile.SceneError, tactile.ModelError) as e:
+    except (tactile.SceneError, tactile.ModelError, tactile.RecordingError) as e:
         row.update(status="error", error=str(e))
     row.update(build=build_id(), worker=f"{socket.gethostname()}:{os.getpid()}", finished_at=time.time())
     return row
 
 
+def parquet_engine() -> bool:
+    """Whether pandas can write Parquet here (pyarrow or fastparquet; Debian 12 packages neither)."""
+    for name in ("pyarrow", "fastparquet"):
+        try:
+            __import__(name)
+            return True
+        except ImportError:
+            pass
+    return False
+
+
 class Table:
-    """The sweep's results: Parquet and CSV side by side, rewritten whole (to a temporary file, then renamed)."""
+    """The sweep's results: Parquet and CSV side by side, rewritten whole (to a temporary file, then renamed). Where
+    pandas has no Parquet engine (the batch image, on Debian's packages), CSV alone, which a rerun reads back."""
 
     def __init__(self, path: pathlib.Path) -> None:
         self.parquet = path.with_suffix(".parquet")
         self.csv = path.with_suffix(".csv")
+        self.use_parquet = parquet_engine()
         self.rows: dict[str, dict[str, Any]] = {}
-        if self.parquet.exists():
-            import pandas as pd
+        import pandas as pd
 
-            for row in pd.read_parquet(self.parquet).to_dict("records"):
-                self.rows[str(row["run_id"])] = {str(k): v for k, v in row.items()}
+        if self.use_parquet and self.parquet.exists():
+            frame = pd.read_parquet(self.parquet)
+        elif self.csv.exists():
+            frame = pd.read_csv(self.csv, dtype={"run_id": str}, keep_default_na=False, na_values=[""])
+            frame = frame.astype(object).where(frame.notna(), None)
+        else:
+            return
+        for row in frame.to_dict("records"):
+            self.rows[str(row["run_id"])] = {str(k): v for k, v in row.items()}
+
+    @property
+    def written(self) -> str:
+        return f"{self.parquet} and {self.csv}" if self.use_parquet else f"{self.csv} (no Parquet engine here)"
 
     def add(self, row: dict[str, Any]) -> None:
         self.rows[row["run_id"]] = row
@@ -221,10 +323,11 @@ class Table:
         rank = {rid: i for i, rid in enumerate(order)}
         rows = sorted(self.rows.values(), key=lambda r: (rank.get(str(r["run_id"]), len(rank)), str(r["run_id"])))
         frame = pd.DataFrame(rows)
-        self.parquet.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.parquet.with_name(f".{self.parquet.name}.tmp")
-        frame.to_parquet(tmp, index=False)
-        os.replace(tmp, self.parquet)
+        self.csv.parent.mkdir(parents=True, exist_ok=True)
+        if self.use_parquet:
+            tmp = self.parquet.with_name(f".{self.parquet.name}.tmp")
+            frame.to_parquet(tmp, index=False)
+            os.replace(tmp, self.parquet)
         tmp = self.csv.with_name(f".{self.csv.name}.tmp")
         frame.to_csv(tmp, index=False)
         os.replace(tmp, self.csv)
@@ -268,7 +371,7 @@ def run_tasks(tasks: list[Task], mode: str, scheduler: str | None, workers: int)
 def fill(table: Table, tasks: list[Task], order: list[str], args: argparse.Namespace) -> None:
     """Runs the tasks the table lacks (all with --rerun), adding their rows as they come."""
     todo = [t for t in tasks if args.rerun or t.key not in table.rows]
-    print(f"tactile-batch: {len(tasks)} runs, {len(tasks) - len(todo)} already in {table.parquet}; "
+    print(f"tactile-batch: {len(tasks)} runs, {len(tasks) - len(todo)} already in {table.written}; "
           f"running {len(todo)}", file=sys.stderr)
     if not todo:
         return
@@ -302,7 +405,8 @@ def execute_accuracy(job: tuple[int, dict[str, Any], str]) -> dict[str, Any]:
 
 def add_where(ap: argparse.ArgumentParser) -> None:
     where = ap.add_mutually_exclusive_group()
-    where.add_argument("--scheduler", help="a running Dask scheduler, tcp://HOST:8786")
+    where.add_argument("--scheduler", help="a running Dask scheduler, tcp://HOST:8786 (default: Dask's "
+                       "scheduler-address setting, DASK_SCHEDULER_ADDRESS, when set)")
     where.add_argument("--workers", type=int, help="worker processes of the embedded LocalCluster (default: cores)")
     where.add_argument("--serial", action="store_true", help="run here one by one, without Dask")
     ap.add_argument("--rerun", action="store_true", help="run again the runs the table already holds")
@@ -320,7 +424,7 @@ def sweep_command(args: argparse.Namespace) -> int:
     fill(table, [Task(r.run_id, execute, r) for r in runs], order, args)
     table.write(order)
     failed = sum(1 for rid in order if table.rows[rid]["status"] != "ok")
-    print(f"tactile-batch: wrote {table.parquet} and {table.csv} ({len(table.rows)} rows, {failed} not ok)",
+    print(f"tactile-batch: wrote {table.written} ({len(table.rows)} rows, {failed} not ok)",
           file=sys.stderr)
     return 0
 
@@ -341,7 +445,7 @@ def accuracy_command(args: argparse.Namespace) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
     print(f"tactile-batch: wrote {args.out} ({len(cases)} runs; {time.perf_counter() - started:.1f} s) and "
-          f"{table.parquet}", file=sys.stderr)
+          f"{table.written}", file=sys.stderr)
     return 0
 
 
@@ -375,7 +479,7 @@ def stability_command(args: argparse.Namespace) -> int:
     for o in failed:
         print(f"FAIL {o['name']}: {o['outcome']} -- {o['why']}", file=sys.stderr)
     print(f"tactile-batch: {len(outcomes)} cases: {len(outcomes) - len(failed)} passed, {len(failed)} failed; "
-          f"wrote {out} and {table.parquet}", file=sys.stderr)
+          f"wrote {out} and {table.written}", file=sys.stderr)
     return 1 if failed else 0
 
 
@@ -408,6 +512,12 @@ def main(argv: list[str] | None = None) -> int:
                            "<name>-runs.parquet); cases in it are not run again")
     add_where(stability)
     args = ap.parse_args(argv)
+    if not (args.scheduler or args.workers or args.serial):
+        # Dask's own setting, as its Client reads it (DASK_SCHEDULER_ADDRESS, or a dask config file): the batch
+        # containers set it, so that a run inside one goes to the cluster's scheduler.
+        import dask.config
+
+        args.scheduler = dask.config.get("scheduler-address", None) or None
     commands = {"sweep": sweep_command, "accuracy": accuracy_command, "stability": stability_command}
     return commands[args.command](args)
 

@@ -71,6 +71,15 @@ bool same_haptic(const wire::HapticFrame& a, const wire::HapticFrame& b) {
          same_vector(a.device_input_sequences(), b.device_input_sequences());
 }
 
+// The largest proxy force of a haptic frame [N].
+double peak_proxy_force(const wire::HapticFrame& f) {
+  double peak = 0;
+  if (f.proxies())
+    for (const wire::ProxyHaptics* p : *f.proxies())
+      peak = std::max(peak, std::hypot(double(p->force().x()), double(p->force().y()), double(p->force().z())));
+  return peak;
+}
+
 // The recorded frame nearest in simulated time to t, within `within`, or nullptr.
 template <class Frame>
 const Frame* nearest(const std::map<double, const Frame*>& frames, double t, double within) {
@@ -130,6 +139,7 @@ ResimReport resimulate(const ResimOptions& o) {
       const wire::HapticFrame* f = wire::GetEnvelope(m.data.data())->message_as_HapticFrame();
       if (!f || f->scene_id() != scene_id) continue;
       haptics[f->sim_time()] = f;
+      report.recorded_peak_force = std::max(report.recorded_peak_force, peak_proxy_force(*f));
       last_frame = std::max(last_frame, f->sim_time());
     }
   }
@@ -182,17 +192,15 @@ ResimReport resimulate(const ResimOptions& o) {
       if (j.is_discarded()) throw ResimError("recording '" + o.recording + "': its scene file is not JSON");
       scenes = parse_scene(j, field(meta, "scene_path", o.recording));
       if (variant.empty() && meta.count("variant")) variant = meta.at("variant");
+    } else if (!o.scene_text.empty()) {
+      const auto j = nlohmann::json::parse(o.scene_text, nullptr, false);
+      if (j.is_discarded()) throw SceneError(o.scene + ": not JSON");
+      scenes = parse_scene(j, o.scene);
     } else {
       scenes = load_scene(o.scene);
     }
-    const Scene* chosen = &scenes.front();
-    if (!variant.empty()) {
-      chosen = nullptr;
-      for (const Scene& s : scenes)
-        if (s.variant == variant) chosen = &s;
-      if (!chosen) throw ResimError("scene has no variant '" + variant + "'");
-    }
-    scene = *chosen;
+    const std::string path = o.scene.empty() ? "recording '" + o.recording + "'" : o.scene;
+    scene = variant.empty() ? std::move(scenes.front()) : pick_variant(std::move(scenes), variant, path);
   }
   LiveOptions lo;
   lo.dt = number(meta, "dt", o.recording);
@@ -245,6 +253,7 @@ ResimReport resimulate(const ResimOptions& o) {
   live.loop().on_haptic([&](std::span<const uint8_t> bytes) {
     const wire::HapticFrame* f = wire::GetEnvelope(bytes.data())->message_as_HapticFrame();
     ++report.haptic;
+    report.peak_force = std::max(report.peak_force, peak_proxy_force(*f));
     if (out) out->post(Topic::Haptic, int64_t(std::llround(f->sim_time() * 1e9)), 0, bytes);
     const wire::HapticFrame* found = nearest(haptics, f->sim_time(), same_scene ? 0.0 : 0.5 * lo.dt.value());
     if (!found) return;

@@ -18,10 +18,12 @@ struct ResimError : std::runtime_error {
 };
 
 struct ResimOptions {
-  std::string recording;  // MCAP, recorded from its scene's start (tactile-server --record)
-  std::string scene;      // another scene file to run the inputs on ("": the recorded one)
-  std::string variant;    // of that scene ("": the recorded variant, or the first)
-  std::string out;        // the re-simulation as a recording ("" for none)
+  std::string recording;   // MCAP, recorded from its scene's start (tactile-server --record)
+  std::string scene;       // another scene file to run the inputs on ("": the recorded one)
+  std::string scene_text;  // that scene's JSON as given here (a sweep's overrides applied) instead of the
+                           // file's; `scene` still names it and anchors its relative mesh paths
+  std::string variant;     // of that scene ("": the recorded variant, or the first)
+  std::string out;         // the re-simulation as a recording ("" for none)
 };
 
 struct ResimReport {
@@ -34,6 +36,8 @@ struct ResimReport {
   double max_position_difference = 0;  // over matched states [m]
   double max_force_difference = 0;     // over matched haptic frames, any proxy [N]
   double first_difference_time = -1;   // simulated time of the first state that differs [s], -1 if none
+  double peak_force = 0;               // largest proxy force of the re-simulation's haptic frames [N]
+  double recorded_peak_force = 0;      // the same over the recording's haptic frames [N]
   std::string note;                    // what was left out (later scenes of the recording...)
 };
 
