@@ -18,6 +18,13 @@ using Vec3 = glm::dvec3;
 using Tet = std::array<int32_t, 4>;
 using Tri = std::array<int32_t, 3>;
 
+// A triangle surface: what a surface file holds, what TetGen meshes, what an
+// embedded surface shows (core/embedding.hpp).
+struct SurfaceMesh {
+  std::vector<Vec3> vertices;  // positions [m] (n_vertices)
+  std::vector<Tri> triangles;  // vertex ids, any consistent or inconsistent winding (n_triangles x 3)
+};
+
 struct TetMesh {
   std::vector<Vec3> X;          // rest positions [m] (n_nodes)
   std::vector<Tet> tets;        // node ids, positively oriented (n_tets x 4)

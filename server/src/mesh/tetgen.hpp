@@ -10,11 +10,6 @@
 
 namespace tactile {
 
-struct SurfaceMesh {
-  std::vector<Vec3> vertices;  // positions [m] (n_vertices)
-  std::vector<Tri> triangles;  // vertex ids, any consistent or inconsistent winding (n_triangles x 3)
-};
-
 struct TetgenOptions {
   double max_radius_edge_ratio = 1.5;  // TetGen -q: circumradius / shortest edge bound; 0 = no quality refinement
   double min_dihedral_deg = 0;         // TetGen -q ratio/angle form when > 0 [deg]

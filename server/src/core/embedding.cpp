@@ -1,0 +1,250 @@
+#include "core/embedding.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <map>
+#include <string>
+#include <utility>
+
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+
+namespace tactile {
+namespace {
+
+// Tets by the cells of a uniform grid their bounding boxes overlap (CSR).
+struct TetGrid {
+  Vec3 lo{0.0};
+  double h = 1;
+  std::array<int32_t, 3> n{1, 1, 1};
+  std::vector<int32_t> start, items;
+
+  int32_t clamp_cell(double v, int d) const {
+    return std::clamp(static_cast<int32_t>(std::floor((v - lo[d]) / h)), 0, n[size_t(d)] - 1);
+  }
+  int32_t index(int32_t i, int32_t j, int32_t k) const { return (k * n[1] + j) * n[0] + i; }
+};
+
+TetGrid build_grid(const TetMesh& mesh) {
+  TetGrid g;
+  const Aabb box = compute_aabb(mesh.X);
+  const Vec3 size = box.size();
+  const double volume = std::max(size.x * size.y * size.z, 1e-30);
+  // About two tets per cell along each axis: few candidates per query, few cells per tet.
+  g.h = std::max(1.5 * std::cbrt(volume / std::max(mesh.n_tets(), 1)), 1e-9 * glm::length(size) + 1e-12);
+  for (int d = 0; d < 3; ++d) g.n[size_t(d)] = std::clamp(static_cast<int32_t>(std::ceil(size[d] / g.h)), 1, 256);
+  g.lo = box.lo;
+  const size_t cells = size_t(g.n[0]) * size_t(g.n[1]) * size_t(g.n[2]);
+  std::vector<std::array<int32_t, 6>> range(mesh.tets.size());
+  std::vector<int32_t> count(cells + 1, 0);
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    Vec3 lo = mesh.X[size_t(mesh.tets[e][0])], hi = lo;
+    for (int32_t v : mesh.tets[e]) {
+      lo = glm::min(lo, mesh.X[size_t(v)]);
+      hi = glm::max(hi, mesh.X[size_t(v)]);
+    }
+    auto& r = range[e];
+    for (int d = 0; d < 3; ++d) {
+      r[size_t(d)] = g.clamp_cell(lo[d], d);
+      r[size_t(d) + 3] = g.clamp_cell(hi[d], d);
+    }
+    for (int32_t k = r[2]; k <= r[5]; ++k)
+      for (int32_t j = r[1]; j <= r[4]; ++j)
+        for (int32_t i = r[0]; i <= r[3]; ++i) ++count[size_t(g.index(i, j, k)) + 1];
+  }
+  for (size_t c = 0; c < cells; ++c) count[c + 1] += count[c];
+  g.start = count;
+  g.items.resize(size_t(count[cells]));
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    const auto& r = range[e];
+    for (int32_t k = r[2]; k <= r[5]; ++k)
+      for (int32_t j = r[1]; j <= r[4]; ++j)
+        for (int32_t i = r[0]; i <= r[3]; ++i) g.items[size_t(count[size_t(g.index(i, j, k))]++)] = int32_t(e);
+  }
+  return g;
+}
+
+// Barycentric coordinates of p in tet e (rest positions).
+std::array<double, 4> barycentric(const TetMesh& mesh, const std::vector<glm::dmat3>& inverse, int32_t e,
+                                  const Vec3& p) {
+  const Vec3 l = inverse[size_t(e)] * (p - mesh.X[size_t(mesh.tets[size_t(e)][0])]);
+  return {1.0 - l.x - l.y - l.z, l.x, l.y, l.z};
+}
+
+// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
+Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
+  if (d1 <= 0 && d2 <= 0) return a;
+  const Vec3 bp = p - b;
+  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
+  if (d3 >= 0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
+  const Vec3 cp = p - c;
+  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
+  if (d6 >= 0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  const double denom = 1.0 / (va + vb + vc);
+  return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+// Distance from p to tet e (0 inside), given p's barycentric coordinates there.
+double distance_to_tet(const TetMesh& mesh, int32_t e, const Vec3& p, const std::array<double, 4>& w) {
+  if (*std::min_element(w.begin(), w.end()) >= 0) return 0;
+  const Tet& t = mesh.tets[size_t(e)];
+  static constexpr int kFaces[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
+  double best = std::numeric_limits<double>::infinity();
+  for (const auto& f : kFaces) {
+    const Vec3 q = closest_on_triangle(p, mesh.X[size_t(t[size_t(f[0])])], mesh.X[size_t(t[size_t(f[1])])],
+                                       mesh.X[size_t(t[size_t(f[2])])]);
+    best = std::min(best, glm::length(p - q));
+  }
+  return best;
+}
+
+std::string format_point(const Vec3& p) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "(%.6g, %.6g, %.6g)", p.x, p.y, p.z);
+  return buf;
+}
+
+}  // namespace
+
+int32_t orient_surface(SurfaceMesh& s) {
+  const size_t nt = s.triangles.size();
+  // Each undirected edge's triangles, with the direction each runs it in.
+  std::map<std::pair<int32_t, int32_t>, std::vector<std::pair<int32_t, bool>>> edges;
+  for (size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const int32_t a = s.triangles[t][size_t(k)], b = s.triangles[t][size_t((k + 1) % 3)];
+      edges[{std::min(a, b), std::max(a, b)}].emplace_back(int32_t(t), a < b);
+    }
+  std::vector<int8_t> flipped(nt, -1);  // -1: not reached yet
+  int32_t flips = 0;
+  std::vector<int32_t> queue, component;
+  for (size_t seed = 0; seed < nt; ++seed) {
+    if (flipped[seed] >= 0) continue;
+    flipped[seed] = 0;
+    queue.assign(1, int32_t(seed));
+    component.clear();
+    bool closed = true;
+    while (!queue.empty()) {
+      const int32_t t = queue.back();
+      queue.pop_back();
+      component.push_back(t);
+      for (int k = 0; k < 3; ++k) {
+        const int32_t a = s.triangles[size_t(t)][size_t(k)], b = s.triangles[size_t(t)][size_t((k + 1) % 3)];
+        const auto& shared = edges[{std::min(a, b), std::max(a, b)}];
+        if (shared.size() != 2) closed = false;
+        // This triangle runs the edge a->b once its flip is applied; a consistent neighbour runs it b->a.
+        const bool forward = (a < b) != (flipped[size_t(t)] == 1);
+        for (const auto& [u, u_forward] : shared) {
+          if (u == t || flipped[size_t(u)] >= 0) continue;
+          flipped[size_t(u)] = (u_forward == forward) ? 1 : 0;
+          queue.push_back(u);
+        }
+      }
+    }
+    for (int32_t t : component)
+      if (flipped[size_t(t)] == 1) std::swap(s.triangles[size_t(t)][1], s.triangles[size_t(t)][2]);
+    if (!closed) continue;
+    double volume = 0;  // six times the signed volume enclosed
+    for (int32_t t : component) {
+      const Tri& f = s.triangles[size_t(t)];
+      volume += glm::dot(s.vertices[size_t(f[0])], glm::cross(s.vertices[size_t(f[1])], s.vertices[size_t(f[2])]));
+    }
+    if (volume < 0)
+      for (int32_t t : component) {
+        std::swap(s.triangles[size_t(t)][1], s.triangles[size_t(t)][2]);
+        flipped[size_t(t)] = int8_t(1 - flipped[size_t(t)]);
+      }
+  }
+  for (int8_t f : flipped) flips += f == 1;
+  return flips;
+}
+
+EmbeddedSurface embed_surface(const TetMesh& mesh, SurfaceMesh surface, double max_outside) {
+  if (surface.triangles.empty()) throw EmbeddingError("the surface has no triangles");
+  if (mesh.tets.empty()) throw EmbeddingError("the body has no tets to carry the surface");
+  const int32_t nv = static_cast<int32_t>(surface.vertices.size());
+  for (size_t t = 0; t < surface.triangles.size(); ++t)
+    for (int32_t v : surface.triangles[t])
+      if (v < 0 || v >= nv)
+        throw EmbeddingError("triangle " + std::to_string(t) + " names vertex " + std::to_string(v) + " of " +
+                             std::to_string(nv));
+  orient_surface(surface);
+
+  std::vector<glm::dmat3> inverse(mesh.tets.size());
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    const Tet& t = mesh.tets[e];
+    const Vec3& x0 = mesh.X[size_t(t[0])];
+    inverse[e] =
+        glm::inverse(glm::dmat3(mesh.X[size_t(t[1])] - x0, mesh.X[size_t(t[2])] - x0, mesh.X[size_t(t[3])] - x0));
+  }
+  const TetGrid g = build_grid(mesh);
+
+  EmbeddedSurface out;
+  out.nodes.resize(size_t(nv));
+  out.weights.resize(size_t(nv));
+  out.tet.resize(size_t(nv));
+  out.outside.resize(size_t(nv));
+  const int32_t rings = static_cast<int32_t>(std::ceil(max_outside / g.h)) + 1;
+  for (int32_t v = 0; v < nv; ++v) {
+    const Vec3& p = surface.vertices[size_t(v)];
+    const std::array<int32_t, 3> c{g.clamp_cell(p.x, 0), g.clamp_cell(p.y, 1), g.clamp_cell(p.z, 2)};
+    int32_t best = -1;
+    double best_distance = std::numeric_limits<double>::infinity(), best_min = -std::numeric_limits<double>::infinity();
+    // Rings of cells around p's, nearest first; a tet holding p ends the search. A ring r cells out is at least
+    // (r - 1) h away from p (p may sit anywhere in its cell, or outside the grid).
+    for (int32_t r = 0; r <= rings; ++r) {
+      if (best >= 0 && (best_distance == 0 || (r - 1) * g.h > best_distance)) break;
+      for (int32_t k = c[2] - r; k <= c[2] + r; ++k)
+        for (int32_t j = c[1] - r; j <= c[1] + r; ++j)
+          for (int32_t i = c[0] - r; i <= c[0] + r; ++i) {
+            if (std::max({std::abs(i - c[0]), std::abs(j - c[1]), std::abs(k - c[2])}) != r) continue;
+            if (i < 0 || j < 0 || k < 0 || i >= g.n[0] || j >= g.n[1] || k >= g.n[2]) continue;
+            const int32_t cell = g.index(i, j, k);
+            for (int32_t q = g.start[size_t(cell)]; q < g.start[size_t(cell) + 1]; ++q) {
+              const int32_t e = g.items[size_t(q)];
+              const std::array<double, 4> w = barycentric(mesh, inverse, e, p);
+              const double lowest = *std::min_element(w.begin(), w.end());
+              // Inside (to round-off): the tet p is deepest in. Outside: the nearest.
+              const double d = lowest >= -1e-12 ? 0.0 : distance_to_tet(mesh, e, p, w);
+              if (d < best_distance || (d == 0 && best_distance == 0 && lowest > best_min)) {
+                best = e;
+                best_distance = d;
+                best_min = lowest;
+              }
+            }
+          }
+    }
+    if (best < 0 || best_distance > max_outside) {
+      std::string how = best < 0 ? "no tet within " + std::to_string(max_outside) + " m"
+                                 : std::to_string(best_distance) + " m from the nearest tet";
+      throw EmbeddingError("vertex " + std::to_string(v) + " at " + format_point(p) + " is outside the body: " + how +
+                           " (max_outside " + std::to_string(max_outside) + " m)");
+    }
+    out.tet[size_t(v)] = best;
+    out.nodes[size_t(v)] = mesh.tets[size_t(best)];
+    out.weights[size_t(v)] = barycentric(mesh, inverse, best, p);
+    out.outside[size_t(v)] = best_distance;
+  }
+  out.rest = std::move(surface);
+  return out;
+}
+
+void compute_embedded_positions(const EmbeddedSurface& e, std::span<const Vec3> x, std::span<Vec3> out) {
+  for (size_t v = 0; v < e.nodes.size(); ++v) {
+    const Tet& n = e.nodes[v];
+    const auto& w = e.weights[v];
+    out[v] = w[0] * x[size_t(n[0])] + w[1] * x[size_t(n[1])] + w[2] * x[size_t(n[2])] + w[3] * x[size_t(n[3])];
+  }
+}
+
+}  // namespace tactile

@@ -1,0 +1,168 @@
+// The embedded surface (core/embedding.hpp): bound once at rest, it gives
+// every rest vertex back, moves rigidly with a rigid body and affinely with an
+// affine one, binds a vertex just outside to the nearest tet, and refuses one
+// too far out by name; orient_surface winds closed surfaces outward.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <random>
+#include <utility>
+#include <vector>
+
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+
+#include "core/embedding.hpp"
+#include "fem_fixtures.hpp"
+
+namespace tactile {
+namespace {
+
+// A closed UV sphere of `around` x `rings` quads split in two (poles fanned), wound outward.
+SurfaceMesh make_uv_sphere(const Vec3& centre, double radius, int around, int rings) {
+  SurfaceMesh s;
+  s.vertices.push_back(centre + Vec3(0, radius, 0));
+  for (int r = 1; r < rings; ++r) {
+    const double theta = M_PI * r / rings;
+    for (int a = 0; a < around; ++a) {
+      const double phi = 2 * M_PI * a / around;
+      s.vertices.push_back(
+          centre + radius * Vec3(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi)));
+    }
+  }
+  s.vertices.push_back(centre - Vec3(0, radius, 0));
+  const int south = int(s.vertices.size()) - 1;
+  auto ring = [&](int r, int a) { return 1 + (r - 1) * around + (a % around); };
+  for (int a = 0; a < around; ++a) s.triangles.push_back({0, ring(1, a + 1), ring(1, a)});
+  for (int r = 1; r + 1 < rings; ++r)
+    for (int a = 0; a < around; ++a) {
+      s.triangles.push_back({ring(r, a), ring(r, a + 1), ring(r + 1, a + 1)});
+      s.triangles.push_back({ring(r, a), ring(r + 1, a + 1), ring(r + 1, a)});
+    }
+  for (int a = 0; a < around; ++a) s.triangles.push_back({south, ring(rings - 1, a), ring(rings - 1, a + 1)});
+  return s;
+}
+
+double signed_volume(const SurfaceMesh& s) {
+  double v = 0;
+  for (const Tri& t : s.triangles)
+    v += glm::dot(s.vertices[size_t(t[0])], glm::cross(s.vertices[size_t(t[1])], s.vertices[size_t(t[2])]));
+  return v / 6;
+}
+
+// The body: a 1 x 0.4 x 0.4 m box of 6 x 3 x 3 cells. The surface: a sphere inside it, and one poking 2 mm out
+// of its top face.
+struct Embedded : ::testing::Test {
+  TetMesh mesh = make_box(Vec3(0, 0, 0), Vec3(1, 0.4, 0.4), {6, 3, 3});
+  SurfaceMesh inside = make_uv_sphere(Vec3(0.5, 0.2, 0.2), 0.15, 24, 12);
+  SurfaceMesh poking = make_uv_sphere(Vec3(0.3, 0.3, 0.2), 0.102, 16, 8);  // top at y = 0.402
+};
+
+TEST_F(Embedded, WeightsGiveEveryRestVertexBack) {
+  for (const SurfaceMesh* s : {&inside, &poking}) {
+    const EmbeddedSurface e = embed_surface(mesh, *s, 0.005);
+    std::vector<Vec3> x(s->vertices.size());
+    compute_embedded_positions(e, mesh.X, x);
+    for (size_t v = 0; v < x.size(); ++v) {
+      EXPECT_LT(glm::length(x[v] - s->vertices[v]), 1e-14) << v;
+      const auto& w = e.weights[v];
+      EXPECT_NEAR(w[0] + w[1] + w[2] + w[3], 1.0, 1e-13) << v;
+      EXPECT_EQ(e.nodes[v], mesh.tets[size_t(e.tet[v])]) << v;
+      if (e.outside[v] == 0) {
+        for (double wi : w) EXPECT_GE(wi, -1e-12) << v;
+      }
+    }
+  }
+}
+
+TEST_F(Embedded, ARigidMotionOfTheBodyMovesTheSurfaceRigidly) {
+  const EmbeddedSurface e = embed_surface(mesh, poking, 0.005);
+  const glm::dmat3 R = test::make_rotation(Vec3(1, 2, -0.5), 0.9);
+  const Vec3 shift(0.3, -1.2, 2.0);
+  std::vector<Vec3> x(mesh.X.size());
+  for (size_t i = 0; i < x.size(); ++i) x[i] = R * mesh.X[i] + shift;
+  std::vector<Vec3> y(poking.vertices.size());
+  compute_embedded_positions(e, x, y);
+  double outside = 0;
+  for (size_t v = 0; v < y.size(); ++v) {
+    EXPECT_LT(glm::length(y[v] - (R * poking.vertices[v] + shift)), 1e-13) << v;
+    outside = std::max(outside, e.outside[v]);
+  }
+  EXPECT_GT(outside, 0.001);  // the vertices poking out went along too
+}
+
+TEST_F(Embedded, AnAffineStretchIsReproducedAndAPerTetDeformationIsFollowed) {
+  const EmbeddedSurface e = embed_surface(mesh, inside, 0.005);
+  const glm::dmat3 A(1.3, 0.1, 0.0, 0.2, 0.8, 0.05, 0.0, -0.1, 1.1);
+  std::vector<Vec3> x(mesh.X.size());
+  for (size_t i = 0; i < x.size(); ++i) x[i] = A * mesh.X[i];
+  std::vector<Vec3> y(inside.vertices.size());
+  compute_embedded_positions(e, x, y);
+  for (size_t v = 0; v < y.size(); ++v) EXPECT_LT(glm::length(y[v] - A * inside.vertices[v]), 1e-13) << v;
+  // One node moved: the vertices bound to its tets move, by its weight times its motion; no other does.
+  const int32_t moved = e.nodes[0][1];
+  x = mesh.X;
+  x[size_t(moved)] += Vec3(0, 0.01, 0);
+  compute_embedded_positions(e, x, y);
+  int followed = 0;
+  for (size_t v = 0; v < y.size(); ++v) {
+    double w = 0;
+    for (int k = 0; k < 4; ++k)
+      if (e.nodes[v][size_t(k)] == moved) w = e.weights[v][size_t(k)];
+    EXPECT_NEAR(y[v].y - inside.vertices[v].y, 0.01 * w, 1e-15) << v;
+    followed += w != 0;
+  }
+  EXPECT_GT(followed, 0);
+}
+
+TEST_F(Embedded, AVertexJustOutsideBindsToTheNearestTetAndOneTooFarIsNamed) {
+  const EmbeddedSurface e = embed_surface(mesh, poking, 0.005);
+  // The sphere's north pole is 2 mm above the top face y = 0.4.
+  EXPECT_NEAR(e.outside[0], 0.002, 1e-12);
+  EXPECT_GT(mesh.X[size_t(e.nodes[0][0])].y + mesh.X[size_t(e.nodes[0][1])].y + mesh.X[size_t(e.nodes[0][2])].y +
+                mesh.X[size_t(e.nodes[0][3])].y,
+            0.4);  // a tet at the top
+  try {
+    embed_surface(mesh, poking, 0.001);
+    FAIL() << "a vertex 2 mm out passed a 1 mm bound";
+  } catch (const EmbeddingError& err) {
+    EXPECT_NE(std::string(err.what()).find("vertex 0 at (0.3, 0.402, 0.2) is outside the body: 0.002"),
+              std::string::npos)
+        << err.what();
+  }
+  SurfaceMesh far = poking;
+  far.vertices[3].x += 5;
+  EXPECT_THROW(embed_surface(mesh, far, 0.005), EmbeddingError);
+  SurfaceMesh bad = inside;
+  bad.triangles[4][1] = int32_t(bad.vertices.size());
+  EXPECT_THROW(embed_surface(mesh, bad, 0.005), EmbeddingError);
+}
+
+TEST(OrientSurface, WindsAClosedSurfaceConsistentlyAndOutward) {
+  SurfaceMesh s = make_uv_sphere(Vec3(1, 2, 3), 0.5, 20, 10);
+  const double volume = signed_volume(s);
+  ASSERT_GT(volume, 0);
+  // Every triangle inverted, then a random third of them back: no consistent winding left.
+  std::mt19937 rng(7);
+  int changed = 0;
+  for (Tri& t : s.triangles) {
+    std::swap(t[1], t[2]);
+    if (rng() % 3 == 0)
+      std::swap(t[1], t[2]);
+    else
+      ++changed;
+  }
+  EXPECT_EQ(orient_surface(s), changed);
+  EXPECT_NEAR(signed_volume(s), volume, 1e-12);
+  std::map<std::pair<int32_t, int32_t>, int> runs;
+  for (const Tri& t : s.triangles)
+    for (int k = 0; k < 3; ++k) ++runs[{t[size_t(k)], t[size_t((k + 1) % 3)]}];
+  for (const auto& [edge, n] : runs) {
+    EXPECT_EQ(n, 1);
+    EXPECT_EQ(runs.count({edge.second, edge.first}), 1u);  // each edge run once each way
+  }
+}
+
+}  // namespace
+}  // namespace tactile
