@@ -5,11 +5,13 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "core/coupling.hpp"
+#include "core/embedding.hpp"
 #include "core/material.hpp"
 #include "core/mesh.hpp"
 #include "core/proxy.hpp"
@@ -121,6 +123,9 @@ struct IntegratorSpec {
 
 struct ModelSpec {
   TetMesh mesh;
+  // A fine surface carried by the mesh (core/embedding.hpp), shown and
+  // touched instead of the mesh's own boundary; null when the scene has none.
+  std::shared_ptr<const EmbeddedSurface> surface;
   std::vector<MaterialSpec> materials;  // indexed by mesh region id
   std::vector<EssentialBc> essential;
   std::vector<NaturalLoad> loads;

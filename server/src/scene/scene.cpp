@@ -8,6 +8,7 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <memory>
 #include <numbers>
 #include <sstream>
 
@@ -41,6 +42,7 @@ struct Context {
   Origin origin;
   std::string scene_dir;
   std::map<std::string, SceneMesh>* mesh_cache;  // by the mesh object's JSON text: variants share meshes
+  std::map<std::string, std::shared_ptr<const EmbeddedSurface>>* surface_cache;  // by mesh and surface JSON
 };
 
 MaterialSpec read_material(const Json& j, const std::string& path, const Origin& o) {
@@ -565,8 +567,8 @@ bool same_mesh_kind(const Json& base, const Json& patch) {
 Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   const Origin& o = ctx.origin;
   const Fields root(j, "", o,
-                    {"$schema", "name", "description", "mesh", "material", "materials", "regions", "boundary", "loads",
-                     "proxies", "hands", "effects", "integrator", "run", "variants"});
+                    {"$schema", "name", "description", "mesh", "surface", "material", "materials", "regions",
+                     "boundary", "loads", "proxies", "hands", "effects", "integrator", "run", "variants"});
   Scene scene;
   scene.path = path;
   if (const Json* s = root.find("$schema")) scene_json::read_string(*s, "$schema", o);
@@ -588,6 +590,14 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   scene.spec.mesh = cached->second.mesh;
   scene.quality = cached->second.quality;
   TetMesh& mesh = scene.spec.mesh;
+  if (const Json* s = root.find("surface")) {
+    // Bound once per mesh and surface: variants that share both share the binding.
+    const std::string key = mesh_key + "\n" + s->dump();
+    auto bound = ctx.surface_cache->find(key);
+    if (bound == ctx.surface_cache->end())
+      bound = ctx.surface_cache->emplace(key, build_embedded_surface(*s, "surface", o, ctx.scene_dir, mesh)).first;
+    scene.spec.surface = bound->second;
+  }
 
   scene.spec.materials = read_materials(root, o);
   if (const Json* r = root.find("regions")) apply_regions(*r, o, scene.spec.materials.size(), mesh);
@@ -662,7 +672,8 @@ ProxyMotion PoseScript::motion(double t0, double t1) const {
 
 std::vector<Scene> parse_scene(const Json& j, const std::string& path) {
   std::map<std::string, SceneMesh> meshes;
-  Context ctx{Origin{path, ""}, fs::path(path).parent_path().string(), &meshes};
+  std::map<std::string, std::shared_ptr<const EmbeddedSurface>> surfaces;
+  Context ctx{Origin{path, ""}, fs::path(path).parent_path().string(), &meshes, &surfaces};
   if (ctx.scene_dir.empty()) ctx.scene_dir = ".";
   if (!j.is_object()) ctx.origin.fail("", "a scene must be a JSON object, got " + scene_json::describe(j));
   const auto variants = j.find("variants");

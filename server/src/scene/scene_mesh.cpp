@@ -223,8 +223,8 @@ TetMesh build_from_file(const Fields& f, const std::string& scene_dir) {
   }
 }
 
-// scale (a number or one per axis, > 0) then translate, applied to the rest positions.
-void apply_transform(const Fields& f, TetMesh& mesh) {
+// scale (a number or one per axis, > 0) then translate, applied to positions.
+void apply_transform(const Fields& f, std::vector<Vec3>& X) {
   Vec3 scale(1.0), shift(0.0);
   if (const Json* s = f.find("scale")) {
     if (s->is_array()) {
@@ -236,12 +236,42 @@ void apply_transform(const Fields& f, TetMesh& mesh) {
     }
   }
   if (f.has("translate")) shift = f.vec3("translate");
-  for (Vec3& x : mesh.X) x = x * scale + shift;
+  for (Vec3& x : X) x = x * scale + shift;
 }
 
 }  // namespace
 
 void set_meshing_watch(MeshingWatch* watch) { meshing_watch.store(watch); }
+
+std::shared_ptr<const EmbeddedSurface> build_embedded_surface(const Json& j, const std::string& path,
+                                                              const Origin& origin, const std::string& scene_dir,
+                                                              const TetMesh& mesh) {
+  const Fields f(j, path, origin, {"file", "scale", "translate", "max_outside"});
+  const std::string given = f.string("file");
+  const std::string where = f.path("file");
+  if (given.empty()) origin.fail(where, "must name a surface file (.obj, .stl, .ply, .off)");
+  fs::path p(given);
+  if (p.is_relative()) p = fs::path(scene_dir) / p;
+  const std::string ext = lower(p.extension().string());
+  if (ext != ".obj" && ext != ".stl" && ext != ".off" && ext != ".ply")
+    origin.fail(where, "unknown surface file extension '" + p.extension().string() + "' (.obj, .stl, .ply, .off)");
+  std::error_code ec;
+  if (!fs::is_regular_file(p, ec))
+    origin.fail(where, "no such file: " + p.string() + " (paths are relative to the scene file)");
+  SurfaceMesh surface;
+  try {
+    surface = read_surface(p.string());
+  } catch (const MeshError& e) {
+    origin.fail(where, e.what());
+  }
+  apply_transform(f, surface.vertices);
+  const double max_outside = f.non_negative_or("max_outside", 0.02 * glm::length(compute_aabb(mesh.X).size()));
+  try {
+    return std::make_shared<const EmbeddedSurface>(embed_surface(mesh, std::move(surface), max_outside));
+  } catch (const EmbeddingError& e) {
+    origin.fail(path, std::string(e.what()) + (f.has("max_outside") ? "" : " (the default: 2 % of the body's size)"));
+  }
+}
 
 SceneMesh build_scene_mesh(const Json& j, const std::string& path, const Origin& origin, const std::string& scene_dir) {
   if (!j.is_object()) origin.fail(path, "must be an object, got " + scene_json::describe(j));
@@ -254,23 +284,23 @@ SceneMesh build_scene_mesh(const Json& j, const std::string& path, const Origin&
     if (file) {
       const Fields f(j, path, origin, {"file", "tetgen", "scale", "translate"});
       out.mesh = build_from_file(f, scene_dir);
-      apply_transform(f, out.mesh);
+      apply_transform(f, out.mesh.X);
     } else {
       const std::string kind = scene_json::read_choice(j.at("primitive"), scene_json::join(path, "primitive"), origin,
                                                        {"box", "cylinder", "sphere"});
       if (kind == "box") {
         const Fields f(j, path, origin, {"primitive", "lo", "hi", "cells", "split", "scale", "translate"});
         out.mesh = build_box(f);
-        apply_transform(f, out.mesh);
+        apply_transform(f, out.mesh.X);
       } else if (kind == "cylinder") {
         const Fields f(j, path, origin,
                        {"primitive", "radius", "height", "around", "layers", "rings", "scale", "translate"});
         out.mesh = build_cylinder(f);
-        apply_transform(f, out.mesh);
+        apply_transform(f, out.mesh.X);
       } else {
         const Fields f(j, path, origin, {"primitive", "centre", "radius", "resolution", "scale", "translate"});
         out.mesh = build_sphere(f);
-        apply_transform(f, out.mesh);
+        apply_transform(f, out.mesh.X);
       }
     }
   } catch (const MeshError& e) {

@@ -2,9 +2,11 @@
 // or a TetGen .node/.ele mesh; then the quality gate.
 #pragma once
 
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "core/embedding.hpp"
 #include "core/mesh.hpp"
 #include "mesh/quality.hpp"
 #include "scene/json_fields.hpp"
@@ -21,6 +23,16 @@ struct SceneMesh {
 // degenerate tets or unreferenced nodes, naming them. Throws SceneError.
 SceneMesh build_scene_mesh(const scene_json::Json& j, const std::string& path, const scene_json::Origin& origin,
                            const std::string& scene_dir);
+
+// The `surface` field of a scene: a fine triangle surface file (.obj, .stl,
+// .ply, .off; relative to `scene_dir`), scaled and translated as `mesh` is,
+// bound to `mesh` at rest (core/embedding.hpp). max_outside: how far outside
+// the body a vertex may be [m] (default 2 % of the body's bounding-box
+// diagonal). Throws SceneError naming the field: the file, or the vertex too
+// far out.
+std::shared_ptr<const EmbeddedSurface> build_embedded_surface(const scene_json::Json& j, const std::string& path,
+                                                              const scene_json::Origin& origin,
+                                                              const std::string& scene_dir, const TetMesh& mesh);
 
 // What watches long meshing: TetGen reports no progress of its own, so a
 // meshing expected to take a while is announced with the tets the size

@@ -154,3 +154,47 @@ TEST(SceneMesh, PrimitivesHaveTheirVolumes) {
 
 }  // namespace
 }  // namespace tactile
+
+namespace tactile {
+namespace {
+
+// The `surface` field: a fine surface file bound to the body, scaled and moved as the mesh is, its errors by field.
+TEST(SceneSurface, AFileIsBoundToTheBodyAndSharedByVariants) {
+  SceneDir dir;
+  // An octahedron in the unit box, wound inward (the loader winds it outward), poking 1 cm out of the top.
+  dir.write("gem.obj",
+            "v 0.5 1.01 0.5\nv 0.5 0.1 0.5\nv 0.1 0.5 0.5\nv 0.9 0.5 0.5\nv 0.5 0.5 0.1\nv 0.5 0.5 0.9\n"
+            "f 1 3 5\nf 1 5 4\nf 1 4 6\nf 1 6 3\nf 2 5 3\nf 2 4 5\nf 2 6 4\nf 2 3 6\n");
+  json j = scene_with_mesh(json{{"primitive", "box"}, {"lo", {0, 0, 0}}, {"hi", {2, 2, 2}}, {"cells", {4, 4, 4}}});
+  j["mesh"]["scale"] = 0.5;
+  j["surface"] = json{{"file", "gem.obj"}, {"max_outside", 0.02}};
+  j["variants"] = json::array({json{{"name", "soft"}}, json{{"name", "stiff"}, {"material", {{"E", 1e6}}}}});
+  const std::vector<Scene> scenes = load_scene(dir.write_json("s.json", j));
+  ASSERT_EQ(scenes.size(), 2u);
+  const auto& e = scenes[0].spec.surface;
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e.get(), scenes[1].spec.surface.get());  // bound once
+  EXPECT_EQ(e->n_vertices(), 6);
+  EXPECT_NEAR(e->outside[0], 0.01, 1e-7);  // (Assimp reads coordinates as float)
+  double volume = 0;
+  for (const Tri& t : e->rest.triangles)
+    volume += glm::dot(e->rest.vertices[size_t(t[0])],
+                       glm::cross(e->rest.vertices[size_t(t[1])], e->rest.vertices[size_t(t[2])])) /
+              6;
+  EXPECT_GT(volume, 0);  // wound outward
+  // Too far out for the bound, and for the default one (2 % of the 1.73 m diagonal is 3.5 cm: a 5 cm poke).
+  j["surface"]["max_outside"] = 0.005;
+  expect_scene_error(dir, "t.json", j, {"surface: vertex 0 at (0.5, 1.01, 0.5) is outside the body: 0.01"});
+  j["surface"].erase("max_outside");
+  j["surface"]["translate"] = {0, 0.04, 0};
+  expect_scene_error(dir, "t.json", j, {"surface: vertex 0", "(the default: 2 % of the body's size)"});
+  j["surface"] = json{{"file", "nothing.obj"}};
+  expect_scene_error(dir, "t.json", j, {"surface.file: no such file"});
+  j["surface"] = json{{"file", "gem.vtk"}};
+  expect_scene_error(dir, "t.json", j, {"surface.file: unknown surface file extension '.vtk'"});
+  j["surface"] = json{{"file", "gem.obj"}, {"shade", "smooth"}};
+  expect_scene_error(dir, "t.json", j, {"surface.shade: unknown field"});
+}
+
+}  // namespace
+}  // namespace tactile
