@@ -29,6 +29,29 @@ Surface extract_surface(const Simulation& sim) {
   s.triangles.reserve(3 * faces.size());
   for (const Tri& f : faces)
     for (int32_t i : f) s.triangles.push_back(uint32_t(vertex_of[size_t(i)]));
+  s.boundary = s.nodes.size();
+  if (const auto& e = sim.surface()) {
+    // The interior nodes the fine surface follows, in the mesh's order after the boundary's.
+    std::vector<int32_t> interior;
+    for (const Tet& t : e->nodes)
+      for (int32_t n : t)
+        if (vertex_of[size_t(n)] < 0) {
+          vertex_of[size_t(n)] = -2;
+          interior.push_back(n);
+        }
+    std::sort(interior.begin(), interior.end());
+    for (int32_t n : interior) {
+      vertex_of[size_t(n)] = int32_t(s.nodes.size());
+      s.nodes.push_back(uint32_t(n));
+    }
+    s.carriers.reserve(4 * e->nodes.size());
+    s.weights.reserve(4 * e->nodes.size());
+    for (size_t v = 0; v < e->nodes.size(); ++v)
+      for (int k = 0; k < 4; ++k) {
+        s.carriers.push_back(uint32_t(vertex_of[size_t(e->nodes[v][size_t(k)])]));
+        s.weights.push_back(float(e->weights[v][size_t(k)]));
+      }
+  }
   return s;
 }
 
@@ -125,10 +148,21 @@ std::span<const uint8_t> FrameEncoder::scene_description(std::span<const Paramet
     params.push_back(wire::CreateParameterDirect(b, p.name.c_str(), p.value, p.min, p.max, p.unit.c_str()));
   std::vector<fb::Offset<fb::String>> names;
   for (const std::string& s : scenes) names.push_back(b.CreateString(s));
-  return seal(
-      b, wire::Message::SceneDescription,
-      wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
-                                         &surface_.nodes, "displacement_m", &proxies, &devices, &params, &names));
+  fb::Offset<wire::EmbeddedSurface> embedded;
+  if (const auto& e = sim_.surface()) {
+    std::vector<float> fine_rest(3 * e->rest.vertices.size());
+    for (size_t v = 0; v < e->rest.vertices.size(); ++v)
+      for (int c = 0; c < 3; ++c) fine_rest[3 * v + size_t(c)] = float(e->rest.vertices[v][c]);
+    std::vector<uint32_t> fine_triangles;
+    fine_triangles.reserve(3 * e->rest.triangles.size());
+    for (const Tri& t : e->rest.triangles)
+      for (int32_t v : t) fine_triangles.push_back(uint32_t(v));
+    embedded = wire::CreateEmbeddedSurfaceDirect(b, &fine_rest, &fine_triangles, &surface_.carriers, &surface_.weights);
+  }
+  return seal(b, wire::Message::SceneDescription,
+              wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
+                                                 &surface_.nodes, "displacement_m", &proxies, &devices, &params, &names,
+                                                 embedded));
 }
 
 std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {

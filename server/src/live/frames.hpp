@@ -21,11 +21,16 @@
 
 namespace tactile {
 
-// The body's surface as the viewers see it: the boundary nodes, renumbered
-// densely, and the boundary triangles in that numbering.
+// The body as the viewers see it: the frame's vertices (the boundary nodes,
+// then the interior nodes an embedded surface follows), renumbered densely,
+// the boundary triangles in that numbering, and the embedded surface's
+// binding to the frame's vertices.
 struct Surface {
-  std::vector<uint32_t> nodes;      // simulation node per surface vertex (n_vertices)
-  std::vector<uint32_t> triangles;  // outward (n_triangles x 3), surface vertex ids
+  std::vector<uint32_t> nodes;      // simulation node per frame vertex (n_vertices)
+  std::vector<uint32_t> triangles;  // outward (n_triangles x 3), frame vertex ids
+  size_t boundary = 0;              // the first this many vertices are the boundary's
+  std::vector<uint32_t> carriers;   // embedded: four frame vertices per fine vertex (n_fine x 4)
+  std::vector<float> weights;       // embedded: their weights (n_fine x 4)
 };
 Surface extract_surface(const Simulation& sim);
 

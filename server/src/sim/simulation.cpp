@@ -242,6 +242,7 @@ Simulation::Simulation(const ModelSpec& spec) {
   else
     engine_ = std::make_unique<EngineOf<double>>(spec, pool_.get());
   precision_ = spec.integrator.precision;
+  surface_ = spec.surface;
 }
 
 Simulation::~Simulation() = default;

@@ -35,6 +35,8 @@ class Simulation {
 
   Precision precision() const;
   const TetMesh& mesh() const;  // the spec's rest mesh
+  // The fine surface the body carries (core/embedding.hpp); null when none.
+  const std::shared_ptr<const EmbeddedSurface>& surface() const { return surface_; }
   int32_t n_nodes() const;
   int32_t n_tets() const;
   double total_mass() const;                      // [kg]
@@ -120,6 +122,7 @@ class Simulation {
   std::unique_ptr<ParallelFor> pool_;  // declared first: outlives the stepper that uses it
   std::unique_ptr<Engine> engine_;
   Precision precision_ = Precision::Double;
+  std::shared_ptr<const EmbeddedSurface> surface_;
 };
 
 }  // namespace tactile

@@ -15,34 +15,10 @@
 
 #include "core/embedding.hpp"
 #include "fem_fixtures.hpp"
+#include "surface_fixtures.hpp"
 
 namespace tactile {
 namespace {
-
-// A closed UV sphere of `around` x `rings` quads split in two (poles fanned), wound outward.
-SurfaceMesh make_uv_sphere(const Vec3& centre, double radius, int around, int rings) {
-  SurfaceMesh s;
-  s.vertices.push_back(centre + Vec3(0, radius, 0));
-  for (int r = 1; r < rings; ++r) {
-    const double theta = M_PI * r / rings;
-    for (int a = 0; a < around; ++a) {
-      const double phi = 2 * M_PI * a / around;
-      s.vertices.push_back(
-          centre + radius * Vec3(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi)));
-    }
-  }
-  s.vertices.push_back(centre - Vec3(0, radius, 0));
-  const int south = int(s.vertices.size()) - 1;
-  auto ring = [&](int r, int a) { return 1 + (r - 1) * around + (a % around); };
-  for (int a = 0; a < around; ++a) s.triangles.push_back({0, ring(1, a + 1), ring(1, a)});
-  for (int r = 1; r + 1 < rings; ++r)
-    for (int a = 0; a < around; ++a) {
-      s.triangles.push_back({ring(r, a), ring(r, a + 1), ring(r + 1, a + 1)});
-      s.triangles.push_back({ring(r, a), ring(r + 1, a + 1), ring(r + 1, a)});
-    }
-  for (int a = 0; a < around; ++a) s.triangles.push_back({south, ring(rings - 1, a), ring(rings - 1, a + 1)});
-  return s;
-}
 
 double signed_volume(const SurfaceMesh& s) {
   double v = 0;
@@ -55,8 +31,8 @@ double signed_volume(const SurfaceMesh& s) {
 // of its top face.
 struct Embedded : ::testing::Test {
   TetMesh mesh = make_box(Vec3(0, 0, 0), Vec3(1, 0.4, 0.4), {6, 3, 3});
-  SurfaceMesh inside = make_uv_sphere(Vec3(0.5, 0.2, 0.2), 0.15, 24, 12);
-  SurfaceMesh poking = make_uv_sphere(Vec3(0.3, 0.3, 0.2), 0.102, 16, 8);  // top at y = 0.402
+  SurfaceMesh inside = test::make_uv_sphere(Vec3(0.5, 0.2, 0.2), 0.15, 24, 12);
+  SurfaceMesh poking = test::make_uv_sphere(Vec3(0.3, 0.3, 0.2), 0.102, 16, 8);  // top at y = 0.402
 };
 
 TEST_F(Embedded, WeightsGiveEveryRestVertexBack) {
@@ -140,7 +116,7 @@ TEST_F(Embedded, AVertexJustOutsideBindsToTheNearestTetAndOneTooFarIsNamed) {
 }
 
 TEST(OrientSurface, WindsAClosedSurfaceConsistentlyAndOutward) {
-  SurfaceMesh s = make_uv_sphere(Vec3(1, 2, 3), 0.5, 20, 10);
+  SurfaceMesh s = test::make_uv_sphere(Vec3(1, 2, 3), 0.5, 20, 10);
   const double volume = signed_volume(s);
   ASSERT_GT(volume, 0);
   // Every triangle inverted, then a random third of them back: no consistent winding left.

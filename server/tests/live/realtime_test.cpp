@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
+#include <memory>
 #include <span>
 #include <string>
 #include <thread>
@@ -18,6 +19,7 @@
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
 
+#include "core/embedding.hpp"
 #include "core/mesh.hpp"
 #include "core/model.hpp"
 #include "live/frames.hpp"
@@ -27,6 +29,7 @@
 
 // Heap allocations made on a thread while it has alloc_count::here set.
 #include "alloc_count.hpp"
+#include "surface_fixtures.hpp"
 
 namespace tactile {
 namespace {
@@ -237,6 +240,67 @@ TEST(FrameEncoder, SurfaceVerticesFollowTheMeshNotTheModel) {
     }
     EXPECT_GT(moved, 1e-4) << "the poke moved no vertex, so this shows nothing";
   }
+}
+
+// An embedded surface comes once, in the scene description: its rest shape and its binding to the frame's
+// vertices, which grow by the interior nodes it follows. Each state then places it from those vertices alone.
+TEST(FrameEncoder, AnEmbeddedSurfaceComesOnceAndFollowsTheFrameVertices) {
+  ModelSpec spec = poke_spec();
+  const size_t boundary = compute_boundary_nodes(compute_boundary_faces(spec.mesh)).size();
+  // A sphere inside the block, its top 1 mm under the block's: it binds to interior nodes too.
+  spec.surface = std::make_shared<const EmbeddedSurface>(
+      embed_surface(spec.mesh, test::make_uv_sphere(Vec3(0.02, 0.0105, 0.02), 0.0085, 24, 12), 0.001));
+  Simulation sim(spec);
+  Pose to = sim.proxy_pose(0);
+  to.position.y -= 0.005;
+  sim.set_proxy_motion(0, ProxyMotion{0.0, 0.02, sim.proxy_pose(0), to});
+  ASSERT_FALSE(sim.advance(0.02).fault);
+  FrameEncoder frames(sim, "poke", 1, 2e-4);
+  const Surface& s = frames.surface();
+  EXPECT_EQ(s.boundary, boundary);
+  ASSERT_GT(s.nodes.size(), boundary) << "the sphere follows no interior node, so this shows less";
+  const auto* d = proto::GetEnvelope(frames.scene_description().data())->message_as_SceneDescription();
+  ASSERT_NE(d, nullptr);
+  ASSERT_NE(d->embedded(), nullptr);
+  const proto::EmbeddedSurface& e = *d->embedded();
+  const EmbeddedSurface& bound = *spec.surface;
+  ASSERT_EQ(e.rest_positions()->size(), 3 * bound.rest.vertices.size());
+  ASSERT_EQ(e.triangles()->size(), 3 * bound.rest.triangles.size());
+  ASSERT_EQ(e.carriers()->size(), 4 * bound.rest.vertices.size());
+  ASSERT_EQ(e.weights()->size(), 4 * bound.rest.vertices.size());
+  ASSERT_EQ(d->rest_positions()->size(), 3 * s.nodes.size());
+  // Placed from the frame's vertices: at rest from the description's, now from a state frame's.
+  const auto* f = proto::GetEnvelope(frames.state_frame(0).data())->message_as_StateFrame();
+  ASSERT_NE(f, nullptr);
+  std::vector<Vec3> x(size_t(sim.n_nodes())), now(bound.rest.vertices.size());
+  for (int32_t n = 0; n < sim.n_nodes(); ++n) x[size_t(n)] = spec.mesh.X[size_t(n)] + sim.displacement(n);
+  compute_embedded_positions(bound, x, now);
+  double moved = 0;
+  for (uint32_t v = 0; v < bound.rest.vertices.size(); ++v) {
+    Vec3 rest(0.0), placed(0.0);
+    for (uint32_t k = 0; k < 4; ++k) {
+      const uint32_t c = e.carriers()->Get(4 * v + k);
+      ASSERT_LT(c, s.nodes.size());
+      const float w = e.weights()->Get(4 * v + k);
+      for (uint32_t a = 0; a < 3; ++a) {
+        rest[int(a)] += w * d->rest_positions()->Get(3 * c + a);
+        placed[int(a)] += w * f->positions()->Get(3 * c + a);
+      }
+    }
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_NEAR(e.rest_positions()->Get(3 * v + uint32_t(a)), bound.rest.vertices[v][a], 1e-7) << v;
+      ASSERT_NEAR(rest[a], bound.rest.vertices[v][a], 1e-6) << v;
+      ASSERT_NEAR(placed[a], now[v][a], 1e-6) << v;
+    }
+    moved = std::max(moved, glm::length(now[v] - bound.rest.vertices[v]));
+  }
+  EXPECT_GT(moved, 1e-4) << "the poke moved no vertex of the sphere, so this shows less";
+  // A scene without one sends none, and only its boundary.
+  Simulation plain(poke_spec());
+  FrameEncoder plain_frames(plain, "poke", 1, 2e-4);
+  const auto* pd = proto::GetEnvelope(plain_frames.scene_description().data())->message_as_SceneDescription();
+  EXPECT_EQ(pd->embedded(), nullptr);
+  EXPECT_EQ(plain_frames.surface().nodes.size(), boundary);
 }
 
 // A haptic frame's force is the mean of the per-step forces over its window,

@@ -7,7 +7,7 @@ import "strconv"
 type ProtocolMinor uint16
 
 const (
-	ProtocolMinorCurrent ProtocolMinor = 6
+	ProtocolMinorCurrent ProtocolMinor = 7
 )
 
 var EnumNamesProtocolMinor = map[ProtocolMinor]string{

@@ -225,8 +225,21 @@ func (rcv *SceneDescription) ScenesLength() int {
 	return 0
 }
 
+func (rcv *SceneDescription) Embedded(obj *EmbeddedSurface) *EmbeddedSurface {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(26))
+	if o != 0 {
+		x := rcv._tab.Indirect(o + rcv._tab.Pos)
+		if obj == nil {
+			obj = new(EmbeddedSurface)
+		}
+		obj.Init(rcv._tab.Bytes, x)
+		return obj
+	}
+	return nil
+}
+
 func SceneDescriptionStart(builder *flatbuffers.Builder) {
-	builder.StartObject(11)
+	builder.StartObject(12)
 }
 func SceneDescriptionAddSceneName(builder *flatbuffers.Builder, sceneName flatbuffers.UOffsetT) {
 	builder.PrependUOffsetTSlot(0, flatbuffers.UOffsetT(sceneName), 0)
@@ -281,6 +294,9 @@ func SceneDescriptionAddScenes(builder *flatbuffers.Builder, scenes flatbuffers.
 }
 func SceneDescriptionStartScenesVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
 	return builder.StartVector(4, numElems, 4)
+}
+func SceneDescriptionAddEmbedded(builder *flatbuffers.Builder, embedded flatbuffers.UOffsetT) {
+	builder.PrependUOffsetTSlot(11, flatbuffers.UOffsetT(embedded), 0)
 }
 func SceneDescriptionEnd(builder *flatbuffers.Builder) flatbuffers.UOffsetT {
 	return builder.EndObject()

@@ -8,6 +8,7 @@ export { DeviceInput, DeviceInputT } from './tactile/proto/device-input';
 export { DeviceLimits, DeviceLimitsT } from './tactile/proto/device-limits';
 export { DeviceStatus, DeviceStatusT } from './tactile/proto/device-status';
 export { EffectCost, EffectCostT } from './tactile/proto/effect-cost';
+export { EmbeddedSurface, EmbeddedSurfaceT } from './tactile/proto/embedded-surface';
 export { Energies, EnergiesT } from './tactile/proto/energies';
 export { Envelope, EnvelopeT } from './tactile/proto/envelope';
 export { Error, ErrorT } from './tactile/proto/error';

@@ -3,4 +3,4 @@
 # namespace: proto
 
 class ProtocolMinor(object):
-    Current = 6
+    Current = 7

@@ -227,7 +227,18 @@ class SceneDescription(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
         return o == 0
 
-def SceneDescriptionStart(builder): builder.StartObject(11)
+    # SceneDescription
+    def Embedded(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(26))
+        if o != 0:
+            x = self._tab.Indirect(o + self._tab.Pos)
+            from tactile_proto.generated.EmbeddedSurface import EmbeddedSurface
+            obj = EmbeddedSurface()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+def SceneDescriptionStart(builder): builder.StartObject(12)
 def Start(builder):
     return SceneDescriptionStart(builder)
 def SceneDescriptionAddSceneName(builder, sceneName): builder.PrependUOffsetTRelativeSlot(0, flatbuffers.number_types.UOffsetTFlags.py_type(sceneName), 0)
@@ -284,13 +295,17 @@ def AddScenes(builder, scenes):
 def SceneDescriptionStartScenesVector(builder, numElems): return builder.StartVector(4, numElems, 4)
 def StartScenesVector(builder, numElems):
     return SceneDescriptionStartScenesVector(builder, numElems)
+def SceneDescriptionAddEmbedded(builder, embedded): builder.PrependUOffsetTRelativeSlot(11, flatbuffers.number_types.UOffsetTFlags.py_type(embedded), 0)
+def AddEmbedded(builder, embedded):
+    return SceneDescriptionAddEmbedded(builder, embedded)
 def SceneDescriptionEnd(builder): return builder.EndObject()
 def End(builder):
     return SceneDescriptionEnd(builder)
+import tactile_proto.generated.EmbeddedSurface
 import tactile_proto.generated.Parameter
 import tactile_proto.generated.ProxyInfo
 try:
-    from typing import List
+    from typing import List, Optional
 except:
     pass
 
@@ -309,6 +324,7 @@ class SceneDescriptionT(object):
         self.devices = None  # type: List[str]
         self.parameters = None  # type: List[tactile_proto.generated.Parameter.ParameterT]
         self.scenes = None  # type: List[str]
+        self.embedded = None  # type: Optional[tactile_proto.generated.EmbeddedSurface.EmbeddedSurfaceT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -375,6 +391,8 @@ class SceneDescriptionT(object):
             self.scenes = []
             for i in range(sceneDescription.ScenesLength()):
                 self.scenes.append(sceneDescription.Scenes(i))
+        if sceneDescription.Embedded() is not None:
+            self.embedded = tactile_proto.generated.EmbeddedSurface.EmbeddedSurfaceT.InitFromObj(sceneDescription.Embedded())
 
     # SceneDescriptionT
     def Pack(self, builder):
@@ -438,6 +456,8 @@ class SceneDescriptionT(object):
             for i in reversed(range(len(self.scenes))):
                 builder.PrependUOffsetTRelative(sceneslist[i])
             scenes = builder.EndVector()
+        if self.embedded is not None:
+            embedded = self.embedded.Pack(builder)
         SceneDescriptionStart(builder)
         if self.sceneName is not None:
             SceneDescriptionAddSceneName(builder, sceneName)
@@ -459,5 +479,7 @@ class SceneDescriptionT(object):
             SceneDescriptionAddParameters(builder, parameters)
         if self.scenes is not None:
             SceneDescriptionAddScenes(builder, scenes)
+        if self.embedded is not None:
+            SceneDescriptionAddEmbedded(builder, embedded)
         sceneDescription = SceneDescriptionEnd(builder)
         return sceneDescription

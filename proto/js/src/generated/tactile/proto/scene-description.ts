@@ -2,6 +2,7 @@
 
 import * as flatbuffers from 'flatbuffers';
 
+import { EmbeddedSurface, EmbeddedSurfaceT } from '../../tactile/proto/embedded-surface';
 import { Parameter, ParameterT } from '../../tactile/proto/parameter';
 import { ProxyInfo, ProxyInfoT } from '../../tactile/proto/proxy-info';
 
@@ -137,8 +138,13 @@ scenesLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+embedded(obj?:EmbeddedSurface):EmbeddedSurface|null {
+  const offset = this.bb!.__offset(this.bb_pos, 26);
+  return offset ? (obj || new EmbeddedSurface()).__init(this.bb!.__indirect(this.bb_pos + offset), this.bb!) : null;
+}
+
 static startSceneDescription(builder:flatbuffers.Builder) {
-  builder.startObject(11);
+  builder.startObject(12);
 }
 
 static addSceneName(builder:flatbuffers.Builder, sceneNameOffset:flatbuffers.Offset) {
@@ -284,26 +290,15 @@ static startScenesVector(builder:flatbuffers.Builder, numElems:number) {
   builder.startVector(4, numElems, 4);
 }
 
+static addEmbedded(builder:flatbuffers.Builder, embeddedOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(11, embeddedOffset, 0);
+}
+
 static endSceneDescription(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createSceneDescription(builder:flatbuffers.Builder, sceneNameOffset:flatbuffers.Offset, sceneId:number, dt:number, restPositionsOffset:flatbuffers.Offset, trianglesOffset:flatbuffers.Offset, surfaceNodesOffset:flatbuffers.Offset, scalarNameOffset:flatbuffers.Offset, proxiesOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, parametersOffset:flatbuffers.Offset, scenesOffset:flatbuffers.Offset):flatbuffers.Offset {
-  SceneDescription.startSceneDescription(builder);
-  SceneDescription.addSceneName(builder, sceneNameOffset);
-  SceneDescription.addSceneId(builder, sceneId);
-  SceneDescription.addDt(builder, dt);
-  SceneDescription.addRestPositions(builder, restPositionsOffset);
-  SceneDescription.addTriangles(builder, trianglesOffset);
-  SceneDescription.addSurfaceNodes(builder, surfaceNodesOffset);
-  SceneDescription.addScalarName(builder, scalarNameOffset);
-  SceneDescription.addProxies(builder, proxiesOffset);
-  SceneDescription.addDevices(builder, devicesOffset);
-  SceneDescription.addParameters(builder, parametersOffset);
-  SceneDescription.addScenes(builder, scenesOffset);
-  return SceneDescription.endSceneDescription(builder);
-}
 
 unpack(): SceneDescriptionT {
   return new SceneDescriptionT(
@@ -317,7 +312,8 @@ unpack(): SceneDescriptionT {
     this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength()),
     this.bb!.createScalarList(this.devices.bind(this), this.devicesLength()),
     this.bb!.createObjList(this.parameters.bind(this), this.parametersLength()),
-    this.bb!.createScalarList(this.scenes.bind(this), this.scenesLength())
+    this.bb!.createScalarList(this.scenes.bind(this), this.scenesLength()),
+    (this.embedded() !== null ? this.embedded()!.unpack() : null)
   );
 }
 
@@ -334,6 +330,7 @@ unpackTo(_o: SceneDescriptionT): void {
   _o.devices = this.bb!.createScalarList(this.devices.bind(this), this.devicesLength());
   _o.parameters = this.bb!.createObjList(this.parameters.bind(this), this.parametersLength());
   _o.scenes = this.bb!.createScalarList(this.scenes.bind(this), this.scenesLength());
+  _o.embedded = (this.embedded() !== null ? this.embedded()!.unpack() : null);
 }
 }
 
@@ -349,7 +346,8 @@ constructor(
   public proxies: (ProxyInfoT)[] = [],
   public devices: (string)[] = [],
   public parameters: (ParameterT)[] = [],
-  public scenes: (string)[] = []
+  public scenes: (string)[] = [],
+  public embedded: EmbeddedSurfaceT|null = null
 ){}
 
 
@@ -363,19 +361,22 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const devices = SceneDescription.createDevicesVector(builder, builder.createObjectOffsetList(this.devices));
   const parameters = SceneDescription.createParametersVector(builder, builder.createObjectOffsetList(this.parameters));
   const scenes = SceneDescription.createScenesVector(builder, builder.createObjectOffsetList(this.scenes));
+  const embedded = (this.embedded !== null ? this.embedded!.pack(builder) : 0);
 
-  return SceneDescription.createSceneDescription(builder,
-    sceneName,
-    this.sceneId,
-    this.dt,
-    restPositions,
-    triangles,
-    surfaceNodes,
-    scalarName,
-    proxies,
-    devices,
-    parameters,
-    scenes
-  );
+  SceneDescription.startSceneDescription(builder);
+  SceneDescription.addSceneName(builder, sceneName);
+  SceneDescription.addSceneId(builder, this.sceneId);
+  SceneDescription.addDt(builder, this.dt);
+  SceneDescription.addRestPositions(builder, restPositions);
+  SceneDescription.addTriangles(builder, triangles);
+  SceneDescription.addSurfaceNodes(builder, surfaceNodes);
+  SceneDescription.addScalarName(builder, scalarName);
+  SceneDescription.addProxies(builder, proxies);
+  SceneDescription.addDevices(builder, devices);
+  SceneDescription.addParameters(builder, parameters);
+  SceneDescription.addScenes(builder, scenes);
+  SceneDescription.addEmbedded(builder, embedded);
+
+  return SceneDescription.endSceneDescription(builder);
 }
 }
