@@ -132,7 +132,9 @@ function onScene(d) {
   stats.sceneName = /** @type {string | null} */ (d.sceneName) || '';
   showFault([]);
   stats.vertices = view.positions.length / 3;
-  $('scene').textContent = `${stats.sceneName}: ${stats.vertices} surface vertices, step ${(d.dt * 1e3).toFixed(3)} ms`;
+  $('scene').textContent = view.embedded
+    ? `${stats.sceneName}: ${view.embedded.triangles} triangles on ${stats.vertices} frame vertices, step ${(d.dt * 1e3).toFixed(3)} ms`
+    : `${stats.sceneName}: ${stats.vertices} surface vertices, step ${(d.dt * 1e3).toFixed(3)} ms`;
   $('legend-name').textContent = /** @type {string | null} */ (d.scalarName) || 'scalar';
   // Frame the body: look at its centre from the front, above.
   const s = /** @type {THREE.Sphere} */ (view.geometry.boundingSphere);  // (SceneView computes it)

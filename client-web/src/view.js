@@ -12,6 +12,7 @@ import * as THREE from 'three';
 
 import { viridisBytes } from './colormap.js';
 import { frontTriangles } from './cull.js';
+import { EmbeddedSurfaceView } from './embedded.js';
 /** @import { ProxyInfoT, SceneDescriptionT } from '@tactile/proto' */
 
 const VIRIDIS = viridisBytes();
@@ -133,6 +134,17 @@ export class SceneView {
     depth.onBeforeCompile = (shader) => inject(shader, false);
     this.mesh.customDepthMaterial = depth;
     this.root.add(this.mesh);
+    // A fine surface the body carries (protocol 1.7) is what the body looks like: the boundary above is
+    // then not drawn (its frames still move the fine surface, and a pointer still picks on it).
+    /** @type {EmbeddedSurfaceView | null} */
+    this.embedded = null;
+    if (description.embedded && description.embedded.triangles && description.embedded.triangles.length > 0) {
+      this.embedded = new EmbeddedSurfaceView(description.embedded, rest, this.uniforms.surfaceMix, quality);
+      for (const k of [0, 1]) this.embedded.write(k, rest, /** @type {Uint8Array} */ (this.slots[k].c.array));
+      this.embedded.bind(this.older, this.newer);
+      this.mesh.visible = false;
+      this.root.add(this.embedded.mesh);
+    }
     // What a pointer picks: the newest state's surface, on the CPU (never drawn).
     const pickGeometry = new THREE.BufferGeometry();
     pickGeometry.setIndex(index);
@@ -179,6 +191,7 @@ export class SceneView {
     geometry.setAttribute('posB', b.p);
     geometry.setAttribute('colA', a.c);
     geometry.setAttribute('colB', b.c);
+    if (this.embedded) this.embedded.bind(this.older, this.newer);
   }
 
   // Positions quantized over the box, and scalars as colours over the range seen so far (it only widens,
@@ -208,6 +221,7 @@ export class SceneView {
       col[4 * i + 2] = VIRIDIS[k + 2];
     }
     slot.c.needsUpdate = true;
+    if (this.embedded) this.embedded.write(this.slots.indexOf(slot), positions, /** @type {Uint8Array} */ (col));
   }
 
   // A new state (positions [m], n x 3; scalars, n): written once into the free slot, which becomes the
@@ -254,6 +268,7 @@ export class SceneView {
   /** @param {THREE.Vector3} eye */
   cullFor(eye) {
     const all = /** @type {THREE.BufferAttribute} */ (this.pick.geometry.index);  // (set in the constructor)
+    if (this.embedded) return this.embedded.triangles;  // the GPU culls it (its vertices are placed there)
     if (!this.culls) return all.count / 3;
     this.root.worldToLocal(this.eye.copy(eye));
     const out = this.culls[this.cullNext];
@@ -301,6 +316,7 @@ export class SceneView {
   }
 
   dispose() {
+    if (this.embedded) this.embedded.dispose();
     this.pick.geometry.dispose();
     this.pick.material.dispose();
     this.root.traverse((o) => {

@@ -35,8 +35,8 @@ Surface extract_surface(const Simulation& sim) {
     std::vector<int32_t> interior;
     for (const Tet& t : e->nodes)
       for (int32_t n : t)
-        if (vertex_of[size_t(n)] < 0) {
-          vertex_of[size_t(n)] = -2;
+        if (vertex_of[size_t(n)] == -1) {
+          vertex_of[size_t(n)] = -2;  // listed
           interior.push_back(n);
         }
     std::sort(interior.begin(), interior.end());

@@ -259,6 +259,11 @@ TEST(FrameEncoder, AnEmbeddedSurfaceComesOnceAndFollowsTheFrameVertices) {
   const Surface& s = frames.surface();
   EXPECT_EQ(s.boundary, boundary);
   ASSERT_GT(s.nodes.size(), boundary) << "the sphere follows no interior node, so this shows less";
+  // Each node once: the frame grows by the interior nodes, never by more than the body has.
+  std::vector<uint32_t> sorted = s.nodes;
+  std::sort(sorted.begin(), sorted.end());
+  EXPECT_EQ(std::unique(sorted.begin(), sorted.end()), sorted.end());
+  EXPECT_TRUE(std::is_sorted(s.nodes.begin() + std::ptrdiff_t(boundary), s.nodes.end()));
   const auto* d = proto::GetEnvelope(frames.scene_description().data())->message_as_SceneDescription();
   ASSERT_NE(d, nullptr);
   ASSERT_NE(d->embedded(), nullptr);
