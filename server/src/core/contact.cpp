@@ -89,8 +89,16 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   friction_ = model.effects.friction;
   if (n_proxies == 0) return;
 
-  // Surface nodes that move freely, clustered in Morton order of rest positions.
-  const std::vector<int32_t> nodes = compute_boundary_nodes(model.surface);
+  // Surface nodes that move freely, clustered in Morton order of rest positions
+  // (with an embedded surface: the nodes its vertices follow, interior ones too).
+  std::vector<int32_t> nodes;
+  if (model.embedded) {
+    for (const Tet& t : model.embedded_nodes) nodes.insert(nodes.end(), t.begin(), t.end());
+    std::sort(nodes.begin(), nodes.end());
+    nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  } else {
+    nodes = compute_boundary_nodes(model.surface);
+  }
   std::vector<int32_t> free, held;
   std::set_difference(nodes.begin(), nodes.end(), model.constrained.begin(), model.constrained.end(),
                       std::back_inserter(free));
@@ -112,13 +120,68 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   for (size_t k : morton_order(rest)) free_nodes_.push_back(free[k]);
   slot_node_ = free_nodes_;
   slot_node_.insert(slot_node_.end(), held.begin(), held.end());
+  std::vector<int32_t> slot_of(model.mesh.X.size(), -1);
+  for (size_t k = 0; k < slot_node_.size(); ++k) slot_of[size_t(slot_node_[k])] = int32_t(k);
+  if (model.embedded)
+    build_embedded(slot_of, morton_order);
+  else
+    build_boundary(slot_of, morton_order);
+
+  x_now_.assign(slot_node_.size(), Vec3(0.0));
+  f_now_.assign(free_nodes_.size(), Vec3(0.0));
+  touched_now_.reserve(free_nodes_.size());
+  dv_.assign(free_nodes_.size(), Vec3(0.0));
+  moved_flag_.assign(free_nodes_.size(), 0);
+  moved_.reserve(free_nodes_.size());
+  points_.reserve((free_nodes_.size() + faces_.size() + emb_slot_.size()) * n_proxies);
+  point_order_.reserve(points_.capacity());
+  // Solve groups: one per proxy, then one per coupled body (at most one per proxy and hand).
+  proxy_begin_.assign(2 * n_proxies + model.hands.size() + 1, 0);
+  proxy_fill_.assign(proxy_begin_.size() - 1, 0);
+}
+
+template <class Real>
+template <class Order>
+void Contact<Real>::build_embedded(const std::vector<int32_t>& slot_of, const Order& morton_order) {
+  // The vertices in Morton order of their rest positions, each with its four slots.
+  const EmbeddedSurface& e = *model_.embedded;
+  std::vector<double> outside;
+  for (size_t v : morton_order(e.rest.vertices)) {
+    const Tet& t = model_.embedded_nodes[v];
+    emb_slot_.push_back({slot_of[size_t(t[0])], slot_of[size_t(t[1])], slot_of[size_t(t[2])], slot_of[size_t(t[3])]});
+    emb_w_.push_back(e.weights[v]);
+    outside.push_back(e.outside[v]);
+  }
+  const auto n = static_cast<int32_t>(emb_slot_.size());
+  emb_cluster_slot_begin_.push_back(0);
+  for (int32_t b = 0; b < n; b += kClusterNodes) {
+    const int32_t end = std::min(n, b + kClusterNodes);
+    emb_clusters_.push_back({b, end, {}, {}});
+    // A vertex inside its tet lies in its nodes' box; one outside, within its rest distance of the tet, grown
+    // with the tet's stretch (twice, as far as the stability suite lets a body stretch).
+    double pad = 0;
+    std::vector<int32_t> slots;
+    for (int32_t v = b; v < end; ++v) {
+      pad = std::max(pad, 2.0 * outside[size_t(v)]);
+      slots.insert(slots.end(), emb_slot_[size_t(v)].begin(), emb_slot_[size_t(v)].end());
+    }
+    std::sort(slots.begin(), slots.end());
+    slots.erase(std::unique(slots.begin(), slots.end()), slots.end());
+    emb_cluster_slots_.insert(emb_cluster_slots_.end(), slots.begin(), slots.end());
+    emb_cluster_slot_begin_.push_back(int32_t(emb_cluster_slots_.size()));
+    emb_pad_.push_back(pad);
+  }
+}
+
+template <class Real>
+template <class Order>
+void Contact<Real>::build_boundary(const std::vector<int32_t>& slot_of, const Order& morton_order) {
+  const Model<Real>& model = model_;
   const auto n = static_cast<int32_t>(free_nodes_.size());
   for (int32_t b = 0; b < n; b += kClusterNodes) clusters_.push_back({b, std::min(n, b + kClusterNodes), {}, {}});
 
   // Faces with a free corner, in Morton order of their rest centroids; an
   // edge's contacts belong to the first face (in that order) that has it.
-  std::vector<int32_t> slot_of(model.mesh.X.size(), -1);
-  for (size_t k = 0; k < slot_node_.size(); ++k) slot_of[size_t(slot_node_[k])] = int32_t(k);
   std::vector<Tri> tris;
   std::vector<Vec3> centroids;
   for (const Tri& t : model.surface) {
@@ -150,18 +213,6 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
     face_cluster_slots_.insert(face_cluster_slots_.end(), corners.begin(), corners.end());
     face_cluster_slot_begin_.push_back(int32_t(face_cluster_slots_.size()));
   }
-
-  x_now_.assign(slot_node_.size(), Vec3(0.0));
-  f_now_.assign(free_nodes_.size(), Vec3(0.0));
-  touched_now_.reserve(free_nodes_.size());
-  dv_.assign(free_nodes_.size(), Vec3(0.0));
-  moved_flag_.assign(free_nodes_.size(), 0);
-  moved_.reserve(free_nodes_.size());
-  points_.reserve((free_nodes_.size() + faces_.size()) * n_proxies);
-  point_order_.reserve(points_.capacity());
-  // Solve groups: one per proxy, then one per coupled body (at most one per proxy and hand).
-  proxy_begin_.assign(2 * n_proxies + model.hands.size() + 1, 0);
-  proxy_fill_.assign(proxy_begin_.size() - 1, 0);
 }
 
 template <class Real>
@@ -180,6 +231,7 @@ void Contact<Real>::init(ContactState& cs) const {
   cs.pushed.reserve(free_nodes_.size());
   cs.memory.assign(free_nodes_.size(), Memory{});
   cs.face_memory.assign(faces_.size(), Memory{});
+  cs.embedded_memory.assign(emb_slot_.size(), Memory{});
   cs.fit.resize(n_proxies);
   cs.device_fit.resize(model_.devices.size());
   cs.device_felt.assign(model_.devices.size(), glm::dmat3(0.0));
@@ -233,6 +285,7 @@ void Contact<Real>::start(State<Real>& s) const {
   cs.pushed.clear();
   std::fill(cs.memory.begin(), cs.memory.end(), Memory{});
   std::fill(cs.face_memory.begin(), cs.face_memory.end(), Memory{});
+  std::fill(cs.embedded_memory.begin(), cs.embedded_memory.end(), Memory{});
   for (Fit& f : cs.fit) f = Fit{};
   for (Fit& f : cs.device_fit) f = Fit{};
   std::fill(cs.device_felt.begin(), cs.device_felt.end(), glm::dmat3(0.0));
@@ -386,6 +439,15 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     for (int32_t m = face_cluster_slot_begin_[j]; m < face_cluster_slot_begin_[j + 1]; ++m)
       sweep(c, face_cluster_slots_[size_t(m)]);
   }
+  for (size_t j = 0; j < emb_clusters_.size(); ++j) {
+    Cluster& c = emb_clusters_[j];
+    c.lo = Vec3(inf);
+    c.hi = Vec3(-inf);
+    for (int32_t m = emb_cluster_slot_begin_[j]; m < emb_cluster_slot_begin_[j + 1]; ++m)
+      sweep(c, emb_cluster_slots_[size_t(m)]);
+    c.lo -= Vec3(emb_pad_[j]);
+    c.hi += Vec3(emb_pad_[j]);
+  }
 
   // The coupled bodies' prediction and coupling (core/coupling.hpp): their
   // motion is the device's.
@@ -419,7 +481,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     lo_[j] = glm::min(b0.lo, b1.lo);
     hi_[j] = glm::max(b0.hi, b1.hi);
   }
-  node_contacts_ = face_contacts_ = 0;
+  node_contacts_ = face_contacts_ = embedded_contacts_ = 0;
   points_.clear();
   for (const Cluster& c : clusters_)
     for (size_t j = 0; j < n_proxies; ++j) {
@@ -453,6 +515,13 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
         }
         find_face_contact(cs, f, int32_t(j), pose0_[j], pose1_[j], dt);
       }
+    }
+
+  // The embedded surface's vertices (in place of the nodes and faces above, which it then has none of).
+  for (const Cluster& c : emb_clusters_)
+    for (size_t j = 0; j < n_proxies; ++j) {
+      if (!boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
+      for (int32_t e = c.begin; e < c.end; ++e) find_embedded_contact(cs, e, int32_t(j), pose0_[j], pose1_[j], dt);
     }
 
   // The impulses, then the velocity changes they make: by eq. (9),
@@ -622,8 +691,8 @@ void Contact<Real>::find_node_contact(ContactState& cs, int32_t k, int32_t proxy
   Point c;
   c.proxy = proxy;
   c.body = cs.proxy_body[size_t(proxy)];
-  c.slot = {k, -1, -1};
-  c.w = Vec3(1, 0, 0);
+  c.slot = {k, -1, -1, -1};
+  c.w = {1, 0, 0, 0};
   c.x = x1;
   c.n = p1.orientation * outward(g, p0.to_local(cs.x_prev[size_t(k)]), q1, at1, mem, proxy);
   c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], x1 - p1.position);
@@ -668,8 +737,8 @@ void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy
   Point c;
   c.proxy = proxy;
   c.body = cs.proxy_body[size_t(proxy)];
-  c.slot = {-1, -1, -1};
-  c.w = Vec3(0.0);
+  c.slot = {-1, -1, -1, -1};
+  c.w = {0, 0, 0, 0};
   c.x = Vec3(0.0);
   c.v_held = Vec3(0.0);
   c.inv_mass = 0;
@@ -683,7 +752,7 @@ void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy
     c.x += wj * x_now_[k];
     if (k < free_nodes_.size()) {
       c.slot[size_t(free)] = int32_t(k);
-      c.w[free++] = wj;
+      c.w[size_t(free++)] = wj;
       c.inv_mass += wj * wj / double(model_.m[size_t(free_nodes_[k])]);
     } else {
       c.v_held += wj * (x_now_[k] - cs.x_prev[k]) / dt;  // held: as prescribed over the step
@@ -699,25 +768,78 @@ void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy
 }
 
 template <class Real>
+void Contact<Real>::find_embedded_contact(ContactState& cs, int32_t e, int32_t proxy, const Pose& p0, const Pose& p1,
+                                          double dt) {
+  const ProxySpec& spec = model_.proxies[size_t(proxy)];
+  const ProxyGeometry& g = spec.geometry;
+  Memory& mem = cs.embedded_memory[size_t(e)];
+  const std::array<int32_t, 4>& slots = emb_slot_[size_t(e)];
+  const std::array<double, 4>& w = emb_w_[size_t(e)];
+  Vec3 x0(0.0), x1(0.0);
+  for (size_t k = 0; k < 4; ++k) {
+    x0 += w[k] * cs.x_prev[size_t(slots[k])];
+    x1 += w[k] * x_now_[size_t(slots[k])];
+  }
+  // The vertex's own path over the step against the proxy's swept box, then the proxy itself.
+  if (!boxes_meet(glm::min(x0, x1), glm::max(x0, x1), lo_[size_t(proxy)], hi_[size_t(proxy)])) {
+    if (mem.proxy == proxy) mem.proxy = -1;
+    return;
+  }
+  const Vec3 q1 = p1.to_local(x1);
+  const SurfacePoint at1 = locate(g, q1);
+  if (at1.phi > 0) {
+    if (mem.proxy == proxy) mem.proxy = -1;
+    return;
+  }
+  Point c;
+  c.proxy = proxy;
+  c.body = cs.proxy_body[size_t(proxy)];
+  c.slot = {-1, -1, -1, -1};
+  c.w = {0, 0, 0, 0};
+  c.x = x1;
+  c.v_held = Vec3(0.0);
+  c.inv_mass = 0;
+  int free = 0;
+  for (size_t k = 0; k < 4; ++k) {
+    const auto slot = size_t(slots[k]);
+    if (w[k] == 0) continue;
+    if (slot < free_nodes_.size()) {
+      c.slot[size_t(free)] = int32_t(slot);
+      c.w[size_t(free++)] = w[k];
+      c.inv_mass += w[k] * w[k] / double(model_.m[size_t(free_nodes_[slot])]);
+    } else {
+      c.v_held += w[k] * (x_now_[slot] - cs.x_prev[slot]) / dt;  // held: as prescribed over the step
+    }
+  }
+  if (!(c.inv_mass > 0)) return;
+  c.n = p1.orientation * outward(g, p0.to_local(x0), q1, at1, mem, proxy);
+  c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], x1 - p1.position);
+  c.r = c.body >= 0 ? x1 - cs.bodies[size_t(c.body)].next.pose.position : Vec3(0.0);
+  c.mu = friction_ ? spec.friction : 0.0;
+  points_.push_back(c);
+  ++embedded_contacts_;
+}
+
+template <class Real>
 Vec3 Contact<Real>::point_velocity(const State<Real>& s, const Point& c) const {
   Vec3 v = c.v_held;
-  for (size_t j = 0; j < 3 && c.slot[j] >= 0; ++j) {
+  for (size_t j = 0; j < 4 && c.slot[j] >= 0; ++j) {
     const auto k = size_t(c.slot[j]);
     const size_t i = size_t(free_nodes_[k]);
-    v += c.w[int(j)] * (Vec3(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2])) + dv_[k]);
+    v += c.w[j] * (Vec3(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2])) + dv_[k]);
   }
   return v;
 }
 
 template <class Real>
 void Contact<Real>::give(ContactState& cs, Point& c, const Vec3& J) {
-  for (size_t j = 0; j < 3 && c.slot[j] >= 0; ++j) {
+  for (size_t j = 0; j < 4 && c.slot[j] >= 0; ++j) {
     const auto k = size_t(c.slot[j]);
     if (!moved_flag_[k]) {
       moved_flag_[k] = 1;
       moved_.push_back(int32_t(k));  // (reserved: never allocates)
     }
-    dv_[k] += (c.w[int(j)] / double(model_.m[size_t(free_nodes_[k])])) * J;
+    dv_[k] += (c.w[j] / double(model_.m[size_t(free_nodes_[k])])) * J;
   }
   if (c.body >= 0) {  // and the opposite to the proxy's body
     Body& b = cs.bodies[size_t(c.body)];

@@ -36,6 +36,14 @@
 // that points sharing nodes (a face and its corner) push no more than they
 // need; one proxy's contacts can always be met together.
 //
+// An embedded surface (core/embedding.hpp), when the model has one, is what
+// proxies meet instead of the boundary: each of its vertices inside a proxy
+// is a contact point x = sum w_k x_k over the four nodes of its tet (interior
+// nodes too), given its impulse by the same rule as a face's point, dv_k =
+// w_k J / m_k, and its opposite summed back to the proxy. A tool smaller than
+// a coarse cell then stops at the surface the user sees; one smaller than
+// the fine surface's spacing can still pass between its vertices.
+//
 // Broad phase: surface nodes in clusters of 32 (Morton order of rest
 // positions), each with a box around its nodes' motion over the step; only
 // clusters whose box meets a proxy's swept bounding box are examined node by
@@ -123,6 +131,7 @@ class Contact {
   // Contact points inside proxies in the latest apply(): on surface nodes, and on faces between them.
   int32_t node_contacts() const { return node_contacts_; }
   int32_t face_contacts() const { return face_contacts_; }
+  int32_t embedded_contacts() const { return embedded_contacts_; }
 
   // Per-node contact force for an output that asks (VTU point data), summed
   // only while tracking is on: the impulse q dv each free surface node took
@@ -141,14 +150,15 @@ class Contact {
     std::array<int32_t, 3> slot;  // its corners, as slots (below)
     uint8_t owns_edge = 0;        // bit c: the contacts on the edge opposite corner c are this face's
   };
-  // A contact point inside a proxy at t_{n+1}: a free surface node, or a
-  // point of a face, x = sum w_c x_c over its corners.
+  // A contact point inside a proxy at t_{n+1}: a free surface node, a
+  // point of a face, x = sum w_c x_c over its corners, or a vertex of an
+  // embedded surface over its tet's four nodes.
   struct Point {
     int32_t proxy;
     int32_t body;                 // its proxy's coupled body, -1 for a kinematic proxy
     Vec3 r;                       // from the body's origin to x (coupled) [m]
-    std::array<int32_t, 3> slot;  // its free corners' slots, -1 for none (a node: slot[0] alone, weight 1)
-    Vec3 w;                       // their weights
+    std::array<int32_t, 4> slot;  // its free corners' slots, -1 for none (a node: slot[0] alone, weight 1)
+    std::array<double, 4> w;      // their weights
     Vec3 x;                       // world position [m]
     Vec3 n;                       // outward normal (world)
     Vec3 vp;                      // the proxy's velocity at x [m/s]
@@ -163,6 +173,12 @@ class Contact {
   using Fit = StiffnessFit;
   void find_node_contact(ContactState& cs, int32_t k, int32_t proxy, const Pose& p0, const Pose& p1);
   void find_face_contact(ContactState& cs, int32_t f, int32_t proxy, const Pose& p0, const Pose& p1, double dt);
+  void find_embedded_contact(ContactState& cs, int32_t e, int32_t proxy, const Pose& p0, const Pose& p1, double dt);
+  // The constructor's two ways: the embedded surface's vertices, or the boundary's nodes and faces.
+  template <class Order>
+  void build_embedded(const std::vector<int32_t>& slot_of, const Order& morton_order);
+  template <class Order>
+  void build_boundary(const std::vector<int32_t>& slot_of, const Order& morton_order);
   // Which way is out of the proxy, for a point at q1 (proxy frame at t_{n+1}) that was at q0 (at t_n).
   Vec3 outward(const ProxyGeometry& g, const Vec3& q0, const Vec3& q1, const SurfacePoint& at1, Memory& mem,
                int32_t proxy) const;
@@ -189,6 +205,14 @@ class Contact {
   std::vector<Face> faces_;          // surface triangles with a free corner, in Morton order of rest centroids
   std::vector<Cluster> face_clusters_;
   std::vector<int32_t> face_cluster_slots_, face_cluster_slot_begin_;  // each face cluster's corners, once each
+  // The embedded surface's vertices (instead of nodes and faces), in Morton
+  // order of their rest positions: each one's four slots and weights, in
+  // clusters of 32 whose box is their slots' grown by emb_pad_.
+  std::vector<std::array<int32_t, 4>> emb_slot_;
+  std::vector<std::array<double, 4>> emb_w_;
+  std::vector<Cluster> emb_clusters_;
+  std::vector<double> emb_pad_;  // per cluster: how far its vertices may stand outside their slots' box [m]
+  std::vector<int32_t> emb_cluster_slots_, emb_cluster_slot_begin_;
   // Workspace of one step.
   std::vector<Vec3> x_now_;                        // world position at t_{n+1} per slot [m]
   std::vector<Vec3> f_now_;                        // contact force on each free slot over this step [N]
@@ -199,7 +223,7 @@ class Contact {
   std::vector<Vec3> dv_;                           // velocity change per free slot, this step [m/s]
   std::vector<int32_t> moved_;                     // free slots given a dv_ this step
   std::vector<uint8_t> moved_flag_;                // per free slot: in moved_
-  int32_t node_contacts_ = 0, face_contacts_ = 0;
+  int32_t node_contacts_ = 0, face_contacts_ = 0, embedded_contacts_ = 0;
   std::vector<Pose> pose0_, pose1_;    // per proxy at t_n and t_{n+1}
   std::vector<Vec3> velocity_, spin_;  // per proxy over the step: velocity [m/s], angular velocity [rad/s]
   std::vector<Vec3> lo_, hi_;          // per proxy: box its bounding sphere sweeps over the step

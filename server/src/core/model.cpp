@@ -472,6 +472,22 @@ Model<Real> build_model(const ModelSpec& spec) {
   if (model.integrator.dt < 0) throw ModelError("integrator.dt must be >= 0 s");
   if (model.integrator.threads < 1) throw ModelError("integrator.threads must be >= 1");
   model.surface = compute_boundary_faces(model.mesh);
+  if (spec.surface) {
+    const EmbeddedSurface& e = *spec.surface;
+    model.embedded = spec.surface;
+    model.embedded_nodes.reserve(e.nodes.size());
+    for (size_t v = 0; v < e.nodes.size(); ++v) {
+      Tet t;
+      for (size_t k = 0; k < 4; ++k) {
+        const int32_t n = e.nodes[v][k];
+        if (n < 0 || n >= model.n_nodes)
+          throw ModelError("surface vertex " + std::to_string(v) + " follows node " + std::to_string(n) +
+                           ", which the mesh lacks (bound to another mesh)");
+        t[k] = model.node_model[size_t(n)];
+      }
+      model.embedded_nodes.push_back(t);
+    }
+  }
   return model;
 }
 

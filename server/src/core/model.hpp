@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -76,6 +77,10 @@ struct Model {
   std::vector<int32_t> node_model;  // model id of each given node (n_nodes)
   std::vector<int32_t> node_given;  // given id of each model node (n_nodes)
   std::vector<Tri> surface;         // boundary triangles, outward (n_faces x 3)
+  // A fine surface the body carries (core/embedding.hpp): contact then
+  // meets its vertices, not the boundary's. Null when the spec has none.
+  std::shared_ptr<const EmbeddedSurface> embedded;
+  std::vector<Tet> embedded_nodes;  // its vertices' four nodes, in this numbering (n_fine)
   int32_t n_nodes = 0;
   int32_t n_tets = 0;
 

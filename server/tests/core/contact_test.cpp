@@ -7,11 +7,13 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include <glm/geometric.hpp>
 
 #include "core/contact.hpp"
+#include "core/embedding.hpp"
 #include "core/model.hpp"
 #include "core/stepper.hpp"
 #include "mesh/primitives.hpp"
@@ -513,6 +515,97 @@ TEST(Contact, FacesHoldABallThatFitsBetweenNodes) {
   EXPECT_GE(first_force_depth, 0.0);
   EXPECT_LT(first_force_depth, 0.0002);  // pushes back from the first touch, not from a node's
   EXPECT_GT(force_at_1mm, 0.0);
+}
+
+// A skin 1 mm outside a coarse block (the fine surface a scene shows, 2.5 mm apart), bound to the block's tets.
+std::shared_ptr<const EmbeddedSurface> skin(const TetMesh& block, std::array<int, 3> cells) {
+  const Aabb box = compute_aabb(block.X);
+  const TetMesh fine = make_box(box.lo - Vec3(0.001, 0.0, 0.001), box.hi + Vec3(0.001), cells);
+  SurfaceMesh s;
+  s.vertices = fine.X;
+  s.triangles = compute_boundary_faces(fine);
+  return std::make_shared<const EmbeddedSurface>(embed_surface(block, s, 0.002));
+}
+
+// A ball smaller than a coarse cell pressed on an embedded surface between the coarse nodes is stopped by
+// that surface, 1 mm above the block's own: its vertices are what the proxy meets, neither the block's
+// nodes nor its faces.
+TEST(Contact, AnEmbeddedSurfaceStopsABallWhereItIsSeen) {
+  ModelSpec spec = block_spec({2, 1, 2});  // 2 cm cells
+  spec.essential = {held_box("base", Vec3(0.0), Vec3(0.04, 0.0, 0.04))};
+  spec.surface = skin(spec.mesh, {17, 9, 17});
+  const double r = 0.003, top = 0.021;             // the skin's top
+  const Vec3 above(0.01, top + r + 0.0005, 0.01);  // over the middle of a coarse cell's top
+  spec.proxies = {sphere_proxy("tip", "left", above, r)};
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  const double dt = 0.5 * model.dt_rest;
+  Pose pose = model.proxies[0].pose;
+  const Vec3 velocity(0.0, -0.05, 0.0);
+  double first_force_bottom = -1;
+  int32_t embedded = 0;
+  for (int k = 0; k < 100000 && pose.position.y - r > top - 0.0015; ++k) {
+    move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    pose.position += velocity * dt;
+    EXPECT_EQ(stepper.contact().node_contacts() + stepper.contact().face_contacts(), 0);
+    embedded = std::max(embedded, stepper.contact().embedded_contacts());
+    if (s.contact.reports[0].force.y > 0 && first_force_bottom < 0) first_force_bottom = pose.position.y - r;
+    EXPECT_GE(s.contact.reports[0].force.y, 0.0);
+  }
+  // The skin under the ball went down with it, none of its vertices deep inside the ball.
+  std::vector<Vec3> x(size_t(model.n_nodes)), fine(spec.surface->rest.vertices.size());
+  std::vector<Vec3> given(size_t(model.n_nodes));
+  for (int32_t i = 0; i < model.n_nodes; ++i) given[size_t(model.node_given[size_t(i)])] = node_position(model, s, i);
+  compute_embedded_positions(*spec.surface, given, fine);
+  double deepest = 0, under = 1;
+  for (size_t v = 0; v < fine.size(); ++v) {
+    deepest = std::max(deepest, r - glm::length(fine[v] - pose.position));
+    const Vec3& X = spec.surface->rest.vertices[v];
+    if (X.y == top && std::hypot(X.x - above.x, X.z - above.z) < 0.002) under = std::min(under, fine[v].y);
+  }
+  std::printf(
+      "  ball r = 3 mm on a skin 1 mm over 2 cm cells: first force with its bottom at %.3f mm (skin at %.1f), "
+      "up to %d skin points; the skin under it at %.2f mm, deepest vertex %.3f mm inside\n",
+      first_force_bottom * 1e3, top * 1e3, embedded, under * 1e3, deepest * 1e3);
+  EXPECT_GT(embedded, 0);
+  EXPECT_GT(first_force_bottom, top - 0.0006);  // stopped at the skin: 1 mm above the block's top (20 mm)
+  EXPECT_LT(under, top - 0.001);                // and the skin went down with the ball
+  EXPECT_LT(deepest, 0.0003);
+}
+
+// The momentum an embedded surface's points give the nodes (w_k J / m_k each, weights summing to 1, some
+// negative for the skin outside its tets) is the proxy's reaction, every step: P_{n+1} - P_n =
+// -dt/2 (F_n + F_{n+1}) on a free block, as for nodes and faces.
+TEST(Contact, AnEmbeddedSurfacesReactionEqualsTheMomentumItGave) {
+  ModelSpec spec = block_spec({4, 2, 4});
+  spec.surface = skin(spec.mesh, {13, 7, 13});
+  spec.proxies = {sphere_proxy("tip", "left", Vec3(0.02, 0.0311, 0.02), 0.01)};
+  const Model<double> model = build_model<double>(spec);
+  Stepper<double> stepper(model);
+  State<double> s = stepper.make_state();
+  const double dt = 0.5 * model.dt_rest;
+  Pose pose = model.proxies[0].pose;
+  const Vec3 velocity(0.0, -0.2, 0.05);
+  Vec3 F_prev(0.0);
+  int in_contact = 0;
+  for (int k = 0; k < 600; ++k) {
+    move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
+    const Vec3 P0 = momentum(model, s);
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    const Vec3 F = s.contact.reports[0].force;
+    const Vec3 expected = -0.5 * dt * (F_prev + F);
+    const Vec3 dP = momentum(model, s) - P0;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(dP[c], expected[c], 1e-9 * glm::length(expected) + 1e-15) << k;
+    in_contact += stepper.contact().embedded_contacts() > 0;
+    EXPECT_EQ(stepper.contact().node_contacts() + stepper.contact().face_contacts(), 0);
+    F_prev = F;
+    pose.position += velocity * dt;
+  }
+  // The ball knocks the free block away (faster than itself: the block springs back) within some 80 steps.
+  EXPECT_GT(in_contact, 10);
+  EXPECT_LT(momentum(model, s).y, -0.01);
 }
 
 // A 10 m/s impact on a 2 mm plate clamped at its rim: no node passes through
