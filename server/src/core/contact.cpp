@@ -750,13 +750,7 @@ void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy
     if (wj == 0) continue;
     x0 += wj * cs.x_prev[k];
     c.x += wj * x_now_[k];
-    if (k < free_nodes_.size()) {
-      c.slot[size_t(free)] = int32_t(k);
-      c.w[size_t(free++)] = wj;
-      c.inv_mass += wj * wj / double(model_.m[size_t(free_nodes_[k])]);
-    } else {
-      c.v_held += wj * (x_now_[k] - cs.x_prev[k]) / dt;  // held: as prescribed over the step
-    }
+    add_corner(cs, c, free, k, wj, dt);
   }
   if (!(c.inv_mass > 0)) return;
   c.n = p1.orientation * outward(g, p0.to_local(x0), q1, at1, mem, proxy);
@@ -765,6 +759,17 @@ void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy
   c.mu = friction_ ? spec.friction : 0.0;
   points_.push_back(c);
   ++face_contacts_;
+}
+
+template <class Real>
+void Contact<Real>::add_corner(const ContactState& cs, Point& c, int& free, size_t slot, double w, double dt) const {
+  if (slot < free_nodes_.size()) {
+    c.slot[size_t(free)] = int32_t(slot);
+    c.w[size_t(free++)] = w;
+    c.inv_mass += w * w / double(model_.m[size_t(free_nodes_[slot])]);
+  } else {
+    c.v_held += w * (x_now_[slot] - cs.x_prev[slot]) / dt;  // held: as prescribed over the step
+  }
 }
 
 template <class Real>
@@ -800,17 +805,8 @@ void Contact<Real>::find_embedded_contact(ContactState& cs, int32_t e, int32_t p
   c.v_held = Vec3(0.0);
   c.inv_mass = 0;
   int free = 0;
-  for (size_t k = 0; k < 4; ++k) {
-    const auto slot = size_t(slots[k]);
-    if (w[k] == 0) continue;
-    if (slot < free_nodes_.size()) {
-      c.slot[size_t(free)] = int32_t(slot);
-      c.w[size_t(free++)] = w[k];
-      c.inv_mass += w[k] * w[k] / double(model_.m[size_t(free_nodes_[slot])]);
-    } else {
-      c.v_held += w[k] * (x_now_[slot] - cs.x_prev[slot]) / dt;  // held: as prescribed over the step
-    }
-  }
+  for (size_t k = 0; k < 4; ++k)
+    if (w[k] != 0) add_corner(cs, c, free, size_t(slots[k]), w[k], dt);
   if (!(c.inv_mass > 0)) return;
   c.n = p1.orientation * outward(g, p0.to_local(x0), q1, at1, mem, proxy);
   c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], x1 - p1.position);

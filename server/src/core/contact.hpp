@@ -174,6 +174,9 @@ class Contact {
   void find_node_contact(ContactState& cs, int32_t k, int32_t proxy, const Pose& p0, const Pose& p1);
   void find_face_contact(ContactState& cs, int32_t f, int32_t proxy, const Pose& p0, const Pose& p1, double dt);
   void find_embedded_contact(ContactState& cs, int32_t e, int32_t proxy, const Pose& p0, const Pose& p1, double dt);
+  // A corner of a face's or an embedded vertex's point, of weight w: a free
+  // node takes its share of the impulse, a held one moves as prescribed.
+  void add_corner(const ContactState& cs, Point& c, int& free, size_t slot, double w, double dt) const;
   // The constructor's two ways: the embedded surface's vertices, or the boundary's nodes and faces.
   template <class Order>
   void build_embedded(const std::vector<int32_t>& slot_of, const Order& morton_order);
