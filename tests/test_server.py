@@ -19,6 +19,7 @@ import urllib.request
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 import websockets
 
@@ -178,6 +179,52 @@ def test_viewer_gets_the_scene_states_and_telemetry(tmp_path: pathlib.Path) -> N
             assert costs.get("elastic", 0) > 0 and costs.get("contact", 0) > 0 and costs.get("essential", 0) > 0
             assert "loads" not in costs
             assert costs["elastic"] > costs["contact"], costs
+
+    with running_server(tmp_path) as (port, _):
+        asyncio.run(run(port))
+
+
+def test_fields_are_sent_only_while_a_viewer_asks_for_them(tmp_path: pathlib.Path) -> None:
+    """Protocol 1.8: a scene that asks for no fields, with viewers that ask for none, sends none (and no
+    scalar); a viewer's Hello.fields turns a field on for the frames (every viewer's, as they are encoded
+    once), an unknown name is answered by an Error naming it, and ViewFields([]) turns it off again."""
+
+    def fields_of(state: Any) -> dict[str, Any]:
+        return {f.name: f.values for f in state.fields or []}
+
+    async def states(ws: Any, count: int) -> list[Any]:
+        return [await next_of(ws, "StateFrameT") for _ in range(count)]
+
+    async def state_after(ws: Any, t: float) -> Any:
+        """The first state past simulated time t (the frames before it may wait unread on the socket)."""
+        while (s := await next_of(ws, "StateFrameT")).simTime <= t:
+            pass
+        return s
+
+    async def run(port: int) -> None:
+        async with websockets.connect(url(port)) as plain, websockets.connect(url(port)) as asking:
+            _, scene = await hello(plain, Role.Viewer)
+            n = len(scene.surfaceNodes)
+            assert [f.name for f in scene.fields] == ["von_mises", "energy_density", "stretch_max", "stretch_min"]
+            assert scene.scalarName in ("", None)
+            for s in await states(plain, 5):
+                assert s.fields is None and s.scalar is None
+            await asking.send(codec.encode(codec.make_hello(Role.Viewer, "", "pytest", fields=["von_mises"])))
+            await next_of(asking, "SceneDescriptionT")
+            got = [fields_of(s) for s in await states(asking, 10)]
+            assert all(list(f) == ["von_mises"] for f in got[2:]), [list(f) for f in got]
+            vm = got[-1]["von_mises"]
+            assert len(vm) == n and all(math.isfinite(x) and x >= 0 for x in vm)
+            latest = (await states(asking, 1))[0].simTime
+            assert list(fields_of(await state_after(plain, latest))) == ["von_mises"], "frames are encoded once for all"
+            await asking.send(codec.encode(codec.make_view_fields(["von_mises", "pressure"])))
+            err = await next_of(asking, "ErrorT")
+            assert err.code == ErrorCode.BadRequest and "no field 'pressure'" in err.message, err.message
+            assert list(fields_of((await states(asking, 3))[-1])) == ["von_mises"], "an error changes nothing"
+            await asking.send(codec.encode(codec.make_view_fields([])))
+            after = await states(asking, 10)
+            assert fields_of(after[-1]) == {}, [list(fields_of(f)) for f in after]
+            assert fields_of(await state_after(plain, after[-1].simTime)) == {}
 
     with running_server(tmp_path) as (port, _):
         asyncio.run(run(port))
@@ -480,7 +527,9 @@ def test_controller_sets_parameters_resets_and_loads_scenes(tmp_path: pathlib.Pa
                 while True:
                     state = await next_of(view, "StateFrameT")
                     if state.simTime > after + 0.5:
-                        return max(state.scalar), state
+                        x = np.asarray(state.positions, np.float64).reshape(-1, 3)
+                        rest = np.asarray(scene.restPositions, np.float64).reshape(-1, 3)
+                        return float(np.linalg.norm(x - rest, axis=1).max()), state
 
             # Gravity turned on: the block sags under its own weight. Then twice as stiff: half the sag, in
             # the same timeline (a small strain: the response is linear).

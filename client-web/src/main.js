@@ -5,10 +5,12 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
 import {
-  ControlCommand, Message, ResetT, Role, decode, encode, makeHello, messageTypeOf, readStateFrame, checkVersion,
+  ControlCommand, Message, ResetT, Role, decode, encode, makeHello, makeViewFields, messageTypeOf, readStateFrame,
+  checkVersion,
 } from '@tactile/proto';
 import { cssGradient } from './colormap.js';
 import { ControlPanel } from './controls.js';
+import { DISPLACEMENT, FieldChoice } from './fields.js';
 import { FrameBuffer } from './frames.js';
 import { PointerDevice } from './pointer.js';
 import { TelemetryPanel } from './telemetry.js';
@@ -56,6 +58,9 @@ sun.shadow.mapSize.set(1024, 1024);
 scene.add(sun);
 scene.add(sun.target);
 $('legend-bar').style.background = cssGradient();
+// What the body is coloured by (?field=von_mises, ... to start with one; the legend's menu changes it).
+const fieldChoice = new FieldChoice(query.get('field') || undefined);
+const fieldMenu = /** @type {HTMLSelectElement} */ ($('legend-field'));
 const telemetry = new TelemetryPanel($('telemetry'));
 // ?device=NAME: the channel the mouse drives (default: one meant for the page, such as 'mouse').
 const pointer = new PointerDevice({ canvas: renderer.domElement, camera, controls, token,
@@ -103,6 +108,41 @@ function showFault(faults) {
   $('fault').hidden = !text;
 }
 
+/** @type {WebSocket | null} */
+let socket = null;
+let sentFields = '';  // the fields the server was last asked for, joined
+/** @type {Float32Array} */
+let scalarsNow = new Float32Array(0);  // the chosen field at each frame vertex, of the newest frame
+
+// Asks the server for the chosen field (or for none, for displacement) when that changed.
+function askFields() {
+  const asked = fieldChoice.asked();
+  if (asked.join(',') === sentFields || !socket || socket.readyState !== WebSocket.OPEN) return;
+  socket.send(encode(makeViewFields(asked)));
+  sentFields = asked.join(',');
+}
+
+function showFieldChoice() {
+  fieldMenu.replaceChildren(...fieldChoice.available.map((f) => {
+    const o = document.createElement('option');
+    o.value = f.name;
+    o.textContent = f.name.replace(/_/g, ' ');
+    o.title = f.description;
+    return o;
+  }));
+  fieldMenu.value = fieldChoice.name;
+  const info = fieldChoice.info();
+  $('legend-unit').textContent = info.unit ? `[${info.unit}]` : '';
+  fieldMenu.title = info.description;
+}
+fieldMenu.addEventListener('change', () => {
+  fieldChoice.name = fieldMenu.value;
+  fieldChoice.wanted = fieldMenu.value;
+  showFieldChoice();
+  askFields();
+  if (view) view.resetScalarRange(fieldChoice.name === DISPLACEMENT);
+});
+
 /** @type {SceneView | null} */
 let view = null;
 /** @type {FrameBuffer | null} */
@@ -135,7 +175,11 @@ function onScene(d) {
   $('scene').textContent = view.embedded
     ? `${stats.sceneName}: ${view.embedded.triangles} triangles on ${stats.vertices} frame vertices, step ${(d.dt * 1e3).toFixed(3)} ms`
     : `${stats.sceneName}: ${stats.vertices} surface vertices, step ${(d.dt * 1e3).toFixed(3)} ms`;
-  $('legend-name').textContent = /** @type {string | null} */ (d.scalarName) || 'scalar';
+  fieldChoice.setDescription(d);
+  showFieldChoice();
+  askFields();
+  view.resetScalarRange(fieldChoice.name === DISPLACEMENT);
+  scalarsNow = new Float32Array(view.scalars.length);
   // Frame the body: look at its centre from the front, above.
   const s = /** @type {THREE.Sphere} */ (view.geometry.boundingSphere);  // (SceneView computes it)
   const c = s.center;
@@ -178,7 +222,8 @@ function onMessage(data) {
     const f = readStateFrame(data);
     if (f.sceneId !== stats.sceneId) return;
     if (buffer.count > 0 && f.simTime < buffer.tb) buffer.reset();  // a replay sought back
-    const kept = buffer.push(f.positions, f.scalar, f.simTime, performance.now() / 1000);
+    const coloured = fieldChoice.values(f, view.rest, scalarsNow);
+    const kept = buffer.push(f.positions, coloured ? scalarsNow : null, f.simTime, performance.now() / 1000);
     stats.decodeMs.push(performance.now() - t0);  // read in place and copied into the buffer
     if (stats.decodeMs.length > 256) stats.decodeMs.shift();
     if (kept) {
@@ -247,8 +292,10 @@ function connect() {
   ws.onopen = () => {
     status(`connected to ${url}`);
     // (Off loopback every role needs the token, the viewer's too.)
-    ws.send(encode(makeHello({ role: Role.Viewer, token, clientName: 'client-web' })));
+    ws.send(encode(makeHello({ role: Role.Viewer, token, clientName: 'client-web', fields: fieldChoice.asked() })));
+    sentFields = fieldChoice.asked().join(',');
   };
+  socket = ws;
   ws.onmessage = (e) => {
     try {
       onMessage(new Uint8Array(e.data));

@@ -224,6 +224,14 @@ export class SceneView {
     if (this.embedded) this.embedded.write(this.slots.indexOf(slot), positions, /** @type {Uint8Array} */ (col));
   }
 
+  // Another field chosen: its colours span the range it shows from the next state on (from zero, for a
+  // magnitude such as the displacement, so that rest is the map's first colour).
+  /** @param {boolean} fromZero */
+  resetScalarRange(fromZero) {
+    this.scalarRange[0] = fromZero ? 0 : Infinity;
+    this.scalarRange[1] = fromZero ? 1e-9 : -Infinity;
+  }
+
   // A new state (positions [m], n x 3; scalars, n): written once into the free slot, which becomes the
   // newer; `older` (the frame before it, as the frame buffer holds it) is rewritten only when the box or
   // the colour range had to widen.

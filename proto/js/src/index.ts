@@ -19,6 +19,7 @@ import {
   Role,
   StateFrame,
   Vec3f,
+  ViewFieldsT,
 } from './generated/tactile_generated';
 import { ProtocolMajor } from './generated/tactile/proto/protocol-major';
 import { ProtocolMinor } from './generated/tactile/proto/protocol-minor';
@@ -154,6 +155,7 @@ export interface HelloOptions {
   token?: string; // required for Device and Controller, and off loopback
   clientName?: string;
   devices?: string[]; // channels a Device client drives
+  fields?: string[]; // per-vertex fields asked for in state frames (1.8; SceneDescription.fields names them)
 }
 
 // The first message of a client, carrying this codec's protocol version.
@@ -165,8 +167,15 @@ export function makeHello(options: HelloOptions = {}): EnvelopeT {
     options.token ?? null,
     options.clientName ?? null,
     options.devices ?? [],
+    [],
+    options.fields ?? [],
   );
   return new EnvelopeT(Message.Hello, hello);
+}
+
+// Asks for other per-vertex fields in state frames than the Hello did (1.8).
+export function makeViewFields(fields: string[]): EnvelopeT {
+  return new EnvelopeT(Message.ViewFields, new ViewFieldsT(fields));
 }
 
 // Throws ProtocolError (code VersionMismatch) when a peer's Hello or Welcome
@@ -190,15 +199,26 @@ export interface StateFrameView {
   simTime: number; // [s]
   serverTimeNs: bigint;
   positions: Float32Array; // surface vertices [m] (n_vertices x 3)
-  scalar: Float32Array; // per surface vertex (n_vertices)
+  scalar: Float32Array; // per surface vertex (n_vertices); none since 1.8
   proxies: Float32Array; // position [m] x y z, orientation w x y z (n_proxies x 7)
   contactForces: Float32Array; // force on each proxy [N] (n_proxies x 3)
+  fields: Map<string, Float32Array>; // the per-vertex fields asked for (1.8), by name (n_vertices each)
 }
 
 // A vector of all-float structs (ProxyPose, Vec3f) as one Float32Array view.
 function structFloats(bytes: Uint8Array, count: number, first: { bb_pos: number } | null, size: number): Float32Array {
   const start = count > 0 && first !== null ? first.bb_pos : 0;
   return new Float32Array(bytes.buffer, bytes.byteOffset + start, (count * size) / 4);
+}
+
+function readFields(frame: StateFrame, empty: Float32Array): Map<string, Float32Array> {
+  const out = new Map<string, Float32Array>();
+  for (let i = 0; i < frame.fieldsLength(); i++) {
+    const f = frame.fields(i);
+    const name = f?.name();
+    if (f && name) out.set(name, f.valuesArray() ?? empty);
+  }
+  return out;
 }
 
 // Reads a StateFrame in place. Throws ProtocolError for damaged bytes or
@@ -220,6 +240,7 @@ export function readStateFrame(data: Uint8Array | ArrayBuffer): StateFrameView {
       scalar: frame.scalarArray() ?? empty,
       proxies: structFloats(bytes, frame.proxiesLength(), frame.proxies(0), ProxyPose.sizeOf()),
       contactForces: structFloats(bytes, frame.contactForcesLength(), frame.contactForces(0), Vec3f.sizeOf()),
+      fields: readFields(frame, empty),
     };
   });
 }

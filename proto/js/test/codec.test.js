@@ -27,6 +27,10 @@ test('makeHello carries this codec\'s version and the options', () => {
     [proto.PROTOCOL_MAJOR, proto.PROTOCOL_MINOR, proto.Role.Controller, 't', 'web', ['a']],
   );
   assert.equal(proto.decode(proto.encode(proto.makeHello())).message.role, proto.Role.Viewer);
+  assert.deepEqual(proto.decode(proto.encode(proto.makeHello({ fields: ['von_mises'] }))).message.fields, ['von_mises']);
+  const asked = proto.decode(proto.encode(proto.makeViewFields(['stretch_max', 'energy_density'])));
+  assert.equal(asked.messageType, proto.Message.ViewFields);
+  assert.deepEqual(asked.message.fields, ['stretch_max', 'energy_density']);
 });
 
 test('a peer of another major version gets a clear error at hello', () => {
@@ -79,6 +83,13 @@ test('readStateFrame gives Float32Array views of the message, not copies', () =>
     assert.equal(view.buffer, bytes.buffer, `${key} is a copy`);
     assert.ok(view.byteOffset >= bytes.byteOffset && view.byteOffset + view.byteLength <= bytes.byteOffset + bytes.length, key);
   }
+  // The fields (1.8), by name, each a view too.
+  assert.deepEqual([...frame.fields.keys()], want.fields.map((f) => f.name));
+  for (const f of want.fields) {
+    const view = frame.fields.get(f.name);
+    assert.deepEqual(Array.from(view), f.values, f.name);
+    assert.equal(view.buffer, bytes.buffer, `${f.name} is a copy`);
+  }
   // A write through the bytes shows in the view: they share memory.
   const at = frame.positions.byteOffset - bytes.byteOffset + 4 * 4;
   new DataView(bytes.buffer, bytes.byteOffset).setFloat32(at, 7.25, true);
@@ -125,6 +136,7 @@ test('readStateFrame reads absent arrays as empty and refuses other messages', (
       assert.ok(frame[key] instanceof Float32Array && frame[key].length === 0, key);
       assert.equal(frame[key].buffer, bytes.buffer, key);
     }
+    assert.equal(frame.fields.size, 0);
   }
   assert.throws(() => proto.readStateFrame(vectors.hello.bytes), (e) => e instanceof proto.ProtocolError && /expected a StateFrame, got Hello/.test(e.message));
 });

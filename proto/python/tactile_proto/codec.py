@@ -33,6 +33,7 @@ from .generated.Hello import HelloT
 from .generated.Message import Message
 from .generated.ProtocolMajor import ProtocolMajor
 from .generated.ProtocolMinor import ProtocolMinor
+from .generated.ViewFields import ViewFieldsT
 from .generated.Welcome import WelcomeT
 
 PROTOCOL_MAJOR: int = ProtocolMajor.Current
@@ -216,8 +217,11 @@ def encode(message: Any) -> bytes:
     return bytes(builder.Output())
 
 
-def make_hello(role: int, token: str = "", client_name: str = "", devices: Sequence[str] = ()) -> HelloT:
-    """A Hello in this codec's protocol version; `role` is a generated Role value (Role.Device...)."""
+def make_hello(
+    role: int, token: str = "", client_name: str = "", devices: Sequence[str] = (), fields: Sequence[str] = ()
+) -> HelloT:
+    """A Hello in this codec's protocol version; `role` is a generated Role value (Role.Device...); `fields`
+    the per-vertex fields asked for in state frames (1.8)."""
     hello = HelloT()
     hello.protocolMajor = PROTOCOL_MAJOR
     hello.protocolMinor = PROTOCOL_MINOR
@@ -225,7 +229,15 @@ def make_hello(role: int, token: str = "", client_name: str = "", devices: Seque
     hello.token = token
     hello.clientName = client_name
     hello.devices = list(devices)
+    hello.fields = list(fields)
     return hello
+
+
+def make_view_fields(fields: Sequence[str]) -> ViewFieldsT:
+    """A ViewFields (1.8): the per-vertex fields a client now asks for in its state frames."""
+    v = ViewFieldsT()
+    v.fields = list(fields)
+    return v
 
 
 def check_version(message: Any) -> None:

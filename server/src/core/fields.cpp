@@ -1,6 +1,8 @@
 #include "core/fields.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 
 #include <glm/mat3x3.hpp>
@@ -10,16 +12,80 @@
 
 namespace tactile {
 
+namespace {
+
+// Eigenvalues of a symmetric 3x3 matrix, largest first, by the closed form of
+// the characteristic cubic (Smith 1961): A = q I + p B with det B = 2 cos 3phi.
+// Accurate to about 1e-8 of |A| where two eigenvalues nearly meet, which a
+// field for viewing and output does not see.
+void symmetric_eigenvalues(const double* A, double* out) {
+  const double p1 = A[1] * A[1] + A[2] * A[2] + A[5] * A[5];
+  const double q = (A[0] + A[4] + A[8]) / 3.0;
+  const double d0 = A[0] - q, d1 = A[4] - q, d2 = A[8] - q;
+  const double p2 = d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * p1;
+  const double p = std::sqrt(p2 / 6.0);
+  if (p == 0) {  // a multiple of I
+    out[0] = out[1] = out[2] = q;
+    return;
+  }
+  const double B[9] = {d0 / p, A[1] / p, A[2] / p, A[3] / p, d1 / p, A[5] / p, A[6] / p, A[7] / p, d2 / p};
+  const double r = std::clamp(0.5 * material::det(B), -1.0, 1.0);
+  const double phi = std::acos(r) / 3.0;
+  constexpr double kThird = 2.0943951023931954923;  // 2 pi / 3
+  out[0] = q + 2.0 * p * std::cos(phi);
+  out[2] = q + 2.0 * p * std::cos(phi + kThird);
+  out[1] = 3.0 * q - out[0] - out[2];
+  std::sort(out, out + 3, std::greater<>());  // the middle one by difference may round past a neighbour
+}
+
+constexpr ViewFieldInfo kViewFields[kViewFieldCount] = {
+    {"von_mises", "Pa", "von Mises stress of the Cauchy stress"},
+    {"energy_density", "J/m^3", "strain-energy density psi(F) per rest volume"},
+    {"stretch_max", "1", "largest principal stretch (1 at rest)"},
+    {"stretch_min", "1", "smallest principal stretch (1 at rest)"},
+};
+
+}  // namespace
+
+const ViewFieldInfo& view_field_info(ViewField f) { return kViewFields[int(f)]; }
+
+bool parse_view_field(std::string_view name, ViewField* out) {
+  for (int k = 0; k < kViewFieldCount; ++k)
+    if (name == kViewFields[k].name) {
+      *out = ViewField(k);
+      return true;
+    }
+  return false;
+}
+
+std::string view_field_names() {
+  std::string s;
+  for (int k = 0; k < kViewFieldCount; ++k) s += std::string(k ? ", " : "") + kViewFields[k].name;
+  return s;
+}
+
+ElementFieldRequest element_request(ViewFieldMask mask) {
+  ElementFieldRequest r;
+  r.von_mises = mask & view_field_bit(ViewField::VonMises);
+  r.energy_density = mask & view_field_bit(ViewField::EnergyDensity);
+  r.principal_stretches = mask & (view_field_bit(ViewField::StretchMax) | view_field_bit(ViewField::StretchMin));
+  return r;
+}
+
 TetFields compute_tet_fields(MaterialModel m, const double* F, double lambda, double mu) {
   TetFields f;
-  double P[9];
-  material::stress(m, F, lambda, mu, P);
+  double P[9], C[9];
+  f.energy_density = material::stress(m, F, lambda, mu, P);
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) {
       double c = 0;
       for (int k = 0; k < 3; ++k) c += F[3 * k + i] * F[3 * k + j];
+      C[3 * i + j] = c;
       f.green[3 * i + j] = 0.5 * (c - (i == j ? 1.0 : 0.0));
     }
+  double eig[3];
+  symmetric_eigenvalues(C, eig);
+  for (int k = 0; k < 3; ++k) f.stretches[k] = std::sqrt(std::max(eig[k], 0.0));
   if (m == MaterialModel::Linear) {
     for (int k = 0; k < 9; ++k) f.cauchy[k] = P[k];
   } else {
@@ -45,16 +111,20 @@ TetFields compute_tet_fields(MaterialModel m, const double* F, double lambda, do
 }
 
 template <class Real>
-ElementFields compute_element_fields(const Model<Real>& model, const State<Real>& s, const ElementFieldRequest& ask) {
+ElementFields compute_element_fields(const Model<Real>& model, const State<Real>& s, const ElementFieldRequest& ask,
+                                     std::span<const int32_t> tets) {
   ElementFields out;
   if (!ask.any()) return out;
-  const size_t nt = size_t(model.n_tets);
+  const size_t nt = tets.empty() ? size_t(model.n_tets) : tets.size();
   if (ask.cauchy_stress) out.cauchy_stress.resize(9 * nt);
   if (ask.green_strain) out.green_strain.resize(9 * nt);
   if (ask.von_mises) out.von_mises.resize(nt);
+  if (ask.energy_density) out.energy_density.resize(nt);
+  if (ask.principal_stretches) out.principal_stretches.resize(3 * nt);
   const std::vector<Vec3>& X = model.mesh.X;
   for (size_t e = 0; e < nt; ++e) {
-    const Tet& t = model.mesh.tets[e];
+    const size_t id = tets.empty() ? e : size_t(tets[e]);
+    const Tet& t = model.mesh.tets[id];
     // Columns: edges from corner 0 (glm is column-major).
     const glm::dmat3 Dm(X[size_t(t[1])] - X[size_t(t[0])], X[size_t(t[2])] - X[size_t(t[0])],
                         X[size_t(t[3])] - X[size_t(t[0])]);
@@ -70,17 +140,22 @@ ElementFields compute_element_fields(const Model<Real>& model, const State<Real>
     double F[9];
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) F[3 * i + j] = Fm[j][i];
-    const TetFields f = compute_tet_fields(model.tet_model[e], F, model.tet_lambda[e], model.tet_mu[e]);
+    const TetFields f = compute_tet_fields(model.tet_model[id], F, model.tet_lambda[id], model.tet_mu[id]);
     for (int k = 0; k < 9; ++k) {
       if (ask.cauchy_stress) out.cauchy_stress[9 * e + size_t(k)] = f.cauchy[k];
       if (ask.green_strain) out.green_strain[9 * e + size_t(k)] = f.green[k];
     }
     if (ask.von_mises) out.von_mises[e] = f.von_mises;
+    if (ask.energy_density) out.energy_density[e] = f.energy_density;
+    if (ask.principal_stretches)
+      for (int k = 0; k < 3; ++k) out.principal_stretches[3 * e + size_t(k)] = f.stretches[k];
   }
   return out;
 }
 
-template ElementFields compute_element_fields(const Model<float>&, const State<float>&, const ElementFieldRequest&);
-template ElementFields compute_element_fields(const Model<double>&, const State<double>&, const ElementFieldRequest&);
+template ElementFields compute_element_fields(const Model<float>&, const State<float>&, const ElementFieldRequest&,
+                                              std::span<const int32_t>);
+template ElementFields compute_element_fields(const Model<double>&, const State<double>&, const ElementFieldRequest&,
+                                              std::span<const int32_t>);
 
 }  // namespace tactile

@@ -60,6 +60,7 @@ LiveScene::LiveScene(Scene scene, uint32_t id, const LiveOptions& options)
                   scene_.name.c_str(), dt, sim_.dt_rest(), sim_.n_tets(), 1.0 / dt, rate, kMaxLiveTetStepsPerSecond);
     throw ModelError(text);
   }
+  loop_.set_view_fields(scene_.view_fields);  // the server adds what its viewers ask
 }
 
 std::vector<uint8_t> LiveScene::describe(std::span<const std::string> scenes) {

@@ -100,7 +100,6 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
                            double force_window)
     : sim_(sim), scene_name_(std::move(scene_name)), scene_id_(scene_id), dt_(dt), surface_(extract_surface(sim)) {
   positions_.resize(3 * surface_.nodes.size());
-  scalar_.resize(surface_.nodes.size());
   poses_.resize(sim.proxies().size());
   forces_.resize(sim.proxies().size());
   proxy_haptics_.resize(sim.proxies().size());
@@ -159,18 +158,84 @@ std::span<const uint8_t> FrameEncoder::scene_description(std::span<const Paramet
       for (int32_t v : t) fine_triangles.push_back(uint32_t(v));
     embedded = wire::CreateEmbeddedSurfaceDirect(b, &fine_rest, &fine_triangles, &surface_.carriers, &surface_.weights);
   }
-  return seal(b, wire::Message::SceneDescription,
-              wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
-                                                 &surface_.nodes, "displacement_m", &proxies, &devices, &params, &names,
-                                                 embedded));
+  std::vector<fb::Offset<wire::FieldInfo>> fields;
+  for (int k = 0; k < kViewFieldCount; ++k) {
+    const ViewFieldInfo& f = view_field_info(ViewField(k));
+    fields.push_back(wire::CreateFieldInfoDirect(b, f.name, f.unit, f.description));
+  }
+  return seal(
+      b, wire::Message::SceneDescription,
+      wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
+                                         &surface_.nodes, "", &proxies, &devices, &params, &names, embedded, &fields));
 }
 
-std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
-  sim_.gather(surface_.nodes, positions_.data(), scalar_.data());  // the surface only: not every node
+void FrameEncoder::build_field_map() {
+  const TetMesh& mesh = sim_.mesh();
+  const std::vector<double>& volume = sim_.tet_volume();
+  std::vector<int32_t> vertex_of(size_t(mesh.n_nodes()), -1);
+  for (size_t k = 0; k < surface_.nodes.size(); ++k) vertex_of[surface_.nodes[k]] = int32_t(k);
+  // Per vertex, its tets: counted, then filled (CSR).
+  field_start_.assign(surface_.nodes.size() + 1, 0);
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    bool touches = false;
+    for (int32_t n : mesh.tets[e])
+      if (vertex_of[size_t(n)] >= 0) {
+        ++field_start_[size_t(vertex_of[size_t(n)]) + 1];
+        touches = true;
+      }
+    if (touches) field_tets_.push_back(int32_t(e));
+  }
+  for (size_t k = 0; k < surface_.nodes.size(); ++k) field_start_[k + 1] += field_start_[k];
+  field_entry_.resize(field_start_.back());
+  field_weight_.resize(field_start_.back());
+  std::vector<uint32_t> next(field_start_.begin(), field_start_.end() - 1);
+  std::vector<double> total(surface_.nodes.size(), 0.0);
+  for (size_t i = 0; i < field_tets_.size(); ++i)
+    for (int32_t n : mesh.tets[size_t(field_tets_[i])])
+      if (const int32_t v = vertex_of[size_t(n)]; v >= 0) {
+        field_entry_[next[size_t(v)]] = uint32_t(i);
+        field_weight_[next[size_t(v)]++] = float(volume[size_t(field_tets_[i])]);
+        total[size_t(v)] += volume[size_t(field_tets_[i])];
+      }
+  for (size_t v = 0; v < surface_.nodes.size(); ++v)
+    for (uint32_t j = field_start_[v]; j < field_start_[v + 1]; ++j)
+      field_weight_[j] = float(field_weight_[j] / total[v]);
+}
+
+std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns, ViewFieldMask fields) {
+  sim_.gather(surface_.nodes, positions_.data(), nullptr);  // the frame's vertices only: not every node
   fb::FlatBufferBuilder& b = state_builder_;
   b.Clear();
   const auto positions = b.CreateVector(positions_);
-  const auto scalar = b.CreateVector(scalar_);
+  fb::Offset<fb::Vector<fb::Offset<wire::FrameField>>> field_vec;
+  if (fields) {
+    // Per tet around the frame's vertices only, then their volume-weighted
+    // mean at each vertex (as ParaView's Cell Data to Point Data).
+    if (field_start_.empty()) build_field_map();
+    const ElementFields per_tet = sim_.compute_element_fields(element_request(fields), field_tets_);
+    std::vector<fb::Offset<wire::FrameField>> out;
+    for (int k = 0; k < kViewFieldCount; ++k) {
+      if (!(fields & view_field_bit(ViewField(k)))) continue;
+      const double* values = nullptr;
+      size_t stride = 1;
+      switch (ViewField(k)) {
+        case ViewField::VonMises: values = per_tet.von_mises.data(); break;
+        case ViewField::EnergyDensity: values = per_tet.energy_density.data(); break;
+        case ViewField::StretchMax: values = per_tet.principal_stretches.data(), stride = 3; break;
+        case ViewField::StretchMin: values = per_tet.principal_stretches.data() + 2, stride = 3; break;
+      }
+      std::vector<float>& v = field_values_[k];
+      v.assign(surface_.nodes.size(), 0.0f);
+      for (size_t i = 0; i < v.size(); ++i) {
+        double sum = 0;
+        for (uint32_t j = field_start_[i]; j < field_start_[i + 1]; ++j)
+          sum += double(field_weight_[j]) * values[stride * field_entry_[j]];
+        v[i] = float(sum);
+      }
+      out.push_back(wire::CreateFrameFieldDirect(b, view_field_info(ViewField(k)).name, &v));
+    }
+    field_vec = b.CreateVector(out);
+  }
   // (CreateVectorOfStructs, not the uninitialized variant: flatbuffers 2.0.8
   // aligns that one to the struct's size, which is wrong for these.)
   const std::vector<ProxyReport>& reports = sim_.proxy_reports();
@@ -187,13 +252,13 @@ std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns) {
   f.add_sim_time(sim_.time());
   f.add_server_time_ns(server_time_ns);
   f.add_positions(positions);
-  f.add_scalar(scalar);
   f.add_proxies(pose_vec);
   f.add_contact_forces(force_vec);
   const Energy& e = sim_.energy();
   const wire::Energies energies(e.kinetic, e.elastic, e.gravity, e.work_loads, e.work_essential, e.work_contact,
                                 e.dissipated, e.discrete, e.restated);
   f.add_energies(&energies);
+  if (fields) f.add_fields(field_vec);
   return seal(b, wire::Message::StateFrame, f.Finish());
 }
 

@@ -1,6 +1,6 @@
 // The protocol messages the simulation publishes (proto/tactile.fbs), encoded
 // from a Simulation into builders that are reused: after the first frames
-// have grown their buffers, encoding a frame allocates nothing.
+// have grown their buffers, encoding a frame without fields allocates nothing.
 //
 // Encoded messages are handed out as std::span, never flatbuffers::span:
 // flatbuffers 2.0.8 makes that an alias of std::span or a class of its own
@@ -54,7 +54,8 @@ class FrameEncoder {
   // With the parameters a controller may set and the scenes it may load.
   std::span<const uint8_t> scene_description(std::span<const Parameter> parameters = {},
                                              std::span<const std::string> scenes = {});
-  std::span<const uint8_t> state_frame(int64_t server_time_ns);
+  // With the per-vertex fields `fields` names (none: none computed).
+  std::span<const uint8_t> state_frame(int64_t server_time_ns, ViewFieldMask fields = 0);
   // After every advance: adds its mean contact forces (impulse over time
   // since the simulation's last clear_impulses(), which the caller then
   // clears) to the force window.
@@ -76,7 +77,15 @@ class FrameEncoder {
   uint32_t scene_id_;
   double dt_;
   Surface surface_;
-  std::vector<float> positions_, scalar_;
+  std::vector<float> positions_;
+  // Per-vertex fields (state_frame), made on the first frame that asks: the
+  // tets around the frame's vertices, and per vertex (field_start_, CSR) its
+  // tets (an index into field_tets_) and their share of its volume.
+  void build_field_map();
+  std::vector<int32_t> field_tets_;
+  std::vector<uint32_t> field_start_, field_entry_;
+  std::vector<float> field_weight_;
+  std::vector<float> field_values_[kViewFieldCount];
   std::vector<proto::ProxyPose> poses_;  // per proxy, staged for the builder
   std::vector<proto::Vec3f> forces_;
   std::vector<proto::ProxyHaptics> proxy_haptics_;

@@ -214,7 +214,7 @@ void RealtimeLoop::step_once(int64_t now_ns) {
   bool state = false;
   if (sim_.time() + 1e-12 >= next_state_) {
     next_state_ += state_period_;
-    if (state_sink_) state_sink_(frames_.state_frame(now_ns));
+    if (state_sink_) state_sink_(frames_.state_frame(now_ns, view_fields()));
     state = true;
   }
   std::lock_guard<std::mutex> lock(stats_mutex_);
@@ -313,7 +313,7 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
 void RealtimeLoop::begin(int64_t stamp_ns) {
   sync_drivers();
   next_state_ = sim_.time();
-  if (state_sink_) state_sink_(frames_.state_frame(stamp_ns));
+  if (state_sink_) state_sink_(frames_.state_frame(stamp_ns, view_fields()));
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     ++stats_.state_frames;

@@ -165,6 +165,11 @@ class RealtimeLoop {
   void set_paused(bool paused) { paused_.store(paused, std::memory_order_relaxed); }
   bool paused() const { return paused_.load(std::memory_order_relaxed); }
 
+  // From any thread: the per-vertex fields the state frames carry from the
+  // next one on (the viewers' and the scene's; none: none computed).
+  void set_view_fields(ViewFieldMask fields) { view_fields_.store(fields, std::memory_order_relaxed); }
+  ViewFieldMask view_fields() const { return view_fields_.load(std::memory_order_relaxed); }
+
  private:
   struct Driver {                  // what one device channel moves
     int32_t hand = -1;             // the hand it drives, or -1
@@ -218,6 +223,7 @@ class RealtimeLoop {
   RealtimeStats stats_;
   std::atomic<int64_t> dropped_{0};
   std::atomic<bool> paused_{false};
+  std::atomic<ViewFieldMask> view_fields_{0};
   std::atomic<bool> interrupt_{false};
 };
 

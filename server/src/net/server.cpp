@@ -43,6 +43,14 @@ void Server::Impl::greeted(Session& s) {
   if (s.reads_replay_status()) w->send(replay_status(), OutKind::Control);
 }
 
+void Server::Impl::view_fields_changed() {
+  ViewFieldMask asked = 0;
+  for (const WsSession* s : sessions)
+    if (s->core().greeted()) asked |= s->core().view_fields();
+  for (const std::shared_ptr<Feed>& f : {feed, incoming})
+    if (f && f->live) f->live->loop().set_view_fields(f->live->scene().view_fields | asked);
+}
+
 void Server::Impl::control(const wire::Control& c, Session& from) {
   WsSession& w = *shell_of(from);
   if (replay) return replay_control(c, w);
@@ -290,6 +298,7 @@ void Server::Impl::built(std::shared_ptr<LiveScene> live, bool carry) {
   if (stopped) return;
   incoming = std::make_shared<Feed>(live, director->scenes());
   attach(*incoming);
+  view_fields_changed();
   if (recorder) tap_feed(*incoming);
   director->replace(std::move(live), carry);
 }

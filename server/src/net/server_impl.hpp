@@ -109,7 +109,7 @@ struct Feed {
     if (d->devices())
       for (const fb::String* name : *d->devices()) devices.push_back(name->str());
   }
-  // The most a state frame takes: positions and scalar per surface vertex, poses and forces per proxy.
+  // The most a state frame takes: positions and up to four fields per vertex, poses and forces per proxy.
   size_t state_bytes() const {
     return 256 + 20 * 3 * live->frames().surface().nodes.size() + 64 * live->sim().proxies().size();
   }
@@ -160,6 +160,8 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
   }
   void control(const wire::Control& c, Session& from) override;
   void greeted(Session& s) override;
+  // The fields the loops' state frames carry: their scene's and every greeted connection's.
+  void view_fields_changed() override;
   asio::steady_timer telemetry_timer;
 
   asio::steady_timer replay_timer;
@@ -264,6 +266,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
 
   ~WsSession() {
     server_->sessions.erase(this);
+    if (core_.view_fields()) server_->view_fields_changed();
     if (server_->controller == this) server_->controller = nullptr;
     if (core_.safety_dropped() > 0)
       std::fprintf(stderr, "safety: connection %llu sent %lld events over the limit of %g per second: dropped\n",

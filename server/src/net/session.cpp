@@ -85,10 +85,40 @@ void Session::dispatch(const wire::Envelope& e, std::span<const uint8_t> raw, Se
     case wire::Message::Control: return on_control(*e.message_as_Control(), raw);
     case wire::Message::SafetyEvent: return on_safety_event(*e.message_as_SafetyEvent(), now);
     case wire::Message::DeviceStatus: return on_device_status(*e.message_as_DeviceStatus(), now);
+    case wire::Message::ViewFields: return on_view_fields(*e.message_as_ViewFields());
     default:
       return reply(wire::ErrorCode::WrongRole,
                    std::string("a client may not send ") + wire::EnumNameMessage(e.message_type()));
   }
+}
+
+namespace {
+
+// The mask of the fields `names` lists, or "" and `*bad` naming the first it does not know.
+ViewFieldMask read_view_fields(const fb::Vector<fb::Offset<fb::String>>* names, const std::string& where,
+                               std::string* bad) {
+  ViewFieldMask mask = 0;
+  if (names)
+    for (const fb::String* n : *names) {
+      ViewField f;
+      if (!parse_view_field(n->string_view(), &f)) {
+        *bad = where + ": no field '" + n->str() + "' (this server sends " + view_field_names() + ")";
+        return 0;
+      }
+      mask |= view_field_bit(f);
+    }
+  return mask;
+}
+
+}  // namespace
+
+void Session::on_view_fields(const wire::ViewFields& v) {
+  std::string bad;
+  const ViewFieldMask mask = read_view_fields(v.fields(), "ViewFields.fields", &bad);
+  if (!bad.empty()) return reply(wire::ErrorCode::BadRequest, bad);
+  if (mask == view_fields_) return;
+  view_fields_ = mask;
+  host_.view_fields_changed();
 }
 
 void Session::on_hello(const wire::Hello& h) {
@@ -133,6 +163,9 @@ void Session::on_hello(const wire::Hello& h) {
         outside_.push_back(false);
       }
   }
+  std::string bad_fields;
+  const ViewFieldMask fields = read_view_fields(h.fields(), "Hello.fields", &bad_fields);
+  if (!bad_fields.empty()) return refuse(wire::ErrorCode::BadRequest, bad_fields);
   if (h.role() == wire::Role::Controller && !host_.claim_controller(*this))
     return refuse(wire::ErrorCode::Busy, "another controller is connected");
   greeted_ = true;
@@ -146,6 +179,8 @@ void Session::on_hello(const wire::Hello& h) {
        OutKind::Control);
   send(host_.description(), OutKind::Control);
   host_.greeted(*this);
+  view_fields_ = fields;
+  if (fields) host_.view_fields_changed();
 }
 
 void Session::bind_devices() {

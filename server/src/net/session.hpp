@@ -18,7 +18,9 @@
 //     channel named in its Hello; safety events have their own bucket
 //     (max_safety_events_per_s; over it dropped, said once per run) and
 //     statuses one of 10 a second (over it dropped silently);
-//   - Control needs the controller role; the server carries it out.
+//   - Control needs the controller role; the server carries it out;
+//   - ViewFields (and Hello.fields) name per-vertex fields for the state
+//     frames: an unknown name is BadRequest (in a Hello, refused and closed).
 // What a slow reader loses is the outbound queue's rule (send()).
 #pragma once
 
@@ -92,6 +94,8 @@ class SessionHost {
   virtual void record(Topic topic, std::span<const uint8_t> message, int64_t time_ns) = 0;
   virtual void control(const proto::Control& c, Session& from) = 0;  // a controller's command
   virtual void greeted(Session& s) = 0;  // after its Welcome and scene (a replay starts, or shows its position)
+  // A greeted connection's view_fields() changed (its Hello asked for some, or a ViewFields).
+  virtual void view_fields_changed() = 0;
 };
 
 class Session {
@@ -124,6 +128,7 @@ class Session {
   proto::Role role() const { return role_; }
   bool greeted() const { return greeted_; }
   uint16_t protocol_minor() const { return protocol_minor_; }
+  ViewFieldMask view_fields() const { return view_fields_; }  // what its state frames should carry
   // Upgraded, not greeted, not closing: it holds a waiting slot.
   bool waiting() const { return !greeted_ && !closed_ && !close_after_write_ && !disconnect_; }
   // SafetyEvent came in 1.2, DeviceStatus in 1.3, ReplayStatus in 1.4: an
@@ -147,6 +152,7 @@ class Session {
   void on_safety_event(const proto::SafetyEvent& ev, SessionClock::time_point now);
   void on_device_status(const proto::DeviceStatus& st, SessionClock::time_point now);
   void on_control(const proto::Control& c, std::span<const uint8_t> raw);
+  void on_view_fields(const proto::ViewFields& v);
   bool named(const std::string& channel) const;  // in its Hello
   void reply(proto::ErrorCode code, const std::string& message, uint32_t request_id = 0);
 
@@ -158,6 +164,7 @@ class Session {
   bool greeted_ = false, close_after_write_ = false, disconnect_ = false, closed_ = false, writing_ = false;
   proto::Role role_ = proto::Role::Viewer;
   uint16_t protocol_minor_ = 0;
+  ViewFieldMask view_fields_ = 0;
   std::vector<std::string> device_names_;  // channels named in Hello
   std::vector<DeviceDrive> drives_;        // how each drives its channel (Hello.device_limits)
   std::vector<int32_t> devices_;           // their index in the current scene, -1 if absent

@@ -465,6 +465,23 @@ bool plane_cuts_mesh(const TetMesh& mesh, const Vec3& point, const Vec3& normal)
   return false;
 }
 
+// What the live server's viewers are shown whatever they ask: "fields", per-vertex
+// fields every state frame carries (core/fields.hpp's ViewField names).
+void read_view(const Json& j, const Origin& o, Scene& scene) {
+  const Fields f(j, "view", o, {"fields"});
+  if (const Json* v = f.find("fields")) {
+    const Json& arr = scene_json::read_array(*v, f.path("fields"), o, 0);
+    for (size_t i = 0; i < arr.size(); ++i) {
+      const std::string path = join(f.path("fields"), i);
+      const std::string name = scene_json::read_string(arr[i], path, o);
+      ViewField field;
+      if (!parse_view_field(name, &field)) o.fail(path, "no field '" + name + "' (known: " + view_field_names() + ")");
+      if (scene.view_fields & view_field_bit(field)) o.fail(path, "'" + name + "' is asked for twice");
+      scene.view_fields |= view_field_bit(field);
+    }
+  }
+}
+
 void read_run(const Json& j, const Origin& o, const TetMesh& mesh, Scene& scene) {
   const Fields f(j, "run", o, {"duration", "frame_rate", "vtu_every", "vtu_fields", "track", "sections"});
   RunSettings& r = scene.run;
@@ -479,13 +496,14 @@ void read_run(const Json& j, const Origin& o, const TetMesh& mesh, Scene& scene)
     std::vector<std::string> seen;
     for (size_t i = 0; i < arr.size(); ++i) {
       const std::string path = join(f.path("vtu_fields"), i);
-      const std::string name =
-          scene_json::read_choice(arr[i], path, o, {"cauchy_stress", "green_strain", "von_mises", "contact_force"});
+      const std::string name = scene_json::read_choice(
+          arr[i], path, o, {"cauchy_stress", "green_strain", "von_mises", "principal_stretches", "contact_force"});
       if (std::find(seen.begin(), seen.end(), name) != seen.end()) o.fail(path, "'" + name + "' is asked for twice");
       seen.push_back(name);
       if (name == "cauchy_stress") r.vtu_cells.cauchy_stress = true;
       if (name == "green_strain") r.vtu_cells.green_strain = true;
       if (name == "von_mises") r.vtu_cells.von_mises = true;
+      if (name == "principal_stretches") r.vtu_cells.principal_stretches = true;
       if (name == "contact_force") r.vtu_contact_force = true;
     }
   }
@@ -568,7 +586,7 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   const Origin& o = ctx.origin;
   const Fields root(j, "", o,
                     {"$schema", "name", "description", "mesh", "surface", "material", "materials", "regions",
-                     "boundary", "loads", "proxies", "hands", "effects", "integrator", "run", "variants"});
+                     "boundary", "loads", "proxies", "hands", "effects", "integrator", "run", "view", "variants"});
   Scene scene;
   scene.path = path;
   if (const Json* s = root.find("$schema")) scene_json::read_string(*s, "$schema", o);
@@ -636,6 +654,7 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   if (const Json* e = root.find("effects")) scene.spec.effects = read_effects(*e, o);
   if (const Json* g = root.find("integrator")) scene.spec.integrator = read_integrator(*g, o);
   read_run(root.at("run"), o, mesh, scene);
+  if (const Json* v = root.find("view")) read_view(*v, o, scene);
   return scene;
 }
 

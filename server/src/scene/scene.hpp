@@ -70,7 +70,7 @@ struct RunSettings {
   double frame_rate = 30.0;  // output frames per simulated second [Hz]
   int32_t vtu_every = 1;     // a VTU file every this many frames
   // Optional VTU arrays, computed only because the scene asks for them:
-  // "cauchy_stress", "green_strain", "von_mises" (cell data) and
+  // "cauchy_stress", "green_strain", "von_mises", "principal_stretches" (cell data) and
   // "contact_force" (point data).
   ElementFieldRequest vtu_cells;
   bool vtu_contact_force = false;
@@ -90,6 +90,9 @@ struct Scene {
   std::vector<TrackedPoint> track;
   std::string variant;  // "" when the scene has no variants
   MeshQuality quality;  // of spec.mesh; poor tets are allowed and listed here
+  // "view.fields": per-vertex fields the live server's state frames carry
+  // whether or not a viewer asks (none by default: none computed).
+  ViewFieldMask view_fields = 0;
 };
 
 // Reads and checks a scene file; one entry per variant (one when it has none).

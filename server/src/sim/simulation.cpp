@@ -40,7 +40,7 @@ struct Simulation::Engine {
   virtual const Energy& energy() const = 0;
   virtual Energy compute_energy() const = 0;
   virtual std::vector<double> compute_element_energy() const = 0;
-  virtual ElementFields compute_element_fields(const ElementFieldRequest& ask) const = 0;
+  virtual ElementFields compute_element_fields(const ElementFieldRequest& ask, std::span<const int32_t> tets) const = 0;
   virtual std::vector<uint8_t> node_constraint() const = 0;
   virtual void track_contact_forces(bool on) = 0;
   virtual double take_contact_impulses(std::vector<double>& impulse) = 0;
@@ -156,8 +156,8 @@ class EngineOf final : public Simulation::Engine {
   const Energy& energy() const override { return state_.energy.latest; }
   Energy compute_energy() const override { return stepper_.compute_energy(state_); }
   std::vector<double> compute_element_energy() const override { return stepper_.compute_element_energy(state_); }
-  ElementFields compute_element_fields(const ElementFieldRequest& ask) const override {
-    return tactile::compute_element_fields(*model_, state_, ask);
+  ElementFields compute_element_fields(const ElementFieldRequest& ask, std::span<const int32_t> tets) const override {
+    return tactile::compute_element_fields(*model_, state_, ask, tets);
   }
   std::vector<uint8_t> node_constraint() const override {
     std::vector<uint8_t> out(size_t(model_->n_nodes), 0);
@@ -190,7 +190,7 @@ class EngineOf final : public Simulation::Engine {
       positions[3 * k] = float(X[g].x + ux);
       positions[3 * k + 1] = float(X[g].y + uy);
       positions[3 * k + 2] = float(X[g].z + uz);
-      norm[k] = float(std::sqrt(ux * ux + uy * uy + uz * uz));
+      if (norm) norm[k] = float(std::sqrt(ux * ux + uy * uy + uz * uz));
     }
   }
   const std::vector<ProxySpec>& proxies() const override { return model_->proxies; }
@@ -264,8 +264,8 @@ double Simulation::compute_critical_dt() const { return engine_->compute_critica
 const Energy& Simulation::energy() const { return engine_->energy(); }
 Energy Simulation::compute_energy() const { return engine_->compute_energy(); }
 std::vector<double> Simulation::compute_element_energy() const { return engine_->compute_element_energy(); }
-ElementFields Simulation::compute_element_fields(const ElementFieldRequest& ask) const {
-  return engine_->compute_element_fields(ask);
+ElementFields Simulation::compute_element_fields(const ElementFieldRequest& ask, std::span<const int32_t> tets) const {
+  return engine_->compute_element_fields(ask, tets);
 }
 std::vector<uint8_t> Simulation::node_constraint() const { return engine_->node_constraint(); }
 void Simulation::track_contact_forces(bool on) { engine_->track_contact_forces(on); }

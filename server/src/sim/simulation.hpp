@@ -54,8 +54,9 @@ class Simulation {
   const Energy& energy() const;                        // as of the latest step
   Energy compute_energy() const;                       // full pass
   std::vector<double> compute_element_energy() const;  // V psi per tet [J] (n_tets)
-  // Stress and strain per tet, only those asked for (core/fields.hpp).
-  ElementFields compute_element_fields(const ElementFieldRequest& ask) const;
+  // Stress and strain per tet, only those asked for, of every tet or of those
+  // listed (core/fields.hpp).
+  ElementFields compute_element_fields(const ElementFieldRequest& ask, std::span<const int32_t> tets = {}) const;
   // Per node: 0 free, 1 held in place, 2 moved by a prescribed motion (an
   // essential BC) (n_nodes).
   std::vector<uint8_t> node_constraint() const;
@@ -65,7 +66,7 @@ class Simulation {
   void copy_velocity(std::vector<double>& v) const;      // [m/s] (n_nodes x 3)
   Vec3 displacement(int32_t node) const;                 // [m]
   // For the listed nodes only, in one pass: positions X + u [m] (n x 3) and
-  // |u| [m] (n), in float, as the state frames carry them.
+  // |u| [m] (n; not written when null), in float.
   void gather(std::span<const uint32_t> nodes, float* positions, float* displacement_norm) const;
 
   // Rigid proxies (core/contact.hpp) as the model holds them: a hand's

@@ -83,6 +83,45 @@ TEST(ElementFields, CauchyStressIsSymmetric) {
   }
 }
 
+// The principal stretches are F's singular values, largest first: their
+// product is |det F|, their squares sum to tr(F^T F) and their squares'
+// pairwise products to the second invariant of C; a rotation changes none.
+// The energy density is the material's own psi(F).
+TEST(ElementFields, PrincipalStretchesAreTheSingularValuesOfF) {
+  const Lame l = compute_lame(kE, kNu);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> d(-0.4, 0.4);
+  for (int trial = 0; trial < 200; ++trial) {
+    double F[9];
+    for (int k = 0; k < 9; ++k) F[k] = (k % 4 == 0 ? 1.0 : 0.0) + d(rng);
+    if (trial % 4 == 0) F[1] = F[2] = F[3] = F[5] = F[6] = F[7] = 0, F[4] = F[0];  // two equal stretches
+    const TetFields f = compute_tet_fields(MaterialModel::NeoHookean, F, l.lambda, l.mu);
+    const double* s = f.stretches;
+    EXPECT_GE(s[0], s[1]);
+    EXPECT_GE(s[1], s[2]);
+    double C[9];
+    material::mul_tn(F, F, C);
+    const double I1 = C[0] + C[4] + C[8];
+    const double I2 = C[0] * C[4] + C[4] * C[8] + C[0] * C[8] - C[1] * C[3] - C[2] * C[6] - C[5] * C[7];
+    EXPECT_NEAR(s[0] * s[1] * s[2], std::fabs(material::det(F)), 1e-9) << trial;
+    EXPECT_NEAR(s[0] * s[0] + s[1] * s[1] + s[2] * s[2], I1, 1e-9) << trial;
+    const double a = s[0] * s[0], b = s[1] * s[1], c = s[2] * s[2];
+    EXPECT_NEAR(a * b + b * c + a * c, I2, 1e-8) << trial;
+    double P[9];
+    EXPECT_EQ(f.energy_density, material::stress(MaterialModel::NeoHookean, F, l.lambda, l.mu, P));
+  }
+  double F[9];
+  to_rows(test::make_rotation(Vec3(0, 1, 1), 0.7) * glm::dmat3(1.3, 0, 0, 0, 0.8, 0, 0, 0, 1.1), F);
+  const TetFields f = compute_tet_fields(MaterialModel::StVK, F, l.lambda, l.mu);
+  EXPECT_NEAR(f.stretches[0], 1.3, 1e-12);
+  EXPECT_NEAR(f.stretches[1], 1.1, 1e-12);
+  EXPECT_NEAR(f.stretches[2], 0.8, 1e-12);
+  const double rest[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  const TetFields r = compute_tet_fields(MaterialModel::StVK, rest, l.lambda, l.mu);
+  for (double x : r.stretches) EXPECT_EQ(x, 1.0);
+  EXPECT_EQ(r.energy_density, 0.0);
+}
+
 // On a model: a homogeneous deformation u = (F - I) X gives every tet that F's
 // fields, in float and double, whatever the model's node numbering; only the
 // fields asked for are made.
@@ -121,6 +160,16 @@ void check_homogeneous_deformation() {
   EXPECT_EQ(some.green_strain, all.green_strain);
   const ElementFields none = compute_element_fields(model, s, {});
   EXPECT_TRUE(none.cauchy_stress.empty() && none.green_strain.empty() && none.von_mises.empty());
+  // The tets listed, in their order: the same rows as the whole model's.
+  const std::vector<int32_t> listed = {int32_t(model.n_tets) - 1, 0, 3};
+  const ElementFields part = compute_element_fields(model, s, {.von_mises = true, .principal_stretches = true}, listed);
+  ASSERT_EQ(part.von_mises.size(), listed.size());
+  ASSERT_EQ(part.principal_stretches.size(), 3 * listed.size());
+  for (size_t i = 0; i < listed.size(); ++i) {
+    EXPECT_EQ(part.von_mises[i], all.von_mises[size_t(listed[i])]);
+    EXPECT_NEAR(part.principal_stretches[3 * i], want.stretches[0], tol);
+    EXPECT_NEAR(part.principal_stretches[3 * i + 2], want.stretches[2], tol);
+  }
 }
 
 TEST(ElementFields, HomogeneousDeformationGivesEveryTetItsFieldsDouble) { check_homogeneous_deformation<double>(); }

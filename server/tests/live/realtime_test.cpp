@@ -20,6 +20,8 @@
 #include <glm/gtc/quaternion.hpp>
 
 #include "core/embedding.hpp"
+#include "core/fields.hpp"
+#include "core/material.hpp"
 #include "core/mesh.hpp"
 #include "core/model.hpp"
 #include "live/frames.hpp"
@@ -306,6 +308,100 @@ TEST(FrameEncoder, AnEmbeddedSurfaceComesOnceAndFollowsTheFrameVertices) {
   const auto* pd = proto::GetEnvelope(plain_frames.scene_description().data())->message_as_SceneDescription();
   EXPECT_EQ(pd->embedded(), nullptr);
   EXPECT_EQ(plain_frames.surface().nodes.size(), boundary);
+}
+
+// Per-vertex fields come only when asked for, each the rest-volume-weighted
+// mean of its tets' values: under a homogeneous deformation F every vertex
+// has F's own value (stretches 1.2, 1.0, 0.9 here), under any other the mean
+// of its tets'. A frame asked for none carries none, and no scalar either
+// (a viewer has the displacement from the positions).
+TEST(FrameEncoder, FieldsComeOnlyWhenAskedForAsTheirTetsMeans) {
+  ModelSpec spec = poke_spec({4, 2, 4});
+  spec.essential.clear();
+  spec.materials = {MaterialSpec{MaterialModel::NeoHookean, 3e4, 0.3, 1000}};
+  // F = R diag(1.2, 0.9, 1.0): principal stretches 1.2, 1.0, 0.9 whatever the rotation R.
+  const glm::dmat3 R = glm::mat3_cast(glm::angleAxis(0.5, glm::normalize(Vec3(1, 2, 0))));
+  const glm::dmat3 G = R * glm::dmat3(1.2, 0, 0, 0, 0.9, 0, 0, 0, 1.0);
+  auto start = [&](auto u_of) {
+    Simulation sim(spec);
+    std::vector<double> u(3 * size_t(sim.n_nodes())), v(u.size(), 0.0);
+    for (size_t n = 0; n < size_t(sim.n_nodes()); ++n) {
+      const Vec3 d = u_of(spec.mesh.X[n]);
+      for (int c = 0; c < 3; ++c) u[3 * n + size_t(c)] = d[c];
+    }
+    sim.set_initial_state(u, v);
+    return sim;
+  };
+  auto field = [](const proto::StateFrame* f, const char* name) -> const flatbuffers::Vector<float>* {
+    if (f->fields())
+      for (const proto::FrameField* x : *f->fields())
+        if (x->name()->str() == name) return x->values();
+    return nullptr;
+  };
+  const ViewFieldMask all = view_field_bit(ViewField::VonMises) | view_field_bit(ViewField::EnergyDensity) |
+                            view_field_bit(ViewField::StretchMax) | view_field_bit(ViewField::StretchMin);
+  {
+    Simulation sim = start([&](const Vec3& X) { return G * X - X; });
+    FrameEncoder frames(sim, "stretch", 1, 2e-4);
+    const auto* none = proto::GetEnvelope(frames.state_frame(0).data())->message_as_StateFrame();
+    EXPECT_EQ(none->fields(), nullptr);
+    EXPECT_EQ(none->scalar(), nullptr);
+    const auto* d = proto::GetEnvelope(frames.scene_description().data())->message_as_SceneDescription();
+    ASSERT_NE(d->fields(), nullptr);
+    EXPECT_EQ(d->fields()->size(), size_t(kViewFieldCount));
+    EXPECT_EQ(d->scalar_name()->str(), "");
+    const auto* f = proto::GetEnvelope(frames.state_frame(0, all).data())->message_as_StateFrame();
+    double Fr[9];
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) Fr[3 * i + j] = G[j][i];
+    const Lame l = compute_lame(3e4, 0.3);
+    const TetFields want = compute_tet_fields(MaterialModel::NeoHookean, Fr, l.lambda, l.mu);
+    EXPECT_NEAR(want.stretches[0], 1.2, 1e-12);
+    EXPECT_NEAR(want.stretches[1], 1.0, 1e-12);
+    EXPECT_NEAR(want.stretches[2], 0.9, 1e-12);
+    const size_t n = frames.surface().nodes.size();
+    for (const char* name : {"von_mises", "energy_density", "stretch_max", "stretch_min"}) {
+      const auto* values = field(f, name);
+      ASSERT_NE(values, nullptr) << name;
+      ASSERT_EQ(values->size(), n) << name;
+      const double expected = std::string(name) == "von_mises"        ? want.von_mises
+                              : std::string(name) == "energy_density" ? want.energy_density
+                              : std::string(name) == "stretch_max"    ? 1.2
+                                                                      : 0.9;
+      for (uint32_t k = 0; k < n; ++k) ASSERT_NEAR(values->Get(k), expected, 1e-5 * expected) << name << " " << k;
+    }
+    EXPECT_GT(want.von_mises, 1e3) << "no stress, so this shows little";
+    // Only those asked for.
+    const auto* one = proto::GetEnvelope(frames.state_frame(0, view_field_bit(ViewField::StretchMin)).data())
+                          ->message_as_StateFrame();
+    ASSERT_NE(one->fields(), nullptr);
+    EXPECT_EQ(one->fields()->size(), 1u);
+    EXPECT_NE(field(one, "stretch_min"), nullptr);
+  }
+  // Bent, not homogeneous: each vertex the volume-weighted mean of its own tets' values.
+  Simulation sim = start([](const Vec3& X) { return Vec3(0.0, 2.0 * (X.x - 0.02) * (X.x - 0.02), 0.1 * X.y * X.x); });
+  FrameEncoder frames(sim, "bent", 1, 2e-4);
+  const auto* f =
+      proto::GetEnvelope(frames.state_frame(0, view_field_bit(ViewField::VonMises)).data())->message_as_StateFrame();
+  const auto* values = field(f, "von_mises");
+  ASSERT_NE(values, nullptr);
+  const ElementFields per_tet = sim.compute_element_fields({.von_mises = true});
+  const Surface& s = frames.surface();
+  double spread = 0;
+  for (uint32_t k = 0; k < s.nodes.size(); ++k) {
+    double sum = 0, volume = 0, lo = 1e30, hi = -1e30;
+    for (size_t e = 0; e < spec.mesh.tets.size(); ++e)
+      for (int32_t node : spec.mesh.tets[e])
+        if (uint32_t(node) == s.nodes[k]) {
+          sum += sim.tet_volume()[e] * per_tet.von_mises[e];
+          volume += sim.tet_volume()[e];
+          lo = std::min(lo, per_tet.von_mises[e]);
+          hi = std::max(hi, per_tet.von_mises[e]);
+        }
+    ASSERT_NEAR(values->Get(k), sum / volume, 1e-5 * hi) << k;
+    spread = std::max(spread, (hi - lo) / hi);
+  }
+  EXPECT_GT(spread, 0.1) << "the tets around each vertex agree, so the mean shows nothing";
 }
 
 // A haptic frame's force is the mean of the per-step forces over its window,

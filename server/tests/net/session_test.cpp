@@ -39,6 +39,7 @@ struct FakeHost : SessionHost {
   std::vector<Topic> recorded;
   std::vector<uint32_t> controls;  // request ids
   int greetings = 0;
+  int fields_changes = 0;  // view_fields_changed() calls
 
   int64_t now_ns() const override { return 42; }
   const Bytes& description() const override { return scene; }
@@ -63,6 +64,7 @@ struct FakeHost : SessionHost {
   void record(Topic t, std::span<const uint8_t>, int64_t) override { recorded.push_back(t); }
   void control(const proto::Control& c, Session&) override { controls.push_back(c.request_id()); }
   void greeted(Session&) override { ++greetings; }
+  void view_fields_changed() override { ++fields_changes; }
 };
 
 const SessionClock::time_point t0{};
@@ -80,6 +82,7 @@ struct HelloFields {
   uint16_t major = uint16_t(proto::ProtocolMajor::Current);
   uint16_t minor = uint16_t(proto::ProtocolMinor::Current);
   float max_force_N = 5;
+  std::vector<std::string> fields;  // Hello.fields (1.8)
 };
 
 std::vector<uint8_t> hello(const HelloFields& f) {
@@ -90,9 +93,19 @@ std::vector<uint8_t> hello(const HelloFields& f) {
     names.push_back(b.CreateString(d));
     limits.push_back(proto::CreateDeviceLimits(b, f.max_force_N, 0.0f, 1000.0f));
   }
-  return wrap(b, Message::Hello,
-              proto::CreateHelloDirect(b, f.major, f.minor, f.role, f.token, "test",
-                                       f.devices.empty() ? nullptr : &names, f.devices.empty() ? nullptr : &limits));
+  std::vector<fb::Offset<fb::String>> fields;
+  for (const std::string& x : f.fields) fields.push_back(b.CreateString(x));
+  return wrap(
+      b, Message::Hello,
+      proto::CreateHelloDirect(b, f.major, f.minor, f.role, f.token, "test", f.devices.empty() ? nullptr : &names,
+                               f.devices.empty() ? nullptr : &limits, f.fields.empty() ? nullptr : &fields));
+}
+
+std::vector<uint8_t> view_fields(const std::vector<std::string>& names) {
+  fb::FlatBufferBuilder b;
+  std::vector<fb::Offset<fb::String>> v;
+  for (const std::string& x : names) v.push_back(b.CreateString(x));
+  return wrap(b, Message::ViewFields, proto::CreateViewFieldsDirect(b, &v));
 }
 
 std::vector<uint8_t> input(const char* channel, double x = 0.1) {
@@ -267,6 +280,40 @@ TEST(SessionHello, TwiceIsAnErrorButNotAClose) {
   c.receive(hello({}));
   expect_error(c, ErrorCode::BadRequest, "Hello sent twice");
   EXPECT_FALSE(c.session.close_after_write());
+}
+
+// The fields a client asks for: in its Hello, then by ViewFields, each
+// change told to the server (which computes what its viewers ask, and no
+// more); a name the server does not know is named, in a Hello with a close.
+TEST(SessionHello, FieldsAskedForAreKeptAndAnUnknownOneIsNamed) {
+  Client c;
+  c.receive(hello({.fields = {"von_mises", "stretch_max"}}));
+  ASSERT_EQ(c.drain().size(), 2u);
+  EXPECT_EQ(c.session.view_fields(), view_field_bit(ViewField::VonMises) | view_field_bit(ViewField::StretchMax));
+  EXPECT_EQ(c.host.fields_changes, 1);
+  c.receive(view_fields({"energy_density"}));
+  EXPECT_TRUE(c.drain().empty());
+  EXPECT_EQ(c.session.view_fields(), view_field_bit(ViewField::EnergyDensity));
+  EXPECT_EQ(c.host.fields_changes, 2);
+  c.receive(view_fields({"energy_density", "pressure"}));
+  expect_error(c, ErrorCode::BadRequest, "ViewFields.fields: no field 'pressure' (this server sends von_mises,");
+  EXPECT_EQ(c.session.view_fields(), view_field_bit(ViewField::EnergyDensity)) << "an error changes nothing";
+  EXPECT_FALSE(c.session.close_after_write());
+  c.receive(view_fields({}));
+  EXPECT_EQ(c.session.view_fields(), 0u);
+  EXPECT_EQ(c.host.fields_changes, 3);
+
+  Client plain;
+  plain.receive(hello({}));
+  plain.drain();
+  EXPECT_EQ(plain.session.view_fields(), 0u);
+  EXPECT_EQ(plain.host.fields_changes, 0) << "a viewer that asks nothing changes nothing";
+
+  Client bad;
+  bad.receive(hello({.fields = {"vonmises"}}));
+  expect_error(bad, ErrorCode::BadRequest, "Hello.fields: no field 'vonmises'");
+  EXPECT_TRUE(bad.session.close_after_write());
+  EXPECT_FALSE(bad.session.greeted());
 }
 
 TEST(SessionHello, NoHelloInTimeIsRefusedOnceGreetedNothing) {

@@ -157,6 +157,25 @@ TEST(SceneMapping, VtuFieldsAreAskedForByName) {
   expect_scene_error(dir, "s.json", j, {"run.vtu_fields[1]: 'green_strain' is asked for twice"});
 }
 
+// "view.fields": what every live state frame carries, by name; none by default.
+TEST(SceneMapping, ViewFieldsAreAskedForByName) {
+  SceneDir dir;
+  json j = make_beam_scene();
+  EXPECT_EQ(load_scene(dir.write_json("a.json", j)).at(0).view_fields, 0u);
+  j["view"] = json{{"fields", json::array({"stretch_min", "von_mises"})}};
+  EXPECT_EQ(load_scene(dir.write_json("a.json", j)).at(0).view_fields,
+            view_field_bit(ViewField::StretchMin) | view_field_bit(ViewField::VonMises));
+  j["view"]["fields"] = json::array({"von_mises", "strain"});
+  expect_scene_error(dir, "s.json", j, {"view.fields[1]", "no field 'strain'", "energy_density"});
+  j["view"]["fields"] = json::array({"von_mises", "von_mises"});
+  expect_scene_error(dir, "s.json", j, {"view.fields[1]: 'von_mises' is asked for twice"});
+  j["view"] = json{{"colours", 1}};
+  expect_scene_error(dir, "s.json", j, {"view", "colours"});
+  j.erase("view");
+  j["run"]["vtu_fields"] = json::array({"principal_stretches"});
+  EXPECT_TRUE(load_scene(dir.write_json("a.json", j)).at(0).run.vtu_cells.principal_stretches);
+}
+
 TEST(SceneMapping, NameDefaultsToTheFileStem) {
   SceneDir dir;
   json j = make_beam_scene();

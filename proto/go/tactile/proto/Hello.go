@@ -122,8 +122,25 @@ func (rcv *Hello) DeviceLimitsLength() int {
 	return 0
 }
 
+func (rcv *Hello) Fields(j int) []byte {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(18))
+	if o != 0 {
+		a := rcv._tab.Vector(o)
+		return rcv._tab.ByteVector(a + flatbuffers.UOffsetT(j*4))
+	}
+	return nil
+}
+
+func (rcv *Hello) FieldsLength() int {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(18))
+	if o != 0 {
+		return rcv._tab.VectorLen(o)
+	}
+	return 0
+}
+
 func HelloStart(builder *flatbuffers.Builder) {
-	builder.StartObject(7)
+	builder.StartObject(8)
 }
 func HelloAddProtocolMajor(builder *flatbuffers.Builder, protocolMajor uint16) {
 	builder.PrependUint16Slot(0, protocolMajor, 0)
@@ -150,6 +167,12 @@ func HelloAddDeviceLimits(builder *flatbuffers.Builder, deviceLimits flatbuffers
 	builder.PrependUOffsetTSlot(6, flatbuffers.UOffsetT(deviceLimits), 0)
 }
 func HelloStartDeviceLimitsVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
+	return builder.StartVector(4, numElems, 4)
+}
+func HelloAddFields(builder *flatbuffers.Builder, fields flatbuffers.UOffsetT) {
+	builder.PrependUOffsetTSlot(7, flatbuffers.UOffsetT(fields), 0)
+}
+func HelloStartFieldsVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
 	return builder.StartVector(4, numElems, 4)
 }
 func HelloEnd(builder *flatbuffers.Builder) flatbuffers.UOffsetT {

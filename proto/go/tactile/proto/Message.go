@@ -22,6 +22,7 @@ const (
 	MessageSafetyEvent      Message = 12
 	MessageDeviceStatus     Message = 13
 	MessageReplayStatus     Message = 14
+	MessageViewFields       Message = 15
 )
 
 var EnumNamesMessage = map[Message]string{
@@ -40,6 +41,7 @@ var EnumNamesMessage = map[Message]string{
 	MessageSafetyEvent:      "SafetyEvent",
 	MessageDeviceStatus:     "DeviceStatus",
 	MessageReplayStatus:     "ReplayStatus",
+	MessageViewFields:       "ViewFields",
 }
 
 var EnumValuesMessage = map[string]Message{
@@ -58,6 +60,7 @@ var EnumValuesMessage = map[string]Message{
 	"SafetyEvent":      MessageSafetyEvent,
 	"DeviceStatus":     MessageDeviceStatus,
 	"ReplayStatus":     MessageReplayStatus,
+	"ViewFields":       MessageViewFields,
 }
 
 func (v Message) String() string {

@@ -7,7 +7,7 @@ import "strconv"
 type ProtocolMinor uint16
 
 const (
-	ProtocolMinorCurrent ProtocolMinor = 7
+	ProtocolMinorCurrent ProtocolMinor = 8
 )
 
 var EnumNamesProtocolMinor = map[ProtocolMinor]string{

@@ -238,8 +238,28 @@ func (rcv *SceneDescription) Embedded(obj *EmbeddedSurface) *EmbeddedSurface {
 	return nil
 }
 
+func (rcv *SceneDescription) Fields(obj *FieldInfo, j int) bool {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(28))
+	if o != 0 {
+		x := rcv._tab.Vector(o)
+		x += flatbuffers.UOffsetT(j) * 4
+		x = rcv._tab.Indirect(x)
+		obj.Init(rcv._tab.Bytes, x)
+		return true
+	}
+	return false
+}
+
+func (rcv *SceneDescription) FieldsLength() int {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(28))
+	if o != 0 {
+		return rcv._tab.VectorLen(o)
+	}
+	return 0
+}
+
 func SceneDescriptionStart(builder *flatbuffers.Builder) {
-	builder.StartObject(12)
+	builder.StartObject(13)
 }
 func SceneDescriptionAddSceneName(builder *flatbuffers.Builder, sceneName flatbuffers.UOffsetT) {
 	builder.PrependUOffsetTSlot(0, flatbuffers.UOffsetT(sceneName), 0)
@@ -297,6 +317,12 @@ func SceneDescriptionStartScenesVector(builder *flatbuffers.Builder, numElems in
 }
 func SceneDescriptionAddEmbedded(builder *flatbuffers.Builder, embedded flatbuffers.UOffsetT) {
 	builder.PrependUOffsetTSlot(11, flatbuffers.UOffsetT(embedded), 0)
+}
+func SceneDescriptionAddFields(builder *flatbuffers.Builder, fields flatbuffers.UOffsetT) {
+	builder.PrependUOffsetTSlot(12, flatbuffers.UOffsetT(fields), 0)
+}
+func SceneDescriptionStartFieldsVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
+	return builder.StartVector(4, numElems, 4)
 }
 func SceneDescriptionEnd(builder *flatbuffers.Builder) flatbuffers.UOffsetT {
 	return builder.EndObject()

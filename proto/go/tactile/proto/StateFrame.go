@@ -184,8 +184,28 @@ func (rcv *StateFrame) Energies(obj *Energies) *Energies {
 	return nil
 }
 
+func (rcv *StateFrame) Fields(obj *FrameField, j int) bool {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(22))
+	if o != 0 {
+		x := rcv._tab.Vector(o)
+		x += flatbuffers.UOffsetT(j) * 4
+		x = rcv._tab.Indirect(x)
+		obj.Init(rcv._tab.Bytes, x)
+		return true
+	}
+	return false
+}
+
+func (rcv *StateFrame) FieldsLength() int {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(22))
+	if o != 0 {
+		return rcv._tab.VectorLen(o)
+	}
+	return 0
+}
+
 func StateFrameStart(builder *flatbuffers.Builder) {
-	builder.StartObject(9)
+	builder.StartObject(10)
 }
 func StateFrameAddSceneId(builder *flatbuffers.Builder, sceneId uint32) {
 	builder.PrependUint32Slot(0, sceneId, 0)
@@ -225,6 +245,12 @@ func StateFrameStartContactForcesVector(builder *flatbuffers.Builder, numElems i
 }
 func StateFrameAddEnergies(builder *flatbuffers.Builder, energies flatbuffers.UOffsetT) {
 	builder.PrependStructSlot(8, flatbuffers.UOffsetT(energies), 0)
+}
+func StateFrameAddFields(builder *flatbuffers.Builder, fields flatbuffers.UOffsetT) {
+	builder.PrependUOffsetTSlot(9, flatbuffers.UOffsetT(fields), 0)
+}
+func StateFrameStartFieldsVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
+	return builder.StartVector(4, numElems, 4)
 }
 func StateFrameEnd(builder *flatbuffers.Builder) flatbuffers.UOffsetT {
 	return builder.EndObject()

@@ -71,6 +71,7 @@ import tactile_proto.generated.SafetyEvent
 import tactile_proto.generated.SceneDescription
 import tactile_proto.generated.StateFrame
 import tactile_proto.generated.Telemetry
+import tactile_proto.generated.ViewFields
 import tactile_proto.generated.Welcome
 try:
     from typing import Union
@@ -82,7 +83,7 @@ class EnvelopeT(object):
     # EnvelopeT
     def __init__(self):
         self.messageType = 0  # type: int
-        self.message = None  # type: Union[None, tactile_proto.generated.Hello.HelloT, tactile_proto.generated.Welcome.WelcomeT, tactile_proto.generated.SceneDescription.SceneDescriptionT, tactile_proto.generated.StateFrame.StateFrameT, tactile_proto.generated.HapticFrame.HapticFrameT, tactile_proto.generated.DeviceInput.DeviceInputT, tactile_proto.generated.Control.ControlT, tactile_proto.generated.Telemetry.TelemetryT, tactile_proto.generated.Ping.PingT, tactile_proto.generated.Pong.PongT, tactile_proto.generated.Error.ErrorT, tactile_proto.generated.SafetyEvent.SafetyEventT, tactile_proto.generated.DeviceStatus.DeviceStatusT, tactile_proto.generated.ReplayStatus.ReplayStatusT]
+        self.message = None  # type: Union[None, tactile_proto.generated.Hello.HelloT, tactile_proto.generated.Welcome.WelcomeT, tactile_proto.generated.SceneDescription.SceneDescriptionT, tactile_proto.generated.StateFrame.StateFrameT, tactile_proto.generated.HapticFrame.HapticFrameT, tactile_proto.generated.DeviceInput.DeviceInputT, tactile_proto.generated.Control.ControlT, tactile_proto.generated.Telemetry.TelemetryT, tactile_proto.generated.Ping.PingT, tactile_proto.generated.Pong.PongT, tactile_proto.generated.Error.ErrorT, tactile_proto.generated.SafetyEvent.SafetyEventT, tactile_proto.generated.DeviceStatus.DeviceStatusT, tactile_proto.generated.ReplayStatus.ReplayStatusT, tactile_proto.generated.ViewFields.ViewFieldsT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):

@@ -108,7 +108,27 @@ class Hello(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(16))
         return o == 0
 
-def HelloStart(builder): builder.StartObject(7)
+    # Hello
+    def Fields(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(18))
+        if o != 0:
+            a = self._tab.Vector(o)
+            return self._tab.String(a + flatbuffers.number_types.UOffsetTFlags.py_type(j * 4))
+        return ""
+
+    # Hello
+    def FieldsLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(18))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # Hello
+    def FieldsIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(18))
+        return o == 0
+
+def HelloStart(builder): builder.StartObject(8)
 def Start(builder):
     return HelloStart(builder)
 def HelloAddProtocolMajor(builder, protocolMajor): builder.PrependUint16Slot(0, protocolMajor, 0)
@@ -138,6 +158,12 @@ def AddDeviceLimits(builder, deviceLimits):
 def HelloStartDeviceLimitsVector(builder, numElems): return builder.StartVector(4, numElems, 4)
 def StartDeviceLimitsVector(builder, numElems):
     return HelloStartDeviceLimitsVector(builder, numElems)
+def HelloAddFields(builder, fields): builder.PrependUOffsetTRelativeSlot(7, flatbuffers.number_types.UOffsetTFlags.py_type(fields), 0)
+def AddFields(builder, fields):
+    return HelloAddFields(builder, fields)
+def HelloStartFieldsVector(builder, numElems): return builder.StartVector(4, numElems, 4)
+def StartFieldsVector(builder, numElems):
+    return HelloStartFieldsVector(builder, numElems)
 def HelloEnd(builder): return builder.EndObject()
 def End(builder):
     return HelloEnd(builder)
@@ -158,6 +184,7 @@ class HelloT(object):
         self.clientName = None  # type: str
         self.devices = None  # type: List[str]
         self.deviceLimits = None  # type: List[tactile_proto.generated.DeviceLimits.DeviceLimitsT]
+        self.fields = None  # type: List[str]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -192,6 +219,10 @@ class HelloT(object):
                 else:
                     deviceLimits_ = tactile_proto.generated.DeviceLimits.DeviceLimitsT.InitFromObj(hello.DeviceLimits(i))
                     self.deviceLimits.append(deviceLimits_)
+        if not hello.FieldsIsNone():
+            self.fields = []
+            for i in range(hello.FieldsLength()):
+                self.fields.append(hello.Fields(i))
 
     # HelloT
     def Pack(self, builder):
@@ -215,6 +246,14 @@ class HelloT(object):
             for i in reversed(range(len(self.deviceLimits))):
                 builder.PrependUOffsetTRelative(deviceLimitslist[i])
             deviceLimits = builder.EndVector()
+        if self.fields is not None:
+            fieldslist = []
+            for i in range(len(self.fields)):
+                fieldslist.append(builder.CreateString(self.fields[i]))
+            HelloStartFieldsVector(builder, len(self.fields))
+            for i in reversed(range(len(self.fields))):
+                builder.PrependUOffsetTRelative(fieldslist[i])
+            fields = builder.EndVector()
         HelloStart(builder)
         HelloAddProtocolMajor(builder, self.protocolMajor)
         HelloAddProtocolMinor(builder, self.protocolMinor)
@@ -227,5 +266,7 @@ class HelloT(object):
             HelloAddDevices(builder, devices)
         if self.deviceLimits is not None:
             HelloAddDeviceLimits(builder, deviceLimits)
+        if self.fields is not None:
+            HelloAddFields(builder, fields)
         hello = HelloEnd(builder)
         return hello

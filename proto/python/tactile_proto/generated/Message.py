@@ -18,6 +18,7 @@ class Message(object):
     SafetyEvent = 12
     DeviceStatus = 13
     ReplayStatus = 14
+    ViewFields = 15
 
 def MessageCreator(unionType, table):
     from flatbuffers.table import Table
@@ -65,4 +66,7 @@ def MessageCreator(unionType, table):
     if unionType == Message().ReplayStatus:
         import tactile_proto.generated.ReplayStatus
         return tactile_proto.generated.ReplayStatus.ReplayStatusT.InitFromBuf(table.Bytes, table.Pos)
+    if unionType == Message().ViewFields:
+        import tactile_proto.generated.ViewFields
+        return tactile_proto.generated.ViewFields.ViewFieldsT.InitFromBuf(table.Bytes, table.Pos)
     return None

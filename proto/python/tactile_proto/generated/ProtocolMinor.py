@@ -3,4 +3,4 @@
 # namespace: proto
 
 class ProtocolMinor(object):
-    Current = 7
+    Current = 8

@@ -238,7 +238,32 @@ class SceneDescription(object):
             return obj
         return None
 
-def SceneDescriptionStart(builder): builder.StartObject(12)
+    # SceneDescription
+    def Fields(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(28))
+        if o != 0:
+            x = self._tab.Vector(o)
+            x += flatbuffers.number_types.UOffsetTFlags.py_type(j) * 4
+            x = self._tab.Indirect(x)
+            from tactile_proto.generated.FieldInfo import FieldInfo
+            obj = FieldInfo()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+    # SceneDescription
+    def FieldsLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(28))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # SceneDescription
+    def FieldsIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(28))
+        return o == 0
+
+def SceneDescriptionStart(builder): builder.StartObject(13)
 def Start(builder):
     return SceneDescriptionStart(builder)
 def SceneDescriptionAddSceneName(builder, sceneName): builder.PrependUOffsetTRelativeSlot(0, flatbuffers.number_types.UOffsetTFlags.py_type(sceneName), 0)
@@ -298,10 +323,17 @@ def StartScenesVector(builder, numElems):
 def SceneDescriptionAddEmbedded(builder, embedded): builder.PrependUOffsetTRelativeSlot(11, flatbuffers.number_types.UOffsetTFlags.py_type(embedded), 0)
 def AddEmbedded(builder, embedded):
     return SceneDescriptionAddEmbedded(builder, embedded)
+def SceneDescriptionAddFields(builder, fields): builder.PrependUOffsetTRelativeSlot(12, flatbuffers.number_types.UOffsetTFlags.py_type(fields), 0)
+def AddFields(builder, fields):
+    return SceneDescriptionAddFields(builder, fields)
+def SceneDescriptionStartFieldsVector(builder, numElems): return builder.StartVector(4, numElems, 4)
+def StartFieldsVector(builder, numElems):
+    return SceneDescriptionStartFieldsVector(builder, numElems)
 def SceneDescriptionEnd(builder): return builder.EndObject()
 def End(builder):
     return SceneDescriptionEnd(builder)
 import tactile_proto.generated.EmbeddedSurface
+import tactile_proto.generated.FieldInfo
 import tactile_proto.generated.Parameter
 import tactile_proto.generated.ProxyInfo
 try:
@@ -325,6 +357,7 @@ class SceneDescriptionT(object):
         self.parameters = None  # type: List[tactile_proto.generated.Parameter.ParameterT]
         self.scenes = None  # type: List[str]
         self.embedded = None  # type: Optional[tactile_proto.generated.EmbeddedSurface.EmbeddedSurfaceT]
+        self.fields = None  # type: List[tactile_proto.generated.FieldInfo.FieldInfoT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -393,6 +426,14 @@ class SceneDescriptionT(object):
                 self.scenes.append(sceneDescription.Scenes(i))
         if sceneDescription.Embedded() is not None:
             self.embedded = tactile_proto.generated.EmbeddedSurface.EmbeddedSurfaceT.InitFromObj(sceneDescription.Embedded())
+        if not sceneDescription.FieldsIsNone():
+            self.fields = []
+            for i in range(sceneDescription.FieldsLength()):
+                if sceneDescription.Fields(i) is None:
+                    self.fields.append(None)
+                else:
+                    fieldInfo_ = tactile_proto.generated.FieldInfo.FieldInfoT.InitFromObj(sceneDescription.Fields(i))
+                    self.fields.append(fieldInfo_)
 
     # SceneDescriptionT
     def Pack(self, builder):
@@ -458,6 +499,14 @@ class SceneDescriptionT(object):
             scenes = builder.EndVector()
         if self.embedded is not None:
             embedded = self.embedded.Pack(builder)
+        if self.fields is not None:
+            fieldslist = []
+            for i in range(len(self.fields)):
+                fieldslist.append(self.fields[i].Pack(builder))
+            SceneDescriptionStartFieldsVector(builder, len(self.fields))
+            for i in reversed(range(len(self.fields))):
+                builder.PrependUOffsetTRelative(fieldslist[i])
+            fields = builder.EndVector()
         SceneDescriptionStart(builder)
         if self.sceneName is not None:
             SceneDescriptionAddSceneName(builder, sceneName)
@@ -481,5 +530,7 @@ class SceneDescriptionT(object):
             SceneDescriptionAddScenes(builder, scenes)
         if self.embedded is not None:
             SceneDescriptionAddEmbedded(builder, embedded)
+        if self.fields is not None:
+            SceneDescriptionAddFields(builder, fields)
         sceneDescription = SceneDescriptionEnd(builder)
         return sceneDescription

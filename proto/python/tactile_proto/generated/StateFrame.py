@@ -169,7 +169,32 @@ class StateFrame(object):
             return obj
         return None
 
-def StateFrameStart(builder): builder.StartObject(9)
+    # StateFrame
+    def Fields(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
+        if o != 0:
+            x = self._tab.Vector(o)
+            x += flatbuffers.number_types.UOffsetTFlags.py_type(j) * 4
+            x = self._tab.Indirect(x)
+            from tactile_proto.generated.FrameField import FrameField
+            obj = FrameField()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+    # StateFrame
+    def FieldsLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # StateFrame
+    def FieldsIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
+        return o == 0
+
+def StateFrameStart(builder): builder.StartObject(10)
 def Start(builder):
     return StateFrameStart(builder)
 def StateFrameAddSceneId(builder, sceneId): builder.PrependUint32Slot(0, sceneId, 0)
@@ -211,10 +236,17 @@ def StartContactForcesVector(builder, numElems):
 def StateFrameAddEnergies(builder, energies): builder.PrependStructSlot(8, flatbuffers.number_types.UOffsetTFlags.py_type(energies), 0)
 def AddEnergies(builder, energies):
     return StateFrameAddEnergies(builder, energies)
+def StateFrameAddFields(builder, fields): builder.PrependUOffsetTRelativeSlot(9, flatbuffers.number_types.UOffsetTFlags.py_type(fields), 0)
+def AddFields(builder, fields):
+    return StateFrameAddFields(builder, fields)
+def StateFrameStartFieldsVector(builder, numElems): return builder.StartVector(4, numElems, 4)
+def StartFieldsVector(builder, numElems):
+    return StateFrameStartFieldsVector(builder, numElems)
 def StateFrameEnd(builder): return builder.EndObject()
 def End(builder):
     return StateFrameEnd(builder)
 import tactile_proto.generated.Energies
+import tactile_proto.generated.FrameField
 import tactile_proto.generated.ProxyPose
 import tactile_proto.generated.Vec3f
 try:
@@ -235,6 +267,7 @@ class StateFrameT(object):
         self.proxies = None  # type: List[tactile_proto.generated.ProxyPose.ProxyPoseT]
         self.contactForces = None  # type: List[tactile_proto.generated.Vec3f.Vec3fT]
         self.energies = None  # type: Optional[tactile_proto.generated.Energies.EnergiesT]
+        self.fields = None  # type: List[tactile_proto.generated.FrameField.FrameFieldT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -288,6 +321,14 @@ class StateFrameT(object):
                     self.contactForces.append(vec3f_)
         if stateFrame.Energies() is not None:
             self.energies = tactile_proto.generated.Energies.EnergiesT.InitFromObj(stateFrame.Energies())
+        if not stateFrame.FieldsIsNone():
+            self.fields = []
+            for i in range(stateFrame.FieldsLength()):
+                if stateFrame.Fields(i) is None:
+                    self.fields.append(None)
+                else:
+                    frameField_ = tactile_proto.generated.FrameField.FrameFieldT.InitFromObj(stateFrame.Fields(i))
+                    self.fields.append(frameField_)
 
     # StateFrameT
     def Pack(self, builder):
@@ -317,6 +358,14 @@ class StateFrameT(object):
             for i in reversed(range(len(self.contactForces))):
                 self.contactForces[i].Pack(builder)
             contactForces = builder.EndVector()
+        if self.fields is not None:
+            fieldslist = []
+            for i in range(len(self.fields)):
+                fieldslist.append(self.fields[i].Pack(builder))
+            StateFrameStartFieldsVector(builder, len(self.fields))
+            for i in reversed(range(len(self.fields))):
+                builder.PrependUOffsetTRelative(fieldslist[i])
+            fields = builder.EndVector()
         StateFrameStart(builder)
         StateFrameAddSceneId(builder, self.sceneId)
         StateFrameAddStep(builder, self.step)
@@ -333,5 +382,7 @@ class StateFrameT(object):
         if self.energies is not None:
             energies = self.energies.Pack(builder)
             StateFrameAddEnergies(builder, energies)
+        if self.fields is not None:
+            StateFrameAddFields(builder, fields)
         stateFrame = StateFrameEnd(builder)
         return stateFrame

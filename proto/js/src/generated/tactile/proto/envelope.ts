@@ -16,6 +16,7 @@ import { SafetyEvent, SafetyEventT } from '../../tactile/proto/safety-event';
 import { SceneDescription, SceneDescriptionT } from '../../tactile/proto/scene-description';
 import { StateFrame, StateFrameT } from '../../tactile/proto/state-frame';
 import { Telemetry, TelemetryT } from '../../tactile/proto/telemetry';
+import { ViewFields, ViewFieldsT } from '../../tactile/proto/view-fields';
 import { Welcome, WelcomeT } from '../../tactile/proto/welcome';
 
 
@@ -108,7 +109,7 @@ unpackTo(_o: EnvelopeT): void {
 export class EnvelopeT {
 constructor(
   public messageType: Message = Message.NONE,
-  public message: ControlT|DeviceInputT|DeviceStatusT|ErrorT|HapticFrameT|HelloT|PingT|PongT|ReplayStatusT|SafetyEventT|SceneDescriptionT|StateFrameT|TelemetryT|WelcomeT|null = null
+  public message: ControlT|DeviceInputT|DeviceStatusT|ErrorT|HapticFrameT|HelloT|PingT|PongT|ReplayStatusT|SafetyEventT|SceneDescriptionT|StateFrameT|TelemetryT|ViewFieldsT|WelcomeT|null = null
 ){}
 
 

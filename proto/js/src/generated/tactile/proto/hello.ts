@@ -75,8 +75,20 @@ deviceLimitsLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+fields(index: number):string
+fields(index: number,optionalEncoding:flatbuffers.Encoding):string|Uint8Array
+fields(index: number,optionalEncoding?:any):string|Uint8Array|null {
+  const offset = this.bb!.__offset(this.bb_pos, 18);
+  return offset ? this.bb!.__string(this.bb!.__vector(this.bb_pos + offset) + index * 4, optionalEncoding) : null;
+}
+
+fieldsLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 18);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startHello(builder:flatbuffers.Builder) {
-  builder.startObject(7);
+  builder.startObject(8);
 }
 
 static addProtocolMajor(builder:flatbuffers.Builder, protocolMajor:number) {
@@ -131,12 +143,28 @@ static startDeviceLimitsVector(builder:flatbuffers.Builder, numElems:number) {
   builder.startVector(4, numElems, 4);
 }
 
+static addFields(builder:flatbuffers.Builder, fieldsOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(7, fieldsOffset, 0);
+}
+
+static createFieldsVector(builder:flatbuffers.Builder, data:flatbuffers.Offset[]):flatbuffers.Offset {
+  builder.startVector(4, data.length, 4);
+  for (let i = data.length - 1; i >= 0; i--) {
+    builder.addOffset(data[i]!);
+  }
+  return builder.endVector();
+}
+
+static startFieldsVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(4, numElems, 4);
+}
+
 static endHello(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createHello(builder:flatbuffers.Builder, protocolMajor:number, protocolMinor:number, role:Role, tokenOffset:flatbuffers.Offset, clientNameOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, deviceLimitsOffset:flatbuffers.Offset):flatbuffers.Offset {
+static createHello(builder:flatbuffers.Builder, protocolMajor:number, protocolMinor:number, role:Role, tokenOffset:flatbuffers.Offset, clientNameOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, deviceLimitsOffset:flatbuffers.Offset, fieldsOffset:flatbuffers.Offset):flatbuffers.Offset {
   Hello.startHello(builder);
   Hello.addProtocolMajor(builder, protocolMajor);
   Hello.addProtocolMinor(builder, protocolMinor);
@@ -145,6 +173,7 @@ static createHello(builder:flatbuffers.Builder, protocolMajor:number, protocolMi
   Hello.addClientName(builder, clientNameOffset);
   Hello.addDevices(builder, devicesOffset);
   Hello.addDeviceLimits(builder, deviceLimitsOffset);
+  Hello.addFields(builder, fieldsOffset);
   return Hello.endHello(builder);
 }
 
@@ -156,7 +185,8 @@ unpack(): HelloT {
     this.token(),
     this.clientName(),
     this.bb!.createScalarList(this.devices.bind(this), this.devicesLength()),
-    this.bb!.createObjList(this.deviceLimits.bind(this), this.deviceLimitsLength())
+    this.bb!.createObjList(this.deviceLimits.bind(this), this.deviceLimitsLength()),
+    this.bb!.createScalarList(this.fields.bind(this), this.fieldsLength())
   );
 }
 
@@ -169,6 +199,7 @@ unpackTo(_o: HelloT): void {
   _o.clientName = this.clientName();
   _o.devices = this.bb!.createScalarList(this.devices.bind(this), this.devicesLength());
   _o.deviceLimits = this.bb!.createObjList(this.deviceLimits.bind(this), this.deviceLimitsLength());
+  _o.fields = this.bb!.createScalarList(this.fields.bind(this), this.fieldsLength());
 }
 }
 
@@ -180,7 +211,8 @@ constructor(
   public token: string|Uint8Array|null = null,
   public clientName: string|Uint8Array|null = null,
   public devices: (string)[] = [],
-  public deviceLimits: (DeviceLimitsT)[] = []
+  public deviceLimits: (DeviceLimitsT)[] = [],
+  public fields: (string)[] = []
 ){}
 
 
@@ -189,6 +221,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const clientName = (this.clientName !== null ? builder.createString(this.clientName!) : 0);
   const devices = Hello.createDevicesVector(builder, builder.createObjectOffsetList(this.devices));
   const deviceLimits = Hello.createDeviceLimitsVector(builder, builder.createObjectOffsetList(this.deviceLimits));
+  const fields = Hello.createFieldsVector(builder, builder.createObjectOffsetList(this.fields));
 
   return Hello.createHello(builder,
     this.protocolMajor,
@@ -197,7 +230,8 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     token,
     clientName,
     devices,
-    deviceLimits
+    deviceLimits,
+    fields
   );
 }
 }

@@ -13,6 +13,7 @@ import { SafetyEvent, SafetyEventT } from '../../tactile/proto/safety-event';
 import { SceneDescription, SceneDescriptionT } from '../../tactile/proto/scene-description';
 import { StateFrame, StateFrameT } from '../../tactile/proto/state-frame';
 import { Telemetry, TelemetryT } from '../../tactile/proto/telemetry';
+import { ViewFields, ViewFieldsT } from '../../tactile/proto/view-fields';
 import { Welcome, WelcomeT } from '../../tactile/proto/welcome';
 
 
@@ -31,13 +32,14 @@ export enum Message {
   Error = 11,
   SafetyEvent = 12,
   DeviceStatus = 13,
-  ReplayStatus = 14
+  ReplayStatus = 14,
+  ViewFields = 15
 }
 
 export function unionToMessage(
   type: Message,
-  accessor: (obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null
-): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
+  accessor: (obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|ViewFields|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|ViewFields|Welcome|null
+): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|ViewFields|Welcome|null {
   switch(Message[type]) {
     case 'NONE': return null; 
     case 'Hello': return accessor(new Hello())! as Hello;
@@ -54,15 +56,16 @@ export function unionToMessage(
     case 'SafetyEvent': return accessor(new SafetyEvent())! as SafetyEvent;
     case 'DeviceStatus': return accessor(new DeviceStatus())! as DeviceStatus;
     case 'ReplayStatus': return accessor(new ReplayStatus())! as ReplayStatus;
+    case 'ViewFields': return accessor(new ViewFields())! as ViewFields;
     default: return null;
   }
 }
 
 export function unionListToMessage(
   type: Message, 
-  accessor: (index: number, obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null, 
+  accessor: (index: number, obj:Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|ViewFields|Welcome) => Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|ViewFields|Welcome|null, 
   index: number
-): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|Welcome|null {
+): Control|DeviceInput|DeviceStatus|Error|HapticFrame|Hello|Ping|Pong|ReplayStatus|SafetyEvent|SceneDescription|StateFrame|Telemetry|ViewFields|Welcome|null {
   switch(Message[type]) {
     case 'NONE': return null; 
     case 'Hello': return accessor(index, new Hello())! as Hello;
@@ -79,6 +82,7 @@ export function unionListToMessage(
     case 'SafetyEvent': return accessor(index, new SafetyEvent())! as SafetyEvent;
     case 'DeviceStatus': return accessor(index, new DeviceStatus())! as DeviceStatus;
     case 'ReplayStatus': return accessor(index, new ReplayStatus())! as ReplayStatus;
+    case 'ViewFields': return accessor(index, new ViewFields())! as ViewFields;
     default: return null;
   }
 }

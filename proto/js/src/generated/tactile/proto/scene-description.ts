@@ -3,6 +3,7 @@
 import * as flatbuffers from 'flatbuffers';
 
 import { EmbeddedSurface, EmbeddedSurfaceT } from '../../tactile/proto/embedded-surface';
+import { FieldInfo, FieldInfoT } from '../../tactile/proto/field-info';
 import { Parameter, ParameterT } from '../../tactile/proto/parameter';
 import { ProxyInfo, ProxyInfoT } from '../../tactile/proto/proxy-info';
 
@@ -143,8 +144,18 @@ embedded(obj?:EmbeddedSurface):EmbeddedSurface|null {
   return offset ? (obj || new EmbeddedSurface()).__init(this.bb!.__indirect(this.bb_pos + offset), this.bb!) : null;
 }
 
+fields(index: number, obj?:FieldInfo):FieldInfo|null {
+  const offset = this.bb!.__offset(this.bb_pos, 28);
+  return offset ? (obj || new FieldInfo()).__init(this.bb!.__indirect(this.bb!.__vector(this.bb_pos + offset) + index * 4), this.bb!) : null;
+}
+
+fieldsLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 28);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startSceneDescription(builder:flatbuffers.Builder) {
-  builder.startObject(12);
+  builder.startObject(13);
 }
 
 static addSceneName(builder:flatbuffers.Builder, sceneNameOffset:flatbuffers.Offset) {
@@ -294,6 +305,22 @@ static addEmbedded(builder:flatbuffers.Builder, embeddedOffset:flatbuffers.Offse
   builder.addFieldOffset(11, embeddedOffset, 0);
 }
 
+static addFields(builder:flatbuffers.Builder, fieldsOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(12, fieldsOffset, 0);
+}
+
+static createFieldsVector(builder:flatbuffers.Builder, data:flatbuffers.Offset[]):flatbuffers.Offset {
+  builder.startVector(4, data.length, 4);
+  for (let i = data.length - 1; i >= 0; i--) {
+    builder.addOffset(data[i]!);
+  }
+  return builder.endVector();
+}
+
+static startFieldsVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(4, numElems, 4);
+}
+
 static endSceneDescription(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
@@ -313,7 +340,8 @@ unpack(): SceneDescriptionT {
     this.bb!.createScalarList(this.devices.bind(this), this.devicesLength()),
     this.bb!.createObjList(this.parameters.bind(this), this.parametersLength()),
     this.bb!.createScalarList(this.scenes.bind(this), this.scenesLength()),
-    (this.embedded() !== null ? this.embedded()!.unpack() : null)
+    (this.embedded() !== null ? this.embedded()!.unpack() : null),
+    this.bb!.createObjList(this.fields.bind(this), this.fieldsLength())
   );
 }
 
@@ -331,6 +359,7 @@ unpackTo(_o: SceneDescriptionT): void {
   _o.parameters = this.bb!.createObjList(this.parameters.bind(this), this.parametersLength());
   _o.scenes = this.bb!.createScalarList(this.scenes.bind(this), this.scenesLength());
   _o.embedded = (this.embedded() !== null ? this.embedded()!.unpack() : null);
+  _o.fields = this.bb!.createObjList(this.fields.bind(this), this.fieldsLength());
 }
 }
 
@@ -347,7 +376,8 @@ constructor(
   public devices: (string)[] = [],
   public parameters: (ParameterT)[] = [],
   public scenes: (string)[] = [],
-  public embedded: EmbeddedSurfaceT|null = null
+  public embedded: EmbeddedSurfaceT|null = null,
+  public fields: (FieldInfoT)[] = []
 ){}
 
 
@@ -362,6 +392,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const parameters = SceneDescription.createParametersVector(builder, builder.createObjectOffsetList(this.parameters));
   const scenes = SceneDescription.createScenesVector(builder, builder.createObjectOffsetList(this.scenes));
   const embedded = (this.embedded !== null ? this.embedded!.pack(builder) : 0);
+  const fields = SceneDescription.createFieldsVector(builder, builder.createObjectOffsetList(this.fields));
 
   SceneDescription.startSceneDescription(builder);
   SceneDescription.addSceneName(builder, sceneName);
@@ -376,6 +407,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   SceneDescription.addParameters(builder, parameters);
   SceneDescription.addScenes(builder, scenes);
   SceneDescription.addEmbedded(builder, embedded);
+  SceneDescription.addFields(builder, fields);
 
   return SceneDescription.endSceneDescription(builder);
 }

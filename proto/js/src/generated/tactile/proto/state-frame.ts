@@ -3,6 +3,7 @@
 import * as flatbuffers from 'flatbuffers';
 
 import { Energies, EnergiesT } from '../../tactile/proto/energies';
+import { FrameField, FrameFieldT } from '../../tactile/proto/frame-field';
 import { ProxyPose, ProxyPoseT } from '../../tactile/proto/proxy-pose';
 import { Vec3f, Vec3fT } from '../../tactile/proto/vec3f';
 
@@ -100,8 +101,18 @@ energies(obj?:Energies):Energies|null {
   return offset ? (obj || new Energies()).__init(this.bb_pos + offset, this.bb!) : null;
 }
 
+fields(index: number, obj?:FrameField):FrameField|null {
+  const offset = this.bb!.__offset(this.bb_pos, 22);
+  return offset ? (obj || new FrameField()).__init(this.bb!.__indirect(this.bb!.__vector(this.bb_pos + offset) + index * 4), this.bb!) : null;
+}
+
+fieldsLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 22);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startStateFrame(builder:flatbuffers.Builder) {
-  builder.startObject(9);
+  builder.startObject(10);
 }
 
 static addSceneId(builder:flatbuffers.Builder, sceneId:number) {
@@ -182,6 +193,22 @@ static addEnergies(builder:flatbuffers.Builder, energiesOffset:flatbuffers.Offse
   builder.addFieldStruct(8, energiesOffset, 0);
 }
 
+static addFields(builder:flatbuffers.Builder, fieldsOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(9, fieldsOffset, 0);
+}
+
+static createFieldsVector(builder:flatbuffers.Builder, data:flatbuffers.Offset[]):flatbuffers.Offset {
+  builder.startVector(4, data.length, 4);
+  for (let i = data.length - 1; i >= 0; i--) {
+    builder.addOffset(data[i]!);
+  }
+  return builder.endVector();
+}
+
+static startFieldsVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(4, numElems, 4);
+}
+
 static endStateFrame(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
@@ -198,7 +225,8 @@ unpack(): StateFrameT {
     this.bb!.createScalarList(this.scalar.bind(this), this.scalarLength()),
     this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength()),
     this.bb!.createObjList(this.contactForces.bind(this), this.contactForcesLength()),
-    (this.energies() !== null ? this.energies()!.unpack() : null)
+    (this.energies() !== null ? this.energies()!.unpack() : null),
+    this.bb!.createObjList(this.fields.bind(this), this.fieldsLength())
   );
 }
 
@@ -213,6 +241,7 @@ unpackTo(_o: StateFrameT): void {
   _o.proxies = this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength());
   _o.contactForces = this.bb!.createObjList(this.contactForces.bind(this), this.contactForcesLength());
   _o.energies = (this.energies() !== null ? this.energies()!.unpack() : null);
+  _o.fields = this.bb!.createObjList(this.fields.bind(this), this.fieldsLength());
 }
 }
 
@@ -226,7 +255,8 @@ constructor(
   public scalar: (number)[] = [],
   public proxies: (ProxyPoseT)[] = [],
   public contactForces: (Vec3fT)[] = [],
-  public energies: EnergiesT|null = null
+  public energies: EnergiesT|null = null,
+  public fields: (FrameFieldT)[] = []
 ){}
 
 
@@ -235,6 +265,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const scalar = StateFrame.createScalarVector(builder, this.scalar);
   const proxies = builder.createStructOffsetList(this.proxies, StateFrame.startProxiesVector);
   const contactForces = builder.createStructOffsetList(this.contactForces, StateFrame.startContactForcesVector);
+  const fields = StateFrame.createFieldsVector(builder, builder.createObjectOffsetList(this.fields));
 
   StateFrame.startStateFrame(builder);
   StateFrame.addSceneId(builder, this.sceneId);
@@ -246,6 +277,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   StateFrame.addProxies(builder, proxies);
   StateFrame.addContactForces(builder, contactForces);
   StateFrame.addEnergies(builder, (this.energies !== null ? this.energies!.pack(builder) : 0));
+  StateFrame.addFields(builder, fields);
 
   return StateFrame.endStateFrame(builder);
 }

@@ -1,0 +1,53 @@
+// What the body is coloured by: its displacement, which the page has from the frames (|x - X| per vertex,
+// nothing asked of the server), or a per-vertex field the server computes only while a viewer asks for it
+// (protocol 1.8: Hello.fields, then ViewFields on each change). The description lists those it can send.
+/** @import { SceneDescriptionT, StateFrameView } from '@tactile/proto' */
+
+export const DISPLACEMENT = 'displacement';
+
+/** @typedef {{ name: string, unit: string, description: string }} FieldChoiceInfo */
+
+export class FieldChoice {
+  // `wanted`: the field to start with (the page's ?field=); displacement when the scene has no such field.
+  /** @param {string} [wanted] */
+  constructor(wanted = DISPLACEMENT) {
+    this.wanted = wanted;
+    this.name = DISPLACEMENT;
+    /** @type {FieldChoiceInfo[]} */
+    this.available = [{ name: DISPLACEMENT, unit: 'm', description: 'how far each point moved from rest' }];
+  }
+
+  // A new scene: what it offers; keeps the choice when the scene has it, else the wanted one, else displacement.
+  /** @param {SceneDescriptionT} d */
+  setDescription(d) {
+    this.available = [this.available[0]];
+    for (const f of d.fields || []) {
+      const name = /** @type {string | null} */ (f.name) || '';
+      if (name) this.available.push({ name, unit: /** @type {string} */ (f.unit) || '', description: /** @type {string} */ (f.description) || '' });
+    }
+    const has = (/** @type {string} */ n) => this.available.some((f) => f.name === n);
+    if (!has(this.name)) this.name = has(this.wanted) ? this.wanted : DISPLACEMENT;
+  }
+
+  // The field names to ask the server for (none for displacement).
+  asked() { return this.name === DISPLACEMENT ? [] : [this.name]; }
+
+  info() { return /** @type {FieldChoiceInfo} */ (this.available.find((f) => f.name === this.name)); }
+
+  // The chosen field's value at each frame vertex, into `out` (n); false when the frame does not carry it
+  // yet (the server answers a change with its next frame).
+  /** @param {StateFrameView} frame @param {Float32Array} rest @param {Float32Array} out */
+  values(frame, rest, out) {
+    if (this.name === DISPLACEMENT) {
+      const p = frame.positions;
+      for (let i = 0, j = 0; i < out.length; i++, j += 3) {
+        out[i] = Math.hypot(p[j] - rest[j], p[j + 1] - rest[j + 1], p[j + 2] - rest[j + 2]);
+      }
+      return true;
+    }
+    const v = frame.fields.get(this.name);
+    if (!v || v.length !== out.length) return false;
+    out.set(v);
+    return true;
+  }
+}
