@@ -103,18 +103,18 @@ def test_the_energy_columns_add_up_to_the_drift_they_report(tmp_path):
 
 # ---- the VTU series as ParaView users read it ------------------------------------------------------------------
 
-def _readme_vtu_arrays() -> dict[str, str]:
-    """The arrays server/scenes/README.md lists under "VTU arrays": name -> where (body points, proxy field
-    data...)."""
+def _readme_vtu_arrays() -> set[tuple[str, str]]:
+    """The arrays server/scenes/README.md lists under "VTU arrays", as (name, where: body points, proxy field
+    data...) pairs (one name may be listed for several blocks)."""
     text = (ROOT / "server/scenes/README.md").read_text()
     table = text.split("### VTU arrays", 1)[1].split("| array | where | unit | what |", 1)[1]
-    rows = {}
+    rows = set()
     for line in table.strip().splitlines()[1:]:  # after the |---| line, to the table's end
         if not line.startswith("|"):
             break
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         assert len(cells) == 4 and cells[2], line  # a name, where, a unit, what
-        rows[cells[0].strip("`")] = cells[1]
+        rows.add((cells[0].strip("`"), cells[1]))
     return rows
 
 
@@ -125,7 +125,8 @@ def poke_series(tmp_path_factory):
     out = tmp_path_factory.mktemp("poke")
     scene = json.loads((ROOT / "server/scenes/poke.json").read_text())
     assert "primitive" in scene["mesh"]  # (a mesh file would be named relative to the scene's folder)
-    scene["run"]["vtu_fields"] = ["cauchy_stress", "green_strain", "von_mises", "contact_force"]
+    scene["run"]["vtu_fields"] = ["cauchy_stress", "green_strain", "von_mises", "principal_stretches",
+                                  "contact_force"]
     path = out / "poke.json"
     path.write_text(json.dumps(scene))
     result = subprocess.run([SIM, "run", str(path), "--out", str(out), "--duration", "0.7", "--quiet"],
@@ -152,9 +153,9 @@ def test_every_array_written_is_listed_in_the_readme_with_its_unit(poke_series):
     listed = _readme_vtu_arrays()
     body = meshio.read(folder / [d.get("file") for d in datasets if d.get("part") == "0"][-1])
     proxy = meshio.read(folder / [d.get("file") for d in datasets if d.get("part") == "1"][-1])
-    written = {**{k: "body points" for k in body.point_data}, **{k: "body cells" for k in body.cell_data},
-               **{k: "proxy field data" for k in proxy.field_data}}
-    assert written == {k: v for k, v in listed.items() if k != "displacement" or v == "body points"}
+    written = {*((k, "body points") for k in body.point_data), *((k, "body cells") for k in body.cell_data),
+               *((k, "proxy field data") for k in proxy.field_data)}
+    assert written == {(k, v) for k, v in listed if v in ("body points", "body cells", "proxy field data")}
     assert set(proxy.point_data) == {"displacement"} and not proxy.point_data["displacement"].any()
 
 
@@ -224,7 +225,113 @@ def test_strain_and_stress_are_those_of_the_written_displacement(poke_series):
     s = sigma - np.trace(sigma, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
     np.testing.assert_allclose(frame.cell_data["von_mises"][0], np.sqrt(1.5 * (s * s).sum(axis=(1, 2))),
                                rtol=1e-9, atol=1e-9 * np.abs(sigma).max())
+    # Principal stretches: the singular values of F, largest first.
+    stretches = np.sqrt(np.linalg.eigvalsh(np.transpose(F, (0, 2, 1)) @ F))[:, ::-1]
+    np.testing.assert_allclose(frame.cell_data["principal_stretches"][0], stretches, atol=1e-9)
+    assert stretches[:, 0].max() > 1.01 and stretches[:, 2].min() < 0.99
+    np.testing.assert_allclose(first.cell_data["principal_stretches"][0], 1.0, atol=1e-12)
     assert not first.cell_data["green_strain"][0].any()
     E_young = json.loads((ROOT / "server/scenes/poke.json").read_text())["material"]["E"]
     for k in ("cauchy_stress", "von_mises"):  # (Neo-Hookean's P(I) is zero to round-off)
         assert np.abs(first.cell_data[k][0]).max() <= 1e-12 * E_young, k
+
+
+# ---- the fine surface a body carries ---------------------------------------------------------------------------
+
+def _box_surface_obj(lo, hi, n) -> tuple[np.ndarray, str]:
+    """A closed box surface split n[d] times along each axis d: its vertices and OBJ text (1-based faces,
+    vertices written exactly). Vertices are shared across the box's edges (keyed by their lattice point)."""
+    index: dict[tuple[int, int, int], int] = {}
+    faces = []
+    for axis in range(3):
+        a1, a2 = (axis + 1) % 3, (axis + 2) % 3
+        for side in (0, n[axis]):
+            grid = {}
+            for i in range(n[a1] + 1):
+                for j in range(n[a2] + 1):
+                    q = [0, 0, 0]
+                    q[axis], q[a1], q[a2] = side, i, j
+                    grid[i, j] = index.setdefault(tuple(q), len(index))
+            for i in range(n[a1]):
+                for j in range(n[a2]):  # any winding: the loader winds the closed surface outward
+                    faces += [(grid[i, j], grid[i + 1, j], grid[i + 1, j + 1]),
+                              (grid[i, j], grid[i + 1, j + 1], grid[i, j + 1])]
+    vertices = [[lo[d] + (hi[d] - lo[d]) * q[d] / n[d] for d in range(3)] for q in index]
+    text = "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in vertices)
+    text += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
+    return np.array(vertices), text
+
+
+@pytest.fixture(scope="module")
+def embedded_series(tmp_path_factory):
+    """The poke with a fine surface (the block's own box split twice as finely as its mesh) carried by the
+    block, pressed by the sphere."""
+    out = tmp_path_factory.mktemp("embedded")
+    scene = json.loads((ROOT / "server/scenes/poke.json").read_text())
+    mesh = scene["mesh"]
+    vertices, text = _box_surface_obj(mesh["lo"], mesh["hi"], [2 * c for c in mesh["cells"]])
+    (out / "fine.obj").write_text(text)
+    scene["surface"] = {"file": "fine.obj"}
+    scene["run"]["vtu_every"] = 5
+    path = out / "poke.json"
+    path.write_text(json.dumps(scene))
+    result = subprocess.run([SIM, "run", str(path), "--out", str(out), "--duration", "0.7", "--quiet"],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    folder = out / "poke" / "run"
+    datasets = ET.parse(folder / "series.pvd").getroot().findall("./Collection/DataSet")
+    return folder, datasets, vertices
+
+
+def _containing_tet_weights(points, X, tets):
+    """For each point, barycentric weights in a tet that holds it (any of them, for a point on a shared face:
+    the linear interpolation is continuous there), found by brute force over every tet."""
+    X0 = X[tets[:, 0]]
+    inv = np.linalg.inv(np.stack([X[tets[:, k]] - X0 for k in (1, 2, 3)], axis=2))
+    found_tet = np.empty(len(points), dtype=int)
+    found_w = np.empty((len(points), 4))
+    for start in range(0, len(points), 256):
+        p = points[start:start + 256]
+        lam = np.einsum("tij,ptj->pti", inv, p[:, None, :] - X0[None, :, :])
+        w = np.concatenate([1.0 - lam.sum(axis=2, keepdims=True), lam], axis=2)
+        best = w.min(axis=2).argmax(axis=1)  # the tet the point is deepest in
+        assert (w.min(axis=2).max(axis=1) > -1e-9).all(), "every vertex of the box lies in the block"
+        found_tet[start:start + 256] = best
+        found_w[start:start + 256] = w[np.arange(len(p)), best]
+    return found_tet, found_w
+
+
+def test_the_fine_surface_is_a_block_of_its_own_warped_with_the_body(embedded_series):
+    """surface_NNNNNN.vtu: the OBJ's vertices (each once, to the float precision the loader reads) as points,
+    and a displacement that
+    is the body's, interpolated linearly in the tet that holds each vertex (found here by brute force from the
+    body's own VTU, not from the server's binding): the warped surface lies on the warped body. Its arrays are
+    the README's."""
+    folder, datasets, vertices = embedded_series
+    blocks = {(d.get("part"), d.get("name")) for d in datasets}
+    assert blocks == {("0", "body"), ("1", "tip"), ("2", "surface")}
+    by_time = {}
+    for d in datasets:
+        by_time.setdefault(float(d.get("timestep")), {})[d.get("name")] = folder / d.get("file")
+    assert all(set(v) == {"body", "tip", "surface"} for v in by_time.values())
+    listed = _readme_vtu_arrays()
+    t = max(by_time)
+    body, surface = meshio.read(by_time[t]["body"]), meshio.read(by_time[t]["surface"])
+    assert {(k, "surface points") for k in surface.point_data} == {(k, v) for k, v in listed if v == "surface points"}
+    assert surface.points.shape == vertices.shape
+    def in_order(p):  # sorted by position rounded to 0.1 um (the vertices are 2.5 mm apart)
+        r = np.round(p * 1e7)
+        return p[np.lexsort(r.T[::-1])]
+    np.testing.assert_allclose(in_order(surface.points), in_order(vertices), atol=1e-8)
+    triangles = np.concatenate([b.data for b in surface.cells if b.type == "triangle"])
+    assert len(triangles) == 2 * 2 * (32 * 16 + 16 * 32 + 32 * 32)
+    tets = np.concatenate([b.data for b in body.cells if b.type == "tetra"])
+    tet, w = _containing_tet_weights(surface.points, body.points, tets)
+    u_body = body.point_data["displacement"]
+    expected = np.einsum("pk,pkd->pd", w, u_body[tets[tet]])
+    u = surface.point_data["displacement"]
+    assert np.abs(u).max() > 4e-3  # pressed millimetres in
+    np.testing.assert_allclose(u, expected, atol=1e-12 + 1e-9 * np.abs(u).max())
+    assert not surface.point_data["outside"].any()
+    # At rest the surface is where the file put it.
+    assert not meshio.read(by_time[0.0]["surface"]).point_data["displacement"].any()

@@ -115,7 +115,8 @@ void clear_old_output(const fs::path& dir) {
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
     const std::string name = entry.path().filename().string();
-    if (((name.starts_with("frame_") || name.starts_with("proxy-")) && name.ends_with(".vtu")) ||
+    if (((name.starts_with("frame_") || name.starts_with("proxy-") || name.starts_with("surface_")) &&
+         name.ends_with(".vtu")) ||
         name == "series.pvd" || name == "forces.csv" || name == "devices.csv")
       fs::remove(entry.path(), ec);
   }
@@ -216,6 +217,12 @@ HeadlessResult run_headless(const Scene& scene, const HeadlessOptions& options) 
       const std::string proxy_file = frame_name("proxy-" + p.name, frame);
       write_vtu((dir / proxy_file).string(), VtuProxy{&surface, c.force, c.torque, c.contacts});
       pvd.push_back({sim.time(), proxy_file, int32_t(1 + j), p.name});
+    }
+    // The fine surface the body carries, a block after the proxies.
+    if (sim.surface()) {
+      const std::string surface_file = frame_name("surface", frame);
+      write_vtu((dir / surface_file).string(), VtuSurface{sim.surface().get(), &u});
+      pvd.push_back({sim.time(), surface_file, int32_t(1 + sim.proxies().size()), "surface"});
     }
   };
 

@@ -121,9 +121,36 @@ void write_vtu(const std::string& path, const VtuFrame& f) {
   if (stress) write_array(out, "Float64", "cauchy_stress", 9, fields->cauchy_stress);
   if (fields && !fields->green_strain.empty()) write_array(out, "Float64", "green_strain", 9, fields->green_strain);
   if (fields && !fields->von_mises.empty()) write_array(out, "Float64", "von_mises", 1, fields->von_mises);
+  if (fields && !fields->principal_stretches.empty())
+    write_array(out, "Float64", "principal_stretches", 3, fields->principal_stretches);
   write_array(out, "Int32", "material", 1, material);
   out << "      </CellData>\n";
   write_piece(out, points, connectivity, 4, 10);  // VTK_TETRA
+  close(out, path);
+}
+
+void write_vtu(const std::string& path, const VtuSurface& f) {
+  const EmbeddedSurface& e = *f.surface;
+  const std::vector<double>& u = *f.u;
+  const auto nv = size_t(e.n_vertices());
+  std::vector<double> points(3 * nv), displacement(3 * nv, 0.0);
+  for (size_t i = 0; i < nv; ++i)
+    for (size_t d = 0; d < 3; ++d) {
+      points[3 * i + d] = e.rest.vertices[i][int(d)];
+      for (size_t k = 0; k < 4; ++k) displacement[3 * i + d] += e.weights[i][k] * u[3 * size_t(e.nodes[i][k]) + d];
+    }
+  std::vector<int32_t> connectivity;
+  connectivity.reserve(3 * e.rest.triangles.size());
+  for (const auto& t : e.rest.triangles) connectivity.insert(connectivity.end(), t.begin(), t.end());
+  std::ofstream out = open(path);
+  begin_grid(out);
+  out << "    <Piece NumberOfPoints=\"" << nv << "\" NumberOfCells=\"" << connectivity.size() / 3 << "\">\n"
+      << "      <PointData Vectors=\"displacement\">\n";
+  write_array(out, "Float64", "displacement", 3, displacement);
+  write_array(out, "Int32", "tet", 1, e.tet);
+  write_array(out, "Float64", "outside", 1, e.outside);
+  out << "      </PointData>\n";
+  write_piece(out, points, connectivity, 3, 5);  // VTK_TRIANGLE
   close(out, path);
 }
 

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "core/embedding.hpp"
 #include "core/fields.hpp"
 #include "core/mesh.hpp"
 #include "core/proxy.hpp"
@@ -58,10 +59,20 @@ struct VtuProxy {
 };
 void write_vtu(const std::string& path, const VtuProxy& proxy);
 
+// One frame of the fine surface a body carries (core/embedding.hpp): its
+// rest vertices as points, and each vertex's displacement interpolated from
+// its tet's nodes by its binding weights, so that Warp By Vector places it
+// where the viewer draws it. Vertices as the scene loaded them (welded).
+struct VtuSurface {
+  const EmbeddedSurface* surface = nullptr;
+  const std::vector<double>* u = nullptr;  // the body's node displacement [m] (n_nodes x 3)
+};
+void write_vtu(const std::string& path, const VtuSurface& surface);
+
 struct PvdEntry {
   double t;          // [s]
   std::string file;  // relative to the .pvd
-  int32_t part = 0;  // block: 0 the body, 1 + k proxy k
+  int32_t part = 0;  // block: 0 the body, 1 + k proxy k, then the fine surface
   std::string name;  // the block's name ("" for none)
 };
 void write_pvd(const std::string& path, const std::vector<PvdEntry>& entries);

@@ -52,7 +52,22 @@ void FoxgloveViews::scene(const proto::SceneDescription& s) {
   described_ = true;
   n_vertices_ = s.rest_positions() ? s.rest_positions()->size() / 3 : 0;
   triangles_.clear();
-  if (s.triangles()) triangles_.assign(s.triangles()->begin(), s.triangles()->end());
+  carriers_.clear();
+  weights_.clear();
+  const proto::EmbeddedSurface* fine = s.embedded();
+  if (fine && fine->triangles() && fine->carriers() && fine->weights() &&
+      fine->carriers()->size() == fine->weights()->size() && fine->carriers()->size() % 4 == 0) {
+    triangles_.assign(fine->triangles()->begin(), fine->triangles()->end());
+    carriers_.assign(fine->carriers()->begin(), fine->carriers()->end());
+    weights_.assign(fine->weights()->begin(), fine->weights()->end());
+    // A carrier out of the frame's range would read past it: draw the boundary instead.
+    for (uint32_t c : carriers_)
+      if (size_t(c) >= n_vertices_) {
+        carriers_.clear(), weights_.clear(), triangles_.clear();
+        break;
+      }
+  }
+  if (carriers_.empty() && s.triangles()) triangles_.assign(s.triangles()->begin(), s.triangles()->end());
   proxies_.clear();
   if (s.proxies())
     for (const proto::ProxyInfo* p : *s.proxies()) {
@@ -69,9 +84,20 @@ void FoxgloveViews::scene(const proto::SceneDescription& s) {
 std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64_t log_ns) const {
   if (!described_ || f.scene_id() != scene_id_ || !f.positions() || f.positions()->size() != 3 * n_vertices_)
     return std::nullopt;
+  const auto* x = f.positions();
   json points = json::array();
-  for (size_t v = 0; v < n_vertices_; ++v)
-    points.push_back(point(f.positions()->Get(3 * v), f.positions()->Get(3 * v + 1), f.positions()->Get(3 * v + 2)));
+  if (!carriers_.empty()) {
+    // The fine surface where the browser draws it: x = sum_k w_k x_{c_k}.
+    for (size_t v = 0; v < carriers_.size(); v += 4) {
+      double p[3] = {0, 0, 0};
+      for (size_t k = 0; k < 4; ++k)
+        for (uint32_t d = 0; d < 3; ++d) p[d] += double(weights_[v + k]) * x->Get(3 * carriers_[v + k] + d);
+      points.push_back(point(p[0], p[1], p[2]));
+    }
+  } else {
+    for (uint32_t v = 0; v < uint32_t(n_vertices_); ++v)
+      points.push_back(point(x->Get(3 * v), x->Get(3 * v + 1), x->Get(3 * v + 2)));
+  }
   json triangles = json::array();
   triangles.push_back({{"pose", pose(nullptr)},
                        {"points", std::move(points)},

@@ -2,7 +2,9 @@
 // the messages the recorder writes, JSON messages of Foxglove's well-known
 // schemas, which its panels recognise by schema name:
 //   /foxglove/body  foxglove.SceneUpdate, one per StateFrame: the body's
-//                   surface as a triangle list, each proxy as a sphere,
+//                   surface as a triangle list (the fine surface it carries,
+//                   placed by its binding, when the scene has one; else its
+//                   boundary), each proxy as a sphere,
 //                   capsule (a sphere at its centre) or box, for the 3D panel;
 //   /foxglove/log   foxglove.Log, one per SafetyEvent and Error, for the Log
 //                   panel.
@@ -45,6 +47,9 @@ class FoxgloveViews {
   bool described_ = false;
   size_t n_vertices_ = 0;
   std::vector<uint32_t> triangles_;
+  // An embedded surface: per fine vertex, four frame vertices and weights.
+  std::vector<uint32_t> carriers_;
+  std::vector<float> weights_;
   std::vector<Proxy> proxies_;
 };
 
