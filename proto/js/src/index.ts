@@ -203,6 +203,7 @@ export interface StateFrameView {
   proxies: Float32Array; // position [m] x y z, orientation w x y z (n_proxies x 7)
   contactForces: Float32Array; // force on each proxy [N] (n_proxies x 3)
   fields: Map<string, Float32Array>; // the per-vertex fields asked for (1.8), by name (n_vertices each)
+  devicePoses: Float32Array; // each device channel's device (1.8), as proxies (n_devices x 7); empty before
 }
 
 // A vector of all-float structs (ProxyPose, Vec3f) as one Float32Array view.
@@ -241,6 +242,7 @@ export function readStateFrame(data: Uint8Array | ArrayBuffer): StateFrameView {
       proxies: structFloats(bytes, frame.proxiesLength(), frame.proxies(0), ProxyPose.sizeOf()),
       contactForces: structFloats(bytes, frame.contactForcesLength(), frame.contactForces(0), Vec3f.sizeOf()),
       fields: readFields(frame, empty),
+      devicePoses: structFloats(bytes, frame.devicePosesLength(), frame.devicePoses(0), ProxyPose.sizeOf()),
     };
   });
 }

@@ -74,6 +74,7 @@ test('readStateFrame gives Float32Array views of the message, not copies', () =>
     scalar: want.scalar,
     proxies: flat(want.proxies),
     contactForces: flat(want.contact_forces),
+    devicePoses: flat(want.device_poses),
   };
   for (const [key, values] of Object.entries(arrays)) {
     const view = frame[key];

@@ -105,6 +105,7 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   proxy_haptics_.resize(sim.proxies().size());
   device_haptics_.resize(sim.devices().size());
   device_poses_.resize(sim.devices().size());
+  state_device_poses_.resize(sim.devices().size());
   device_couplings_.resize(sim.devices().size());
   contacts_proxy_.assign(sim.proxies().size(), 0);
   contacts_device_.assign(sim.devices().size(), 0);
@@ -246,6 +247,17 @@ std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns, ViewF
   }
   const auto pose_vec = b.CreateVectorOfStructs(poses_.data(), reports.size());
   const auto force_vec = b.CreateVectorOfStructs(forces_.data(), reports.size());
+  // Where each channel's device is: a coupled channel's device pose (which
+  // its proxy or hand is pulled toward, and may lag behind); else its hand's
+  // or first proxy's, which follow it.
+  const std::vector<DeviceReport>& dr = sim_.device_reports();
+  for (size_t d = 0; d < dr.size(); ++d) {
+    const Pose p = dr[d].coupled          ? dr[d].target
+                   : device_hand_[d] >= 0 ? sim_.hand_pose(device_hand_[d])
+                                          : sim_.proxy_pose(device_proxy_[d]);
+    state_device_poses_[d] = wire::ProxyPose(to_wire(p.position), to_wire(p.orientation));
+  }
+  const auto device_vec = b.CreateVectorOfStructs(state_device_poses_.data(), dr.size());
   wire::StateFrameBuilder f(b);
   f.add_scene_id(scene_id_);
   f.add_step(uint64_t(sim_.steps()));
@@ -259,6 +271,7 @@ std::span<const uint8_t> FrameEncoder::state_frame(int64_t server_time_ns, ViewF
                                 e.dissipated, e.discrete, e.restated);
   f.add_energies(&energies);
   if (fields) f.add_fields(field_vec);
+  f.add_device_poses(device_vec);
   return seal(b, wire::Message::StateFrame, f.Finish());
 }
 

@@ -91,6 +91,7 @@ class FrameEncoder {
   std::vector<proto::ProxyHaptics> proxy_haptics_;
   std::vector<proto::DeviceHaptics> device_haptics_;
   std::vector<proto::ProxyPose> device_poses_;             // per device channel, staged for the builder
+  std::vector<proto::ProxyPose> state_device_poses_;       // the same, for the state frames' builder
   std::vector<uint64_t> input_sequences_;                  // per device channel
   std::vector<proto::DeviceCoupling> device_couplings_;    // per device channel
   std::vector<int32_t> contacts_proxy_, contacts_device_;  // the most contacts of a step since the last haptic frame

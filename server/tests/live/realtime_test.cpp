@@ -510,6 +510,11 @@ TEST(FrameEncoder, HapticFramesCarryEachChannelsPoseAndNewestInput) {
   ASSERT_EQ(h->device_poses()->size(), 2u);
   expect_pose(*h->device_poses()->Get(0), sim.hand_pose(0));
   expect_pose(*h->device_poses()->Get(1), sim.proxy_pose(1));
+  // A viewer's state frame places them the same.
+  const proto::StateFrame* state = envelope(frames.state_frame(123))->message_as_StateFrame();
+  ASSERT_EQ(state->device_poses()->size(), 2u);
+  expect_pose(*state->device_poses()->Get(0), sim.hand_pose(0));
+  expect_pose(*state->device_poses()->Get(1), sim.proxy_pose(1));
   EXPECT_NE(sim.hand_pose(0).position, sim.proxy_pose(0).position);        // the hand, not its first tip
   EXPECT_GT(glm::length(sim.proxy_pose(1).position - stylus_from), 1e-4);  // it did move
   ASSERT_EQ(h->device_input_sequences()->size(), 2u);
@@ -619,6 +624,14 @@ TEST(FrameEncoder, AFreeCoupledProxyTellsItsDeviceNoStiffness) {
     if (k >= 500 && k < 1000 && d.contacts() > 0) {
       ++pressed;
       told_pressing += kyy < 0;
+    }
+    if (k == 999) {
+      // Held in: the state frame shows the device where it is, below its
+      // proxy, which the block holds up (a viewer draws both).
+      const proto::StateFrame* f = envelope(frames.state_frame(0))->message_as_StateFrame();
+      ASSERT_EQ(f->device_poses()->size(), 1u);
+      expect_pose(*f->device_poses()->Get(0), device);
+      EXPECT_GT(f->proxies()->Get(0)->position().y() - f->device_poses()->Get(0)->position().y(), 0.5e-3);
     }
     untouched = d.contacts() > 0 ? 0 : untouched + 1;
     if (k >= 1000 && untouched * dt > 2e-3 + 1e-9) {

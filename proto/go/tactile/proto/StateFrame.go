@@ -204,8 +204,27 @@ func (rcv *StateFrame) FieldsLength() int {
 	return 0
 }
 
+func (rcv *StateFrame) DevicePoses(obj *ProxyPose, j int) bool {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(24))
+	if o != 0 {
+		x := rcv._tab.Vector(o)
+		x += flatbuffers.UOffsetT(j) * 28
+		obj.Init(rcv._tab.Bytes, x)
+		return true
+	}
+	return false
+}
+
+func (rcv *StateFrame) DevicePosesLength() int {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(24))
+	if o != 0 {
+		return rcv._tab.VectorLen(o)
+	}
+	return 0
+}
+
 func StateFrameStart(builder *flatbuffers.Builder) {
-	builder.StartObject(10)
+	builder.StartObject(11)
 }
 func StateFrameAddSceneId(builder *flatbuffers.Builder, sceneId uint32) {
 	builder.PrependUint32Slot(0, sceneId, 0)
@@ -251,6 +270,12 @@ func StateFrameAddFields(builder *flatbuffers.Builder, fields flatbuffers.UOffse
 }
 func StateFrameStartFieldsVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
 	return builder.StartVector(4, numElems, 4)
+}
+func StateFrameAddDevicePoses(builder *flatbuffers.Builder, devicePoses flatbuffers.UOffsetT) {
+	builder.PrependUOffsetTSlot(10, flatbuffers.UOffsetT(devicePoses), 0)
+}
+func StateFrameStartDevicePosesVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
+	return builder.StartVector(28, numElems, 4)
 }
 func StateFrameEnd(builder *flatbuffers.Builder) flatbuffers.UOffsetT {
 	return builder.EndObject()

@@ -194,7 +194,31 @@ class StateFrame(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
         return o == 0
 
-def StateFrameStart(builder): builder.StartObject(10)
+    # StateFrame
+    def DevicePoses(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
+        if o != 0:
+            x = self._tab.Vector(o)
+            x += flatbuffers.number_types.UOffsetTFlags.py_type(j) * 28
+            from tactile_proto.generated.ProxyPose import ProxyPose
+            obj = ProxyPose()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+    # StateFrame
+    def DevicePosesLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # StateFrame
+    def DevicePosesIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
+        return o == 0
+
+def StateFrameStart(builder): builder.StartObject(11)
 def Start(builder):
     return StateFrameStart(builder)
 def StateFrameAddSceneId(builder, sceneId): builder.PrependUint32Slot(0, sceneId, 0)
@@ -242,6 +266,12 @@ def AddFields(builder, fields):
 def StateFrameStartFieldsVector(builder, numElems): return builder.StartVector(4, numElems, 4)
 def StartFieldsVector(builder, numElems):
     return StateFrameStartFieldsVector(builder, numElems)
+def StateFrameAddDevicePoses(builder, devicePoses): builder.PrependUOffsetTRelativeSlot(10, flatbuffers.number_types.UOffsetTFlags.py_type(devicePoses), 0)
+def AddDevicePoses(builder, devicePoses):
+    return StateFrameAddDevicePoses(builder, devicePoses)
+def StateFrameStartDevicePosesVector(builder, numElems): return builder.StartVector(28, numElems, 4)
+def StartDevicePosesVector(builder, numElems):
+    return StateFrameStartDevicePosesVector(builder, numElems)
 def StateFrameEnd(builder): return builder.EndObject()
 def End(builder):
     return StateFrameEnd(builder)
@@ -268,6 +298,7 @@ class StateFrameT(object):
         self.contactForces = None  # type: List[tactile_proto.generated.Vec3f.Vec3fT]
         self.energies = None  # type: Optional[tactile_proto.generated.Energies.EnergiesT]
         self.fields = None  # type: List[tactile_proto.generated.FrameField.FrameFieldT]
+        self.devicePoses = None  # type: List[tactile_proto.generated.ProxyPose.ProxyPoseT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -329,6 +360,14 @@ class StateFrameT(object):
                 else:
                     frameField_ = tactile_proto.generated.FrameField.FrameFieldT.InitFromObj(stateFrame.Fields(i))
                     self.fields.append(frameField_)
+        if not stateFrame.DevicePosesIsNone():
+            self.devicePoses = []
+            for i in range(stateFrame.DevicePosesLength()):
+                if stateFrame.DevicePoses(i) is None:
+                    self.devicePoses.append(None)
+                else:
+                    proxyPose_ = tactile_proto.generated.ProxyPose.ProxyPoseT.InitFromObj(stateFrame.DevicePoses(i))
+                    self.devicePoses.append(proxyPose_)
 
     # StateFrameT
     def Pack(self, builder):
@@ -366,6 +405,11 @@ class StateFrameT(object):
             for i in reversed(range(len(self.fields))):
                 builder.PrependUOffsetTRelative(fieldslist[i])
             fields = builder.EndVector()
+        if self.devicePoses is not None:
+            StateFrameStartDevicePosesVector(builder, len(self.devicePoses))
+            for i in reversed(range(len(self.devicePoses))):
+                self.devicePoses[i].Pack(builder)
+            devicePoses = builder.EndVector()
         StateFrameStart(builder)
         StateFrameAddSceneId(builder, self.sceneId)
         StateFrameAddStep(builder, self.step)
@@ -384,5 +428,7 @@ class StateFrameT(object):
             StateFrameAddEnergies(builder, energies)
         if self.fields is not None:
             StateFrameAddFields(builder, fields)
+        if self.devicePoses is not None:
+            StateFrameAddDevicePoses(builder, devicePoses)
         stateFrame = StateFrameEnd(builder)
         return stateFrame

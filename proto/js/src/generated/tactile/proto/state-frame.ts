@@ -111,8 +111,18 @@ fieldsLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+devicePoses(index: number, obj?:ProxyPose):ProxyPose|null {
+  const offset = this.bb!.__offset(this.bb_pos, 24);
+  return offset ? (obj || new ProxyPose()).__init(this.bb!.__vector(this.bb_pos + offset) + index * 28, this.bb!) : null;
+}
+
+devicePosesLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 24);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startStateFrame(builder:flatbuffers.Builder) {
-  builder.startObject(10);
+  builder.startObject(11);
 }
 
 static addSceneId(builder:flatbuffers.Builder, sceneId:number) {
@@ -209,6 +219,14 @@ static startFieldsVector(builder:flatbuffers.Builder, numElems:number) {
   builder.startVector(4, numElems, 4);
 }
 
+static addDevicePoses(builder:flatbuffers.Builder, devicePosesOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(10, devicePosesOffset, 0);
+}
+
+static startDevicePosesVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(28, numElems, 4);
+}
+
 static endStateFrame(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
@@ -226,7 +244,8 @@ unpack(): StateFrameT {
     this.bb!.createObjList(this.proxies.bind(this), this.proxiesLength()),
     this.bb!.createObjList(this.contactForces.bind(this), this.contactForcesLength()),
     (this.energies() !== null ? this.energies()!.unpack() : null),
-    this.bb!.createObjList(this.fields.bind(this), this.fieldsLength())
+    this.bb!.createObjList(this.fields.bind(this), this.fieldsLength()),
+    this.bb!.createObjList(this.devicePoses.bind(this), this.devicePosesLength())
   );
 }
 
@@ -242,6 +261,7 @@ unpackTo(_o: StateFrameT): void {
   _o.contactForces = this.bb!.createObjList(this.contactForces.bind(this), this.contactForcesLength());
   _o.energies = (this.energies() !== null ? this.energies()!.unpack() : null);
   _o.fields = this.bb!.createObjList(this.fields.bind(this), this.fieldsLength());
+  _o.devicePoses = this.bb!.createObjList(this.devicePoses.bind(this), this.devicePosesLength());
 }
 }
 
@@ -256,7 +276,8 @@ constructor(
   public proxies: (ProxyPoseT)[] = [],
   public contactForces: (Vec3fT)[] = [],
   public energies: EnergiesT|null = null,
-  public fields: (FrameFieldT)[] = []
+  public fields: (FrameFieldT)[] = [],
+  public devicePoses: (ProxyPoseT)[] = []
 ){}
 
 
@@ -266,6 +287,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const proxies = builder.createStructOffsetList(this.proxies, StateFrame.startProxiesVector);
   const contactForces = builder.createStructOffsetList(this.contactForces, StateFrame.startContactForcesVector);
   const fields = StateFrame.createFieldsVector(builder, builder.createObjectOffsetList(this.fields));
+  const devicePoses = builder.createStructOffsetList(this.devicePoses, StateFrame.startDevicePosesVector);
 
   StateFrame.startStateFrame(builder);
   StateFrame.addSceneId(builder, this.sceneId);
@@ -278,6 +300,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   StateFrame.addContactForces(builder, contactForces);
   StateFrame.addEnergies(builder, (this.energies !== null ? this.energies!.pack(builder) : 0));
   StateFrame.addFields(builder, fields);
+  StateFrame.addDevicePoses(builder, devicePoses);
 
   return StateFrame.endStateFrame(builder);
 }
