@@ -17,7 +17,8 @@ export class FieldChoice {
     this.available = [{ name: DISPLACEMENT, unit: 'm', description: 'how far each point moved from rest' }];
   }
 
-  // A new scene: what it offers; keeps the choice when the scene has it, else the wanted one, else displacement.
+  // A new scene: what it offers; the wanted field (the menu's last choice, or ?field=) when the scene has
+  // it, else the current one if it has that, else displacement.
   /** @param {SceneDescriptionT} d */
   setDescription(d) {
     this.available = [this.available[0]];
@@ -26,7 +27,8 @@ export class FieldChoice {
       if (name) this.available.push({ name, unit: /** @type {string} */ (f.unit) || '', description: /** @type {string} */ (f.description) || '' });
     }
     const has = (/** @type {string} */ n) => this.available.some((f) => f.name === n);
-    if (!has(this.name)) this.name = has(this.wanted) ? this.wanted : DISPLACEMENT;
+    if (has(this.wanted)) this.name = this.wanted;
+    else if (!has(this.name)) this.name = DISPLACEMENT;
   }
 
   // The field names to ask the server for (none for displacement).
