@@ -11,8 +11,10 @@
 // recorded first (tactile-server --record), then replayed to the page (--replay serves it at its recorded
 // pace and simulates nothing): the page has the machine to itself, as a viewer on another machine than
 // the server has.
+// --wire 1 or 0: the simulation mesh's wireframe on or off (the page's default: on over a bare boundary,
+// as these plates are).
 //   node client-web/bench/render_bench.mjs [--seconds S] [--sizes 50,100,157] [--quality low|high]
-//                                          [--source replay|live]
+//                                          [--source replay|live] [--wire 0|1]
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
@@ -28,6 +30,7 @@ const { values: opts } = parseArgs({
     sizes: { type: 'string', default: '50,100,157' },
     quality: { type: 'string', default: '' },
     source: { type: 'string', default: 'replay' },
+    wire: { type: 'string', default: '' },
     build: { type: 'string', default: process.env.TACTILE_BUILD || 'build/release' },
   },
 });
@@ -95,7 +98,10 @@ try {
     const { proc, port } = await serve(n);
     try {
       const page = await browser.newPage({ viewport: { width: 1024, height: 768 } });
-      await page.goto(`http://127.0.0.1:${port}/${opts.quality ? `?quality=${opts.quality}` : ''}`);
+      const query = new URLSearchParams();
+      if (opts.quality) query.set('quality', opts.quality);
+      if (opts.wire) query.set('wire', opts.wire);
+      await page.goto(`http://127.0.0.1:${port}/?${query}`);
       await page.waitForFunction(() => window.tactile && window.tactile.frames >= 3, null, { timeout: 120000 });
       await page.waitForTimeout(1000);  // past the start-up
       const read = () => page.evaluate(() => {

@@ -1,6 +1,7 @@
 // The browser view: connects to the server that serves this page, says Hello as a viewer, builds the
 // scene from its SceneDescription and draws the body from its state frames, interpolated to the
-// screen's rate.
+// screen's rate. Around it: panels that fold away (panels.js), camera presets and fit-to-body (camera.js),
+// the simulation mesh as a wireframe, and the keys for them.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
@@ -8,10 +9,14 @@ import {
   ControlCommand, Message, ResetT, Role, decode, encode, makeHello, makeViewFields, messageTypeOf, readStateFrame,
   checkVersion,
 } from '@tactile/proto';
+import 'uplot/dist/uPlot.min.css';  // (esbuild writes it to dist/app.css, which index.html links)
+
+import { PRESETS, START, applyFraming, computeBoundingSphere, viewDirection } from './camera.js';
 import { cssGradient } from './colormap.js';
 import { ControlPanel } from './controls.js';
 import { DISPLACEMENT, FieldChoice } from './fields.js';
 import { FrameBuffer } from './frames.js';
+import { Panels } from './panels.js';
 import { PointerDevice } from './pointer.js';
 import { TelemetryPanel } from './telemetry.js';
 import { Timeline } from './timeline.js';
@@ -23,6 +28,9 @@ import { SceneView } from './view.js';
 
 // (index.html has every element the page asks for by id.)
 const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
+// A phone, or a window as narrow: the panels start folded, but for the legend (index.html's breakpoint).
+const small = window.matchMedia('(max-width: 600px)').matches;
+const panels = new Panels(document, small);
 const status = (/** @type {string} */ text) => { $('status').textContent = text; };
 
 // Shadows and multisampling where a GPU draws; without them where the CPU does (SwiftShader, llvmpipe:
@@ -73,10 +81,12 @@ const pointer = new PointerDevice({ canvas: renderer.domElement, camera, control
  *   errors: ErrorT['message'][], lastStep: number, quality: string, decodeMs: number[], slotMs: number[],
  *   frameMs: number[], timeline?: Timeline, pointer?: PointerDevice, controls?: ControlPanel,
  *   project?: (x: number, y: number, z: number) => number[], fault?: string, view?: SceneView,
- *   drawnTriangles?: number, telemetry?: TelemetryT, deviceStatus?: DeviceStatusT, replay?: ReplayStatusT }}
+ *   drawnTriangles?: number, telemetry?: TelemetryT, deviceStatus?: DeviceStatusT, replay?: ReplayStatusT,
+ *   camera: THREE.PerspectiveCamera, panels: Panels, plots: TelemetryPanel['plots'], wire: boolean,
+ *   fit?: (preset?: string) => void }}
  */
 const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality,
-                decodeMs: [], slotMs: [], frameMs: [] };
+                decodeMs: [], slotMs: [], frameMs: [], camera, panels, plots: telemetry.plots, wire: false };
 const controlPanel = new ControlPanel($('controls'), { token, url: wsUrl });
 const timeline = new Timeline($('timeline'), controlPanel);
 stats.timeline = timeline;
@@ -84,6 +94,7 @@ stats.pointer = pointer;
 stats.controls = controlPanel;
 // Where a scene point [m] is drawn, in CSS pixels of the page (for tests that point at the body).
 stats.project = (x, y, z) => {
+  camera.updateMatrixWorld();  // (a preset moves the camera between renders)
   const v = new THREE.Vector3(x, y, z).project(camera);
   const r = renderer.domElement.getBoundingClientRect();
   return [r.left + ((v.x + 1) / 2) * r.width, r.top + ((1 - v.y) / 2) * r.height];
@@ -150,6 +161,10 @@ let buffer = null;
 let cameraMoved = false;  // since the last cull
 const legendRange = [NaN, NaN];  // as the legend shows it
 controls.addEventListener('change', () => { cameraMoved = true; });
+// Whether the camera stands where a preset or a fit put it (a resize then frames the body again); a person
+// turning or moving the view takes it over.
+let framed = false;
+controls.addEventListener('start', () => { framed = false; });
 /** @type {THREE.Mesh<THREE.PlaneGeometry, THREE.ShadowMaterial> | null} */
 let ground = null;
 
@@ -159,11 +174,64 @@ function resize() {
   renderer.setSize(w, h, false);
   camera.aspect = w / Math.max(1, h);
   camera.updateProjectionMatrix();
+  if (framed) frameBody(viewDirection(camera, controls));
+  telemetry.resize();
 }
 window.addEventListener('resize', resize);
+$('telemetry').addEventListener('toggle', () => telemetry.resize());
+
+// Frames the body's bounding sphere (its newest state's) from `direction` (camera - centre; the current
+// one by default).
+/** @param {ArrayLike<number>} [direction] */
+function frameBody(direction = viewDirection(camera, controls)) {
+  if (!view) return;
+  const sphere = computeBoundingSphere(view.positions);
+  const d = Math.hypot(direction[0], direction[1], direction[2]) > 0 ? direction : START;
+  applyFraming(camera, controls, sphere, d);
+  framed = true;
+  cameraMoved = true;
+}
+/** @type {{ [name: string]: ArrayLike<number> }} */
+const presets = PRESETS;
+stats.fit = (preset) => frameBody(preset ? presets[preset] : undefined);
+for (const name of [...Object.keys(PRESETS), 'fit']) {
+  $('camera').querySelector(`button[name=view-${name}]`)?.addEventListener('click', () => stats.fit?.(name === 'fit' ? undefined : name));
+}
+
+// The simulation mesh as a wireframe. By default off over a fine surface (it would hide what the body looks
+// like), on over a bare boundary coarse enough for its edges to be told apart (WIRE_EDGES); off over a finer
+// one, whose edges would paint the body over (and where the CPU draws, cost a third of the frame rate at
+// 20 k vertices: render_bench --wire 1). The checkbox, the W key or ?wire=1 / ?wire=0 choose.
+const WIRE_EDGES = 6000;
+const wireBox = /** @type {HTMLInputElement} */ ($('wire'));
+/** @type {boolean | null} */
+let wireWanted = query.has('wire') ? query.get('wire') !== '0' : null;
+function showWire() {
+  stats.wire = wireWanted ?? (view !== null && !view.embedded && view.edges <= WIRE_EDGES);
+  wireBox.checked = stats.wire;
+  if (view) view.setWire(stats.wire);
+}
+wireBox.addEventListener('change', () => { wireWanted = wireBox.checked; showWire(); });
+
+// Keys (not while typing in a field): 1-4 the presets, F fit, W the wireframe, H folds or opens the panels.
+window.addEventListener('keydown', (e) => {
+  const t = /** @type {HTMLElement | null} */ (e.target);
+  if (e.ctrlKey || e.metaKey || e.altKey || (t && /^(INPUT|SELECT|TEXTAREA)$/.test(t.tagName) && t !== wireBox)) return;
+  const key = e.key.toLowerCase();
+  const preset = ['front', 'top', 'side', 'iso'][Number(key) - 1];
+  if (preset) stats.fit?.(preset);
+  else if (key === 'f') stats.fit?.();
+  else if (key === 'w') { wireWanted = !stats.wire; showWire(); }
+  else if (key === 'h') { panels.toggleAll(); telemetry.resize(); }
+  else return;
+  e.preventDefault();
+});
 
 /** @param {SceneDescriptionT} d */
 function onScene(d) {
+  // The same body again (a reset, a parameter set) keeps the camera where it was; another is framed.
+  const same = view !== null && stats.sceneName === ((/** @type {string | null} */ (d.sceneName)) || '') &&
+    view.rest.length === d.restPositions.length;
   if (view) view.dispose();
   view = new SceneView(scene, d, quality);
   stats.view = view;
@@ -180,15 +248,12 @@ function onScene(d) {
   askFields();
   view.resetScalarRange(fieldChoice.name === DISPLACEMENT);
   scalarsNow = new Float32Array(view.scalars.length);
-  // Frame the body: look at its centre from the front, above.
+  showWire();
+  resize();
+  if (!same) frameBody(START);
   const s = /** @type {THREE.Sphere} */ (view.geometry.boundingSphere);  // (SceneView computes it)
   const c = s.center;
   const r = s.radius || 0.05;
-  controls.target.copy(c);
-  camera.position.set(c.x + 1.6 * r, c.y + 1.4 * r, c.z + 2.6 * r);
-  camera.near = r / 100;
-  camera.far = r * 100;
-  camera.updateProjectionMatrix();
   sun.position.set(c.x + 2 * r, c.y + 5 * r, c.z + 3 * r);
   sun.target.position.copy(c);
   const cam = sun.shadow.camera;
@@ -208,7 +273,6 @@ function onScene(d) {
     ground.receiveShadow = true;
     scene.add(ground);
   }
-  resize();
   pointer.setScene(d, view, wsUrl);
   controlPanel.setDescription(d);
 }
@@ -235,7 +299,7 @@ function onMessage(data) {
       if (stats.slotMs.length > 256) stats.slotMs.shift();
       stats.frames += 1;
       stats.lastStep = Number(f.step);
-      view.updateProxies(f.proxies, f.contactForces);
+      view.updateProxies(f.proxies, f.contactForces, f.devicePoses);
       pointer.observe(f.proxies);
       const forces = [];
       for (let j = 0; j < view.proxies.length; j++) {

@@ -1,13 +1,50 @@
-// The telemetry panel: the server's figures as text, and the step time, the real-time factor, (while
-// this page drives a device) the input-to-force latency, and (while a device bridge reports, protocol 1.3)
-// the bridge's tick lateness and display delay over the last minute as a plot (a 2D canvas, redrawn when a
-// Telemetry arrives, about once a second). Safety events relayed from device bridges are listed with their
-// time and cause.
+// The telemetry panel: the server's figures as text, and two plots over the last minute (uPlot, redrawn
+// when a Telemetry arrives, about once a second): the step time and the real-time factor; and, in ms, the
+// input-to-force latency (while this page drives a device) and the first device bridge's display delay and
+// tick lateness (while one reports, protocol 1.3). Safety events relayed from device bridges are listed
+// with their time and cause.
+import uPlot from 'uplot';
 
 import { SafetyKind } from '@tactile/proto';
 /** @import { DeviceStatusT, SafetyEventT, TelemetryT } from '@tactile/proto' */
 
 const SPAN = 60; // samples kept (about a minute)
+const PLOT_HEIGHT = 96;  // each plot's drawing area with its axes [CSS px]
+const AXIS = { stroke: '#aab2c0', font: '10px system-ui, sans-serif', labelFont: '10px system-ui, sans-serif',
+               grid: { stroke: 'rgba(255, 255, 255, 0.08)', width: 1 }, ticks: { stroke: 'rgba(255, 255, 255, 0.2)', width: 1 } };
+
+// The legend's value: the number with its unit, or a dash where there is none.
+/** @param {string} unit @param {number} digits */
+const shown = (unit, digits) => (/** @type {uPlot} */ _u, /** @type {number | null} */ v) =>
+  (v === null || v === undefined || !Number.isFinite(v) ? '–' : `${v.toFixed(digits)}${unit ? ' ' + unit : ''}`);
+
+// An axis's tick with its unit, a thousand of it in the next unit up (1500 µs as 1.5 ms), so that the axis
+// stays narrow.
+/** @param {string[]} units smallest first, each a thousand of the one before */
+const ticksIn = (units) => (/** @type {uPlot} */ _u, /** @type {number[]} */ ticks) => ticks.map((t) => {
+  let k = 0;
+  let v = t;
+  while (Math.abs(v) >= 1000 && k + 1 < units.length) { v /= 1000; k += 1; }
+  return `${+v.toPrecision(4)} ${units[k]}`;
+});
+
+// A plot of the last minute (x: seconds before the newest sample) with its axes and series.
+/**
+ * @param {HTMLElement} into @param {uPlot.Scales} scales @param {uPlot.Axis[]} axes @param {uPlot.Series[]} series
+ */
+function makePlot(into, scales, axes, series) {
+  /** @type {uPlot.Options} */
+  const options = {
+    width: 280,
+    height: PLOT_HEIGHT,
+    scales: { x: { time: false, range: [-SPAN, 0] }, ...scales },
+    axes: [{ ...AXIS, size: 28, values: (_u, ticks) => ticks.map((t) => (t === 0 ? 'now' : `${t} s`)) }, ...axes],
+    series: [{ label: 'time', value: shown('s', 0) }, ...series],
+    cursor: { drag: { x: false, y: false } },
+  };
+  return new uPlot(options, [[], ...series.map(() => [])], into);
+}
+
 // 'ContinuousLimit' -> 'continuous limit'
 /** @param {SafetyKind} k */
 const kindName = (k) => (SafetyKind[k] ?? `kind ${k}`).replace(/([a-z])([A-Z])/g, '$1 $2').toLowerCase();
@@ -17,8 +54,9 @@ export class TelemetryPanel {
   constructor(element) {
     // (index.html has each of them.)
     this.text = /** @type {HTMLElement} */ (element.querySelector('.figures'));
-    this.canvas = /** @type {HTMLCanvasElement} */ (element.querySelector('canvas'));
+    this.plotsElement = /** @type {HTMLElement} */ (element.querySelector('.plots'));
     this.events = /** @type {HTMLElement} */ (element.querySelector('.events'));
+    this.timeS = new Float64Array(SPAN);                  // when each sample was taken: server clock [s]
     this.stepUs = new Float64Array(SPAN);
     this.rtf = new Float64Array(SPAN);
     this.latency = new Float64Array(SPAN).fill(NaN);
@@ -29,6 +67,25 @@ export class TelemetryPanel {
     this.count = 0;
     /** @type {TelemetryT | null} */
     this.latest = null;
+    const fromZero = /** @type {uPlot.Scale.Range} */ ((_u, _lo, hi) => [0, hi > 0 ? 1.15 * hi : 1]);
+    this.plots = [
+      makePlot(this.plotsElement, { us: { range: fromZero }, rtf: { range: [0, 1.25] } },
+               [{ ...AXIS, scale: 'us', size: 54, values: ticksIn(['µs', 'ms', 's']) },
+                { ...AXIS, scale: 'rtf', side: 1, size: 34, grid: { show: false } }],
+               [{ label: 'step time', scale: 'us', stroke: '#7fc8ff', width: 1.5, value: shown('µs', 1) },
+                { label: 'real-time factor', scale: 'rtf', stroke: '#ffd166', width: 1.5, value: shown('', 3) }]),
+      makePlot(this.plotsElement, { ms: { range: fromZero } },
+               [{ ...AXIS, scale: 'ms', size: 54, values: ticksIn(['ms', 's']) }],
+               [{ label: 'input to force', scale: 'ms', stroke: '#ef6f6c', width: 1.5, value: shown('ms', 1) },
+                { label: 'bridge delay', scale: 'ms', stroke: '#9be564', width: 1.5, value: shown('ms', 2) },
+                { label: 'bridge tick late p99', scale: 'ms', stroke: '#c792ea', width: 1.5, value: shown('ms', 2) }]),
+    ];
+  }
+
+  // Sizes the plots to the panel (after a resize, or when the panel opens; not while it is folded).
+  resize() {
+    const w = this.plotsElement.clientWidth;
+    if (w > 0) for (const p of this.plots) if (p.width !== w) p.setSize({ width: w, height: PLOT_HEIGHT });
   }
 
   // A TelemetryT (object API); `latencies`: this page's latest input-to-force round trips [ms] (the
@@ -37,6 +94,7 @@ export class TelemetryPanel {
   update(t, latencies = []) {
     this.latest = t;
     const k = this.count % SPAN;
+    this.timeS[k] = Number(t.serverTimeNs) / 1e9;
     this.stepUs[k] = t.stepTimeMeanUs;
     this.rtf[k] = t.realTimeFactor;
     const fresh = latencies.splice(0).sort((a, b) => a - b);
@@ -83,47 +141,21 @@ export class TelemetryPanel {
     while (this.events.children.length > 8) /** @type {ChildNode} */ (this.events.lastChild).remove();
   }
 
+  // The samples, oldest first, as the plots' data: x in seconds before the newest; a missing value as null
+  // (a gap in its line).
   draw() {
-    const c = this.canvas;
-    const g = /** @type {CanvasRenderingContext2D} */ (c.getContext('2d'));
-    const w = c.width;
-    const h = c.height;
-    g.clearRect(0, 0, w, h);
     const n = Math.min(this.count, SPAN);
-    if (n < 2) return;
-    let top = 0;
-    for (let i = 0; i < n; i++) top = Math.max(top, this.stepUs[i]);
-    top = top * 1.2 || 1;
-    /** @param {Float64Array} values @param {number} scale @param {string} colour */
-    const series = (values, scale, colour) => {
-      g.strokeStyle = colour;
-      g.beginPath();
-      let open = false;
-      for (let i = 0; i < n; i++) {
-        const v = values[(this.count - n + i) % SPAN];
-        if (!Number.isFinite(v)) { open = false; continue; }
-        const x = (i / (SPAN - 1)) * w;
-        const y = h - Math.min(1, v / scale) * (h - 2) - 1;
-        if (!open) g.moveTo(x, y);
-        else g.lineTo(x, y);
-        open = true;
-      }
-      g.stroke();
-    };
-    series(this.stepUs, top, '#7fc8ff');
-    series(this.rtf, 1.25, '#ffd166');
-    series(this.latency, 50, '#ef6f6c');
-    series(this.bridgeDelay, 10, '#9be564');
-    series(this.bridgeLate, 2, '#c792ea');
-    g.fillStyle = '#aab';
-    g.fillText(`step time (0-${top.toFixed(0)} us)`, 4, 10);
-    g.fillStyle = '#ffd166';
-    g.fillText('real-time factor (0-1.25)', 4, 22);
-    g.fillStyle = '#ef6f6c';
-    g.fillText('input to force (0-50 ms)', 4, 34);
-    g.fillStyle = '#9be564';
-    g.fillText('bridge delay (0-10 ms)', 4, 46);
-    g.fillStyle = '#c792ea';
-    g.fillText('bridge tick late p99 (0-2 ms)', 4, 58);
+    const at = (/** @type {number} */ i) => (this.count - n + i) % SPAN;
+    const newest = this.timeS[at(n - 1)];
+    const x = Array.from({ length: n }, (_, i) => this.timeS[at(i)] - newest);
+    /** @param {Float64Array} values */
+    const series = (values) => Array.from({ length: n }, (_, i) => {
+      const v = values[at(i)];
+      return Number.isFinite(v) ? v : null;
+    });
+    this.plots[0].setData([x, series(this.stepUs), series(this.rtf)]);
+    this.plots[1].setData([x, series(this.latency), series(this.bridgeDelay), series(this.bridgeLate)]);
+    // The legend shows the newest values, with their units, unless the pointer is over a plot.
+    for (const p of this.plots) if (n > 0 && !(p.cursor.left !== undefined && p.cursor.left >= 0)) p.setLegend({ idx: n - 1 });
   }
 }

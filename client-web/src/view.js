@@ -1,5 +1,6 @@
-// The three.js scene of one SceneDescription: the body's surface, the proxies drawn as their shapes, and
-// an arrow per proxy for its contact force.
+// The three.js scene of one SceneDescription: the body's surface, the proxies drawn as their shapes, an
+// arrow per proxy for its contact force, each device's own pose where it left its proxy (ghosts.js), and,
+// when asked for, the simulation mesh's boundary as a wireframe.
 //
 // The surface is interpolated on the GPU: each state frame is written once, when it arrives, into one of
 // three vertex-buffer slots (positions as 16-bit integers over a box around the body, colours as bytes);
@@ -12,12 +13,17 @@ import * as THREE from 'three';
 
 import { viridisBytes } from './colormap.js';
 import { frontTriangles } from './cull.js';
+import { computeUniqueEdges } from './edges.js';
 import { EmbeddedSurfaceView } from './embedded.js';
+import { DeviceGhosts } from './ghosts.js';
+import { makeProxyGeometry, shapeName } from './shapes.js';
 /** @import { ProxyInfoT, SceneDescriptionT } from '@tactile/proto' */
 
 const VIRIDIS = viridisBytes();
+const NO_POSES = new Float32Array(0);
 
-const SHAPES = ['sphere', 'capsule', 'box', 'plane'];
+// The wireframe's colour: off the colour map (whose blue stays under 0.56) and the background.
+export const WIRE_COLOUR = [0.93, 0.95, 1.0];
 
 // The surface's shading where the CPU draws (software renderers): a light at the camera and an ambient
 // floor, on each triangle's own normal, in one short shader with two varyings, front faces only. three.js's Lambert, with
@@ -54,6 +60,34 @@ function lowQualityMaterial(uniforms) {
         vec3 n = normalize(cross(dFdx(vView), dFdy(vView)));
         float light = abs(dot(n, normalize(vec3(0.3, 0.6, 0.75))));  // from above the camera, either side lit
         gl_FragColor = vec4(vColour * (0.35 + 0.65 * light), 1.0);
+      }`,
+  });
+}
+
+// The simulation mesh's edges, placed as the surface is (the same slots, mixed with the same weight), in
+// one colour. Each vertex is drawn `wireLift` [m] nearer the eye than it is, so that the edges of the faces
+// turned to the eye pass the depth test against a fine surface they lie just under (a chord of a curved
+// surface) or on (the boundary itself), while those of the far side stay hidden behind the body.
+/** @param {{ [name: string]: THREE.IUniform }} uniforms */
+function wireMaterial(uniforms) {
+  return new THREE.ShaderMaterial({
+    uniforms,
+    vertexShader: `
+      attribute vec3 posA;
+      attribute vec3 posB;
+      uniform float surfaceMix;
+      uniform vec3 surfaceCentre;
+      uniform float surfaceHalf;
+      uniform float wireLift;
+      void main() {
+        vec4 p = modelViewMatrix * vec4(surfaceCentre + surfaceHalf * mix(posA, posB, surfaceMix), 1.0);
+        p.xyz *= max(0.0, 1.0 - wireLift / max(length(p.xyz), 1e-9));
+        gl_Position = projectionMatrix * p;
+      }`,
+    fragmentShader: `
+      uniform vec3 wireColour;
+      void main() {
+        gl_FragColor = vec4(wireColour, 1.0);
       }`,
   });
 }
@@ -162,23 +196,39 @@ export class SceneView {
     });
     this.forces = new Float32Array(3 * this.proxies.length);
     this.tmp = new THREE.Vector3();
+    this.ghosts = new DeviceGhosts(this.root, description, this.size);
+
+    // The simulation mesh (the boundary's edges over the frame vertices), hidden until asked for. It reads
+    // the surface's slots: a state costs it nothing more. Lifted toward the eye by 4 % of the body's size
+    // over a fine surface (the coarse faces' chords lie under it by their sagitta, a few mm on the organ
+    // scene), by 0.4 % over the boundary itself (only to win the depth test).
+    const wireGeometry = new THREE.BufferGeometry();
+    wireGeometry.setIndex(new THREE.BufferAttribute(computeUniqueEdges(description.triangles), 1));
+    wireGeometry.setAttribute('position', geometry.getAttribute('position'));
+    this.wireUniforms = { ...this.uniforms, wireLift: { value: (this.embedded ? 0.04 : 0.004) * this.size },
+                          wireColour: { value: new THREE.Color().fromArray(WIRE_COLOUR) } };
+    this.wire = new THREE.LineSegments(wireGeometry, wireMaterial(this.wireUniforms));
+    this.wire.name = 'simulation mesh';
+    this.wire.frustumCulled = false;  // the shader moves it, as the surface
+    this.wire.visible = false;
+    this.edges = wireGeometry.index ? wireGeometry.index.count / 2 : 0;
+    this.bindSlots();
+    this.root.add(this.wire);
+  }
+
+  // Shows or hides the simulation mesh's wireframe.
+  /** @param {boolean} shown */
+  setWire(shown) {
+    this.wire.visible = shown;
   }
 
   /** @param {ProxyInfoT} info */
   makeProxy(info) {
-    const shape = SHAPES[info.shape] ?? 'sphere';
-    let geometry;
-    const r = info.radius || 0.005;
-    if (shape === 'capsule') geometry = new THREE.CapsuleGeometry(r, 2 * (info.halfLength || 0), 8, 16);
-    else if (shape === 'box') {
-      const h = info.halfExtents || { x: r, y: r, z: r };
-      geometry = new THREE.BoxGeometry(2 * h.x, 2 * h.y, 2 * h.z);
-    } else if (shape === 'plane') geometry = new THREE.PlaneGeometry(4 * this.size, 4 * this.size).rotateX(-Math.PI / 2);
-    else geometry = new THREE.SphereGeometry(r, 32, 16);
+    const plane = shapeName(info) === 'plane';
     const material = new THREE.MeshStandardMaterial({ color: 0xd0d4dc, roughness: 0.3, metalness: 0.2,
-                                                     transparent: shape === 'plane', opacity: shape === 'plane' ? 0.3 : 1 });
-    const mesh = new THREE.Mesh(geometry, material);
-    mesh.castShadow = shape !== 'plane';
+                                                     transparent: plane, opacity: plane ? 0.3 : 1 });
+    const mesh = new THREE.Mesh(makeProxyGeometry(info, this.size), material);
+    mesh.castShadow = !plane;
     mesh.name = /** @type {string | null} */ (info.name) || '';
     this.root.add(mesh);
     return mesh;
@@ -191,6 +241,10 @@ export class SceneView {
     geometry.setAttribute('posB', b.p);
     geometry.setAttribute('colA', a.c);
     geometry.setAttribute('colB', b.c);
+    if (this.wire) {
+      this.wire.geometry.setAttribute('posA', a.p);
+      this.wire.geometry.setAttribute('posB', b.p);
+    }
     if (this.embedded) this.embedded.bind(this.older, this.newer);
   }
 
@@ -297,9 +351,10 @@ export class SceneView {
     this.uniforms.surfaceMix.value = w;
   }
 
-  // Proxy poses (n x 7: position, orientation w x y z) and forces (n x 3) from a state frame.
-  /** @param {Float32Array} poses @param {Float32Array} forces */
-  updateProxies(poses, forces) {
+  // Proxy poses (n x 7: position, orientation w x y z), forces (n x 3) and the device channels' own poses
+  // (n_devices x 7; empty before protocol 1.8) from a state frame.
+  /** @param {Float32Array} poses @param {Float32Array} forces @param {Float32Array} [devicePoses] */
+  updateProxies(poses, forces, devicePoses = NO_POSES) {
     for (let j = 0; j < this.proxies.length && 7 * j + 6 < poses.length; j++) {
       const m = this.proxies[j];
       m.position.set(poses[7 * j], poses[7 * j + 1], poses[7 * j + 2]);
@@ -321,6 +376,7 @@ export class SceneView {
         a.setLength(len, Math.min(0.3 * len, 0.2 * this.size), Math.min(0.15 * len, 0.1 * this.size));
       }
     }
+    this.ghosts.update(devicePoses, poses);
   }
 
   dispose() {

@@ -47,14 +47,26 @@ export async function startServer(scene, args = [], options = {}) {
   return spawnServer([scenePath, ...args], options);
 }
 
-// A page of the server at `port` in Chromium; `problems` collects console errors and page errors.
-export async function openPage(port, { query = '', viewport = { width: 800, height: 600 } } = {}) {
-  const browser = await chromium.launch({ executablePath: CHROMIUM, args: SWIFTSHADER });
-  const page = await browser.newPage({ viewport });
+// Debian's Chromium, drawing in software (SwiftShader).
+export function launchBrowser() {
+  return chromium.launch({ executablePath: CHROMIUM, args: SWIFTSHADER });
+}
+
+// A page of the server at `port` in a fresh context of `browser` (its own localStorage); `context` adds
+// options of a browser context (hasTouch, isMobile, ...). `problems` collects console errors and page errors.
+export async function openPageIn(browser, port, { query = '', viewport = { width: 800, height: 600 }, context = {} } = {}) {
+  const page = await browser.newPage({ viewport, ...context });
   const problems = [];
   page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
   page.on('pageerror', (e) => problems.push(`page: ${e.message}`));
   await page.goto(`http://127.0.0.1:${port}/${query}`);
+  return { page, problems };
+}
+
+// A page of the server at `port` in Chromium; `problems` collects console errors and page errors.
+export async function openPage(port, { query = '', viewport = { width: 800, height: 600 } } = {}) {
+  const browser = await launchBrowser();
+  const { page, problems } = await openPageIn(browser, port, { query, viewport });
   return { browser, page, problems };
 }
 
