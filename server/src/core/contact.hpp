@@ -215,6 +215,7 @@ class Contact {
   std::vector<std::array<double, 4>> emb_w_;
   std::vector<Cluster> emb_clusters_;
   std::vector<double> emb_pad_;  // per cluster: how far its vertices may stand outside their slots' box [m]
+  std::vector<Vec3> emb_rest_lo_, emb_rest_hi_;  // per cluster: its slots' box at rest, grown by its pad
   std::vector<int32_t> emb_cluster_slots_, emb_cluster_slot_begin_;
   // Workspace of one step.
   std::vector<Vec3> x_now_;                        // world position at t_{n+1} per slot [m]
