@@ -72,20 +72,31 @@ ElementFieldRequest element_request(ViewFieldMask mask) {
   return r;
 }
 
-TetFields compute_tet_fields(MaterialModel m, const double* F, double lambda, double mu) {
+TetFields compute_tet_fields(MaterialModel m, const double* F, double lambda, double mu,
+                             const ElementFieldRequest* ask) {
   TetFields f;
-  double P[9], C[9];
+  double P[9];
   f.energy_density = material::stress(m, F, lambda, mu, P);
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) {
-      double c = 0;
-      for (int k = 0; k < 3; ++k) c += F[3 * k + i] * F[3 * k + j];
-      C[3 * i + j] = c;
-      f.green[3 * i + j] = 0.5 * (c - (i == j ? 1.0 : 0.0));
+  // The eigenvalues (two trigonometric calls) were a third of a frame's
+  // fields when every field was computed for any (embedding_bench).
+  const bool strain = !ask || ask->green_strain, stretches = !ask || ask->principal_stretches;
+  const bool stress = !ask || ask->cauchy_stress || ask->von_mises;
+  if (strain || stretches) {
+    double C[9];
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        double c = 0;
+        for (int k = 0; k < 3; ++k) c += F[3 * k + i] * F[3 * k + j];
+        C[3 * i + j] = c;
+        f.green[3 * i + j] = 0.5 * (c - (i == j ? 1.0 : 0.0));
+      }
+    if (stretches) {
+      double eig[3];
+      symmetric_eigenvalues(C, eig);
+      for (int k = 0; k < 3; ++k) f.stretches[k] = std::sqrt(std::max(eig[k], 0.0));
     }
-  double eig[3];
-  symmetric_eigenvalues(C, eig);
-  for (int k = 0; k < 3; ++k) f.stretches[k] = std::sqrt(std::max(eig[k], 0.0));
+  }
+  if (!stress) return f;
   if (m == MaterialModel::Linear) {
     for (int k = 0; k < 9; ++k) f.cauchy[k] = P[k];
   } else {
@@ -140,7 +151,7 @@ ElementFields compute_element_fields(const Model<Real>& model, const State<Real>
     double F[9];
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) F[3 * i + j] = Fm[j][i];
-    const TetFields f = compute_tet_fields(model.tet_model[id], F, model.tet_lambda[id], model.tet_mu[id]);
+    const TetFields f = compute_tet_fields(model.tet_model[id], F, model.tet_lambda[id], model.tet_mu[id], &ask);
     for (int k = 0; k < 9; ++k) {
       if (ask.cauchy_stress) out.cauchy_stress[9 * e + size_t(k)] = f.cauchy[k];
       if (ask.green_strain) out.green_strain[9 * e + size_t(k)] = f.green[k];

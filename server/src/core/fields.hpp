@@ -67,10 +67,12 @@ constexpr ViewFieldMask view_field_bit(ViewField f) { return ViewFieldMask(1) <<
 // What the mask's fields need computed per tet.
 ElementFieldRequest element_request(ViewFieldMask mask);
 
-// One tet's, from its F (row-major) and material; for the tests.
+// One tet's, from its F (row-major) and material: those `ask` names (null:
+// all; energy_density always, as the stress comes with it), the rest zero.
 struct TetFields {
-  double cauchy[9], green[9], von_mises, energy_density, stretches[3];
+  double cauchy[9] = {}, green[9] = {}, von_mises = 0, energy_density = 0, stretches[3] = {};
 };
-TetFields compute_tet_fields(MaterialModel m, const double* F, double lambda, double mu);
+TetFields compute_tet_fields(MaterialModel m, const double* F, double lambda, double mu,
+                             const ElementFieldRequest* ask = nullptr);
 
 }  // namespace tactile
