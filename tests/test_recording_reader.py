@@ -55,8 +55,10 @@ from tactile_proto.generated.DeviceHaptics import DeviceHapticsT
 from tactile_proto.generated.DeviceInput import DeviceInputT
 from tactile_proto.generated.DeviceStatus import DeviceStatusT
 from tactile_proto.generated.EffectCost import EffectCostT
+from tactile_proto.generated.EmbeddedSurface import EmbeddedSurfaceT
 from tactile_proto.generated.Energies import EnergiesT
 from tactile_proto.generated.Error import ErrorT
+from tactile_proto.generated.FrameField import FrameFieldT
 from tactile_proto.generated.HapticFrame import HapticFrameT
 from tactile_proto.generated.Mat3f import Mat3fT
 from tactile_proto.generated.ProxyHaptics import ProxyHapticsT
@@ -685,6 +687,58 @@ def test_vtu_series_hold_the_written_surfaces(tmp_path, closed):
             np.testing.assert_allclose(mesh.points + mesh.point_data["displacement"], x, rtol=1e-6)
             np.testing.assert_array_equal(mesh.point_data["displacement_m"], s.scalar)
     assert any("surface-2.pvd" in n for n in result.notes)
+
+
+def test_an_embedded_surface_and_the_frames_fields_are_exported_too(tmp_path):
+    """A scene with a fine surface (three vertices bound to the four frame vertices, one of them outside its
+    tet: a negative weight) and states with a field: the coarse series gets the field, and a fine series has
+    the fine rest vertices, their displacement placed by the weights and the field interpolated likewise."""
+    rng = np.random.default_rng(3)
+    s = scene(1, ["tip"])
+    s.embedded = EmbeddedSurfaceT()
+    fine_rest = np.array([0.025, 0, 0.05, 0.1, 0, 0, -0.05, 0, 0], np.float32)
+    s.embedded.restPositions, s.embedded.triangles = fine_rest, np.array([0, 1, 2], np.uint32)
+    carriers = np.array([[0, 1, 2, 3], [1, 0, 2, 3], [0, 1, 2, 3]], np.uint32)
+    weights = np.array([[0.25, 0.25, 0.25, 0.25], [1, 0, 0, 0], [1.5, -0.5, 0, 0]], np.float32)
+    s.embedded.carriers, s.embedded.weights = carriers.ravel(), weights.ravel()
+    messages = [Written("/scene", T0, T0, s, tp.encode(s))]
+    states = []
+    for k in range(1, 4):
+        f = state(rng, 1, 10 * k, T0 + k * 10_000_000, energies=False)
+        field = FrameFieldT()
+        field.name, field.values = "von_mises", rng.uniform(0, 100, size=4).astype(np.float32)
+        f.fields = [field]
+        states.append(f)
+        messages.append(Written("/state", T0 + k * 10_000_000, f.serverTimeNs, f, tp.encode(f)))
+    result = export(open_recording(write_recording(tmp_path / "fine.mcap", messages)), tmp_path / "out",
+                    tables=False)
+    out = tmp_path / "out"
+    datasets = ET.parse(out / "fine-1.pvd").getroot().findall("./Collection/DataSet")
+    assert result.files["fine-1.pvd"] == len(datasets) == len(states)
+    for dataset, f, coarse in zip(datasets, states, ET.parse(out / "surface-1.pvd").getroot()
+                                  .findall("./Collection/DataSet"), strict=True):
+        assert float(dataset.get("timestep", "")) == f.simTime
+        x = f.positions.reshape(-1, 3).astype(np.float64)
+        vm = f.fields[0].values.astype(np.float64)
+        np.testing.assert_array_equal(meshio.read(out / coarse.get("file", "")).point_data["von_mises"],
+                                      f.fields[0].values)
+        mesh = meshio.read(out / dataset.get("file", ""))
+        np.testing.assert_array_equal(mesh.points, fine_rest.reshape(-1, 3))
+        np.testing.assert_array_equal(mesh.cells_dict["triangle"], [[0, 1, 2]])
+        placed = np.array([sum(w * x[c] for w, c in zip(weights[v], carriers[v], strict=True)) for v in range(3)])
+        np.testing.assert_allclose(mesh.point_data["displacement"], placed - fine_rest.reshape(-1, 3), atol=1e-7)
+        np.testing.assert_allclose(mesh.point_data["von_mises"],
+                                   [sum(w * vm[c] for w, c in zip(weights[v], carriers[v], strict=True))
+                                    for v in range(3)], rtol=1e-6)
+    # A binding that names no frame vertex is left out, with a note.
+    carriers[2, 3] = 9
+    s.embedded.carriers = carriers.ravel()
+    messages[0] = Written("/scene", T0, T0, s, tp.encode(s))
+    result = export(open_recording(write_recording(tmp_path / "bad.mcap", messages)), tmp_path / "bad",
+                    tables=False)
+    assert not (tmp_path / "bad" / "fine-1.pvd").exists() and (tmp_path / "bad" / "surface-1.pvd").exists()
+    assert any("embedded surface is not written: a carrier is not one of the 4 frame vertices" in n
+               for n in result.notes), result.notes
 
 
 def test_vtu_series_can_hold_every_nth_state(tmp_path, closed):

@@ -26,8 +26,12 @@ VTU: one series per scene_id (a load or a reset starts a new one, since sim_time
 differ): `surface-<scene_id>/<index>.vtu` per StateFrame (points: the rest positions, as the headless
 series has them; cells: the scene's triangles; point data: `displacement`, positions minus rest positions
 [m], the active vector that ParaView's Warp By Vector deforms the surface by, and the scalar under
-SceneDescription.scalar_name) and `surface-<scene_id>.pvd`, the collection ParaView opens, with sim_time as
-the timestep.
+SceneDescription.scalar_name, and each per-vertex field the frame carries (1.8: `von_mises`, ... under their
+own names)) and `surface-<scene_id>.pvd`, the collection ParaView opens, with sim_time as the timestep. A
+scene with an embedded surface (1.7) also gets its fine surface, placed by its binding as the browser places
+it: `fine-<scene_id>/<index>.vtu` (points: the fine rest vertices; cells: the fine triangles; point data:
+`displacement`, sum_k w_k x_{carrier_k} minus the rest vertex, and the frame's fields interpolated by the same
+weights) and `fine-<scene_id>.pvd`.
 `surface_every=N` (the CLI's `--every N`) writes the first state of each series and every Nth after it: a
 20 k-vertex surface takes about 0.1 s and 0.7 MB per file (meshio's zlib-compressed binary VTU).
 The VTU files are written by meshio (imported only for them; tests/requirements.txt pins it); meshio writes
@@ -258,6 +262,9 @@ class _Surface:
         self.seen: dict[int, int] = {}  # scene_id -> state frames of its series, written or not
         self.series: dict[int, list[tuple[float, str]]] = {}  # scene_id -> (sim_time [s], .vtu path) per frame
         self.cells: dict[int, list[tuple[str, np.ndarray]]] = {}  # scene_id -> meshio cells
+        # scene_id -> the embedded surface's (rest vertices, triangles, carriers, weights), or None
+        self.fine: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None] = {}
+        self.fine_series: dict[int, list[tuple[float, str]]] = {}
         self.skipped: dict[str, int] = {}  # why -> frames
 
     def add(self, t: int, frame: StateFrameT, scene: SceneDescriptionT | None) -> None:
@@ -282,6 +289,7 @@ class _Surface:
             # meshio reads no file back that has points and no cells: a scene without triangles gets vertices
             self.cells[scene_id] = ([("triangle", triangles)] if len(triangles)
                                     else [("vertex", np.arange(len(X), dtype=np.int64).reshape(-1, 1))])
+            self.fine[scene_id] = self._binding(scene, len(X))
             if len(self.series) > 1:
                 self.result.notes.append(f"surface: the scene changed at log time {t} ns (scene_id {scene_id}): its "
                                          f"states are in surface-{scene_id}.pvd")
@@ -294,22 +302,68 @@ class _Surface:
             scalar_name = "displacement_scalar"
         if frame.scalar is not None and len(frame.scalar) == len(x):
             point_data[scalar_name] = np.asarray(frame.scalar, np.float32)
+        fields = {}
+        for f in frame.fields or []:
+            values = np.asarray(f.values if f.values is not None else [], np.float32)
+            field_name = f.name.decode() if isinstance(f.name, bytes) else f.name
+            if field_name and len(values) == len(x) and field_name not in point_data:
+                fields[field_name] = values
+        point_data.update(fields)
         frames = self.series[scene_id]
         name = f"surface-{scene_id}/{len(frames):06d}.vtu"
         self.meshio.write(self.out_dir / name, self.meshio.Mesh(X, self.cells[scene_id], point_data=point_data),
                           file_format="vtu")
         frames.append((float(frame.simTime), name))
+        fine = self.fine[scene_id]
+        if fine is not None:
+            rest, triangles, carriers, weights = fine
+
+            def place(v: np.ndarray) -> np.ndarray:  # per fine vertex: sum_k w_k v[carrier_k]
+                return np.einsum("pk,pk...->p...", weights, v[carriers])
+            fine_data = {"displacement": (place(x.astype(np.float64)) - rest).astype(np.float32)}
+            fine_data.update({k: place(v.astype(np.float64)).astype(np.float32) for k, v in fields.items()})
+            series = self.fine_series.setdefault(scene_id, [])
+            if not series:
+                (self.out_dir / f"fine-{scene_id}").mkdir(exist_ok=True)
+            fine_name = f"fine-{scene_id}/{len(series):06d}.vtu"
+            self.meshio.write(self.out_dir / fine_name,
+                              self.meshio.Mesh(rest.astype(np.float32), [("triangle", triangles)],
+                                               point_data=fine_data), file_format="vtu")
+            series.append((float(frame.simTime), fine_name))
+
+    def _binding(self, scene: SceneDescriptionT, n_vertices: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """The scene's embedded surface, checked against its frame vertices; None without one (or, with a
+        note, with one that does not fit them)."""
+        e = scene.embedded
+        if e is None or e.restPositions is None or e.triangles is None:
+            return None
+        rest = np.asarray(e.restPositions, np.float64).reshape(-1, 3)
+        triangles = np.asarray(e.triangles, np.int64).reshape(-1, 3)
+        carriers = np.asarray(e.carriers if e.carriers is not None else [], np.int64).reshape(-1, 4)
+        weights = np.asarray(e.weights if e.weights is not None else [], np.float64).reshape(-1, 4)
+        why = ("its carriers and weights are not 4 per fine vertex" if len(carriers) != len(rest) or
+               len(weights) != len(rest) else
+               f"a carrier is not one of the {n_vertices} frame vertices" if carriers.size and
+               (carriers.min() < 0 or carriers.max() >= n_vertices) else
+               "a triangle names no fine vertex" if triangles.size and
+               (triangles.min() < 0 or triangles.max() >= len(rest)) else "")
+        if why:
+            self.result.notes.append(f"surface: scene_id {scene.sceneId}'s embedded surface is not written: {why}")
+            return None
+        return rest, triangles, carriers, weights
 
     def close(self) -> None:
-        for scene_id, frames in self.series.items():
-            root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
-            collection = ET.SubElement(root, "Collection")
-            for sim_time, name in frames:
-                ET.SubElement(collection, "DataSet", timestep=_f64(sim_time), group="", part="0", file=name)
-            ET.indent(root)
-            pvd = f"surface-{scene_id}.pvd"
-            ET.ElementTree(root).write(self.out_dir / pvd, encoding="utf-8", xml_declaration=True)
-            self.result.files[pvd] = len(frames)
+        for prefix, all_series in (("surface", self.series), ("fine", self.fine_series)):
+            for scene_id, frames in all_series.items():
+                root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
+                collection = ET.SubElement(root, "Collection")
+                for sim_time, name in frames:
+                    ET.SubElement(collection, "DataSet", timestep=_f64(sim_time), group="", part="0", file=name)
+                ET.indent(root)
+                pvd = f"{prefix}-{scene_id}.pvd"
+                ET.ElementTree(root).write(self.out_dir / pvd, encoding="utf-8", xml_declaration=True)
+                self.result.files[pvd] = len(frames)
         for why, n in self.skipped.items():
             self.result.notes.append(f"surface: {n} state frames written as no VTU: {why}")
 
