@@ -140,6 +140,9 @@ export class ControlPanel {
     // Scenes, and the run.
     const picker = el('select', { name: 'scene' });
     for (const s of d.scenes || []) picker.append(el('option', { value: s, textContent: s }));
+    // (The scene running, when the list names its file.)
+    const running = (d.scenes || []).find((s) => s.replace(/\.json$/, '') === d.sceneName);
+    if (running) picker.value = running;
     const load = el('button', { textContent: 'load', disabled: !(d.scenes || []).length });
     load.addEventListener('click', () => {
       this.send(ControlCommand.LoadScene, new LoadSceneT(picker.value), `load ${picker.value}`);

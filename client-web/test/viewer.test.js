@@ -354,8 +354,17 @@ test('on a phone the body fills the view, no panel over its middle, most panels 
     const width = Math.max(...xs) - Math.min(...xs);
     assert.ok(Math.min(...xs) >= 0 && Math.max(...xs) <= PHONE.width, `the body is drawn from x = ${Math.min(...xs)} to ${Math.max(...xs)}`);
     assert.ok(width > 0.7 * PHONE.width, `the body is ${width.toFixed(0)} px wide on a ${PHONE.width} px screen`);
-    // A finger opens the view panel and picks the top view.
+    // A finger opens the telemetry, which rises as a sheet with its plots across the screen, the other
+    // titles still in reach: the view panel's opens it and folds the telemetry; its top button picks the view.
+    await page.tap('#telemetry > summary');
+    await page.waitForTimeout(300);
+    const sheet = await page.evaluate(() => ({ open: document.getElementById('telemetry').open,
+                                               plot: window.tactile.plots[0].width }));
+    assert.ok(sheet.open && sheet.plot > 0.8 * PHONE.width, `telemetry open: ${sheet.open}, its plot ${sheet.plot} px wide`);
     await page.tap('#camera > summary');
+    await page.waitForTimeout(300);
+    assert.deepEqual(await page.evaluate(() => [document.getElementById('telemetry').open, document.getElementById('camera').open]),
+                     [false, true]);
     await page.tap('button[name=view-top]');
     const p = await probeCamera(page);
     assert.ok(dist(p.y, p.centre) < 1.5, `top (tapped): +y drawn ${dist(p.y, p.centre).toFixed(1)} px from the centre`);
