@@ -85,3 +85,30 @@ def test_every_channel_of_a_fresh_recording_decodes_with_foxglove_libraries(tmp_
     assert any(p.startswith("devices[0].force") for p in recorded["/haptic"]["numeric_fields"]), recorded["/haptic"]
     assert {"positions[0]", "energies.elastic"} <= set(recorded["/state"]["numeric_fields"]), recorded["/state"]
     assert any(p.startswith("position") for p in recorded["/input"]["numeric_fields"]), recorded["/input"]
+
+
+def test_an_embedded_surface_is_drawn_for_foxglove_once_a_second(tmp_path: pathlib.Path) -> None:
+    """The organ scene, recorded for about 2.5 s with a viewer connected: /foxglove/body is the coarse boundary
+    at every state, /foxglove/surface the 20 480-triangle fine surface at the first state and once a second
+    after (each message checked against @foxglove/schemas' SceneUpdate), not at every state."""
+    scene = json.loads((ROOT / "server/scenes/organ.json").read_text())
+    meshes = ROOT / "server/scenes"
+    scene["mesh"]["file"] = str(meshes / scene["mesh"]["file"])
+    scene["surface"]["file"] = str(meshes / scene["surface"]["file"])
+    path = tmp_path / "organ.mcap"
+
+    async def watch(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as view:
+            await hello(view, Role.Viewer)
+            for _ in range(60):  # 2 s of states at 30 Hz (more when the server keeps real time)
+                await next_of(view, "StateFrameT", 10.0)
+
+    with server_process(tmp_path, scene, TOKEN, "--record", str(path), file_name="organ.json") as (port, _):
+        asyncio.run(watch(port))
+    report = decode_with_foxglove_libraries(path)
+    states, body, surface = report["/state"], report["/foxglove/body"], report["/foxglove/surface"]
+    assert body["decoded"] == body["messages"] == states["messages"] >= 60
+    assert surface["error"] is None and surface["decoded"] == surface["messages"], surface
+    duration_s = states["messages"] / 30.0
+    assert 2 <= surface["messages"] <= duration_s + 2, (surface["messages"], states["messages"])
+    assert "entities[0].triangles[0].points[0].x" in surface["numeric_fields"]

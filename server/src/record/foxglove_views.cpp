@@ -28,6 +28,25 @@ json pose(const proto::ProxyPose* p) {
 
 json colour(double r, double g, double b, double a) { return {{"r", r}, {"g", g}, {"b", b}, {"a", a}}; }
 
+// A SceneUpdate of one entity `id` in frame `scene`, lasting until replaced.
+std::string scene_update(int64_t log_ns, const char* id, json triangles, json spheres, json cubes) {
+  json entity = {{"timestamp", time_of(log_ns)},
+                 {"frame_id", "scene"},
+                 {"id", id},
+                 {"lifetime", {{"sec", 0}, {"nsec", 0}}},
+                 {"frame_locked", false},
+                 {"metadata", json::array()},
+                 {"arrows", json::array()},
+                 {"cubes", std::move(cubes)},
+                 {"spheres", std::move(spheres)},
+                 {"cylinders", json::array()},
+                 {"lines", json::array()},
+                 {"triangles", std::move(triangles)},
+                 {"texts", json::array()},
+                 {"models", json::array()}};
+  return json{{"deletions", json::array()}, {"entities", json::array({std::move(entity)})}}.dump();
+}
+
 }  // namespace
 
 std::string_view scene_update_json_schema() {
@@ -52,22 +71,25 @@ void FoxgloveViews::scene(const proto::SceneDescription& s) {
   described_ = true;
   n_vertices_ = s.rest_positions() ? s.rest_positions()->size() / 3 : 0;
   triangles_.clear();
+  if (s.triangles()) triangles_.assign(s.triangles()->begin(), s.triangles()->end());
+  fine_triangles_.clear();
   carriers_.clear();
   weights_.clear();
+  last_surface_ns_.reset();
   const proto::EmbeddedSurface* fine = s.embedded();
-  if (fine && fine->triangles() && fine->carriers() && fine->weights() &&
-      fine->carriers()->size() == fine->weights()->size() && fine->carriers()->size() % 4 == 0) {
-    triangles_.assign(fine->triangles()->begin(), fine->triangles()->end());
-    carriers_.assign(fine->carriers()->begin(), fine->carriers()->end());
-    weights_.assign(fine->weights()->begin(), fine->weights()->end());
-    // A carrier out of the frame's range would read past it: draw the boundary instead.
-    for (uint32_t c : carriers_)
-      if (size_t(c) >= n_vertices_) {
-        carriers_.clear(), weights_.clear(), triangles_.clear();
-        break;
-      }
+  if (fine && fine->triangles() && fine->carriers() && fine->weights() && fine->rest_positions() &&
+      fine->carriers()->size() == fine->weights()->size() && fine->carriers()->size() % 4 == 0 &&
+      fine->carriers()->size() / 4 == fine->rest_positions()->size() / 3) {
+    const auto fine_vertices = uint32_t(fine->carriers()->size() / 4);
+    bool fits = true;  // a carrier or corner out of range would read past the frame or the points
+    for (uint32_t c : *fine->carriers()) fits = fits && size_t(c) < n_vertices_;
+    for (uint32_t v : *fine->triangles()) fits = fits && v < fine_vertices;
+    if (fits) {
+      fine_triangles_.assign(fine->triangles()->begin(), fine->triangles()->end());
+      carriers_.assign(fine->carriers()->begin(), fine->carriers()->end());
+      weights_.assign(fine->weights()->begin(), fine->weights()->end());
+    }
   }
-  if (carriers_.empty() && s.triangles()) triangles_.assign(s.triangles()->begin(), s.triangles()->end());
   proxies_.clear();
   if (s.proxies())
     for (const proto::ProxyInfo* p : *s.proxies()) {
@@ -86,18 +108,8 @@ std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64
     return std::nullopt;
   const auto* x = f.positions();
   json points = json::array();
-  if (!carriers_.empty()) {
-    // The fine surface where the browser draws it: x = sum_k w_k x_{c_k}.
-    for (size_t v = 0; v < carriers_.size(); v += 4) {
-      double p[3] = {0, 0, 0};
-      for (size_t k = 0; k < 4; ++k)
-        for (uint32_t d = 0; d < 3; ++d) p[d] += double(weights_[v + k]) * x->Get(3 * carriers_[v + k] + d);
-      points.push_back(point(p[0], p[1], p[2]));
-    }
-  } else {
-    for (uint32_t v = 0; v < uint32_t(n_vertices_); ++v)
-      points.push_back(point(x->Get(3 * v), x->Get(3 * v + 1), x->Get(3 * v + 2)));
-  }
+  for (uint32_t v = 0; v < uint32_t(n_vertices_); ++v)
+    points.push_back(point(x->Get(3 * v), x->Get(3 * v + 1), x->Get(3 * v + 2)));
   json triangles = json::array();
   triangles.push_back({{"pose", pose(nullptr)},
                        {"points", std::move(points)},
@@ -117,21 +129,30 @@ std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64
       spheres.push_back({{"pose", pose(p)}, {"size", point(d, d, d)}, {"color", colour(0.3, 0.6, 0.9, 0.8)}});
     }
   }
-  json entity = {{"timestamp", time_of(log_ns)},
-                 {"frame_id", "scene"},
-                 {"id", "body"},
-                 {"lifetime", {{"sec", 0}, {"nsec", 0}}},
-                 {"frame_locked", false},
-                 {"metadata", json::array()},
-                 {"arrows", json::array()},
-                 {"cubes", std::move(cubes)},
-                 {"spheres", std::move(spheres)},
-                 {"cylinders", json::array()},
-                 {"lines", json::array()},
-                 {"triangles", std::move(triangles)},
-                 {"texts", json::array()},
-                 {"models", json::array()}};
-  return json{{"deletions", json::array()}, {"entities", json::array({std::move(entity)})}}.dump();
+  return scene_update(log_ns, "body", std::move(triangles), std::move(spheres), std::move(cubes));
+}
+
+std::optional<std::string> FoxgloveViews::surface(const proto::StateFrame& f, int64_t log_ns) {
+  if (carriers_.empty() || !described_ || f.scene_id() != scene_id_ || !f.positions() ||
+      f.positions()->size() != 3 * n_vertices_ || (last_surface_ns_ && log_ns - *last_surface_ns_ < kSurfaceEveryNs))
+    return std::nullopt;
+  last_surface_ns_ = log_ns;
+  // Where the browser draws it: x = sum_k w_k x_{c_k}.
+  const auto* x = f.positions();
+  json points = json::array();
+  for (size_t v = 0; v < carriers_.size(); v += 4) {
+    double p[3] = {0, 0, 0};
+    for (size_t k = 0; k < 4; ++k)
+      for (uint32_t d = 0; d < 3; ++d) p[d] += double(weights_[v + k]) * x->Get(3 * carriers_[v + k] + d);
+    points.push_back(point(p[0], p[1], p[2]));
+  }
+  json triangles = json::array();
+  triangles.push_back({{"pose", pose(nullptr)},
+                       {"points", std::move(points)},
+                       {"color", colour(0.85, 0.55, 0.45, 1.0)},
+                       {"colors", json::array()},
+                       {"indices", fine_triangles_}});
+  return scene_update(log_ns, "surface", std::move(triangles), json::array(), json::array());
 }
 
 std::string FoxgloveViews::log(const proto::SafetyEvent& e, int64_t log_ns) {

@@ -2,10 +2,13 @@
 // the messages the recorder writes, JSON messages of Foxglove's well-known
 // schemas, which its panels recognise by schema name:
 //   /foxglove/body  foxglove.SceneUpdate, one per StateFrame: the body's
-//                   surface as a triangle list (the fine surface it carries,
-//                   placed by its binding, when the scene has one; else its
-//                   boundary), each proxy as a sphere,
+//                   boundary as a triangle list, each proxy as a sphere,
 //                   capsule (a sphere at its centre) or box, for the 3D panel;
+//   /foxglove/surface  foxglove.SceneUpdate, for a scene with an embedded
+//                   surface: the fine surface, placed by its binding as the
+//                   browser places it, once a second of log time (20 k
+//                   triangles are some 0.8 MB of JSON a message: at every
+//                   state they were nine tenths of a recording's bytes);
 //   /foxglove/log   foxglove.Log, one per SafetyEvent and Error, for the Log
 //                   panel.
 // They are views: the replay and the readers use the protocol's channels.
@@ -33,6 +36,10 @@ class FoxgloveViews {
   // The body and proxies at this state; nothing for a state of another
   // scene than the last described, or of another size.
   std::optional<std::string> body(const proto::StateFrame& f, int64_t log_ns) const;
+  // The fine surface at this state, when the scene has one and a second of
+  // log time has passed since the last (the first state of a scene has it).
+  std::optional<std::string> surface(const proto::StateFrame& f, int64_t log_ns);
+  static constexpr int64_t kSurfaceEveryNs = 1'000'000'000;
   // A log line for a safety event or an error the server answered.
   static std::string log(const proto::SafetyEvent& e, int64_t log_ns);
   static std::string log(const proto::Error& e, int64_t log_ns);
@@ -47,9 +54,10 @@ class FoxgloveViews {
   bool described_ = false;
   size_t n_vertices_ = 0;
   std::vector<uint32_t> triangles_;
-  // An embedded surface: per fine vertex, four frame vertices and weights.
-  std::vector<uint32_t> carriers_;
+  // An embedded surface: its triangles, and per fine vertex four frame vertices and weights.
+  std::vector<uint32_t> fine_triangles_, carriers_;
   std::vector<float> weights_;
+  std::optional<int64_t> last_surface_ns_;
   std::vector<Proxy> proxies_;
 };
 

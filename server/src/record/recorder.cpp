@@ -182,9 +182,10 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
     }
   }
   // Foxglove's own schemas, for its 3D and Log panels (foxglove_views.hpp).
-  body_channel_ = writer_.add_channel(
-      writer_.add_schema("foxglove.SceneUpdate", "jsonschema", bytes_of(scene_update_json_schema())), "/foxglove/body",
-      "json");
+  const uint16_t scene_update =
+      writer_.add_schema("foxglove.SceneUpdate", "jsonschema", bytes_of(scene_update_json_schema()));
+  body_channel_ = writer_.add_channel(scene_update, "/foxglove/body", "json");
+  surface_channel_ = writer_.add_channel(scene_update, "/foxglove/surface", "json");
   log_channel_ = writer_.add_channel(writer_.add_schema("foxglove.Log", "jsonschema", bytes_of(log_json_schema())),
                                      "/foxglove/log", "json");
   mcap::Map meta = metadata;
@@ -326,6 +327,8 @@ void Recorder::run() {
           } else if (const auto* state = e->message_as_StateFrame()) {
             view = views_.body(*state, item.log_ns);
             to = body_channel_;
+            if (const std::optional<std::string> fine = views_.surface(*state, item.log_ns))
+              writer_.write(surface_channel_, uint64_t(item.log_ns), uint64_t(item.publish_ns), bytes_of(*fine));
           } else if (const auto* safety = e->message_as_SafetyEvent()) {
             view = FoxgloveViews::log(*safety, item.log_ns);
           } else if (const auto* err = e->message_as_Error()) {

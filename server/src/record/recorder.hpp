@@ -107,8 +107,8 @@ class Recorder {
   RecorderOptions options_;
   mcap::Writer writer_;
   std::unique_ptr<flatbuffers::Parser> schema_;  // the protocol schema, for /control's JSON
-  FoxgloveViews views_;                          // /foxglove/body and /foxglove/log
-  uint16_t body_channel_ = 0, log_channel_ = 0;
+  FoxgloveViews views_;                          // /foxglove/body, /foxglove/surface and /foxglove/log
+  uint16_t body_channel_ = 0, surface_channel_ = 0, log_channel_ = 0;
   uint16_t channel_[kTopicCount] = {};
   int64_t epoch_offset_ns_;  // steady -> Unix time, fixed at the start
 

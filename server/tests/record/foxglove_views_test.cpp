@@ -1,6 +1,6 @@
-// Foxglove's view of the body: the boundary as the frame has it, or, for a
+// Foxglove's views of the body: the boundary as the frame has it, and, for a
 // scene with an embedded surface, the fine surface placed by its binding as
-// the browser places it (x = sum_k w_k x_{c_k}).
+// the browser places it (x = sum_k w_k x_{c_k}), once a second.
 #include "record/foxglove_views.hpp"
 
 #include <gtest/gtest.h>
@@ -35,13 +35,24 @@ proto::StateFrameT moved_frame() {
   return f;
 }
 
-nlohmann::json view_of(const proto::SceneDescriptionT& s, const proto::StateFrameT& f) {
-  FoxgloveViews views;
-  const std::vector<uint8_t> scene = bytes_of(s), state = bytes_of(f);
-  views.scene(*flatbuffers::GetRoot<proto::SceneDescription>(scene.data()));
-  const std::optional<std::string> text = views.body(*flatbuffers::GetRoot<proto::StateFrame>(state.data()), 1);
-  EXPECT_TRUE(text.has_value());
+// The triangle list of a view, or null when there is none.
+nlohmann::json triangles_of(const std::optional<std::string>& text) {
   return text ? nlohmann::json::parse(*text)["entities"][0]["triangles"][0] : nlohmann::json();
+}
+
+struct Views {
+  FoxgloveViews views;
+  std::vector<uint8_t> state;
+  Views(const proto::SceneDescriptionT& s, const proto::StateFrameT& f) : state(bytes_of(f)) {
+    const std::vector<uint8_t> scene = bytes_of(s);
+    views.scene(*flatbuffers::GetRoot<proto::SceneDescription>(scene.data()));
+  }
+  const proto::StateFrame& frame() const { return *flatbuffers::GetRoot<proto::StateFrame>(state.data()); }
+};
+
+nlohmann::json view_of(const proto::SceneDescriptionT& s, const proto::StateFrameT& f) {
+  Views v(s, f);
+  return triangles_of(v.views.body(v.frame(), 1));
 }
 
 TEST(FoxgloveViews, WithoutAnEmbeddedSurfaceTheBoundaryIsDrawnAsTheFrameHasIt) {
@@ -52,7 +63,7 @@ TEST(FoxgloveViews, WithoutAnEmbeddedSurfaceTheBoundaryIsDrawnAsTheFrameHasIt) {
   EXPECT_EQ(t["indices"].get<std::vector<uint32_t>>(), tetrahedron_scene().triangles);
 }
 
-TEST(FoxgloveViews, AnEmbeddedSurfaceIsPlacedByItsWeights) {
+proto::SceneDescriptionT embedded_scene() {
   proto::SceneDescriptionT s = tetrahedron_scene();
   s.embedded = std::make_unique<proto::EmbeddedSurfaceT>();
   // Three fine vertices: the centroid, a vertex at node 1, one outside (a negative weight).
@@ -60,26 +71,33 @@ TEST(FoxgloveViews, AnEmbeddedSurfaceIsPlacedByItsWeights) {
   s.embedded->triangles = {0, 1, 2};
   s.embedded->carriers = {0, 1, 2, 3, 1, 0, 2, 3, 0, 1, 2, 3};
   s.embedded->weights = {0.25f, 0.25f, 0.25f, 0.25f, 1, 0, 0, 0, 1.5f, -0.5f, 0, 0};
-  const proto::StateFrameT f = moved_frame();
-  const nlohmann::json t = view_of(s, f);
+  return s;
+}
+
+TEST(FoxgloveViews, AnEmbeddedSurfaceIsPlacedByItsWeightsOnceASecond) {
+  Views v(embedded_scene(), moved_frame());
+  // The body stays the boundary, every state.
+  EXPECT_EQ(triangles_of(v.views.body(v.frame(), 1))["points"].size(), 4u);
+  const nlohmann::json t = triangles_of(v.views.surface(v.frame(), 1000));
   ASSERT_EQ(t["points"].size(), 3u);
   EXPECT_EQ(t["indices"].get<std::vector<uint32_t>>(), (std::vector<uint32_t>{0, 1, 2}));
   const double expected[3][3] = {{(0.5 + 2 + 0.5 + 0.5) / 4, 0.25, 0.75}, {2, 0, 0}, {1.5 * 0.5 - 0.5 * 2, 0, 0}};
-  for (int v = 0; v < 3; ++v)
+  for (int k = 0; k < 3; ++k)
     for (int d = 0; d < 3; ++d)
-      EXPECT_NEAR(t["points"][v][std::string(1, char('x' + d))].get<double>(), expected[v][d], 1e-6) << v << d;
+      EXPECT_NEAR(t["points"][k][std::string(1, char('x' + d))].get<double>(), expected[k][d], 1e-6) << k << d;
+  // Not again before a second of log time has passed; then again.
+  EXPECT_FALSE(v.views.surface(v.frame(), 1000 + FoxgloveViews::kSurfaceEveryNs - 1).has_value());
+  EXPECT_TRUE(v.views.surface(v.frame(), 1000 + FoxgloveViews::kSurfaceEveryNs).has_value());
 }
 
-TEST(FoxgloveViews, ABindingThatReadsPastTheFrameFallsBackToTheBoundary) {
-  proto::SceneDescriptionT s = tetrahedron_scene();
-  s.embedded = std::make_unique<proto::EmbeddedSurfaceT>();
-  s.embedded->rest_positions = {0, 0, 0};
-  s.embedded->triangles = {0, 0, 0};
-  s.embedded->carriers = {0, 1, 2, 9};  // no frame vertex 9
-  s.embedded->weights = {0.25f, 0.25f, 0.25f, 0.25f};
-  const nlohmann::json t = view_of(s, moved_frame());
-  EXPECT_EQ(t["points"].size(), 4u);
-  EXPECT_EQ(t["indices"].get<std::vector<uint32_t>>(), tetrahedron_scene().triangles);
+TEST(FoxgloveViews, NoSurfaceWithoutOneOrWithABindingThatReadsPastTheFrame) {
+  Views plain(tetrahedron_scene(), moved_frame());
+  EXPECT_FALSE(plain.views.surface(plain.frame(), 1).has_value());
+  proto::SceneDescriptionT s = embedded_scene();
+  s.embedded->carriers[3] = 9;  // no frame vertex 9
+  Views bad(s, moved_frame());
+  EXPECT_FALSE(bad.views.surface(bad.frame(), 1).has_value());
+  EXPECT_EQ(triangles_of(bad.views.body(bad.frame(), 1))["points"].size(), 4u);
 }
 
 }  // namespace
