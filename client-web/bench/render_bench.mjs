@@ -13,16 +13,20 @@
 // the server has.
 // --wire 1 or 0: the simulation mesh's wireframe on or off (the page's default: on over a bare boundary,
 // as these plates are).
+// --embedded 5,6,7: instead of plates, the organ scene (3662 tets) carrying fine surfaces that
+// server/scenes/meshes/make_organ.py makes at these subdivision levels (20 480, 81 920 and 327 680
+// triangles), each placed and shaded on the GPU from the 939 frame vertices (src/embedded.js).
 //   node client-web/bench/render_bench.mjs [--seconds S] [--sizes 50,100,157] [--quality low|high]
-//                                          [--source replay|live] [--wire 0|1]
+//                                          [--source replay|live] [--wire 0|1] [--embedded 5,6,7]
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
+import { execFileSync } from 'node:child_process';
 import { parseArgs } from 'node:util';
 
 import { chromium } from 'playwright-core';
 
-import { CHROMIUM, SWIFTSHADER, spawnServer, startServer } from '../test/live.js';
+import { CHROMIUM, SWIFTSHADER, root, spawnServer, startServer } from '../test/live.js';
 
 const { values: opts } = parseArgs({
   options: {
@@ -31,6 +35,7 @@ const { values: opts } = parseArgs({
     quality: { type: 'string', default: '' },
     source: { type: 'string', default: 'replay' },
     wire: { type: 'string', default: '' },
+    embedded: { type: 'string', default: '' },
     build: { type: 'string', default: process.env.TACTILE_BUILD || 'build/release' },
   },
 });
@@ -59,6 +64,22 @@ function plate(n) {
   };
 }
 
+// The organ scene with a fine surface of subdivision level `level` (make_organ.py), written to a folder of its own.
+function organ(level) {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-organ-'));
+  execFileSync('python3', [path.join(root, 'server/scenes/meshes/make_organ.py'), dir, String(level)]);
+  const scene = JSON.parse(fs.readFileSync(path.join(root, 'server/scenes/organ.json'), 'utf8'));
+  scene.name = `organ_${level}`;
+  scene.mesh.file = path.join(root, 'server/scenes', scene.mesh.file);
+  scene.surface.file = path.join(dir, 'organ_fine.obj');
+  // Pressed by its sphere again and again, so that the states move the surface (alone it settles and stays).
+  const keyframes = [];
+  for (let k = 0; k <= 40; k++) keyframes.push({ t: 1.5 * k, position: [0.03, k % 2 ? 0.088 : 0.115, 0] });
+  scene.proxies[0].script = { easing: 'smooth', keyframes };
+  delete scene.proxies[0].position;
+  return scene;
+}
+
 const median = (xs) => {
   const s = [...xs].sort((a, b) => a - b);
   return s.length ? s[Math.floor(s.length / 2)] : NaN;
@@ -83,10 +104,11 @@ console.log(`render_bench: headless Chromium, ${os.cpus().length} cores, ${secon
 // The server the page watches: the live plate, or a replay of its recording (made first: long enough in
 // wall time for the measurement, at whatever pace the simulation kept).
 async function serve(n) {
-  if (opts.source === 'live') return startServer(plate(n), [], { build: opts.build });
+  const scene = opts.embedded ? organ(n) : plate(n);
+  if (opts.source === 'live') return startServer(scene, [], { build: opts.build });
   const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-render-'));
-  const recording = path.join(dir, `plate_${n}.mcap`);
-  const rec = await startServer(plate(n), ['--record', recording], { build: opts.build });
+  const recording = path.join(dir, `${scene.name}.mcap`);
+  const rec = await startServer(scene, ['--record', recording], { build: opts.build });
   await new Promise((resolve) => setTimeout(resolve, 1000 * (seconds + 6)));
   rec.proc.kill('SIGINT');
   await new Promise((resolve) => rec.proc.on('exit', resolve));
@@ -94,7 +116,7 @@ async function serve(n) {
 }
 console.log('  vertices  triangles  sent   quality  fps (drawn/s)  frame work ms (median, p95)  state read+copy ms (median, p95)  state to slot ms (median, p95)  states/s');
 try {
-  for (const n of opts.sizes.split(',').map(Number)) {
+  for (const n of (opts.embedded || opts.sizes).split(',').map(Number)) {
     const { proc, port } = await serve(n);
     try {
       const page = await browser.newPage({ viewport: { width: 1024, height: 768 } });
@@ -108,7 +130,8 @@ try {
         const t = window.tactile;
         return { rendered: t.rendered, frames: t.frames, at: performance.now(), frameMs: t.frameMs.splice(0),
                  decodeMs: t.decodeMs.splice(0), slotMs: t.slotMs.splice(0), vertices: t.vertices, quality: t.quality,
-                 triangles: t.view.pick.geometry.index.count / 3, sent: t.drawnTriangles };
+                 triangles: t.view.embedded ? t.view.embedded.triangles : t.view.pick.geometry.index.count / 3,
+                 sent: t.view.embedded ? '' : t.drawnTriangles };
       });
       const a = await read();
       const frameMs = [];

@@ -2,9 +2,10 @@
 """Writes organ_fine.obj and organ_coarse.obj: one organ-like lobe (a bean-shaped body some 18 x 9 x 11 cm with
 a shallow hilum and low bumps), as a fine surface to see and touch and a coarse one for TetGen to mesh.
 
-Usage: python3 make_organ.py [OUT_DIR]. Both are the same star-shaped surface, r(direction) around a centre,
+Usage: python3 make_organ.py [OUT_DIR [FINE]]. Both are the same star-shaped surface, r(direction) around a centre,
 sampled on an icosphere: the fine one subdivided FINE times (20 x 4^FINE triangles), the coarse one COARSE times.
-The shipped files are this script's output with the defaults below; rerun it after changing them. The shape is
+The shipped files are this script's output with the defaults below; rerun it after changing them. A FINE
+argument makes a finer or coarser fine surface (client-web/bench/render_bench.mjs --embedded draws 5, 6 and 7). The shape is
 made here, from a formula: no scan, no third party's data.
 """
 import math
@@ -71,7 +72,7 @@ def write(path: pathlib.Path, level: int) -> None:
 
 def main() -> None:
     out = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else pathlib.Path(__file__).parent)
-    write(out / "organ_fine.obj", FINE)
+    write(out / "organ_fine.obj", int(sys.argv[2]) if len(sys.argv) > 2 else FINE)
     write(out / "organ_coarse.obj", COARSE)
 
 
