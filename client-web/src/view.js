@@ -369,8 +369,9 @@ export class SceneView {
       const f = Math.hypot(fx, fy, fz);
       a.visible = f > 1e-4;
       if (a.visible) {
-        // 1 N is drawn as half the body's size.
-        const len = 0.5 * this.size * f;
+        // Proportional below a newton or so, and never longer than 0.8 of the body's size: 1 N is 0.27 of
+        // it, 2 N 0.4, 8 N 0.64 (the force's value is in the scene panel).
+        const len = (0.8 * this.size * f) / (f + 2);
         a.position.copy(m.position);
         a.setDirection(this.tmp.set(fx / f, fy / f, fz / f));
         a.setLength(len, Math.min(0.3 * len, 0.2 * this.size), Math.min(0.15 * len, 0.1 * this.size));
