@@ -489,8 +489,8 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   // The embedded surface's clusters: a cluster's slots lie within `reach` of
   // their rest box, so one whose rest box so grown meets no proxy's box is
   // left empty without a look at its slots (each slot is in several
-  // clusters: the exact boxes of all 320 of the organ's clusters were 16 k
-  // slot visits a step, most of the embedding's cost; docs/perf.md).
+  // clusters, so exact boxes for all of them cost most of the embedding's
+  // step; embedding_bench guards this).
   const double reach = std::sqrt(reach2);
   for (size_t j = 0; j < emb_clusters_.size(); ++j) {
     Cluster& c = emb_clusters_[j];
