@@ -110,6 +110,16 @@ void add_options(CLI::App& app, Options& o, std::string& on_fault) {
       ->type_name("stop|reset")
       ->check(one_of({"stop", "reset"}))
       ->capture_default_str();
+  app.add_option("--max-connections", o.server.max_connections, "WebSocket clients greeted at once, >= 1")
+      ->type_name("N")
+      ->check(CLI::Range(size_t(1), size_t(1) << 20).description(""))
+      ->capture_default_str();
+  app.add_option("--max-waiting", o.server.max_waiting,
+                 "upgraded WebSockets not yet greeted, >= 1; when full, the oldest past its first second,\n"
+                 "from the address holding the most, makes room (else the newcomer is refused)")
+      ->type_name("N")
+      ->check(CLI::Range(size_t(1), size_t(1) << 20).description(""))
+      ->capture_default_str();
   scene->excludes(replay);
   app.callback([&o] {
     if (o.scene.empty() && o.replay.empty()) throw CLI::RequiredError("a scene or --replay");

@@ -43,8 +43,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       beast::error_code ec;
       const asio::ip::address peer = stream_.socket().remote_endpoint(ec).address();
       if (ec) return;  // gone already
-      if (!server_->make_room(peer.to_string()))
-        return respond(req, http::status::service_unavailable, "too many connections\n");
+      if (const Admission a = server_->admit(peer.to_string()); !a.admit)
+        return refuse_upgrade(std::move(req), a.reason);
       auto session =
           std::make_shared<WsSession>(server_, stream_.release_socket(), peer.is_loopback(), peer.to_string());
       session->start(std::move(req));
@@ -74,6 +74,20 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     if (!in || std::filesystem::is_directory(path)) return respond(req, http::status::not_found, "not found\n");
     std::string body((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     respond(req, http::status::ok, std::move(body), content_type(path));
+  }
+
+  // A refused upgrade is completed and closed at once, so that the client
+  // (a browser too, which sees no HTTP status) reads why: close code 1013
+  // (try again later) and the reason. The socket goes within a second.
+  void refuse_upgrade(http::request<http::string_body> req, const std::string& reason) {
+    auto ws = std::make_shared<websocket::stream<beast::tcp_stream>>(stream_.release_socket());
+    websocket::stream_base::timeout t = websocket::stream_base::timeout::suggested(beast::role_type::server);
+    t.handshake_timeout = std::chrono::seconds(1);
+    ws->set_option(t);
+    ws->async_accept(req, [ws, why = WsSession::close_reason(reason)](beast::error_code ec) {
+      if (ec) return;
+      ws->async_close(why, [ws](beast::error_code) {});
+    });
   }
 
   // The recordings folder: "/recordings/" lists its MCAP files (JSON: name,

@@ -91,24 +91,33 @@ void Server::Impl::live_control(const wire::Control& c, WsSession& from) {
 
 // ---- the server ------------------------------------------------------------------------------
 
-bool Server::Impl::make_room(const std::string& address) {
-  size_t greeted = 0, waiting = 0, waiting_here = 0;
-  WsSession *oldest = nullptr, *oldest_here = nullptr;
-  for (WsSession* s : sessions) {
+Admission Server::Impl::admit(const std::string& address) {
+  const SessionClock::time_point now = SessionClock::now();
+  size_t greeted = 0;
+  std::vector<WaitingSlot> waiting;
+  for (const WsSession* s : sessions) {
     if (s->core().greeted() && !s->core().closed()) ++greeted;
-    if (!s->core().waiting()) continue;
-    ++waiting;
-    if (!oldest || s->core().id() < oldest->core().id()) oldest = s;
-    if (s->core().address() != address) continue;
-    ++waiting_here;
-    if (!oldest_here || s->core().id() < oldest_here->core().id()) oldest_here = s;
+    if (s->core().waiting()) waiting.push_back({s->core().id(), s->core().address(), s->core().since()});
   }
-  if (greeted >= options.max_connections) return false;
-  if (waiting_here >= options.max_waiting_per_address)
-    oldest_here->drop();
-  else if (waiting >= options.max_waiting)
-    oldest->drop();
-  return true;
+  Admission a = decide_admission(waiting, greeted, address, now,
+                                 {options.max_connections, options.max_waiting, options.hello_grace_s});
+  if (a.evict)
+    for (WsSession* s : sessions)
+      if (s->core().id() == a.evict) {
+        log_admission(now,
+                      "evicted connection " + std::to_string(a.evict) + " (" + s->core().address() + "): " + a.reason);
+        s->evict(a.reason);
+        break;
+      }
+  if (!a.admit) log_admission(now, "refused a connection from " + address + ": " + a.reason);
+  return a;
+}
+
+void Server::Impl::log_admission(SessionClock::time_point now, const std::string& line) {
+  if (!admission_log.take(now)) return;
+  const int64_t more = admission_log.held_back();
+  std::fprintf(stderr, "server: %s%s\n", line.c_str(),
+               more ? (" (and " + std::to_string(more) + " more evicted or refused in the last second)").c_str() : "");
 }
 
 bool Server::Impl::host_allowed(std::string_view host) const {
@@ -146,7 +155,27 @@ bool Server::Impl::origin_allowed(const std::string& origin) const {
          options.allowed_origins.end();
 }
 
+// Every connection holds a descriptor: the soft limit is raised (up to the
+// hard one) to cover max_connections greeted, max_waiting waiting and the
+// refused ones closing, with 64 to spare for files; short of that, said once.
+void Server::Impl::ensure_descriptors() const {
+  rlimit lim{};
+  if (::getrlimit(RLIMIT_NOFILE, &lim) != 0) return;
+  const rlim_t want = rlim_t(2 * (options.max_connections + options.max_waiting) + 64);
+  if (lim.rlim_cur >= want) return;
+  const rlim_t before = lim.rlim_cur;
+  lim.rlim_cur = lim.rlim_max == RLIM_INFINITY ? want : std::min(want, lim.rlim_max);
+  if (::setrlimit(RLIMIT_NOFILE, &lim) != 0) lim.rlim_cur = before;
+  if (lim.rlim_cur < want)
+    std::fprintf(stderr,
+                 "server: %llu file descriptors allowed (ulimit -n), %llu wanted for %zu connections and %zu "
+                 "waiting: past that, new connections fail until some close\n",
+                 (unsigned long long)lim.rlim_cur, (unsigned long long)want, options.max_connections,
+                 options.max_waiting);
+}
+
 void Server::Impl::listen() {
+  ensure_descriptors();
   beast::error_code ec;
   const asio::ip::address address = asio::ip::make_address(options.bind, ec);
   if (ec) throw ServerError("bind address '" + options.bind + "' is not an IP address");
@@ -165,8 +194,17 @@ void Server::Impl::listen() {
 void Server::Impl::accept() {
   acceptor.async_accept([self = shared_from_this()](beast::error_code ec, tcp::socket socket) {
     if (self->stopped) return;
-    if (!ec) serve_http(self, std::move(socket));
-    self->accept();
+    if (!ec) {
+      serve_http(self, std::move(socket));
+      return self->accept();
+    }
+    // Out of descriptors (EMFILE) or the like: the connection stays in the
+    // backlog, so accepting again at once would spin; wait for some to close.
+    self->log_admission(SessionClock::now(), "cannot accept a connection: " + ec.message());
+    self->accept_timer.expires_after(std::chrono::milliseconds(50));
+    self->accept_timer.async_wait([self](beast::error_code wait_ec) {
+      if (!wait_ec && !self->stopped) self->accept();
+    });
   });
 }
 
@@ -355,6 +393,7 @@ void Server::stop() {
   impl_->wake_fd.close(ec);
   impl_->telemetry_timer.cancel();
   impl_->replay_timer.cancel();
+  impl_->accept_timer.cancel();
   impl_->stop_recording();
   for (auto& r : impl_->finishing) r->wait();  // closed files, with their summaries
   impl_->finishing.clear();

@@ -47,8 +47,8 @@ struct ServerOptions {
   std::string static_dir;                    // served over HTTP (client-web); "" for none
   double viewer_rate_hz = 30;                // state frames per second per viewer at most
   size_t max_connections = 256;              // greeted WebSocket sessions
-  size_t max_waiting = 64;                   // upgraded, no Hello yet: the oldest makes room for a newer one
-  size_t max_waiting_per_address = 8;        // of those, from one IP address
+  size_t max_waiting = 1024;                 // upgraded, no Hello yet (net/admission.hpp: who makes room)
+  double hello_grace_s = 1;                  // a connection waiting for less is never evicted
   size_t max_message_bytes = 64 * 1024;      // inbound
   double max_messages_per_s = 5000;          // inbound per connection (burst: a second's worth)
   size_t device_queue = 256;                 // haptic frames queued per device before the oldest drop

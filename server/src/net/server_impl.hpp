@@ -21,6 +21,8 @@
 #include <thread>
 #include <unordered_set>
 
+#include <sys/resource.h>
+
 #include <glm/vector_relational.hpp>
 
 #include <boost/asio.hpp>
@@ -29,6 +31,7 @@
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
 
+#include "net/admission.hpp"
 #include "net/inbound.hpp"
 #include "net/mailbox.hpp"
 #include "net/session.hpp"
@@ -122,6 +125,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
   Replay* replay;      // a recording played back (one of the two)
   ServerOptions options;
   tcp::acceptor acceptor;
+  asio::steady_timer accept_timer;  // a failed accept waits on it before the next
   bool stopped = false;
 
   // Signalled from the simulation thread after each publication.
@@ -183,6 +187,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
         replay(r),
         options(std::move(o)),
         acceptor(io),
+        accept_timer(io),
         wake_fd(io, ::dup(wakeup->fd())),
         telemetry_timer(io),
         replay_timer(io) {
@@ -235,6 +240,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
   void installed(const std::shared_ptr<LiveScene>& live);
   void send_to_controller(const Bytes& message);
 
+  void ensure_descriptors() const;
   void listen();
   void accept();
   void wait_wakeup();
@@ -243,14 +249,11 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl>, SessionHost {
   Bytes telemetry_message(const std::string& extra_fault);
   bool origin_allowed(const std::string& origin) const;
   bool host_allowed(std::string_view host) const;
-  // Room for one more WebSocket from `address`: false when the greeted
-  // sessions fill max_connections. Connections that have not said Hello
-  // hold waiting slots, max_waiting_per_address per address and
-  // max_waiting in all; a new one takes the slot of the oldest waiting one
-  // from its own address when that address has its fill, else of the
-  // oldest of all when all are taken. So no flood of upgrades that never
-  // say Hello keeps a client out who says it at once.
-  bool make_room(const std::string& address);
+  // The verdict on one more WebSocket from `address` (net/admission.hpp);
+  // a connection it evicts is closed here, with the reason.
+  Admission admit(const std::string& address);
+  LogBudget admission_log;  // evictions and refusals: a line a second at most
+  void log_admission(SessionClock::time_point now, const std::string& line);
   void close_all();
 };
 
@@ -324,6 +327,23 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     core_.mark_closed();
     hello_timer_.cancel();
     beast::get_lowest_layer(ws_).close();
+  }
+  // Closes a waiting connection whose slot the server needs (Server::Impl::
+  // admit): close code 1013 (try again later) with the reason, and the socket
+  // within a second whether or not the peer answers.
+  void evict(const std::string& reason) {
+    if (core_.closed()) return;
+    core_.mark_closed();
+    hello_timer_.cancel();
+    websocket::stream_base::timeout t = websocket::stream_base::timeout::suggested(beast::role_type::server);
+    t.handshake_timeout = std::chrono::seconds(1);
+    ws_.set_option(t);
+    ws_.async_close(close_reason(reason), [self = shared_from_this()](beast::error_code) {});
+  }
+  // A close frame's reason holds 123 bytes at most.
+  static websocket::close_reason close_reason(const std::string& reason) {
+    return websocket::close_reason(websocket::close_code::try_again_later,
+                                   beast::string_view(reason.data(), std::min<size_t>(reason.size(), 123)));
   }
   void close() {
     if (core_.closed()) return;

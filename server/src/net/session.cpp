@@ -46,6 +46,7 @@ Session::Session(SessionHost& host, const SessionLimits& limits, bool loopback, 
       loopback_(loopback),
       address_(std::move(address)),
       id_(id),
+      since_(now),
       // Full at the first message: a second's burst.
       messages_{limits.max_messages_per_s, 1e18, now},
       safety_{limits.max_safety_events_per_s, 1e18, now},

@@ -125,6 +125,7 @@ class Session {
   // ---- what it is ----
   uint64_t id() const { return id_; }
   const std::string& address() const { return address_; }
+  SessionClock::time_point since() const { return since_; }  // when it was upgraded
   proto::Role role() const { return role_; }
   bool greeted() const { return greeted_; }
   uint16_t protocol_minor() const { return protocol_minor_; }
@@ -161,6 +162,7 @@ class Session {
   bool loopback_;
   std::string address_;  // the peer's IP address
   uint64_t id_;
+  SessionClock::time_point since_;
   bool greeted_ = false, close_after_write_ = false, disconnect_ = false, closed_ = false, writing_ = false;
   proto::Role role_ = proto::Role::Viewer;
   uint16_t protocol_minor_ = 0;
