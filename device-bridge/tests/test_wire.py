@@ -93,6 +93,25 @@ def test_reader_reads_the_golden_vector() -> None:
     assert r.max_force[0] == c[0].maxForceN == 6.0
 
 
+def test_a_sim_time_no_simulation_has_is_a_bad_state() -> None:
+    """NaN, infinite, negative or past 1e9 s: refused before the reader fills anything (the link counts it as a
+    bad state and drops it). Before: taken, and rendered."""
+    rng = random.Random(3)
+    r = HapticReader(1)
+    for bad in (float("nan"), float("inf"), -1.0, 1e300):
+        f = frame(rng, 1)
+        f.simTime = bad
+        _, table = message_type(encode(f))
+        with pytest.raises(ProtocolError, match="sim_time"):
+            r.read(table, [0])
+        assert r.contacts == [0] and r.step == 0
+    f = frame(rng, 1)
+    f.simTime = 12.5
+    _, table = message_type(encode(f))
+    r.read(table, [0])
+    assert r.sim_time == 12.5 and r.step == f.step
+
+
 def test_damaged_frames_are_refused_not_misread() -> None:
     raw = bytearray(encode(frame(random.Random(1), 2)))
     with pytest.raises(ProtocolError):

@@ -95,6 +95,11 @@ def message_type(buf: Any) -> tuple[int, Table | None]:
     return kind, Table(buf, n, p + _U32.unpack_from(buf, p)[0])
 
 
+# The latest simulated time a frame may carry [s]: thirty years of a server stepping in real time. Past it (or
+# NaN, or below 0) the frame is not a simulation's, and is refused as a bad state.
+MAX_SIM_TIME_S = 1e9
+
+
 class HapticReader:
     """Reads the parts of a HapticFrame one bridge needs: for each of its devices (by index into
     SceneDescription.devices) force, stiffness, contacts, pose and coupling, into preallocated lists."""
@@ -103,6 +108,7 @@ class HapticReader:
         self.scene_id = 0
         self.step = 0
         self.server_time_ns = 0
+        self.sim_time = 0.0                                              # [s]
         self.force = [[0.0, 0.0, 0.0] for _ in range(n_devices)]       # [N], scene frame
         self.stiffness = [[0.0] * 9 for _ in range(n_devices)]          # [N/m], row-major
         self.contacts = [0] * n_devices
@@ -114,7 +120,13 @@ class HapticReader:
         self.max_force = [0.0] * n_devices                              # its coupling's saturation [N]
 
     def read(self, t: Table, channels: list[int]) -> None:
-        """Fills the lists for channels[k] (the wire index of bridge device k, -1 if the scene lacks it)."""
+        """Fills the lists for channels[k] (the wire index of bridge device k, -1 if the scene lacks it).
+        ProtocolError, before any is filled, for a frame whose sim_time is not a simulation's."""
+        sim_time = t.scalar(F_SIM_TIME, _F64, 0.0)
+        if not 0.0 <= sim_time <= MAX_SIM_TIME_S:  # (NaN fails both)
+            raise ProtocolError(
+                f"HapticFrame.sim_time {sim_time!r} s is not a simulated time (0 to {MAX_SIM_TIME_S:g} s)")
+        self.sim_time = sim_time
         self.scene_id = t.scalar(F_SCENE_ID, _U32)
         self.step = t.scalar(F_STEP, _U64)
         self.server_time_ns = t.scalar(F_SERVER_TIME, _I64)
