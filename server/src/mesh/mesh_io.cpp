@@ -165,6 +165,103 @@ SurfaceMesh read_off(const std::string& path) {
   return s;
 }
 
+// --- PLY header: what the body must hold, before Assimp allocates for it ---
+
+// Assimp's PLY reader reserves what the header declares: a 263-byte file that
+// declares 10^8 vertices would take gigabytes before it failed. So the
+// header is read here first, and each element's declared count is checked
+// against the bytes after the header: every element takes at least
+// `least` bytes (binary: its scalars' sizes and its lists' count fields;
+// ASCII: a digit and a separator per property), so a count the body cannot
+// hold is refused, naming the count and the bound.
+void check_ply_counts(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw MeshError(path + ": cannot open for reading");
+  constexpr size_t kMaxHeader = 64 * 1024;
+  std::string line;
+  size_t header_bytes = 0;
+  int number = 0;
+  std::string format;
+  struct Element {
+    std::string name;
+    int64_t count = 0;
+    int64_t least = 0;  // bytes one element takes at least
+    int line = 0;
+  };
+  std::vector<Element> elements;
+  const auto size_of = [&](const std::string& type) -> int64_t {
+    static const std::map<std::string, int64_t> sizes = {{"char", 1},  {"uchar", 1},   {"int8", 1},   {"uint8", 1},
+                                                         {"short", 2}, {"ushort", 2},  {"int16", 2},  {"uint16", 2},
+                                                         {"int", 4},   {"uint", 4},    {"int32", 4},  {"uint32", 4},
+                                                         {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
+    const auto it = sizes.find(type);
+    if (it == sizes.end())
+      throw MeshError(path + ":" + std::to_string(number) + ": unknown PLY property type '" + type + "'");
+    return it->second;
+  };
+  bool ended = false;
+  while (std::getline(in, line)) {
+    ++number;
+    header_bytes += line.size() + 1;
+    if (header_bytes > kMaxHeader) break;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream words(line);
+    std::string key;
+    words >> key;
+    if (number == 1) {
+      if (key != "ply") throw MeshError(path + ": not a PLY file (its first line is not 'ply')");
+      continue;
+    }
+    if (key == "format") {
+      words >> format;
+    } else if (key == "element") {
+      Element e;
+      std::string count;
+      words >> e.name >> count;
+      const char* end = count.data() + count.size();
+      if (std::from_chars(count.data(), end, e.count).ptr != end || count.empty() || e.count < 0)
+        throw MeshError(path + ":" + std::to_string(number) + ": element '" + e.name + "' has no valid count ('" +
+                        count + "')");
+      e.line = number;
+      elements.push_back(e);
+    } else if (key == "property") {
+      if (elements.empty()) throw MeshError(path + ":" + std::to_string(number) + ": a property before any element");
+      std::string type;
+      words >> type;
+      const bool ascii = format == "ascii";
+      if (type == "list") {
+        std::string count_type, item_type;
+        words >> count_type >> item_type;
+        elements.back().least += ascii ? 2 : size_of(count_type);
+        (void)size_of(item_type);
+      } else {
+        elements.back().least += ascii ? 2 : size_of(type);
+      }
+    } else if (key == "end_header") {
+      ended = true;
+      break;
+    }
+  }
+  if (!ended) throw MeshError(path + ": no PLY end_header in its first " + std::to_string(kMaxHeader / 1024) + " KiB");
+  if (format != "ascii" && format != "binary_little_endian" && format != "binary_big_endian")
+    throw MeshError(path + ": PLY format '" + format + "' is not ascii, binary_little_endian or binary_big_endian");
+  std::error_code ec;
+  const auto file_bytes = int64_t(fs::file_size(path, ec));
+  const int64_t body = ec ? 0 : std::max<int64_t>(0, file_bytes - int64_t(header_bytes));
+  int64_t used = 0;  // by the elements before, at least
+  for (const Element& e : elements) {
+    const int64_t least = std::max<int64_t>(e.least, 1);  // an element of no properties still counts
+    const int64_t room = (body - used) / least;
+    if (e.count > room || e.count > std::numeric_limits<int32_t>::max())
+      throw MeshError(path + ":" + std::to_string(e.line) + ": element '" + e.name + "' declares " +
+                      std::to_string(e.count) + " items, but the " + std::to_string(body - used) +
+                      " bytes of the file left for it hold at most " +
+                      std::to_string(std::min<int64_t>(room, std::numeric_limits<int32_t>::max())) + " (" +
+                      std::to_string(least) + " bytes each at least, " + format + ")");
+    used += e.count * least;
+  }
+}
+
 // --- OBJ, STL, PLY through Assimp ---
 
 SurfaceMesh read_with_assimp(const std::string& path, const std::string& format) {
@@ -338,6 +435,10 @@ SurfaceMesh read_surface(const std::string& path) {
   if (ext == ".off") {
     s = read_off(path);
   } else if (ext == ".obj" || ext == ".stl" || ext == ".ply") {
+    if (ext == ".ply") {
+      require_file(path);
+      check_ply_counts(path);
+    }
     s = read_with_assimp(path, ext == ".obj" ? "OBJ" : ext == ".stl" ? "STL" : "PLY");
   } else {
     throw MeshError(path + ": unknown surface mesh extension '" + fs::path(path).extension().string() +

@@ -185,6 +185,34 @@ TEST(ReadSurfaceErrors, IndexOutOfRange) {
   expect_mesh_error([&] { read_surface(dir.file("bad.ply")); }, {"bad.ply", "out of range"});
 }
 
+// A header that declares more than its body can hold is refused before
+// Assimp reserves for it (a 263-byte file declaring 10^8 vertices took
+// 2.8 GB and a minute), naming the count and the bound.
+TEST(ReadSurfaceErrors, PlyCountsTheBodyCannotHoldAreRefusedBeforeReading) {
+  const TempDir dir;
+  std::string ascii = cube_ply_ascii();
+  ascii.replace(ascii.find("element vertex 8"), 16, "element vertex 100000000");
+  write_file(dir.file("huge.ply"), ascii);
+  expect_mesh_error([&] { read_surface(dir.file("huge.ply")); },
+                    {"huge.ply:4", "element 'vertex' declares 100000000 items", "hold at most", "ascii"});
+  std::string binary = cube_ply_binary();
+  binary.replace(binary.find("element face 6"), 14, "element face 100000000");
+  write_file(dir.file("faces.ply"), binary);
+  expect_mesh_error([&] { read_surface(dir.file("faces.ply")); },
+                    {"faces.ply:8", "element 'face' declares 100000000 items", "(1 bytes each at least"});
+  // Vertices of 3 doubles: the body's 294 bytes (8 x 24 of vertices, 6 x 17
+  // of faces) would hold 12 of them.
+  binary = cube_ply_binary();
+  binary.replace(binary.find("element vertex 8"), 16, "element vertex 13");
+  write_file(dir.file("more.ply"), binary);
+  expect_mesh_error([&] { read_surface(dir.file("more.ply")); },
+                    {"more.ply:4", "declares 13 items", "hold at most 12 (24 bytes each at least"});
+  write_file(dir.file("no_end.ply"), "ply\nformat ascii 1.0\nelement vertex 3\n");
+  expect_mesh_error([&] { read_surface(dir.file("no_end.ply")); }, {"no_end.ply", "no PLY end_header"});
+  write_file(dir.file("count.ply"), "ply\nformat ascii 1.0\nelement vertex -3\nend_header\n");
+  expect_mesh_error([&] { read_surface(dir.file("count.ply")); }, {"count.ply:3", "no valid count ('-3')"});
+}
+
 TEST(WriteSurfaceObj, RoundTripsThroughReadSurface) {
   const TempDir dir;
   SurfaceMesh s = test::make_cube_surface();
