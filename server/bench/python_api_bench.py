@@ -4,10 +4,10 @@
 
 - advance() of one 1 ms interval on a body of about 5 k tets, called from a Python loop against the same calls in
   a C++ loop on the same Simulation (Simulation.time_advance): medians over alternated batches, and their ratio;
-  once with no node array taken, once with the positions view on (which gathers the positions in the mesh's
-  numbering after each advance);
-- reading the positions of a body of about 100 k nodes: the property (a new view of the same memory, no copy)
-  and a copy of it, per call.
+  once reading no node array, once reading sim.positions after each call from Python (which gathers the
+  positions in the mesh's numbering, into a buffer no live view shows);
+- reading the positions of a body of about 100 k nodes: the property again in the same step (a new view of the
+  same memory, no copy), the first read after a step (the gather), and a copy of it, per call.
 """
 
 from __future__ import annotations
@@ -35,10 +35,12 @@ def box_scene(cells: tuple[int, int, int], size: tuple[float, float, float]) -> 
     return tactile.parse_scene(data)
 
 
-def per_call_python(sim: tactile.Simulation, seconds: float, count: int) -> float:
+def per_call_python(sim: tactile.Simulation, seconds: float, count: int, read: bool = False) -> float:
     t0 = time.perf_counter()
     for _ in range(count):
         sim.advance(seconds)
+        if read:
+            _ = sim.positions
     return (time.perf_counter() - t0) / count
 
 
@@ -51,12 +53,10 @@ def advance_overhead(quick: bool) -> None:
     print("| node views     | C++ loop [us] | Python loop [us] | Python / C++ |")
     print("|----------------|---------------|------------------|--------------|")
     for label in ("none", "positions"):
-        if label == "positions":
-            _ = sim.positions  # turns the gather on
         cpp, py = [], []
         for _ in range(batches):
             cpp.append(float(np.mean(sim.time_advance(1e-3, count))))
-            py.append(per_call_python(sim, 1e-3, count))
+            py.append(per_call_python(sim, 1e-3, count, read=label == "positions"))
         c, p = statistics.median(cpp), statistics.median(py)
         print(f"| {label:14s} | {1e6 * c:13.1f} | {1e6 * p:16.1f} | {p / c:11.3f}x |")
     print()
@@ -72,13 +72,20 @@ def read_positions(quick: bool) -> None:
         x = sim.positions
     view = (time.perf_counter() - t0) / count
     assert not x.flags.owndata and np.shares_memory(x, sim.positions)
+    gathers = 20 if quick else 200
+    t0 = time.perf_counter()
+    for _ in range(gathers):
+        sim.step(1e-6)
+        x = sim.positions
+    gather = (time.perf_counter() - t0) / gathers
     copies = 20 if quick else 200
     t0 = time.perf_counter()
     for _ in range(copies):
         y = np.array(sim.positions)
     copy = (time.perf_counter() - t0) / copies
     print(f"## Reading the positions of {sim.n_nodes} nodes ({scene.n_tets} tets)\n")
-    print(f"sim.positions (a read-only view, no copy): {1e6 * view:.2f} us per read")
+    print(f"sim.positions again in the same step (a read-only view, no copy): {1e6 * view:.2f} us per read")
+    print(f"step(1 us), then sim.positions (the gather after a step): {1e6 * gather:.0f} us per read")
     print(f"np.array(sim.positions) (a copy, {y.nbytes / 1e6:.1f} MB): {1e6 * copy:.0f} us per read")
 
 

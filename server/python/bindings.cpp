@@ -5,11 +5,18 @@
 // server/CMakeLists.txt (server/pyproject.toml).
 //
 // The views: the model keeps its nodes in its own order (core/model.hpp), so
-// the Simulation's per-node arrays in the mesh's order are gathered once per
-// advance() into arrays this object owns, and only for the arrays a caller
-// has asked for (the first read of .positions turns it on). A view is made
-// once and reflects every later step without a new call; reading it copies
-// nothing.
+// a per-node array in the mesh's order is gathered when it is first read
+// after a step, into a buffer this object owns, and handed out as a
+// read-only view of that buffer: the array as of the step it was read at.
+// A buffer is never written again while a view of it lives (the next step's
+// gather takes a free one), so a view never changes under its reader: not
+// in another thread, not inside a NumPy call that lets the GIL go (a view
+// that followed the steps in place was read half-written there).
+//
+// Threads: calls on one Simulation are serialised by its lock (a second
+// thread waits for the first's advance() to end). A long advance() checks
+// for signals ten times a second: Ctrl-C stops it between two steps, at the
+// time reached.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -18,6 +25,7 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -111,19 +119,95 @@ py::dict report_dict(const AdvanceReport& r) {
   return d;
 }
 
+// Holds a Simulation's lock for a call. Whoever waits for it lets the GIL go
+// first: the holder may need the GIL to publish its step, so waiting with it
+// would deadlock. Recursive: a call may make another (step() -> advance()).
+class Busy {
+ public:
+  explicit Busy(std::recursive_mutex& m) : lock_(m, std::try_to_lock) {
+    if (lock_.owns_lock()) return;
+    py::gil_scoped_release release;
+    lock_.lock();
+  }
+
+ private:
+  std::unique_lock<std::recursive_mutex> lock_;
+};
+
+// A Simulation for one expression, its lock held: `s.sim()->time()`.
+class Locked {
+ public:
+  Locked(std::recursive_mutex& m, Simulation& sim) : busy_(m), sim_(sim) {}
+  Simulation* operator->() const { return &sim_; }
+  Simulation& operator*() const { return sim_; }
+
+ private:
+  Busy busy_;
+  Simulation& sim_;
+};
+
+// Asked between steps without the GIL: every 0.1 s of wall time it takes the
+// GIL and checks for signals (Ctrl-C); a handler that raises stops the
+// advance, and the exception is rethrown once the step's arrays are published.
+class SignalCheck {
+ public:
+  bool operator()() {
+    const auto now = std::chrono::steady_clock::now();
+    if (now < next_) return false;
+    next_ = now + std::chrono::milliseconds(100);
+    py::gil_scoped_acquire gil;
+    raised_ = PyErr_CheckSignals() != 0;
+    return raised_;
+  }
+  // Raises what the signal handler raised, if it did.
+  void rethrow() const {
+    if (raised_) throw py::error_already_set();
+  }
+
+ private:
+  std::chrono::steady_clock::time_point next_ = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
+  bool raised_ = false;
+};
+
+// One per-node array as views show it (n_nodes x 3): the buffers gathered
+// into, each kept while a view of it lives (its capsule holds a reference).
+class Published {
+ public:
+  // A view of the array at `generation`, gathered by `gather` if the latest
+  // buffer is older.
+  template <class Gather>
+  py::array view(uint64_t generation, Gather gather) {
+    if (current_ < 0 || generation != generation_) {
+      // In place only while no view shows it; else a free buffer, or a new one.
+      if (current_ < 0 || pool_[size_t(current_)].use_count() > 1) {
+        current_ = -1;
+        for (size_t k = 0; k < pool_.size() && current_ < 0; ++k)
+          if (pool_[k].use_count() == 1) current_ = int64_t(k);
+        if (current_ < 0) {
+          pool_.push_back(std::make_shared<std::vector<double>>());
+          current_ = int64_t(pool_.size() - 1);
+        }
+      }
+      gather(*pool_[size_t(current_)]);
+      generation_ = generation;
+    }
+    using Buffer = std::shared_ptr<std::vector<double>>;
+    const Buffer& b = pool_[size_t(current_)];
+    py::capsule owner(new Buffer(b), [](void* p) { delete static_cast<Buffer*>(p); });
+    return tactile::view(b->data(), b->size() / 3, 3, owner);
+  }
+
+ private:
+  std::vector<std::shared_ptr<std::vector<double>>> pool_;
+  int64_t current_ = -1;  // the latest gathered (index into pool_)
+  uint64_t generation_ = 0;
+};
+
 // The Python face of a Simulation: the simulation, and the mesh-ordered
 // arrays its views show.
 class PySimulation {
  public:
   explicit PySimulation(const Scene& scene) : scene_(scene), sim_(scene.spec) {
-    const size_t n = 3 * size_t(sim_.n_nodes());
-    positions_.resize(n);
-    displacements_.resize(n);
-    velocities_.resize(n);
-    // The rest state's arrays, for a view taken before the first step.
-    sim_.copy_positions(positions_);
-    sim_.copy_displacement(displacements_);
-    sim_.copy_velocity(velocities_);
     tets_.reserve(4 * size_t(sim_.n_tets()));
     for (const Tet& t : sim_.mesh().tets) tets_.insert(tets_.end(), t.begin(), t.end());
   }
@@ -131,12 +215,15 @@ class PySimulation {
   py::dict advance(double seconds) {
     if (!(seconds > 0) || !std::isfinite(seconds))
       throw py::value_error("advance: seconds must be finite and > 0, got " + std::to_string(seconds));
+    const Busy busy(mutex_);
     AdvanceReport r;
+    SignalCheck signals;
     {
       py::gil_scoped_release release;
-      r = sim_.advance(seconds);
-      refresh();
+      r = sim_.advance(seconds, std::ref(signals));
     }
+    ++generation_;
+    signals.rethrow();
     return report_dict(r);
   }
 
@@ -146,16 +233,19 @@ class PySimulation {
   py::array_t<double> time_advance(double seconds, int32_t count) {
     if (!(seconds > 0) || !std::isfinite(seconds) || count < 1)
       throw py::value_error("time_advance: seconds must be finite and > 0 and count >= 1");
+    const Busy busy(mutex_);
     py::array_t<double> out(count);
     double* w = out.mutable_data();
-    {
-      py::gil_scoped_release release;
-      for (int32_t k = 0; k < count; ++k) {
-        const auto t0 = std::chrono::steady_clock::now();
-        sim_.advance(seconds);
-        refresh();
-        w[k] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    SignalCheck signals;
+    for (int32_t k = 0; k < count; ++k) {
+      const auto t0 = std::chrono::steady_clock::now();
+      {
+        py::gil_scoped_release release;
+        sim_.advance(seconds, std::ref(signals));
       }
+      ++generation_;
+      w[k] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      signals.rethrow();
     }
     return out;
   }
@@ -164,32 +254,23 @@ class PySimulation {
   // the current critical step): advance(dt) covers it with one step unless
   // stability asks for more.
   py::dict step(std::optional<double> dt) {
+    const Busy busy(mutex_);
     const double fixed = scene_.spec.integrator.dt;
     const double d = dt ? *dt : fixed > 0 ? fixed : scene_.spec.integrator.safety * sim_.compute_critical_dt();
     return advance(d);
   }
 
-  void refresh() {
-    // Only the arrays a caller reads: gathering costs a pass over the nodes.
-    if (want_positions_) sim_.copy_positions(positions_);
-    if (want_displacements_) sim_.copy_displacement(displacements_);
-    if (want_velocities_) sim_.copy_velocity(velocities_);
+  py::array positions() {
+    const Busy busy(mutex_);
+    return positions_.view(generation_, [&](std::vector<double>& x) { sim_.copy_positions(x); });
   }
-
-  py::array positions(py::object self) {
-    if (!want_positions_) sim_.copy_positions(positions_);
-    want_positions_ = true;
-    return view(positions_.data(), positions_.size() / 3, 3, self);
+  py::array displacements() {
+    const Busy busy(mutex_);
+    return displacements_.view(generation_, [&](std::vector<double>& u) { sim_.copy_displacement(u); });
   }
-  py::array displacements(py::object self) {
-    if (!want_displacements_) sim_.copy_displacement(displacements_);
-    want_displacements_ = true;
-    return view(displacements_.data(), displacements_.size() / 3, 3, self);
-  }
-  py::array velocities(py::object self) {
-    if (!want_velocities_) sim_.copy_velocity(velocities_);
-    want_velocities_ = true;
-    return view(velocities_.data(), velocities_.size() / 3, 3, self);
+  py::array velocities() {
+    const Busy busy(mutex_);
+    return velocities_.view(generation_, [&](std::vector<double>& v) { sim_.copy_velocity(v); });
   }
   py::array rest_positions(py::object self) {
     static_assert(sizeof(Vec3) == 3 * sizeof(double));
@@ -205,6 +286,7 @@ class PySimulation {
 
   // Per proxy or device: (n, 3) arrays of what each felt in the latest step
   // and the mean over the steps since clear_impulses().
+  // (The caller holds the lock: sim()->proxy_reports().)
   template <class Report>
   py::dict reports(const std::vector<Report>& rs) const {
     py::array_t<double> force({rs.size(), size_t(3)}), torque({rs.size(), size_t(3)}),
@@ -233,10 +315,12 @@ class PySimulation {
   }
 
   void set_proxy_motion(int32_t proxy, const PoseTuple& from, const PoseTuple& to, double t0, double t1) {
+    const Busy busy(mutex_);
     check_index("proxy", proxy, sim_.proxies().size());
     sim_.set_proxy_motion(proxy, motion(from, to, t0, t1));
   }
   void set_hand_motion(int32_t hand, const PoseTuple& from, const PoseTuple& to, double t0, double t1) {
+    const Busy busy(mutex_);
     check_index("hand", hand, sim_.hands().size());
     sim_.set_hand_motion(hand, motion(from, to, t0, t1));
   }
@@ -244,6 +328,7 @@ class PySimulation {
   // `orientation`) over the next `duration` seconds.
   void move_proxy(int32_t proxy, const std::array<double, 3>& position,
                   const std::optional<std::array<double, 4>>& orientation, double duration) {
+    const Busy busy(mutex_);
     check_index("proxy", proxy, sim_.proxies().size());
     if (!(duration > 0) || !std::isfinite(duration)) throw py::value_error("duration: must be finite and > 0");
     const Pose from = sim_.proxy_pose(proxy);
@@ -254,6 +339,7 @@ class PySimulation {
   // The scene's scripted motions over [t0, t1], as a headless run sets them
   // before each control interval, and the impulse sums started again.
   void drive_scripts(double t0, double t1) {
+    const Busy busy(mutex_);
     for (size_t j = 0; j < scene_.proxy_script.size(); ++j)
       if (scene_.proxy_script[j]) sim_.set_proxy_motion(int32_t(j), scene_.proxy_script[j]->motion(t0, t1));
     for (size_t h = 0; h < scene_.hand_script.size(); ++h)
@@ -262,6 +348,7 @@ class PySimulation {
   }
 
   void write_vtu(const std::string& path, const std::vector<std::string>& cell_fields) {
+    const Busy busy(mutex_);
     ElementFieldRequest ask;
     for (const std::string& f : cell_fields) {
       if (f == "cauchy_stress")
@@ -282,7 +369,7 @@ class PySimulation {
     tactile::write_vtu(path, VtuFrame{&sim_.mesh(), &u, &v, &fixed, nullptr, &density, &fields});
   }
 
-  Simulation& sim() { return sim_; }
+  Locked sim() { return Locked(mutex_, sim_); }
   const Scene& scene() const { return scene_; }
 
  private:
@@ -295,11 +382,12 @@ class PySimulation {
     return ProxyMotion{t0, t1, to_pose(from.first, from.second), to_pose(to.first, to.second)};
   }
 
+  std::recursive_mutex mutex_;  // held by every call on sim_ (Busy)
   Scene scene_;
   Simulation sim_;
-  std::vector<double> positions_, displacements_, velocities_;  // mesh order (n_nodes x 3)
-  std::vector<int32_t> tets_;                                   // (n_tets x 4)
-  bool want_positions_ = false, want_displacements_ = false, want_velocities_ = false;
+  Published positions_, displacements_, velocities_;  // mesh order (n_nodes x 3)
+  uint64_t generation_ = 0;                           // advance() calls so far: a view's array is of one
+  std::vector<int32_t> tets_;                         // (n_tets x 4)
 };
 
 }  // namespace
@@ -519,49 +607,50 @@ PYBIND11_MODULE(_core, m) {
       .def(py::init<const Scene&>(), py::arg("scene"))
       .def("advance", &PySimulation::advance, py::arg("seconds"),
            "Covers `seconds` with as many steps as stability needs; returns the report (substeps, dt, dt_critical, "
-           "subdivided, fault).")
+           "subdivided, fault). Another thread's call on this Simulation waits for it; Ctrl-C (KeyboardInterrupt) "
+           "stops it between two steps, at the time reached.")
       .def("step", &PySimulation::step, py::arg("dt") = py::none(),
            "One step of dt [s] (default: the scene's fixed step, else safety x the current critical step).")
       .def("time_advance", &PySimulation::time_advance, py::arg("seconds"), py::arg("count"),
            "advance(seconds) `count` times in a loop in C++; the wall time of each call [s] (a benchmark's "
            "reference for the same loop from Python).")
-      .def_property_readonly("time", [](PySimulation& s) { return s.sim().time(); })
-      .def_property_readonly("steps", [](PySimulation& s) { return s.sim().steps(); })
-      .def_property_readonly("n_nodes", [](PySimulation& s) { return s.sim().n_nodes(); })
-      .def_property_readonly("n_tets", [](PySimulation& s) { return s.sim().n_tets(); })
-      .def_property_readonly("dt_rest", [](PySimulation& s) { return s.sim().dt_rest(); })
+      .def_property_readonly("time", [](PySimulation& s) { return s.sim()->time(); })
+      .def_property_readonly("steps", [](PySimulation& s) { return s.sim()->steps(); })
+      .def_property_readonly("n_nodes", [](PySimulation& s) { return s.sim()->n_nodes(); })
+      .def_property_readonly("n_tets", [](PySimulation& s) { return s.sim()->n_tets(); })
+      .def_property_readonly("dt_rest", [](PySimulation& s) { return s.sim()->dt_rest(); })
       .def_property_readonly(
-          "precision", [](PySimulation& s) { return s.sim().precision() == Precision::Float ? "float" : "double"; })
-      .def("critical_dt", [](PySimulation& s) { return s.sim().compute_critical_dt(); })
+          "precision", [](PySimulation& s) { return s.sim()->precision() == Precision::Float ? "float" : "double"; })
+      .def("critical_dt", [](PySimulation& s) { return s.sim()->compute_critical_dt(); })
       .def_property_readonly(
-          "positions", [](py::object self) { return self.cast<PySimulation&>().positions(self); },
-          "X + u [m] (n_nodes x 3), a read-only view that follows the simulation")
+          "positions", &PySimulation::positions,
+          "X + u [m] (n_nodes x 3) now: a read-only view that never changes (read it again after advance())")
       .def_property_readonly(
-          "displacements", [](py::object self) { return self.cast<PySimulation&>().displacements(self); },
-          "u [m] (n_nodes x 3), a read-only view that follows the simulation")
+          "displacements", &PySimulation::displacements,
+          "u [m] (n_nodes x 3) now: a read-only view that never changes (read it again after advance())")
       .def_property_readonly(
-          "velocities", [](py::object self) { return self.cast<PySimulation&>().velocities(self); },
-          "v [m/s] (n_nodes x 3), a read-only view that follows the simulation")
+          "velocities", &PySimulation::velocities,
+          "v [m/s] (n_nodes x 3) now: a read-only view that never changes (read it again after advance())")
       .def_property_readonly(
           "rest_positions", [](py::object self) { return self.cast<PySimulation&>().rest_positions(self); },
           "X [m] (n_nodes x 3), read-only")
       .def_property_readonly(
           "tets", [](py::object self) { return self.cast<PySimulation&>().tets(self); },
           "node ids of each tet (n_tets x 4), read-only")
-      .def_property_readonly("energy", [](PySimulation& s) { return energy_dict(s.sim().energy()); })
-      .def("compute_energy", [](PySimulation& s) { return energy_dict(s.sim().compute_energy()); })
-      .def_property_readonly("fault", [](PySimulation& s) { return fault_object(s.sim().fault()); })
+      .def_property_readonly("energy", [](PySimulation& s) { return energy_dict(s.sim()->energy()); })
+      .def("compute_energy", [](PySimulation& s) { return energy_dict(s.sim()->compute_energy()); })
+      .def_property_readonly("fault", [](PySimulation& s) { return fault_object(s.sim()->fault()); })
       .def("element_energy",
            [](PySimulation& s) {
-             const std::vector<double> e = s.sim().compute_element_energy();
+             const std::vector<double> e = s.sim()->compute_element_energy();
              return py::array_t<double>(py::ssize_t(e.size()), e.data());
            })
       .def(
           "element_fields",
           [](PySimulation& s, bool cauchy_stress, bool green_strain, bool von_mises) {
-            const ElementFields f = s.sim().compute_element_fields({cauchy_stress, green_strain, von_mises});
+            const ElementFields f = s.sim()->compute_element_fields({cauchy_stress, green_strain, von_mises});
             py::dict out;
-            const auto n = size_t(s.sim().n_tets());
+            const auto n = size_t(s.sim()->n_tets());
             if (cauchy_stress)
               out["cauchy_stress"] = py::array_t<double>({n, size_t(3), size_t(3)}, f.cauchy_stress.data());
             if (green_strain)
@@ -573,19 +662,19 @@ PYBIND11_MODULE(_core, m) {
       .def_property_readonly("proxy_names",
                              [](PySimulation& s) {
                                std::vector<std::string> out;
-                               for (const ProxySpec& p : s.sim().proxies()) out.push_back(p.name);
+                               for (const ProxySpec& p : s.sim()->proxies()) out.push_back(p.name);
                                return out;
                              })
-      .def_property_readonly("devices", [](PySimulation& s) { return s.sim().devices(); })
-      .def_property_readonly("proxy_reports", [](PySimulation& s) { return s.reports(s.sim().proxy_reports()); })
-      .def_property_readonly("device_reports", [](PySimulation& s) { return s.reports(s.sim().device_reports()); })
+      .def_property_readonly("devices", [](PySimulation& s) { return s.sim()->devices(); })
+      .def_property_readonly("proxy_reports", [](PySimulation& s) { return s.reports(s.sim()->proxy_reports()); })
+      .def_property_readonly("device_reports", [](PySimulation& s) { return s.reports(s.sim()->device_reports()); })
       .def_property_readonly("proxy_forces",
-                             [](PySimulation& s) { return s.reports(s.sim().proxy_reports())["force"]; })
-      .def("clear_impulses", [](PySimulation& s) { s.sim().clear_impulses(); })
+                             [](PySimulation& s) { return s.reports(s.sim()->proxy_reports())["force"]; })
+      .def("clear_impulses", [](PySimulation& s) { s.sim()->clear_impulses(); })
       .def(
-          "proxy_pose", [](PySimulation& s, int32_t j) { return from_pose(s.sim().proxy_pose(j)); }, py::arg("proxy"))
+          "proxy_pose", [](PySimulation& s, int32_t j) { return from_pose(s.sim()->proxy_pose(j)); }, py::arg("proxy"))
       .def(
-          "hand_pose", [](PySimulation& s, int32_t h) { return from_pose(s.sim().hand_pose(h)); }, py::arg("hand"))
+          "hand_pose", [](PySimulation& s, int32_t h) { return from_pose(s.sim()->hand_pose(h)); }, py::arg("hand"))
       .def("set_proxy_motion", &PySimulation::set_proxy_motion, py::arg("proxy"), py::arg("pose_from"),
            py::arg("pose_to"), py::arg("t0"), py::arg("t1"))
       .def("set_hand_motion", &PySimulation::set_hand_motion, py::arg("hand"), py::arg("pose_from"), py::arg("pose_to"),
@@ -597,21 +686,21 @@ PYBIND11_MODULE(_core, m) {
       .def(
           "couple_device",
           [](PySimulation& s, int32_t device, std::optional<std::array<double, 3>> limits) {
-            if (device < 0 || size_t(device) >= s.sim().devices().size())
+            if (device < 0 || size_t(device) >= s.sim()->devices().size())
               throw py::index_error("device " + std::to_string(device) + ": the scene has " +
-                                    std::to_string(s.sim().devices().size()));
-            if (!limits) return s.sim().couple_device(device, nullptr);
+                                    std::to_string(s.sim()->devices().size()));
+            if (!limits) return s.sim()->couple_device(device, nullptr);
             const DeviceLimits l{(*limits)[0], (*limits)[1], (*limits)[2]};
-            s.sim().couple_device(device, &l);
+            s.sim()->couple_device(device, &l);
           },
           py::arg("device"), py::arg("limits") = py::none(),
           "Couples a device channel's proxies (limits: max force [N], max torque [N m], stiffness [N/m]).")
       .def("release_device",
            [](PySimulation& s, int32_t device) {
-             if (device < 0 || size_t(device) >= s.sim().devices().size())
+             if (device < 0 || size_t(device) >= s.sim()->devices().size())
                throw py::index_error("device " + std::to_string(device) + ": the scene has " +
-                                     std::to_string(s.sim().devices().size()));
-             s.sim().release_device(device);
+                                     std::to_string(s.sim()->devices().size()));
+             s.sim()->release_device(device);
            })
       .def("write_vtu", &PySimulation::write_vtu, py::arg("path"), py::arg("fields") = std::vector<std::string>{},
            "Writes the body as it is now (VTK XML, .vtu): displacement, velocity, constraint and energy density, and "

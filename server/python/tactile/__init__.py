@@ -3,13 +3,14 @@
 Load a scene (a file, or a dict in the same schema: the same loader as the CLIs, the same errors naming the
 field), build a :class:`Simulation` from it, ``advance(seconds)`` or ``step()``, move proxies and hands, and read
 positions, velocities, forces, energies and faults as NumPy arrays. Node arrays are read-only views in the node
-numbering of the scene's mesh that follow the simulation: take ``sim.positions`` once and it shows every later
-step, with no copy on reading.
+numbering of the scene's mesh, of the step they were read at: a view never changes (read ``sim.positions``
+again after ``advance()``), so a thread reading it never sees half a step. Calls on one Simulation from several
+threads take turns; Ctrl-C stops a long ``advance()`` between two steps.
 
     >>> import tactile
-    >>> sim = tactile.Simulation(tactile.load_scene("server/scenes/cantilever.json"))
-    >>> x = sim.positions
+    >>> sim = tactile.Simulation(tactile.load_scene("server/scenes/fig3_cantilever.json", variant="stvk"))
     >>> report = sim.advance(0.05)
+    >>> x = sim.positions
 """
 
 from __future__ import annotations

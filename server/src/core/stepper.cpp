@@ -596,7 +596,7 @@ void Stepper<Real>::clear_fault(State<Real>& s) const {
 }
 
 template <class Real>
-AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
+AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt, const std::function<bool()>& interrupt) {
   AdvanceReport report;
   if (s.fault) {
     report.fault = s.fault;
@@ -636,6 +636,10 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt) {
     }
     ++report.substeps;
     covered += dt;
+    if (k + 1 < n && interrupt && interrupt()) {
+      report.interrupted = true;
+      break;
+    }
     // A proxy that squashes the elements under it within the interval: the
     // rest of the interval is split again at their new critical step. (After
     // the last step the next advance() looks, before it plans its steps.)

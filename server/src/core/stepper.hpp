@@ -21,6 +21,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -60,9 +61,10 @@ class StepProbe {
 
 struct AdvanceReport {
   int32_t substeps = 0;
-  double dt = 0;            // sub-step used [s]
-  double dt_critical = 0;   // estimate for the current configuration [s]
-  bool subdivided = false;  // a fixed dt above the estimate was split
+  double dt = 0;             // sub-step used [s]
+  double dt_critical = 0;    // estimate for the current configuration [s]
+  bool subdivided = false;   // a fixed dt above the estimate was split
+  bool interrupted = false;  // the caller's interrupt stopped it between two steps
   Fault fault;
 };
 
@@ -82,7 +84,9 @@ class Stepper {
   // Covers frame_dt [s] with as many equal sub-steps as stability needs
   // (auto step), or with the scene's fixed step, subdivided or refused when
   // it exceeds the critical step of the current configuration.
-  AdvanceReport advance(State<Real>& s, double frame_dt);
+  // `interrupt`, when set, is asked between steps: true stops the interval
+  // there (report.interrupted), the state consistent at the time reached.
+  AdvanceReport advance(State<Real>& s, double frame_dt, const std::function<bool()>& interrupt = {});
 
   // Sets a consistent with the forces at s.t, eq. (1): M a = F - R(u) - D v,
   // and the constrained nodes' v, a and reaction. step() does this itself when

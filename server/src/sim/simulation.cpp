@@ -35,7 +35,7 @@ struct Simulation::Engine {
   virtual int32_t parts() const = 0;
   virtual double time() const = 0;
   virtual int64_t steps() const = 0;
-  virtual AdvanceReport advance(double frame_dt) = 0;
+  virtual AdvanceReport advance(double frame_dt, const std::function<bool()>& interrupt) = 0;
   virtual double compute_critical_dt() const = 0;
   virtual const Energy& energy() const = 0;
   virtual Energy compute_energy() const = 0;
@@ -151,7 +151,9 @@ class EngineOf final : public Simulation::Engine {
   int32_t parts() const override { return stepper_.parts(); }
   double time() const override { return state_.t; }
   int64_t steps() const override { return state_.step; }
-  AdvanceReport advance(double frame_dt) override { return stepper_.advance(state_, frame_dt); }
+  AdvanceReport advance(double frame_dt, const std::function<bool()>& interrupt) override {
+    return stepper_.advance(state_, frame_dt, interrupt);
+  }
   double compute_critical_dt() const override { return stepper_.compute_critical_dt(state_); }
   const Energy& energy() const override { return state_.energy.latest; }
   Energy compute_energy() const override { return stepper_.compute_energy(state_); }
@@ -259,7 +261,9 @@ double Simulation::dt_rest() const { return engine_->dt_rest(); }
 int32_t Simulation::parts() const { return engine_->parts(); }
 double Simulation::time() const { return engine_->time(); }
 int64_t Simulation::steps() const { return engine_->steps(); }
-AdvanceReport Simulation::advance(double frame_dt) { return engine_->advance(frame_dt); }
+AdvanceReport Simulation::advance(double frame_dt, const std::function<bool()>& interrupt) {
+  return engine_->advance(frame_dt, interrupt);
+}
 double Simulation::compute_critical_dt() const { return engine_->compute_critical_dt(); }
 const Energy& Simulation::energy() const { return engine_->energy(); }
 Energy Simulation::compute_energy() const { return engine_->compute_energy(); }
@@ -292,7 +296,16 @@ void Simulation::set_proxy_motion(int32_t proxy, const ProxyMotion& m) { engine_
 void Simulation::set_hand_motion(int32_t hand, const ProxyMotion& m) { engine_->set_hand_motion(hand, m); }
 Pose Simulation::proxy_pose(int32_t proxy) const { return engine_->proxy_pose(proxy); }
 Pose Simulation::hand_pose(int32_t hand) const { return engine_->hand_pose(hand); }
-void Simulation::couple_device(int32_t device, const DeviceLimits* limits) { engine_->couple_device(device, limits); }
+void Simulation::couple_device(int32_t device, const DeviceLimits* limits) {
+  if (limits)
+    for (const auto& [name, value] :
+         {std::pair{"max_force", limits->max_force}, std::pair{"max_torque", limits->max_torque},
+          std::pair{"stiffness", limits->stiffness}})
+      if (!std::isfinite(value) || value < 0)
+        throw std::invalid_argument(std::string("device limits: ") + name +
+                                    " must be finite and >= 0 (0: not given), got " + std::to_string(value));
+  engine_->couple_device(device, limits);
+}
 void Simulation::release_device(int32_t device) { engine_->release_device(device); }
 bool Simulation::device_coupled(int32_t device) const { return engine_->device_coupled(device); }
 const std::vector<ProxyReport>& Simulation::proxy_reports() const { return engine_->proxy_reports(); }

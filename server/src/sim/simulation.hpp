@@ -12,6 +12,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -47,8 +48,9 @@ class Simulation {
   double time() const;  // simulated [s]
   int64_t steps() const;
 
-  // Covers frame_dt [s] with as many sub-steps as stability needs (Stepper::advance).
-  AdvanceReport advance(double frame_dt);
+  // Covers frame_dt [s] with as many sub-steps as stability needs
+  // (Stepper::advance); `interrupt`, asked between steps, may stop it there.
+  AdvanceReport advance(double frame_dt, const std::function<bool()>& interrupt = {});
   double compute_critical_dt() const;  // of the current configuration [s]
 
   const Energy& energy() const;                        // as of the latest step
@@ -84,7 +86,8 @@ class Simulation {
   // become rigid bodies that the motion set for them (the device's pose)
   // pulls through a spring-damper saturated at the device's limits (nullptr:
   // the scene's, or soft defaults). Coupling again changes the coupling;
-  // release_device makes them kinematic again.
+  // release_device makes them kinematic again. Limits must be finite and
+  // >= 0 (0: not given); else std::invalid_argument naming the field.
   void couple_device(int32_t device, const DeviceLimits* limits);
   void release_device(int32_t device);
   bool device_coupled(int32_t device) const;
