@@ -44,7 +44,8 @@ from tactile_proto.generated.StartRecording import StartRecordingT
 from tactile_proto.generated.StopRecording import StopRecordingT
 from tactile_proto.recording import TOPICS, open_recording
 from test_scenes_schema import built
-from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, url
+from test_server import (READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, set_parameter,
+                         url)
 
 
 def start(name: str, request_id: int = 1) -> Any:
@@ -240,12 +241,26 @@ def test_recording_requests_are_refused_by_name(tmp_path: pathlib.Path) -> None:
             name = t.recording
             assert name.startswith("session-") and name.endswith(".mcap")
             await refused(start("second"), ErrorCode.Busy, "under way", name)
+            # A SetParameter of NaN is refused, and recorded all the same (before: left out, "did not verify").
+            await refused(control(ControlCommand.SetParameter, set_parameter("material.E", float("nan")), 9),
+                          ErrorCode.BadRequest, "material.E")
+            # Stopped and started again at once, with a name of the server's: a file of its own (before: the
+            # second had the first's name, to the second, and was refused).
+            await ctl.send(codec.encode(control(ControlCommand.StopRecording, StopRecordingT(), 2)))
+            await ctl.send(codec.encode(start("", 3)))
+            again = ""
+            while not again or again == name:
+                again = (await next_of(ctl, "TelemetryT")).recording
+            assert again.startswith("session-") and again != name
 
     with running_server(tmp_path, "--recordings", str(rec_dir)) as (port, _):
         asyncio.run(run(port, True))
     assert (rec_dir / "taken.mcap").read_bytes() == b"not mine"
-    picked = [p for p in rec_dir.iterdir() if p.name.startswith("session-")]
-    assert len(picked) == 1 and read_closed(picked[0])["/scene"], "the server closes its recording when it stops"
+    picked = sorted(p for p in rec_dir.iterdir() if p.name.startswith("session-"))
+    assert len(picked) == 2 and all(read_closed(p)["/scene"] for p in picked), "closed when stopped"
+    nan_controls = [json.loads(m.data) for p in picked for _, c, m in make_reader(p.open("rb")).iter_messages()
+                    if c.topic == "/control"]
+    assert [c["command"]["value"] for c in nan_controls if c["request_id"] == 9] == ["NaN"]
     assert not (tmp_path / "escape.mcap").exists()
     with running_server(tmp_path) as (port, _):
         asyncio.run(run(port, False))

@@ -70,11 +70,17 @@ std::string Server::Impl::start_recording(const std::string& name, bool any_path
     if (options.recordings_dir.empty())
       return "StartRecording: this server has no recordings folder (start it with --recordings DIR)";
     std::string file = name;
-    if (file.empty()) {
-      const std::time_t t = std::time(nullptr);
-      char stamp[32];
-      std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", std::gmtime(&t));
+    if (file.empty()) {  // session-<UTC to the millisecond>[-N].mcap: a second one in the same second is its own
+      const auto now = std::chrono::system_clock::now();
+      const std::time_t t = std::chrono::system_clock::to_time_t(now);
+      const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count() % 1000;
+      char stamp[48];
+      const size_t n = std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", std::gmtime(&t));
+      std::snprintf(stamp + n, sizeof stamp - n, "-%03lld", static_cast<long long>(ms));
       file = std::string("session-") + stamp + ".mcap";
+      std::error_code ec;
+      for (int k = 2; std::filesystem::exists(std::filesystem::path(options.recordings_dir) / file, ec); ++k)
+        file = std::string("session-") + stamp + "-" + std::to_string(k) + ".mcap";
     }
     const bool plain = file.size() <= 128 && file[0] != '.' && std::all_of(file.begin(), file.end(), [](char ch) {
                          return std::isalnum(static_cast<unsigned char>(ch)) || ch == '.' || ch == '_' || ch == '-';
@@ -100,9 +106,13 @@ std::string Server::Impl::start_recording(const std::string& name, bool any_path
                  {"haptic_rate_hz", exact(options.live.haptic_rate_hz)},
                  {"force_window", exact(options.live.force_window)},
                  {"server", options.server_name}};
+  std::error_code ec;
+  const bool existed = std::filesystem::exists(path, ec);
   try {
     recorder = std::make_unique<Recorder>(path, meta);
   } catch (const mcap::McapError& e) {
+    // (A full disk: the file may have been made, empty. Not left behind.)
+    if (!existed) std::filesystem::remove(path, ec);
     return std::string("StartRecording: ") + e.what();
   }
   std::fprintf(stderr, "recording: %s\n", path.c_str());
@@ -136,8 +146,12 @@ std::string Server::Impl::check_recorder() {
     const RecorderStats st = r->stats();
     if (!st.finished) return false;
     r->wait();
+    // The file's size as it lies on disk: what the writer handed over may
+    // not all have landed (a full disk).
+    std::error_code ec;
+    const uintmax_t on_disk = std::filesystem::file_size(st.path, ec);
     std::fprintf(stderr, "recording: closed %s: %llu messages, %llu bytes", st.path.c_str(),
-                 static_cast<unsigned long long>(st.messages), static_cast<unsigned long long>(st.bytes));
+                 static_cast<unsigned long long>(st.messages), static_cast<unsigned long long>(ec ? 0 : on_disk));
     if (st.late > 0)
       std::fprintf(stderr, "; %llu came after a later-stamped one and carry its log time",
                    static_cast<unsigned long long>(st.late));

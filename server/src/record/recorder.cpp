@@ -3,6 +3,7 @@
 #include <flatbuffers/idl.h>
 
 #include <array>
+#include <cctype>
 #include <cstdio>
 #include <cstring>
 #include <string_view>
@@ -108,6 +109,51 @@ void restore_envelopes(mcap::Recording& rec) {
 }
 
 namespace {
+
+// FlatBuffers' text writes a non-finite double as nan, inf or -inf, which
+// JSON has not: outside strings each becomes the string "NaN", "Infinity"
+// or "-Infinity" (as Python's and JavaScript's JSON name them), so that a
+// Control carrying one (a SetParameter of NaN, which the server refuses) is
+// still recorded, its Envelope with it.
+std::string quote_non_finite(const std::string& text) {
+  std::string out;
+  out.reserve(text.size());
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (in_string) {
+      out += c;
+      if (c == '\\' && i + 1 < text.size())
+        out += text[++i];
+      else if (c == '"')
+        in_string = false;
+      continue;
+    }
+    if (c == '"') {
+      in_string = true;
+      out += c;
+      continue;
+    }
+    size_t end = i;
+    while (end < text.size() && (std::isalnum(static_cast<unsigned char>(text[end])) || text[end] == '+' ||
+                                 text[end] == '-' || text[end] == '.'))
+      ++end;
+    std::string word = text.substr(i, end - i);
+    for (char& ch : word) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+    const bool negative = word.starts_with('-');
+    if (word.starts_with('-') || word.starts_with('+')) word.erase(0, 1);
+    if (word == "nan") {
+      out += "\"NaN\"";
+    } else if (word == "inf" || word == "infinity") {
+      out += negative ? "\"-Infinity\"" : "\"Infinity\"";
+    } else {
+      out.append(text, i, end - i);
+      if (end == i) out += c;
+    }
+    i = end > i ? end - 1 : i;
+  }
+  return out;
+}
 
 // Whether a topic's channel carries its Envelopes behind a root header
 // rooted at their message type. Not /control: a Control holds a union,
@@ -345,7 +391,7 @@ void Recorder::run() {
           std::string text;
           nlohmann::json j;
           if (c && flatbuffers::GenerateTextFromTable(*schema_, c, "tactile.proto.Control", &text))
-            j = nlohmann::json::parse(text, nullptr, false);
+            j = nlohmann::json::parse(quote_non_finite(text), nullptr, false);
           if (!j.is_object()) {
             ++unreadable;
             waiting.erase(waiting.begin());
