@@ -1,6 +1,7 @@
-"""The outside battery of issue 22 at full length, against the built server; prints its figures.
+"""The outside batteries (issues 22 and 40) at full length, against the built server; prints their figures.
 
-    .venv/bin/python tests/battery.py [--only slots,pings,inputs,kills] [--kills N] [--flood-seconds S]
+    .venv/bin/python tests/battery.py [--only slots,pings,inputs,kills,crowd,reload,threads,meshes] [--kills N]
+                                      [--flood-seconds S]
 
 - slots:  300 upgrades that never say Hello, renewed as the server closes them, while a device with the token
           connects and says Hello 20 times: how long each waited, and how many were refused (target: none).
@@ -9,8 +10,16 @@
 - inputs: 10 000 random finite device inputs, coupled and then direct: faults (target: none).
 - kills:  N recordings (32 by default) killed with SIGKILL mid-press, each recovered (tactile-recording recover)
           and read by the mcap package's default reader (target: all).
+- crowd:  20, 50 and 200 viewers opening at once from one address, each saying Hello as soon as it is upgraded:
+          how many were welcomed (target: all, while under max_connections) and what the others were told.
+- reload: a storm of 100 pages reloading at once (each reconnects 1 s after its close, as the page does): seconds
+          until all are welcomed again (target: <= 3 s), and the connections refused or evicted on the way.
+- threads: two Python threads advancing one Simulation, 3 trials: faults (target: none).
+- meshes: peak memory of `tactile-sim check` on hostile mesh files (a few hundred bytes declaring 10^7-10^9
+          items, PLY, STL, OFF, .node): its error and its peak RSS (target: <= 64 MB before the refusal).
 
-The short forms of each are tests (tests/test_hardening.py, tests/test_recording.py). Autobahn|Testsuite, the
+The short forms of each are tests (tests/test_hardening.py, tests/test_recording.py, tests/test_python_api.py,
+server/tests/mesh/mesh_io_test.cpp). Autobahn|Testsuite, the
 battery's WebSocket fuzzer, is Python 2 only (not on this project's Python); the protocol's own probes are the
 inbound fuzzer (server/fuzz/) and test_server.py's bad clients; the scene cases are the SceneErrors tests.
 """
@@ -136,9 +145,128 @@ def kills(tmp: pathlib.Path, n: int) -> None:
           f"message for message ({min(kept)}-{max(kept)} messages each)")
 
 
+def crowd(tmp: pathlib.Path) -> None:
+    from test_hardening import greet_at_once
+
+    with server_process(tmp, SCENE, TOKEN, file_name="scene.json") as (port, _):
+        for n in (20, 50, 200):
+            welcomed, others = asyncio.run(greet_at_once(port, n))
+            told = sorted(set(others))[:2]
+            print(f"crowd: {n} viewers at once from one address: {welcomed} welcomed"
+                  + (f"; the others: {told}" if told else ""))
+            time.sleep(1.0)
+
+
+def reload(tmp: pathlib.Path) -> None:
+    async def page(port: int, closed: asyncio.Event, back: list[float], drops: list[str]) -> None:
+        """One page: connected and greeted; at the storm its socket closes, and it reconnects 1 s after each
+        close until welcomed again (the page's own rule, client-web)."""
+        ws = await websockets.connect(url(port), max_queue=None)
+        await hello(ws, Role.Viewer)
+        await closed.wait()
+        await ws.close()
+        t0 = time.monotonic()
+        while True:
+            await asyncio.sleep(1.0)
+            try:
+                async with websockets.connect(url(port), max_queue=None, open_timeout=10) as again:
+                    await hello(again, Role.Viewer)
+                    back.append(time.monotonic() - t0)
+                    return
+            except websockets.exceptions.ConnectionClosed as e:
+                drops.append(f"{e.rcvd.code if e.rcvd else None}")
+            except Exception as e:  # noqa: BLE001 - any failure to come back counts as a drop
+                drops.append(type(e).__name__)
+
+    async def storm(port: int) -> tuple[list[float], list[str]]:
+        closed = asyncio.Event()
+        back: list[float] = []
+        drops: list[str] = []
+        pages = [asyncio.create_task(page(port, closed, back, drops)) for _ in range(100)]
+        await asyncio.sleep(2.0)
+        closed.set()
+        await asyncio.wait_for(asyncio.gather(*pages), 60)
+        return back, drops
+
+    with server_process(tmp, SCENE, TOKEN, file_name="scene.json") as (port, _):
+        back, drops = asyncio.run(storm(port))
+    print(f"reload: 100 pages reloading at once: all {len(back)} back within {max(back):.1f} s of the storm; "
+          f"{len(drops)} connections refused or dropped on the way")
+
+
+def threads() -> None:
+    import threading
+
+    import tactile
+    from test_python_api import falling_block
+
+    for trial in range(3):
+        sim = tactile.Simulation(falling_block())
+        faults: list[object] = []
+
+        def advance(s: tactile.Simulation = sim, out: list[object] = faults) -> None:
+            for _ in range(40):
+                out.append(s.advance(0.005)["fault"])
+
+        workers = [threading.Thread(target=advance) for _ in range(2)]
+        for w in workers:
+            w.start()
+        for w in workers:
+            w.join()
+        bad = [f for f in faults if f is not None]
+        print(f"threads: trial {trial + 1}: two threads x 40 advances of 5 ms: {len(bad)} faults, "
+              f"simulated {sim.time:.3f} s of 0.400 s" + (f"; first: {bad[0]}" if bad else ""))
+
+
+def meshes(tmp: pathlib.Path) -> None:
+    import json
+    import os
+    import struct
+    import subprocess
+
+    from test_scenes_schema import built
+
+    exe = built("tactile-sim")
+    assert exe is not None, "tactile-sim is not built"
+    hostile = {
+        "ascii_1e7.ply": b"ply\nformat ascii 1.0\nelement vertex 10000000\nproperty float x\nproperty float y\n"
+                         b"property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                         b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "ascii_1e8.ply": b"ply\nformat ascii 1.0\nelement vertex 100000000\nproperty float x\nproperty float y\n"
+                         b"property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                         b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "binary_faces_1e8.ply": b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+                                b"property float y\nproperty float z\nelement face 100000000\n"
+                                b"property list uchar int vertex_indices\nend_header\n"
+                                + struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) + struct.pack("<B3i", 3, 0, 1, 2),
+        "facets_1e8.stl": b"\0" * 80 + struct.pack("<I", 100_000_000) + struct.pack("<12fH", *([0.0] * 12), 0),
+        "faces_1e8.off": b"OFF\n3 100000000 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        "nodes_1e9.node": b"1000000000 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n",
+    }
+    (tmp / "nodes_1e9.ele").write_bytes(b"1 4 0\n1 1 2 3 4\n")
+    for name, data in hostile.items():
+        (tmp / name).write_bytes(data)
+        scene = {"name": "hostile", "mesh": {"file": name},
+                 "material": {"model": "stvk", "E": 1e5, "nu": 0.3, "rho": 1000}, "run": {"duration": 0.01}}
+        path = tmp / f"hostile_{name}.json"
+        path.write_text(json.dumps(scene))
+        t0 = time.monotonic()
+        with (tmp / "out.txt").open("w+") as out:
+            # (under a 4 GiB address-space limit: an unbounded reader fails there instead of taking the machine)
+            proc = subprocess.Popen(["prlimit", "--as=4294967296", exe, "check", str(path)], stdout=out,
+                                    stderr=subprocess.STDOUT)
+            _, status, usage = os.wait4(proc.pid, 0)
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            out.seek(0)
+            said = out.read().strip().splitlines()[-1:] or [""]
+        took = time.monotonic() - t0
+        print(f"meshes: {name} ({len(data)} B): exit {proc.returncode} in {took:.2f} s, peak RSS "
+              f"{usage.ru_maxrss / 1024:.1f} MB; {said[0][:200]}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--only", default="slots,pings,inputs,kills")
+    ap.add_argument("--only", default="slots,pings,inputs,kills,crowd,reload,threads,meshes")
     ap.add_argument("--kills", type=int, default=32)
     ap.add_argument("--flood-seconds", type=float, default=60.0)
     args = ap.parse_args()
@@ -146,7 +274,8 @@ def main() -> None:
         tmp = pathlib.Path(d)
         for what in args.only.split(","):
             {"slots": lambda: slots(tmp), "pings": lambda: pings(tmp, args.flood_seconds),
-             "inputs": lambda: inputs(tmp), "kills": lambda: kills(tmp, args.kills)}[what]()
+             "inputs": lambda: inputs(tmp), "kills": lambda: kills(tmp, args.kills), "crowd": lambda: crowd(tmp),
+             "reload": lambda: reload(tmp), "threads": threads, "meshes": lambda: meshes(tmp)}[what]()
 
 
 if __name__ == "__main__":
