@@ -610,6 +610,11 @@ def test_a_resimulation_refuses_what_it_cannot_replay_by_name(tmp_path: pathlib.
         asyncio.run(run(port))
     r = resim(str(rec_dir / "late.mcap"))
     assert r.returncode == 2 and "starts at t =" in r.stderr and "--record" in r.stderr, r.stderr
+    # Cut short (a killed server, a copy that stopped): the cut is named, not "not a tactile-server recording".
+    whole = (rec_dir / "late.mcap").read_bytes()
+    (tmp_path / "cut.mcap").write_bytes(whole[:300])
+    r = resim(str(tmp_path / "cut.mcap"))
+    assert r.returncode == 2 and "cut short" in r.stderr and "not a tactile-server" not in r.stderr, r.stderr
     r = resim(str(tmp_path / "scene.json"))
     assert r.returncode == 2 and "not an MCAP file" in r.stderr, r.stderr
     r = resim(str(tmp_path / "nothing.mcap"))

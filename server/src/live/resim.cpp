@@ -20,9 +20,18 @@ namespace {
 
 namespace wire = proto;
 
+// What a file cut short lacks is said as its cut: "; cut short: <the reader's problems>".
+std::string cut_note(const mcap::Recording& rec) {
+  if (rec.complete) return "";
+  std::string out = "; the file is cut short";
+  for (const std::string& p : rec.problems) out += (out.ends_with("short") ? ": " : "; ") + p;
+  return out;
+}
+
 const mcap::Map& tactile_metadata(const mcap::Recording& rec, const std::string& path) {
   for (const auto& [name, map] : rec.metadata)
     if (name == "tactile") return map;
+  if (!rec.complete) throw ResimError("recording '" + path + "' ends before its 'tactile' metadata" + cut_note(rec));
   throw ResimError("recording '" + path + "' has no 'tactile' metadata: not a tactile-server recording");
 }
 
@@ -113,7 +122,9 @@ ResimReport resimulate(const ResimOptions& o) {
       recorded_scene = wire::GetEnvelope(m.data.data())->message_as_SceneDescription();
       break;
     }
-  if (!recorded_scene) throw ResimError("recording '" + o.recording + "' holds no scene description");
+  if (!recorded_scene)
+    throw ResimError("recording '" + o.recording + "' holds no scene description" +
+                     (rec.complete ? "" : " whole" + cut_note(rec)));
   const uint32_t scene_id = recorded_scene->scene_id();
   std::vector<std::string> recorded_devices;
   if (recorded_scene->devices())
@@ -147,10 +158,14 @@ ResimReport resimulate(const ResimOptions& o) {
     throw ResimError("recording '" + o.recording + "' starts at t = " + std::to_string(first_state) +
                      " s of its scene: a re-simulation starts from the scene's start (record with --record, "
                      "or from a load or reset)");
-  if (later_scene)
+  if (!rec.complete)
     report.note =
-        "the recording goes on in a later scene (a load, reset or parameter change): "
-        "re-simulated up to it";
+        "the recording is cut short: re-simulated to its last whole frame, t = " + std::to_string(last_frame) +
+        " s (inputs applied just before the cut may be lost with it)";
+  if (later_scene)
+    report.note += std::string(report.note.empty() ? "" : "; ") +
+                   "the recording goes on in a later scene (a load, reset or parameter change): "
+                   "re-simulated up to it";
 
   // What the loop applied, and the inputs themselves.
   struct Applied {
