@@ -1,6 +1,6 @@
 """The outside batteries (issues 22 and 40) at full length, against the built server; prints their figures.
 
-    .venv/bin/python tests/battery.py [--only slots,pings,inputs,kills,crowd,reload,threads,meshes] [--kills N]
+    .venv/bin/python tests/battery.py [--only slots,pings,inputs,kills,crowd,reload,fast,threads,meshes] [--kills N]
                                       [--flood-seconds S]
 
 - slots:  300 upgrades that never say Hello, renewed as the server closes them, while a device with the token
@@ -14,6 +14,9 @@
           how many were welcomed (target: all, while under max_connections) and what the others were told.
 - reload: a storm of 100 pages reloading at once (each reconnects 1 s after its close, as the page does): seconds
           until all are welcomed again (target: <= 3 s), and the connections refused or evicted on the way.
+- fast:   a device sending 10 000 inputs a second for 3 s (twice the 5000 messages a second a connection may
+          send): still connected (target: yes; before, cut off after 1.65 s); over the rate its inputs are
+          coalesced, the newest of each channel kept.
 - threads: two Python threads advancing one Simulation, 3 trials: faults (target: none).
 - meshes: peak memory of `tactile-sim check` on hostile mesh files (a few hundred bytes declaring 10^7-10^9
           items, PLY, STL, OFF, .node): its error and its peak RSS (target: <= 64 MB before the refusal).
@@ -194,6 +197,31 @@ def reload(tmp: pathlib.Path) -> None:
           f"{len(drops)} connections refused or dropped on the way")
 
 
+def fast(tmp: pathlib.Path) -> None:
+    with server_process(tmp, SCENE, TOKEN, file_name="scene.json") as (port, _):
+        s = upgrade(port)
+        s.sendall(frame(codec.encode(codec.make_hello(Role.Device, TOKEN, "fast", ["stylus"]))))
+        s.setblocking(False)
+        sent, cut, t0 = 0, "", time.monotonic()
+        while (now := time.monotonic()) - t0 < 3.0:
+            while sent < 10_000 * (now - t0):
+                try:
+                    s.sendall(frame(codec.encode(device_input(sent + 1, 0.03, 0.0, 0.0))))
+                except BlockingIOError:
+                    break
+                except OSError as e:
+                    cut = f"cut off after {now - t0:.2f} s: {e}"
+                    break
+                sent += 1
+            if cut or not still_open(s):
+                cut = cut or f"closed by the server after {time.monotonic() - t0:.2f} s"
+                break
+            time.sleep(0.0005)
+        rate = sent / (time.monotonic() - t0)
+        s.close()
+    print(f"fast: a device at {rate:.0f} inputs/s for 3 s ({sent} inputs): {cut or 'still connected'}")
+
+
 def threads() -> None:
     import threading
 
@@ -266,7 +294,7 @@ def meshes(tmp: pathlib.Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--only", default="slots,pings,inputs,kills,crowd,reload,threads,meshes")
+    ap.add_argument("--only", default="slots,pings,inputs,kills,crowd,reload,fast,threads,meshes")
     ap.add_argument("--kills", type=int, default=32)
     ap.add_argument("--flood-seconds", type=float, default=60.0)
     args = ap.parse_args()
@@ -275,7 +303,8 @@ def main() -> None:
         for what in args.only.split(","):
             {"slots": lambda: slots(tmp), "pings": lambda: pings(tmp, args.flood_seconds),
              "inputs": lambda: inputs(tmp), "kills": lambda: kills(tmp, args.kills), "crowd": lambda: crowd(tmp),
-             "reload": lambda: reload(tmp), "threads": threads, "meshes": lambda: meshes(tmp)}[what]()
+             "reload": lambda: reload(tmp), "fast": lambda: fast(tmp), "threads": threads,
+             "meshes": lambda: meshes(tmp)}[what]()
 
 
 if __name__ == "__main__":

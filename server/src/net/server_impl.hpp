@@ -265,6 +265,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       : server_(std::move(server)),
         ws_(std::move(socket)),
         hello_timer_(server_->ioc),
+        flush_timer_(server_->ioc),
         core_(*server_, limits(server_->options), loopback, std::move(address), next_id_++, SessionClock::now()) {}
 
   ~WsSession() {
@@ -363,6 +364,21 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     });
   }
 
+  // Inputs coalesced over the rate wait for a token (Session::flush).
+  void arm_flush_timer() {
+    if (!core_.flush_due() || flush_armed_) return;
+    flush_armed_ = true;
+    flush_timer_.expires_at(core_.flush_at());
+    flush_timer_.async_wait([weak = weak_from_this()](beast::error_code ec) {
+      auto self = weak.lock();
+      if (ec || !self) return;
+      self->flush_armed_ = false;
+      self->core_.flush(SessionClock::now());
+      self->arm_flush_timer();
+      self->pump();
+    });
+  }
+
   void read() {
     ws_.async_read(in_, [self = shared_from_this()](beast::error_code ec, size_t) {
       if (ec) {
@@ -374,6 +390,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       self->core_.receive({data, self->in_.size()}, self->ws_.got_binary(), SessionClock::now());
       self->in_.consume(self->in_.size());
       if (self->core_.greeted()) self->hello_timer_.cancel();
+      self->arm_flush_timer();
       self->pump();
       if (!self->core_.closed()) self->read();
     });
@@ -397,6 +414,8 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   websocket::stream<beast::tcp_stream> ws_;
   beast::flat_buffer in_;
   asio::steady_timer hello_timer_;
+  asio::steady_timer flush_timer_;
+  bool flush_armed_ = false;
   Session core_;
   static inline uint64_t next_id_ = 1;
 };

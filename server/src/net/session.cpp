@@ -50,18 +50,54 @@ Session::Session(SessionHost& host, const SessionLimits& limits, bool loopback, 
       // Full at the first message: a second's burst.
       messages_{limits.max_messages_per_s, 1e18, now},
       safety_{limits.max_safety_events_per_s, 1e18, now},
-      status_{10.0, 1e18, now} {}
+      status_{10.0, 1e18, now},
+      coalescing_{3 * limits.max_messages_per_s, 1e18, now} {}
 
 // ---- in ---------------------------------------------------------------------------------
 
 void Session::receive(std::span<const uint8_t> bytes, bool binary, SessionClock::time_point now) {
-  if (!messages_.take(now))
-    return refuse(wire::ErrorCode::RateLimited,
-                  "more than " + std::to_string(int64_t(limits_.max_messages_per_s)) + " messages per second");
+  const std::string over = "more than " + std::to_string(int64_t(limits_.max_messages_per_s)) + " messages per second";
+  if (!messages_.take(now)) {
+    // A device's inputs over the rate are coalesced (the latest of each
+    // channel waits for a token); anything else, or past the coalescing
+    // bucket, is a flood.
+    if (!(greeted_ && role_ == wire::Role::Device && binary && coalescing_.take(now)))
+      return refuse(wire::ErrorCode::RateLimited, over);
+    const Inbound inbound = read_inbound(bytes.data(), bytes.size());
+    const wire::DeviceInput* in = inbound ? inbound.envelope->message_as_DeviceInput() : nullptr;
+    if (!in) return refuse(wire::ErrorCode::RateLimited, over);
+    const std::string name = in->device() ? in->device()->str() : "";
+    const auto it = std::find(device_names_.begin(), device_names_.end(), name);
+    if (it == device_names_.end()) return;  // not its channel: nothing to keep (said when the rate allows)
+    std::vector<uint8_t>& slot = waiting_input_[size_t(it - device_names_.begin())];
+    if (slot.empty())
+      ++pending_inputs_;
+    else
+      ++inputs_coalesced_;
+    slot.assign(bytes.begin(), bytes.end());
+    return;
+  }
   if (!binary) return reply(wire::ErrorCode::Malformed, "text message: the protocol is binary FlatBuffers");
   const Inbound inbound = read_inbound(bytes.data(), bytes.size());
   if (!inbound) return reply(inbound.error, inbound.message);
   dispatch(*inbound.envelope, bytes, now);
+}
+
+SessionClock::time_point Session::flush_at() const {
+  // When the bucket has a token again.
+  const double wait = std::max(0.0, 1.0 - messages_.tokens) / messages_.rate + 1e-6;  // (past rounding)
+  return messages_.last + std::chrono::duration_cast<SessionClock::duration>(std::chrono::duration<double>(wait));
+}
+
+void Session::flush(SessionClock::time_point now) {
+  for (std::vector<uint8_t>& slot : waiting_input_) {
+    if (slot.empty() || closed_) continue;
+    if (!messages_.take(now)) return;
+    const std::vector<uint8_t> bytes = std::move(slot);
+    slot.clear();
+    --pending_inputs_;
+    on_input(*wire::GetEnvelope(bytes.data())->message_as_DeviceInput(), bytes);  // (verified when it came)
+  }
 }
 
 void Session::hello_timed_out() {
@@ -153,6 +189,7 @@ void Session::on_hello(const wire::Hello& h) {
                                                    "' is driven by another device (connection " +
                                                    std::to_string(other) + ")");
         device_names_.push_back(d->str());
+        waiting_input_.emplace_back();
         DeviceDrive drive;
         if (h.device_limits() && h.device_limits()->size() > drives_.size()) {
           const wire::DeviceLimits& l = *h.device_limits()->Get(uint32_t(drives_.size()));
@@ -212,6 +249,11 @@ void Session::on_input(const wire::DeviceInput& in, std::span<const uint8_t> raw
     return reply(wire::ErrorCode::BadRequest,
                  "DeviceInput for channel '" + name + "', which this connection did not name in its Hello");
   const size_t k = size_t(it - device_names_.begin());
+  if (!waiting_input_[k].empty()) {  // an older one coalesced over the rate: this one is newer
+    waiting_input_[k].clear();
+    --pending_inputs_;
+    ++inputs_coalesced_;
+  }
   if (devices_[k] < 0) return;  // not in this scene (said at the switch)
   if (const std::string bad = check_device_input(in); !bad.empty()) return reply(wire::ErrorCode::BadRequest, bad);
   // Outside the workspace the loop holds the proxy at the edge; said once per excursion.

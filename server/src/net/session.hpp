@@ -5,7 +5,11 @@
 //
 // The rules, in the order a message meets them:
 //   - a token bucket of max_messages_per_s (a second's burst): over it, an
-//     Error RateLimited and the connection closes;
+//     Error RateLimited and the connection closes; except a greeted
+//     device's DeviceInputs, which over it are coalesced, up to three times
+//     the rate more: the latest of each channel waits and is taken when a
+//     token comes (flush()), older ones are dropped and counted (a 10 kHz
+//     device is served at the rate, its newest pose never lost);
 //   - a text message is answered Malformed (the protocol is binary);
 //   - the bytes are verified (net/inbound.hpp): Malformed or UnknownMessage;
 //   - before Hello only Hello and Ping are taken (WrongRole and closed);
@@ -106,6 +110,11 @@ class Session {
   // ---- in: what the client sent, and the hello timer ----
   void receive(std::span<const uint8_t> bytes, bool binary, SessionClock::time_point now);
   void hello_timed_out();  // no Hello within the hello timeout: refused
+  // Inputs coalesced over the rate wait: the shell calls flush() at
+  // flush_at() (or later), which takes them if the bucket has a token.
+  bool flush_due() const { return pending_inputs_ > 0; }
+  SessionClock::time_point flush_at() const;
+  void flush(SessionClock::time_point now);
 
   // ---- out: what to write, and whether to close ----
   // Queues a message under `kind`'s rule (OutKind).
@@ -145,6 +154,7 @@ class Session {
   int64_t haptics_dropped() const { return haptics_dropped_; }
   int64_t events_dropped() const { return events_dropped_; }
   int64_t safety_dropped() const { return safety_dropped_; }
+  int64_t inputs_coalesced() const { return inputs_coalesced_; }  // dropped for a newer one over the rate
 
  private:
   void dispatch(const proto::Envelope& e, std::span<const uint8_t> raw, SessionClock::time_point now);
@@ -187,6 +197,11 @@ class Session {
     bool take(SessionClock::time_point now);  // refills at `rate` up to a second's burst, then takes one
   };
   Bucket messages_, safety_, status_;
+  Bucket coalescing_;  // DeviceInputs over messages_' rate: coalesced within it, a flood past it
+  // Per channel named in Hello: its latest input over the rate, waiting (empty: none).
+  std::vector<std::vector<uint8_t>> waiting_input_;
+  size_t pending_inputs_ = 0;
+  int64_t inputs_coalesced_ = 0;
   bool safety_limited_ = false;
   int64_t safety_dropped_ = 0;
 };

@@ -341,6 +341,47 @@ TEST(SessionInbound, MessagesOverTheRateAreRefusedAndClose) {
   EXPECT_TRUE(c.session.close_after_write());
 }
 
+// A 10 kHz device against a rate of 5000 messages a second: before, cut
+// off after 1.65 s. Now its inputs over the rate are coalesced (the latest
+// of its channel waits for a token), and its newest pose is never lost.
+TEST(SessionInbound, ADevicesInputsOverTheRateAreCoalescedNotRefused) {
+  SessionLimits l = Client::with_token();
+  l.max_messages_per_s = 400;
+  Client c(true, l);
+  const FakeHost& host = c.host;
+  c.receive(hello({.role = Role::Device, .devices = {"stylus"}}), t0);
+  c.drain();
+  // Two seconds at 1 kHz against 400 a second (2.5 times the rate, as 10 kHz against the default 5000 is 2).
+  for (int k = 0; k < 2000; ++k) {
+    const SessionClock::time_point now = t0 + k * 1ms;
+    if (c.session.flush_due() && c.session.flush_at() <= now) c.session.flush(now);
+    c.receive(input("stylus", 1e-4 * k), now);
+  }
+  EXPECT_FALSE(c.session.close_after_write());
+  EXPECT_TRUE(c.drain().empty());
+  // The last input waits; a flush at its time takes it.
+  ASSERT_TRUE(c.session.flush_due());
+  c.session.flush(c.session.flush_at());
+  EXPECT_FALSE(c.session.flush_due());
+  ASSERT_FALSE(host.inputs.empty());
+  EXPECT_DOUBLE_EQ(host.inputs.back().pose.position.x, 1e-4 * 1999);
+  EXPECT_NEAR(double(host.inputs.size()), 400 + 2 * 400, 20);  // the burst and the rate over two seconds
+  EXPECT_EQ(int64_t(host.inputs.size()) + c.session.inputs_coalesced(), 2000);
+}
+
+TEST(SessionInbound, PastThreeTimesTheRateEvenInputsAreAFlood) {
+  SessionLimits l = Client::with_token();
+  l.max_messages_per_s = 10;
+  Client c(true, l);
+  c.receive(hello({.role = Role::Device, .devices = {"stylus"}}), t0);
+  c.drain();
+  for (int k = 0; k < 9 + 30; ++k) c.receive(input("stylus"), t0);  // the burst, then three times more
+  EXPECT_FALSE(c.session.close_after_write());
+  c.receive(input("stylus"), t0);
+  expect_error(c, ErrorCode::RateLimited, "more than 10 messages per second");
+  EXPECT_TRUE(c.session.close_after_write());
+}
+
 TEST(SessionInbound, TheBucketRefillsAtItsRate) {
   SessionLimits l = Client::with_token();
   l.max_messages_per_s = 10;
