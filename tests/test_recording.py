@@ -44,8 +44,7 @@ from tactile_proto.generated.StartRecording import StartRecordingT
 from tactile_proto.generated.StopRecording import StopRecordingT
 from tactile_proto.recording import TOPICS, open_recording
 from test_scenes_schema import built
-from test_server import (READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, set_parameter,
-                         url)
+from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, set_parameter, url
 
 
 def start(name: str, request_id: int = 1) -> Any:
