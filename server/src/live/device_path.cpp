@@ -73,21 +73,66 @@ DevicePath::Lead DevicePath::lead(double t) const {
   return {anchor_lead_ + drift * s + x, drift + v};
 }
 
+// Whether the device's stamps are a clock: judged at the first input of
+// each loop step, by the inputs of the steps before (a burst of late inputs
+// is judged once it is whole). A clock that ran less than kSlowestClock of
+// the loop's time over kClockWindow (stamps microseconds apart for inputs a
+// millisecond apart), or that stepped back kBackwards times, is not one:
+// its inputs are timed by the loop's time at which they are applied.
+// (Interpolating stamps a microsecond apart, the path raced through a
+// millisecond of motion per microsecond played and overshot the device by
+// what the loop's speed limit let through.)
+void DevicePath::judge_clock(double device_s, double t) {
+  if (count_ == 0 || arrival_) return;
+  if (device_s < sample(0).device_s) ++backwards_;
+  if (t > last_t_) {
+    const double span = last_t_ - window_t_;
+    if (span >= kClockWindow) {
+      if (sample(0).device_s - window_s_ < kSlowestClock * span) arrival_ = true;
+      window_t_ = last_t_;
+      window_s_ = sample(0).device_s;
+    }
+  }
+  if (backwards_ >= kBackwards) arrival_ = true;
+  if (arrival_) count_ = 0;  // a new path, on the loop's time
+}
+
 bool DevicePath::add(double device_s, const Pose& pose, double t) {
+  judge_clock(device_s, t);
+  last_t_ = t;
+  if (arrival_) {
+    // On the loop's time: a second input of one step is where the device is now.
+    if (count_ > 0 && t <= sample(0).device_s) {
+      ring_[(count_ - 1) % ring_.size()].pose = pose;
+      return false;
+    }
+    device_s = t;
+  }
   const double lag = t - device_s;
   // (The anchor never moves back: an input applied at an earlier time than
   // the one before would let the lead jump by the slew over the difference.)
   const double anchor_t = count_ > 0 ? std::max(t, anchor_t_) : t;
   const Lead now = count_ > 0 ? lead(anchor_t) : Lead{0.0, 0.0};
   bool first = false;
-  if (count_ == 0 || std::fabs(device_s - sample(0).device_s) > kPause) {
-    count_ = 0;  // a new path: the first input, or one after a pause (or a device that restarted its clock)
+  // A new path: the first input, one after a pause, or one stamped before the
+  // newest (a device whose clock restarted, or one that runs backwards: its
+  // stamps order nothing, so each such input is where the device is now).
+  if (count_ == 0 || device_s - sample(0).device_s > kPause || device_s < sample(0).device_s) {
+    if (count_ > 0 && device_s - sample(0).device_s > kPause) {  // after a pause: judged again
+      arrival_ = false;
+      backwards_ = 0;
+    }
+    count_ = 0;
     offset_ = lag;
     jitter_ = 0;
     first = true;
+    if (!arrival_) {
+      window_t_ = t;
+      window_s_ = device_s;
+    }
   } else {
     const double gap = device_s - sample(0).device_s;
-    if (!(gap > 0)) return false;  // no later than the newest: nothing new on the path
+    if (!(gap > 0)) return false;  // stamped as the newest (a repeat): nothing new on the path
     offset_ += kDrift * gap;
     jitter_ *= std::exp(-gap / kJitterMemory);
     if (lag < offset_ - kStall) {

@@ -49,15 +49,24 @@ class DevicePath {
   // by 1 m/s^2 at most, which a 10 g proxy follows with 0.01 N. Guarded by
   // bridge_bench.py loop --cases free,default --loaded (docs/perf.md).
   static constexpr double kLeadAccel = 2.0;
+  // A device's stamps are judged as a clock over this much of the loop's
+  // time [s]; one that ran less than kSlowestClock of it, or that stepped
+  // back kBackwards times, is not a clock: its inputs are timed by when the
+  // loop applies them (judge_clock()).
+  static constexpr double kClockWindow = 0.05;
+  static constexpr double kSlowestClock = 0.25;
+  static constexpr int kBackwards = 3;
 
   // An input taken at device time `device_s` [s], applied at loop time `t` [s].
-  // Returns true when it starts a new path (the first, after a pause, or
-  // after the loop's time stood still for a while: its path jumped ahead).
+  // Returns true when it starts a new path (the first, after a pause, one
+  // stamped before the newest, or after the loop's time stood still for a
+  // while: its path jumped ahead).
   bool add(double device_s, const Pose& pose, double t);
   bool empty() const { return count_ == 0; }
   // The device's pose on the path at loop time t.
   Pose at(double t) const;
-  double delay() const { return jitter_; }  // [s]
+  double delay() const { return jitter_; }        // [s]
+  bool on_loop_time() const { return arrival_; }  // the device's stamps were judged no clock
 
  private:
   struct Sample {
@@ -74,8 +83,13 @@ class DevicePath {
     double lead, rate;
   };
   Lead lead(double t) const;
-  double offset_ = 0;                                        // loop time minus device time, the smallest lately [s]
-  double jitter_ = 0;                                        // how much later than that inputs come [s]
+  void judge_clock(double device_s, double t);
+  bool arrival_ = false;                // inputs timed by the loop's time (the stamps are no clock)
+  int backwards_ = 0;                   // inputs stamped before the newest, on this clock
+  double last_t_ = 0;                   // the loop's time of the latest input [s]
+  double window_t_ = 0, window_s_ = 0;  // where the clock's judging window began: loop, device time [s]
+  double offset_ = 0;                   // loop time minus device time, the smallest lately [s]
+  double jitter_ = 0;                   // how much later than that inputs come [s]
   double anchor_t_ = 0, anchor_lead_ = 0, anchor_rate_ = 0;  // the lead at the latest input [s], [s/s]
   double target_rate_ = 0;                                   // the target's drift, smoothed [s/s]
   double drift_t_ = 0, drift_target_ = 0;                    // the target when the drift was last taken [s]

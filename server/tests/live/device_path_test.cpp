@@ -113,6 +113,60 @@ TEST(DevicePath, AStallStartsANewPathAndASilentDeviceComesToRestNearWhereItSaidI
   }
 }
 
+// A device whose clock runs backwards (each 1 kHz input stamped 1 ms before the one before) while it moves at
+// 0.1 m/s: each input stamped before the newest starts a new path where the device says it is, and after
+// kBackwards of them its inputs are timed by the loop: the path follows it. Before: every input stamped before the
+// newest was ignored until one was 0.1 s away, the path standing still up to 94 ms while its inputs were taken.
+TEST(DevicePath, ADeviceClockRunningBackwardsStillMovesThePath) {
+  DevicePath path;
+  const double v = 0.1;
+  double worst_behind = 0;
+  for (int k = 0; k < 200; ++k) {
+    const double t = 1e-3 * k;
+    path.add(1.0 - 1e-3 * k, at_x(v * t), t);
+    worst_behind = std::max(worst_behind, v * t - path.at(t + 0.5e-3).position.x);
+  }
+  EXPECT_LT(worst_behind, 1e-12) << "the path stood still behind the device";
+  EXPECT_TRUE(path.on_loop_time());
+}
+
+// A device whose stamps are microseconds apart for inputs a millisecond of motion apart (1 kHz, 0.5 m/s): once
+// its clock has been judged (kClockWindow), the path follows its inputs on the loop's time, never past the newest
+// pose sent by more than a millisecond of its motion. Before: the path raced through a millisecond of motion per
+// microsecond played and overshot every pose sent by what the loop's speed limit let through (25-33 mm).
+TEST(DevicePath, StampsMicrosecondsApartForMillisecondsOfMotionDoNotOvershoot) {
+  DevicePath path;
+  const double v = 0.5;
+  double worst_ahead = 0, worst_behind = 0;
+  for (double t = 0.0; t < 0.3; t += 1e-4) {
+    const int k = int(std::floor(t * 1e3 + 1e-9));
+    if (std::fabs(t - 1e-3 * k) < 5e-5) path.add(1e-6 * k, at_x(v * 1e-3 * k), t);  // input k at k ms
+    if (t < DevicePath::kClockWindow + 0.01) continue;
+    const double x = path.at(t).position.x, newest = v * 1e-3 * k;
+    worst_ahead = std::max(worst_ahead, x - newest);
+    worst_behind = std::max(worst_behind, newest - x);
+  }
+  std::printf("  past the judging: at most %.3f mm ahead of and %.3f mm behind the newest pose sent\n",
+              1e3 * worst_ahead, 1e3 * worst_behind);
+  EXPECT_TRUE(path.on_loop_time());
+  EXPECT_LE(worst_ahead, v * 1e-3 * 1.01);
+  EXPECT_LE(worst_behind, v * 1e-3 * 1.01);
+}
+
+// A device whose inputs stop for 40 ms and then come all at once (a stalled network) keeps its clock: the burst
+// is judged once it is whole.
+TEST(DevicePath, ABurstOfLateInputsLeavesTheClockTrusted) {
+  DevicePath path;
+  int k = 1;
+  for (double t = 0.0; t < 0.3; t += 1e-4) {
+    while (1e-3 * k <= t && !(k >= 100 && k <= 140 && t < 0.1405)) {
+      path.add(1e-3 * k, at_x(0.5e-3 * k), t);
+      ++k;
+    }
+  }
+  EXPECT_FALSE(path.on_loop_time());
+}
+
 // A device moving at 0.5 m/s whose inputs stop for 8 ms (a loaded host) and then come all at once: its path
 // goes on at its speed through the gap and after, within the lead's slew, its speed changing smoothly as the lead makes
 // room for the lateness seen (a coupled proxy's damper answers a change of the path's velocity, 0.5 m/s in one step,
