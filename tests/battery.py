@@ -1,7 +1,7 @@
 """The outside batteries (issues 22 and 40) at full length, against the built server; prints their figures.
 
-    .venv/bin/python tests/battery.py [--only slots,pings,inputs,kills,crowd,reload,fast,threads,meshes] [--kills N]
-                                      [--flood-seconds S]
+    .venv/bin/python tests/battery.py [--only slots,pings,inputs,kills,crowd,reload,fast,clocks,threads,meshes]
+                                      [--kills N] [--flood-seconds S]
 
 - slots:  300 upgrades that never say Hello, renewed as the server closes them, while a device with the token
           connects and says Hello 20 times: how long each waited, and how many were refused (target: none).
@@ -17,6 +17,11 @@
 - fast:   a device sending 10 000 inputs a second for 3 s (twice the 5000 messages a second a connection may
           send): still connected (target: yes; before, cut off after 1.65 s); over the rate its inputs are
           coalesced, the newest of each channel kept.
+- clocks: a device moving at 0.1 m/s sends 1 kHz inputs stamped by a sane clock, by one whose stamps are 1 us
+          apart, and by one that runs backwards: how far the server's device pose (StateFrame.device_poses) ran
+          ahead of and behind the newest pose sent, after the first 0.3 s and within it (target: no overshoot;
+          before, 25-33 mm ahead for the 1 us stamps, and standing still up to 94 ms for the backwards clock). A
+          device that stops comes to rest a little past its last pose by design (speed x 20 ms at most).
 - threads: two Python threads advancing one Simulation, 3 trials: faults (target: none).
 - meshes: peak memory of `tactile-sim check` on hostile mesh files (a few hundred bytes declaring 10^7-10^9
           items, PLY, STL, OFF, .node): its error and its peak RSS (target: <= 64 MB before the refusal).
@@ -222,6 +227,51 @@ def fast(tmp: pathlib.Path) -> None:
     print(f"fast: a device at {rate:.0f} inputs/s for 3 s ({sent} inputs): {cut or 'still connected'}")
 
 
+def clocks(tmp: pathlib.Path) -> None:
+    from tactile_proto.generated.StateFrame import StateFrameT
+
+    async def run(port: int, stamp: str) -> tuple[float, float, float]:
+        sent: list[tuple[float, float]] = []  # (monotonic time, x) of each input
+        seen: list[tuple[float, float]] = []  # (monotonic time, device pose x) of each state frame
+        async with websockets.connect(url(port), max_queue=None) as dev, \
+                websockets.connect(url(port), max_queue=None) as viewer:
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            await hello(viewer, Role.Viewer)
+
+            async def watch() -> None:
+                while True:
+                    m = codec.decode(await viewer.recv()).message
+                    if isinstance(m, StateFrameT) and m.devicePoses:
+                        seen.append((time.monotonic(), m.devicePoses[0].position.x))
+
+            watcher = asyncio.create_task(watch())
+            t0, base = time.monotonic(), time.monotonic_ns()
+            for k in range(1000):
+                x = 1e-4 * k  # 0.1 m/s at 1 kHz, from above the proxy's rest (x = 0)
+                d = device_input(k + 1, 0.06, x)
+                d.deviceTimeNs = {"sane": time.monotonic_ns(), "1 us apart": base + 1000 * k,
+                                  "backwards": base - 1_000_000 * k}[stamp]
+                await dev.send(codec.encode(d))
+                sent.append((time.monotonic(), x))
+                await asyncio.sleep(max(0.0, t0 + 1e-3 * (k + 1) - time.monotonic()))
+            await asyncio.sleep(0.2)
+            watcher.cancel()
+        ahead = behind = early = 0.0
+        for when, x in seen:
+            newest = max((xs for ts, xs in sent if ts <= when), default=0.0)
+            if when < t0 + 0.3:  # (a clock is judged over its first 50 ms: what it did then glides away)
+                early = max(early, x - newest)
+                continue
+            ahead, behind = max(ahead, x - newest), max(behind, newest - x)
+        return ahead, behind, early
+
+    for stamp in ("sane", "1 us apart", "backwards"):  # each on a server of its own, the proxy at its rest
+        with server_process(tmp, SCENE, TOKEN, file_name="scene.json") as (port, _):
+            ahead, behind, early = asyncio.run(run(port, stamp))
+        print(f"clocks: stamps {stamp}: after 0.3 s the device pose at most {1e3 * ahead:.1f} mm ahead of and "
+              f"{1e3 * behind:.1f} mm behind the newest pose sent (in the first 0.3 s: {1e3 * early:.1f} mm ahead)")
+
+
 def threads() -> None:
     import threading
 
@@ -294,7 +344,7 @@ def meshes(tmp: pathlib.Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--only", default="slots,pings,inputs,kills,crowd,reload,fast,threads,meshes")
+    ap.add_argument("--only", default="slots,pings,inputs,kills,crowd,reload,fast,clocks,threads,meshes")
     ap.add_argument("--kills", type=int, default=32)
     ap.add_argument("--flood-seconds", type=float, default=60.0)
     args = ap.parse_args()
@@ -303,8 +353,8 @@ def main() -> None:
         for what in args.only.split(","):
             {"slots": lambda: slots(tmp), "pings": lambda: pings(tmp, args.flood_seconds),
              "inputs": lambda: inputs(tmp), "kills": lambda: kills(tmp, args.kills), "crowd": lambda: crowd(tmp),
-             "reload": lambda: reload(tmp), "fast": lambda: fast(tmp), "threads": threads,
-             "meshes": lambda: meshes(tmp)}[what]()
+             "reload": lambda: reload(tmp), "fast": lambda: fast(tmp), "clocks": lambda: clocks(tmp),
+             "threads": threads, "meshes": lambda: meshes(tmp)}[what]()
 
 
 if __name__ == "__main__":

@@ -53,7 +53,7 @@ class DevicePath {
   // time [s]; one that ran less than kSlowestClock of it, or that stepped
   // back kBackwards times, is not a clock: its inputs are timed by when the
   // loop applies them (judge_clock()).
-  static constexpr double kClockWindow = 0.05;
+  static constexpr double kClockWindow = 0.02;
   static constexpr double kSlowestClock = 0.25;
   static constexpr int kBackwards = 3;
 
