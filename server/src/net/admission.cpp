@@ -15,9 +15,8 @@ std::string seconds(double s) {
 
 }  // namespace
 
-Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted, std::string_view address,
-                           SessionClock::time_point now, const AdmissionLimits& limits) {
-  (void)address;  // who asks does not change the verdict: every address is served alike
+Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted, SessionClock::time_point now,
+                           const AdmissionLimits& limits) {
   Admission a;
   if (greeted >= limits.max_connections) {
     a.reason = "server full: " + std::to_string(greeted) + " connections (max_connections); try again later";

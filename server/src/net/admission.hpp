@@ -49,10 +49,11 @@ struct Admission {
   std::string reason;  // why the newcomer is refused, or why `evict` is closed
 };
 
-// The verdict on a newcomer from `address`, given the connections waiting
-// and the number greeted (open, not closing).
-Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted, std::string_view address,
-                           SessionClock::time_point now, const AdmissionLimits& limits);
+// The verdict on a newcomer, given the connections waiting and the number
+// greeted (open, not closing). Where it comes from changes nothing: every
+// address is served alike, and only the waiting are weighed by address.
+Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted, SessionClock::time_point now,
+                           const AdmissionLimits& limits);
 
 // A log line at most once per `period_s`; the lines held back in between are
 // counted, for the next line to say.

@@ -99,8 +99,8 @@ Admission Server::Impl::admit(const std::string& address) {
     if (s->core().greeted() && !s->core().closed()) ++greeted;
     if (s->core().waiting()) waiting.push_back({s->core().id(), s->core().address(), s->core().since()});
   }
-  Admission a = decide_admission(waiting, greeted, address, now,
-                                 {options.max_connections, options.max_waiting, options.hello_grace_s});
+  Admission a =
+      decide_admission(waiting, greeted, now, {options.max_connections, options.max_waiting, options.hello_grace_s});
   if (a.evict)
     for (WsSession* s : sessions)
       if (s->core().id() == a.evict) {
