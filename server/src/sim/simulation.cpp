@@ -5,26 +5,17 @@
 #include <stdexcept>
 #include <utility>
 
+#include "core/carry.hpp"
 #include "core/model.hpp"
 
 #include "parallel/thread_pool.hpp"
 
 namespace tactile {
 
-// What continue_from carries from one engine to another, in double.
-struct Carry {
-  std::vector<double> u, v;
-  double t = 0;
-  int64_t step = 0;
-  double work_loads = 0, work_essential = 0, work_contact = 0, dissipated = 0;
-  std::vector<ProxyMotion> proxy, hand;
-  std::vector<CoupledBodyState> bodies;
-};
-
 struct Simulation::Engine {
   virtual ~Engine() = default;
-  virtual Carry carry_out() const = 0;
-  virtual void carry_in(const Carry& c) = 0;
+  virtual Carried carry_out() const = 0;
+  virtual void carry_in(const Carried& c) = 0;
   virtual void set_initial_state(const std::vector<double>& u, const std::vector<double>& v) = 0;
   virtual const TetMesh& mesh() const = 0;
   virtual int32_t n_nodes() const = 0;
@@ -78,29 +69,8 @@ class EngineOf final : public Simulation::Engine {
         state_(stepper_.make_state()),
         node_model_(model_->node_model) {}
 
-  Carry carry_out() const override {
-    // In the mesh's own node numbering: another model of it may number its
-    // nodes otherwise (build_model orders them by its element blocks).
-    Carry c;
-    c.u.resize(state_.u.size());
-    c.v.resize(state_.v.size());
-    for (size_t i = 0; i < model_->node_given.size(); ++i)
-      for (size_t d = 0; d < 3; ++d) {
-        c.u[3 * size_t(model_->node_given[i]) + d] = double(state_.u[3 * i + d]);
-        c.v[3 * size_t(model_->node_given[i]) + d] = double(state_.v[3 * i + d]);
-      }
-    c.t = state_.t;
-    c.step = state_.step;
-    c.work_loads = state_.work_loads;
-    c.work_essential = state_.work_essential;
-    c.work_contact = state_.work_contact;
-    c.dissipated = state_.dissipated;
-    c.proxy = state_.contact.motion;
-    c.hand = state_.contact.hand_motion;
-    c.bodies = state_.contact.bodies;
-    return c;
-  }
-  void carry_in(const Carry& c) override {
+  Carried carry_out() const override { return tactile::carry_out(state_, model_->node_given); }
+  void carry_in(const Carried& c) override {
     if (c.u.size() != state_.u.size() || c.proxy.size() != model_->proxies.size() ||
         c.hand.size() != model_->hands.size())
       throw std::invalid_argument("continue_from: the other simulation has " + std::to_string(c.u.size() / 3) +
@@ -108,19 +78,7 @@ class EngineOf final : public Simulation::Engine {
                                   std::to_string(c.hand.size()) + " hands; this one " +
                                   std::to_string(state_.u.size() / 3) + ", " + std::to_string(model_->proxies.size()) +
                                   " and " + std::to_string(model_->hands.size()));
-    for (size_t i = 0; i < model_->node_given.size(); ++i)
-      for (size_t d = 0; d < 3; ++d) {
-        state_.u[3 * i + d] = Real(c.u[3 * size_t(model_->node_given[i]) + d]);
-        state_.v[3 * i + d] = Real(c.v[3 * size_t(model_->node_given[i]) + d]);
-      }
-    state_.t = c.t;
-    state_.step = c.step;
-    state_.work_loads = c.work_loads;
-    state_.work_essential = c.work_essential;
-    state_.work_contact = c.work_contact;
-    state_.dissipated = c.dissipated;
-    state_.contact.hand_motion = c.hand;
-    state_.contact.motion = c.proxy;
+    tactile::carry_in(c, model_->node_given, state_);
     stepper_.contact().take_bodies(state_, c.bodies);
   }
 
