@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 #include <utility>
+#include <variant>
 
 #include "core/carry.hpp"
 #include "core/model.hpp"
@@ -12,195 +13,57 @@
 
 namespace tactile {
 
-struct Simulation::Engine {
-  virtual ~Engine() = default;
-  virtual Carried carry_out() const = 0;
-  virtual void carry_in(const Carried& c) = 0;
-  virtual void set_initial_state(const std::vector<double>& u, const std::vector<double>& v) = 0;
-  virtual const TetMesh& mesh() const = 0;
-  virtual int32_t n_nodes() const = 0;
-  virtual int32_t n_tets() const = 0;
-  virtual double total_mass() const = 0;
-  virtual const std::vector<double>& tet_volume() const = 0;
-  virtual double dt_rest() const = 0;
-  virtual int32_t parts() const = 0;
-  virtual double time() const = 0;
-  virtual int64_t steps() const = 0;
-  virtual AdvanceReport advance(double frame_dt, const std::function<bool()>& interrupt) = 0;
-  virtual double compute_critical_dt() const = 0;
-  virtual const Energy& energy() const = 0;
-  virtual Energy compute_energy() const = 0;
-  virtual std::vector<double> compute_element_energy() const = 0;
-  virtual ElementFields compute_element_fields(const ElementFieldRequest& ask, std::span<const int32_t> tets) const = 0;
-  virtual std::vector<uint8_t> node_constraint() const = 0;
-  virtual void track_contact_forces(bool on) = 0;
-  virtual double take_contact_impulses(std::vector<double>& impulse) = 0;
-  virtual void copy_displacement(std::vector<double>& u) const = 0;
-  virtual void copy_velocity(std::vector<double>& v) const = 0;
-  virtual Vec3 displacement(int32_t node) const = 0;
-  virtual void gather(std::span<const uint32_t> nodes, float* positions, float* norm) const = 0;
-  virtual const std::vector<ProxySpec>& proxies() const = 0;
-  virtual const std::vector<HandSpec>& hands() const = 0;
-  virtual const std::vector<std::string>& devices() const = 0;
-  virtual const std::vector<int32_t>& proxy_device() const = 0;
-  virtual void set_proxy_motion(int32_t proxy, const ProxyMotion& m) = 0;
-  virtual void set_hand_motion(int32_t hand, const ProxyMotion& m) = 0;
-  virtual Pose proxy_pose(int32_t proxy) const = 0;
-  virtual Pose hand_pose(int32_t hand) const = 0;
-  virtual void couple_device(int32_t device, const DeviceLimits* limits) = 0;
-  virtual void release_device(int32_t device) = 0;
-  virtual bool device_coupled(int32_t device) const = 0;
-  virtual const std::vector<ProxyReport>& proxy_reports() const = 0;
-  virtual const std::vector<DeviceReport>& device_reports() const = 0;
-  virtual void clear_impulses() = 0;
-  virtual const Fault& fault() const = 0;
-  virtual void set_probe(StepProbe* probe) = 0;
-};
-
 namespace {
 
+// The precision-specific part: a model, its stepper and its state, of one
+// scalar type. Plain members: each Simulation accessor below reads them
+// directly through visit(), one place per accessor.
 template <class Real>
-class EngineOf final : public Simulation::Engine {
- public:
-  EngineOf(const ModelSpec& spec, ParallelFor* pool)
-      : mesh_(spec.mesh),
-        model_(std::make_unique<Model<Real>>(build_model<Real>(spec))),
-        stepper_(*model_, pool),
-        state_(stepper_.make_state()),
-        node_model_(model_->node_model) {}
+struct Body {
+  Body(const ModelSpec& spec, ParallelFor* pool)
+      : mesh(spec.mesh),
+        model(std::make_unique<Model<Real>>(build_model<Real>(spec))),
+        stepper(*model, pool),
+        state(stepper.make_state()) {}
 
-  Carried carry_out() const override { return tactile::carry_out(state_, model_->node_given); }
-  void carry_in(const Carried& c) override {
-    if (c.u.size() != state_.u.size() || c.proxy.size() != model_->proxies.size() ||
-        c.hand.size() != model_->hands.size())
-      throw std::invalid_argument("continue_from: the other simulation has " + std::to_string(c.u.size() / 3) +
-                                  " nodes, " + std::to_string(c.proxy.size()) + " proxies and " +
-                                  std::to_string(c.hand.size()) + " hands; this one " +
-                                  std::to_string(state_.u.size() / 3) + ", " + std::to_string(model_->proxies.size()) +
-                                  " and " + std::to_string(model_->hands.size()));
-    tactile::carry_in(c, model_->node_given, state_);
-    stepper_.contact().take_bodies(state_, c.bodies);
-  }
-
-  void set_initial_state(const std::vector<double>& u, const std::vector<double>& v) override {
-    if (state_.step != 0)
-      throw std::logic_error("set_initial_state: the simulation has taken " + std::to_string(state_.step) +
-                             " steps; an initial state is set before the first");
-    if (u.size() != state_.u.size() || v.size() != state_.v.size())
-      throw std::invalid_argument("set_initial_state: " + std::to_string(u.size() / 3) + " displacements and " +
-                                  std::to_string(v.size() / 3) + " velocities for " +
-                                  std::to_string(state_.u.size() / 3) + " nodes");
-    for (size_t k = 0; k < u.size(); ++k)
-      if (!std::isfinite(u[k]) || !std::isfinite(v[k]))
-        throw std::invalid_argument("set_initial_state: node " + std::to_string(k / 3) + " has a non-finite value");
-    for (size_t g = 0; g < node_model_.size(); ++g)
-      for (size_t d = 0; d < 3; ++d) {
-        state_.u[3 * size_t(node_model_[g]) + d] = Real(u[3 * g + d]);
-        state_.v[3 * size_t(node_model_[g]) + d] = Real(v[3 * g + d]);
-      }
-  }
-
-  const TetMesh& mesh() const override { return mesh_; }
-  int32_t n_nodes() const override { return model_->n_nodes; }
-  int32_t n_tets() const override { return model_->n_tets; }
-  double total_mass() const override { return model_->total_mass; }
-  const std::vector<double>& tet_volume() const override { return model_->tet_volume; }
-  double dt_rest() const override { return model_->dt_rest; }
-  int32_t parts() const override { return stepper_.parts(); }
-  double time() const override { return state_.t; }
-  int64_t steps() const override { return state_.step; }
-  AdvanceReport advance(double frame_dt, const std::function<bool()>& interrupt) override {
-    return stepper_.advance(state_, frame_dt, interrupt);
-  }
-  double compute_critical_dt() const override { return stepper_.compute_critical_dt(state_); }
-  const Energy& energy() const override { return state_.energy.latest; }
-  Energy compute_energy() const override { return stepper_.compute_energy(state_); }
-  std::vector<double> compute_element_energy() const override { return stepper_.compute_element_energy(state_); }
-  ElementFields compute_element_fields(const ElementFieldRequest& ask, std::span<const int32_t> tets) const override {
-    return tactile::compute_element_fields(*model_, state_, ask, tets);
-  }
-  std::vector<uint8_t> node_constraint() const override {
-    std::vector<uint8_t> out(size_t(model_->n_nodes), 0);
-    for (const EssentialSet& set : model_->essential)
-      for (int32_t i : set.nodes) {
-        uint8_t& c = out[size_t(model_->node_given[size_t(i)])];
-        c = std::max<uint8_t>(c, set.moving ? 2 : 1);
-      }
-    return out;
-  }
-  void track_contact_forces(bool on) override { stepper_.contact().track_node_impulses(state_, on); }
-  double take_contact_impulses(std::vector<double>& impulse) override {
-    impulses_.assign(state_.u.size(), 0.0);
-    const double span = stepper_.contact().take_node_impulses(state_, impulses_);
-    copy_given(impulses_.data(), impulse);
-    return span;
-  }
-  void copy_displacement(std::vector<double>& u) const override { copy_given(state_.u.data(), u); }
-  void copy_velocity(std::vector<double>& v) const override { copy_given(state_.v.data(), v); }
-  Vec3 displacement(int32_t node) const override {
-    const size_t j = 3 * size_t(node_model_.at(size_t(node)));
-    return {double(state_.u[j]), double(state_.u[j + 1]), double(state_.u[j + 2])};
-  }
-  void gather(std::span<const uint32_t> nodes, float* positions, float* norm) const override {
-    const std::vector<Vec3>& X = mesh_.X;
-    const Real* u = state_.u.data();
-    for (size_t k = 0; k < nodes.size(); ++k) {
-      const size_t g = nodes[k], i = size_t(node_model_[g]);
-      const double ux = double(u[3 * i]), uy = double(u[3 * i + 1]), uz = double(u[3 * i + 2]);
-      positions[3 * k] = float(X[g].x + ux);
-      positions[3 * k + 1] = float(X[g].y + uy);
-      positions[3 * k + 2] = float(X[g].z + uz);
-      if (norm) norm[k] = float(std::sqrt(ux * ux + uy * uy + uz * uz));
-    }
-  }
-  const std::vector<ProxySpec>& proxies() const override { return model_->proxies; }
-  const std::vector<HandSpec>& hands() const override { return model_->hands; }
-  const std::vector<std::string>& devices() const override { return model_->devices; }
-  const std::vector<int32_t>& proxy_device() const override { return model_->proxy_device; }
-  void set_proxy_motion(int32_t proxy, const ProxyMotion& m) override {
-    stepper_.contact().set_motion(state_, proxy, m);
-  }
-  void set_hand_motion(int32_t hand, const ProxyMotion& m) override {
-    stepper_.contact().set_hand_motion(state_, hand, m);
-  }
-  Pose proxy_pose(int32_t proxy) const override { return stepper_.contact().proxy_pose(state_, proxy); }
-  Pose hand_pose(int32_t hand) const override { return stepper_.contact().hand_pose(state_, hand); }
-  void couple_device(int32_t device, const DeviceLimits* limits) override {
-    stepper_.contact().couple(state_, device, limits);
-  }
-  void release_device(int32_t device) override { stepper_.contact().release(state_, device); }
-  bool device_coupled(int32_t device) const override { return state_.contact.coupled(device); }
-  const std::vector<ProxyReport>& proxy_reports() const override { return state_.contact.reports; }
-  const std::vector<DeviceReport>& device_reports() const override { return state_.contact.device_reports; }
-  void clear_impulses() override { state_.contact.clear_impulses(); }
-  const Fault& fault() const override { return state_.fault; }
-  void set_probe(StepProbe* probe) override { stepper_.set_probe(probe); }
-
- private:
   // A per-node array of the model's numbering, in the mesh's (n_nodes x 3).
   template <class T>
   void copy_given(const T* model_order, std::vector<double>& out) const {
-    out.resize(3 * node_model_.size());
-    for (size_t g = 0; g < node_model_.size(); ++g)
-      for (size_t d = 0; d < 3; ++d) out[3 * g + d] = double(model_order[3 * size_t(node_model_[g]) + d]);
+    const std::vector<int32_t>& node_model = model->node_model;
+    out.resize(3 * node_model.size());
+    for (size_t g = 0; g < node_model.size(); ++g)
+      for (size_t d = 0; d < 3; ++d) out[3 * g + d] = double(model_order[3 * size_t(node_model[g]) + d]);
   }
 
-  TetMesh mesh_;                        // the spec's, in its own numbering
-  std::unique_ptr<Model<Real>> model_;  // the stepper keeps a reference: the model must not move
-  Stepper<Real> stepper_;
-  State<Real> state_;
-  std::vector<int32_t> node_model_;  // the model's id of each mesh node
-  std::vector<double> impulses_;     // take_contact_impulses' model-ordered scratch
+  TetMesh mesh;                        // the spec's, in its own numbering
+  std::unique_ptr<Model<Real>> model;  // the stepper keeps a reference: the model must not move
+  Stepper<Real> stepper;
+  State<Real> state;
+  std::vector<double> impulses;  // take_contact_impulses' model-ordered scratch
 };
 
 }  // namespace
 
-Simulation::Simulation(const ModelSpec& spec) {
+struct Simulation::Engine {
+  std::variant<std::unique_ptr<Body<float>>, std::unique_ptr<Body<double>>> body;
+};
+
+// f(body) for the body of this simulation's precision.
+template <class F>
+decltype(auto) Simulation::visit(F&& f) const {
+  return std::visit([&](const auto& b) -> decltype(auto) { return f(std::as_const(*b)); }, engine_->body);
+}
+template <class F>
+decltype(auto) Simulation::visit(F&& f) {
+  return std::visit([&](auto& b) -> decltype(auto) { return f(*b); }, engine_->body);
+}
+
+Simulation::Simulation(const ModelSpec& spec) : engine_(std::make_unique<Engine>()) {
   if (spec.integrator.threads > 1) pool_ = std::make_unique<ThreadPool>(spec.integrator.threads);
   if (spec.integrator.precision == Precision::Float)
-    engine_ = std::make_unique<EngineOf<float>>(spec, pool_.get());
+    engine_->body = std::make_unique<Body<float>>(spec, pool_.get());
   else
-    engine_ = std::make_unique<EngineOf<double>>(spec, pool_.get());
+    engine_->body = std::make_unique<Body<double>>(spec, pool_.get());
   precision_ = spec.integrator.precision;
   surface_ = spec.surface;
 }
@@ -210,50 +73,129 @@ Simulation::Simulation(Simulation&&) noexcept = default;
 Simulation& Simulation::operator=(Simulation&&) noexcept = default;
 
 Precision Simulation::precision() const { return precision_; }
-const TetMesh& Simulation::mesh() const { return engine_->mesh(); }
-int32_t Simulation::n_nodes() const { return engine_->n_nodes(); }
-int32_t Simulation::n_tets() const { return engine_->n_tets(); }
-double Simulation::total_mass() const { return engine_->total_mass(); }
-const std::vector<double>& Simulation::tet_volume() const { return engine_->tet_volume(); }
-double Simulation::dt_rest() const { return engine_->dt_rest(); }
-int32_t Simulation::parts() const { return engine_->parts(); }
-double Simulation::time() const { return engine_->time(); }
-int64_t Simulation::steps() const { return engine_->steps(); }
+const TetMesh& Simulation::mesh() const {
+  return visit([](const auto& b) -> const TetMesh& { return b.mesh; });
+}
+int32_t Simulation::n_nodes() const {
+  return visit([](const auto& b) { return b.model->n_nodes; });
+}
+int32_t Simulation::n_tets() const {
+  return visit([](const auto& b) { return b.model->n_tets; });
+}
+double Simulation::total_mass() const {
+  return visit([](const auto& b) { return b.model->total_mass; });
+}
+const std::vector<double>& Simulation::tet_volume() const {
+  return visit([](const auto& b) -> const std::vector<double>& { return b.model->tet_volume; });
+}
+double Simulation::dt_rest() const {
+  return visit([](const auto& b) { return b.model->dt_rest; });
+}
+int32_t Simulation::parts() const {
+  return visit([](const auto& b) { return b.stepper.parts(); });
+}
+double Simulation::time() const {
+  return visit([](const auto& b) { return b.state.t; });
+}
+int64_t Simulation::steps() const {
+  return visit([](const auto& b) { return b.state.step; });
+}
 AdvanceReport Simulation::advance(double frame_dt, const std::function<bool()>& interrupt) {
-  return engine_->advance(frame_dt, interrupt);
+  return visit([&](auto& b) { return b.stepper.advance(b.state, frame_dt, interrupt); });
 }
-double Simulation::compute_critical_dt() const { return engine_->compute_critical_dt(); }
-const Energy& Simulation::energy() const { return engine_->energy(); }
-Energy Simulation::compute_energy() const { return engine_->compute_energy(); }
-std::vector<double> Simulation::compute_element_energy() const { return engine_->compute_element_energy(); }
+double Simulation::compute_critical_dt() const {
+  return visit([](const auto& b) { return b.stepper.compute_critical_dt(b.state); });
+}
+const Energy& Simulation::energy() const {
+  return visit([](const auto& b) -> const Energy& { return b.state.energy.latest; });
+}
+Energy Simulation::compute_energy() const {
+  return visit([](const auto& b) { return b.stepper.compute_energy(b.state); });
+}
+std::vector<double> Simulation::compute_element_energy() const {
+  return visit([](const auto& b) { return b.stepper.compute_element_energy(b.state); });
+}
 ElementFields Simulation::compute_element_fields(const ElementFieldRequest& ask, std::span<const int32_t> tets) const {
-  return engine_->compute_element_fields(ask, tets);
+  return visit([&](const auto& b) { return tactile::compute_element_fields(*b.model, b.state, ask, tets); });
 }
-std::vector<uint8_t> Simulation::node_constraint() const { return engine_->node_constraint(); }
-void Simulation::track_contact_forces(bool on) { engine_->track_contact_forces(on); }
+std::vector<uint8_t> Simulation::node_constraint() const {
+  return visit([](const auto& b) {
+    std::vector<uint8_t> out(size_t(b.model->n_nodes), 0);
+    for (const EssentialSet& set : b.model->essential)
+      for (int32_t i : set.nodes) {
+        uint8_t& c = out[size_t(b.model->node_given[size_t(i)])];
+        c = std::max<uint8_t>(c, set.moving ? 2 : 1);
+      }
+    return out;
+  });
+}
+void Simulation::track_contact_forces(bool on) {
+  visit([&](auto& b) { b.stepper.contact().track_node_impulses(b.state, on); });
+}
 double Simulation::take_contact_impulses(std::vector<double>& impulse) {
-  return engine_->take_contact_impulses(impulse);
+  return visit([&](auto& b) {
+    b.impulses.assign(b.state.u.size(), 0.0);
+    const double span = b.stepper.contact().take_node_impulses(b.state, b.impulses);
+    b.copy_given(b.impulses.data(), impulse);
+    return span;
+  });
 }
 void Simulation::copy_positions(std::vector<double>& x) const {
-  engine_->copy_displacement(x);
+  copy_displacement(x);
   const TetMesh& m = mesh();
   for (size_t i = 0; i < m.X.size(); ++i)
     for (size_t d = 0; d < 3; ++d) x[3 * i + d] += m.X[i][int(d)];
 }
-void Simulation::copy_displacement(std::vector<double>& u) const { engine_->copy_displacement(u); }
-void Simulation::copy_velocity(std::vector<double>& v) const { engine_->copy_velocity(v); }
-Vec3 Simulation::displacement(int32_t node) const { return engine_->displacement(node); }
-void Simulation::gather(std::span<const uint32_t> nodes, float* positions, float* displacement_norm) const {
-  engine_->gather(nodes, positions, displacement_norm);
+void Simulation::copy_displacement(std::vector<double>& u) const {
+  visit([&](const auto& b) { b.copy_given(b.state.u.data(), u); });
 }
-const std::vector<ProxySpec>& Simulation::proxies() const { return engine_->proxies(); }
-const std::vector<HandSpec>& Simulation::hands() const { return engine_->hands(); }
-const std::vector<std::string>& Simulation::devices() const { return engine_->devices(); }
-const std::vector<int32_t>& Simulation::proxy_device() const { return engine_->proxy_device(); }
-void Simulation::set_proxy_motion(int32_t proxy, const ProxyMotion& m) { engine_->set_proxy_motion(proxy, m); }
-void Simulation::set_hand_motion(int32_t hand, const ProxyMotion& m) { engine_->set_hand_motion(hand, m); }
-Pose Simulation::proxy_pose(int32_t proxy) const { return engine_->proxy_pose(proxy); }
-Pose Simulation::hand_pose(int32_t hand) const { return engine_->hand_pose(hand); }
+void Simulation::copy_velocity(std::vector<double>& v) const {
+  visit([&](const auto& b) { b.copy_given(b.state.v.data(), v); });
+}
+Vec3 Simulation::displacement(int32_t node) const {
+  return visit([&](const auto& b) {
+    const size_t j = 3 * size_t(b.model->node_model.at(size_t(node)));
+    return Vec3(double(b.state.u[j]), double(b.state.u[j + 1]), double(b.state.u[j + 2]));
+  });
+}
+void Simulation::gather(std::span<const uint32_t> nodes, float* positions, float* displacement_norm) const {
+  visit([&](const auto& b) {
+    const std::vector<Vec3>& X = b.mesh.X;
+    const auto* u = b.state.u.data();
+    for (size_t k = 0; k < nodes.size(); ++k) {
+      const size_t g = nodes[k], i = size_t(b.model->node_model[g]);
+      const double ux = double(u[3 * i]), uy = double(u[3 * i + 1]), uz = double(u[3 * i + 2]);
+      positions[3 * k] = float(X[g].x + ux);
+      positions[3 * k + 1] = float(X[g].y + uy);
+      positions[3 * k + 2] = float(X[g].z + uz);
+      if (displacement_norm) displacement_norm[k] = float(std::sqrt(ux * ux + uy * uy + uz * uz));
+    }
+  });
+}
+const std::vector<ProxySpec>& Simulation::proxies() const {
+  return visit([](const auto& b) -> const std::vector<ProxySpec>& { return b.model->proxies; });
+}
+const std::vector<HandSpec>& Simulation::hands() const {
+  return visit([](const auto& b) -> const std::vector<HandSpec>& { return b.model->hands; });
+}
+const std::vector<std::string>& Simulation::devices() const {
+  return visit([](const auto& b) -> const std::vector<std::string>& { return b.model->devices; });
+}
+const std::vector<int32_t>& Simulation::proxy_device() const {
+  return visit([](const auto& b) -> const std::vector<int32_t>& { return b.model->proxy_device; });
+}
+void Simulation::set_proxy_motion(int32_t proxy, const ProxyMotion& m) {
+  visit([&](auto& b) { b.stepper.contact().set_motion(b.state, proxy, m); });
+}
+void Simulation::set_hand_motion(int32_t hand, const ProxyMotion& m) {
+  visit([&](auto& b) { b.stepper.contact().set_hand_motion(b.state, hand, m); });
+}
+Pose Simulation::proxy_pose(int32_t proxy) const {
+  return visit([&](const auto& b) { return b.stepper.contact().proxy_pose(b.state, proxy); });
+}
+Pose Simulation::hand_pose(int32_t hand) const {
+  return visit([&](const auto& b) { return b.stepper.contact().hand_pose(b.state, hand); });
+}
 void Simulation::couple_device(int32_t device, const DeviceLimits* limits) {
   if (limits)
     for (const auto& [name, value] :
@@ -262,18 +204,63 @@ void Simulation::couple_device(int32_t device, const DeviceLimits* limits) {
       if (!std::isfinite(value) || value < 0)
         throw std::invalid_argument(std::string("device limits: ") + name +
                                     " must be finite and >= 0 (0: not given), got " + std::to_string(value));
-  engine_->couple_device(device, limits);
+  visit([&](auto& b) { b.stepper.contact().couple(b.state, device, limits); });
 }
-void Simulation::release_device(int32_t device) { engine_->release_device(device); }
-bool Simulation::device_coupled(int32_t device) const { return engine_->device_coupled(device); }
-const std::vector<ProxyReport>& Simulation::proxy_reports() const { return engine_->proxy_reports(); }
-const std::vector<DeviceReport>& Simulation::device_reports() const { return engine_->device_reports(); }
-void Simulation::clear_impulses() { engine_->clear_impulses(); }
-void Simulation::continue_from(const Simulation& other) { engine_->carry_in(other.engine_->carry_out()); }
+void Simulation::release_device(int32_t device) {
+  visit([&](auto& b) { b.stepper.contact().release(b.state, device); });
+}
+bool Simulation::device_coupled(int32_t device) const {
+  return visit([&](const auto& b) { return b.state.contact.coupled(device); });
+}
+const std::vector<ProxyReport>& Simulation::proxy_reports() const {
+  return visit([](const auto& b) -> const std::vector<ProxyReport>& { return b.state.contact.reports; });
+}
+const std::vector<DeviceReport>& Simulation::device_reports() const {
+  return visit([](const auto& b) -> const std::vector<DeviceReport>& { return b.state.contact.device_reports; });
+}
+void Simulation::clear_impulses() {
+  visit([](auto& b) { b.state.contact.clear_impulses(); });
+}
+void Simulation::continue_from(const Simulation& other) {
+  const Carried c = other.visit([](const auto& b) { return carry_out(b.state, b.model->node_given); });
+  visit([&](auto& b) {
+    if (c.u.size() != b.state.u.size() || c.proxy.size() != b.model->proxies.size() ||
+        c.hand.size() != b.model->hands.size())
+      throw std::invalid_argument(
+          "continue_from: the other simulation has " + std::to_string(c.u.size() / 3) + " nodes, " +
+          std::to_string(c.proxy.size()) + " proxies and " + std::to_string(c.hand.size()) + " hands; this one " +
+          std::to_string(b.state.u.size() / 3) + ", " + std::to_string(b.model->proxies.size()) + " and " +
+          std::to_string(b.model->hands.size()));
+    carry_in(c, b.model->node_given, b.state);
+    b.stepper.contact().take_bodies(b.state, c.bodies);
+  });
+}
 void Simulation::set_initial_state(const std::vector<double>& u, const std::vector<double>& v) {
-  engine_->set_initial_state(u, v);
+  visit([&](auto& b) {
+    using Real = typename std::decay_t<decltype(b.state.u)>::value_type;
+    if (b.state.step != 0)
+      throw std::logic_error("set_initial_state: the simulation has taken " + std::to_string(b.state.step) +
+                             " steps; an initial state is set before the first");
+    if (u.size() != b.state.u.size() || v.size() != b.state.v.size())
+      throw std::invalid_argument("set_initial_state: " + std::to_string(u.size() / 3) + " displacements and " +
+                                  std::to_string(v.size() / 3) + " velocities for " +
+                                  std::to_string(b.state.u.size() / 3) + " nodes");
+    for (size_t k = 0; k < u.size(); ++k)
+      if (!std::isfinite(u[k]) || !std::isfinite(v[k]))
+        throw std::invalid_argument("set_initial_state: node " + std::to_string(k / 3) + " has a non-finite value");
+    const std::vector<int32_t>& node_model = b.model->node_model;
+    for (size_t g = 0; g < node_model.size(); ++g)
+      for (size_t d = 0; d < 3; ++d) {
+        b.state.u[3 * size_t(node_model[g]) + d] = Real(u[3 * g + d]);
+        b.state.v[3 * size_t(node_model[g]) + d] = Real(v[3 * g + d]);
+      }
+  });
 }
-const Fault& Simulation::fault() const { return engine_->fault(); }
-void Simulation::set_probe(StepProbe* probe) { engine_->set_probe(probe); }
+const Fault& Simulation::fault() const {
+  return visit([](const auto& b) -> const Fault& { return b.state.fault; });
+}
+void Simulation::set_probe(StepProbe* probe) {
+  visit([&](auto& b) { b.stepper.set_probe(probe); });
+}
 
 }  // namespace tactile

@@ -120,9 +120,16 @@ class Simulation {
   const Fault& fault() const;
   void set_probe(StepProbe* probe);
 
-  struct Engine;  // the precision-specific part, simulation.cpp
+  struct Engine;  // the body in its precision (a variant of float and double), simulation.cpp
 
  private:
+  // f(body) on the body of this simulation's precision: each accessor is one
+  // such call (simulation.cpp), its one place.
+  template <class F>
+  decltype(auto) visit(F&& f) const;
+  template <class F>
+  decltype(auto) visit(F&& f);
+
   std::unique_ptr<ParallelFor> pool_;  // declared first: outlives the stepper that uses it
   std::unique_ptr<Engine> engine_;
   Precision precision_ = Precision::Double;
