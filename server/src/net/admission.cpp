@@ -1,5 +1,7 @@
 #include "net/admission.hpp"
 
+#include <algorithm>
+#include <cctype>
 #include <cstdio>
 #include <map>
 
@@ -13,7 +15,37 @@ std::string seconds(double s) {
   return buf;
 }
 
+// The host of "scheme://host[:port]" or "host[:port]", without the port
+// ("[::1]" keeps its brackets), in lower case.
+std::string host_part(std::string_view s) {
+  if (const size_t scheme = s.find("://"); scheme != std::string_view::npos) s = s.substr(scheme + 3);
+  if (s.starts_with('['))
+    s = s.substr(0, s.find(']') + 1);
+  else if (const size_t colon = s.rfind(':'); colon != std::string_view::npos)
+    s = s.substr(0, colon);
+  std::string out(s);
+  for (char& ch : out) ch = char(std::tolower(uint8_t(ch)));
+  return out;
+}
+
 }  // namespace
+
+bool origin_allowed(std::string_view origin, uint16_t port, const std::vector<std::string>& allowed_origins) {
+  for (const char* host : {"127.0.0.1", "localhost", "[::1]"})
+    if (origin == "http://" + std::string(host) + ":" + std::to_string(port)) return true;
+  return std::find(allowed_origins.begin(), allowed_origins.end(), origin) != allowed_origins.end();
+}
+
+bool host_allowed(std::string_view host, std::string_view bind, const std::vector<std::string>& allowed_origins) {
+  const std::string name = host_part(host);
+  if (name.empty()) return false;
+  for (const char* loopback : {"127.0.0.1", "localhost", "[::1]"})
+    if (name == loopback) return true;
+  if (name == bind) return true;
+  for (const std::string& origin : allowed_origins)
+    if (host_part(origin) == name) return true;
+  return false;
+}
 
 Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted, SessionClock::time_point now,
                            const AdmissionLimits& limits) {

@@ -1,9 +1,18 @@
-// Who gets a WebSocket slot, without sockets (sans-I/O, like net/session.hpp):
-// the waiting connections, the greeted count and the clock in, a verdict
-// out. The shell (net/http_session.cpp) asks before each upgrade and carries
-// the verdict out; the tests (server/tests/net/admission_test.cpp) drive it
-// directly, one test per rule.
+// Who gets in, without sockets (sans-I/O, like net/session.hpp): the
+// browser Origin of a WebSocket, the Host of a plain HTTP request, and a
+// WebSocket slot. The shell (net/http_session.cpp) asks before it answers;
+// the tests (server/tests/net/admission_test.cpp) ask directly, one test
+// per rule.
 //
+// Origin (a browser's WebSocket): pages of this server itself
+// (http://localhost, 127.0.0.1 or [::1] at its port) and those named with
+// --allow-origin, exactly; a client that sends none (the bridge) is not
+// checked. Host (the page, its files, the recordings): a loopback name, the
+// bound address or the host of an --allow-origin, any port, any case; else
+// 421, for a page of another site whose name was made to resolve here (DNS
+// rebinding).
+//
+// A slot:
 // A connection "waits" from its upgrade until its Hello. The rules:
 //   - the greeted connections fill max_connections: the newcomer is refused;
 //   - the waiting pool has room: admitted, nobody evicted (a crowd behind
@@ -25,10 +34,17 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "net/session.hpp"
 
 namespace tactile {
+
+// Whether a browser page of `origin` may open a WebSocket to a server on `port`.
+bool origin_allowed(std::string_view origin, uint16_t port, const std::vector<std::string>& allowed_origins);
+// Whether `host` (a Host header: a name or address, with or without a port)
+// names this server, bound to `bind`.
+bool host_allowed(std::string_view host, std::string_view bind, const std::vector<std::string>& allowed_origins);
 
 struct AdmissionLimits {
   size_t max_connections = 256;  // greeted connections

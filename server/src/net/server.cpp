@@ -121,38 +121,11 @@ void Server::Impl::log_admission(SessionClock::time_point now, const std::string
 }
 
 bool Server::Impl::host_allowed(std::string_view host) const {
-  // The name without its port ("[::1]:8765", "localhost:8765", "example.org").
-  std::string_view name = host;
-  if (name.starts_with('['))
-    name = name.substr(0, name.find(']') + 1);
-  else if (const size_t colon = name.rfind(':'); colon != std::string_view::npos)
-    name = name.substr(0, colon);
-  std::string lower(name);
-  for (char& c : lower) c = char(std::tolower(uint8_t(c)));
-  if (lower.empty()) return false;
-  for (const char* loopback : {"127.0.0.1", "localhost", "[::1]"})
-    if (lower == loopback) return true;
-  if (lower == options.bind) return true;
-  for (const std::string& origin : options.allowed_origins) {  // "scheme://name[:port]"
-    std::string_view o = origin;
-    if (const size_t scheme = o.find("://"); scheme != std::string_view::npos) o = o.substr(scheme + 3);
-    if (o.starts_with('['))
-      o = o.substr(0, o.find(']') + 1);
-    else
-      o = o.substr(0, o.find(':'));
-    std::string allowed(o);
-    for (char& c : allowed) c = char(std::tolower(uint8_t(c)));
-    if (allowed == lower) return true;
-  }
-  return false;
+  return tactile::host_allowed(host, options.bind, options.allowed_origins);
 }
 
 bool Server::Impl::origin_allowed(const std::string& origin) const {
-  const uint16_t port = acceptor.local_endpoint().port();
-  for (const char* host : {"127.0.0.1", "localhost", "[::1]"})
-    if (origin == "http://" + std::string(host) + ":" + std::to_string(port)) return true;
-  return std::find(options.allowed_origins.begin(), options.allowed_origins.end(), origin) !=
-         options.allowed_origins.end();
+  return tactile::origin_allowed(origin, acceptor.local_endpoint().port(), options.allowed_origins);
 }
 
 // Every connection holds a descriptor: the soft limit is raised (up to the

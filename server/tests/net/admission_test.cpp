@@ -1,5 +1,5 @@
-// Who gets a WebSocket slot (net/admission.hpp), without a socket: one test
-// per rule, on waiting pools written inline.
+// Who gets in (net/admission.hpp), without a socket: one test per rule, on
+// Origins, Hosts and waiting pools written inline.
 #include <gtest/gtest.h>
 
 #include <string>
@@ -11,6 +11,46 @@ namespace tactile {
 namespace {
 
 using namespace std::chrono_literals;
+
+// ---- Origin and Host ---------------------------------------------------------------------
+
+const std::vector<std::string> none;
+
+TEST(OriginAllowed, ThisServersOwnPagesAtItsPortOnly) {
+  for (const char* o : {"http://localhost:8765", "http://127.0.0.1:8765", "http://[::1]:8765"})
+    EXPECT_TRUE(origin_allowed(o, 8765, none)) << o;
+  for (const char* o : {"http://localhost:8766", "https://localhost:8765", "http://localhost", "http://evil.example",
+                        "null", "http://127.0.0.1:8765.evil.example"})
+    EXPECT_FALSE(origin_allowed(o, 8765, none)) << o;
+}
+
+TEST(OriginAllowed, AnAllowedOriginExactlyAsNamed) {
+  const std::vector<std::string> allowed{"http://sim.lab:8765"};
+  EXPECT_TRUE(origin_allowed("http://sim.lab:8765", 8765, allowed));
+  EXPECT_FALSE(origin_allowed("http://sim.lab:9999", 8765, allowed));
+  EXPECT_FALSE(origin_allowed("http://SIM.lab:8765.evil", 8765, allowed));
+}
+
+TEST(HostAllowed, LoopbackNamesAtAnyPortAndInAnyCase) {
+  for (const char* h : {"localhost:8765", "LOCALHOST", "127.0.0.1:1", "[::1]:8765", "[::1]"})
+    EXPECT_TRUE(host_allowed(h, "127.0.0.1", none)) << h;
+}
+
+TEST(HostAllowed, TheBoundAddressAndTheHostsOfAllowedOrigins) {
+  const std::vector<std::string> allowed{"http://sim.lab:8765", "http://[fd00::7]:8765"};
+  EXPECT_TRUE(host_allowed("10.0.0.5:8765", "10.0.0.5", allowed));
+  EXPECT_TRUE(host_allowed("Sim.Lab:8765", "0.0.0.0", allowed));
+  EXPECT_TRUE(host_allowed("[fd00::7]:8765", "0.0.0.0", allowed));
+}
+
+TEST(HostAllowed, AnotherSitesNameIsRefused) {
+  // A page of another site whose name was made to resolve here (DNS rebinding) sends its own name.
+  const std::vector<std::string> allowed{"http://sim.lab:8765"};
+  for (const char* h : {"evil.example:8765", "sim.lab.evil.example", "", ":8765", "0.0.0.0:8765"})
+    EXPECT_FALSE(host_allowed(h, "10.0.0.5", allowed)) << "'" << h << "'";
+}
+
+// ---- waiting slots -----------------------------------------------------------------------
 
 const SessionClock::time_point t0{};
 const AdmissionLimits small{.max_connections = 10, .max_waiting = 4, .hello_grace_s = 1.0};
