@@ -316,7 +316,7 @@ void Contact<Real>::couple(State<Real>& s, int32_t device, const DeviceLimits* l
     const double r = bounding_radius(model_.proxies[size_t(j)].geometry);
     return std::isfinite(r) ? r : 0.1;  // a plane: a body of a tenth of a metre
   };
-  const auto add = [&](int32_t hand, int32_t proxy, const CouplingSpec& spec, double radius) {
+  const auto add = [&](int32_t hand, int32_t proxy, const Coupling& spec, double radius) {
     Body* b = nullptr;
     for (Body& existing : cs.bodies)
       if (existing.hand == hand && existing.proxy == proxy) b = &existing;

@@ -35,7 +35,7 @@ bool saturate(Vec3& v, double limit) {
 
 }  // namespace
 
-Coupling resolve_coupling(const CouplingSpec& scene, const DeviceLimits* device, double radius) {
+Coupling resolve_coupling(const Coupling& scene, const DeviceLimits* device, double radius) {
   const DeviceLimits none;
   const DeviceLimits& dev = device ? *device : none;
   const double r = std::max(radius, 1e-6);

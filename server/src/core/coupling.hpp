@@ -34,21 +34,6 @@
 
 namespace tactile {
 
-// What a scene asks of a coupling, per proxy or hand; 0 leaves a field to the
-// device (its Hello) or, where the device says nothing, to the defaults of
-// resolve_coupling. Stiffness, force and torque are upper bounds on what the
-// device asks for: a scene may lower them, never raise them.
-struct CouplingSpec {
-  double stiffness = 0;          // [N/m]
-  double damping = 0;            // [N s/m]
-  double max_force = 0;          // [N]
-  double angular_stiffness = 0;  // [N m/rad]
-  double angular_damping = 0;    // [N m s/rad]
-  double max_torque = 0;         // [N m]
-  double mass = 0;               // [kg]
-  double inertia = 0;            // [kg m^2]
-};
-
 // What a device says it renders (its Hello): 0 for a field it does not give.
 // A device that renders no torque (a 3-DoF arm) gives max_torque 0; its
 // body still turns with it, through the scene's (or the default) soft
@@ -59,7 +44,12 @@ struct DeviceLimits {
   double stiffness = 0;   // the stiffest spring it renders stably [N/m]
 };
 
-// A coupling as the body runs it: every field set.
+// A coupling: as a scene asks it of a proxy or hand (ProxySpec::coupling,
+// HandSpec::coupling), where 0 leaves a field to the device (its Hello) or,
+// where the device says nothing, to the defaults of resolve_coupling (its
+// stiffness, force and torque are upper bounds on what the device asks for:
+// a scene may lower them, never raise them); and as the body runs it, the
+// one resolve_coupling returns, every field set.
 struct Coupling {
   double stiffness = 0;          // [N/m]
   double damping = 0;            // [N s/m]
@@ -84,7 +74,7 @@ inline constexpr double kCouplingDampingRatio = 0.7;
 // bound the smaller of the two where both give it. The angular spring, when
 // unset, is the linear one at the body's radius (k r^2, saturating at
 // max_force r); inertia, when unset, a solid ball's 2/5 m r^2. Pure.
-Coupling resolve_coupling(const CouplingSpec& scene, const DeviceLimits* device, double radius);
+Coupling resolve_coupling(const Coupling& scene, const DeviceLimits* device, double radius);
 
 // Raises c.mass and c.inertia where the explicit spring would not resolve
 // the step dt (omega dt <= 1), keeping their ratio. Pure.

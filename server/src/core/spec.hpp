@@ -85,16 +85,16 @@ struct ProxySpec {
   std::string device;  // device channel that drives it and receives its force ("" in a hand: the hand's)
   std::string hand;    // hand it belongs to ("" = none)
   ProxyGeometry geometry;
-  Pose pose;              // at t = 0 (world)
-  double friction = 0;    // Coulomb coefficient mu (used when effects.friction)
-  CouplingSpec coupling;  // when a device drives it alone through a coupling (core/coupling.hpp)
+  Pose pose;            // at t = 0 (world)
+  double friction = 0;  // Coulomb coefficient mu (used when effects.friction)
+  Coupling coupling;    // when a device drives it alone through a coupling (core/coupling.hpp)
 };
 
 struct HandSpec {
   std::string name;
-  std::string device;     // device channel that drives the hand
-  Pose pose;              // at t = 0 (world): its proxies keep their offsets from it
-  CouplingSpec coupling;  // when its device drives it through a coupling (core/coupling.hpp)
+  std::string device;  // device channel that drives the hand
+  Pose pose;           // at t = 0 (world): its proxies keep their offsets from it
+  Coupling coupling;   // when its device drives it through a coupling (core/coupling.hpp)
 };
 
 struct Effects {

@@ -269,11 +269,11 @@ Pose read_start_pose(const Fields& f, const Origin& o, std::optional<PoseScript>
 
 // {"stiffness", "damping", "max_force", "angular_stiffness", "angular_damping",
 // "max_torque", "mass", "inertia"}: each optional, each > 0 (core/coupling.hpp).
-CouplingSpec read_coupling(const Json& j, const std::string& path, const Origin& o) {
+Coupling read_coupling(const Json& j, const std::string& path, const Origin& o) {
   const Fields f(
       j, path, o,
       {"stiffness", "damping", "max_force", "angular_stiffness", "angular_damping", "max_torque", "mass", "inertia"});
-  CouplingSpec c;
+  Coupling c;
   const auto get = [&](const char* key, double& out) {
     if (f.has(key)) out = f.positive(key);
   };

@@ -81,7 +81,7 @@ Vec3 node_momentum(const Model<Real>& model, const State<Real>& s) {
 }
 
 TEST(Coupling, TakesTheSmallerOfTheScenesAndTheDevicesBounds) {
-  CouplingSpec scene;
+  Coupling scene;
   scene.max_force = 4.0;
   DeviceLimits device;
   device.max_force = 6.0;
@@ -95,7 +95,7 @@ TEST(Coupling, TakesTheSmallerOfTheScenesAndTheDevicesBounds) {
   scene.stiffness = 3000.0;  // a scene may not raise what the device renders
   EXPECT_EQ(resolve_coupling(scene, &device, 0.02).stiffness, 1500.0);
   // Nothing from either: the soft defaults (a mouse).
-  c = resolve_coupling(CouplingSpec{}, nullptr, 0.02);
+  c = resolve_coupling(Coupling{}, nullptr, 0.02);
   EXPECT_EQ(c.stiffness, kDefaultCouplingStiffness);
   EXPECT_EQ(c.max_force, kDefaultCouplingForce);
   EXPECT_EQ(c.mass, kDefaultProxyMass);

@@ -310,7 +310,7 @@ TEST(SceneMapping, CouplingsBecomeTheCoreSpec) {
   j["proxies"][1]["coupling"] = json{{"stiffness", 800.0}, {"max_force", 3.0}, {"mass", 0.05}};
   j["hands"][0]["coupling"] = json{{"max_torque", 0.2}, {"angular_stiffness", 4.0}};
   const Scene s = load_scene(dir.write_json("p.json", j)).at(0);
-  const CouplingSpec& c = s.spec.proxies[1].coupling;
+  const Coupling& c = s.spec.proxies[1].coupling;
   EXPECT_EQ(c.stiffness, 800.0);
   EXPECT_EQ(c.max_force, 3.0);
   EXPECT_EQ(c.mass, 0.05);
