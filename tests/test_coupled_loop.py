@@ -1,4 +1,4 @@
-"""The default haptic loop, coupled (DESIGN.md item 8), with the real server and the `tactile-bridge` command
+"""The default haptic loop, coupled (docs/design.md item 8), with the real server and the `tactile-bridge` command
 driving the simulated arm: the device's limits reach the server in its Hello, the proxy is a body the device
 pulls through a spring, and the bridge displays that spring.
 

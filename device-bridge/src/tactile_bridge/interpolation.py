@@ -5,7 +5,7 @@ produced; the network side of the bridge converts that stamp into the bridge's c
 the state into a `StateHistory`. At every tick the tick asks a `ForceRender` for the force to display now.
 
 Modes:
-  coupled  the default, with a server that couples the device's proxy (protocol 1.5; DESIGN.md item 8): the
+  coupled  the default, with a server that couples the device's proxy (protocol 1.5; docs/design.md item 8): the
            device displays the coupling's force. What comes from the body is displayed the paper's way, one
            step late and interpolated (as `delay`: the coupling's force F, the stiffness K the device feels
            through the coupling, fitted by the server from F and the device's pose, and the device's pose

@@ -208,7 +208,7 @@ class Profile:
         return f.max_N / gain, f.max_torque_Nm / gain * ws.scale, f.max_stiffness_N_per_m / (gain * ws.scale)
 
 
-# The time within which the safety layer must bring any force to zero (DESIGN.md, issue 5: states that stop
+# The time within which the safety layer must bring any force to zero (docs/design.md, issue 5: states that stop
 # arriving reach zero within 50 ms of the last one, after at most 10 ms of hold), so the slew limit must
 # allow max_N to fall to zero in 40 ms.
 RAMP_DOWN_S = 0.040

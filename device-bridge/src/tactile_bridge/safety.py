@@ -1,7 +1,7 @@
 """The safety layer: what stands between a rendered force and a machine that a person holds.
 
 `Safety.apply` turns the force the tick wants (device frame [N]) into the force the device gets, once per
-tick, under these rules (DESIGN.md "Safety", issue 5), in this order:
+tick, under these rules (docs/design.md "Safety of the arm", issue 5), in this order:
 
   1. A non-finite command, a lost link, a server fault or an unplugged device: the target is zero at once,
      and forces disengage (they come back only through start-up, rule 6).

@@ -1,4 +1,4 @@
-// The virtual coupling between a device and the proxy it drives (DESIGN.md,
+// The virtual coupling between a device and the proxy it drives (docs/design.md,
 // item 8; Colgate, Stanley & Brown 1995; the god-object of Zilles &
 // Salisbury, ref. 37 of the paper). A device-driven proxy, or a hand of them,
 // is a rigid body of the simulation with a mass and an inertia. The device's
