@@ -393,10 +393,12 @@ class PySimulation {
 }  // namespace
 }  // namespace tactile
 
-PYBIND11_MODULE(_core, m) {
-  using namespace tactile;
-  m.doc() = "The tactile simulation core: scenes, simulations and their arrays (see the tactile package).";
+namespace tactile {
+namespace {
 
+// The module's exceptions: SceneError, ModelError and RecordingError, each a
+// ValueError, and the C++ exceptions they translate.
+void bind_errors(py::module_& m) {
   static py::exception<SceneError> scene_error(m, "SceneError", PyExc_ValueError);
   static py::exception<ModelError> model_error(m, "ModelError", PyExc_ValueError);
   static py::exception<ResimError> recording_error(m, "RecordingError", PyExc_ValueError);
@@ -416,7 +418,10 @@ PYBIND11_MODULE(_core, m) {
       PyErr_SetString(recording_error.ptr(), e.what());
     }
   });
+}
 
+// Scene, load_scene and parse_scene: the CLIs' loader.
+void bind_scene(py::module_& m) {
   py::class_<Scene>(m, "Scene", "A scene as the loader checked it (one variant).")
       .def_readonly("name", &Scene::name)
       .def_readonly("variant", &Scene::variant)
@@ -464,7 +469,10 @@ PYBIND11_MODULE(_core, m) {
       },
       py::arg("text"), py::arg("path"), py::arg("variant") = py::none(),
       "The same from JSON text; `path` names the scene in messages and anchors relative mesh paths.");
+}
 
+// Whole runs as the CLIs make them: run_headless, resimulate.
+void bind_runs(py::module_& m) {
   m.def(
       "run_headless",
       [](const Scene& scene, const std::string& out_dir, bool vtu) {
@@ -523,7 +531,10 @@ PYBIND11_MODULE(_core, m) {
       "the recorded scene, or on `scene` (a file; with `scene_text`, that JSON instead of the file's, `scene` "
       "anchoring its paths). Returns the report as a dict; with `out`, writes the re-simulation as a recording. "
       "Raises RecordingError naming what is wrong with the recording.");
+}
 
+// The accuracy study and the stability suite one case at a time, for tactile-batch.
+void bind_studies(py::module_& m) {
   // The accuracy-cost study one run at a time (study/accuracy.hpp), for tactile-batch.
   m.def(
       "accuracy_cases",
@@ -602,7 +613,10 @@ PYBIND11_MODULE(_core, m) {
       },
       py::arg("name"), py::arg("quick") = false, py::arg("seed") = 1,
       "One case, run; its outcome as JSON (an entry of tactile-stability --json).");
+}
 
+// Simulation: one body in motion, stepped and read from Python.
+void bind_simulation(py::module_& m) {
   py::class_<PySimulation>(m, "Simulation", "One body in motion: a scene's model, stepper and state.")
       .def(py::init<const Scene&>(), py::arg("scene"))
       .def("advance", &PySimulation::advance, py::arg("seconds"),
@@ -705,4 +719,17 @@ PYBIND11_MODULE(_core, m) {
       .def("write_vtu", &PySimulation::write_vtu, py::arg("path"), py::arg("fields") = std::vector<std::string>{},
            "Writes the body as it is now (VTK XML, .vtu): displacement, velocity, constraint and energy density, and "
            "the cell fields named (cauchy_stress, green_strain, von_mises).");
+}
+
+}  // namespace
+}  // namespace tactile
+
+PYBIND11_MODULE(_core, m) {
+  using namespace tactile;
+  m.doc() = "The tactile simulation core: scenes, simulations and their arrays (see the tactile package).";
+  bind_errors(m);
+  bind_scene(m);
+  bind_runs(m);
+  bind_studies(m);
+  bind_simulation(m);
 }
