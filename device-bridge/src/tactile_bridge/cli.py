@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from . import exchange as ex
 from .bridge import Bridge, Options
-from .drivers import DeviceError
+from .drivers import DeviceError, registry
 from .interpolation import MODES
 from .profile import Profile, ProfileError, load_profile
 from .safety import Mode
@@ -113,7 +113,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     "safety rules of its profile. Without arguments: the simulated arm poking the default "
                     "scene's beam, on a server at ws://127.0.0.1:8765/.",
         epilog="Profiles shipped: " + ", ".join(sorted(q.stem for q in PROFILES.glob("*.toml")))
-               + f" (in {PROFILES}). Events and the status line go to stderr.")
+               + f" (in {PROFILES}). Drivers (a profile's driver = \"...\"): "
+               + "; ".join(f"{d.name}, {d.summary}" for d in registry.REGISTRY)
+               + ". Events and the status line go to stderr.")
     ap.add_argument("--profile", "-p", action="append", metavar="PROFILE",
                     help="a device profile (TOML path or shipped name); repeat for several devices (default: sim)")
     ap.add_argument("--server", default="ws://127.0.0.1:8765/", help="the server's WebSocket URL")

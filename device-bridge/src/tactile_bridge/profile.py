@@ -18,7 +18,10 @@ import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
-DRIVERS = ("sim", "serial", "hid")
+# The drivers' names and tables come from their registry, which imports no driver module: a driver's module is
+# imported by name when a profile uses it, so driver modules may import this one at module level.
+from .drivers import registry
+
 AXES = ("x", "y", "z")
 
 
@@ -188,7 +191,7 @@ class ForceLimits:
 class Profile:
     path: str
     name: str
-    driver: str                  # one of DRIVERS
+    driver: str                  # a registered driver's name (drivers/registry.py)
     channel: str                 # the server's device channel this device drives
     rate_hz: float               # tick rate of the bridge loop
     workspace: Workspace
@@ -248,11 +251,9 @@ def parse_force(f: Fields) -> ForceLimits:
 
 def parse_profile(table: dict[str, Any], path: str = "<profile>") -> Profile:
     """A profile from a parsed TOML table; ProfileError names `path` and the field at fault."""
-    from . import drivers  # the driver sections are the drivers' own
-
-    top = Fields(table, f"{path}:", ("name", "driver", "channel", "rate_hz", "workspace", "force",
-                                     *drivers.SECTIONS))
-    driver = top.string("driver", choices=DRIVERS)
+    sections = registry.sections()  # each driver's own table, checked by the driver's module
+    top = Fields(table, f"{path}:", ("name", "driver", "channel", "rate_hz", "workspace", "force", *sections))
+    driver = top.string("driver", choices=registry.names())
     ws = Fields(top.table_of("workspace") or {}, f"{path}: workspace",
                 ("scale", "offset_m", "axes"))
     if "force" not in table:
@@ -260,10 +261,10 @@ def parse_profile(table: dict[str, Any], path: str = "<profile>") -> Profile:
     fo = Fields(top.table_of("force"), f"{path}: force",
                 ("max_N", "continuous_N", "slew_N_per_s", "gain", "engage_below_N", "engage_ticks", "ramp_in_s",
                  "max_stiffness_N_per_m", "max_torque_Nm"))
-    for other in drivers.SECTIONS:
-        if other != driver and other in table:
+    spec = registry.get(driver)
+    for other in sections:
+        if other != spec.section and other in table:
             raise ProfileError(f"{path}: [{other}] given but driver is {driver!r}")
-    section = table.get(driver, {})
     return Profile(
         path=path,
         name=top.string("name", pathlib.Path(path).stem),
@@ -272,7 +273,7 @@ def parse_profile(table: dict[str, Any], path: str = "<profile>") -> Profile:
         rate_hz=top.number("rate_hz", 1000.0, low=100.0, high=20000.0),
         workspace=parse_workspace(ws),
         force=parse_force(fo),
-        driver_config=drivers.parse_config(driver, section, f"{path}: {driver}"),
+        driver_config=spec.load().parse_config(table.get(spec.section, {}), f"{path}: {spec.section}", Fields),
     )
 
 

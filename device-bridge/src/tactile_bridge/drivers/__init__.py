@@ -5,28 +5,25 @@ driver that needs blocking I/O does it in a thread of its own and hands over the
 that unplugs reads as not connected, and the tick falls back to zero force; a driver that can reconnect
 does so by itself and reads as connected again.
 
-Drivers:
-  sim     tactile_bridge.drivers.sim_arm     a mass-damper arm held by a scripted, yielding hand (default)
-  serial  tactile_bridge.drivers.serial_link  the framed binary protocol of docs/serial-protocol.md (pyserial)
-  hid     tactile_bridge.drivers.hid_device   report layouts from the profile (hidapi)
-
 A driver that speaks a byte protocol keeps its codec in a module of its own, without I/O (serial_protocol,
 hid_report), so that tests feed it bytes and an emulator plays the device with it.
+
+The drivers are registered in drivers/registry.py, one entry each, and nowhere else. The list that ends
+this docstring is generated from that registry when the package is imported.
 """
 
 from __future__ import annotations
 
 import abc
-import importlib
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
+
+from . import registry
 
 if TYPE_CHECKING:
     from ..profile import Profile
 
-# The profile table each driver reads its own settings from, and the module that parses them.
-SECTIONS = ("sim", "serial", "hid")
-_MODULES = {"sim": "sim_arm", "serial": "serial_link", "hid": "hid_device"}
+__doc__ = f"{__doc__ or ''}\nDrivers:\n{registry.listing()}\n"
 
 
 class DeviceError(RuntimeError):
@@ -78,16 +75,7 @@ class Device(abc.ABC):
         return f"{self.profile.driver} {'connected' if self.connected else 'not connected'}"
 
 
-def parse_config(driver: str, table: dict[str, Any], where: str) -> Any:
-    """The driver's profile section, checked by the driver's own `parse_config(Fields)`."""
-    from ..profile import Fields
-
-    module = importlib.import_module(f"{__name__}.{_MODULES[driver]}")
-    return module.parse_config(table, where, Fields)
-
-
 def make_device(profile: Profile, **options: Any) -> Device:
     """The driver a profile names, not yet opened."""
-    module = importlib.import_module(f"{__name__}.{_MODULES[profile.driver]}")
-    device: Device = module.make_device(profile, **options)
+    device: Device = registry.get(profile.driver).load().make_device(profile, **options)
     return device

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from ..profile import ProfileError
 from . import Device, DeviceSample
 
 SCRIPTS = ("poke", "stroke", "pinch", "twist", "tap", "hold")
@@ -59,8 +60,6 @@ def _unit(v: tuple[float, ...], name: str, where: str, error: Any) -> tuple[floa
 
 def parse_config(table: dict[str, Any], where: str, fields: Any) -> SimConfig:
     """The profile's [sim] table (every field optional)."""
-    from ..profile import ProfileError
-
     f = fields(table, where, tuple(SimConfig.__dataclass_fields__))
     d = SimConfig()
     return SimConfig(
