@@ -105,10 +105,65 @@ const Frame* nearest(const std::map<double, const Frame*>& frames, double t, dou
 
 }  // namespace
 
-ResimReport resimulate(const ResimOptions& o) {
-  mcap::Recording rec = mcap::read_file(o.recording);
+namespace {
+
+// One re-simulation in its stages: read_recording() (its first scene, its
+// frames by simulated time, what the loop applied and the inputs),
+// build_scene() (the recorded scene or another, paced as recorded),
+// open_output() (the re-simulation as a recording, when asked), compare()
+// (each frame the loop publishes against the recorded one), feed() (each
+// input before the step it was applied at), then finish().
+class Resimulation {
+ public:
+  explicit Resimulation(const ResimOptions& options) : o(options) {}
+  ResimReport run() {
+    read_recording();
+    build_scene();
+    open_output();
+    compare();
+    feed();
+    finish();
+    return report;
+  }
+
+ private:
+  void read_recording();
+  void build_scene();
+  void open_output();
+  void compare();
+  void feed();
+  void finish();
+
+  struct Applied {
+    int64_t loop_step;
+    int32_t device;
+    uint64_t sequence;
+    DeviceDrive drive;
+  };
+
+  const ResimOptions& o;
+  ResimReport report;
+  mcap::Recording rec;
+  const mcap::Map* meta = nullptr;  // the recording's 'tactile' metadata
+  uint32_t scene_id = 0;
+  std::vector<std::string> recorded_devices;
+  std::map<double, const wire::StateFrame*> states;  // by simulated time
+  std::map<double, const wire::HapticFrame*> haptics;
+  double last_frame = 0;  // of the first scene, any kind [s]
+  std::vector<Applied> applied;
+  std::map<std::pair<std::string, uint64_t>, std::deque<const mcap::Message*>> inputs;
+  Scene scene;
+  LiveOptions lo;
+  std::unique_ptr<LiveScene> live;
+  std::vector<int32_t> device_index;  // per recorded channel, the scene's (-1: it has none)
+  std::unique_ptr<Recorder> out;
+  bool same_scene = false;
+};
+
+void Resimulation::read_recording() {
+  rec = mcap::read_file(o.recording);
   restore_envelopes(rec);
-  const mcap::Map& meta = tactile_metadata(rec, o.recording);
+  meta = &tactile_metadata(rec, o.recording);
 
   // The recorded session: its first scene, from its start.
   const uint16_t ch_scene = rec.channel_of("/scene"), ch_state = rec.channel_of("/state"),
@@ -125,15 +180,11 @@ ResimReport resimulate(const ResimOptions& o) {
   if (!recorded_scene)
     throw ResimError("recording '" + o.recording + "' holds no scene description" +
                      (rec.complete ? "" : " whole" + cut_note(rec)));
-  const uint32_t scene_id = recorded_scene->scene_id();
-  std::vector<std::string> recorded_devices;
+  scene_id = recorded_scene->scene_id();
   if (recorded_scene->devices())
     for (const flatbuffers::String* d : *recorded_scene->devices()) recorded_devices.push_back(d->str());
 
-  ResimReport report;
-  std::map<double, const wire::StateFrame*> states;  // by simulated time
-  std::map<double, const wire::HapticFrame*> haptics;
-  double first_state = -1, last_frame = 0;  // of the first scene, any kind
+  double first_state = -1;  // of the first scene
   bool later_scene = false;
   for (const mcap::Message& m : rec.messages) {
     if (m.channel == ch_state) {
@@ -168,13 +219,6 @@ ResimReport resimulate(const ResimOptions& o) {
                    "re-simulated up to it";
 
   // What the loop applied, and the inputs themselves.
-  struct Applied {
-    int64_t loop_step;
-    int32_t device;
-    uint64_t sequence;
-    DeviceDrive drive;
-  };
-  std::vector<Applied> applied;
   for (const mcap::Message& m : rec.messages)
     if (m.channel == ch_applied) {
       const auto j = nlohmann::json::parse(m.data.begin(), m.data.end(), nullptr, false);
@@ -190,23 +234,23 @@ ResimReport resimulate(const ResimOptions& o) {
       }
       applied.push_back(a);
     }
-  std::map<std::pair<std::string, uint64_t>, std::deque<const mcap::Message*>> inputs;
   for (const mcap::Message& m : rec.messages)
     if (m.channel == ch_input) {
       const wire::DeviceInput* in = wire::GetEnvelope(m.data.data())->message_as_DeviceInput();
       if (in && in->device()) inputs[{in->device()->str(), in->sequence()}].push_back(&m);
     }
+}
 
+void Resimulation::build_scene() {
   // The scene: the recorded one (its file as it was), or another.
-  Scene scene;
   {
     std::vector<Scene> scenes;
     std::string variant = o.variant;
     if (o.scene.empty()) {
-      const auto j = nlohmann::json::parse(field(meta, "scene_file", o.recording), nullptr, false);
+      const auto j = nlohmann::json::parse(field(*meta, "scene_file", o.recording), nullptr, false);
       if (j.is_discarded()) throw ResimError("recording '" + o.recording + "': its scene file is not JSON");
-      scenes = parse_scene(j, field(meta, "scene_path", o.recording));
-      if (variant.empty() && meta.count("variant")) variant = meta.at("variant");
+      scenes = parse_scene(j, field(*meta, "scene_path", o.recording));
+      if (variant.empty() && meta->count("variant")) variant = meta->at("variant");
     } else if (!o.scene_text.empty()) {
       const auto j = nlohmann::json::parse(o.scene_text, nullptr, false);
       if (j.is_discarded()) throw SceneError(o.scene + ": not JSON");
@@ -217,35 +261,36 @@ ResimReport resimulate(const ResimOptions& o) {
     const std::string path = o.scene.empty() ? "recording '" + o.recording + "'" : o.scene;
     scene = variant.empty() ? std::move(scenes.front()) : pick_variant(std::move(scenes), variant, path);
   }
-  LiveOptions lo;
-  lo.dt = number(meta, "dt", o.recording);
-  lo.state_rate_hz = number(meta, "state_rate_hz", o.recording);
-  lo.haptic_rate_hz = number(meta, "haptic_rate_hz", o.recording);
-  lo.force_window = number(meta, "force_window", o.recording);
-  LiveScene live(scene, scene_id, lo);
+  lo.dt = number(*meta, "dt", o.recording);
+  lo.state_rate_hz = number(*meta, "state_rate_hz", o.recording);
+  lo.haptic_rate_hz = number(*meta, "haptic_rate_hz", o.recording);
+  lo.force_window = number(*meta, "force_window", o.recording);
+  live = std::make_unique<LiveScene>(scene, scene_id, lo);
   report.scene_name = scene.name;
   // Channels by name: another scene may order them otherwise, or lack one.
-  std::vector<int32_t> device_index;
   for (const std::string& name : recorded_devices) {
-    const auto& names = live.sim().devices();
+    const auto& names = live->sim().devices();
     const auto it = std::find(names.begin(), names.end(), name);
     device_index.push_back(it == names.end() ? -1 : int32_t(it - names.begin()));
   }
+}
 
-  std::unique_ptr<Recorder> out;
+void Resimulation::open_output() {
+  same_scene = o.scene.empty();
   if (!o.out.empty()) {
-    mcap::Map m = meta;
+    mcap::Map m = *meta;
     m["scene_name"] = scene.name;
     m["scene_path"] = scene.path;
     m["resimulated_from"] = o.recording;
     if (!o.scene.empty()) m.erase("scene_file");  // (its own file is at scene_path)
     out = std::make_unique<Recorder>(o.out, m, RecorderOptions{.wait_for_room = true});
-    const std::vector<uint8_t> d = live.describe({});
+    const std::vector<uint8_t> d = live->describe({});
     out->post(Topic::Scene, 0, 0, d);
   }
-  const bool same_scene = o.scene.empty();
+}
 
-  live.loop().on_state([&](std::span<const uint8_t> bytes) {
+void Resimulation::compare() {
+  live->loop().on_state([this](std::span<const uint8_t> bytes) {
     const wire::StateFrame* f = wire::GetEnvelope(bytes.data())->message_as_StateFrame();
     ++report.states;
     if (out) out->post(Topic::State, int64_t(std::llround(f->sim_time() * 1e9)), 0, bytes);
@@ -265,7 +310,7 @@ ResimReport resimulate(const ResimOptions& o) {
         report.max_position_difference =
             std::max(report.max_position_difference, double(std::fabs(f->positions()->Get(i) - r.positions()->Get(i))));
   });
-  live.loop().on_haptic([&](std::span<const uint8_t> bytes) {
+  live->loop().on_haptic([this](std::span<const uint8_t> bytes) {
     const wire::HapticFrame* f = wire::GetEnvelope(bytes.data())->message_as_HapticFrame();
     ++report.haptic;
     report.peak_force = std::max(report.peak_force, peak_proxy_force(*f));
@@ -287,9 +332,11 @@ ResimReport resimulate(const ResimOptions& o) {
                      std::hypot(double(a.x() - b.x()), double(a.y() - b.y()), double(a.z() - b.z())));
       }
   });
+}
 
-  RealtimeLoop& loop = live.loop();
-  const Simulation& sim = live.sim();
+void Resimulation::feed() {
+  RealtimeLoop& loop = live->loop();
+  const Simulation& sim = live->sim();
   loop.begin(0);
   size_t next = 0;
   while (sim.time() < last_frame - 0.5 * loop.dt()) {
@@ -326,6 +373,9 @@ ResimReport resimulate(const ResimOptions& o) {
       break;
     }
   }
+}
+
+void Resimulation::finish() {
   for (size_t d = 0; d < device_index.size(); ++d)
     if (device_index[d] < 0)
       report.note += std::string(report.note.empty() ? "" : "; ") + "scene '" + scene.name + "' has no channel '" +
@@ -336,7 +386,10 @@ ResimReport resimulate(const ResimOptions& o) {
     if (const std::string fault = out->stats().fault; !fault.empty())
       throw ResimError("writing " + o.out + ": " + fault);
   }
-  return report;
 }
+
+}  // namespace
+
+ResimReport resimulate(const ResimOptions& o) { return Resimulation(o).run(); }
 
 }  // namespace tactile
