@@ -292,6 +292,65 @@ RecorderStats Recorder::stats() const {
 
 int64_t Recorder::log_now_ns() const { return steady_now_ns() + epoch_offset_ns_; }
 
+// Writes one message on its channel: an Envelope behind its root header
+// (and Foxglove's views of it), a Control as JSON with its Envelope, the
+// rest as they came. False, writing nothing, for one that does not verify.
+bool Recorder::write_item(const Item& item) {
+  if (rooted_at_message(item.topic)) {
+    // The root header: offset of the message table (behind the header),
+    // then the file identifier. Envelopes come from the server's own
+    // encoders and its verified inputs; one that does not verify here
+    // is left out, counted.
+    flatbuffers::Verifier v(item.bytes.data(), item.bytes.size());
+    if (!proto::VerifyEnvelopeBuffer(v) || !proto::GetEnvelope(item.bytes.data())->message()) {
+      return false;
+    }
+    const auto* table = static_cast<const uint8_t*>(proto::GetEnvelope(item.bytes.data())->message());
+    const uint32_t root = uint32_t(kEnvelopeOffset + size_t(table - item.bytes.data()));
+    uint8_t head[kEnvelopeOffset];
+    std::memcpy(head, &root, 4);  // little-endian, as FlatBuffers are on every target we build for
+    std::memcpy(head + 4, proto::EnvelopeIdentifier(), 4);
+    writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes,
+                  {head, kEnvelopeOffset});
+    // Foxglove's views of it, at the same time.
+    const proto::Envelope* e = proto::GetEnvelope(item.bytes.data());
+    std::optional<std::string> view;
+    uint16_t to = log_channel_;
+    if (const auto* scene = e->message_as_SceneDescription()) {
+      views_.scene(*scene);
+    } else if (const auto* state = e->message_as_StateFrame()) {
+      view = views_.body(*state, item.log_ns);
+      to = body_channel_;
+      if (const std::optional<std::string> fine = views_.surface(*state, item.log_ns))
+        writer_.write(surface_channel_, uint64_t(item.log_ns), uint64_t(item.publish_ns), bytes_of(*fine));
+    } else if (const auto* safety = e->message_as_SafetyEvent()) {
+      view = FoxgloveViews::log(*safety, item.log_ns);
+    } else if (const auto* err = e->message_as_Error()) {
+      view = FoxgloveViews::log(*err, item.log_ns);
+    }
+    if (view) writer_.write(to, uint64_t(item.log_ns), uint64_t(item.publish_ns), bytes_of(*view));
+  } else if (item.topic == Topic::Control) {
+    // {"request_id", "command_type", "command", "envelope"}: the
+    // Control's fields as flatbuffers' text generator writes them, and
+    // its Envelope for replay.
+    flatbuffers::Verifier v(item.bytes.data(), item.bytes.size());
+    const proto::Control* c =
+        proto::VerifyEnvelopeBuffer(v) ? proto::GetEnvelope(item.bytes.data())->message_as_Control() : nullptr;
+    std::string text;
+    nlohmann::json j;
+    if (c && flatbuffers::GenerateTextFromTable(*schema_, c, "tactile.proto.Control", &text))
+      j = nlohmann::json::parse(quote_non_finite(text), nullptr, false);
+    if (!j.is_object()) {
+      return false;
+    }
+    j["envelope"] = to_base64(item.bytes);
+    writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), bytes_of(j.dump()));
+  } else {
+    writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes);
+  }
+  return true;
+}
+
 void Recorder::run() {
   using Clock = std::chrono::steady_clock;
   const int64_t hold_ns = int64_t(options_.order_seconds * 1e9);
@@ -346,63 +405,7 @@ void Recorder::run() {
         }
         written = item.log_ns;
         if (writer_.chunk_empty()) chunk_opened = Clock::now();
-        if (rooted_at_message(item.topic)) {
-          // The root header: offset of the message table (behind the header),
-          // then the file identifier. Envelopes come from the server's own
-          // encoders and its verified inputs; one that does not verify here
-          // is left out, counted.
-          flatbuffers::Verifier v(item.bytes.data(), item.bytes.size());
-          if (!proto::VerifyEnvelopeBuffer(v) || !proto::GetEnvelope(item.bytes.data())->message()) {
-            ++unreadable;
-            waiting.erase(waiting.begin());
-            continue;
-          }
-          const auto* table = static_cast<const uint8_t*>(proto::GetEnvelope(item.bytes.data())->message());
-          const uint32_t root = uint32_t(kEnvelopeOffset + size_t(table - item.bytes.data()));
-          uint8_t head[kEnvelopeOffset];
-          std::memcpy(head, &root, 4);  // little-endian, as FlatBuffers are on every target we build for
-          std::memcpy(head + 4, proto::EnvelopeIdentifier(), 4);
-          writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes,
-                        {head, kEnvelopeOffset});
-          // Foxglove's views of it, at the same time.
-          const proto::Envelope* e = proto::GetEnvelope(item.bytes.data());
-          std::optional<std::string> view;
-          uint16_t to = log_channel_;
-          if (const auto* scene = e->message_as_SceneDescription()) {
-            views_.scene(*scene);
-          } else if (const auto* state = e->message_as_StateFrame()) {
-            view = views_.body(*state, item.log_ns);
-            to = body_channel_;
-            if (const std::optional<std::string> fine = views_.surface(*state, item.log_ns))
-              writer_.write(surface_channel_, uint64_t(item.log_ns), uint64_t(item.publish_ns), bytes_of(*fine));
-          } else if (const auto* safety = e->message_as_SafetyEvent()) {
-            view = FoxgloveViews::log(*safety, item.log_ns);
-          } else if (const auto* err = e->message_as_Error()) {
-            view = FoxgloveViews::log(*err, item.log_ns);
-          }
-          if (view) writer_.write(to, uint64_t(item.log_ns), uint64_t(item.publish_ns), bytes_of(*view));
-        } else if (item.topic == Topic::Control) {
-          // {"request_id", "command_type", "command", "envelope"}: the
-          // Control's fields as flatbuffers' text generator writes them, and
-          // its Envelope for replay.
-          flatbuffers::Verifier v(item.bytes.data(), item.bytes.size());
-          const proto::Control* c =
-              proto::VerifyEnvelopeBuffer(v) ? proto::GetEnvelope(item.bytes.data())->message_as_Control() : nullptr;
-          std::string text;
-          nlohmann::json j;
-          if (c && flatbuffers::GenerateTextFromTable(*schema_, c, "tactile.proto.Control", &text))
-            j = nlohmann::json::parse(quote_non_finite(text), nullptr, false);
-          if (!j.is_object()) {
-            ++unreadable;
-            waiting.erase(waiting.begin());
-            continue;
-          }
-          j["envelope"] = to_base64(item.bytes);
-          writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns),
-                        bytes_of(j.dump()));
-        } else {
-          writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes);
-        }
+        if (!write_item(item)) ++unreadable;
         waiting.erase(waiting.begin());
         if (writer_.chunk_bytes() >= options_.chunk_bytes) writer_.close_chunk();
       }

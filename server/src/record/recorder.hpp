@@ -101,7 +101,8 @@ class Recorder {
     std::vector<uint8_t> bytes;
   };
   void run();
-  int64_t log_now_ns() const;  // the steady clock as log time
+  bool write_item(const Item& item);  // false for one that does not verify (nothing written)
+  int64_t log_now_ns() const;         // the steady clock as log time
 
   std::string path_;
   RecorderOptions options_;
