@@ -5,9 +5,11 @@
 // description, telemetry showing the pause) or an Error naming what is wrong, shown here.
 import {
   ControlCommand, ControlT, EnvelopeT, ErrorCode, LoadSceneT, Message, PauseT, ResetT, ResumeT, Role,
-  SetParameterT, StartRecordingT, StopRecordingT, decode, encode, makeHello, messageTypeOf,
+  SetParameterT, StartRecordingT, StopRecordingT, decode, messageTypeOf,
 } from '@tactile/proto';
+import { ClosedError, ServerError, connect } from './connection.js';
 /** @import { ErrorT, SceneDescriptionT } from '@tactile/proto' */
+/** @import { Connection } from './connection.js' */
 
 // An element with properties and children.
 /**
@@ -27,8 +29,8 @@ export class ControlPanel {
   constructor(element, { token, url }) {
     this.token = token;
     this.url = url;
-    /** @type {WebSocket | null} */
-    this.ws = null;
+    /** @type {Connection | null} */
+    this.connection = null;
     this.granted = false;
     this.requestId = 0;
     /** @type {Map<number, string>} */
@@ -54,35 +56,42 @@ export class ControlPanel {
   say(text) { this.message.textContent = text; }
 
   connect() {
-    const ws = new WebSocket(this.url);
-    ws.binaryType = 'arraybuffer';
-    this.ws = ws;
-    ws.onopen = () => ws.send(encode(makeHello({ role: Role.Controller, token: this.token, clientName: 'client-web' })));
-    ws.onmessage = (e) => {
-      const data = new Uint8Array(e.data);
-      const type = messageTypeOf(data);
-      if (type === Message.Welcome) {
-        this.granted = true;
-        this.take.textContent = 'release control';
-        this.say('in control');
+    const connection = connect(this.url, Role.Controller, {
+      token: this.token, clientName: 'client-web',
+      onMessage: (data) => {
+        if (messageTypeOf(data) !== Message.Error) return;
+        this.showError(new ServerError(/** @type {ErrorT} */ (decode(data).message)));
+      },
+      onClose: ({ reason }) => {
+        if (this.connection !== connection) return;
+        this.connection = null;
+        this.granted = false;
+        this.take.textContent = 'take control';
+        if (reason) this.say(reason);  // (refused or evicted, close code 1013)
         this.build();
-        for (const [type, command, what] of this.queued.splice(0)) this.send(type, command, what);
-      } else if (type === Message.Error) {
-        const err = /** @type {ErrorT} */ (decode(data).message);
-        const asked = this.pending.get(err.requestId);
-        this.pending.delete(err.requestId);
-        // (The object API decodes a string as one; null where the field is absent.)
-        this.say(asked ? `${asked}: ${err.message}` : /** @type {string} */ (err.message));
-        if (!this.granted && err.code === ErrorCode.Busy) this.say('another controller is connected');
-      }
-    };
-    ws.onclose = () => {
-      if (this.ws !== ws) return;
-      this.ws = null;
-      this.granted = false;
-      this.take.textContent = 'take control';
+      },
+    });
+    this.connection = connection;
+    connection.welcome.then(() => {
+      if (this.connection !== connection) return;
+      this.granted = true;
+      this.take.textContent = 'release control';
+      this.say('in control');
       this.build();
-    };
+      for (const [type, command, what] of this.queued.splice(0)) this.send(type, command, what);
+    }, (err) => {
+      if (!(err instanceof ClosedError)) this.showError(err);  // (a close is onClose's)
+    });
+  }
+
+  // The server's Error, with what the request it answers asked (a refused Hello: another controller, a wrong
+  // token), or bytes that are no message.
+  /** @param {Error & { code?: ErrorCode, requestId?: number }} err */
+  showError(err) {
+    const asked = this.pending.get(err.requestId ?? 0);
+    this.pending.delete(err.requestId ?? 0);
+    this.say(asked ? `${asked}: ${err.message}` : err.message);
+    if (!this.granted && err.code === ErrorCode.Busy) this.say('another controller is connected');
   }
 
   // Sends now if in control, else takes control first (the page has the token) and sends then.
@@ -90,7 +99,7 @@ export class ControlPanel {
   sendWhenGranted(type, command, what) {
     if (this.granted) { this.send(type, command, what); return; }
     this.queued.push([type, command, what]);
-    if (!this.ws) this.connect();
+    if (!this.connection) this.connect();
   }
 
   /** @param {boolean} replaying */
@@ -101,7 +110,7 @@ export class ControlPanel {
   }
 
   release() {
-    if (this.ws) this.ws.close();
+    if (this.connection) this.connection.close();
   }
 
   // From the viewer connection: every description (a load, a reset, a parameter set) and telemetry.
@@ -120,11 +129,11 @@ export class ControlPanel {
 
   /** @param {ControlCommand} type @param {ControlT['command']} command @param {string} what */
   send(type, command, what) {
-    if (!this.ws || !this.granted) return;
+    if (!this.connection || !this.granted) return;
     this.requestId += 1;
     this.pending.set(this.requestId, what);  // (answered by an Error, or by the change: the latest 64 kept)
     if (this.pending.size > 64) this.pending.delete(/** @type {number} */ (this.pending.keys().next().value));
-    this.ws.send(encode(new EnvelopeT(Message.Control, new ControlT(this.requestId, type, command))));
+    this.connection.send(new EnvelopeT(Message.Control, new ControlT(this.requestId, type, command)));
     this.say(`${what}…`);
   }
 

@@ -6,13 +6,13 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
 import {
-  ControlCommand, Message, ResetT, Role, decode, encode, makeHello, makeViewFields, messageTypeOf, readStateFrame,
-  checkVersion,
+  ControlCommand, Message, ResetT, Role, decode, makeViewFields, messageTypeOf, readStateFrame, checkVersion,
 } from '@tactile/proto';
 import 'uplot/dist/uPlot.min.css';  // (esbuild writes it to dist/app.css, which index.html links)
 
 import { PRESETS, START, applyFraming, computeBoundingSphere, viewDirection } from './camera.js';
 import { cssGradient } from './colormap.js';
+import { ClosedError, ServerError, connect } from './connection.js';
 import { ControlPanel } from './controls.js';
 import { DISPLACEMENT, FieldChoice } from './fields.js';
 import { FrameBuffer } from './frames.js';
@@ -22,9 +22,10 @@ import { TelemetryPanel } from './telemetry.js';
 import { Timeline } from './timeline.js';
 import { SceneView } from './view.js';
 /**
- * @import { DeviceStatusT, ErrorT, ReplayStatusT, SafetyEventT, SceneDescriptionT, TelemetryT, WelcomeT }
+ * @import { DeviceStatusT, ErrorT, ReplayStatusT, SafetyEventT, SceneDescriptionT, TelemetryT }
  *   from '@tactile/proto'
  */
+/** @import { Connection } from './connection.js' */
 
 // (index.html has every element the page asks for by id.)
 const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.getElementById(id));
@@ -119,7 +120,7 @@ function showFault(faults) {
   $('fault').hidden = !text;
 }
 
-/** @type {WebSocket | null} */
+/** @type {Connection | null} */
 let socket = null;
 let sentFields = '';  // the fields the server was last asked for, joined
 /** @type {Float32Array} */
@@ -128,8 +129,8 @@ let scalarsNow = new Float32Array(0);  // the chosen field at each frame vertex,
 // Asks the server for the chosen field (or for none, for displacement) when that changed.
 function askFields() {
   const asked = fieldChoice.asked();
-  if (asked.join(',') === sentFields || !socket || socket.readyState !== WebSocket.OPEN) return;
-  socket.send(encode(makeViewFields(asked)));
+  if (asked.join(',') === sentFields || !socket || !socket.open) return;
+  socket.send(makeViewFields(asked));
   sentFields = asked.join(',');
 }
 
@@ -315,14 +316,8 @@ function onMessage(data) {
   // the union of them all.
   const m = decode(data);
   switch (m.messageType) {
-    case Message.Welcome: checkVersion(/** @type {WelcomeT} */ (m.message)); break;
     case Message.SceneDescription: onScene(/** @type {SceneDescriptionT} */ (m.message)); break;
-    case Message.Error: {
-      const err = /** @type {ErrorT} */ (m.message);
-      status(`server: ${err.message}`);
-      stats.errors.push(err.message);
-      break;
-    }
+    case Message.Error: serverSaid(/** @type {ErrorT} */ (m.message).message); break;
     case Message.Telemetry: {
       const t = /** @type {TelemetryT} */ (m.message);
       telemetry.update(t, pointer.latencies);
@@ -349,29 +344,48 @@ function onMessage(data) {
   }
 }
 
-function connect() {
+// What went wrong, in the status line and in the errors the tests read: the server's word (an Error, or the
+// reason it closed the connection), or what could not be read.
+/** @param {ErrorT['message']} text */
+function serverSaid(text) {
+  status(`server: ${text}`);
+  stats.errors.push(text);
+}
+/** @param {unknown} err */
+function badMessage(err) {
+  status(`bad message: ${/** @type {Error} */ (err).message}`);
+  stats.errors.push(String(/** @type {Error} */ (err).message));
+}
+
+function connectViewer() {
   const url = wsUrl;
-  const ws = new WebSocket(url);
-  ws.binaryType = 'arraybuffer';
-  ws.onopen = () => {
-    status(`connected to ${url}`);
-    // (Off loopback every role needs the token, the viewer's too.)
-    ws.send(encode(makeHello({ role: Role.Viewer, token, clientName: 'client-web', fields: fieldChoice.asked() })));
-    sentFields = fieldChoice.asked().join(',');
-  };
-  socket = ws;
-  ws.onmessage = (e) => {
-    try {
-      onMessage(new Uint8Array(e.data));
-    } catch (err) {
-      status(`bad message: ${/** @type {Error} */ (err).message}`);
-      stats.errors.push(String(/** @type {Error} */ (err).message));
-    }
-  };
-  ws.onclose = () => {
-    status('disconnected: reconnecting');
-    setTimeout(connect, 1000);
-  };
+  const fields = fieldChoice.asked();
+  // (Off loopback every role needs the token, the viewer's too.)
+  const connection = connect(url, Role.Viewer, {
+    token, clientName: 'client-web', fields,
+    onOpen: () => {
+      status(`connected to ${url}`);
+      sentFields = fields.join(',');
+    },
+    onMessage: (data) => {
+      try {
+        onMessage(data);
+      } catch (err) {
+        badMessage(err);
+      }
+    },
+    onClose: ({ reason }) => {
+      // (A connection the server refused or evicted, close code 1013, is told why.)
+      status(reason ? `server: ${reason} (reconnecting)` : 'disconnected: reconnecting');
+      if (reason) stats.errors.push(reason);
+      setTimeout(connectViewer, 1000);
+    },
+  });
+  socket = connection;
+  connection.welcome.then(checkVersion).catch((err) => {
+    if (err instanceof ServerError) serverSaid(err.message);
+    else if (!(err instanceof ClosedError)) badMessage(err);  // (another major version too; a close is onClose's)
+  });
 }
 
 function frame() {
@@ -406,5 +420,5 @@ function frame() {
 }
 
 resize();
-connect();
+connectViewer();
 frame();

@@ -6,11 +6,13 @@ import * as THREE from 'three';
 
 import {
   ByteBuffer, DeviceInputT, Envelope, EnvelopeT, ErrorCode, HapticFrame, Message, QuatdT, Role, Vec3dT,
-  decode, encode, makeHello, messageTypeOf,
+  decode, messageTypeOf,
 } from '@tactile/proto';
+import { ClosedError, ServerError, connect } from './connection.js';
 import { channelOrder, pressTarget } from './press.js';
 /** @import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js' */
 /** @import { DeviceHaptics, ErrorT, SceneDescriptionT, Vec3f } from '@tactile/proto' */
+/** @import { Connection } from './connection.js' */
 /** @import { SceneView } from './view.js' */
 
 export class PointerDevice {
@@ -27,8 +29,8 @@ export class PointerDevice {
     this.controls = controls;
     this.token = token;
     this.onStatus = onStatus;
-    /** @type {WebSocket | null} */
-    this.ws = null;
+    /** @type {Connection | null} */
+    this.connection = null;
     /** @type {string | null} */
     this.channel = null;        // the channel it drives, once the server welcomed it
     this.channelIndex = -1;     // in SceneDescription.devices
@@ -87,50 +89,44 @@ export class PointerDevice {
       return;
     }
     const channel = order[k];
-    const ws = new WebSocket(url);
-    ws.binaryType = 'arraybuffer';
-    this.ws = ws;
-    let welcomed = false;
-    ws.onopen = () => ws.send(encode(makeHello({ role: Role.Device, token: this.token, clientName: 'client-web mouse',
-                                                  devices: [channel] })));
-    ws.onmessage = (e) => {
-      const data = new Uint8Array(e.data);
-      const type = messageTypeOf(data);
-      if (type === Message.HapticFrame) { this.onHaptic(data, performance.now()); return; }
-      if (type === Message.Welcome) {
-        welcomed = true;
-        this.channel = channel;
-        this.channelIndex = (description.devices || []).indexOf(channel);
-        this.proxy = (description.proxies || []).findIndex((p) => p.device === channel);
-        this.radius = this.proxy >= 0 ? description.proxies[this.proxy].radius || 0.01 : 0.01;
-        this.depth = 0.3 * this.radius;
-        this.onStatus(`poke: drag the body to press with '${channel}' (wheel: deeper or shallower)`);
-        return;
-      }
-      if (type === Message.Error) {
-        const err = /** @type {ErrorT} */ (decode(data).message);
-        if (!welcomed && err.code === ErrorCode.Busy) {
-          ws.onclose = null;
-          ws.close();
-          this.tryChannels(url, description, order, k + 1);
-        } else {
-          this.onStatus(`poke: ${err.message}`);
-        }
-      }
-    };
-    ws.onclose = () => {
-      if (this.ws === ws) {
+    const connection = connect(url, Role.Device, {
+      token: this.token, clientName: 'client-web mouse', devices: [channel],
+      onMessage: (data) => {
+        const type = messageTypeOf(data);
+        if (type === Message.HapticFrame) { this.onHaptic(data, performance.now()); return; }
+        if (type === Message.Error) this.onStatus(`poke: ${/** @type {ErrorT} */ (decode(data).message).message}`);
+      },
+      onClose: ({ reason }) => {
+        if (this.connection !== connection) return;
         this.channel = null;
-        this.onStatus('poke: the device connection closed');
+        // (A connection the server refused or evicted, close code 1013, is told why.)
+        this.onStatus(reason ? `poke: ${reason}` : 'poke: the device connection closed');
+      },
+    });
+    this.connection = connection;
+    connection.welcome.then(() => {
+      if (this.connection !== connection) return;
+      this.channel = channel;
+      this.channelIndex = (description.devices || []).indexOf(channel);
+      this.proxy = (description.proxies || []).findIndex((p) => p.device === channel);
+      this.radius = this.proxy >= 0 ? description.proxies[this.proxy].radius || 0.01 : 0.01;
+      this.depth = 0.3 * this.radius;
+      this.onStatus(`poke: drag the body to press with '${channel}' (wheel: deeper or shallower)`);
+    }, (err) => {
+      if (err instanceof ClosedError) return;  // (onClose's)
+      if (err instanceof ServerError && err.code === ErrorCode.Busy) {  // another device drives it: the next one
+        connection.close({ quiet: true });
+        this.tryChannels(url, description, order, k + 1);
+      } else {
+        this.onStatus(`poke: ${err.message}`);
       }
-    };
+    });
   }
 
   close() {
-    if (this.ws) {
-      this.ws.onclose = null;
-      this.ws.close();
-      this.ws = null;
+    if (this.connection) {
+      this.connection.close({ quiet: true });
+      this.connection = null;
     }
     this.dragging = false;
     this.controls.enabled = true;
@@ -197,13 +193,13 @@ export class PointerDevice {
   // glides between inputs over their interval).
   /** @param {number} now */
   tick(now) {
-    if (!this.channel || !this.ws || this.ws.readyState !== WebSocket.OPEN) return;
+    if (!this.channel || !this.connection || !this.connection.open) return;
     const to = this.dragging ? this.target : this.home;
     if (to) {
       this.sequence += 1;
       const input = new DeviceInputT(this.channel, BigInt(this.sequence), BigInt(Math.round(now * 1e6)),
                                      new Vec3dT(to.x, to.y, to.z), new QuatdT(1, 0, 0, 0), this.dragging ? 1 : 0);
-      this.ws.send(encode(new EnvelopeT(Message.DeviceInput, input)));
+      this.connection.send(new EnvelopeT(Message.DeviceInput, input));
       this.sent.set(this.sequence, now);
       if (this.sent.size > 600) this.sent.delete(/** @type {number} */ (this.sent.keys().next().value));
     }
