@@ -120,8 +120,9 @@ py::dict report_dict(const AdvanceReport& r) {
 }
 
 // Holds a Simulation's lock for a call. Whoever waits for it lets the GIL go
-// first: the holder may need the GIL to publish its step, so waiting with it
-// would deadlock. Recursive: a call may make another (step() -> advance()).
+// first: the holder takes the GIL again while it holds the lock (to check for
+// signals, and when its step returns), so waiting with it would deadlock. Recursive: a call may make another (step() ->
+// advance()).
 class Busy {
  public:
   explicit Busy(std::recursive_mutex& m) : lock_(m, std::try_to_lock) {

@@ -12,8 +12,8 @@
 // 421, for a page of another site whose name was made to resolve here (DNS
 // rebinding).
 //
-// A slot:
-// A connection "waits" from its upgrade until its Hello. The rules:
+// A WebSocket slot: a connection "waits" from its upgrade until its Hello.
+// The rules:
 //   - the greeted connections fill max_connections: the newcomer is refused;
 //   - the waiting pool has room: admitted, nobody evicted (a crowd behind
 //     one address, a NAT or `kubectl port-forward`, all get in);

@@ -56,16 +56,18 @@ Session::Session(SessionHost& host, const SessionLimits& limits, bool loopback, 
 // ---- in ---------------------------------------------------------------------------------
 
 void Session::receive(std::span<const uint8_t> bytes, bool binary, SessionClock::time_point now) {
-  const std::string over = "more than " + std::to_string(int64_t(limits_.max_messages_per_s)) + " messages per second";
   if (!messages_.take(now)) {
     // A device's inputs over the rate are coalesced (the latest of each
     // channel waits for a token); anything else, or past the coalescing
     // bucket, is a flood.
-    if (!(greeted_ && role_ == wire::Role::Device && binary && coalescing_.take(now)))
-      return refuse(wire::ErrorCode::RateLimited, over);
+    const auto flood = [&] {
+      refuse(wire::ErrorCode::RateLimited,
+             "more than " + std::to_string(int64_t(limits_.max_messages_per_s)) + " messages per second");
+    };
+    if (!(greeted_ && role_ == wire::Role::Device && binary && coalescing_.take(now))) return flood();
     const Inbound inbound = read_inbound(bytes.data(), bytes.size());
     const wire::DeviceInput* in = inbound ? inbound.envelope->message_as_DeviceInput() : nullptr;
-    if (!in) return refuse(wire::ErrorCode::RateLimited, over);
+    if (!in) return flood();
     const std::string name = in->device() ? in->device()->str() : "";
     const auto it = std::find(device_names_.begin(), device_names_.end(), name);
     if (it == device_names_.end()) return;  // not its channel: nothing to keep (said when the rate allows)
@@ -93,10 +95,10 @@ void Session::flush(SessionClock::time_point now) {
   for (std::vector<uint8_t>& slot : waiting_input_) {
     if (slot.empty() || closed_) continue;
     if (!messages_.take(now)) return;
-    const std::vector<uint8_t> bytes = std::move(slot);
+    flushing_.swap(slot);  // (the slot keeps a buffer for the next input over the rate)
     slot.clear();
     --pending_inputs_;
-    on_input(*wire::GetEnvelope(bytes.data())->message_as_DeviceInput(), bytes);  // (verified when it came)
+    on_input(*wire::GetEnvelope(flushing_.data())->message_as_DeviceInput(), flushing_);  // (verified when it came)
   }
 }
 

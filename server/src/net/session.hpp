@@ -200,6 +200,7 @@ class Session {
   Bucket coalescing_;  // DeviceInputs over messages_' rate: coalesced within it, a flood past it
   // Per channel named in Hello: its latest input over the rate, waiting (empty: none).
   std::vector<std::vector<uint8_t>> waiting_input_;
+  std::vector<uint8_t> flushing_;  // the one flush() is taking
   size_t pending_inputs_ = 0;
   int64_t inputs_coalesced_ = 0;
   bool safety_limited_ = false;
