@@ -63,13 +63,25 @@ LiveScene::LiveScene(Scene scene, uint32_t id, const LiveOptions& options)
   loop_.set_view_fields(scene_.view_fields);  // the server adds what its viewers ask
 }
 
+void LiveScene::publish(std::shared_ptr<Wakeup> wakeup) {
+  // The most a frame takes: a state, its positions and up to four fields per
+  // surface vertex and a pose and force per proxy; a haptic frame, ~92 B per
+  // proxy and ~100 B per device channel (live/frames.hpp).
+  const size_t state_bytes = 256 + 20 * 3 * frames_.surface().nodes.size() + 64 * sim_.proxies().size();
+  const size_t haptic_bytes = 512 + 128 * sim_.proxies().size() + 160 * sim_.devices().size();
+  outbox_ = std::make_unique<Outbox>(state_bytes, haptic_bytes, std::move(wakeup));
+  outbox_->attach(loop_);
+}
+
 std::vector<uint8_t> LiveScene::describe(std::span<const std::string> scenes) {
   const std::vector<Parameter> parameters = list_parameters(scene_.spec);
   const std::span<const uint8_t> d = frames_.scene_description(parameters, scenes);
   return {d.begin(), d.end()};
 }
 
-Director::Director(std::shared_ptr<LiveScene> first) : next_id_(first->id() + 1), current_(std::move(first)) {}
+Director::Director(std::shared_ptr<LiveScene> first) : next_id_(first->id() + 1), current_(std::move(first)) {
+  current_->publish(wakeup_);
+}
 
 Director::~Director() { finish_building(); }
 
@@ -91,7 +103,7 @@ void Director::set_library(const std::string& scenes_dir, const LiveOptions& opt
   std::sort(scenes_.begin(), scenes_.end());
 }
 
-std::string Director::request(const Change& change, Built built, bool* busy) {
+std::string Director::request(const Change& change, Done done, bool* busy) {
   if (busy) *busy = false;
   if (building_.load()) {
     if (busy) *busy = true;
@@ -125,17 +137,18 @@ std::string Director::request(const Change& change, Built built, bool* busy) {
   finish_building();
   building_.store(true);
   builder_ = std::thread(
-      [this, scene = std::move(scene), load_path, id, carry, built = std::move(built), options = options_]() mutable {
+      [this, scene = std::move(scene), load_path, id, carry, done = std::move(done), options = options_]() mutable {
         std::shared_ptr<LiveScene> live;
-        std::string error;
         try {
           if (!load_path.empty()) scene = load_scene(load_path).front();
           live = std::make_shared<LiveScene>(std::move(scene), id, options);
         } catch (const std::exception& e) {
-          error = e.what();
+          building_.store(false);
+          return done(nullptr, e.what());
         }
+        live->publish(wakeup_);
+        replace(std::move(live), carry, std::move(done));
         building_.store(false);
-        built(std::move(live), carry, error);
       });
   return "";
 }
@@ -145,15 +158,25 @@ std::shared_ptr<LiveScene> Director::current() const {
   return current_;
 }
 
-void Director::replace(std::shared_ptr<LiveScene> next, bool carry) {
+void Director::replace(std::shared_ptr<LiveScene> next, bool carry, Done done) {
   std::shared_ptr<LiveScene> running;
+  Done replaced;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    if (next_) replaced = std::move(next_done_);
     next_ = std::move(next);
     carry_ = carry;
+    next_done_ = std::move(done);
     running = current_;
   }
+  if (replaced) replaced(nullptr, "replaced by a later change before it ran");
   running->loop().interrupt();
+}
+
+void Director::set_view_fields(ViewFieldMask extra) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  extra_fields_ = extra;
+  current_->loop().set_view_fields(current_->scene().view_fields | extra);
 }
 
 std::string Director::fault() const {
@@ -181,10 +204,12 @@ void Director::run(const std::atomic<bool>& stop, double duration) {
     }
     std::shared_ptr<LiveScene> next;
     bool carry = false;
+    Done done;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       next = std::move(next_);
       carry = carry_;
+      done = std::move(next_done_);
     }
     if (!next) {
       // Interrupted with nothing to switch to (a replacement replaced), or
@@ -196,11 +221,13 @@ void Director::run(const std::atomic<bool>& stop, double duration) {
     next->loop().set_paused(scene->loop().paused());
     {
       std::lock_guard<std::mutex> lock(mutex_);
+      next->loop().set_view_fields(next->scene().view_fields | extra_fields_);
       current_ = next;
     }
     faulted_.store(false);
     scene = std::move(next);
     if (installed_) installed_(scene);
+    if (done) done(scene, "");
   }
 }
 

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "live/frames.hpp"
+#include "live/outbox.hpp"
 #include "live/realtime.hpp"
 #include "scene/scene.hpp"
 #include "sim/simulation.hpp"
@@ -53,18 +54,27 @@ class LiveScene {
   // not change while the loop runs; call from one thread at a time.
   std::vector<uint8_t> describe(std::span<const std::string> scenes);
 
+  // Gives the scene its outbox (live/outbox.hpp), sized for its frames, as
+  // the loop's sinks; `wakeup` is signalled after each frame. Before the
+  // loop runs. A scene run otherwise (a re-simulation) sets its own sinks.
+  void publish(std::shared_ptr<Wakeup> wakeup);
+  Outbox* outbox() { return outbox_.get(); }  // null until published
+
  private:
   Scene scene_;
   uint32_t id_;
   Simulation sim_;
   FrameEncoder frames_;
   RealtimeLoop loop_;
+  std::unique_ptr<Outbox> outbox_;
 };
 
 class Director {
  public:
   using Installed = std::function<void(const std::shared_ptr<LiveScene>&)>;
 
+  // Publishes `first` (LiveScene::publish) and every scene it builds, all
+  // waking wakeup().
   explicit Director(std::shared_ptr<LiveScene> first);
   ~Director();  // waits for a scene being built
   Director(const Director&) = delete;
@@ -83,20 +93,30 @@ class Director {
     std::string parameter;  // Parameter: its name (scene/parameters.hpp)
     double value = 0;
   };
-  // Called on the builder thread with the scene a change built and whether
-  // it carries the body on, or with what went wrong (scene null).
-  using Built = std::function<void(std::shared_ptr<LiveScene> scene, bool carry, const std::string& error)>;
-  // Checks the change and builds its scene on a thread of the director's
-  // own (meshing and model building take from milliseconds to seconds: never
-  // on the network's or the simulation's thread). Returns "" when the build
-  // started, else why not (a scene it lacks, a parameter the scene refuses).
-  // A parameter change carries the body on in the same timeline with the
-  // same scene id; a reset or a load (and a parameter change after a fault,
-  // when there is no body to carry) starts from rest with a new id. The
-  // caller hands the built scene to replace() once its sinks are attached.
-  // `busy` is set when a build is still under way (the change is refused).
-  std::string request(const Change& change, Built built, bool* busy = nullptr);
+  // The answer to a change, called once (unless the director stops first):
+  // with the scene installed (on the simulation thread, before its first
+  // step), or with what went wrong (the scene null, on the builder thread:
+  // the build failed, or a later replacement took its place before it ran).
+  using Done = std::function<void(std::shared_ptr<LiveScene> installed, const std::string& error)>;
+  // Checks the change, builds its scene on a thread of the director's own
+  // (meshing and model building take from milliseconds to seconds: never on
+  // the network's or the simulation's thread), publishes it and installs it
+  // between two steps. Returns "" when the build started, else why not (a
+  // scene it lacks, a parameter the scene refuses; `busy` is set when a
+  // build is still under way), and then `done` is never called. A parameter
+  // change carries the body on in the same timeline with the same scene id;
+  // a reset or a load (and a parameter change after a fault, when there is
+  // no body to carry) starts from rest with a new id.
+  std::string request(const Change& change, Done done, bool* busy = nullptr);
   void finish_building();  // waits for the scene being built, if any
+
+  // The eventfd every published scene signals after each frame.
+  const std::shared_ptr<Wakeup>& wakeup() const { return wakeup_; }
+
+  // From any thread: the per-vertex fields the state frames carry besides
+  // each scene's own (the viewers'), for the running scene and every one
+  // installed after it.
+  void set_view_fields(ViewFieldMask extra);
 
   // From any thread: the scene the simulation thread runs (or is about to).
   std::shared_ptr<LiveScene> current() const;
@@ -104,8 +124,9 @@ class Director {
   // From any thread: switch to `next` between two steps. With `carry`, next
   // takes over the current body and proxies (same mesh required). The
   // paused state carries over either way. A replacement not yet installed
-  // is itself replaced.
-  void replace(std::shared_ptr<LiveScene> next, bool carry);
+  // is itself replaced (its `done` told so). `done`, if set, is called once
+  // with `next` once it is installed.
+  void replace(std::shared_ptr<LiveScene> next, bool carry, Done done = nullptr);
 
   // Called on the simulation thread after each switch, before the new
   // scene's first step. Set before run().
@@ -127,10 +148,13 @@ class Director {
   uint32_t next_id_;
   std::thread builder_;
   std::atomic<bool> building_{false};
+  std::shared_ptr<Wakeup> wakeup_ = std::make_shared<Wakeup>();
 
   mutable std::mutex mutex_;
   std::shared_ptr<LiveScene> current_, next_;
   bool carry_ = false;
+  Done next_done_;
+  ViewFieldMask extra_fields_ = 0;
   std::atomic<bool> faulted_{false};
   Installed installed_;
 };

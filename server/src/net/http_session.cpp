@@ -1,6 +1,24 @@
-#include "net/server_impl.hpp"
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <optional>
+
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/websocket.hpp>
+
+#include "net/inbound.hpp"
+#include "net/listener.hpp"
+#include "net/ws_session.hpp"
 
 namespace tactile {
+
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace websocket = beast::websocket;
+using tcp = asio::ip::tcp;
 
 namespace {
 
@@ -20,8 +38,8 @@ const char* content_type(const std::filesystem::path& p) {
 
 class HttpSession : public std::enable_shared_from_this<HttpSession> {
  public:
-  HttpSession(std::shared_ptr<Server::Impl> server, tcp::socket socket)
-      : server_(std::move(server)), stream_(std::move(socket)) {}
+  HttpSession(std::shared_ptr<Host> host, uint16_t port, tcp::socket socket)
+      : host_(std::move(host)), port_(port), stream_(std::move(socket)) {}
 
   void start() {
     parser_.emplace();
@@ -38,15 +56,13 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   void on_request(http::request<http::string_body> req) {
     if (websocket::is_upgrade(req)) {
       const std::string origin(req[http::field::origin]);
-      if (!origin.empty() && !server_->origin_allowed(origin))
+      if (!origin.empty() && !origin_allowed(origin, port_, host_->options().allowed_origins))
         return respond(req, http::status::forbidden, "Origin '" + origin + "' is not allowed to connect\n");
       beast::error_code ec;
       const asio::ip::address peer = stream_.socket().remote_endpoint(ec).address();
       if (ec) return;  // gone already
-      if (const Admission a = server_->admit(peer.to_string()); !a.admit)
-        return refuse_upgrade(std::move(req), a.reason);
-      auto session =
-          std::make_shared<WsSession>(server_, stream_.release_socket(), peer.is_loopback(), peer.to_string());
+      if (const Admission a = host_->admit(peer.to_string()); !a.admit) return refuse_upgrade(std::move(req), a.reason);
+      auto session = std::make_shared<WsSession>(host_, stream_.release_socket(), peer.is_loopback(), peer.to_string());
       session->start(std::move(req));
       return;
     }
@@ -54,7 +70,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     // another site whose name was made to resolve here (DNS rebinding) sends
     // its own name as Host. (An upgrade is guarded by its Origin and token.)
     const std::string host(req[http::field::host]);
-    if (!server_->host_allowed(host))
+    if (!host_allowed(host, host_->options().bind, host_->options().allowed_origins))
       return respond(req, http::status::misdirected_request,
                      "Host '" + utf8_text(host) +
                          "' is not a name of this server: loopback names, the bound "
@@ -63,13 +79,13 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       return respond(req, http::status::method_not_allowed, "only GET and HEAD\n");
     const std::string full(req.target());
     if (full.starts_with("/recordings/")) return serve_recording(req, full.substr(12, full.find('?') - 12));
-    if (server_->options.static_dir.empty())
+    if (host_->options().static_dir.empty())
       return respond(req, http::status::not_found, "this server serves no files (no static folder set)\n");
     std::string target(req.target().substr(0, req.target().find('?')));
     if (target.empty() || target[0] != '/' || target.find("..") != std::string::npos)
       return respond(req, http::status::bad_request, "bad path\n");
     if (target.back() == '/') target += "index.html";
-    const std::filesystem::path path = std::filesystem::path(server_->options.static_dir) / target.substr(1);
+    const std::filesystem::path path = std::filesystem::path(host_->options().static_dir) / target.substr(1);
     std::ifstream in(path, std::ios::binary);
     if (!in || std::filesystem::is_directory(path)) return respond(req, http::status::not_found, "not found\n");
     std::string body((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -84,7 +100,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     websocket::stream_base::timeout t = websocket::stream_base::timeout::suggested(beast::role_type::server);
     t.handshake_timeout = std::chrono::seconds(1);
     ws->set_option(t);
-    ws->async_accept(req, [ws, why = WsSession::close_reason(reason)](beast::error_code ec) {
+    ws->async_accept(req, [ws, why = WsSession::try_again_later(reason)](beast::error_code ec) {
       if (ec) return;
       ws->async_close(why, [ws](beast::error_code) {});
     });
@@ -93,7 +109,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   // The recordings folder: "/recordings/" lists its MCAP files (JSON: name,
   // bytes), "/recordings/NAME" downloads one (Foxglove opens it).
   void serve_recording(const http::request<http::string_body>& req, const std::string& name) {
-    const std::string& dir = server_->options.recordings_dir;
+    const std::string& dir = host_->options().recordings_dir;
     if (dir.empty()) return respond(req, http::status::not_found, "this server keeps no recordings (--recordings)\n");
     // A recording holds a whole session: off loopback, only with the token (?token=...), as every role needs.
     beast::error_code peer_ec;
@@ -102,7 +118,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       const std::string target(req.target());
       const size_t q = target.find("token=");
       const std::string given = q == std::string::npos ? "" : target.substr(q + 6, target.find('&', q) - q - 6);
-      if (server_->options.token.empty() || given != server_->options.token)
+      if (host_->options().token.empty() || given != host_->options().token)
         return respond(req, http::status::unauthorized, "recordings need the token off loopback (?token=...)\n");
     }
     std::error_code ec;
@@ -131,7 +147,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
   void respond(const http::request<http::string_body>& req, http::status status, std::string body,
                const char* type = "text/plain; charset=utf-8") {
     auto res = std::make_shared<http::response<http::string_body>>(status, req.version());
-    res->set(http::field::server, server_->options.server_name);
+    res->set(http::field::server, host_->options().server_name);
     res->set(http::field::content_type, type);
     res->set(http::field::cache_control, "no-cache");
     res->keep_alive(false);
@@ -143,7 +159,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     });
   }
 
-  std::shared_ptr<Server::Impl> server_;
+  std::shared_ptr<Host> host_;
+  uint16_t port_;  // the listener's, for the page's own Origin
   beast::tcp_stream stream_;
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
@@ -151,8 +168,8 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
 }  // namespace
 
-void serve_http(std::shared_ptr<Server::Impl> server, tcp::socket socket) {
-  std::make_shared<HttpSession>(std::move(server), std::move(socket))->start();
+void serve_http(std::shared_ptr<Host> host, uint16_t port, tcp::socket socket) {
+  std::make_shared<HttpSession>(std::move(host), port, std::move(socket))->start();
 }
 
 }  // namespace tactile

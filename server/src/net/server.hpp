@@ -1,6 +1,11 @@
 // The WebSocket endpoint (Boost.Beast) and the static HTTP files on the same
 // port, on its own thread (one io_context), fed by the real-time loop
-// through mailboxes it never waits on (net/mailbox.hpp).
+// through its scene's outbox, which it never waits on (live/outbox.hpp).
+// Its parts: a host, live (net/live_host.hpp) or replaying
+// (net/replay_host.hpp), chosen by the constructor; the listener
+// (net/listener.hpp) and HTTP (net/http_session.cpp); each connection's
+// shell (net/ws_session.hpp) and rules (net/session.hpp); the admission
+// rules (net/admission.hpp) and the scene-change rules (net/scene_switch.hpp).
 //
 // Roles (granted at Hello, proto/tactile.fbs):
 //   viewer      the scene description, then state frames at up to the state
@@ -73,9 +78,8 @@ struct ServerError : std::runtime_error {
 
 class Server {
  public:
-  // Installs itself as the sinks of the director's scenes (and its
-  // installed callback). The director must outlive the server; it runs on
-  // its own thread.
+  // Serves the director's scenes as they run (they publish into their
+  // outboxes). The director must outlive the server; it runs on its own thread.
   Server(boost::asio::io_context& ioc, Director& director, ServerOptions options);
   // Serves a recording as the live session was served (the same messages,
   // at their recorded pace): viewers get its states, devices its haptic
@@ -91,10 +95,9 @@ class Server {
   uint16_t port() const;  // the port bound
   void stop();            // closes the acceptor and every connection
 
-  struct Impl;
-
  private:
-  std::shared_ptr<Impl> impl_;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
 };
 
 }  // namespace tactile

@@ -1,6 +1,6 @@
 // The rules of one client connection, without sockets (sans-I/O): bytes and
 // times in, messages to write and actions on the server out. The WebSocket
-// shell (WsSession, net/server_impl.hpp) feeds it what it reads and writes what it queues;
+// shell (WsSession, net/ws_session.hpp) feeds it what it reads and writes what it queues;
 // the tests (server/tests/net/session_test.cpp) drive it directly.
 //
 // The rules, in the order a message meets them:

@@ -1,6 +1,6 @@
 // A recording played back: its messages in log-time order, due as a clock
 // that can pause, seek and change speed passes their times. No threads and
-// no sockets: the server asks what is due (net/replay_serving.cpp, on its own
+// no sockets: the server asks what is due (net/replay_host.cpp, on its own
 // thread) and serves it as it served the live session.
 #pragma once
 

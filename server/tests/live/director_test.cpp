@@ -140,65 +140,110 @@ TEST(Director, ChangesAreCheckedThenBuiltOffTheCallersThread) {
   EXPECT_EQ(std::find(director.scenes().begin(), director.scenes().end(), "scene.schema.json"),
             director.scenes().end());
 
+  std::atomic<bool> stop{false};
+  std::thread sim([&] { director.run(stop); });
+
+  // Each change is answered once: with its scene once the simulation thread
+  // runs it, or with what went wrong.
   struct Result {
     std::mutex mutex;
     std::shared_ptr<LiveScene> scene;
-    bool carry = false, done = false;
+    double time_at_install = -1;
+    int answers = 0;
     std::string error;
     std::thread::id thread;
   } r;
-  auto built = [&r](std::shared_ptr<LiveScene> s, bool carry, const std::string& error) {
+  auto done = [&r](std::shared_ptr<LiveScene> s, const std::string& error) {
     std::lock_guard<std::mutex> lock(r.mutex);
-    r.scene = std::move(s), r.carry = carry, r.error = error, r.done = true, r.thread = std::this_thread::get_id();
+    if (s) r.time_at_install = s->sim().time();
+    r.scene = std::move(s), r.error = error, ++r.answers, r.thread = std::this_thread::get_id();
   };
   auto take = [&r] {
     EXPECT_TRUE(wait_for([&] {
       std::lock_guard<std::mutex> lock(r.mutex);
-      return r.done;
+      return r.answers > 0;
     }));
+    std::this_thread::sleep_for(20ms);  // a second answer would come by now
     std::lock_guard<std::mutex> lock(r.mutex);
-    r.done = false;
+    EXPECT_EQ(r.answers, 1);
+    r.answers = 0;
     EXPECT_NE(r.thread, std::this_thread::get_id());
   };
 
   Director::Change load;
   load.kind = Director::Change::Kind::Load;
   load.scene = "nowhere.json";
-  const std::string no = director.request(load, built);
+  const std::string no = director.request(load, done);
   EXPECT_NE(no.find("no scene 'nowhere.json' on this server; it has: "), std::string::npos) << no;
   EXPECT_NE(no.find("poke.json"), std::string::npos) << no;
 
   Director::Change parameter;
   parameter.kind = Director::Change::Kind::Parameter;
   parameter.parameter = "material.X";
-  EXPECT_NE(director.request(parameter, built), "");
+  EXPECT_NE(director.request(parameter, done), "");
 
+  ASSERT_TRUE(wait_for([&] { return first->sim().time() > 0.01; }));
   parameter.parameter = "material.E";
   parameter.value = 6e4;
-  ASSERT_EQ(director.request(parameter, built), "");
+  ASSERT_EQ(director.request(parameter, done), "");
   take();
   ASSERT_NE(r.scene, nullptr) << r.error;
-  EXPECT_TRUE(r.carry);
+  EXPECT_EQ(director.current(), r.scene);
+  EXPECT_GT(r.time_at_install, 0.01) << "the body carried on";
   EXPECT_EQ(r.scene->id(), 4u);  // the same timeline
+  EXPECT_NE(r.scene->outbox(), nullptr) << "published";
 
-  ASSERT_EQ(director.request(Director::Change{}, built), "");  // a reset
+  ASSERT_EQ(director.request(Director::Change{}, done), "");  // a reset
   take();
   ASSERT_NE(r.scene, nullptr) << r.error;
-  EXPECT_FALSE(r.carry);
+  EXPECT_EQ(r.time_at_install, 0.0) << "from rest";
   EXPECT_EQ(r.scene->id(), 5u);
 
   load.scene = "poke.json";
-  ASSERT_EQ(director.request(load, built), "");
+  ASSERT_EQ(director.request(load, done), "");
   // While the load builds (meshing a 12 k-tet block takes far longer than
   // this call), another change is refused as busy.
   bool busy = false;
-  EXPECT_EQ(director.request(Director::Change{}, built, &busy),
+  EXPECT_EQ(director.request(Director::Change{}, done, &busy),
             "a scene change is under way: wait for its SceneDescription");
   EXPECT_TRUE(busy);
   take();
   ASSERT_NE(r.scene, nullptr) << r.error;
   EXPECT_EQ(r.scene->scene().name, "poke");
   EXPECT_EQ(r.scene->id(), 6u);
+  stop = true;
+  sim.join();
+}
+
+// A replacement replaced before it ran is answered so; the viewers' fields
+// reach the running scene and every one installed after it.
+TEST(Director, AReplacedChangeIsAnsweredAndViewFieldsCarryOver) {
+  LiveOptions options;
+  options.dt = 2e-4;
+  auto first = std::make_shared<LiveScene>(block_scene(), 1, options);
+  Director director(first);
+  director.set_view_fields(view_field_bit(ViewField::VonMises));
+  EXPECT_EQ(first->loop().view_fields(), first->scene().view_fields | view_field_bit(ViewField::VonMises));
+
+  std::string first_answer = "none";
+  auto a = std::make_shared<LiveScene>(block_scene(), 2, options);
+  director.replace(a, false, [&](std::shared_ptr<LiveScene> s, const std::string& error) {
+    first_answer = s ? "installed" : error;
+  });
+  std::atomic<int> second{0};
+  auto b = std::make_shared<LiveScene>(block_scene(), 3, options);
+  director.replace(b, false, [&](std::shared_ptr<LiveScene> s, const std::string&) {
+    if (s == b) ++second;
+  });
+  EXPECT_EQ(first_answer, "replaced by a later change before it ran");
+  std::atomic<bool> stop{false};
+  std::thread sim([&] { director.run(stop); });
+  ASSERT_TRUE(wait_for([&] { return second.load() == 1; }));
+  EXPECT_EQ(director.current(), b);
+  EXPECT_EQ(b->loop().view_fields(), b->scene().view_fields | view_field_bit(ViewField::VonMises));
+  stop = true;
+  sim.join();
+  EXPECT_EQ(second.load(), 1);
 }
 
 }  // namespace

@@ -1,0 +1,159 @@
+#include "net/ws_session.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+
+#include "net/host.hpp"
+
+namespace tactile {
+
+namespace beast = boost::beast;
+namespace websocket = beast::websocket;
+namespace wire = proto;
+using tcp = asio::ip::tcp;
+
+namespace {
+
+SessionLimits limits(const ServerOptions& o) {
+  return {
+      o.token,       o.server_name,  o.viewer_rate_hz, o.max_messages_per_s, o.device_queue, o.max_safety_events_per_s,
+      o.event_queue, o.control_queue};
+}
+
+uint64_t next_id = 1;  // on the network thread
+
+}  // namespace
+
+WsSession::WsSession(std::shared_ptr<Host> host, tcp::socket socket, bool loopback, std::string address)
+    : host_(std::move(host)),
+      ws_(std::move(socket)),
+      hello_timer_(host_->io()),
+      flush_timer_(host_->io()),
+      core_(*host_, limits(host_->options()), loopback, std::move(address), next_id++, SessionClock::now()) {}
+
+WsSession::~WsSession() {
+  host_->leave(this);
+  if (core_.safety_dropped() > 0)
+    std::fprintf(stderr, "safety: connection %llu sent %lld events over the limit of %g per second: dropped\n",
+                 (unsigned long long)core_.id(), (long long)core_.safety_dropped(),
+                 host_->options().max_safety_events_per_s);
+  if (core_.events_dropped() > 0)
+    std::fprintf(stderr, "safety: connection %llu (%s) read too slowly and missed %lld safety events\n",
+                 (unsigned long long)core_.id(), wire::EnumNameRole(core_.role()), (long long)core_.events_dropped());
+}
+
+void WsSession::start(beast::http::request<beast::http::string_body> req) {
+  host_->join(this);
+  beast::get_lowest_layer(ws_).expires_never();
+  // Without it, Nagle's algorithm holds each small haptic frame until the
+  // peer's next message acks the previous one: a whole input period of latency.
+  beast::error_code ignored;
+  beast::get_lowest_layer(ws_).socket().set_option(tcp::no_delay(true), ignored);
+  websocket::stream_base::timeout t = websocket::stream_base::timeout::suggested(beast::role_type::server);
+  t.idle_timeout = std::chrono::milliseconds(int64_t(host_->options().idle_timeout_s * 1000));
+  t.keep_alive_pings = true;
+  ws_.set_option(t);
+  ws_.read_message_max(host_->options().max_message_bytes);
+  ws_.binary(true);
+  ws_.async_accept(req, [self = shared_from_this()](beast::error_code ec) {
+    if (ec) return;
+    self->arm_hello_timer();
+    self->read();
+  });
+}
+
+void WsSession::rebind() {
+  core_.bind_devices();
+  pump();
+}
+
+void WsSession::send(const Bytes& message, OutKind kind) {
+  core_.send(message, kind);
+  pump();
+}
+
+void WsSession::drop() {
+  if (core_.closed()) return;
+  core_.mark_closed();
+  hello_timer_.cancel();
+  beast::get_lowest_layer(ws_).close();
+}
+
+void WsSession::evict(const std::string& reason) {
+  if (core_.closed()) return;
+  core_.mark_closed();
+  hello_timer_.cancel();
+  websocket::stream_base::timeout t = websocket::stream_base::timeout::suggested(beast::role_type::server);
+  t.handshake_timeout = std::chrono::seconds(1);
+  ws_.set_option(t);
+  ws_.async_close(try_again_later(reason), [self = shared_from_this()](beast::error_code) {});
+}
+
+websocket::close_reason WsSession::try_again_later(const std::string& reason) {
+  return websocket::close_reason(websocket::close_code::try_again_later,
+                                 beast::string_view(reason.data(), std::min<size_t>(reason.size(), 123)));
+}
+
+void WsSession::close() {
+  if (core_.closed()) return;
+  core_.mark_closed();
+  hello_timer_.cancel();
+  ws_.async_close(websocket::close_code::normal, [self = shared_from_this()](beast::error_code) {});
+}
+
+void WsSession::arm_hello_timer() {
+  hello_timer_.expires_after(std::chrono::milliseconds(int64_t(host_->options().hello_timeout_s * 1000)));
+  hello_timer_.async_wait([weak = weak_from_this()](beast::error_code ec) {
+    auto self = weak.lock();
+    if (ec || !self) return;
+    self->core_.hello_timed_out();
+    self->pump();
+  });
+}
+
+void WsSession::arm_flush_timer() {
+  if (!core_.flush_due() || flush_armed_) return;
+  flush_armed_ = true;
+  flush_timer_.expires_at(core_.flush_at());
+  flush_timer_.async_wait([weak = weak_from_this()](beast::error_code ec) {
+    auto self = weak.lock();
+    if (ec || !self) return;
+    self->flush_armed_ = false;
+    self->core_.flush(SessionClock::now());
+    self->arm_flush_timer();
+    self->pump();
+  });
+}
+
+void WsSession::read() {
+  ws_.async_read(in_, [self = shared_from_this()](beast::error_code ec, size_t) {
+    if (ec) {
+      self->core_.mark_closed();  // closed, timed out, or too big (Beast sends close code 1009)
+      self->hello_timer_.cancel();
+      return;
+    }
+    const auto* data = static_cast<const uint8_t*>(self->in_.data().data());
+    self->core_.receive({data, self->in_.size()}, self->ws_.got_binary(), SessionClock::now());
+    self->in_.consume(self->in_.size());
+    if (self->core_.greeted()) self->hello_timer_.cancel();
+    self->arm_flush_timer();
+    self->pump();
+    if (!self->core_.closed()) self->read();
+  });
+}
+
+void WsSession::pump() {
+  if (core_.disconnect()) return drop();
+  if (const Bytes* message = core_.next_write()) {
+    ws_.async_write(asio::buffer(**message), [self = shared_from_this()](beast::error_code ec, size_t) {
+      self->core_.written();
+      if (ec) return self->core_.mark_closed();
+      self->pump();
+    });
+    return;
+  }
+  if (core_.idle() && core_.close_after_write()) close();
+}
+
+}  // namespace tactile
