@@ -106,7 +106,7 @@ def test_a_session_is_one_server_of_its_own_run_as_compose_runs_it() -> None:
     assert named["containerPort"] == port
     assert svc["spec"]["ports"][0]["targetPort"] == named["name"]
     assert server["readinessProbe"]["httpGet"]["port"] == named["name"]
-    # Its Host header is one the server answers to (loopback names, http_session.cpp).
+    # Its Host header is one the server answers to (loopback names, http_connection.cpp).
     host = server["readinessProbe"]["httpGet"]["httpHeaders"][0]
     assert host["name"] == "Host" and host["value"] == f"localhost:{port}"
     # Guaranteed QoS: whole cores, requests equal to limits.

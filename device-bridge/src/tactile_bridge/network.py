@@ -112,7 +112,7 @@ class Network:
         try:
             while not stop.is_set():
                 try:
-                    await self._session(stop)
+                    await self._connection(stop)
                 except (TimeoutError, OSError, websockets.exceptions.WebSocketException, LinkError, ProtocolError) as e:
                     msg = str(e) or type(e).__name__
                     if msg != self.last_error:
@@ -134,7 +134,7 @@ class Network:
         self.ex.i[ex.H_LINK] = 0
         self._ws = None
 
-    async def _session(self, stop: asyncio.Event) -> None:
+    async def _connection(self, stop: asyncio.Event) -> None:
         async with websockets.connect(self.url, max_size=64 << 20, compression=None, open_timeout=3,
                                       ping_interval=None) as ws:
             hello = make_hello(Role.Device, self.token, self.client_name, [p.channel for p in self.profiles])

@@ -141,7 +141,7 @@ void RealtimeLoop::apply_inputs() {
       drv.drive = s.drive;
     }
     // An input outside the workspace is held at its edge (the server says so
-    // to the device: Session::on_input, net/session.cpp); the path is never farther than that.
+    // to the device: Connection::on_input, net/connection.cpp); the path is never farther than that.
     s.pose.position = glm::clamp(s.pose.position, workspace_lo_, workspace_hi_);
     // A new path (the device's first input, or one after a pause) may start
     // far from where its proxy waits: the proxy's pose glides onto it.

@@ -47,7 +47,7 @@ bool host_allowed(std::string_view host, std::string_view bind, const std::vecto
   return false;
 }
 
-Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted, SessionClock::time_point now,
+Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted, ConnectionClock::time_point now,
                            const AdmissionLimits& limits) {
   Admission a;
   if (greeted >= limits.max_connections) {
@@ -96,7 +96,7 @@ Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted,
   return a;
 }
 
-bool LogBudget::take(SessionClock::time_point now) {
+bool LogBudget::take(ConnectionClock::time_point now) {
   if (any_ && now - last_ < period_) {
     ++counting_;
     return false;

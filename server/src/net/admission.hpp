@@ -1,6 +1,6 @@
-// Who gets in, without sockets (sans-I/O, like net/session.hpp): the
+// Who gets in, without sockets (sans-I/O, like net/connection.hpp): the
 // browser Origin of a WebSocket, the Host of a plain HTTP request, and a
-// WebSocket slot. The shell (net/http_session.cpp) asks before it answers;
+// WebSocket slot. The shell (net/http_connection.cpp) asks before it answers;
 // the tests (server/tests/net/admission_test.cpp) ask directly, one test
 // per rule.
 //
@@ -36,7 +36,7 @@
 #include <string_view>
 #include <vector>
 
-#include "net/session.hpp"
+#include "net/connection.hpp"
 
 namespace tactile {
 
@@ -56,7 +56,7 @@ struct AdmissionLimits {
 struct WaitingSlot {
   uint64_t id = 0;
   std::string_view address;  // the peer's IP address
-  SessionClock::time_point since{};
+  ConnectionClock::time_point since{};
 };
 
 struct Admission {
@@ -68,7 +68,7 @@ struct Admission {
 // The verdict on a newcomer, given the connections waiting and the number
 // greeted (open, not closing). Where it comes from changes nothing: every
 // address is served alike, and only the waiting are weighed by address.
-Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted, SessionClock::time_point now,
+Admission decide_admission(std::span<const WaitingSlot> waiting, size_t greeted, ConnectionClock::time_point now,
                            const AdmissionLimits& limits);
 
 // A log line at most once per `period_s`; the lines held back in between are
@@ -78,12 +78,12 @@ class LogBudget {
   explicit LogBudget(double period_s = 1.0) : period_(period_s) {}
   // True when a line may be written now; then held_back() tells how many
   // were not since the last one (and starts counting again).
-  bool take(SessionClock::time_point now);
+  bool take(ConnectionClock::time_point now);
   int64_t held_back() const { return held_back_; }
 
  private:
   std::chrono::duration<double> period_;
-  SessionClock::time_point last_{};
+  ConnectionClock::time_point last_{};
   bool any_ = false;
   int64_t held_back_ = 0, counting_ = 0;
 };

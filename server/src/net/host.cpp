@@ -2,52 +2,52 @@
 
 #include <cstdio>
 
-#include "net/ws_session.hpp"
+#include "net/ws_connection.hpp"
 
 namespace tactile {
 
 void Host::stop() {
   stopped_ = true;
-  std::vector<WsSession*> all(connections_.begin(), connections_.end());
-  for (WsSession* s : all) s->close();
+  std::vector<WsConnection*> all(connections_.begin(), connections_.end());
+  for (WsConnection* s : all) s->close();
 }
 
-void Host::leave(WsSession* s) {
+void Host::leave(WsConnection* s) {
   connections_.erase(s);
   if (controller_ == s) controller_ = nullptr;
   if (s->core().view_fields()) view_fields_changed();
 }
 
-WsSession* Host::shell_of(const Session& s) const {
-  for (WsSession* w : connections_)
+WsConnection* Host::shell_of(const Connection& s) const {
+  for (WsConnection* w : connections_)
     if (&w->core() == &s) return w;
   return nullptr;
 }
 
-uint64_t Host::driver_of(const std::string& channel, const Session& asking) const {
-  for (const WsSession* w : connections_)
+uint64_t Host::driver_of(const std::string& channel, const Connection& asking) const {
+  for (const WsConnection* w : connections_)
     if (&w->core() != &asking && w->core().drives(channel)) return w->core().id();
   return 0;
 }
 
-bool Host::claim_controller(Session& s) {
+bool Host::claim_controller(Connection& s) {
   if (controller_) return false;
   controller_ = shell_of(s);
   return true;
 }
 
 void Host::relay(const Bytes& message, OutKind kind) {
-  for (WsSession* w : connections_)
+  for (WsConnection* w : connections_)
     if (w->core().reads(kind)) w->send(message, kind);
 }
 
-void Host::send_each(const Bytes& message, OutKind kind, const std::function<bool(const Session&)>& to) {
-  for (WsSession* w : connections_)
+void Host::send_each(const Bytes& message, OutKind kind, const std::function<bool(const Connection&)>& to) {
+  for (WsConnection* w : connections_)
     if (w->core().greeted() && (!to || to(w->core()))) w->send(message, kind);
 }
 
-void Host::send_to(const Session& s, const Bytes& message, OutKind kind) {
-  if (WsSession* w = shell_of(s)) w->send(message, kind);
+void Host::send_to(const Connection& s, const Bytes& message, OutKind kind) {
+  if (WsConnection* w = shell_of(s)) w->send(message, kind);
 }
 
 void Host::send_to_controller(const Bytes& message) {
@@ -56,7 +56,7 @@ void Host::send_to_controller(const Bytes& message) {
 
 void Host::serve_scene(Served next) {
   served_ = std::move(next);
-  for (WsSession* w : connections_) {
+  for (WsConnection* w : connections_) {
     if (!w->core().greeted()) continue;
     w->send(served_.description, OutKind::Control);
     if (w->core().role() == proto::Role::Device) w->rebind();
@@ -65,30 +65,30 @@ void Host::serve_scene(Served next) {
 
 ViewFieldMask Host::fields_asked() const {
   ViewFieldMask asked = 0;
-  for (const WsSession* w : connections_)
+  for (const WsConnection* w : connections_)
     if (w->core().greeted()) asked |= w->core().view_fields();
   return asked;
 }
 
 size_t Host::count_greeted(proto::Role role) const {
   size_t n = 0;
-  for (const WsSession* w : connections_)
+  for (const WsConnection* w : connections_)
     if (w->core().greeted() && w->core().role() == role) ++n;
   return n;
 }
 
 Admission Host::admit(const std::string& address) {
-  const SessionClock::time_point now = SessionClock::now();
+  const ConnectionClock::time_point now = ConnectionClock::now();
   size_t greeted = 0;
   std::vector<WaitingSlot> waiting;
-  for (const WsSession* w : connections_) {
+  for (const WsConnection* w : connections_) {
     if (w->core().greeted() && !w->core().closed()) ++greeted;
     if (w->core().waiting()) waiting.push_back({w->core().id(), w->core().address(), w->core().since()});
   }
   Admission a =
       decide_admission(waiting, greeted, now, {options_.max_connections, options_.max_waiting, options_.hello_grace_s});
   if (a.evict)
-    for (WsSession* w : connections_)
+    for (WsConnection* w : connections_)
       if (w->core().id() == a.evict) {
         log_admission(now,
                       "evicted connection " + std::to_string(a.evict) + " (" + w->core().address() + "): " + a.reason);
@@ -99,7 +99,7 @@ Admission Host::admit(const std::string& address) {
   return a;
 }
 
-void Host::log_admission(SessionClock::time_point now, const std::string& line) {
+void Host::log_admission(ConnectionClock::time_point now, const std::string& line) {
   if (!admission_log_.take(now)) return;
   const int64_t more = admission_log_.held_back();
   std::fprintf(stderr, "server: %s%s\n", line.c_str(),

@@ -1,5 +1,5 @@
 // What a server serves from, and what its two modes share: the connections
-// (each a WsSession shell around its rules, net/session.hpp), the one
+// (each a WsConnection shell around its rules, net/connection.hpp), the one
 // controller, the admission of new ones (net/admission.hpp), and the scene
 // being served. A LiveHost (net/live_host.hpp) serves a director's scenes as
 // they run; a ReplayHost (net/replay_host.hpp) a recording as it was served.
@@ -18,8 +18,8 @@
 #include <boost/asio/io_context.hpp>
 
 #include "net/admission.hpp"
+#include "net/connection.hpp"
 #include "net/server.hpp"
-#include "net/session.hpp"
 
 namespace tactile {
 
@@ -35,9 +35,9 @@ inline Bytes copy_bytes(const uint8_t* data, size_t n) {
   return std::make_shared<const std::vector<uint8_t>>(data, data + n);
 }
 
-class WsSession;
+class WsConnection;
 
-class Host : public SessionHost, public std::enable_shared_from_this<Host> {
+class Host : public ConnectionHost, public std::enable_shared_from_this<Host> {
  public:
   // The scene served: its SceneDescription (Envelope bytes), name and device channels.
   struct Served {
@@ -57,30 +57,30 @@ class Host : public SessionHost, public std::enable_shared_from_this<Host> {
 
   // The connections: a shell joins when its upgrade starts and leaves when
   // it is destroyed (the controller's role is then free).
-  void join(WsSession* s) { connections_.insert(s); }
-  void leave(WsSession* s);
+  void join(WsConnection* s) { connections_.insert(s); }
+  void leave(WsConnection* s);
   // The verdict on one more WebSocket from `address` (net/admission.hpp);
   // a connection it evicts is closed here, with the reason.
   Admission admit(const std::string& address);
   // A line on stderr for an eviction, a refusal or a failed accept: one a
   // second at most, with a count of those held back.
-  void log_admission(SessionClock::time_point now, const std::string& line);
+  void log_admission(ConnectionClock::time_point now, const std::string& line);
 
-  // ---- SessionHost: what every mode answers alike ----
+  // ---- ConnectionHost: what every mode answers alike ----
   int64_t now_ns() const override { return tactile::now_ns(); }
   const Bytes& description() const override { return served_.description; }
   const std::vector<std::string>& devices() const override { return served_.devices; }
   const std::string& scene_name() const override { return served_.scene_name; }
-  uint64_t driver_of(const std::string& channel, const Session& asking) const override;
-  bool claim_controller(Session& s) override;
+  uint64_t driver_of(const std::string& channel, const Connection& asking) const override;
+  bool claim_controller(Connection& s) override;
   void relay(const Bytes& message, OutKind kind) override;
 
  protected:
   Served served_;
 
   // Queues `message` as `kind` to each greeted connection `to` picks (all without).
-  void send_each(const Bytes& message, OutKind kind, const std::function<bool(const Session&)>& to = nullptr);
-  void send_to(const Session& s, const Bytes& message, OutKind kind);
+  void send_each(const Bytes& message, OutKind kind, const std::function<bool(const Connection&)>& to = nullptr);
+  void send_to(const Connection& s, const Bytes& message, OutKind kind);
   void send_to_controller(const Bytes& message);
   // Serves `next` from now on: its description to every greeted connection,
   // and the devices' channels mapped onto its own.
@@ -91,12 +91,12 @@ class Host : public SessionHost, public std::enable_shared_from_this<Host> {
   bool stopped_ = false;
 
  private:
-  WsSession* shell_of(const Session& s) const;
+  WsConnection* shell_of(const Connection& s) const;
 
   asio::io_context& io_;
   ServerOptions options_;
-  std::unordered_set<WsSession*> connections_;
-  WsSession* controller_ = nullptr;
+  std::unordered_set<WsConnection*> connections_;
+  WsConnection* controller_ = nullptr;
   LogBudget admission_log_;  // evictions and refusals: a line a second at most
 };
 

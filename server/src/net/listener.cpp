@@ -57,7 +57,7 @@ void Listener::accept() {
     }
     // Out of descriptors (EMFILE) or the like: the connection stays in the
     // backlog, so accepting again at once would spin; wait for some to close.
-    self->host_->log_admission(SessionClock::now(), "cannot accept a connection: " + ec.message());
+    self->host_->log_admission(ConnectionClock::now(), "cannot accept a connection: " + ec.message());
     self->accept_timer_.expires_after(std::chrono::milliseconds(50));
     self->accept_timer_.async_wait([self](boost::system::error_code wait_ec) {
       if (!wait_ec && !self->stopped_) self->accept();

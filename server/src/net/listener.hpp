@@ -1,5 +1,5 @@
 // The port a server listens on: it accepts TCP connections and hands each to
-// an HTTP exchange (net/http_session.cpp), which serves a static file or a
+// an HTTP exchange (net/http_connection.cpp), which serves a static file or a
 // recording, or upgrades to a WebSocket that its host admits
 // (Host::admit) or refuses.
 #pragma once
@@ -36,7 +36,7 @@ class Listener : public std::enable_shared_from_this<Listener> {
 
 // Serves one accepted connection for `host`, whose listener has `port`:
 // static files over HTTP, the recordings folder, or the upgrade to a
-// WebSocket (net/http_session.cpp).
+// WebSocket (net/http_connection.cpp).
 void serve_http(std::shared_ptr<Host> host, uint16_t port, boost::asio::ip::tcp::socket socket);
 
 }  // namespace tactile

@@ -72,7 +72,7 @@ bool LiveHost::workspace(Vec3& lo, Vec3& hi) const {
   return true;
 }
 
-void LiveHost::control(const wire::Control& c, Session& from) {
+void LiveHost::control(const wire::Control& c, Connection& from) {
   auto refuse = [&](wire::ErrorCode code, const std::string& why) {
     send_to(from, make_error(code, why, c.request_id()), OutKind::Control);
   };
@@ -115,7 +115,7 @@ void LiveHost::deliver() {
   Outbox& out = *live_->outbox();
   const bool recording = recording_.active();
   const bool devices = count_greeted(wire::Role::Device) > 0;
-  auto is_device = [](const Session& s) { return s.role() == wire::Role::Device; };
+  auto is_device = [](const Connection& s) { return s.role() == wire::Role::Device; };
   // Every haptic frame, to the devices and the recording, stamped with its own server time.
   out.haptics.drain([&](const uint8_t* data, size_t n) {
     if (recording)

@@ -30,12 +30,12 @@ class LiveHost final : public Host, private SceneSwitch::Port {
   void start() override;  // the command line's recording (throws ServerError if refused), wakeups, telemetry
   void stop() override;
 
-  // ---- SessionHost ----
+  // ---- ConnectionHost ----
   bool workspace(Vec3& lo, Vec3& hi) const override;
   void post_input(const DeviceSample& s) override { live_->loop().post_input(s); }  // a full queue drops and counts
   void record(Topic topic, std::span<const uint8_t> m, int64_t time_ns) override { recording_.post(topic, m, time_ns); }
-  void control(const proto::Control& c, Session& from) override;
-  void greeted(Session&) override {}
+  void control(const proto::Control& c, Connection& from) override;
+  void greeted(Connection&) override {}
   void view_fields_changed() override { director_.set_view_fields(fields_asked()); }
 
  private:

@@ -34,7 +34,7 @@ void ReplayHost::stop() {
   Host::stop();
 }
 
-void ReplayHost::greeted(Session& s) {
+void ReplayHost::greeted(Connection& s) {
   if (!started_) {  // the first client starts the playback
     started_ = true;
     replay_.play(Replay::Clock::now());
@@ -53,7 +53,7 @@ void ReplayHost::tick() {
   replay_.due(now, [&](const Replay::Item& item) { serve_item(item); });
   if (now >= status_due_) {
     const Bytes st = status();
-    send_each(st, OutKind::Control, [](const Session& s) { return s.reads_replay_status(); });
+    send_each(st, OutKind::Control, [](const Connection& s) { return s.reads_replay_status(); });
     status_due_ = now + std::chrono::milliseconds(100);
   }
   // Until the next message is due or the next status, whichever is first.
@@ -68,12 +68,12 @@ void ReplayHost::tick() {
 
 void ReplayHost::serve_item(const Replay::Item& item) {
   const Bytes m = copy_bytes(item.bytes.data(), item.bytes.size());
-  auto is_device = [](const Session& s) { return s.role() == wire::Role::Device; };
+  auto is_device = [](const Connection& s) { return s.role() == wire::Role::Device; };
   switch (item.topic) {
     case Topic::Scene:
       if (*m == *served_.description) return;
       return serve_scene(recorded(m));
-    case Topic::State: return send_each(m, OutKind::State, [&](const Session& s) { return !is_device(s); });
+    case Topic::State: return send_each(m, OutKind::State, [&](const Connection& s) { return !is_device(s); });
     case Topic::Haptic:  // a bridge plays the recorded forces to its device, under its safety rules
       return send_each(m, OutKind::Haptic, is_device);
     case Topic::Telemetry: return send_each(m, OutKind::Control);
@@ -100,7 +100,7 @@ Bytes ReplayHost::status() {
                                      replay_.duration(), replay_.position(now), replay_.speed(), replay_.paused()));
 }
 
-void ReplayHost::control(const wire::Control& c, Session& from) {
+void ReplayHost::control(const wire::Control& c, Connection& from) {
   const auto now = Replay::Clock::now();
   auto refuse = [&](const std::string& why) {
     send_to(from, make_error(wire::ErrorCode::BadRequest, why, c.request_id()), OutKind::Control);

@@ -22,12 +22,12 @@ class ReplayHost final : public Host {
   void start() override { tick(); }
   void stop() override;
 
-  // ---- SessionHost ----
+  // ---- ConnectionHost ----
   bool workspace(Vec3&, Vec3&) const override { return false; }  // nothing simulated
   void post_input(const DeviceSample&) override {}               // moves nothing
   void record(Topic, std::span<const uint8_t>, int64_t) override {}
-  void control(const proto::Control& c, Session& from) override;
-  void greeted(Session& s) override;
+  void control(const proto::Control& c, Connection& from) override;
+  void greeted(Connection& s) override;
   void view_fields_changed() override {}  // the fields are those recorded
 
  private:

@@ -14,7 +14,7 @@
 #include <string>
 
 #include "live/director.hpp"
-#include "net/session.hpp"
+#include "net/connection.hpp"
 
 namespace tactile {
 

@@ -3,8 +3,8 @@
 // through its scene's outbox, which it never waits on (live/outbox.hpp).
 // Its parts: a host, live (net/live_host.hpp) or replaying
 // (net/replay_host.hpp), chosen by the constructor; the listener
-// (net/listener.hpp) and HTTP (net/http_session.cpp); each connection's
-// shell (net/ws_session.hpp) and rules (net/session.hpp); the admission
+// (net/listener.hpp) and HTTP (net/http_connection.cpp); each connection's
+// shell (net/ws_connection.hpp) and rules (net/connection.hpp); the admission
 // rules (net/admission.hpp) and the scene-change rules (net/scene_switch.hpp).
 //
 // Roles (granted at Hello, proto/tactile.fbs):
@@ -51,7 +51,7 @@ struct ServerOptions {
   std::vector<std::string> allowed_origins;  // extra browser Origins (its own http://host:port always allowed)
   std::string static_dir;                    // served over HTTP (client-web); "" for none
   double viewer_rate_hz = 30;                // state frames per second per viewer at most
-  size_t max_connections = 256;              // greeted WebSocket sessions
+  size_t max_connections = 256;              // greeted WebSocket connections
   size_t max_waiting = 1024;                 // upgraded, no Hello yet (net/admission.hpp: who makes room)
   double hello_grace_s = 1;                  // a connection waiting for less is never evicted
   size_t max_message_bytes = 64 * 1024;      // inbound

@@ -52,7 +52,7 @@ TEST(HostAllowed, AnotherSitesNameIsRefused) {
 
 // ---- waiting slots -----------------------------------------------------------------------
 
-const SessionClock::time_point t0{};
+const ConnectionClock::time_point t0{};
 const AdmissionLimits small{.max_connections = 10, .max_waiting = 4, .hello_grace_s = 1.0};
 
 TEST(Admission, AGreetedServerAtMaxConnectionsRefusesAndSaysSo) {

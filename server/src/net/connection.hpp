@@ -1,7 +1,7 @@
 // The rules of one client connection, without sockets (sans-I/O): bytes and
 // times in, messages to write and actions on the server out. The WebSocket
-// shell (WsSession, net/ws_session.hpp) feeds it what it reads and writes what it queues;
-// the tests (server/tests/net/session_test.cpp) drive it directly.
+// shell (WsConnection, net/ws_connection.hpp) feeds it what it reads and writes what it queues;
+// the tests (server/tests/net/connection_test.cpp) drive it directly.
 //
 // The rules, in the order a message meets them:
 //   - a token bucket of max_messages_per_s (a second's burst): over it, an
@@ -43,7 +43,7 @@
 namespace tactile {
 
 using Bytes = std::shared_ptr<const std::vector<uint8_t>>;
-using SessionClock = std::chrono::steady_clock;
+using ConnectionClock = std::chrono::steady_clock;
 
 // A sealed message: the Envelope of `body`, finished with the file identifier.
 template <class T>
@@ -53,7 +53,7 @@ Bytes seal(flatbuffers::FlatBufferBuilder& b, proto::Message type, flatbuffers::
 }
 Bytes make_error(proto::ErrorCode code, const std::string& message, uint32_t request_id = 0);
 
-// What a slow reader loses (Session::send): a State is replaced by the next,
+// What a slow reader loses (Connection::send): a State is replaced by the next,
 // a Haptic frame, an Event (SafetyEvent) or a Status (DeviceStatus) beyond
 // its bound drops the oldest of its kind waiting, a Control message
 // (replies, Telemetry, ReplayStatus) is never dropped: a reader that lets
@@ -61,7 +61,7 @@ Bytes make_error(proto::ErrorCode code, const std::string& message, uint32_t req
 enum class OutKind { Control, State, Haptic, Event, Status };
 
 // The bounds the rules hold a connection to (ServerOptions' share).
-struct SessionLimits {
+struct ConnectionLimits {
   std::string token;  // "" : no token set, so only loopback viewers are let in
   std::string server_name = "tactile";
   double viewer_rate_hz = 30;            // states per second at most
@@ -72,14 +72,14 @@ struct SessionLimits {
   size_t control_queue = 1024;           // control messages waiting unread: disconnected
 };
 
-class Session;
+class Connection;
 
 // What the rules need of the server around them: the scene it serves, the
 // other connections, and where what a client sends goes. The shell
 // implements it over the live loop or a replay; the tests with a fake.
-class SessionHost {
+class ConnectionHost {
  public:
-  virtual ~SessionHost() = default;
+  virtual ~ConnectionHost() = default;
   virtual int64_t now_ns() const = 0;  // the server's clock, for stamps
   // The scene being served: its SceneDescription, its device channels and name.
   virtual const Bytes& description() const = 0;
@@ -88,37 +88,37 @@ class SessionHost {
   // The live loop's workspace [m] (false for a replay, which simulates nothing).
   virtual bool workspace(Vec3& lo, Vec3& hi) const = 0;
   // Another greeted connection that drives `channel` (its id), or 0.
-  virtual uint64_t driver_of(const std::string& channel, const Session& asking) const = 0;
+  virtual uint64_t driver_of(const std::string& channel, const Connection& asking) const = 0;
   // Makes `s` the controller; false when another one is.
-  virtual bool claim_controller(Session& s) = 0;
+  virtual bool claim_controller(Connection& s) = 0;
   virtual void post_input(const DeviceSample& s) = 0;  // to the live loop (a replay drops it)
   // A safety event (OutKind::Event) or a device status (Status), stamped,
   // for every reader of it.
   virtual void relay(const Bytes& message, OutKind kind) = 0;
   virtual void record(Topic topic, std::span<const uint8_t> message, int64_t time_ns) = 0;
-  virtual void control(const proto::Control& c, Session& from) = 0;  // a controller's command
-  virtual void greeted(Session& s) = 0;  // after its Welcome and scene (a replay starts, or shows its position)
+  virtual void control(const proto::Control& c, Connection& from) = 0;  // a controller's command
+  virtual void greeted(Connection& s) = 0;  // after its Welcome and scene (a replay starts, or shows its position)
   // A greeted connection's view_fields() changed (its Hello asked for some, or a ViewFields).
   virtual void view_fields_changed() = 0;
 };
 
-class Session {
+class Connection {
  public:
-  Session(SessionHost& host, const SessionLimits& limits, bool loopback, std::string address, uint64_t id,
-          SessionClock::time_point now);
+  Connection(ConnectionHost& host, const ConnectionLimits& limits, bool loopback, std::string address, uint64_t id,
+             ConnectionClock::time_point now);
 
   // ---- in: what the client sent, and the hello timer ----
-  void receive(std::span<const uint8_t> bytes, bool binary, SessionClock::time_point now);
+  void receive(std::span<const uint8_t> bytes, bool binary, ConnectionClock::time_point now);
   void hello_timed_out();  // no Hello within the hello timeout: refused
   // Inputs coalesced over the rate wait: the shell calls flush() at
   // flush_at() (or later), which takes them if the bucket has a token.
   bool flush_due() const { return pending_inputs_ > 0; }
-  SessionClock::time_point flush_at() const;
-  void flush(SessionClock::time_point now);
+  ConnectionClock::time_point flush_at() const;
+  void flush(ConnectionClock::time_point now);
 
   // ---- out: what to write, and whether to close ----
   // Queues a message under `kind`'s rule (OutKind).
-  void send(const Bytes& message, OutKind kind, SessionClock::time_point now = SessionClock::now());
+  void send(const Bytes& message, OutKind kind, ConnectionClock::time_point now = ConnectionClock::now());
   void refuse(proto::ErrorCode code, const std::string& message);  // an Error, then close
   // The message to write now, or null (nothing queued, or one being written).
   const Bytes* next_write();
@@ -134,7 +134,7 @@ class Session {
   // ---- what it is ----
   uint64_t id() const { return id_; }
   const std::string& address() const { return address_; }
-  SessionClock::time_point since() const { return since_; }  // when it was upgraded
+  ConnectionClock::time_point since() const { return since_; }  // when it was upgraded
   proto::Role role() const { return role_; }
   bool greeted() const { return greeted_; }
   uint16_t protocol_minor() const { return protocol_minor_; }
@@ -157,22 +157,22 @@ class Session {
   int64_t inputs_coalesced() const { return inputs_coalesced_; }  // dropped for a newer one over the rate
 
  private:
-  void dispatch(const proto::Envelope& e, std::span<const uint8_t> raw, SessionClock::time_point now);
+  void dispatch(const proto::Envelope& e, std::span<const uint8_t> raw, ConnectionClock::time_point now);
   void on_hello(const proto::Hello& h);
   void on_input(const proto::DeviceInput& in, std::span<const uint8_t> raw);
-  void on_safety_event(const proto::SafetyEvent& ev, SessionClock::time_point now);
-  void on_device_status(const proto::DeviceStatus& st, SessionClock::time_point now);
+  void on_safety_event(const proto::SafetyEvent& ev, ConnectionClock::time_point now);
+  void on_device_status(const proto::DeviceStatus& st, ConnectionClock::time_point now);
   void on_control(const proto::Control& c, std::span<const uint8_t> raw);
   void on_view_fields(const proto::ViewFields& v);
   bool named(const std::string& channel) const;  // in its Hello
   void reply(proto::ErrorCode code, const std::string& message, uint32_t request_id = 0);
 
-  SessionHost& host_;
-  SessionLimits limits_;
+  ConnectionHost& host_;
+  ConnectionLimits limits_;
   bool loopback_;
   std::string address_;  // the peer's IP address
   uint64_t id_;
-  SessionClock::time_point since_;
+  ConnectionClock::time_point since_;
   bool greeted_ = false, close_after_write_ = false, disconnect_ = false, closed_ = false, writing_ = false;
   proto::Role role_ = proto::Role::Viewer;
   uint16_t protocol_minor_ = 0;
@@ -188,13 +188,13 @@ class Session {
   Bytes pending_state_, current_;
   size_t haptics_queued_ = 0, events_queued_ = 0, statuses_queued_ = 0, controls_queued_ = 0;
   int64_t haptics_dropped_ = 0, events_dropped_ = 0;
-  SessionClock::time_point next_state_due_{};
+  ConnectionClock::time_point next_state_due_{};
 
   // Token buckets: inbound messages, safety events, statuses.
   struct Bucket {
     double rate, tokens;
-    SessionClock::time_point last;
-    bool take(SessionClock::time_point now);  // refills at `rate` up to a second's burst, then takes one
+    ConnectionClock::time_point last;
+    bool take(ConnectionClock::time_point now);  // refills at `rate` up to a second's burst, then takes one
   };
   Bucket messages_, safety_, status_;
   Bucket coalescing_;  // DeviceInputs over messages_' rate: coalesced within it, a flood past it

@@ -11,7 +11,7 @@
 
 #include "net/inbound.hpp"
 #include "net/listener.hpp"
-#include "net/ws_session.hpp"
+#include "net/ws_connection.hpp"
 
 namespace tactile {
 
@@ -36,9 +36,9 @@ const char* content_type(const std::filesystem::path& p) {
 
 // ---- HTTP: static files, or the upgrade to a WebSocket -------------------------------------
 
-class HttpSession : public std::enable_shared_from_this<HttpSession> {
+class HttpConnection : public std::enable_shared_from_this<HttpConnection> {
  public:
-  HttpSession(std::shared_ptr<Host> host, uint16_t port, tcp::socket socket)
+  HttpConnection(std::shared_ptr<Host> host, uint16_t port, tcp::socket socket)
       : host_(std::move(host)), port_(port), stream_(std::move(socket)) {}
 
   void start() {
@@ -62,8 +62,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       const asio::ip::address peer = stream_.socket().remote_endpoint(ec).address();
       if (ec) return;  // gone already
       if (const Admission a = host_->admit(peer.to_string()); !a.admit) return refuse_upgrade(std::move(req), a.reason);
-      auto session = std::make_shared<WsSession>(host_, stream_.release_socket(), peer.is_loopback(), peer.to_string());
-      session->start(std::move(req));
+      auto connection =
+          std::make_shared<WsConnection>(host_, stream_.release_socket(), peer.is_loopback(), peer.to_string());
+      connection->start(std::move(req));
       return;
     }
     // Files and recordings only to pages that name this server: a page of
@@ -100,7 +101,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     websocket::stream_base::timeout t = websocket::stream_base::timeout::suggested(beast::role_type::server);
     t.handshake_timeout = std::chrono::seconds(1);
     ws->set_option(t);
-    ws->async_accept(req, [ws, why = WsSession::try_again_later(reason)](beast::error_code ec) {
+    ws->async_accept(req, [ws, why = WsConnection::try_again_later(reason)](beast::error_code ec) {
       if (ec) return;
       ws->async_close(why, [ws](beast::error_code) {});
     });
@@ -169,7 +170,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 }  // namespace
 
 void serve_http(std::shared_ptr<Host> host, uint16_t port, tcp::socket socket) {
-  std::make_shared<HttpSession>(std::move(host), port, std::move(socket))->start();
+  std::make_shared<HttpConnection>(std::move(host), port, std::move(socket))->start();
 }
 
 }  // namespace tactile

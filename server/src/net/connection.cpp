@@ -1,4 +1,4 @@
-#include "net/session.hpp"
+#include "net/connection.hpp"
 
 #include <algorithm>
 #include <cstdio>
@@ -31,7 +31,7 @@ Bytes make_error(wire::ErrorCode code, const std::string& message, uint32_t requ
   return seal(b, wire::Message::Error, body);
 }
 
-bool Session::Bucket::take(SessionClock::time_point now) {
+bool Connection::Bucket::take(ConnectionClock::time_point now) {
   tokens = std::min(rate, tokens + rate * std::chrono::duration<double>(now - last).count());
   last = now;
   if (tokens < 1) return false;
@@ -39,8 +39,8 @@ bool Session::Bucket::take(SessionClock::time_point now) {
   return true;
 }
 
-Session::Session(SessionHost& host, const SessionLimits& limits, bool loopback, std::string address, uint64_t id,
-                 SessionClock::time_point now)
+Connection::Connection(ConnectionHost& host, const ConnectionLimits& limits, bool loopback, std::string address,
+                       uint64_t id, ConnectionClock::time_point now)
     : host_(host),
       limits_(limits),
       loopback_(loopback),
@@ -55,7 +55,7 @@ Session::Session(SessionHost& host, const SessionLimits& limits, bool loopback, 
 
 // ---- in ---------------------------------------------------------------------------------
 
-void Session::receive(std::span<const uint8_t> bytes, bool binary, SessionClock::time_point now) {
+void Connection::receive(std::span<const uint8_t> bytes, bool binary, ConnectionClock::time_point now) {
   if (!messages_.take(now)) {
     // A device's inputs over the rate are coalesced (the latest of each
     // channel waits for a token); anything else, or past the coalescing
@@ -85,13 +85,13 @@ void Session::receive(std::span<const uint8_t> bytes, bool binary, SessionClock:
   dispatch(*inbound.envelope, bytes, now);
 }
 
-SessionClock::time_point Session::flush_at() const {
+ConnectionClock::time_point Connection::flush_at() const {
   // When the bucket has a token again.
   const double wait = std::max(0.0, 1.0 - messages_.tokens) / messages_.rate + 1e-6;  // (past rounding)
-  return messages_.last + std::chrono::duration_cast<SessionClock::duration>(std::chrono::duration<double>(wait));
+  return messages_.last + std::chrono::duration_cast<ConnectionClock::duration>(std::chrono::duration<double>(wait));
 }
 
-void Session::flush(SessionClock::time_point now) {
+void Connection::flush(ConnectionClock::time_point now) {
   for (std::vector<uint8_t>& slot : waiting_input_) {
     if (slot.empty() || closed_) continue;
     if (!messages_.take(now)) return;
@@ -102,11 +102,11 @@ void Session::flush(SessionClock::time_point now) {
   }
 }
 
-void Session::hello_timed_out() {
+void Connection::hello_timed_out() {
   if (!greeted_) refuse(wire::ErrorCode::BadRequest, "no Hello within the hello timeout");
 }
 
-void Session::dispatch(const wire::Envelope& e, std::span<const uint8_t> raw, SessionClock::time_point now) {
+void Connection::dispatch(const wire::Envelope& e, std::span<const uint8_t> raw, ConnectionClock::time_point now) {
   if (!greeted_ && e.message_type() != wire::Message::Hello && e.message_type() != wire::Message::Ping)
     return refuse(wire::ErrorCode::WrongRole,
                   std::string("the first message must be Hello, got ") + wire::EnumNameMessage(e.message_type()));
@@ -151,7 +151,7 @@ ViewFieldMask read_view_fields(const fb::Vector<fb::Offset<fb::String>>* names, 
 
 }  // namespace
 
-void Session::on_view_fields(const wire::ViewFields& v) {
+void Connection::on_view_fields(const wire::ViewFields& v) {
   std::string bad;
   const ViewFieldMask mask = read_view_fields(v.fields(), "ViewFields.fields", &bad);
   if (!bad.empty()) return reply(wire::ErrorCode::BadRequest, bad);
@@ -160,7 +160,7 @@ void Session::on_view_fields(const wire::ViewFields& v) {
   host_.view_fields_changed();
 }
 
-void Session::on_hello(const wire::Hello& h) {
+void Connection::on_hello(const wire::Hello& h) {
   if (greeted_) return reply(wire::ErrorCode::BadRequest, "Hello sent twice");
   const int major = int(wire::ProtocolMajor::Current), minor = int(wire::ProtocolMinor::Current);
   if (h.protocol_major() != major)
@@ -223,7 +223,7 @@ void Session::on_hello(const wire::Hello& h) {
   if (fields) host_.view_fields_changed();
 }
 
-void Session::bind_devices() {
+void Connection::bind_devices() {
   const std::vector<std::string>& names = host_.devices();
   devices_.clear();
   for (const std::string& d : device_names_) {
@@ -235,15 +235,15 @@ void Session::bind_devices() {
   }
 }
 
-bool Session::named(const std::string& channel) const {
+bool Connection::named(const std::string& channel) const {
   return std::find(device_names_.begin(), device_names_.end(), channel) != device_names_.end();
 }
 
-bool Session::drives(const std::string& channel) const {
+bool Connection::drives(const std::string& channel) const {
   return greeted_ && role_ == wire::Role::Device && named(channel);
 }
 
-void Session::on_input(const wire::DeviceInput& in, std::span<const uint8_t> raw) {
+void Connection::on_input(const wire::DeviceInput& in, std::span<const uint8_t> raw) {
   if (role_ != wire::Role::Device) return reply(wire::ErrorCode::WrongRole, "DeviceInput needs the device role");
   const std::string name = in.device() ? in.device()->str() : "";
   const auto it = std::find(device_names_.begin(), device_names_.end(), name);
@@ -277,7 +277,7 @@ void Session::on_input(const wire::DeviceInput& in, std::span<const uint8_t> raw
   host_.post_input(device_sample(in, devices_[k], drives_[k]));
 }
 
-void Session::on_safety_event(const wire::SafetyEvent& ev, SessionClock::time_point now) {
+void Connection::on_safety_event(const wire::SafetyEvent& ev, ConnectionClock::time_point now) {
   if (role_ != wire::Role::Device)
     return reply(wire::ErrorCode::WrongRole,
                  std::string("SafetyEvent needs the Device role; this connection has the ") +
@@ -310,7 +310,7 @@ void Session::on_safety_event(const wire::SafetyEvent& ev, SessionClock::time_po
   host_.record(Topic::Safety, *relayed, host_.now_ns());
 }
 
-void Session::on_device_status(const wire::DeviceStatus& st, SessionClock::time_point now) {
+void Connection::on_device_status(const wire::DeviceStatus& st, ConnectionClock::time_point now) {
   if (role_ != wire::Role::Device)
     return reply(wire::ErrorCode::WrongRole,
                  std::string("DeviceStatus needs the Device role; this connection has the ") +
@@ -333,7 +333,7 @@ void Session::on_device_status(const wire::DeviceStatus& st, SessionClock::time_
   host_.record(Topic::DeviceStatus, *relayed, host_.now_ns());
 }
 
-void Session::on_control(const wire::Control& c, std::span<const uint8_t> raw) {
+void Connection::on_control(const wire::Control& c, std::span<const uint8_t> raw) {
   if (role_ != wire::Role::Controller)
     return reply(wire::ErrorCode::WrongRole, "Control needs the controller role", c.request_id());
   host_.record(Topic::Control, raw, host_.now_ns());
@@ -342,16 +342,16 @@ void Session::on_control(const wire::Control& c, std::span<const uint8_t> raw) {
 
 // ---- out --------------------------------------------------------------------------------
 
-void Session::reply(wire::ErrorCode code, const std::string& message, uint32_t request_id) {
+void Connection::reply(wire::ErrorCode code, const std::string& message, uint32_t request_id) {
   send(make_error(code, message, request_id), OutKind::Control);
 }
 
-void Session::refuse(wire::ErrorCode code, const std::string& message) {
+void Connection::refuse(wire::ErrorCode code, const std::string& message) {
   reply(code, message);
   close_after_write_ = true;
 }
 
-bool Session::reads(OutKind kind) const {
+bool Connection::reads(OutKind kind) const {
   switch (kind) {
     case OutKind::Event: return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 2;
     case OutKind::Status: return greeted_ && role_ != wire::Role::Device && protocol_minor_ >= 3;
@@ -359,7 +359,7 @@ bool Session::reads(OutKind kind) const {
   }
 }
 
-void Session::send(const Bytes& message, OutKind kind, SessionClock::time_point now) {
+void Connection::send(const Bytes& message, OutKind kind, ConnectionClock::time_point now) {
   if (kind == OutKind::Control && role_ == wire::Role::Controller && greeted_ &&
       wire::GetEnvelope(message->data())->message_type() == wire::Message::Error)
     host_.record(Topic::Error, *message, host_.now_ns());
@@ -369,8 +369,8 @@ void Session::send(const Bytes& message, OutKind kind, SessionClock::time_point 
     // the next one's due time a period on, and a state a little early (a
     // quarter period: the simulation's publishing jitters) still passes,
     // or states made at exactly the viewer's rate would lose every other one.
-    const auto period =
-        std::chrono::duration_cast<SessionClock::duration>(std::chrono::duration<double>(1.0 / limits_.viewer_rate_hz));
+    const auto period = std::chrono::duration_cast<ConnectionClock::duration>(
+        std::chrono::duration<double>(1.0 / limits_.viewer_rate_hz));
     if (now + period / 4 < next_state_due_) return;
     if (pending_state_) {
       pending_state_ = message;  // replaces the one not yet sent
@@ -408,7 +408,7 @@ void Session::send(const Bytes& message, OutKind kind, SessionClock::time_point 
   kinds_.push_back(kind);
 }
 
-const Bytes* Session::next_write() {
+const Bytes* Connection::next_write() {
   if (writing_ || queue_.empty() || closed_) return nullptr;
   writing_ = true;
   current_ = queue_.front() ? queue_.front() : pending_state_;
@@ -416,7 +416,7 @@ const Bytes* Session::next_write() {
   return &current_;
 }
 
-void Session::written() {
+void Connection::written() {
   writing_ = false;
   switch (kinds_.front()) {
     case OutKind::Haptic: --haptics_queued_; break;

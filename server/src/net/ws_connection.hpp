@@ -1,5 +1,5 @@
 // The WebSocket shell (Boost.Beast) around one connection's rules
-// (net/session.hpp): it feeds them what it reads and the timers' ticks, and
+// (net/connection.hpp): it feeds them what it reads and the timers' ticks, and
 // writes what they queue, one message at a time. Joins its host
 // (net/host.hpp) when its upgrade starts and leaves it when destroyed.
 #pragma once
@@ -13,27 +13,27 @@
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
 
-#include "net/session.hpp"
+#include "net/connection.hpp"
 
 namespace tactile {
 
 class Host;
 
-class WsSession : public std::enable_shared_from_this<WsSession> {
+class WsConnection : public std::enable_shared_from_this<WsConnection> {
  public:
   using Stream = boost::beast::websocket::stream<boost::beast::tcp_stream>;
 
-  WsSession(std::shared_ptr<Host> host, boost::asio::ip::tcp::socket socket, bool loopback, std::string address);
-  ~WsSession();
+  WsConnection(std::shared_ptr<Host> host, boost::asio::ip::tcp::socket socket, bool loopback, std::string address);
+  ~WsConnection();
 
   // Completes the upgrade `req` asked for and starts reading.
   void start(boost::beast::http::request<boost::beast::http::string_body> req);
 
-  Session& core() { return core_; }
-  const Session& core() const { return core_; }
+  Connection& core() { return core_; }
+  const Connection& core() const { return core_; }
   // After a scene change: its channels mapped onto the new scene's.
   void rebind();
-  // Queues a message under its kind's rule (net/session.hpp) and writes.
+  // Queues a message under its kind's rule (net/connection.hpp) and writes.
   void send(const Bytes& message, OutKind kind);
   // Closes the socket at once: its pending operations end, and with them the shell.
   void drop();
@@ -48,7 +48,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
 
  private:
   void arm_hello_timer();
-  void arm_flush_timer();  // inputs coalesced over the rate wait for a token (Session::flush)
+  void arm_flush_timer();  // inputs coalesced over the rate wait for a token (Connection::flush)
   void read();
   void pump();  // writes what the rules queued; closes when they say
 
@@ -58,7 +58,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   boost::asio::steady_timer hello_timer_;
   boost::asio::steady_timer flush_timer_;
   bool flush_armed_ = false;
-  Session core_;
+  Connection core_;
 };
 
 }  // namespace tactile

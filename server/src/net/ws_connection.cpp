@@ -1,4 +1,4 @@
-#include "net/ws_session.hpp"
+#include "net/ws_connection.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -15,7 +15,7 @@ using tcp = asio::ip::tcp;
 
 namespace {
 
-SessionLimits limits(const ServerOptions& o) {
+ConnectionLimits limits(const ServerOptions& o) {
   return {
       o.token,       o.server_name,  o.viewer_rate_hz, o.max_messages_per_s, o.device_queue, o.max_safety_events_per_s,
       o.event_queue, o.control_queue};
@@ -25,14 +25,14 @@ uint64_t next_id = 1;  // on the network thread
 
 }  // namespace
 
-WsSession::WsSession(std::shared_ptr<Host> host, tcp::socket socket, bool loopback, std::string address)
+WsConnection::WsConnection(std::shared_ptr<Host> host, tcp::socket socket, bool loopback, std::string address)
     : host_(std::move(host)),
       ws_(std::move(socket)),
       hello_timer_(host_->io()),
       flush_timer_(host_->io()),
-      core_(*host_, limits(host_->options()), loopback, std::move(address), next_id++, SessionClock::now()) {}
+      core_(*host_, limits(host_->options()), loopback, std::move(address), next_id++, ConnectionClock::now()) {}
 
-WsSession::~WsSession() {
+WsConnection::~WsConnection() {
   host_->leave(this);
   if (core_.safety_dropped() > 0)
     std::fprintf(stderr, "safety: connection %llu sent %lld events over the limit of %g per second: dropped\n",
@@ -43,7 +43,7 @@ WsSession::~WsSession() {
                  (unsigned long long)core_.id(), wire::EnumNameRole(core_.role()), (long long)core_.events_dropped());
 }
 
-void WsSession::start(beast::http::request<beast::http::string_body> req) {
+void WsConnection::start(beast::http::request<beast::http::string_body> req) {
   host_->join(this);
   beast::get_lowest_layer(ws_).expires_never();
   // Without it, Nagle's algorithm holds each small haptic frame until the
@@ -63,24 +63,24 @@ void WsSession::start(beast::http::request<beast::http::string_body> req) {
   });
 }
 
-void WsSession::rebind() {
+void WsConnection::rebind() {
   core_.bind_devices();
   pump();
 }
 
-void WsSession::send(const Bytes& message, OutKind kind) {
+void WsConnection::send(const Bytes& message, OutKind kind) {
   core_.send(message, kind);
   pump();
 }
 
-void WsSession::drop() {
+void WsConnection::drop() {
   if (core_.closed()) return;
   core_.mark_closed();
   hello_timer_.cancel();
   beast::get_lowest_layer(ws_).close();
 }
 
-void WsSession::evict(const std::string& reason) {
+void WsConnection::evict(const std::string& reason) {
   if (core_.closed()) return;
   core_.mark_closed();
   hello_timer_.cancel();
@@ -90,19 +90,19 @@ void WsSession::evict(const std::string& reason) {
   ws_.async_close(try_again_later(reason), [self = shared_from_this()](beast::error_code) {});
 }
 
-websocket::close_reason WsSession::try_again_later(const std::string& reason) {
+websocket::close_reason WsConnection::try_again_later(const std::string& reason) {
   return websocket::close_reason(websocket::close_code::try_again_later,
                                  beast::string_view(reason.data(), std::min<size_t>(reason.size(), 123)));
 }
 
-void WsSession::close() {
+void WsConnection::close() {
   if (core_.closed()) return;
   core_.mark_closed();
   hello_timer_.cancel();
   ws_.async_close(websocket::close_code::normal, [self = shared_from_this()](beast::error_code) {});
 }
 
-void WsSession::arm_hello_timer() {
+void WsConnection::arm_hello_timer() {
   hello_timer_.expires_after(std::chrono::milliseconds(int64_t(host_->options().hello_timeout_s * 1000)));
   hello_timer_.async_wait([weak = weak_from_this()](beast::error_code ec) {
     auto self = weak.lock();
@@ -112,7 +112,7 @@ void WsSession::arm_hello_timer() {
   });
 }
 
-void WsSession::arm_flush_timer() {
+void WsConnection::arm_flush_timer() {
   if (!core_.flush_due() || flush_armed_) return;
   flush_armed_ = true;
   flush_timer_.expires_at(core_.flush_at());
@@ -120,13 +120,13 @@ void WsSession::arm_flush_timer() {
     auto self = weak.lock();
     if (ec || !self) return;
     self->flush_armed_ = false;
-    self->core_.flush(SessionClock::now());
+    self->core_.flush(ConnectionClock::now());
     self->arm_flush_timer();
     self->pump();
   });
 }
 
-void WsSession::read() {
+void WsConnection::read() {
   ws_.async_read(in_, [self = shared_from_this()](beast::error_code ec, size_t) {
     if (ec) {
       self->core_.mark_closed();  // closed, timed out, or too big (Beast sends close code 1009)
@@ -134,7 +134,7 @@ void WsSession::read() {
       return;
     }
     const auto* data = static_cast<const uint8_t*>(self->in_.data().data());
-    self->core_.receive({data, self->in_.size()}, self->ws_.got_binary(), SessionClock::now());
+    self->core_.receive({data, self->in_.size()}, self->ws_.got_binary(), ConnectionClock::now());
     self->in_.consume(self->in_.size());
     if (self->core_.greeted()) self->hello_timer_.cancel();
     self->arm_flush_timer();
@@ -143,7 +143,7 @@ void WsSession::read() {
   });
 }
 
-void WsSession::pump() {
+void WsConnection::pump() {
   if (core_.disconnect()) return drop();
   if (const Bytes* message = core_.next_write()) {
     ws_.async_write(asio::buffer(**message), [self = shared_from_this()](beast::error_code ec, size_t) {

@@ -1,4 +1,4 @@
-// The rules of one client connection (net/session.hpp), without a socket:
+// The rules of one client connection (net/connection.hpp), without a socket:
 // bytes and times in, what it would write and what it asks of the server out.
 #include <gtest/gtest.h>
 
@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "net/session.hpp"
+#include "net/connection.hpp"
 
 // Hellos are written with designated initializers naming only the fields a
 // test changes; GCC 12 warns about the others, which keep their defaults.
@@ -22,9 +22,9 @@ using proto::Message;
 using proto::Role;
 using namespace std::chrono_literals;
 
-// The server around the session: a scene with channels "stylus" and
+// The server around the connection: a scene with channels "stylus" and
 // "mouse", and a record of everything asked of it.
-struct FakeHost : SessionHost {
+struct FakeHost : ConnectionHost {
   Bytes scene = [] {
     fb::FlatBufferBuilder b;
     return seal(b, Message::SceneDescription, proto::CreateSceneDescriptionDirect(b, "plate", 1));
@@ -33,7 +33,7 @@ struct FakeHost : SessionHost {
   std::string name = "plate";
   bool live = true;
   uint64_t other_driver = 0;  // a connection that drives every channel, 0 for none
-  Session* controller = nullptr;
+  Connection* controller = nullptr;
   std::vector<DeviceSample> inputs;
   std::vector<std::pair<Bytes, OutKind>> relayed;
   std::vector<Topic> recorded;
@@ -50,8 +50,8 @@ struct FakeHost : SessionHost {
     hi = Vec3(1.0);
     return live;
   }
-  uint64_t driver_of(const std::string&, const Session&) const override { return other_driver; }
-  bool claim_controller(Session& s) override {
+  uint64_t driver_of(const std::string&, const Connection&) const override { return other_driver; }
+  bool claim_controller(Connection& s) override {
     if (controller) return false;
     controller = &s;
     return true;
@@ -62,12 +62,12 @@ struct FakeHost : SessionHost {
   }
   void relay(const Bytes& m, OutKind kind) override { relayed.emplace_back(m, kind); }
   void record(Topic t, std::span<const uint8_t>, int64_t) override { recorded.push_back(t); }
-  void control(const proto::Control& c, Session&) override { controls.push_back(c.request_id()); }
-  void greeted(Session&) override { ++greetings; }
+  void control(const proto::Control& c, Connection&) override { controls.push_back(c.request_id()); }
+  void greeted(Connection&) override { ++greetings; }
   void view_fields_changed() override { ++fields_changes; }
 };
 
-const SessionClock::time_point t0{};
+const ConnectionClock::time_point t0{};
 
 template <class T>
 std::vector<uint8_t> wrap(fb::FlatBufferBuilder& b, Message type, fb::Offset<T> body) {
@@ -138,27 +138,27 @@ std::vector<uint8_t> ping() {
   return wrap(b, Message::Ping, proto::CreatePing(b, 9, 100));
 }
 
-// A session and what it writes.
+// A connection and what it writes.
 struct Client {
   FakeHost host;
-  SessionLimits limits;
-  Session session;
-  explicit Client(bool loopback = true, SessionLimits l = with_token())
-      : limits(l), session(host, limits, loopback, "10.0.0.7", 3, t0) {}
-  static SessionLimits with_token() {
-    SessionLimits l;
+  ConnectionLimits limits;
+  Connection connection;
+  explicit Client(bool loopback = true, ConnectionLimits l = with_token())
+      : limits(l), connection(host, limits, loopback, "10.0.0.7", 3, t0) {}
+  static ConnectionLimits with_token() {
+    ConnectionLimits l;
     l.token = "secret";
     return l;
   }
-  void receive(const std::vector<uint8_t>& bytes, SessionClock::time_point now = t0) {
-    session.receive({bytes.data(), bytes.size()}, true, now);
+  void receive(const std::vector<uint8_t>& bytes, ConnectionClock::time_point now = t0) {
+    connection.receive({bytes.data(), bytes.size()}, true, now);
   }
   // Everything queued, written in order.
   std::vector<Bytes> drain() {
     std::vector<Bytes> out;
-    while (const Bytes* m = session.next_write()) {
+    while (const Bytes* m = connection.next_write()) {
       out.push_back(*m);
-      session.written();
+      connection.written();
     }
     return out;
   }
@@ -189,9 +189,9 @@ TEST(SessionHello, AcceptedWithWelcomeThenTheScene) {
   EXPECT_EQ(w->role(), Role::Viewer);
   EXPECT_EQ(w->session_id(), 3u);
   EXPECT_EQ(out[1], c.host.scene);
-  EXPECT_TRUE(c.session.greeted());
+  EXPECT_TRUE(c.connection.greeted());
   EXPECT_EQ(c.host.greetings, 1);
-  EXPECT_FALSE(c.session.close_after_write());
+  EXPECT_FALSE(c.connection.close_after_write());
 }
 
 TEST(SessionHello, OnlyHelloOrPingMayComeFirst) {
@@ -200,16 +200,16 @@ TEST(SessionHello, OnlyHelloOrPingMayComeFirst) {
   ASSERT_EQ(c.drain().size(), 1u);  // a Pong
   c.receive(input("stylus"));
   expect_error(c, ErrorCode::WrongRole, "the first message must be Hello, got DeviceInput");
-  EXPECT_TRUE(c.session.close_after_write());
-  EXPECT_TRUE(c.session.idle());
+  EXPECT_TRUE(c.connection.close_after_write());
+  EXPECT_TRUE(c.connection.idle());
 }
 
 TEST(SessionHello, AnotherMajorVersionIsRefused) {
   Client c;
   c.receive(hello({.major = 9, .minor = 1}));
   expect_error(c, ErrorCode::VersionMismatch, "client speaks protocol 9.1");
-  EXPECT_TRUE(c.session.close_after_write());
-  EXPECT_FALSE(c.session.greeted());
+  EXPECT_TRUE(c.connection.close_after_write());
+  EXPECT_FALSE(c.connection.greeted());
 }
 
 TEST(SessionHello, ARoleOutOfRangeIsRefused) {
@@ -222,7 +222,7 @@ TEST(SessionHello, TheTokenIsNeededByEveryRoleButALoopbackViewer) {
   {
     Client c;  // loopback viewer, no token: in
     c.receive(hello({.token = nullptr}));
-    EXPECT_TRUE(c.session.greeted());
+    EXPECT_TRUE(c.connection.greeted());
   }
   {
     Client c(false);  // off loopback, even a viewer
@@ -235,7 +235,7 @@ TEST(SessionHello, TheTokenIsNeededByEveryRoleButALoopbackViewer) {
     expect_error(c, ErrorCode::Unauthorized, "a wrong or missing token for the Device role");
   }
   {
-    Client c(true, SessionLimits{});  // a server without a token lets in no device
+    Client c(true, ConnectionLimits{});  // a server without a token lets in no device
     c.receive(hello({.role = Role::Device, .devices = {"stylus"}}));
     expect_error(c, ErrorCode::Unauthorized, "this server has no token set");
   }
@@ -243,11 +243,11 @@ TEST(SessionHello, TheTokenIsNeededByEveryRoleButALoopbackViewer) {
 
 TEST(SessionHello, OneControllerAtATime) {
   Client first, second;
-  second.host.controller = &first.session;  // the server already has one
+  second.host.controller = &first.connection;  // the server already has one
   second.receive(hello({.role = Role::Controller}));
   expect_error(second, ErrorCode::Busy, "another controller is connected");
   first.receive(hello({.role = Role::Controller}));
-  EXPECT_EQ(first.host.controller, &first.session);
+  EXPECT_EQ(first.host.controller, &first.connection);
 }
 
 TEST(SessionHello, ADeviceNamesChannelsTheSceneHasAndNoOtherDeviceDrives) {
@@ -269,8 +269,8 @@ TEST(SessionHello, ADeviceNamesChannelsTheSceneHasAndNoOtherDeviceDrives) {
   }
   Client c;
   c.receive(hello({.role = Role::Device, .devices = {"mouse"}}));
-  EXPECT_TRUE(c.session.drives("mouse"));
-  EXPECT_FALSE(c.session.drives("stylus"));
+  EXPECT_TRUE(c.connection.drives("mouse"));
+  EXPECT_FALSE(c.connection.drives("stylus"));
 }
 
 TEST(SessionHello, TwiceIsAnErrorButNotAClose) {
@@ -279,7 +279,7 @@ TEST(SessionHello, TwiceIsAnErrorButNotAClose) {
   c.drain();
   c.receive(hello({}));
   expect_error(c, ErrorCode::BadRequest, "Hello sent twice");
-  EXPECT_FALSE(c.session.close_after_write());
+  EXPECT_FALSE(c.connection.close_after_write());
 }
 
 // The fields a client asks for: in its Hello, then by ViewFields, each
@@ -289,63 +289,63 @@ TEST(SessionHello, FieldsAskedForAreKeptAndAnUnknownOneIsNamed) {
   Client c;
   c.receive(hello({.fields = {"von_mises", "stretch_max"}}));
   ASSERT_EQ(c.drain().size(), 2u);
-  EXPECT_EQ(c.session.view_fields(), view_field_bit(ViewField::VonMises) | view_field_bit(ViewField::StretchMax));
+  EXPECT_EQ(c.connection.view_fields(), view_field_bit(ViewField::VonMises) | view_field_bit(ViewField::StretchMax));
   EXPECT_EQ(c.host.fields_changes, 1);
   c.receive(view_fields({"energy_density"}));
   EXPECT_TRUE(c.drain().empty());
-  EXPECT_EQ(c.session.view_fields(), view_field_bit(ViewField::EnergyDensity));
+  EXPECT_EQ(c.connection.view_fields(), view_field_bit(ViewField::EnergyDensity));
   EXPECT_EQ(c.host.fields_changes, 2);
   c.receive(view_fields({"energy_density", "pressure"}));
   expect_error(c, ErrorCode::BadRequest, "ViewFields.fields: no field 'pressure' (this server sends von_mises,");
-  EXPECT_EQ(c.session.view_fields(), view_field_bit(ViewField::EnergyDensity)) << "an error changes nothing";
-  EXPECT_FALSE(c.session.close_after_write());
+  EXPECT_EQ(c.connection.view_fields(), view_field_bit(ViewField::EnergyDensity)) << "an error changes nothing";
+  EXPECT_FALSE(c.connection.close_after_write());
   c.receive(view_fields({}));
-  EXPECT_EQ(c.session.view_fields(), 0u);
+  EXPECT_EQ(c.connection.view_fields(), 0u);
   EXPECT_EQ(c.host.fields_changes, 3);
 
   Client plain;
   plain.receive(hello({}));
   plain.drain();
-  EXPECT_EQ(plain.session.view_fields(), 0u);
+  EXPECT_EQ(plain.connection.view_fields(), 0u);
   EXPECT_EQ(plain.host.fields_changes, 0) << "a viewer that asks nothing changes nothing";
 
   Client bad;
   bad.receive(hello({.fields = {"vonmises"}}));
   expect_error(bad, ErrorCode::BadRequest, "Hello.fields: no field 'vonmises'");
-  EXPECT_TRUE(bad.session.close_after_write());
-  EXPECT_FALSE(bad.session.greeted());
+  EXPECT_TRUE(bad.connection.close_after_write());
+  EXPECT_FALSE(bad.connection.greeted());
 }
 
 TEST(SessionHello, NoHelloInTimeIsRefusedOnceGreetedNothing) {
   Client late;
-  late.session.hello_timed_out();
+  late.connection.hello_timed_out();
   expect_error(late, ErrorCode::BadRequest, "no Hello within the hello timeout");
-  EXPECT_TRUE(late.session.close_after_write());
+  EXPECT_TRUE(late.connection.close_after_write());
   Client c;
   c.receive(hello({}));
   c.drain();
-  c.session.hello_timed_out();
+  c.connection.hello_timed_out();
   EXPECT_TRUE(c.drain().empty());
 }
 
 // ---- what comes in ---------------------------------------------------------------------------
 
 TEST(SessionInbound, MessagesOverTheRateAreRefusedAndClose) {
-  SessionLimits l = Client::with_token();
+  ConnectionLimits l = Client::with_token();
   l.max_messages_per_s = 10;
   Client c(true, l);
   for (int k = 0; k < 10; ++k) c.receive(ping(), t0 + 1ms);  // a second's burst
   EXPECT_EQ(c.drain().size(), 10u);
   c.receive(ping(), t0 + 1ms);
   expect_error(c, ErrorCode::RateLimited, "more than 10 messages per second");
-  EXPECT_TRUE(c.session.close_after_write());
+  EXPECT_TRUE(c.connection.close_after_write());
 }
 
 // A 10 kHz device against a rate of 5000 messages a second: before, cut
 // off after 1.65 s. Now its inputs over the rate are coalesced (the latest
 // of its channel waits for a token), and its newest pose is never lost.
 TEST(SessionInbound, ADevicesInputsOverTheRateAreCoalescedNotRefused) {
-  SessionLimits l = Client::with_token();
+  ConnectionLimits l = Client::with_token();
   l.max_messages_per_s = 400;
   Client c(true, l);
   const FakeHost& host = c.host;
@@ -353,54 +353,54 @@ TEST(SessionInbound, ADevicesInputsOverTheRateAreCoalescedNotRefused) {
   c.drain();
   // Two seconds at 1 kHz against 400 a second (2.5 times the rate, as 10 kHz against the default 5000 is 2).
   for (int k = 0; k < 2000; ++k) {
-    const SessionClock::time_point now = t0 + k * 1ms;
-    if (c.session.flush_due() && c.session.flush_at() <= now) c.session.flush(now);
+    const ConnectionClock::time_point now = t0 + k * 1ms;
+    if (c.connection.flush_due() && c.connection.flush_at() <= now) c.connection.flush(now);
     c.receive(input("stylus", 1e-4 * k), now);
   }
-  EXPECT_FALSE(c.session.close_after_write());
+  EXPECT_FALSE(c.connection.close_after_write());
   EXPECT_TRUE(c.drain().empty());
   // The last input waits; a flush at its time takes it.
-  ASSERT_TRUE(c.session.flush_due());
-  c.session.flush(c.session.flush_at());
-  EXPECT_FALSE(c.session.flush_due());
+  ASSERT_TRUE(c.connection.flush_due());
+  c.connection.flush(c.connection.flush_at());
+  EXPECT_FALSE(c.connection.flush_due());
   ASSERT_FALSE(host.inputs.empty());
   EXPECT_DOUBLE_EQ(host.inputs.back().pose.position.x, 1e-4 * 1999);
   EXPECT_NEAR(double(host.inputs.size()), 400 + 2 * 400, 20);  // the burst and the rate over two seconds
-  EXPECT_EQ(int64_t(host.inputs.size()) + c.session.inputs_coalesced(), 2000);
+  EXPECT_EQ(int64_t(host.inputs.size()) + c.connection.inputs_coalesced(), 2000);
 }
 
 TEST(SessionInbound, PastThreeTimesTheRateEvenInputsAreAFlood) {
-  SessionLimits l = Client::with_token();
+  ConnectionLimits l = Client::with_token();
   l.max_messages_per_s = 10;
   Client c(true, l);
   c.receive(hello({.role = Role::Device, .devices = {"stylus"}}), t0);
   c.drain();
   for (int k = 0; k < 9 + 30; ++k) c.receive(input("stylus"), t0);  // the burst, then three times more
-  EXPECT_FALSE(c.session.close_after_write());
+  EXPECT_FALSE(c.connection.close_after_write());
   c.receive(input("stylus"), t0);
   expect_error(c, ErrorCode::RateLimited, "more than 10 messages per second");
-  EXPECT_TRUE(c.session.close_after_write());
+  EXPECT_TRUE(c.connection.close_after_write());
 }
 
 TEST(SessionInbound, TheBucketRefillsAtItsRate) {
-  SessionLimits l = Client::with_token();
+  ConnectionLimits l = Client::with_token();
   l.max_messages_per_s = 10;
   Client c(true, l);
   for (int k = 0; k < 10; ++k) c.receive(ping(), t0);
   c.receive(ping(), t0 + 100ms);  // one more token after a tenth of a second
-  EXPECT_FALSE(c.session.close_after_write());
+  EXPECT_FALSE(c.connection.close_after_write());
   EXPECT_EQ(c.drain().size(), 11u);
 }
 
 TEST(SessionInbound, TextAndDamagedBytesGetErrorsAndTheConnectionStays) {
   Client c;
   const std::vector<uint8_t> bytes = ping();
-  c.session.receive({bytes.data(), bytes.size()}, false, t0);
+  c.connection.receive({bytes.data(), bytes.size()}, false, t0);
   expect_error(c, ErrorCode::Malformed, "text message: the protocol is binary FlatBuffers");
   const std::vector<uint8_t> junk{1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12};
   c.receive(junk);
   expect_error(c, ErrorCode::Malformed, "not a tactile Envelope");
-  EXPECT_FALSE(c.session.close_after_write());
+  EXPECT_FALSE(c.connection.close_after_write());
 }
 
 TEST(SessionInbound, AViewerMayNotSendDeviceOrControlMessages) {
@@ -456,7 +456,7 @@ TEST(SessionInbound, AChannelTheNewSceneLacksIsSaidAndItsInputsDropped) {
   Device d;
   d.host.channels = {"stylus"};
   d.host.name = "other";
-  d.session.bind_devices();
+  d.connection.bind_devices();
   expect_error(d, ErrorCode::BadRequest, "scene 'other' has no device channel 'mouse'");
   d.receive(input("mouse"));
   EXPECT_TRUE(d.host.inputs.empty());
@@ -464,7 +464,7 @@ TEST(SessionInbound, AChannelTheNewSceneLacksIsSaidAndItsInputsDropped) {
 }
 
 TEST(SessionInbound, SafetyEventsAreStampedRelayedRecordedAndRateLimited) {
-  SessionLimits l = Client::with_token();
+  ConnectionLimits l = Client::with_token();
   l.max_safety_events_per_s = 3;
   Client c(true, l);
   c.receive(hello({.role = Role::Device, .devices = {"stylus"}}));
@@ -478,7 +478,7 @@ TEST(SessionInbound, SafetyEventsAreStampedRelayedRecordedAndRateLimited) {
   c.receive(safety(), t0 + 1ms);
   c.receive(safety(), t0 + 1ms);
   expect_error(c, ErrorCode::RateLimited, "more than 3 safety events per second: dropped, not relayed (1 so far)");
-  EXPECT_EQ(c.session.safety_dropped(), 2);
+  EXPECT_EQ(c.connection.safety_dropped(), 2);
   c.receive(safety(), t0 + 1001ms);  // refilled: relayed again
   EXPECT_EQ(c.host.relayed.size(), 4u);
   c.receive(safety("mouse"), t0 + 1001ms);
@@ -501,7 +501,7 @@ TEST(SessionInbound, AControllersCommandIsRecordedAndCarriedOut) {
   EXPECT_EQ(c.host.controls, (std::vector<uint32_t>{5}));
   EXPECT_EQ(c.host.recorded, (std::vector<Topic>{Topic::Control}));
   // An Error to a controller is kept in the recording.
-  c.session.send(make_error(ErrorCode::BadRequest, "no scene 'x'", 5), OutKind::Control);
+  c.connection.send(make_error(ErrorCode::BadRequest, "no scene 'x'", 5), OutKind::Control);
   EXPECT_EQ(c.host.recorded.back(), Topic::Error);
 }
 
@@ -512,27 +512,27 @@ TEST(SessionOutbound, StatesAreLatestWinsAtTheViewerRate) {
   c.receive(hello({}));
   c.drain();
   const Bytes a = make_error(ErrorCode::Internal, "state a"), b = make_error(ErrorCode::Internal, "state b");
-  c.session.send(a, OutKind::State, t0 + 1s);
-  c.session.send(b, OutKind::State, t0 + 1s + 1ms);  // replaces a, not yet written
+  c.connection.send(a, OutKind::State, t0 + 1s);
+  c.connection.send(b, OutKind::State, t0 + 1s + 1ms);  // replaces a, not yet written
   EXPECT_EQ(c.drain(), (std::vector<Bytes>{b}));
   // After a pause the next is due at once (the average rate allows it), then a period (1/30 s) on.
-  c.session.send(a, OutKind::State, t0 + 1s + 5ms);
+  c.connection.send(a, OutKind::State, t0 + 1s + 5ms);
   EXPECT_EQ(c.drain().size(), 1u);
-  c.session.send(a, OutKind::State, t0 + 1s + 10ms);  // before the next is due: dropped
+  c.connection.send(a, OutKind::State, t0 + 1s + 10ms);  // before the next is due: dropped
   EXPECT_TRUE(c.drain().empty());
-  c.session.send(a, OutKind::State, t0 + 1s + 30ms);  // a little early (jitter) still passes
+  c.connection.send(a, OutKind::State, t0 + 1s + 30ms);  // a little early (jitter) still passes
   EXPECT_EQ(c.drain().size(), 1u);
   // At exactly 30 Hz for a second, none is lost.
   int passed = 0;
   for (int k = 1; k <= 30; ++k) {
-    c.session.send(a, OutKind::State, t0 + 2s + k * std::chrono::microseconds(33'333));
+    c.connection.send(a, OutKind::State, t0 + 2s + k * std::chrono::microseconds(33'333));
     passed += int(c.drain().size());
   }
   EXPECT_EQ(passed, 30);
 }
 
 TEST(SessionOutbound, ASlowDeviceLosesItsOldestHapticFramesNotTheNewest) {
-  SessionLimits l = Client::with_token();
+  ConnectionLimits l = Client::with_token();
   l.device_queue = 4;
   Client c(true, l);
   c.receive(hello({.role = Role::Device, .devices = {"stylus"}}));
@@ -540,38 +540,38 @@ TEST(SessionOutbound, ASlowDeviceLosesItsOldestHapticFramesNotTheNewest) {
   std::vector<Bytes> frames;
   for (int k = 0; k < 7; ++k) {
     frames.push_back(make_error(ErrorCode::Internal, "frame " + std::to_string(k)));
-    c.session.send(frames.back(), OutKind::Haptic);
+    c.connection.send(frames.back(), OutKind::Haptic);
   }
-  EXPECT_EQ(c.session.haptics_dropped(), 3);
+  EXPECT_EQ(c.connection.haptics_dropped(), 3);
   const std::vector<Bytes> out = c.drain();
   EXPECT_EQ(out, (std::vector<Bytes>{frames[3], frames[4], frames[5], frames[6]}));
 }
 
 TEST(SessionOutbound, TheMessageBeingWrittenIsNeverTheOneDropped) {
-  SessionLimits l = Client::with_token();
+  ConnectionLimits l = Client::with_token();
   l.device_queue = 2;
   Client c(true, l);
   const Bytes f0 = make_error(ErrorCode::Internal, "0"), f1 = make_error(ErrorCode::Internal, "1"),
               f2 = make_error(ErrorCode::Internal, "2");
-  c.session.send(f0, OutKind::Haptic);
-  c.session.send(f1, OutKind::Haptic);
-  const Bytes* writing = c.session.next_write();
+  c.connection.send(f0, OutKind::Haptic);
+  c.connection.send(f1, OutKind::Haptic);
+  const Bytes* writing = c.connection.next_write();
   ASSERT_NE(writing, nullptr);
   EXPECT_EQ(*writing, f0);
-  c.session.send(f2, OutKind::Haptic);  // drops f1, not f0 which is on the wire
-  c.session.written();
+  c.connection.send(f2, OutKind::Haptic);  // drops f1, not f0 which is on the wire
+  c.connection.written();
   EXPECT_EQ(c.drain(), (std::vector<Bytes>{f2}));
 }
 
 TEST(SessionOutbound, AReaderThatLetsControlMessagesPileUpIsDisconnected) {
-  SessionLimits l = Client::with_token();
+  ConnectionLimits l = Client::with_token();
   l.control_queue = 3;
   Client c(true, l);
-  for (int k = 0; k < 3; ++k) c.session.send(make_error(ErrorCode::Internal, "t"), OutKind::Control);
-  EXPECT_FALSE(c.session.disconnect());
-  c.session.send(make_error(ErrorCode::Internal, "t"), OutKind::Control);
-  EXPECT_TRUE(c.session.disconnect());
-  EXPECT_FALSE(c.session.waiting());
+  for (int k = 0; k < 3; ++k) c.connection.send(make_error(ErrorCode::Internal, "t"), OutKind::Control);
+  EXPECT_FALSE(c.connection.disconnect());
+  c.connection.send(make_error(ErrorCode::Internal, "t"), OutKind::Control);
+  EXPECT_TRUE(c.connection.disconnect());
+  EXPECT_FALSE(c.connection.waiting());
 }
 
 TEST(SessionOutbound, WhoReadsSafetyEventsAndStatuses) {
@@ -579,18 +579,18 @@ TEST(SessionOutbound, WhoReadsSafetyEventsAndStatuses) {
   viewer.receive(hello({}));
   device.receive(hello({.role = Role::Device, .devices = {"stylus"}}));
   old.receive(hello({.minor = 1}));
-  EXPECT_TRUE(viewer.session.reads(OutKind::Event) && viewer.session.reads(OutKind::Status));
-  EXPECT_FALSE(device.session.reads(OutKind::Event) || device.session.reads(OutKind::Status));
-  EXPECT_FALSE(old.session.reads(OutKind::Event) || old.session.reads(OutKind::Status));  // a 1.1 codec
-  EXPECT_FALSE(old.session.reads_replay_status());
+  EXPECT_TRUE(viewer.connection.reads(OutKind::Event) && viewer.connection.reads(OutKind::Status));
+  EXPECT_FALSE(device.connection.reads(OutKind::Event) || device.connection.reads(OutKind::Status));
+  EXPECT_FALSE(old.connection.reads(OutKind::Event) || old.connection.reads(OutKind::Status));  // a 1.1 codec
+  EXPECT_FALSE(old.connection.reads_replay_status());
 }
 
 TEST(SessionOutbound, NothingIsQueuedOnceTheSocketIsClosed) {
   Client c;
-  c.session.mark_closed();
-  c.session.send(make_error(ErrorCode::Internal, "late"), OutKind::Control);
-  EXPECT_TRUE(c.session.idle());
-  EXPECT_EQ(c.session.next_write(), nullptr);
+  c.connection.mark_closed();
+  c.connection.send(make_error(ErrorCode::Internal, "late"), OutKind::Control);
+  EXPECT_TRUE(c.connection.idle());
+  EXPECT_EQ(c.connection.next_write(), nullptr);
 }
 
 }  // namespace
