@@ -10,7 +10,7 @@ scripts/setup.sh
 echo "test: C++ format (clang-format, scripts/check-format.sh)"
 scripts/check-format.sh
 echo "test: Python lint and types (ruff, mypy)"
-.venv/bin/ruff check device-bridge proto/python server/python tests server/bench docs/examples
+.venv/bin/ruff check device-bridge proto/python proto/recording server/python tests server/bench docs/examples
 .venv/bin/mypy
 build="${TACTILE_BUILD:-build/release}"
 echo "test: C++ (ctest)"

@@ -47,3 +47,9 @@ def test_the_readme_command_installs_a_working_bridge_in_a_fresh_venv(tmp_path: 
     # hidapi's native library loads: a machine without HID devices lists none.
     hid = subprocess.run([bridge, "--list-hid"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
     assert hid.returncode == 0, hid.stderr
+
+    # The recordings' tools (proto/recording) and mcap stay off the arm's machine.
+    listed = subprocess.run([str(bin_dir / "pip"), "list", "--format=freeze"], env=env, capture_output=True,
+                            text=True, timeout=60)
+    names = {line.split("==")[0].lower() for line in listed.stdout.split()}
+    assert "tactile-proto" in names and not names & {"mcap", "tactile-recording", "zstandard", "lz4"}, names

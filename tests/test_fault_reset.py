@@ -14,7 +14,7 @@ import numpy as np
 import test_fault_to_zero_force as fault_case
 from serverproc import server_process
 from tactile_proto import decode
-from tactile_proto.recording import open_recording
+from tactile_recording.reader import open_recording
 
 TOKEN = "reset-test"
 # The fault test's arm, its presses repeated every 6 s: in over 1.5 s (the guard stops the simulation on the

@@ -55,7 +55,7 @@ def test_forces_csv_has_the_columns_and_one_row_per_millisecond(poke_trace):
 def test_the_headless_and_the_exported_force_tables_have_the_same_columns(poke_trace):
     """One convention: a recording's exported forces.csv is the headless one with the recording's keys (log time,
     step, scene id) added, never other names for the same quantities."""
-    from tactile_proto.export import _Tables
+    from tactile_recording.export import _Tables
     header, _, _ = poke_trace
     extra = ("log_time_ns", "step", "scene_id")
     assert [c for c in _Tables.FORCES if c not in extra] == header["forces"]

@@ -42,7 +42,7 @@ from tactile_proto.generated.Seek import SeekT
 from tactile_proto.generated.SetSpeed import SetSpeedT
 from tactile_proto.generated.StartRecording import StartRecordingT
 from tactile_proto.generated.StopRecording import StopRecordingT
-from tactile_proto.recording import TOPICS, open_recording
+from tactile_recording.reader import TOPICS, open_recording
 from test_scenes_schema import built
 from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, set_parameter, url
 

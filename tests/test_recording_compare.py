@@ -1,4 +1,4 @@
-"""`tactile-recording compare` (proto/python/tactile_proto/compare.py) on recordings written in the server's
+"""`tactile-recording compare` (proto/recording/tactile_recording/compare.py) on recordings written in the server's
 layout (test_recording_reader.write_server_layout) with values exact in float32 (steps of 2^-10 s, positions
 and forces on a 2^-10 grid), so that every difference is known exactly: a recording compared with itself is
 identical bit for bit, with zero differences; known force, position and pose offsets come back as those
@@ -17,8 +17,6 @@ import numpy as np
 import pytest
 
 import tactile_proto as tp
-from tactile_proto import recording_cli
-from tactile_proto.compare import compare, compute_rotation_angle, pair_nearest, read_frames
 from tactile_proto.generated.DeviceHaptics import DeviceHapticsT
 from tactile_proto.generated.HapticFrame import HapticFrameT
 from tactile_proto.generated.Mat3f import Mat3fT
@@ -28,7 +26,9 @@ from tactile_proto.generated.ProxyPose import ProxyPoseT
 from tactile_proto.generated.Quatf import QuatfT
 from tactile_proto.generated.SceneDescription import SceneDescriptionT
 from tactile_proto.generated.StateFrame import StateFrameT
-from tactile_proto.recording import open_recording
+from tactile_recording import cli as recording_cli
+from tactile_recording.compare import compare, compute_rotation_angle, pair_nearest, read_frames
+from tactile_recording.reader import open_recording
 from test_recording_reader import T0, Written, vec3f, write_server_layout
 
 DT = 2.0 ** -10  # step [s]: every sim time step * DT is exact

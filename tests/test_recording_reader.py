@@ -1,5 +1,5 @@
-"""The reader and exporter of recordings (proto/python/tactile_proto/recording.py, export.py,
-recording_cli.py) against recordings written by the mcap package's Writer in proto/RECORDING.md's layout:
+"""The reader and exporter of recordings (proto/recording/tactile_recording/reader.py, export.py,
+cli.py) against recordings written by the mcap package's Writer in proto/RECORDING.md's layout:
 every message reads back; a file cut at any byte reads back every message of every whole chunk before the
 cut and says where it was cut, never raising; a chunk with a flipped byte is reported and none of its
 messages come back, while the other chunks' do; a file that is no MCAP is refused by name; the CSV tables
@@ -47,8 +47,6 @@ from mcap.stream_reader import breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 import tactile_proto as tp
-from tactile_proto import recording_cli
-from tactile_proto.export import export
 from tactile_proto.generated.Control import ControlT
 from tactile_proto.generated.ControlCommand import ControlCommand
 from tactile_proto.generated.DeviceHaptics import DeviceHapticsT
@@ -73,7 +71,9 @@ from tactile_proto.generated.StateFrame import StateFrameT
 from tactile_proto.generated.Telemetry import TelemetryT
 from tactile_proto.generated.Vec3d import Vec3dT
 from tactile_proto.generated.Vec3f import Vec3fT
-from tactile_proto.recording import SCHEMA_NAME, TOPICS, RecordingError, open_recording
+from tactile_recording import cli as recording_cli
+from tactile_recording.export import export
+from tactile_recording.reader import SCHEMA_NAME, TOPICS, RecordingError, open_recording
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SCHEMA_PATH = ROOT / "proto" / "tactile.fbs"
@@ -796,10 +796,13 @@ def test_export_command_writes_what_its_flags_ask(tmp_path, closed, capsys):
 
 
 def test_the_command_is_installed_and_runs_as_a_module(closed):
-    project = tomllib.loads((ROOT / "proto" / "python" / "pyproject.toml").read_text(encoding="utf-8"))["project"]
-    assert project["scripts"]["tactile-recording"] == "tactile_proto.recording_cli:main"
+    project = tomllib.loads((ROOT / "proto" / "recording" / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    assert project["scripts"]["tactile-recording"] == "tactile_recording.cli:main"
     assert "mcap==1.2.2" in project["dependencies"]
+    # The protocol package, which the bridge installs, carries neither the tools nor mcap.
+    codec = tomllib.loads((ROOT / "proto" / "python" / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    assert not any(d.startswith("mcap") for d in codec["dependencies"]) and "scripts" not in codec
     assert "mcap==1.2.2" in (ROOT / "tests" / "requirements.txt").read_text(encoding="utf-8").split()
-    run = subprocess.run([sys.executable, "-m", "tactile_proto.recording_cli", "info", str(closed)],
+    run = subprocess.run([sys.executable, "-m", "tactile_recording.cli", "info", str(closed)],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0 and "complete: summary and footer" in run.stdout, run.stderr

@@ -28,7 +28,7 @@ def test_ctrl_c_leaves_a_closed_recording(tmp_path: pathlib.Path) -> None:
     import signal
     import time
 
-    from tactile_proto.recording import open_recording
+    from tactile_recording.reader import open_recording
 
     path = tmp_path / "session.mcap"
     proc = subprocess.Popen([str(ROOT / "scripts/run.sh"), "server/scenes/default.json", "--port", "0", "--record",

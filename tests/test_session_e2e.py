@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from serverproc import server_process
-from tactile_proto.recording import open_recording
+from tactile_recording.reader import open_recording
 from test_bridge_closed_loop import PROFILE, RADIUS, SCENE, TOP
 from test_scenes_schema import built
 

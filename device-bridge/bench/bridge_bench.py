@@ -381,7 +381,7 @@ def server_peak(recording: pathlib.Path, channel: str) -> tuple[float, int]:
     """The largest force the server sent the channel [N], and the faults its telemetry named."""
     from tactile_bridge.wire import HAPTIC_FRAME, HapticReader, message_type
     from tactile_proto import decode
-    from tactile_proto.recording import open_recording
+    from tactile_recording.reader import open_recording
 
     rec = open_recording(recording)
     index, peak, faults = -1, 0.0, 0

@@ -331,7 +331,7 @@ def main() -> None:
             out, _ = proc.communicate(timeout=30)
             print("\n" + out.strip())
         if args.record:
-            from tactile_proto.recording import open_recording
+            from tactile_recording.reader import open_recording
             rec = open_recording(recording)
             counts = rec.summary_counts or {}
             size = os.path.getsize(recording)

@@ -51,12 +51,13 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from .generated.Energies import EnergiesT
-from .generated.HapticFrame import HapticFrameT
-from .generated.SceneDescription import SceneDescriptionT
-from .generated.StateFrame import StateFrameT
-from .generated.Telemetry import TelemetryT
-from .recording import Recording
+from tactile_proto.generated.Energies import EnergiesT
+from tactile_proto.generated.HapticFrame import HapticFrameT
+from tactile_proto.generated.SceneDescription import SceneDescriptionT
+from tactile_proto.generated.StateFrame import StateFrameT
+from tactile_proto.generated.Telemetry import TelemetryT
+
+from .reader import Recording
 
 
 @dataclass

@@ -57,18 +57,19 @@ from typing import Any
 
 import numpy as np
 
-from .codec import FILE_IDENTIFIER, ProtocolError, decode
+from tactile_proto.codec import FILE_IDENTIFIER, ProtocolError, decode
+from tactile_proto.generated.DeviceHaptics import DeviceHaptics
+from tactile_proto.generated.Envelope import Envelope
+from tactile_proto.generated.HapticFrame import HapticFrame
+from tactile_proto.generated.Message import Message
+from tactile_proto.generated.ProxyHaptics import ProxyHaptics
+from tactile_proto.generated.ProxyPose import ProxyPose
+from tactile_proto.generated.SceneDescription import SceneDescriptionT
+from tactile_proto.generated.StateFrame import StateFrame
+from tactile_proto.generated.Vec3f import Vec3f
+
 from .export import _f32, _f64
-from .generated.DeviceHaptics import DeviceHaptics
-from .generated.Envelope import Envelope
-from .generated.HapticFrame import HapticFrame
-from .generated.Message import Message
-from .generated.ProxyHaptics import ProxyHaptics
-from .generated.ProxyPose import ProxyPose
-from .generated.SceneDescription import SceneDescriptionT
-from .generated.StateFrame import StateFrame
-from .generated.Vec3f import Vec3f
-from .recording import Recording
+from .reader import Recording
 
 # tactile.fbs's structs as numpy records (little-endian, 4-byte fields, no padding).
 POSE = np.dtype([("position", "<f4", (3,)), ("orientation", "<f4", (4,))])  # ProxyPose: [m], quaternion w x y z

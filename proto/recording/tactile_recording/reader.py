@@ -55,8 +55,8 @@ from mcap.records import (
 )
 from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
 
-from .codec import ProtocolError, decode
-from .generated.Envelope import EnvelopeT
+from tactile_proto.codec import ProtocolError, decode
+from tactile_proto.generated.Envelope import EnvelopeT
 
 MAGIC = b"\x89MCAP0\r\n"
 SCHEMA_NAME = "tactile.proto.Envelope"  # the schema of a channel of whole Envelopes (all of them before 1.7)

@@ -4,7 +4,7 @@
                                                            truncated, and what could not be read
     tactile-recording export FILE --out DIR [--csv] [--vtu] [--every N]
                                                            CSV tables and/or a VTU series of every Nth state
-                                                           (neither flag: both); tactile_proto/export.py says
+                                                           (neither flag: both); tactile_recording/export.py says
                                                            what each holds
     tactile-recording compare A B --out DIR [--tolerance S]
                                                            two recordings of one session side by side (a live
@@ -15,7 +15,7 @@
                                                            when the meshes differ); writes compare.csv and
                                                            compare.png, prints whether they are identical bit
                                                            for bit or their largest differences;
-                                                           tactile_proto/compare.py says what each holds
+                                                           tactile_recording/compare.py says what each holds
     tactile-recording recover FILE OUT                     a recording cut short (a killed server) rewritten
                                                            as a complete, indexed MCAP file that the mcap
                                                            package's default readers and other tools open
@@ -33,10 +33,11 @@ import pathlib
 import sys
 from collections import Counter
 
-from .codec import ProtocolError, decode
+from tactile_proto.codec import ProtocolError, decode
+
 from .compare import CompareError, compare, plot, plot_available, summarize, write_csv
 from .export import export
-from .recording import TOPICS, Recording, RecordingError, open_recording, recover
+from .reader import TOPICS, Recording, RecordingError, open_recording, recover
 
 
 def describe(recording: Recording) -> str:
