@@ -93,13 +93,14 @@ const browser = await chromium.launch({
   executablePath: CHROMIUM,
   // Unthrottled (no vsync, no frame-rate cap): what the machine can draw, not headless mode's software
   // frame pacing (16 fps at 1024 x 768 whatever the scene); a display caps it at its refresh rate.
-  args: [...SWIFTSHADER, ...(process.env.UNTHROTTLED ? ['--disable-gpu-vsync',
-         '--disable-frame-rate-limit'] : [])],
+  args: [...SWIFTSHADER, ...(process.env.UNTHROTTLED ? ['--disable-gpu-vsync', '--disable-frame-rate-limit'] : [])],
 });
 const seconds = Number(opts.seconds);
 if (!['live', 'replay'].includes(opts.source)) throw new Error(`--source: live or replay, not ${opts.source}`);
-console.log(`render_bench: headless Chromium, ${os.cpus().length} cores, ${seconds} s per size, 1024 x 768, ` +
-            `states from the ${opts.source === 'live' ? 'live server (simulating beside the page)' : 'replay of a recording'}`);
+console.log(
+  `render_bench: headless Chromium, ${os.cpus().length} cores, ${seconds} s per size, 1024 x 768, ` +
+    `states from the ${opts.source === 'live' ? 'live server (simulating beside the page)' : 'replay of a recording'}`,
+);
 
 // The server the page watches: the live plate, or a replay of its recording (made first: long enough in
 // wall time for the measurement, at whatever pace the simulation kept).
@@ -114,7 +115,9 @@ async function serve(n) {
   await new Promise((resolve) => rec.proc.on('exit', resolve));
   return spawnServer(['--replay', recording], { build: opts.build });
 }
-console.log('  vertices  triangles  sent   quality  fps (drawn/s)  frame work ms (median, p95)  state read+copy ms (median, p95)  state to slot ms (median, p95)  states/s');
+console.log(
+  '  vertices  triangles  sent   quality  fps (drawn/s)  frame work ms (median, p95)  state read+copy ms (median, p95)  state to slot ms (median, p95)  states/s',
+);
 try {
   for (const n of (opts.embedded || opts.sizes).split(',').map(Number)) {
     const { proc, port } = await serve(n);
@@ -125,14 +128,23 @@ try {
       if (opts.wire) query.set('wire', opts.wire);
       await page.goto(`http://127.0.0.1:${port}/?${query}`);
       await page.waitForFunction(() => window.tactile && window.tactile.frames >= 3, null, { timeout: 120000 });
-      await page.waitForTimeout(1000);  // past the start-up
-      const read = () => page.evaluate(() => {
-        const t = window.tactile;
-        return { rendered: t.rendered, frames: t.frames, at: performance.now(), frameMs: t.frameMs.splice(0),
-                 decodeMs: t.decodeMs.splice(0), slotMs: t.slotMs.splice(0), vertices: t.vertices, quality: t.quality,
-                 triangles: t.view.embedded ? t.view.embedded.triangles : t.view.pick.geometry.index.count / 3,
-                 sent: t.view.embedded ? '' : t.drawnTriangles };
-      });
+      await page.waitForTimeout(1000); // past the start-up
+      const read = () =>
+        page.evaluate(() => {
+          const t = window.tactile;
+          return {
+            rendered: t.rendered,
+            frames: t.frames,
+            at: performance.now(),
+            frameMs: t.frameMs.splice(0),
+            decodeMs: t.decodeMs.splice(0),
+            slotMs: t.slotMs.splice(0),
+            vertices: t.vertices,
+            quality: t.quality,
+            triangles: t.view.embedded ? t.view.embedded.triangles : t.view.pick.geometry.index.count / 3,
+            sent: t.view.embedded ? '' : t.drawnTriangles,
+          };
+        });
       const a = await read();
       const frameMs = [];
       const decodeMs = [];
@@ -149,11 +161,13 @@ try {
       const wall = (b.at - a.at) / 1000;
       const fps = (b.rendered - a.rendered) / wall;
       const states = (b.frames - a.frames) / wall;
-      console.log(`  ${String(a.vertices).padStart(8)}  ${String(a.triangles).padStart(9)}  ${String(b.sent ?? '').padStart(5)}  ${a.quality.padEnd(7)}  ` +
-                  `${fps.toFixed(1).padStart(13)}  ${median(frameMs).toFixed(2).padStart(13)}, ${pct(frameMs, 0.95).toFixed(2).padStart(6)}` +
-                  `               ${median(decodeMs).toFixed(3).padStart(6)}, ${pct(decodeMs, 0.95).toFixed(3).padStart(6)}` +
-                  `                ${median(slotMs).toFixed(3).padStart(6)}, ${pct(slotMs, 0.95).toFixed(3).padStart(6)}` +
-                  `                 ${states.toFixed(1).padStart(5)}`);
+      console.log(
+        `  ${String(a.vertices).padStart(8)}  ${String(a.triangles).padStart(9)}  ${String(b.sent ?? '').padStart(5)}  ${a.quality.padEnd(7)}  ` +
+          `${fps.toFixed(1).padStart(13)}  ${median(frameMs).toFixed(2).padStart(13)}, ${pct(frameMs, 0.95).toFixed(2).padStart(6)}` +
+          `               ${median(decodeMs).toFixed(3).padStart(6)}, ${pct(decodeMs, 0.95).toFixed(3).padStart(6)}` +
+          `                ${median(slotMs).toFixed(3).padStart(6)}, ${pct(slotMs, 0.95).toFixed(3).padStart(6)}` +
+          `                 ${states.toFixed(1).padStart(5)}`,
+      );
       await page.close();
     } finally {
       proc.kill('SIGINT');

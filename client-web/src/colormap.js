@@ -1,8 +1,16 @@
 // A perceptually even colour map (viridis, sampled at 9 stops) for per-vertex scalars.
 const STOPS = [
-  [0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530], [0.207, 0.372, 0.553],
-  [0.164, 0.471, 0.558], [0.128, 0.567, 0.551], [0.135, 0.659, 0.518], [0.267, 0.749, 0.441],
-  [0.478, 0.821, 0.318], [0.741, 0.873, 0.150], [0.993, 0.906, 0.144],
+  [0.267, 0.005, 0.329],
+  [0.283, 0.141, 0.458],
+  [0.254, 0.265, 0.53],
+  [0.207, 0.372, 0.553],
+  [0.164, 0.471, 0.558],
+  [0.128, 0.567, 0.551],
+  [0.135, 0.659, 0.518],
+  [0.267, 0.749, 0.441],
+  [0.478, 0.821, 0.318],
+  [0.741, 0.873, 0.15],
+  [0.993, 0.906, 0.144],
 ];
 
 // Writes the colour of u in [0, 1] (clamped) into out[o..o+2].
@@ -31,6 +39,8 @@ export function viridisBytes() {
 
 // The CSS gradient of the map, for the legend.
 export function cssGradient() {
-  const c = STOPS.map((s, k) => `rgb(${s.map((v) => Math.round(255 * v)).join(',')}) ${(100 * k) / (STOPS.length - 1)}%`);
+  const c = STOPS.map(
+    (s, k) => `rgb(${s.map((v) => Math.round(255 * v)).join(',')}) ${(100 * k) / (STOPS.length - 1)}%`,
+  );
   return `linear-gradient(to right, ${c.join(', ')})`;
 }

@@ -9,7 +9,7 @@ import { Message, decode, encode, makeHello, messageTypeOf } from '@tactile/prot
 
 // The close code of a connection the server refused or evicted ("try again later"); its reason says why.
 export const TRY_AGAIN_LATER = 1013;
-const OPEN = 1;  // WebSocket.OPEN
+const OPEN = 1; // WebSocket.OPEN
 
 // The server's Error in answer to the Hello: its message, code and request id.
 export class ServerError extends Error {
@@ -48,18 +48,33 @@ export class ClosedError extends Error {
 
 export class Connection {
   /** @param {string} url @param {Role} role @param {ConnectOptions} [options] */
-  constructor(url, role, { token = '', clientName = 'client-web', devices = [], fields = [], onOpen, onMessage,
-                           onClose, WebSocket: Socket = globalThis.WebSocket } = {}) {
+  constructor(
+    url,
+    role,
+    {
+      token = '',
+      clientName = 'client-web',
+      devices = [],
+      fields = [],
+      onOpen,
+      onMessage,
+      onClose,
+      WebSocket: Socket = globalThis.WebSocket,
+    } = {},
+  ) {
     this.url = url;
     this.welcomed = false;
-    this.quiet = false;   // closed by close({ quiet: true }): nothing more is reported
+    this.quiet = false; // closed by close({ quiet: true }): nothing more is reported
     /** @type {(welcome: WelcomeT) => void} */
     let resolve = () => {};
     /** @type {(error: Error) => void} */
     let reject = () => {};
     // Settles once: the Welcome, or the first Error or close before it.
     /** @type {Promise<WelcomeT>} */
-    this.welcome = new Promise((yes, no) => { resolve = yes; reject = no; });
+    this.welcome = new Promise((yes, no) => {
+      resolve = yes;
+      reject = no;
+    });
     // Not a rejection nobody handled where a caller only listens to onClose.
     this.welcome.catch(() => {});
     const ws = new Socket(url);
@@ -73,7 +88,10 @@ export class Connection {
     ws.onmessage = (e) => {
       if (this.quiet) return;
       const data = new Uint8Array(e.data);
-      if (this.welcomed) { onMessage?.(data); return; }
+      if (this.welcomed) {
+        onMessage?.(data);
+        return;
+      }
       try {
         const type = messageTypeOf(data);
         if (type === Message.Welcome) {
@@ -81,12 +99,15 @@ export class Connection {
           this.welcomed = true;
           return;
         }
-        if (type === Message.Error) { reject(new ServerError(/** @type {ErrorT} */ (decode(data).message))); return; }
+        if (type === Message.Error) {
+          reject(new ServerError(/** @type {ErrorT} */ (decode(data).message)));
+          return;
+        }
       } catch (err) {
-        reject(/** @type {Error} */ (err));  // (bytes that are no message: the caller says so)
+        reject(/** @type {Error} */ (err)); // (bytes that are no message: the caller says so)
         return;
       }
-      onMessage?.(data);  // (another message before the Welcome: a Pong)
+      onMessage?.(data); // (another message before the Welcome: a Pong)
     };
     ws.onclose = (e) => {
       if (!this.welcomed) reject(new ClosedError(e.code, e.reason));
@@ -95,10 +116,14 @@ export class Connection {
   }
 
   // Whether messages can go now.
-  get open() { return this.socket.readyState === OPEN; }
+  get open() {
+    return this.socket.readyState === OPEN;
+  }
 
   /** @param {EnvelopeT} envelope */
-  send(envelope) { this.socket.send(encode(envelope)); }
+  send(envelope) {
+    this.socket.send(encode(envelope));
+  }
 
   // Closes the connection; onClose hears of it when the socket has closed, unless `quiet`: then nothing more
   // is reported (neither messages nor the close).

@@ -4,8 +4,21 @@
 // change goes as a Control with its own request id; the server answers with the change itself (a new
 // description, telemetry showing the pause) or an Error naming what is wrong, shown here.
 import {
-  ControlCommand, ControlT, EnvelopeT, ErrorCode, LoadSceneT, Message, PauseT, ResetT, ResumeT, Role,
-  SetParameterT, StartRecordingT, StopRecordingT, decode, messageTypeOf,
+  ControlCommand,
+  ControlT,
+  EnvelopeT,
+  ErrorCode,
+  LoadSceneT,
+  Message,
+  PauseT,
+  ResetT,
+  ResumeT,
+  Role,
+  SetParameterT,
+  StartRecordingT,
+  StopRecordingT,
+  decode,
+  messageTypeOf,
 } from '@tactile/proto';
 import { ClosedError, ServerError, connect } from './connection.js';
 /** @import { ErrorT, SceneDescriptionT } from '@tactile/proto' */
@@ -34,16 +47,19 @@ export class ControlPanel {
     this.granted = false;
     this.requestId = 0;
     /** @type {Map<number, string>} */
-    this.pending = new Map();   // request id -> what it asked, for the answer
+    this.pending = new Map(); // request id -> what it asked, for the answer
     /** @type {SceneDescriptionT | null} */
     this.description = null;
     this.paused = false;
-    this.replaying = false;    // the server replays a recording: only the timeline steers it
+    this.replaying = false; // the server replays a recording: only the timeline steers it
     /** @type {[ControlCommand, ControlT['command'], string][]} */
-    this.queued = [];          // sent once control is granted (sendWhenGranted)
+    this.queued = []; // sent once control is granted (sendWhenGranted)
     this.head = el('div', { className: 'head' });
-    this.take = el('button', { textContent: 'take control', disabled: !token,
-                               title: token ? '' : 'the controller role needs the token: open the URL with ?token=...' });
+    this.take = el('button', {
+      textContent: 'take control',
+      disabled: !token,
+      title: token ? '' : 'the controller role needs the token: open the URL with ?token=...',
+    });
     this.take.addEventListener('click', () => (this.granted ? this.release() : this.connect()));
     this.head.append(this.take);
     this.body = el('div', { className: 'body' });
@@ -53,11 +69,14 @@ export class ControlPanel {
   }
 
   /** @param {string} text */
-  say(text) { this.message.textContent = text; }
+  say(text) {
+    this.message.textContent = text;
+  }
 
   connect() {
     const connection = connect(this.url, Role.Controller, {
-      token: this.token, clientName: 'client-web',
+      token: this.token,
+      clientName: 'client-web',
       onMessage: (data) => {
         if (messageTypeOf(data) !== Message.Error) return;
         this.showError(new ServerError(/** @type {ErrorT} */ (decode(data).message)));
@@ -67,21 +86,24 @@ export class ControlPanel {
         this.connection = null;
         this.granted = false;
         this.take.textContent = 'take control';
-        if (reason) this.say(reason);  // (refused or evicted, close code 1013)
+        if (reason) this.say(reason); // (refused or evicted, close code 1013)
         this.build();
       },
     });
     this.connection = connection;
-    connection.welcome.then(() => {
-      if (this.connection !== connection) return;
-      this.granted = true;
-      this.take.textContent = 'release control';
-      this.say('in control');
-      this.build();
-      for (const [type, command, what] of this.queued.splice(0)) this.send(type, command, what);
-    }, (err) => {
-      if (!(err instanceof ClosedError)) this.showError(err);  // (a close is onClose's)
-    });
+    connection.welcome.then(
+      () => {
+        if (this.connection !== connection) return;
+        this.granted = true;
+        this.take.textContent = 'release control';
+        this.say('in control');
+        this.build();
+        for (const [type, command, what] of this.queued.splice(0)) this.send(type, command, what);
+      },
+      (err) => {
+        if (!(err instanceof ClosedError)) this.showError(err); // (a close is onClose's)
+      },
+    );
   }
 
   // The server's Error, with what the request it answers asked (a refused Hello: another controller, a wrong
@@ -97,7 +119,10 @@ export class ControlPanel {
   // Sends now if in control, else takes control first (the page has the token) and sends then.
   /** @param {ControlCommand} type @param {ControlT['command']} command @param {string} what */
   sendWhenGranted(type, command, what) {
-    if (this.granted) { this.send(type, command, what); return; }
+    if (this.granted) {
+      this.send(type, command, what);
+      return;
+    }
     this.queued.push([type, command, what]);
     if (!this.connection) this.connect();
   }
@@ -131,7 +156,7 @@ export class ControlPanel {
   send(type, command, what) {
     if (!this.connection || !this.granted) return;
     this.requestId += 1;
-    this.pending.set(this.requestId, what);  // (answered by an Error, or by the change: the latest 64 kept)
+    this.pending.set(this.requestId, what); // (answered by an Error, or by the change: the latest 64 kept)
     if (this.pending.size > 64) this.pending.delete(/** @type {number} */ (this.pending.keys().next().value));
     this.connection.send(new EnvelopeT(Message.Control, new ControlT(this.requestId, type, command)));
     this.say(`${what}…`);
@@ -142,8 +167,12 @@ export class ControlPanel {
     const d = this.description;
     if (!this.granted || !d) return;
     if (this.replaying) {
-      this.body.append(el('div', { textContent: 'replaying a recording: the timeline steers it; scenes, parameters '
-                                                 + 'and recording need a live session' }));
+      this.body.append(
+        el('div', {
+          textContent:
+            'replaying a recording: the timeline steers it; scenes, parameters ' + 'and recording need a live session',
+        }),
+      );
       return;
     }
     // Scenes, and the run.
@@ -163,7 +192,10 @@ export class ControlPanel {
     });
     const reset = el('button', { textContent: 'reset', name: 'reset' });
     reset.addEventListener('click', () => this.send(ControlCommand.Reset, new ResetT(), 'reset'));
-    this.body.append(el('div', { className: 'row' }, picker, load), el('div', { className: 'row' }, this.pauseButton, reset));
+    this.body.append(
+      el('div', { className: 'row' }, picker, load),
+      el('div', { className: 'row' }, this.pauseButton, reset),
+    );
     // Parameters: a switch for on/off, a number field (applied on change) for the rest.
     const table = el('div', { className: 'params' });
     for (const p of d.parameters || []) {
@@ -176,11 +208,19 @@ export class ControlPanel {
           this.send(ControlCommand.SetParameter, new SetParameterT(name, input.checked ? 1 : 0), `set ${name}`);
         });
       } else {
-        input = el('input', { type: 'number', value: String(p.value), min: String(p.min), max: String(p.max),
-                              step: 'any' });
+        input = el('input', {
+          type: 'number',
+          value: String(p.value),
+          min: String(p.min),
+          max: String(p.max),
+          step: 'any',
+        });
         input.addEventListener('change', () => {
           const v = Number(input.value);
-          if (!Number.isFinite(v)) { this.say(`${name}: not a number`); return; }
+          if (!Number.isFinite(v)) {
+            this.say(`${name}: not a number`);
+            return;
+          }
           this.send(ControlCommand.SetParameter, new SetParameterT(name, v), `set ${name}`);
         });
       }
@@ -195,7 +235,9 @@ export class ControlPanel {
       this.send(ControlCommand.StartRecording, new StartRecordingT(file.value), `record ${file.value}`);
     });
     const stop = el('button', { textContent: 'stop recording' });
-    stop.addEventListener('click', () => this.send(ControlCommand.StopRecording, new StopRecordingT(), 'stop recording'));
+    stop.addEventListener('click', () =>
+      this.send(ControlCommand.StopRecording, new StopRecordingT(), 'stop recording'),
+    );
     this.body.append(el('div', { className: 'row' }, file, start, stop));
   }
 }

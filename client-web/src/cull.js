@@ -19,16 +19,26 @@ export function frontTriangles(tris, a, b, eye, out, margin = 0.2) {
   let k = 0;
   /** @param {ArrayLike<number>} P @param {number} i @param {number} j @param {number} l */
   const faces = (P, i, j, l) => {
-    const ux = P[j] - P[i], uy = P[j + 1] - P[i + 1], uz = P[j + 2] - P[i + 2];
-    const vx = P[l] - P[i], vy = P[l + 1] - P[i + 1], vz = P[l + 2] - P[i + 2];
-    const nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
-    const dx = ex - P[i], dy = ey - P[i + 1], dz = ez - P[i + 2];
+    const ux = P[j] - P[i],
+      uy = P[j + 1] - P[i + 1],
+      uz = P[j + 2] - P[i + 2];
+    const vx = P[l] - P[i],
+      vy = P[l + 1] - P[i + 1],
+      vz = P[l + 2] - P[i + 2];
+    const nx = uy * vz - uz * vy,
+      ny = uz * vx - ux * vz,
+      nz = ux * vy - uy * vx;
+    const dx = ex - P[i],
+      dy = ey - P[i + 1],
+      dz = ez - P[i + 2];
     const d = nx * dx + ny * dy + nz * dz;
     // n . d > -margin |n| |d|: in front, edge-on, or past it by less than the margin
     return d >= 0 || d * d < m2 * (nx * nx + ny * ny + nz * nz) * (dx * dx + dy * dy + dz * dz);
   };
   for (let t = 0; t < tris.length; t += 3) {
-    const i = 3 * tris[t], j = 3 * tris[t + 1], l = 3 * tris[t + 2];
+    const i = 3 * tris[t],
+      j = 3 * tris[t + 1],
+      l = 3 * tris[t + 2];
     if (faces(b, i, j, l) || (a !== b && faces(a, i, j, l))) {
       out[k++] = tris[t];
       out[k++] = tris[t + 1];

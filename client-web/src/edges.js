@@ -15,7 +15,7 @@ export function computeUniqueEdges(triangles) {
       const b = triangles[t + ((k + 1) % 3)];
       const lo = Math.min(a, b);
       const hi = Math.max(a, b);
-      const key = lo * n + hi;  // (below 2^53 for any mesh a browser holds)
+      const key = lo * n + hi; // (below 2^53 for any mesh a browser holds)
       if (lo === hi || seen.has(key)) continue;
       seen.add(key);
       out.push(lo, hi);

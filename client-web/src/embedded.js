@@ -56,7 +56,9 @@ function lowQualityMaterial(uniforms) {
   return new THREE.ShaderMaterial({
     uniforms,
     side: THREE.FrontSide,
-    vertexShader: PLACE + `
+    vertexShader:
+      PLACE +
+      `
       varying vec3 vNormal;
       varying vec3 vColour;
       void main() {
@@ -85,13 +87,13 @@ export class EmbeddedSurfaceView {
   constructor(e, frameRest, mix, quality) {
     const rest = new Float32Array(e.restPositions);
     const n = rest.length / 3;
-    const carriers = new Float32Array(e.carriers);  // (indices below 2^24: exact as floats)
+    const carriers = new Float32Array(e.carriers); // (indices below 2^24: exact as floats)
     const weights = new Float32Array(e.weights);
     this.frameVertices = frameRest.length / 3;
     this.triangles = e.triangles.length / 3;
     const geometry = new THREE.BufferGeometry();
     geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(e.triangles), 1));
-    geometry.setAttribute('position', new THREE.BufferAttribute(rest, 3));  // bounds and rest normals only
+    geometry.setAttribute('position', new THREE.BufferAttribute(rest, 3)); // bounds and rest normals only
     geometry.computeVertexNormals();
     const normals = /** @type {THREE.BufferAttribute} */ (geometry.getAttribute('normal')).array;
     // Dm^T N per vertex, Dm = [X1 - X0, X2 - X0, X3 - X0] of its tet at rest.
@@ -125,8 +127,13 @@ export class EmbeddedSurfaceView {
       }
       return { p, c, positions, colours };
     });
-    this.uniforms = { surfaceMix: mix, embPosA: { value: this.slots[0].p }, embPosB: { value: this.slots[1].p },
-                      embColA: { value: this.slots[0].c }, embColB: { value: this.slots[1].c } };
+    this.uniforms = {
+      surfaceMix: mix,
+      embPosA: { value: this.slots[0].p },
+      embPosB: { value: this.slots[1].p },
+      embColA: { value: this.slots[0].c },
+      embColB: { value: this.slots[1].c },
+    };
     /** @param {THREE.WebGLProgramParametersWithUniforms} shader @param {boolean} shade */
     const inject = (shader, shade) => {
       Object.assign(shader.uniforms, this.uniforms);
@@ -137,21 +144,28 @@ export class EmbeddedSurfaceView {
           .replace('#include <color_vertex>', 'embPlace();\nvColor = embRgb;')
           .replace('#include <beginnormal_vertex>', 'vec3 objectNormal = embNormal;');
       } else {
-        shader.vertexShader = shader.vertexShader.replace('#include <begin_vertex>', 'embPlace();\n#include <begin_vertex>');
+        shader.vertexShader = shader.vertexShader.replace(
+          '#include <begin_vertex>',
+          'embPlace();\n#include <begin_vertex>',
+        );
       }
       shader.vertexShader = shader.vertexShader.replace('#include <begin_vertex>', 'vec3 transformed = embPosition;');
     };
     let material;
     if (quality === 'high') {
-      material = new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.5, metalness: 0.0,
-                                                  side: THREE.FrontSide });
+      material = new THREE.MeshStandardMaterial({
+        vertexColors: true,
+        roughness: 0.5,
+        metalness: 0.0,
+        side: THREE.FrontSide,
+      });
       material.onBeforeCompile = (shader) => inject(shader, true);
     } else {
       material = lowQualityMaterial(this.uniforms);
     }
     this.mesh = new THREE.Mesh(geometry, material);
     this.mesh.name = 'embedded surface';
-    this.mesh.frustumCulled = false;  // the shader moves it past its rest bounds
+    this.mesh.frustumCulled = false; // the shader moves it past its rest bounds
     this.mesh.castShadow = true;
     this.mesh.receiveShadow = true;
     const depth = new THREE.MeshDepthMaterial({ depthPacking: THREE.RGBADepthPacking });

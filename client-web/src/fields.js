@@ -24,7 +24,12 @@ export class FieldChoice {
     this.available = [this.available[0]];
     for (const f of d.fields || []) {
       const name = /** @type {string | null} */ (f.name) || '';
-      if (name) this.available.push({ name, unit: /** @type {string} */ (f.unit) || '', description: /** @type {string} */ (f.description) || '' });
+      if (name)
+        this.available.push({
+          name,
+          unit: /** @type {string} */ (f.unit) || '',
+          description: /** @type {string} */ (f.description) || '',
+        });
     }
     const has = (/** @type {string} */ n) => this.available.some((f) => f.name === n);
     if (has(this.wanted)) this.name = this.wanted;
@@ -32,9 +37,13 @@ export class FieldChoice {
   }
 
   // The field names to ask the server for (none for displacement).
-  asked() { return this.name === DISPLACEMENT ? [] : [this.name]; }
+  asked() {
+    return this.name === DISPLACEMENT ? [] : [this.name];
+  }
 
-  info() { return /** @type {FieldChoiceInfo} */ (this.available.find((f) => f.name === this.name)); }
+  info() {
+    return /** @type {FieldChoiceInfo} */ (this.available.find((f) => f.name === this.name));
+  }
 
   // The chosen field's value at each frame vertex, into `out` (n); false when the frame does not carry it
   // yet (the server answers a change with its next frame).

@@ -11,15 +11,15 @@ export class FrameBuffer {
   // nValues: floats per frame (3 x surface vertices); nScalars: per-vertex scalars.
   /** @param {number} nValues @param {number} [nScalars] */
   constructor(nValues, nScalars = 0) {
-    this.a = new Float32Array(nValues);        // older frame
-    this.b = new Float32Array(nValues);        // newer frame
+    this.a = new Float32Array(nValues); // older frame
+    this.b = new Float32Array(nValues); // newer frame
     this.sa = new Float32Array(nScalars);
     this.sb = new Float32Array(nScalars);
-    this.ta = 0;                               // their simulated times [s]
+    this.ta = 0; // their simulated times [s]
     this.tb = 0;
-    this.count = 0;                            // frames pushed
-    this.arrival = 0;                          // when the newer arrived, local clock [s]
-    this.interval = 1 / 30;                    // between frames, smoothed [s]
+    this.count = 0; // frames pushed
+    this.arrival = 0; // when the newer arrived, local clock [s]
+    this.interval = 1 / 30; // between frames, smoothed [s]
   }
 
   // Forgets the frames (a replay sought back in time): the next push starts over.

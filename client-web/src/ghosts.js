@@ -29,15 +29,21 @@ export class DeviceGhosts {
     const proxies = description.proxies || [];
     this.proxyOf = channelProxies(description.devices || [], proxies);
     this.gaps = Float32Array.from(this.proxyOf, (j) => (j >= 0 ? ghostGap(proxies[j]) : Infinity));
-    this.shown = 0;  // how many are drawn (tests read it)
+    this.shown = 0; // how many are drawn (tests read it)
     this.outlines = Array.from(this.proxyOf, (j, k) => {
       if (j < 0) return null;
-      const material = new THREE.MeshBasicMaterial({ color: GHOST_COLOUR, wireframe: true, transparent: true, opacity: 0.8,
-                                                     depthTest: false, depthWrite: false });
+      const material = new THREE.MeshBasicMaterial({
+        color: GHOST_COLOUR,
+        wireframe: true,
+        transparent: true,
+        opacity: 0.8,
+        depthTest: false,
+        depthWrite: false,
+      });
       const outline = new THREE.Mesh(makeProxyGeometry(proxies[j], bodySize, 0.4), material);
       outline.name = `device ${description.devices[k]}`;
       outline.visible = false;
-      outline.renderOrder = 2;  // over the body, which is drawn first
+      outline.renderOrder = 2; // over the body, which is drawn first
       root.add(outline);
       return outline;
     });
@@ -45,9 +51,17 @@ export class DeviceGhosts {
       if (j < 0) return null;
       const geometry = new THREE.BufferGeometry();
       geometry.setAttribute('position', new THREE.BufferAttribute(new Float32Array(6), 3));
-      const line = new THREE.Line(geometry, new THREE.LineBasicMaterial({ color: GHOST_COLOUR, transparent: true, opacity: 0.9,
-                                                                         depthTest: false, depthWrite: false }));
-      line.frustumCulled = false;  // its ends move; it is short and drawn rarely
+      const line = new THREE.Line(
+        geometry,
+        new THREE.LineBasicMaterial({
+          color: GHOST_COLOUR,
+          transparent: true,
+          opacity: 0.9,
+          depthTest: false,
+          depthWrite: false,
+        }),
+      );
+      line.frustumCulled = false; // its ends move; it is short and drawn rarely
       line.renderOrder = 2;
       line.visible = false;
       root.add(line);
@@ -67,8 +81,13 @@ export class DeviceGhosts {
       const d = 7 * k;
       const p = 7 * j;
       const present = d + 6 < devicePoses.length && p + 6 < proxyPoses.length;
-      const gap = present ? Math.hypot(devicePoses[d] - proxyPoses[p], devicePoses[d + 1] - proxyPoses[p + 1],
-                                       devicePoses[d + 2] - proxyPoses[p + 2]) : 0;
+      const gap = present
+        ? Math.hypot(
+            devicePoses[d] - proxyPoses[p],
+            devicePoses[d + 1] - proxyPoses[p + 1],
+            devicePoses[d + 2] - proxyPoses[p + 2],
+          )
+        : 0;
       const show = gap > this.gaps[k];
       outline.visible = show;
       line.visible = show;

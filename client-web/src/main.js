@@ -6,9 +6,17 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
 import {
-  ControlCommand, Message, ResetT, Role, decode, makeViewFields, messageTypeOf, readStateFrame, checkVersion,
+  ControlCommand,
+  Message,
+  ResetT,
+  Role,
+  decode,
+  makeViewFields,
+  messageTypeOf,
+  readStateFrame,
+  checkVersion,
 } from '@tactile/proto';
-import 'uplot/dist/uPlot.min.css';  // (esbuild writes it to dist/app.css, which index.html links)
+import 'uplot/dist/uPlot.min.css'; // (esbuild writes it to dist/app.css, which index.html links)
 
 import { PRESETS, START, applyFraming, computeBoundingSphere, viewDirection } from './camera.js';
 import { cssGradient } from './colormap.js';
@@ -32,7 +40,9 @@ const $ = (/** @type {string} */ id) => /** @type {HTMLElement} */ (document.get
 // A phone, or a window as narrow: the panels start folded, but for the legend (index.html's breakpoint).
 const small = window.matchMedia('(max-width: 600px)').matches;
 const panels = new Panels(document, small);
-const status = (/** @type {string} */ text) => { $('status').textContent = text; };
+const status = (/** @type {string} */ text) => {
+  $('status').textContent = text;
+};
 
 // Shadows and multisampling where a GPU draws; without them where the CPU does (SwiftShader, llvmpipe:
 // headless browsers, remote desktops), which they would slow to a few frames a second.
@@ -72,9 +82,16 @@ const fieldChoice = new FieldChoice(query.get('field') || undefined);
 const fieldMenu = /** @type {HTMLSelectElement} */ ($('legend-field'));
 const telemetry = new TelemetryPanel($('telemetry'));
 // ?device=NAME: the channel the mouse drives (default: one meant for the page, such as 'mouse').
-const pointer = new PointerDevice({ canvas: renderer.domElement, camera, controls, token,
-                                    wanted: query.get('device') || '',
-                                    onStatus: (/** @type {string} */ text) => { $('poke').textContent = text; } });
+const pointer = new PointerDevice({
+  canvas: renderer.domElement,
+  camera,
+  controls,
+  token,
+  wanted: query.get('device') || '',
+  onStatus: (/** @type {string} */ text) => {
+    $('poke').textContent = text;
+  },
+});
 
 // What the tests read (and a person can, in the console).
 /**
@@ -86,8 +103,23 @@ const pointer = new PointerDevice({ canvas: renderer.domElement, camera, control
  *   camera: THREE.PerspectiveCamera, panels: Panels, plots: TelemetryPanel['plots'], wire: boolean,
  *   fit?: (preset?: string) => void }}
  */
-const stats = { frames: 0, rendered: 0, sceneId: -1, sceneName: '', vertices: 0, errors: [], lastStep: 0, quality,
-                decodeMs: [], slotMs: [], frameMs: [], camera, panels, plots: telemetry.plots, wire: false };
+const stats = {
+  frames: 0,
+  rendered: 0,
+  sceneId: -1,
+  sceneName: '',
+  vertices: 0,
+  errors: [],
+  lastStep: 0,
+  quality,
+  decodeMs: [],
+  slotMs: [],
+  frameMs: [],
+  camera,
+  panels,
+  plots: telemetry.plots,
+  wire: false,
+};
 const controlPanel = new ControlPanel($('controls'), { token, url: wsUrl });
 const timeline = new Timeline($('timeline'), controlPanel);
 stats.timeline = timeline;
@@ -95,7 +127,7 @@ stats.pointer = pointer;
 stats.controls = controlPanel;
 // Where a scene point [m] is drawn, in CSS pixels of the page (for tests that point at the body).
 stats.project = (x, y, z) => {
-  camera.updateMatrixWorld();  // (a preset moves the camera between renders)
+  camera.updateMatrixWorld(); // (a preset moves the camera between renders)
   const v = new THREE.Vector3(x, y, z).project(camera);
   const r = renderer.domElement.getBoundingClientRect();
   return [r.left + ((v.x + 1) / 2) * r.width, r.top + ((1 - v.y) / 2) * r.height];
@@ -122,9 +154,9 @@ function showFault(faults) {
 
 /** @type {Connection | null} */
 let socket = null;
-let sentFields = '';  // the fields the server was last asked for, joined
+let sentFields = ''; // the fields the server was last asked for, joined
 /** @type {Float32Array} */
-let scalarsNow = new Float32Array(0);  // the chosen field at each frame vertex, of the newest frame
+let scalarsNow = new Float32Array(0); // the chosen field at each frame vertex, of the newest frame
 
 // Asks the server for the chosen field (or for none, for displacement) when that changed.
 function askFields() {
@@ -135,13 +167,15 @@ function askFields() {
 }
 
 function showFieldChoice() {
-  fieldMenu.replaceChildren(...fieldChoice.available.map((f) => {
-    const o = document.createElement('option');
-    o.value = f.name;
-    o.textContent = f.name.replace(/_/g, ' ');
-    o.title = f.description;
-    return o;
-  }));
+  fieldMenu.replaceChildren(
+    ...fieldChoice.available.map((f) => {
+      const o = document.createElement('option');
+      o.value = f.name;
+      o.textContent = f.name.replace(/_/g, ' ');
+      o.title = f.description;
+      return o;
+    }),
+  );
   fieldMenu.value = fieldChoice.name;
   const info = fieldChoice.info();
   $('legend-unit').textContent = info.unit ? `[${info.unit}]` : '';
@@ -159,13 +193,17 @@ fieldMenu.addEventListener('change', () => {
 let view = null;
 /** @type {FrameBuffer | null} */
 let buffer = null;
-let cameraMoved = false;  // since the last cull
-const legendRange = [NaN, NaN];  // as the legend shows it
-controls.addEventListener('change', () => { cameraMoved = true; });
+let cameraMoved = false; // since the last cull
+const legendRange = [NaN, NaN]; // as the legend shows it
+controls.addEventListener('change', () => {
+  cameraMoved = true;
+});
 // Whether the camera stands where a preset or a fit put it (a resize then frames the body again); a person
 // turning or moving the view takes it over.
 let framed = false;
-controls.addEventListener('start', () => { framed = false; });
+controls.addEventListener('start', () => {
+  framed = false;
+});
 /** @type {THREE.Mesh<THREE.PlaneGeometry, THREE.ShadowMaterial> | null} */
 let ground = null;
 
@@ -196,7 +234,9 @@ function frameBody(direction = viewDirection(camera, controls)) {
 const presets = PRESETS;
 stats.fit = (preset) => frameBody(preset ? presets[preset] : undefined);
 for (const name of [...Object.keys(PRESETS), 'fit']) {
-  $('camera').querySelector(`button[name=view-${name}]`)?.addEventListener('click', () => stats.fit?.(name === 'fit' ? undefined : name));
+  $('camera')
+    .querySelector(`button[name=view-${name}]`)
+    ?.addEventListener('click', () => stats.fit?.(name === 'fit' ? undefined : name));
 }
 
 // The simulation mesh as a wireframe. By default off over a fine surface (it would hide what the body looks
@@ -212,7 +252,10 @@ function showWire() {
   wireBox.checked = stats.wire;
   if (view) view.setWire(stats.wire);
 }
-wireBox.addEventListener('change', () => { wireWanted = wireBox.checked; showWire(); });
+wireBox.addEventListener('change', () => {
+  wireWanted = wireBox.checked;
+  showWire();
+});
 
 // Keys (not while typing in a field): 1-4 the presets, F fit, W the wireframe, H folds or opens the panels.
 window.addEventListener('keydown', (e) => {
@@ -222,16 +265,22 @@ window.addEventListener('keydown', (e) => {
   const preset = ['front', 'top', 'side', 'iso'][Number(key) - 1];
   if (preset) stats.fit?.(preset);
   else if (key === 'f') stats.fit?.();
-  else if (key === 'w') { wireWanted = !stats.wire; showWire(); }
-  else if (key === 'h') { panels.toggleAll(); telemetry.resize(); }
-  else return;
+  else if (key === 'w') {
+    wireWanted = !stats.wire;
+    showWire();
+  } else if (key === 'h') {
+    panels.toggleAll();
+    telemetry.resize();
+  } else return;
   e.preventDefault();
 });
 
 /** @param {SceneDescriptionT} d */
 function onScene(d) {
   // The same body again (a reset, a parameter set) keeps the camera where it was; another is framed.
-  const same = view !== null && stats.sceneName === ((/** @type {string | null} */ (d.sceneName)) || '') &&
+  const same =
+    view !== null &&
+    stats.sceneName === /** @type {string | null} */ (d.sceneName || '') &&
     view.rest.length === d.restPositions.length;
   if (view) view.dispose();
   view = new SceneView(scene, d, quality);
@@ -252,7 +301,7 @@ function onScene(d) {
   showWire();
   resize();
   if (!same) frameBody(START);
-  const s = /** @type {THREE.Sphere} */ (view.geometry.boundingSphere);  // (SceneView computes it)
+  const s = /** @type {THREE.Sphere} */ (view.geometry.boundingSphere); // (SceneView computes it)
   const c = s.center;
   const r = s.radius || 0.05;
   sun.position.set(c.x + 2 * r, c.y + 5 * r, c.z + 3 * r);
@@ -263,13 +312,20 @@ function onScene(d) {
   cam.near = r / 10;
   cam.far = 20 * r;
   cam.updateProjectionMatrix();
-  if (ground) { ground.geometry.dispose(); ground.material.dispose(); scene.remove(ground); ground = null; }
+  if (ground) {
+    ground.geometry.dispose();
+    ground.material.dispose();
+    scene.remove(ground);
+    ground = null;
+  }
   // The ground only catches the body's shadow: without shadows it would be a transparent pass over most
   // of the screen that draws nothing.
   if (renderer.shadowMap.enabled) {
     view.geometry.computeBoundingBox();
-    ground = new THREE.Mesh(new THREE.PlaneGeometry(12 * r, 12 * r).rotateX(-Math.PI / 2),
-                            new THREE.ShadowMaterial({ opacity: 0.35 }));
+    ground = new THREE.Mesh(
+      new THREE.PlaneGeometry(12 * r, 12 * r).rotateX(-Math.PI / 2),
+      new THREE.ShadowMaterial({ opacity: 0.35 }),
+    );
     ground.position.set(c.x, /** @type {THREE.Box3} */ (view.geometry.boundingBox).min.y - 1e-4, c.z);
     ground.receiveShadow = true;
     scene.add(ground);
@@ -282,21 +338,21 @@ function onScene(d) {
 function onMessage(data) {
   const type = messageTypeOf(data);
   if (type === Message.StateFrame) {
-    if (!buffer || !view) return;  // (onScene makes both)
+    if (!buffer || !view) return; // (onScene makes both)
     const t0 = performance.now();
     const f = readStateFrame(data);
     if (f.sceneId !== stats.sceneId) return;
-    if (buffer.count > 0 && f.simTime < buffer.tb) buffer.reset();  // a replay sought back
+    if (buffer.count > 0 && f.simTime < buffer.tb) buffer.reset(); // a replay sought back
     const coloured = fieldChoice.values(f, view.rest, scalarsNow);
     const kept = buffer.push(f.positions, coloured ? scalarsNow : null, f.simTime, performance.now() / 1000);
-    stats.decodeMs.push(performance.now() - t0);  // read in place and copied into the buffer
+    stats.decodeMs.push(performance.now() - t0); // read in place and copied into the buffer
     if (stats.decodeMs.length > 256) stats.decodeMs.shift();
     if (kept) {
       const t1 = performance.now();
       view.pushState(buffer.b, buffer.sb, buffer.a, buffer.sa);
       stats.drawnTriangles = view.cullFor(camera.position);
       cameraMoved = false;
-      stats.slotMs.push(performance.now() - t1);  // quantized and coloured into the free slot
+      stats.slotMs.push(performance.now() - t1); // quantized and coloured into the free slot
       if (stats.slotMs.length > 256) stats.slotMs.shift();
       stats.frames += 1;
       stats.lastStep = Number(f.step);
@@ -316,8 +372,12 @@ function onMessage(data) {
   // the union of them all.
   const m = decode(data);
   switch (m.messageType) {
-    case Message.SceneDescription: onScene(/** @type {SceneDescriptionT} */ (m.message)); break;
-    case Message.Error: serverSaid(/** @type {ErrorT} */ (m.message).message); break;
+    case Message.SceneDescription:
+      onScene(/** @type {SceneDescriptionT} */ (m.message));
+      break;
+    case Message.Error:
+      serverSaid(/** @type {ErrorT} */ (m.message).message);
+      break;
     case Message.Telemetry: {
       const t = /** @type {TelemetryT} */ (m.message);
       telemetry.update(t, pointer.latencies);
@@ -326,7 +386,9 @@ function onMessage(data) {
       stats.telemetry = t;
       break;
     }
-    case Message.SafetyEvent: telemetry.safety(/** @type {SafetyEventT} */ (m.message)); break;
+    case Message.SafetyEvent:
+      telemetry.safety(/** @type {SafetyEventT} */ (m.message));
+      break;
     case Message.DeviceStatus: {
       const d = /** @type {DeviceStatusT} */ (m.message);
       telemetry.deviceStatus(d);
@@ -340,7 +402,8 @@ function onMessage(data) {
       stats.replay = r;
       break;
     }
-    default: break;
+    default:
+      break;
   }
 }
 
@@ -362,7 +425,9 @@ function connectViewer() {
   const fields = fieldChoice.asked();
   // (Off loopback every role needs the token, the viewer's too.)
   const connection = connect(url, Role.Viewer, {
-    token, clientName: 'client-web', fields,
+    token,
+    clientName: 'client-web',
+    fields,
     onOpen: () => {
       status(`connected to ${url}`);
       sentFields = fields.join(',');
@@ -384,7 +449,7 @@ function connectViewer() {
   socket = connection;
   connection.welcome.then(checkVersion).catch((err) => {
     if (err instanceof ServerError) serverSaid(err.message);
-    else if (!(err instanceof ClosedError)) badMessage(err);  // (another major version too; a close is onClose's)
+    else if (!(err instanceof ClosedError)) badMessage(err); // (another major version too; a close is onClose's)
   });
 }
 
@@ -394,7 +459,8 @@ function frame() {
   pointer.tick(now);
   if (pointer.channel) {
     const f = pointer.force.length();
-    $('feel').textContent = `${pointer.channel} feels ${f.toFixed(3)} N` +
+    $('feel').textContent =
+      `${pointer.channel} feels ${f.toFixed(3)} N` +
       (Number.isFinite(pointer.latencyMs) ? `, input to force ${pointer.latencyMs.toFixed(1)} ms` : '');
   }
   if (view && buffer && buffer.count > 0) {
@@ -415,7 +481,7 @@ function frame() {
   }
   renderer.render(scene, camera);
   stats.rendered += 1;
-  stats.frameMs.push(performance.now() - now);  // this frame's work: interpolate, normals, colours, draw
+  stats.frameMs.push(performance.now() - now); // this frame's work: interpolate, normals, colours, draw
   if (stats.frameMs.length > 256) stats.frameMs.shift();
 }
 

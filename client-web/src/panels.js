@@ -26,7 +26,7 @@ export class Panels {
     /** @type {{ [id: string]: boolean }} */
     this.stored = this.load();
     /** @type {Set<string>} */
-    this.byPerson = new Set();  // panels whose next toggle a person made (a title clicked)
+    this.byPerson = new Set(); // panels whose next toggle a person made (a title clicked)
     for (const p of this.panels) {
       p.open = initialOpen(p.id, this.stored, small, p.dataset.small === 'open');
       const title = p.querySelector(':scope > summary');

@@ -5,8 +5,18 @@
 import * as THREE from 'three';
 
 import {
-  ByteBuffer, DeviceInputT, Envelope, EnvelopeT, ErrorCode, HapticFrame, Message, QuatdT, Role, Vec3dT,
-  decode, messageTypeOf,
+  ByteBuffer,
+  DeviceInputT,
+  Envelope,
+  EnvelopeT,
+  ErrorCode,
+  HapticFrame,
+  Message,
+  QuatdT,
+  Role,
+  Vec3dT,
+  decode,
+  messageTypeOf,
 } from '@tactile/proto';
 import { ClosedError, ServerError, connect } from './connection.js';
 import { channelOrder, pressTarget } from './press.js';
@@ -24,7 +34,7 @@ export class PointerDevice {
    */
   constructor({ canvas, camera, controls, token, onStatus, wanted = '' }) {
     this.canvas = canvas;
-    this.wanted = wanted;  // the channel ?device= names, or '' for those meant for the page
+    this.wanted = wanted; // the channel ?device= names, or '' for those meant for the page
     this.camera = camera;
     this.controls = controls;
     this.token = token;
@@ -32,22 +42,22 @@ export class PointerDevice {
     /** @type {Connection | null} */
     this.connection = null;
     /** @type {string | null} */
-    this.channel = null;        // the channel it drives, once the server welcomed it
-    this.channelIndex = -1;     // in SceneDescription.devices
-    this.proxy = -1;            // the first proxy of that channel (index in the scene)
+    this.channel = null; // the channel it drives, once the server welcomed it
+    this.channelIndex = -1; // in SceneDescription.devices
+    this.proxy = -1; // the first proxy of that channel (index in the scene)
     this.radius = 0.01;
     /** @type {THREE.Vector3 | null} */
-    this.home = null;           // where that proxy waits: its pose before any input [m]
+    this.home = null; // where that proxy waits: its pose before any input [m]
     this.target = new THREE.Vector3();
     this.dragging = false;
-    this.depth = 0;             // how far past the grabbed surface [m]
+    this.depth = 0; // how far past the grabbed surface [m]
     this.sequence = 0;
     /** @type {Map<number, number>} */
-    this.sent = new Map();      // sequence -> performance.now() it was sent, for the latency
-    this.latencyMs = NaN;       // input to the haptic frame that had seen it, latest
-    this.force = new THREE.Vector3();  // what the channel felt, latest haptic frame [N]
+    this.sent = new Map(); // sequence -> performance.now() it was sent, for the latency
+    this.latencyMs = NaN; // input to the haptic frame that had seen it, latest
+    this.force = new THREE.Vector3(); // what the channel felt, latest haptic frame [N]
     /** @type {number[]} */
-    this.latencies = [];        // the latest input round trips [ms]
+    this.latencies = []; // the latest input round trips [ms]
     this.ray = new THREE.Raycaster();
     this.ndc = new THREE.Vector2();
     this.plane = { point: new THREE.Vector3(), normal: new THREE.Vector3() };
@@ -74,9 +84,13 @@ export class PointerDevice {
     const devices = description.devices || [];
     const order = channelOrder(devices, this.wanted);
     if (!order.length) {
-      this.onStatus(this.wanted ? `poke: this scene has no device channel '${this.wanted}'`
-        : devices.length ? `poke: no channel for the page (${devices.join(', ')} are the arms'; ?device=NAME takes one)`
-          : 'poke: this scene has no device channel');
+      this.onStatus(
+        this.wanted
+          ? `poke: this scene has no device channel '${this.wanted}'`
+          : devices.length
+            ? `poke: no channel for the page (${devices.join(', ')} are the arms'; ?device=NAME takes one)`
+            : 'poke: this scene has no device channel',
+      );
       return;
     }
     this.tryChannels(url, description, order, 0);
@@ -85,15 +99,22 @@ export class PointerDevice {
   /** @param {string} url @param {SceneDescriptionT} description @param {string[]} order @param {number} k */
   tryChannels(url, description, order, k) {
     if (k >= order.length) {
-      this.onStatus(order.length ? 'poke: every device channel is driven by a device' : 'poke: this scene has no device channel');
+      this.onStatus(
+        order.length ? 'poke: every device channel is driven by a device' : 'poke: this scene has no device channel',
+      );
       return;
     }
     const channel = order[k];
     const connection = connect(url, Role.Device, {
-      token: this.token, clientName: 'client-web mouse', devices: [channel],
+      token: this.token,
+      clientName: 'client-web mouse',
+      devices: [channel],
       onMessage: (data) => {
         const type = messageTypeOf(data);
-        if (type === Message.HapticFrame) { this.onHaptic(data, performance.now()); return; }
+        if (type === Message.HapticFrame) {
+          this.onHaptic(data, performance.now());
+          return;
+        }
         if (type === Message.Error) this.onStatus(`poke: ${/** @type {ErrorT} */ (decode(data).message).message}`);
       },
       onClose: ({ reason }) => {
@@ -104,23 +125,27 @@ export class PointerDevice {
       },
     });
     this.connection = connection;
-    connection.welcome.then(() => {
-      if (this.connection !== connection) return;
-      this.channel = channel;
-      this.channelIndex = (description.devices || []).indexOf(channel);
-      this.proxy = (description.proxies || []).findIndex((p) => p.device === channel);
-      this.radius = this.proxy >= 0 ? description.proxies[this.proxy].radius || 0.01 : 0.01;
-      this.depth = 0.3 * this.radius;
-      this.onStatus(`poke: drag the body to press with '${channel}' (wheel: deeper or shallower)`);
-    }, (err) => {
-      if (err instanceof ClosedError) return;  // (onClose's)
-      if (err instanceof ServerError && err.code === ErrorCode.Busy) {  // another device drives it: the next one
-        connection.close({ quiet: true });
-        this.tryChannels(url, description, order, k + 1);
-      } else {
-        this.onStatus(`poke: ${err.message}`);
-      }
-    });
+    connection.welcome.then(
+      () => {
+        if (this.connection !== connection) return;
+        this.channel = channel;
+        this.channelIndex = (description.devices || []).indexOf(channel);
+        this.proxy = (description.proxies || []).findIndex((p) => p.device === channel);
+        this.radius = this.proxy >= 0 ? description.proxies[this.proxy].radius || 0.01 : 0.01;
+        this.depth = 0.3 * this.radius;
+        this.onStatus(`poke: drag the body to press with '${channel}' (wheel: deeper or shallower)`);
+      },
+      (err) => {
+        if (err instanceof ClosedError) return; // (onClose's)
+        if (err instanceof ServerError && err.code === ErrorCode.Busy) {
+          // another device drives it: the next one
+          connection.close({ quiet: true });
+          this.tryChannels(url, description, order, k + 1);
+        } else {
+          this.onStatus(`poke: ${err.message}`);
+        }
+      },
+    );
   }
 
   close() {
@@ -152,7 +177,7 @@ export class PointerDevice {
     if (!this.channel || !this.view || this.proxy < 0 || e.button > 0) return;
     this.pointerRay(e);
     const hit = this.ray.intersectObject(this.view.pick, false)[0];
-    if (!hit) return;  // not on the body: the view turns instead
+    if (!hit) return; // not on the body: the view turns instead
     this.plane.point.copy(hit.point);
     // The face's outward normal (the body is drawn untransformed: its local frame is the scene's).
     // (A mesh's hit always has its face.)
@@ -197,8 +222,14 @@ export class PointerDevice {
     const to = this.dragging ? this.target : this.home;
     if (to) {
       this.sequence += 1;
-      const input = new DeviceInputT(this.channel, BigInt(this.sequence), BigInt(Math.round(now * 1e6)),
-                                     new Vec3dT(to.x, to.y, to.z), new QuatdT(1, 0, 0, 0), this.dragging ? 1 : 0);
+      const input = new DeviceInputT(
+        this.channel,
+        BigInt(this.sequence),
+        BigInt(Math.round(now * 1e6)),
+        new Vec3dT(to.x, to.y, to.z),
+        new QuatdT(1, 0, 0, 0),
+        this.dragging ? 1 : 0,
+      );
       this.connection.send(new EnvelopeT(Message.DeviceInput, input));
       this.sent.set(this.sequence, now);
       if (this.sent.size > 600) this.sent.delete(/** @type {number} */ (this.sent.keys().next().value));

@@ -23,6 +23,10 @@ export function pressTarget(ray, planePoint, planeNormal, radius, depth, out) {
   if (Math.abs(denom) < 1e-6) return false;
   const s = planePoint.clone().sub(ray.origin).dot(planeNormal) / denom;
   if (s <= 0) return false;
-  out.copy(ray.direction).multiplyScalar(s).add(ray.origin).addScaledVector(planeNormal, radius - depth);
+  out
+    .copy(ray.direction)
+    .multiplyScalar(s)
+    .add(ray.origin)
+    .addScaledVector(planeNormal, radius - depth);
   return true;
 }

@@ -29,8 +29,12 @@ export function makeProxyGeometry(info, bodySize, detail = 1) {
   const shape = shapeName(info);
   const r = info.radius || 0.005;
   if (shape === 'capsule') {
-    return new THREE.CapsuleGeometry(r, 2 * (info.halfLength || 0), Math.max(2, Math.round(8 * detail)),
-                                     Math.max(6, Math.round(16 * detail)));
+    return new THREE.CapsuleGeometry(
+      r,
+      2 * (info.halfLength || 0),
+      Math.max(2, Math.round(8 * detail)),
+      Math.max(6, Math.round(16 * detail)),
+    );
   }
   if (shape === 'box') {
     const h = info.halfExtents || { x: r, y: r, z: r };

@@ -2,9 +2,7 @@
 // second). Play and pause, a slider to seek, the speed, and where the replay is. Each action goes as a
 // Control through the controller connection (ControlPanel), taken on first use when the page has the
 // token; without it the timeline only shows where the replay is.
-import {
-  ControlCommand, PauseT, ResumeT, SeekT, SetSpeedT,
-} from '@tactile/proto';
+import { ControlCommand, PauseT, ResumeT, SeekT, SetSpeedT } from '@tactile/proto';
 import { el } from './controls.js';
 /** @import { ControlT, ReplayStatusT } from '@tactile/proto' */
 /** @import { ControlPanel } from './controls.js' */
@@ -27,7 +25,10 @@ export class Timeline {
       else this.send(ControlCommand.Pause, new PauseT(), 'pause');
     });
     this.slider = el('input', { type: 'range', min: '0', max: '1', step: 'any', value: '0', name: 'replay-seek' });
-    this.slider.addEventListener('input', () => { this.dragging = true; this.showTime(Number(this.slider.value)); });
+    this.slider.addEventListener('input', () => {
+      this.dragging = true;
+      this.showTime(Number(this.slider.value));
+    });
     this.slider.addEventListener('change', () => {
       this.dragging = false;
       const t = Number(this.slider.value);
@@ -72,7 +73,9 @@ export class Timeline {
   /** @param {number} t */
   showTime(t) {
     const st = this.status;
-    this.time.textContent = `${t.toFixed(2)} / ${st ? st.durationS.toFixed(2) : '?'} s` +
-      (st && st.speed !== 1 ? ` at ${st.speed}x` : '') + (st && st.paused ? ', paused' : '');
+    this.time.textContent =
+      `${t.toFixed(2)} / ${st ? st.durationS.toFixed(2) : '?'} s` +
+      (st && st.speed !== 1 ? ` at ${st.speed}x` : '') +
+      (st && st.paused ? ', paused' : '');
   }
 }

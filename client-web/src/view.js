@@ -101,9 +101,9 @@ export class SceneView {
     scene.add(this.root);
     const rest = new Float32Array(description.restPositions);
     const n = rest.length / 3;
-    this.rest = rest;                         // the rest shape [m] (readers: tests pick vertices by it)
-    this.positions = new Float32Array(rest);  // the newest state's positions [m] (CPU copy: picking, readers)
-    this.scalars = new Float32Array(n);       // and its scalars
+    this.rest = rest; // the rest shape [m] (readers: tests pick vertices by it)
+    this.positions = new Float32Array(rest); // the newest state's positions [m] (CPU copy: picking, readers)
+    this.scalars = new Float32Array(n); // and its scalars
     this.scalarRange = [0, 1e-9];
     // The box positions are quantized over: a cube around the rest shape, three times its size; widened
     // when a state leaves it.
@@ -113,7 +113,7 @@ export class SceneView {
     const index = new THREE.BufferAttribute(new Uint32Array(description.triangles), 1);
     const geometry = new THREE.BufferGeometry();
     geometry.setIndex(index);
-    geometry.setAttribute('position', new THREE.BufferAttribute(rest, 3));  // bounds only: the shader moves it
+    geometry.setAttribute('position', new THREE.BufferAttribute(rest, 3)); // bounds only: the shader moves it
     // Four components a vertex, the fourth unused: SwiftShader reads 4 x int16 and 4 x uint8 as they are,
     // where ANGLE widens 3-component 16- and 8-bit formats on the CPU after every write (render_bench, 20 k
     // vertices: 17.7-19.5 -> 21-27 fps, alternated runs).
@@ -126,7 +126,11 @@ export class SceneView {
     });
     this.older = 0;
     this.newer = 1;
-    this.uniforms = { surfaceMix: { value: 1 }, surfaceCentre: { value: this.centre }, surfaceHalf: { value: this.half } };
+    this.uniforms = {
+      surfaceMix: { value: 1 },
+      surfaceCentre: { value: this.centre },
+      surfaceHalf: { value: this.half },
+    };
     for (const k of [0, 1]) this.writeSlot(this.slots[k], rest, this.scalars);
     this.bindSlots(geometry);
     geometry.computeBoundingSphere();
@@ -134,33 +138,47 @@ export class SceneView {
     /** @param {THREE.WebGLProgramParametersWithUniforms} shader @param {boolean} colours */
     const inject = (shader, colours) => {
       Object.assign(shader.uniforms, this.uniforms);
-      shader.vertexShader = 'attribute vec3 posA;\nattribute vec3 posB;\nattribute vec3 colA;\nattribute vec3 colB;\n' +
+      shader.vertexShader =
+        'attribute vec3 posA;\nattribute vec3 posB;\nattribute vec3 colA;\nattribute vec3 colB;\n' +
         'uniform float surfaceMix;\nuniform vec3 surfaceCentre;\nuniform float surfaceHalf;\n' +
-        shader.vertexShader.replace('#include <begin_vertex>',
-          'vec3 transformed = surfaceCentre + surfaceHalf * mix(posA, posB, surfaceMix);');
+        shader.vertexShader.replace(
+          '#include <begin_vertex>',
+          'vec3 transformed = surfaceCentre + surfaceHalf * mix(posA, posB, surfaceMix);',
+        );
       if (colours) {
-        shader.vertexShader = shader.vertexShader.replace('#include <color_vertex>',
-          'vColor = mix(colA, colB, surfaceMix);');
+        shader.vertexShader = shader.vertexShader.replace(
+          '#include <color_vertex>',
+          'vColor = mix(colA, colB, surfaceMix);',
+        );
       }
     };
     let material;
     if (quality === 'high') {
-      material = new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.55, metalness: 0.0,
-                                                  side: THREE.DoubleSide, flatShading: true });
+      material = new THREE.MeshStandardMaterial({
+        vertexColors: true,
+        roughness: 0.55,
+        metalness: 0.0,
+        side: THREE.DoubleSide,
+        flatShading: true,
+      });
       material.onBeforeCompile = (shader) => inject(shader, true);
     } else {
       material = lowQualityMaterial(this.uniforms);
     }
     // Where the CPU draws, only the triangles that face the eye are sent (see cull.js), from one of three
     // index arrays in turn, for the same reason as the slots.
-    this.culls = quality === 'high' ? null : [0, 1, 2].map(() =>
-      new THREE.BufferAttribute(new Uint32Array(index.count), 1).setUsage(THREE.DynamicDrawUsage));
+    this.culls =
+      quality === 'high'
+        ? null
+        : [0, 1, 2].map(() =>
+            new THREE.BufferAttribute(new Uint32Array(index.count), 1).setUsage(THREE.DynamicDrawUsage),
+          );
     this.cullNext = 0;
-    this.olderPositions = new Float32Array(rest);  // the older state's positions, for the cull
+    this.olderPositions = new Float32Array(rest); // the older state's positions, for the cull
     this.eye = new THREE.Vector3();
     this.eyeXyz = [0, 0, 0];
     this.mesh = new THREE.Mesh(geometry, material);
-    this.mesh.frustumCulled = false;  // it deforms past its rest bounds; it is the scene's subject anyway
+    this.mesh.frustumCulled = false; // it deforms past its rest bounds; it is the scene's subject anyway
     this.mesh.castShadow = true;
     this.mesh.receiveShadow = true;
     // The shadow pass draws the surface where the shader puts it too.
@@ -185,7 +203,7 @@ export class SceneView {
     this.pickAttr = new THREE.BufferAttribute(this.positions, 3);
     pickGeometry.setAttribute('position', this.pickAttr);
     this.pick = new THREE.Mesh(pickGeometry, new THREE.MeshBasicMaterial({ side: THREE.DoubleSide }));
-    this.size = /** @type {THREE.Sphere} */ (geometry.boundingSphere).radius || 0.05;  // (computed above)
+    this.size = /** @type {THREE.Sphere} */ (geometry.boundingSphere).radius || 0.05; // (computed above)
 
     this.proxies = (description.proxies || []).map((p) => this.makeProxy(p));
     this.arrows = this.proxies.map(() => {
@@ -205,11 +223,14 @@ export class SceneView {
     const wireGeometry = new THREE.BufferGeometry();
     wireGeometry.setIndex(new THREE.BufferAttribute(computeUniqueEdges(description.triangles), 1));
     wireGeometry.setAttribute('position', geometry.getAttribute('position'));
-    this.wireUniforms = { ...this.uniforms, wireLift: { value: (this.embedded ? 0.04 : 0.004) * this.size },
-                          wireColour: { value: new THREE.Color().fromArray(WIRE_COLOUR) } };
+    this.wireUniforms = {
+      ...this.uniforms,
+      wireLift: { value: (this.embedded ? 0.04 : 0.004) * this.size },
+      wireColour: { value: new THREE.Color().fromArray(WIRE_COLOUR) },
+    };
     this.wire = new THREE.LineSegments(wireGeometry, wireMaterial(this.wireUniforms));
     this.wire.name = 'simulation mesh';
-    this.wire.frustumCulled = false;  // the shader moves it, as the surface
+    this.wire.frustumCulled = false; // the shader moves it, as the surface
     this.wire.visible = false;
     this.edges = wireGeometry.index ? wireGeometry.index.count / 2 : 0;
     this.bindSlots();
@@ -225,8 +246,13 @@ export class SceneView {
   /** @param {ProxyInfoT} info */
   makeProxy(info) {
     const plane = shapeName(info) === 'plane';
-    const material = new THREE.MeshStandardMaterial({ color: 0xd0d4dc, roughness: 0.3, metalness: 0.2,
-                                                     transparent: plane, opacity: plane ? 0.3 : 1 });
+    const material = new THREE.MeshStandardMaterial({
+      color: 0xd0d4dc,
+      roughness: 0.3,
+      metalness: 0.2,
+      transparent: plane,
+      opacity: plane ? 0.3 : 1,
+    });
     const mesh = new THREE.Mesh(makeProxyGeometry(info, this.size), material);
     mesh.castShadow = !plane;
     mesh.name = /** @type {string | null} */ (info.name) || '';
@@ -269,7 +295,7 @@ export class SceneView {
     const col = slot.c.array;
     for (let i = 0; i < scalars.length; i++) {
       const u = (scalars[i] - lo) * scale;
-      const k = 3 * (u >= 255 ? 255 : u > 0 ? Math.round(u) : 0);  // (NaN reads as 0)
+      const k = 3 * (u >= 255 ? 255 : u > 0 ? Math.round(u) : 0); // (NaN reads as 0)
       col[4 * i] = VIRIDIS[k];
       col[4 * i + 1] = VIRIDIS[k + 1];
       col[4 * i + 2] = VIRIDIS[k + 2];
@@ -297,7 +323,12 @@ export class SceneView {
     let far = 0;
     const c = this.centre;
     for (let i = 0; i < positions.length; i += 3) {
-      far = Math.max(far, Math.abs(positions[i] - c.x), Math.abs(positions[i + 1] - c.y), Math.abs(positions[i + 2] - c.z));
+      far = Math.max(
+        far,
+        Math.abs(positions[i] - c.x),
+        Math.abs(positions[i + 1] - c.y),
+        Math.abs(positions[i + 2] - c.z),
+      );
     }
     let lo = this.scalarRange[0];
     let hi = this.scalarRange[1];
@@ -329,14 +360,13 @@ export class SceneView {
   // screen, where the CPU draws; the count sent, or all of them where it does not cull.
   /** @param {THREE.Vector3} eye */
   cullFor(eye) {
-    const all = /** @type {THREE.BufferAttribute} */ (this.pick.geometry.index);  // (set in the constructor)
-    if (this.embedded) return this.embedded.triangles;  // the GPU culls it (its vertices are placed there)
+    const all = /** @type {THREE.BufferAttribute} */ (this.pick.geometry.index); // (set in the constructor)
+    if (this.embedded) return this.embedded.triangles; // the GPU culls it (its vertices are placed there)
     if (!this.culls) return all.count / 3;
     this.root.worldToLocal(this.eye.copy(eye));
     const out = this.culls[this.cullNext];
     this.cullNext = (this.cullNext + 1) % 3;
-    const k = frontTriangles(all.array, this.olderPositions, this.positions, this.eye.toArray(this.eyeXyz),
-                             out.array);
+    const k = frontTriangles(all.array, this.olderPositions, this.positions, this.eye.toArray(this.eyeXyz), out.array);
     out.clearUpdateRanges();
     out.addUpdateRange(0, k);
     out.needsUpdate = true;

@@ -36,7 +36,12 @@ test('each preset looks at the centre along its direction, the whole sphere in v
     const views = [...Object.entries(PRESETS), ['start', START]];
     for (const [name, dir] of views) {
       const camera = new THREE.PerspectiveCamera(40, aspect, 0.01, 100);
-      const controls = { target: new THREE.Vector3(), update() { camera.lookAt(this.target); } };
+      const controls = {
+        target: new THREE.Vector3(),
+        update() {
+          camera.lookAt(this.target);
+        },
+      };
       applyFraming(camera, /** @type {any} */ (controls), sphere, dir);
       camera.updateMatrixWorld();
       const c = new THREE.Vector3(...sphere.centre);
@@ -49,14 +54,22 @@ test('each preset looks at the centre along its direction, the whole sphere in v
       // Points of the sphere all fall in the view; the outermost near its narrower edge.
       let most = 0;
       for (let i = 0; i < 2000; i++) {
-        const u = 1 - (2 * (i + 0.5)) / 2000;  // (a Fibonacci sphere: even over the surface)
+        const u = 1 - (2 * (i + 0.5)) / 2000; // (a Fibonacci sphere: even over the surface)
         const phi = i * 2.399963;
         const p = new THREE.Vector3(Math.sqrt(1 - u * u) * Math.cos(phi), u, Math.sqrt(1 - u * u) * Math.sin(phi))
-          .multiplyScalar(sphere.radius).add(c).project(camera);
-        assert.ok(Math.abs(p.x) <= 1 && Math.abs(p.y) <= 1, `${name}, aspect ${aspect.toFixed(2)}: a point at ${p.x}, ${p.y}`);
+          .multiplyScalar(sphere.radius)
+          .add(c)
+          .project(camera);
+        assert.ok(
+          Math.abs(p.x) <= 1 && Math.abs(p.y) <= 1,
+          `${name}, aspect ${aspect.toFixed(2)}: a point at ${p.x}, ${p.y}`,
+        );
         most = Math.max(most, aspect < 1 ? Math.abs(p.x) : Math.abs(p.y));
       }
-      assert.ok(most > 0.85, `${name}, aspect ${aspect.toFixed(2)}: the sphere reaches ${most} of the narrower half-view`);
+      assert.ok(
+        most > 0.85,
+        `${name}, aspect ${aspect.toFixed(2)}: the sphere reaches ${most} of the narrower half-view`,
+      );
     }
   }
 });

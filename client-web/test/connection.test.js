@@ -4,8 +4,19 @@ import assert from 'node:assert/strict';
 import test from 'node:test';
 
 import {
-  EnvelopeT, ErrorCode, ErrorT, Message, PROTOCOL_MAJOR, PROTOCOL_MINOR, PongT, Role, WelcomeT, decode, encode,
-  makeViewFields, messageTypeOf,
+  EnvelopeT,
+  ErrorCode,
+  ErrorT,
+  Message,
+  PROTOCOL_MAJOR,
+  PROTOCOL_MINOR,
+  PongT,
+  Role,
+  WelcomeT,
+  decode,
+  encode,
+  makeViewFields,
+  messageTypeOf,
 } from '@tactile/proto';
 
 import { ClosedError, ServerError, TRY_AGAIN_LATER, connect } from '../src/connection.js';
@@ -34,17 +45,28 @@ class FakeSocket {
   }
 
   /** @param {Uint8Array} bytes */
-  send(bytes) { this.sent.push(bytes); }
-  close() { this.closeCalls += 1; this.readyState = 2; }
+  send(bytes) {
+    this.sent.push(bytes);
+  }
+  close() {
+    this.closeCalls += 1;
+    this.readyState = 2;
+  }
 
   // The server's side.
-  open() { this.readyState = 1; this.onopen?.(); }
+  open() {
+    this.readyState = 1;
+    this.onopen?.();
+  }
   /** @param {EnvelopeT} envelope */
   receive(envelope) {
-    this.onmessage?.({ data: encode(envelope).slice().buffer });  // (a buffer of its own, as a browser's)
+    this.onmessage?.({ data: encode(envelope).slice().buffer }); // (a buffer of its own, as a browser's)
   }
   /** @param {number} code @param {string} reason */
-  closed(code, reason) { this.readyState = 3; this.onclose?.({ code, reason }); }
+  closed(code, reason) {
+    this.readyState = 3;
+    this.onclose?.({ code, reason });
+  }
 }
 
 // A connection on a fake socket, with what it hands its caller.
@@ -55,7 +77,9 @@ function open(role, options = {}) {
   /** @type {Closed[]} */
   const closes = [];
   const connection = connect('ws://server.test/', role, {
-    ...options, onMessage: (data) => messages.push(data), onClose: (c) => closes.push(c),
+    ...options,
+    onMessage: (data) => messages.push(data),
+    onClose: (c) => closes.push(c),
     WebSocket: /** @type {any} */ (FakeSocket),
   });
   const socket = /** @type {FakeSocket} */ (/** @type {unknown} */ (connection.socket));
@@ -65,8 +89,11 @@ function open(role, options = {}) {
 const welcome = () => new EnvelopeT(Message.Welcome, new WelcomeT(PROTOCOL_MAJOR, PROTOCOL_MINOR, Role.Device, 'test'));
 
 test('the Hello says the role and its options; the Welcome resolves, and later messages go to the caller', async () => {
-  const { connection, socket, messages, closes } = open(Role.Device, { token: 's3cret', clientName: 'a mouse',
-                                                                       devices: ['mouse'] });
+  const { connection, socket, messages, closes } = open(Role.Device, {
+    token: 's3cret',
+    clientName: 'a mouse',
+    devices: ['mouse'],
+  });
   assert.equal(socket.binaryType, 'arraybuffer');
   assert.equal(connection.open, false);
   socket.open();
@@ -74,13 +101,15 @@ test('the Hello says the role and its options; the Welcome resolves, and later m
   assert.equal(socket.sent.length, 1);
   const hello = /** @type {HelloT} */ (decode(socket.sent[0]).message);
   assert.equal(messageTypeOf(socket.sent[0]), Message.Hello);
-  assert.deepEqual([hello.role, hello.token, hello.clientName, hello.devices, hello.protocolMajor],
-                   [Role.Device, 's3cret', 'a mouse', ['mouse'], PROTOCOL_MAJOR]);
+  assert.deepEqual(
+    [hello.role, hello.token, hello.clientName, hello.devices, hello.protocolMajor],
+    [Role.Device, 's3cret', 'a mouse', ['mouse'], PROTOCOL_MAJOR],
+  );
   socket.receive(welcome());
   const w = await connection.welcome;
   assert.equal(w.serverName, 'test');
   assert.equal(connection.welcomed, true);
-  assert.equal(messages.length, 0, 'the Welcome is the helper\'s');
+  assert.equal(messages.length, 0, "the Welcome is the helper's");
   socket.receive(new EnvelopeT(Message.Pong, new PongT(7)));
   socket.receive(new EnvelopeT(Message.Error, new ErrorT(ErrorCode.BadRequest, 'out of the workspace', 0)));
   assert.deepEqual(messages.map(messageTypeOf), [Message.Pong, Message.Error]);
@@ -90,7 +119,7 @@ test('the Hello says the role and its options; the Welcome resolves, and later m
   assert.deepEqual(closes, [{ code: 1000, reason: '', welcomed: true }]);
 });
 
-test('an Error before the Welcome rejects, naming the server\'s message and code', async () => {
+test("an Error before the Welcome rejects, naming the server's message and code", async () => {
   const { connection, socket, messages, closes } = open(Role.Controller, { token: 's3cret' });
   socket.open();
   socket.receive(new EnvelopeT(Message.Error, new ErrorT(ErrorCode.Busy, 'another controller is connected', 0)));
@@ -102,11 +131,11 @@ test('an Error before the Welcome rejects, naming the server\'s message and code
   });
   assert.equal(connection.welcomed, false);
   assert.equal(messages.length, 0);
-  socket.closed(1000, '');  // the server closes a refused Hello
+  socket.closed(1000, ''); // the server closes a refused Hello
   assert.deepEqual(closes, [{ code: 1000, reason: '', welcomed: false }]);
 });
 
-test('a close with code 1013 (refused, evicted) is reported with the server\'s reason', async () => {
+test("a close with code 1013 (refused, evicted) is reported with the server's reason", async () => {
   const reason = 'server full: 256 connections (max_connections); try again later';
   const { connection, socket, closes } = open(Role.Viewer, { fields: ['von_mises'] });
   socket.open();

@@ -8,7 +8,14 @@ import { frontTriangles } from '../src/cull.js';
 function cube() {
   const x = [];
   for (let i = 0; i < 8; i++) x.push(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-  const quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+  const quads = [
+    [0, 2, 3, 1],
+    [4, 5, 7, 6],
+    [0, 1, 5, 4],
+    [2, 6, 7, 3],
+    [0, 4, 6, 2],
+    [1, 3, 7, 5],
+  ];
   const tris = [];
   for (const [p, q, r, s] of quads) tris.push(p, q, r, p, r, s);
   return { x: Float32Array.from(x), tris: Uint32Array.from(tris) };
@@ -24,11 +31,13 @@ function normal(x, tris, t) {
   return [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]];
 }
 
-test('the cube is wound outward (the test\'s own check)', () => {
+test("the cube is wound outward (the test's own check)", () => {
   const { x, tris } = cube();
   for (let t = 0; t < 12; t++) {
     const n = normal(x, tris, t);
-    const c = [0, 1, 2].map((k) => (x[3 * tris[3 * t] + k] + x[3 * tris[3 * t + 1] + k] + x[3 * tris[3 * t + 2] + k]) / 3 - 0.5);
+    const c = [0, 1, 2].map(
+      (k) => (x[3 * tris[3 * t] + k] + x[3 * tris[3 * t + 1] + k] + x[3 * tris[3 * t + 2] + k]) / 3 - 0.5,
+    );
     assert.ok(n[0] * c[0] + n[1] * c[1] + n[2] * c[2] > 0, `triangle ${t}`);
   }
 });
@@ -36,7 +45,12 @@ test('the cube is wound outward (the test\'s own check)', () => {
 test('seen from outside a face, the cube keeps exactly the faces that face the eye', () => {
   const { x, tris } = cube();
   const out = new Uint32Array(tris.length);
-  for (const eye of [[0.5, 0.5, 5], [5, 5, 5], [-3, 0.2, 0.7], [0.5, -4, 0.5]]) {
+  for (const eye of [
+    [0.5, 0.5, 5],
+    [5, 5, 5],
+    [-3, 0.2, 0.7],
+    [0.5, -4, 0.5],
+  ]) {
     const k = frontTriangles(tris, x, x, eye, out, 0);
     const kept = new Set();
     for (let i = 0; i < k; i += 3) kept.add(`${out[i]},${out[i + 1]},${out[i + 2]}`);
@@ -56,7 +70,8 @@ test('a triangle facing the eye in either state is kept, and the margin keeps th
   const tris = Uint32Array.of(0, 1, 2);
   const flat = Float32Array.of(0, 0, 0, 1, 0, 0, 0, 1, 0);
   const out = new Uint32Array(3);
-  const tilted = (/** @type {number} */ deg) => {  // turned about the y axis: positive angles turn the normal toward +x
+  const tilted = (/** @type {number} */ deg) => {
+    // turned about the y axis: positive angles turn the normal toward +x
     const r = (deg * Math.PI) / 180;
     return Float32Array.of(0, 0, 0, Math.cos(r), 0, -Math.sin(r), 0, 1, 0);
   };

@@ -22,17 +22,23 @@ export function serverExe(build = process.env.TACTILE_BUILD || 'build/release') 
 
 // Starts tactile-server with `argv` (after the executable), serving this folder on a free port.
 export async function spawnServer(argv, { build, timeoutMs = 120000 } = {}) {
-  const proc = spawn(serverExe(build), [...argv, '--port', '0', '--static', path.join(root, 'client-web')],
-                     { stdio: ['ignore', 'pipe', 'pipe'] });
+  const proc = spawn(serverExe(build), [...argv, '--port', '0', '--static', path.join(root, 'client-web')], {
+    stdio: ['ignore', 'pipe', 'pipe'],
+  });
   let out = '';
   const port = await new Promise((resolve, reject) => {
     const timer = setTimeout(() => reject(new Error(`the server did not start:\n${out}`)), timeoutMs);
     proc.stdout.on('data', (d) => {
       out += d;
       const m = /listening on http:\/\/127\.0\.0\.1:(\d+)\//.exec(out);
-      if (m) { clearTimeout(timer); resolve(Number(m[1])); }
+      if (m) {
+        clearTimeout(timer);
+        resolve(Number(m[1]));
+      }
     });
-    proc.stderr.on('data', (d) => { out += d; });
+    proc.stderr.on('data', (d) => {
+      out += d;
+    });
     proc.on('exit', (code) => reject(new Error(`the server exited (${code}):\n${out}`)));
   });
   proc.output = () => out;
@@ -54,10 +60,16 @@ export function launchBrowser() {
 
 // A page of the server at `port` in a fresh context of `browser` (its own localStorage); `context` adds
 // options of a browser context (hasTouch, isMobile, ...). `problems` collects console errors and page errors.
-export async function openPageIn(browser, port, { query = '', viewport = { width: 800, height: 600 }, context = {} } = {}) {
+export async function openPageIn(
+  browser,
+  port,
+  { query = '', viewport = { width: 800, height: 600 }, context = {} } = {},
+) {
   const page = await browser.newPage({ viewport, ...context });
   const problems = [];
-  page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
+  page.on('console', (m) => {
+    if (m.type() === 'error') problems.push(`console: ${m.text()}`);
+  });
   page.on('pageerror', (e) => problems.push(`page: ${e.message}`));
   await page.goto(`http://127.0.0.1:${port}/${query}`);
   return { page, problems };
@@ -76,16 +88,22 @@ export async function openLive(scene, { args = [], query = '', viewport = { widt
   const { proc, port } = await startServer(scene, args);
   const { browser, page, problems } = await openPage(port, { query, viewport });
   return {
-    port, page, problems,
+    port,
+    page,
+    problems,
     // What the page and the server show, for a test's failure message: the page's frame count and
     // status line, its console errors, and the end of the server's output.
     describe: async () => {
-      const state = await page.evaluate(() => ({
-        frames: window.tactile ? window.tactile.frames : null,
-        status: document.querySelector('#status') ? document.querySelector('#status').textContent : null,
-      })).catch((e) => ({ error: e.message }));
-      return `page: ${JSON.stringify(state)}\nproblems: ${problems.join('; ') || 'none'}\n` +
-        `server output (end):\n${proc.output().slice(-2000)}`;
+      const state = await page
+        .evaluate(() => ({
+          frames: window.tactile ? window.tactile.frames : null,
+          status: document.querySelector('#status') ? document.querySelector('#status').textContent : null,
+        }))
+        .catch((e) => ({ error: e.message }));
+      return (
+        `page: ${JSON.stringify(state)}\nproblems: ${problems.join('; ') || 'none'}\n` +
+        `server output (end):\n${proc.output().slice(-2000)}`
+      );
     },
     close: async () => {
       await browser.close();

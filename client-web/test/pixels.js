@@ -21,8 +21,12 @@ export function maskUnlike(image, background, tolerance = 12) {
   const d = image.data;
   for (let i = 0; i < out.length; i++) {
     const o = 4 * i;
-    out[i] = Math.abs(d[o] - background[0]) > tolerance || Math.abs(d[o + 1] - background[1]) > tolerance ||
-      Math.abs(d[o + 2] - background[2]) > tolerance ? 1 : 0;
+    out[i] =
+      Math.abs(d[o] - background[0]) > tolerance ||
+      Math.abs(d[o + 1] - background[1]) > tolerance ||
+      Math.abs(d[o + 2] - background[2]) > tolerance
+        ? 1
+        : 0;
   }
   return out;
 }
@@ -45,9 +49,12 @@ export function maskWhere(image, test) {
 export function rasterise(xy, triangles, width, height) {
   const out = new Uint8Array(width * height);
   for (let t = 0; t < triangles.length; t += 3) {
-    const ax = xy[2 * triangles[t]], ay = xy[2 * triangles[t] + 1];
-    const bx = xy[2 * triangles[t + 1]], by = xy[2 * triangles[t + 1] + 1];
-    const cx = xy[2 * triangles[t + 2]], cy = xy[2 * triangles[t + 2] + 1];
+    const ax = xy[2 * triangles[t]],
+      ay = xy[2 * triangles[t] + 1];
+    const bx = xy[2 * triangles[t + 1]],
+      by = xy[2 * triangles[t + 1] + 1];
+    const cx = xy[2 * triangles[t + 2]],
+      cy = xy[2 * triangles[t + 2] + 1];
     const area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
     if (!Number.isFinite(area) || area === 0) continue;
     const x0 = Math.max(0, Math.floor(Math.min(ax, bx, cx)));
@@ -92,7 +99,12 @@ export function dilate(mask, width, height, k) {
 // The mask shrunk by `k` pixels.
 /** @param {Uint8Array} mask @param {number} width @param {number} height @param {number} k */
 export function erode(mask, width, height, k) {
-  const grown = dilate(mask.map((v) => 1 - v), width, height, k);
+  const grown = dilate(
+    mask.map((v) => 1 - v),
+    width,
+    height,
+    k,
+  );
   return grown.map((v) => 1 - v);
 }
 
@@ -104,7 +116,8 @@ export function erode(mask, width, height, k) {
 export function clearRects(mask, width, height, rects) {
   for (const r of rects) {
     for (let y = Math.max(0, Math.floor(r.y)); y < Math.min(height, Math.ceil(r.y + r.height)); y++) {
-      for (let x = Math.max(0, Math.floor(r.x)); x < Math.min(width, Math.ceil(r.x + r.width)); x++) mask[y * width + x] = 0;
+      for (let x = Math.max(0, Math.floor(r.x)); x < Math.min(width, Math.ceil(r.x + r.width)); x++)
+        mask[y * width + x] = 0;
     }
   }
   return mask;
@@ -128,11 +141,16 @@ export function colourMapDistance(r, g, b, sLo = 0.3) {
   let best = Infinity;
   let u = 0;
   for (let k = 0; k < 256; k++) {
-    const vr = MAP[3 * k], vg = MAP[3 * k + 1], vb = MAP[3 * k + 2];
+    const vr = MAP[3 * k],
+      vg = MAP[3 * k + 1],
+      vb = MAP[3 * k + 2];
     const vv = vr * vr + vg * vg + vb * vb;
     const s = Math.min(1.02, Math.max(sLo, (r * vr + g * vg + b * vb) / (vv || 1)));
     const d = Math.hypot(r - s * vr, g - s * vg, b - s * vb);
-    if (d < best) { best = d; u = k / 255; }
+    if (d < best) {
+      best = d;
+      u = k / 255;
+    }
   }
   return { distance: best, u };
 }

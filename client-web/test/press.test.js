@@ -6,7 +6,7 @@ import * as THREE from 'three';
 
 import { channelOrder, pressTarget } from '../src/press.js';
 
-test('the page takes the channels meant for it, or the one ?device= names, never an arm\'s', () => {
+test("the page takes the channels meant for it, or the one ?device= names, never an arm's", () => {
   assert.deepEqual(channelOrder(['stylus', 'mouse', 'left', 'finger2']), ['mouse', 'finger2']);
   assert.deepEqual(channelOrder(['stylus', 'left']), []);
   assert.deepEqual(channelOrder(['stylus', 'left'], 'left'), ['left']);
@@ -27,8 +27,26 @@ test('the proxy stands off the grabbed tangent plane so that it reaches the chos
   assert.ok(pressTarget(ray, new THREE.Vector3(0, 0.03, 0), normal, 0.01, 0.008, out));
   assert.ok(Math.abs(out.y - 0.032) < 1e-12, `${out.y}`);
   // A ray along the plane, or one pointing away from it, gives no target.
-  assert.equal(pressTarget(new THREE.Ray(new THREE.Vector3(0, 0.05, 0), new THREE.Vector3(1, 0, 0)),
-                           new THREE.Vector3(0, 0.03, 0), normal, 0.01, 0.003, out), false);
-  assert.equal(pressTarget(new THREE.Ray(new THREE.Vector3(0, 0.05, 0), new THREE.Vector3(0, 1, 0)),
-                           new THREE.Vector3(0, 0.03, 0), normal, 0.01, 0.003, out), false);
+  assert.equal(
+    pressTarget(
+      new THREE.Ray(new THREE.Vector3(0, 0.05, 0), new THREE.Vector3(1, 0, 0)),
+      new THREE.Vector3(0, 0.03, 0),
+      normal,
+      0.01,
+      0.003,
+      out,
+    ),
+    false,
+  );
+  assert.equal(
+    pressTarget(
+      new THREE.Ray(new THREE.Vector3(0, 0.05, 0), new THREE.Vector3(0, 1, 0)),
+      new THREE.Vector3(0, 0.03, 0),
+      normal,
+      0.01,
+      0.003,
+      out,
+    ),
+    false,
+  );
 });

@@ -19,8 +19,11 @@ const SCENE = {
   material: { model: 'stvk', E: 100000, nu: 0.3, rho: 1000 },
   boundary: [
     { name: 'base', select: { box: { lo: [-0.02, 0, -0.02], hi: [0.02, 0, 0.02] } }, fixed: true },
-    { name: 'lid', select: { plane: { point: [0, 0.12, 0], normal: [0, 1, 0] } },
-      rotate: { centre: [0, 0.12, 0], axis: [0, 1, 0], angle_deg: 540, duration: 6.0, start: 0.0 } },
+    {
+      name: 'lid',
+      select: { plane: { point: [0, 0.12, 0], normal: [0, 1, 0] } },
+      rotate: { centre: [0, 0.12, 0], axis: [0, 1, 0], angle_deg: 540, duration: 6.0, start: 0.0 },
+    },
   ],
   effects: { damping: { alpha: 5.0 } },
   run: { duration: 6 },
@@ -47,9 +50,13 @@ test('a recording replays in the page with its timeline', { timeout: 180000 }, a
     assert.ok(shown.timeline && shown.text.includes('replay: twist.mcap'), shown.text);
 
     // The recorded body moves.
-    const sample = () => page.evaluate(() => ({ step: window.tactile.lastStep, frames: window.tactile.frames,
-                                                x: Array.from(window.tactile.view.positions),
-                                                replay: { ...window.tactile.replay } }));
+    const sample = () =>
+      page.evaluate(() => ({
+        step: window.tactile.lastStep,
+        frames: window.tactile.frames,
+        x: Array.from(window.tactile.view.positions),
+        replay: { ...window.tactile.replay },
+      }));
     const a = await sample();
     await page.waitForTimeout(800);
     const b = await sample();
@@ -78,8 +85,9 @@ test('a recording replays in the page with its timeline', { timeout: 180000 }, a
     // Twice the speed, and play again.
     await page.selectOption('select[name=replay-speed]', '2');
     await page.click('button[name=replay-play]');
-    await page.waitForFunction(() => window.tactile.replay.speed === 2 && !window.tactile.replay.paused, null,
-                               { timeout: 10000 });
+    await page.waitForFunction(() => window.tactile.replay.speed === 2 && !window.tactile.replay.paused, null, {
+      timeout: 10000,
+    });
     const e = await sample();
     await page.waitForTimeout(500);
     const f = await sample();
