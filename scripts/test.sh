@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Sets everything up, then runs the formatters and linters (clang-format, ruff,
-# mypy, eslint) and all the tests: the C++ suites (ctest), the
+# mypy, eslint, prettier) and all the tests: the C++ suites (ctest), the
 # JavaScript codec's (node --test), the browser view's (tsc --checkJs, then node --test, with an
 # end-to-end test in Chromium), the device bridge's (pytest) and the cross-piece tests in tests/ (pytest).
 set -euo pipefail
@@ -17,9 +17,10 @@ echo "test: C++ (ctest)"
 ctest --test-dir "$build" --output-on-failure -j"$(nproc)"
 echo "test: JavaScript codec (proto/js, node --test)"
 npm --prefix proto/js test
-echo "test: JavaScript lint (eslint: proto/js, client-web)"
+echo "test: JavaScript lint (eslint: proto/js, client-web) and the page's format (prettier: client-web)"
 npm --prefix proto/js run -s lint
 npm --prefix client-web run -s lint
+npm --prefix client-web run -s format:check
 echo "test: browser view (client-web, tsc --checkJs, then node --test; end to end in Chromium against the server)"
 TACTILE_BUILD="$build" npm --prefix client-web test
 echo "test: device bridge (pytest device-bridge/tests)"
