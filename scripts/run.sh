@@ -7,14 +7,18 @@
 # at 2 kHz at most: the default scene steps at 7.7 kHz, and a bridge ticking at
 # 1 kHz needs no more (a later --haptic-rate among the options wins). The page's
 # record button writes into recordings/ (a later --recordings wins).
-#   scripts/run.sh [SCENE.json] [tactile-server options...]
+#   scripts/run.sh [SCENE.json] [tactile-server options...]   (e.g. --record run.mcap)
 # The headless simulator: build/release/tactile-sim run SCENE.json --out out
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 scripts/setup.sh
-scene="${1:-server/scenes/default.json}"
-shift || true
+# The first argument is the scene unless it is an option (scripts/run.sh --record x.mcap runs the default).
+scene="server/scenes/default.json"
+if [ $# -gt 0 ] && [ "${1#-}" = "$1" ]; then
+  scene="$1"
+  shift
+fi
 build="${TACTILE_BUILD:-build/release}"
 device="${TACTILE_DEVICE:-sim}"
 # A token of this run's own: the device role needs one.

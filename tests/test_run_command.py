@@ -31,8 +31,9 @@ def test_ctrl_c_leaves_a_closed_recording(tmp_path: pathlib.Path) -> None:
     from tactile_recording.reader import open_recording
 
     path = tmp_path / "session.mcap"
-    proc = subprocess.Popen([str(ROOT / "scripts/run.sh"), "server/scenes/default.json", "--port", "0", "--record",
-                             str(path)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    # No scene named: the first argument is an option, and the default scene runs.
+    proc = subprocess.Popen([str(ROOT / "scripts/run.sh"), "--port", "0", "--record", str(path)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             start_new_session=True, env={**os.environ, "TACTILE_DEVICE": "none"})
     assert proc.stdout is not None
     deadline = time.time() + 120
@@ -44,3 +45,4 @@ def test_ctrl_c_leaves_a_closed_recording(tmp_path: pathlib.Path) -> None:
     proc.communicate(timeout=60)
     recording = open_recording(path)
     assert recording.complete, recording.problems
+    assert recording.metadata["scene_name"] == "default"
