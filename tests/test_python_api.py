@@ -215,14 +215,16 @@ def test_two_threads_advancing_one_simulation_are_serialised_and_readers_see_who
 
 
 def test_ctrl_c_stops_a_long_advance_between_two_steps() -> None:
-    """advance(1e9) in a child process, sent SIGINT after a second: KeyboardInterrupt within a fraction of a
-    second, the simulation at the time it reached and still usable. Before: the call ran on."""
+    """advance(1e9) in a child process, sent SIGINT once the advance runs: KeyboardInterrupt within a fraction of
+    a second, the simulation at the time it reached and still usable. Before: the call ran on."""
     code = (
-        "import sys, time, tactile\n"
+        "import sys, threading, time, tactile\n"
         "sys.path.insert(0, sys.argv[1])\n"
         "from test_python_api import falling_block\n"
         "sim = tactile.Simulation(falling_block(4))\n"
-        "print('ready', flush=True)\n"
+        # Said from a thread, which runs only once advance() has let the GIL go: the signal then comes
+        # during the advance, never before it (where it would interrupt plain Python instead).
+        "threading.Timer(0.2, lambda: print('ready', flush=True)).start()\n"
         "t0 = time.monotonic()\n"
         "try:\n"
         "    sim.advance(1e9)\n"
@@ -235,9 +237,14 @@ def test_ctrl_c_stops_a_long_advance_between_two_steps() -> None:
     proc = subprocess.Popen([sys.executable, "-c", code, str(pathlib.Path(__file__).parent)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
-    time.sleep(1.0)
+    time.sleep(0.5)
     proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=10)
+    try:
+        out, err = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        raise AssertionError(f"the advance ran on 30 s after SIGINT; stdout {out!r}, stderr {err[-2000:]!r}") from None
     print(out)
     assert "interrupted after" in out, err
     assert float(out.split("after ")[1].split(" s")[0]) < 2.0
