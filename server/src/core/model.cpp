@@ -1,5 +1,7 @@
 #include "core/model.hpp"
 
+#include "core/model_build.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -115,22 +117,11 @@ double compute_element_critical_dt(const Vec3& X0, const Vec3& X1, const Vec3& X
   return 2.0 / std::sqrt(k_max / m_node);
 }
 
-template <class Real>
-Model<Real> build_model(const ModelSpec& spec) {
-  constexpr int W = kLanes<Real>;
-  const TetMesh& mesh = spec.mesh;
-  if (std::string err = check_mesh_structure(mesh); !err.empty()) throw ModelError("mesh: " + err);
+// ---- the stages (core/model_build.hpp) ----------------------------------------------------
 
-  Model<Real> model;
-  model.mesh = mesh;
-  model.n_nodes = mesh.n_nodes();
-  model.n_tets = mesh.n_tets();
-  const auto nn = static_cast<size_t>(model.n_nodes);
-  const auto nt = static_cast<size_t>(model.n_tets);
-
-  // Materials per region.
-  for (size_t r = 0; r < spec.materials.size(); ++r) {
-    const MaterialSpec& mat = spec.materials[r];
+void check_materials(const std::vector<MaterialSpec>& materials) {
+  for (size_t r = 0; r < materials.size(); ++r) {
+    const MaterialSpec& mat = materials[r];
     const std::string where = "materials[" + std::to_string(r) + "]";
     if (!(mat.E > 0) || !std::isfinite(mat.E))
       throw ModelError(where + ".E must be > 0 Pa, got " + std::to_string(mat.E));
@@ -139,14 +130,24 @@ Model<Real> build_model(const ModelSpec& spec) {
     if (!(mat.rho > 0) || !std::isfinite(mat.rho))
       throw ModelError(where + ".rho must be > 0 kg/m^3, got " + std::to_string(mat.rho));
   }
+}
 
-  // Rest volumes, orientation and per-element constants.
-  model.tet_model.resize(nt);
-  model.tet_volume.resize(nt);
-  model.tet_lambda.resize(nt);
-  model.tet_mu.resize(nt);
-  model.tet_altitude.resize(nt);
-  model.tet_dt.resize(nt);
+namespace {
+
+const MaterialSpec& material_of(const TetMesh& mesh, const std::vector<MaterialSpec>& materials, size_t e) {
+  const int32_t r = mesh.region_of(int32_t(e));
+  if (r < 0 || size_t(r) >= materials.size())
+    throw ModelError("tet " + std::to_string(e) + " is in region " + std::to_string(r) + " but materials has " +
+                     std::to_string(materials.size()) + " entries");
+  return materials[size_t(r)];
+}
+
+}  // namespace
+
+ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials) {
+  const auto nt = size_t(mesh.n_tets());
+  ElementConstants out;
+  out.volume.resize(nt);
   std::vector<int32_t> inverted, flat;
   for (size_t e = 0; e < nt; ++e) {
     const Tet& t = mesh.tets[e];
@@ -159,7 +160,7 @@ Model<Real> build_model(const ModelSpec& spec) {
       inverted.push_back(int32_t(e));
     else if (V <= 1e-9 * L * L * L)
       flat.push_back(int32_t(e));
-    model.tet_volume[e] = V;
+    out.volume[e] = V;
   }
   if (!inverted.empty() || !flat.empty()) {
     std::string msg = "mesh refused:";
@@ -170,69 +171,70 @@ Model<Real> build_model(const ModelSpec& spec) {
              list_ids(flat) + ")";
     throw ModelError(msg);
   }
-
-  model.m.assign(nn, Real(0));
-  std::vector<double> mass(nn, 0.0);
+  out.model.resize(nt);
+  out.lambda.resize(nt);
+  out.mu.resize(nt);
+  out.altitude.resize(nt);
+  out.dt.resize(nt);
   for (size_t e = 0; e < nt; ++e) {
-    const int32_t r = mesh.region_of(int32_t(e));
-    if (r < 0 || size_t(r) >= spec.materials.size())
-      throw ModelError("tet " + std::to_string(e) + " is in region " + std::to_string(r) + " but materials has " +
-                       std::to_string(spec.materials.size()) + " entries");
-    const MaterialSpec& mat = spec.materials[size_t(r)];
+    const MaterialSpec& mat = material_of(mesh, materials, e);
     const Lame lame = compute_lame(mat.E, mat.nu);
-    model.tet_model[e] = mat.model;
-    model.tet_lambda[e] = lame.lambda;
-    model.tet_mu[e] = lame.mu;
-    if (!can_invert(mat.model)) model.any_non_invertible = true;
+    out.model[e] = mat.model;
+    out.lambda[e] = lame.lambda;
+    out.mu[e] = lame.mu;
+    if (!can_invert(mat.model)) out.any_non_invertible = true;
     const Tet& t = mesh.tets[e];
     const Vec3 &x0 = mesh.X[size_t(t[0])], &x1 = mesh.X[size_t(t[1])], &x2 = mesh.X[size_t(t[2])],
                &x3 = mesh.X[size_t(t[3])];
-    model.tet_altitude[e] = compute_min_altitude(x0, x1, x2, x3);
-    model.tet_dt[e] = compute_element_critical_dt(x0, x1, x2, x3, lame.lambda, lame.mu, mat.rho);
-    const double m4 = mat.rho * model.tet_volume[e] / 4.0;  // section 4.1: lump by rows
-    for (int32_t id : t) mass[size_t(id)] += m4;
+    out.altitude[e] = compute_min_altitude(x0, x1, x2, x3);
+    out.dt[e] = compute_element_critical_dt(x0, x1, x2, x3, lame.lambda, lame.mu, mat.rho);
   }
-  model.dt_rest = *std::min_element(model.tet_dt.begin(), model.tet_dt.end());
+  return out;
+}
 
-  std::vector<int32_t> unreferenced;
-  model.inv_m.assign(nn, Real(0));
-  for (size_t i = 0; i < nn; ++i) {
-    model.m[i] = Real(mass[i]);
-    model.total_mass += mass[i];
-    if (mass[i] > 0)
-      model.inv_m[i] = Real(1.0 / mass[i]);
-    else
-      unreferenced.push_back(int32_t(i));
+std::vector<double> compute_lumped_masses(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
+                                          const std::vector<double>& volume) {
+  std::vector<double> mass(size_t(mesh.n_nodes()), 0.0);
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    const double m4 = material_of(mesh, materials, e).rho * volume[e] / 4.0;  // section 4.1: lump by rows
+    for (int32_t id : mesh.tets[e]) mass[size_t(id)] += m4;
   }
+  std::vector<int32_t> unreferenced;
+  for (size_t i = 0; i < mass.size(); ++i)
+    if (!(mass[i] > 0)) unreferenced.push_back(int32_t(i));
   if (!unreferenced.empty())
     throw ModelError("mesh has " + std::to_string(unreferenced.size()) + " node(s) in no tet (ids " +
                      list_ids(unreferenced) + "); compact the mesh first");
+  return mass;
+}
 
-  // Element order: a sweep of the body in layers across its longest axis,
-  // rows across its next longest, and along the shortest within a row, on a
-  // grid of cells the size of the elements. Threads take consecutive slabs of
-  // the sweep (integrator.threads parts, cut at equal element counts), so two
-  // parts meet on one layer of nodes. At least kMinPartElements per part:
-  // below that the hand-offs between threads cost more than the split saves
-  // (fem_bench --only=threads; docs/perf.md, Threads).
-  //
-  // A sweep, not a space-filling curve: the elements around a node follow
-  // one another within a layer or two, so the node arrays stream through
-  // the cache once a step, where a Morton curve comes back to a node's
-  // neighbours half the body later (fem_bench --large --only=passes, the
-  // elastic column at 1 M tets; docs/perf.md, Element and node order).
-  constexpr size_t kMinPartElements = 4096;
-  const auto n_parts =
-      static_cast<int32_t>(std::clamp<size_t>(nt / kMinPartElements, 1, size_t(std::max(1, spec.integrator.threads))));
-  std::vector<int32_t> order(nt);
+// Element order: a sweep of the body in layers across its longest axis,
+// rows across its next longest, and along the shortest within a row, on a
+// grid of cells the size of the elements. Threads take consecutive slabs of
+// the sweep (integrator.threads parts, cut at equal element counts), so two
+// parts meet on one layer of nodes. At least kMinPartElements per part:
+// below that the hand-offs between threads cost more than the split saves
+// (fem_bench --only=threads; docs/perf.md, Threads).
+//
+// A sweep, not a space-filling curve: the elements around a node follow
+// one another within a layer or two, so the node arrays stream through
+// the cache once a step, where a Morton curve comes back to a node's
+// neighbours half the body later (fem_bench --large --only=passes, the
+// elastic column at 1 M tets; docs/perf.md, Element and node order).
+ElementOrder compute_element_order(const TetMesh& mesh, const std::vector<double>& volume, int threads) {
+  const auto nt = size_t(mesh.n_tets());
+  ElementOrder out;
+  out.n_parts = static_cast<int32_t>(std::clamp<size_t>(nt / kMinPartElements, 1, size_t(std::max(1, threads))));
+  std::vector<int32_t>& order = out.order;
+  order.resize(nt);
   std::iota(order.begin(), order.end(), 0);
   {
-    double volume = 0;
-    for (double V : model.tet_volume) volume += V;
+    double total = 0;
+    for (double V : volume) total += V;
     const Aabb box = compute_aabb(mesh.X);
     const Vec3 extent = box.size();
-    const double cell = std::cbrt(6.0 * volume / double(nt));  // a cube of 6 tets of the mean volume
-    std::array<int, 3> axis{0, 1, 2};                          // slowest first
+    const double cell = std::cbrt(6.0 * total / double(nt));  // a cube of 6 tets of the mean volume
+    std::array<int, 3> axis{0, 1, 2};                         // slowest first
     std::stable_sort(axis.begin(), axis.end(), [&](int a, int b) { return extent[a] > extent[b]; });
     std::vector<std::array<int32_t, 3>> key(nt);
     for (size_t e = 0; e < nt; ++e) {
@@ -242,26 +244,34 @@ Model<Real> build_model(const ModelSpec& spec) {
     }
     std::stable_sort(order.begin(), order.end(), [&](int32_t a, int32_t b) { return key[size_t(a)] < key[size_t(b)]; });
   }
-  std::vector<int32_t> part_of(nt);
-  for (size_t k = 0; k < nt; ++k) part_of[size_t(order[k])] = int32_t(k * size_t(n_parts) / nt);
+  out.part_of.resize(nt);
+  for (size_t k = 0; k < nt; ++k) out.part_of[size_t(order[k])] = int32_t(k * size_t(out.n_parts) / nt);
   // Within a part, elements grouped by material (model and Lame parameters:
   // a group's kernel takes them once), each group in sweep order.
   std::stable_sort(order.begin(), order.end(), [&](int32_t a, int32_t b) {
-    if (part_of[size_t(a)] != part_of[size_t(b)]) return part_of[size_t(a)] < part_of[size_t(b)];
+    if (out.part_of[size_t(a)] != out.part_of[size_t(b)]) return out.part_of[size_t(a)] < out.part_of[size_t(b)];
     return mesh.region_of(a) < mesh.region_of(b);
   });
+  return out;
+}
 
-  // Lane blocks, one run per part and material, in strips of kStripBlocks
-  // blocks (see model.hpp).
-  std::vector<int32_t> first_block(size_t(n_parts), -1);
+// Lane blocks, one run per part and material, in strips of kStripBlocks
+// blocks (see model.hpp).
+template <class Real>
+LaneBlocks<Real> make_lane_blocks(const TetMesh& mesh, const ElementConstants& elements, const ElementOrder& eo) {
+  constexpr int W = kLanes<Real>;
+  const auto nt = size_t(mesh.n_tets());
+  const std::vector<int32_t>& order = eo.order;
+  LaneBlocks<Real> out;
+  out.first_block.assign(size_t(eo.n_parts), -1);
   for (size_t i = 0; i < nt;) {
-    const int32_t part = part_of[size_t(order[i])];
+    const int32_t part = eo.part_of[size_t(order[i])];
     const int32_t region = mesh.region_of(order[i]);
     size_t j = i;
-    while (j < nt && part_of[size_t(order[j])] == part && mesh.region_of(order[j]) == region) ++j;
-    if (first_block[size_t(part)] < 0) first_block[size_t(part)] = int32_t(model.blocks.size());
+    while (j < nt && eo.part_of[size_t(order[j])] == part && mesh.region_of(order[j]) == region) ++j;
+    if (out.first_block[size_t(part)] < 0) out.first_block[size_t(part)] = int32_t(out.blocks.size());
     const auto e0 = size_t(order[i]);
-    ElementGroup group{model.tet_model[e0], int32_t(model.blocks.size()), 0, model.tet_lambda[e0], model.tet_mu[e0]};
+    ElementGroup group{elements.model[e0], int32_t(out.blocks.size()), 0, elements.lambda[e0], elements.mu[e0]};
     for (size_t k = i; k < j; k += W * size_t(kStripBlocks)) {
       const size_t count = std::min(j - k, W * size_t(kStripBlocks));  // elements in this chunk
       const size_t n_blocks = (count + W - 1) / W;
@@ -275,95 +285,78 @@ Model<Real> build_model(const ModelSpec& spec) {
             for (int c = 0; c < 4; ++c) B.node4[c][l] = B.node4[0][0];
             for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
             B.V[l] = Real(0);
-            model.lane_tet.push_back(-1);
-            model.lane_dt.push_back(std::numeric_limits<double>::infinity());
+            out.lane_tet.push_back(-1);
+            out.lane_dt.push_back(std::numeric_limits<double>::infinity());
             continue;
           }
           const auto e = size_t(order[k + slot]);
           const Tet& t = mesh.tets[e];
-          for (int c = 0; c < 4; ++c) B.node4[c][l] = t[size_t(c)];  // the given id until renumbered below
+          for (int c = 0; c < 4; ++c) B.node4[c][l] = t[size_t(c)];  // the given id until renumbered
           const Vec3& X0 = mesh.X[size_t(t[0])];
           const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
           const glm::dmat3 Dinv = glm::inverse(Dm);  // glm is column-major: Dinv[col][row]
           for (int r = 0; r < 3; ++r)
             for (int c = 0; c < 3; ++c) B.Dinv[3 * r + c][l] = Real(Dinv[c][r]);
-          B.V[l] = Real(model.tet_volume[e]);
-          model.lane_tet.push_back(int32_t(e));
-          model.lane_dt.push_back(model.tet_dt[e]);
+          B.V[l] = Real(elements.volume[e]);
+          out.lane_tet.push_back(int32_t(e));
+          out.lane_dt.push_back(elements.dt[e]);
         }
-        model.blocks.push_back(B);
+        out.blocks.push_back(B);
       }
     }
-    group.end = int32_t(model.blocks.size());
-    model.groups.push_back(group);
+    group.end = int32_t(out.blocks.size());
+    out.groups.push_back(group);
     i = j;
   }
+  out.tet_lane.assign(nt, -1);
+  for (size_t k = 0; k < out.lane_tet.size(); ++k)
+    if (out.lane_tet[k] >= 0) out.tet_lane[size_t(out.lane_tet[k])] = int32_t(k);
+  return out;
+}
 
-  model.tet_lane.assign(nt, -1);
-  for (size_t k = 0; k < model.lane_tet.size(); ++k)
-    if (model.lane_tet[k] >= 0) model.tet_lane[size_t(model.lane_tet[k])] = int32_t(k);
+// Nodes renumbered in the order the blocks first touch them, so that the
+// element pass reads and adds into the node arrays nearly in sequence, a
+// few new cache lines a block: a stream the hardware prefetcher follows
+// with no prefetches in software (fem_bench --large --only=passes;
+// docs/perf.md, Element and node order).
+template <class Real>
+NodeNumbering compute_node_numbering(const LaneBlocks<Real>& lanes, int32_t n_parts, int32_t n_nodes) {
+  constexpr int W = kLanes<Real>;
+  const auto nn = size_t(n_nodes);
+  NodeNumbering out;
+  out.cut.assign(size_t(n_parts) + 1, 0);
+  out.node_model.assign(nn, -1);
+  out.node_given.assign(nn, -1);
+  int32_t next = 0;
+  for (int32_t p = 0; p < n_parts; ++p) {
+    // A part's node-pass range starts where its blocks start numbering,
+    // rounded to 16 nodes so that no cache line of a node array holds two
+    // parts' nodes.
+    if (p > 0) out.cut[size_t(p)] = std::max(out.cut[size_t(p) - 1], std::min(n_nodes, (next + 8) / 16 * 16));
+    if (lanes.first_block[size_t(p)] < 0) continue;
+    const int32_t b1 = p + 1 < n_parts ? lanes.first_block[size_t(p) + 1] : int32_t(lanes.blocks.size());
+    for (int32_t b = lanes.first_block[size_t(p)]; b < b1; ++b)
+      for (int c = 0; c < 4; ++c)
+        for (int l = 0; l < W; ++l) {
+          int32_t& id = out.node_model[size_t(lanes.blocks[size_t(b)].node4[c][l])];
+          if (id < 0) id = next++;
+        }
+  }
+  out.cut[size_t(n_parts)] = n_nodes;
+  for (size_t i = 0; i < nn; ++i) out.node_given[size_t(out.node_model[i])] = int32_t(i);
+  return out;
+}
 
-  // Nodes renumbered in the order the blocks first touch them, so that the
-  // element pass reads and adds into the node arrays nearly in sequence, a
-  // few new cache lines a block: a stream the hardware prefetcher follows
-  // with no prefetches in software (fem_bench --large --only=passes;
-  // docs/perf.md, Element and node order). Everything the model holds uses
-  // these numbers; node_given and node_model translate.
-  std::vector<int32_t> cut(size_t(n_parts) + 1, 0);
-  model.node_model.assign(nn, -1);
-  model.node_given.assign(nn, -1);
-  {
-    int32_t next = 0;
-    for (int32_t p = 0; p < n_parts; ++p) {
-      // A part's node-pass range starts where its blocks start numbering,
-      // rounded to 16 nodes so that no cache line of a node array holds two
-      // parts' nodes.
-      if (p > 0) cut[size_t(p)] = std::max(cut[size_t(p) - 1], std::min(int32_t(nn), (next + 8) / 16 * 16));
-      if (first_block[size_t(p)] < 0) continue;
-      const int32_t b1 = p + 1 < n_parts ? first_block[size_t(p) + 1] : int32_t(model.blocks.size());
-      for (int32_t b = first_block[size_t(p)]; b < b1; ++b)
-        for (int c = 0; c < 4; ++c)
-          for (int l = 0; l < W; ++l) {
-            int32_t& id = model.node_model[size_t(model.blocks[size_t(b)].node4[c][l])];
-            if (id < 0) id = next++;
-          }
-    }
-    cut[size_t(n_parts)] = int32_t(nn);
-  }
-  for (size_t i = 0; i < nn; ++i) model.node_given[size_t(model.node_model[i])] = int32_t(i);
-  for (ElementBlock<Real>& B : model.blocks)
-    for (int c = 0; c < 4; ++c)
-      for (int l = 0; l < W; ++l) B.node4[c][l] = 4 * model.node_model[size_t(B.node4[c][l])];
-  for (size_t i = 0; i < nn; ++i) model.mesh.X[size_t(model.node_model[i])] = mesh.X[i];
-  for (Tet& t : model.mesh.tets)
-    for (int32_t& id : t) id = model.node_model[size_t(id)];
-  {
-    std::vector<double> given = mass;
-    for (size_t i = 0; i < nn; ++i) {
-      const auto k = size_t(model.node_model[i]);
-      mass[k] = given[i];
-      model.m[k] = Real(given[i]);
-      model.inv_m[k] = Real(1.0 / given[i]);
-    }
-  }
+BoundarySets compute_boundary_sets(const ModelSpec& spec, const std::vector<int32_t>& node_model,
+                                   const std::vector<double>& mass) {
   // A node set names nodes as the mesh gave them.
   auto select = [&](const NodeSelector& where) {
-    std::vector<int32_t> nodes = select_nodes(mesh, where);
-    for (int32_t& i : nodes) i = model.node_model[size_t(i)];
+    std::vector<int32_t> nodes = select_nodes(spec.mesh, where);
+    for (int32_t& i : nodes) i = node_model[size_t(i)];
     std::sort(nodes.begin(), nodes.end());
     return nodes;
   };
-
-  model.parts.resize(size_t(n_parts));
-  for (int32_t p = n_parts - 1; p >= 0; --p) {
-    ModelPart& part = model.parts[size_t(p)];
-    part.block_end = p + 1 < n_parts ? model.parts[size_t(p) + 1].block_begin : int32_t(model.blocks.size());
-    part.block_begin = first_block[size_t(p)] < 0 ? part.block_end : first_block[size_t(p)];
-    part.node_begin = cut[size_t(p)];
-    part.node_end = cut[size_t(p) + 1];
-  }
-
-  // Boundary conditions and loads.
+  BoundarySets out;
   for (size_t k = 0; k < spec.essential.size(); ++k) {
     const EssentialBc& bc = spec.essential[k];
     EssentialSet set{bc, select(bc.where), bc.angle.has_value() || bc.shift.has_value()};
@@ -372,14 +365,13 @@ Model<Real> build_model(const ModelSpec& spec) {
                        " selects no node");
     if (bc.angle && !(glm::length(bc.axis) > 0))
       throw ModelError("boundary condition " + std::to_string(k) + " rotates about a zero axis");
-    model.constrained.insert(model.constrained.end(), set.nodes.begin(), set.nodes.end());
-    model.essential.push_back(std::move(set));
+    out.constrained.insert(out.constrained.end(), set.nodes.begin(), set.nodes.end());
+    out.essential.push_back(std::move(set));
   }
-  std::sort(model.constrained.begin(), model.constrained.end());
-  const size_t before = model.constrained.size();
-  model.constrained.erase(std::unique(model.constrained.begin(), model.constrained.end()), model.constrained.end());
-  if (model.constrained.size() != before)
-    throw ModelError("boundary conditions overlap: a node is held by two of them");
+  std::sort(out.constrained.begin(), out.constrained.end());
+  const size_t before = out.constrained.size();
+  out.constrained.erase(std::unique(out.constrained.begin(), out.constrained.end()), out.constrained.end());
+  if (out.constrained.size() != before) throw ModelError("boundary conditions overlap: a node is held by two of them");
 
   for (size_t k = 0; k < spec.loads.size(); ++k) {
     const NaturalLoad& load = spec.loads[k];
@@ -390,11 +382,15 @@ Model<Real> build_model(const ModelSpec& spec) {
     double sum = 0;
     for (int32_t i : set.nodes) sum += mass[size_t(i)];
     for (int32_t i : set.nodes) set.weight.push_back(mass[size_t(i)] / sum);
-    model.loads.push_back(std::move(set));
+    out.loads.push_back(std::move(set));
   }
+  return out;
+}
 
-  for (size_t j = 0; j < spec.proxies.size(); ++j) {
-    const ProxySpec& proxy = spec.proxies[j];
+ProxySetup check_proxies(const std::vector<ProxySpec>& proxies, const std::vector<HandSpec>& hands) {
+  ProxySetup out;
+  for (size_t j = 0; j < proxies.size(); ++j) {
+    const ProxySpec& proxy = proxies[j];
     const std::string where = "proxy " + std::to_string(j) + (proxy.name.empty() ? "" : " ('" + proxy.name + "')");
     const ProxyGeometry& g = proxy.geometry;
     auto positive = [&](double value, const char* field) {
@@ -417,16 +413,16 @@ Model<Real> build_model(const ModelSpec& spec) {
       throw ModelError(where + ": orientation must be a unit quaternion, |q| = " + std::to_string(qn));
     if (!std::isfinite(glm::length(proxy.pose.position))) throw ModelError(where + ": position must be finite");
     for (size_t k = 0; k < j; ++k)
-      if (!proxy.name.empty() && spec.proxies[k].name == proxy.name)
+      if (!proxy.name.empty() && proxies[k].name == proxy.name)
         throw ModelError(where + ": name used twice (also proxy " + std::to_string(k) + ")");
     ProxySpec kept = proxy;
     int32_t hand = -1;
     Pose offset;
     if (!proxy.hand.empty()) {
-      for (size_t h = 0; h < spec.hands.size(); ++h)
-        if (spec.hands[h].name == proxy.hand) hand = int32_t(h);
+      for (size_t h = 0; h < hands.size(); ++h)
+        if (hands[h].name == proxy.hand) hand = int32_t(h);
       if (hand < 0) throw ModelError(where + ": hand '" + proxy.hand + "' is not among the hands");
-      const HandSpec& hs = spec.hands[size_t(hand)];
+      const HandSpec& hs = hands[size_t(hand)];
       if (!proxy.device.empty() && proxy.device != hs.device)
         throw ModelError(where + ": device '" + proxy.device + "' differs from its hand's ('" + hs.device +
                          "'); a hand's proxies go to the hand's device");
@@ -436,19 +432,19 @@ Model<Real> build_model(const ModelSpec& spec) {
     }
     if (kept.device.empty()) throw ModelError(where + ": device must name the channel that drives it");
     int32_t device = -1;
-    for (size_t d = 0; d < model.devices.size(); ++d)
-      if (model.devices[d] == kept.device) device = int32_t(d);
+    for (size_t d = 0; d < out.devices.size(); ++d)
+      if (out.devices[d] == kept.device) device = int32_t(d);
     if (device < 0) {
-      device = int32_t(model.devices.size());
-      model.devices.push_back(kept.device);
+      device = int32_t(out.devices.size());
+      out.devices.push_back(kept.device);
     }
-    model.proxies.push_back(kept);
-    model.proxy_hand.push_back(hand);
-    model.proxy_offset.push_back(offset);
-    model.proxy_device.push_back(device);
+    out.proxies.push_back(kept);
+    out.proxy_hand.push_back(hand);
+    out.proxy_offset.push_back(offset);
+    out.proxy_device.push_back(device);
   }
-  for (size_t h = 0; h < spec.hands.size(); ++h) {
-    const HandSpec& hs = spec.hands[h];
+  for (size_t h = 0; h < hands.size(); ++h) {
+    const HandSpec& hs = hands[h];
     const std::string where = "hand " + std::to_string(h) + (hs.name.empty() ? "" : " ('" + hs.name + "')");
     if (hs.name.empty()) throw ModelError(where + ": name must not be empty");
     if (hs.device.empty()) throw ModelError(where + ": device must name the channel that drives it");
@@ -456,41 +452,132 @@ Model<Real> build_model(const ModelSpec& spec) {
     if (!(std::fabs(std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z) - 1.0) < 1e-6))
       throw ModelError(where + ": orientation must be a unit quaternion");
     for (size_t k = 0; k < h; ++k)
-      if (spec.hands[k].name == hs.name)
-        throw ModelError(where + ": name used twice (also hand " + std::to_string(k) + ")");
-    if (std::find(model.proxy_hand.begin(), model.proxy_hand.end(), int32_t(h)) == model.proxy_hand.end())
+      if (hands[k].name == hs.name) throw ModelError(where + ": name used twice (also hand " + std::to_string(k) + ")");
+    if (std::find(out.proxy_hand.begin(), out.proxy_hand.end(), int32_t(h)) == out.proxy_hand.end())
       throw ModelError(where + ": no proxy belongs to it");
-    model.hands.push_back(hs);
+    out.hands.push_back(hs);
+  }
+  return out;
+}
+
+void check_settings(const Effects& effects, const IntegratorSpec& integrator) {
+  if (effects.damping && !(effects.alpha >= 0))
+    throw ModelError("damping alpha must be >= 0 1/s, got " + std::to_string(effects.alpha));
+  if (!(integrator.safety > 0 && integrator.safety <= 1))
+    throw ModelError("integrator.safety must lie in (0, 1], got " + std::to_string(integrator.safety));
+  if (integrator.dt < 0) throw ModelError("integrator.dt must be >= 0 s");
+  if (integrator.threads < 1) throw ModelError("integrator.threads must be >= 1");
+}
+
+std::vector<Tet> compute_embedded_nodes(const EmbeddedSurface& surface, const std::vector<int32_t>& node_model) {
+  std::vector<Tet> out;
+  out.reserve(surface.nodes.size());
+  for (size_t v = 0; v < surface.nodes.size(); ++v) {
+    Tet t;
+    for (size_t k = 0; k < 4; ++k) {
+      const int32_t n = surface.nodes[v][k];
+      if (n < 0 || size_t(n) >= node_model.size())
+        throw ModelError("surface vertex " + std::to_string(v) + " follows node " + std::to_string(n) +
+                         ", which the mesh lacks (bound to another mesh)");
+      t[k] = node_model[size_t(n)];
+    }
+    out.push_back(t);
+  }
+  return out;
+}
+
+// ---- the model -------------------------------------------------------------------------------
+
+template <class Real>
+Model<Real> build_model(const ModelSpec& spec) {
+  constexpr int W = kLanes<Real>;
+  const TetMesh& mesh = spec.mesh;
+  if (std::string err = check_mesh_structure(mesh); !err.empty()) throw ModelError("mesh: " + err);
+  check_materials(spec.materials);
+  ElementConstants elements = compute_element_constants(mesh, spec.materials);
+  const std::vector<double> given_mass = compute_lumped_masses(mesh, spec.materials, elements.volume);
+  const ElementOrder order = compute_element_order(mesh, elements.volume, spec.integrator.threads);
+  LaneBlocks<Real> lanes = make_lane_blocks<Real>(mesh, elements, order);
+  NodeNumbering numbers = compute_node_numbering(lanes, order.n_parts, mesh.n_nodes());
+
+  Model<Real> model;
+  model.n_nodes = mesh.n_nodes();
+  model.n_tets = mesh.n_tets();
+  const auto nn = static_cast<size_t>(model.n_nodes);
+
+  // Everything the model holds uses the model's node ids; node_given and node_model translate.
+  model.mesh = mesh;
+  for (size_t i = 0; i < nn; ++i) model.mesh.X[size_t(numbers.node_model[i])] = mesh.X[i];
+  for (Tet& t : model.mesh.tets)
+    for (int32_t& id : t) id = numbers.node_model[size_t(id)];
+  for (ElementBlock<Real>& B : lanes.blocks)
+    for (int c = 0; c < 4; ++c)
+      for (int l = 0; l < W; ++l) B.node4[c][l] = 4 * numbers.node_model[size_t(B.node4[c][l])];
+  std::vector<double> mass(nn);
+  model.m.resize(nn);
+  model.inv_m.resize(nn);
+  for (size_t i = 0; i < nn; ++i) {
+    const auto k = size_t(numbers.node_model[i]);
+    mass[k] = given_mass[i];
+    model.m[k] = Real(given_mass[i]);
+    model.inv_m[k] = Real(1.0 / given_mass[i]);
+    model.total_mass += given_mass[i];
   }
 
+  model.tet_model = std::move(elements.model);
+  model.tet_volume = std::move(elements.volume);
+  model.tet_lambda = std::move(elements.lambda);
+  model.tet_mu = std::move(elements.mu);
+  model.tet_altitude = std::move(elements.altitude);
+  model.tet_dt = std::move(elements.dt);
+  model.any_non_invertible = elements.any_non_invertible;
+  model.dt_rest = *std::min_element(model.tet_dt.begin(), model.tet_dt.end());
+
+  model.blocks = std::move(lanes.blocks);
+  model.groups = std::move(lanes.groups);
+  model.lane_tet = std::move(lanes.lane_tet);
+  model.lane_dt = std::move(lanes.lane_dt);
+  model.tet_lane = std::move(lanes.tet_lane);
+  const int32_t n_parts = order.n_parts;
+  model.parts.resize(size_t(n_parts));
+  for (int32_t p = n_parts - 1; p >= 0; --p) {
+    ModelPart& part = model.parts[size_t(p)];
+    part.block_end = p + 1 < n_parts ? model.parts[size_t(p) + 1].block_begin : int32_t(model.blocks.size());
+    part.block_begin = lanes.first_block[size_t(p)] < 0 ? part.block_end : lanes.first_block[size_t(p)];
+    part.node_begin = numbers.cut[size_t(p)];
+    part.node_end = numbers.cut[size_t(p) + 1];
+  }
+
+  BoundarySets boundary = compute_boundary_sets(spec, numbers.node_model, mass);
+  model.essential = std::move(boundary.essential);
+  model.constrained = std::move(boundary.constrained);
+  model.loads = std::move(boundary.loads);
+
+  ProxySetup proxies = check_proxies(spec.proxies, spec.hands);
+  model.proxies = std::move(proxies.proxies);
+  model.hands = std::move(proxies.hands);
+  model.proxy_hand = std::move(proxies.proxy_hand);
+  model.proxy_offset = std::move(proxies.proxy_offset);
+  model.devices = std::move(proxies.devices);
+  model.proxy_device = std::move(proxies.proxy_device);
+
+  check_settings(spec.effects, spec.integrator);
   model.effects = spec.effects;
-  if (model.effects.damping && !(model.effects.alpha >= 0))
-    throw ModelError("damping alpha must be >= 0 1/s, got " + std::to_string(model.effects.alpha));
   model.integrator = spec.integrator;
-  if (!(model.integrator.safety > 0 && model.integrator.safety <= 1))
-    throw ModelError("integrator.safety must lie in (0, 1], got " + std::to_string(model.integrator.safety));
-  if (model.integrator.dt < 0) throw ModelError("integrator.dt must be >= 0 s");
-  if (model.integrator.threads < 1) throw ModelError("integrator.threads must be >= 1");
   model.surface = compute_boundary_faces(model.mesh);
   if (spec.surface) {
-    const EmbeddedSurface& e = *spec.surface;
     model.embedded = spec.surface;
-    model.embedded_nodes.reserve(e.nodes.size());
-    for (size_t v = 0; v < e.nodes.size(); ++v) {
-      Tet t;
-      for (size_t k = 0; k < 4; ++k) {
-        const int32_t n = e.nodes[v][k];
-        if (n < 0 || n >= model.n_nodes)
-          throw ModelError("surface vertex " + std::to_string(v) + " follows node " + std::to_string(n) +
-                           ", which the mesh lacks (bound to another mesh)");
-        t[k] = model.node_model[size_t(n)];
-      }
-      model.embedded_nodes.push_back(t);
-    }
+    model.embedded_nodes = compute_embedded_nodes(*spec.surface, numbers.node_model);
   }
+  model.node_model = std::move(numbers.node_model);
+  model.node_given = std::move(numbers.node_given);
   return model;
 }
 
+template LaneBlocks<float> make_lane_blocks<float>(const TetMesh&, const ElementConstants&, const ElementOrder&);
+template LaneBlocks<double> make_lane_blocks<double>(const TetMesh&, const ElementConstants&, const ElementOrder&);
+template NodeNumbering compute_node_numbering<float>(const LaneBlocks<float>&, int32_t, int32_t);
+template NodeNumbering compute_node_numbering<double>(const LaneBlocks<double>&, int32_t, int32_t);
 template Model<float> build_model<float>(const ModelSpec&);
 template Model<double> build_model<double>(const ModelSpec&);
 

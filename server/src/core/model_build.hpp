@@ -1,0 +1,113 @@
+// The stages of build_model (core/model.hpp), in order, each a function of
+// plain data that returns plain data, with its own tests
+// (server/tests/core/model_build_test.cpp). build_model runs them and moves
+// what they return into the Model:
+//
+//   check_materials            every material's E, nu and rho in range
+//   compute_element_constants  per tet: rest volume (inverted and flat tets
+//                              refused, by id), material, Lame parameters,
+//                              smallest altitude, critical step at rest
+//   compute_lumped_masses      per node: its share of its tets' mass (a node
+//                              in no tet refused)
+//   compute_element_order      the sweep the element pass follows, cut into
+//                              parts for threads, grouped by material in each
+//   make_lane_blocks           the lane blocks, in strips, with their groups
+//                              and the maps between tets and lanes
+//   compute_node_numbering     the model's node ids: the order the blocks
+//                              first touch the nodes, and each part's range
+//   compute_boundary_sets      essential sets and loads, in model ids
+//   check_proxies              the proxies, their hands and devices
+//   check_settings             damping and the integrator's settings
+//   compute_embedded_nodes     a fine surface's nodes, in model ids
+//
+// A ModelError names what is refused.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/model.hpp"
+
+namespace tactile {
+
+void check_materials(const std::vector<MaterialSpec>& materials);
+
+// Per tet (n_tets each), in the mesh's tet ids.
+struct ElementConstants {
+  std::vector<MaterialModel> model;
+  std::vector<double> volume;  // rest volume [m^3]
+  std::vector<double> lambda;  // Lame parameters [Pa]
+  std::vector<double> mu;
+  std::vector<double> altitude;  // smallest rest altitude [m]
+  std::vector<double> dt;        // critical step at rest, exact per element [s]
+  bool any_non_invertible = false;
+};
+ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials);
+
+// Row-sum lumping, section 4.1: each tet gives a quarter of its mass to each
+// corner [kg] (n_nodes, the mesh's ids).
+std::vector<double> compute_lumped_masses(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
+                                          const std::vector<double>& volume);
+
+// The tets in the element pass's order (a permutation of the tet ids), the
+// part each falls in (by tet id), and how many parts: `threads` at most, and
+// kMinPartElements tets a part at least.
+struct ElementOrder {
+  std::vector<int32_t> order;
+  std::vector<int32_t> part_of;
+  int32_t n_parts = 1;
+};
+inline constexpr size_t kMinPartElements = 4096;
+ElementOrder compute_element_order(const TetMesh& mesh, const std::vector<double>& volume, int threads);
+
+// The lane blocks with the mesh's node ids (compute_node_numbering renumbers them), one
+// run per part and material; a part's first block (-1 for a part without
+// one). lane_tet, lane_dt and tet_lane as in Model.
+template <class Real>
+struct LaneBlocks {
+  std::vector<ElementBlock<Real>> blocks;
+  std::vector<ElementGroup> groups;
+  std::vector<int32_t> lane_tet;
+  std::vector<double> lane_dt;
+  std::vector<int32_t> tet_lane;
+  std::vector<int32_t> first_block;  // per part
+};
+template <class Real>
+LaneBlocks<Real> make_lane_blocks(const TetMesh& mesh, const ElementConstants& elements, const ElementOrder& order);
+
+// The model's node ids: node_model[given] and node_given[model], numbered in
+// the order the blocks first touch them; cut[p] where part p's node range
+// starts (a multiple of 16 but the last, n_parts + 1 entries).
+struct NodeNumbering {
+  std::vector<int32_t> node_model, node_given, cut;
+};
+template <class Real>
+NodeNumbering compute_node_numbering(const LaneBlocks<Real>& lanes, int32_t n_parts, int32_t n_nodes);
+
+// The essential sets (nodes held by two of them refused) and the loads, each
+// load's weights by the nodes' masses; in model ids. `mesh` in the spec's ids,
+// `mass` in the model's.
+struct BoundarySets {
+  std::vector<EssentialSet> essential;
+  std::vector<int32_t> constrained;  // sorted unique
+  std::vector<LoadSet> loads;
+};
+BoundarySets compute_boundary_sets(const ModelSpec& spec, const std::vector<int32_t>& node_model,
+                                   const std::vector<double>& mass);
+
+struct ProxySetup {
+  std::vector<ProxySpec> proxies;  // device filled in from the hand for hand proxies
+  std::vector<HandSpec> hands;
+  std::vector<int32_t> proxy_hand;    // hand index per proxy, -1 if none
+  std::vector<Pose> proxy_offset;     // pose in its hand's frame (identity if no hand)
+  std::vector<std::string> devices;   // distinct device channels, in order of first use
+  std::vector<int32_t> proxy_device;  // device index per proxy
+};
+ProxySetup check_proxies(const std::vector<ProxySpec>& proxies, const std::vector<HandSpec>& hands);
+
+void check_settings(const Effects& effects, const IntegratorSpec& integrator);
+
+// The four nodes each vertex of a fine surface follows, in model ids.
+std::vector<Tet> compute_embedded_nodes(const EmbeddedSurface& surface, const std::vector<int32_t>& node_model);
+
+}  // namespace tactile
