@@ -1,0 +1,85 @@
+#include "core/quadratic.hpp"
+
+#include <algorithm>
+#include <map>
+
+namespace tactile {
+
+namespace {
+
+std::array<double, 4> barycentric(const Vec3& xi) { return {1.0 - xi.x - xi.y - xi.z, xi.x, xi.y, xi.z}; }
+
+// d L_i / d xi.
+const std::array<Vec3, 4> kDL = {Vec3(-1, -1, -1), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
+
+}  // namespace
+
+std::array<double, kP2Nodes> p2_shape(const Vec3& xi) {
+  const std::array<double, 4> L = barycentric(xi);
+  std::array<double, kP2Nodes> N{};
+  for (int i = 0; i < 4; ++i) N[size_t(i)] = L[size_t(i)] * (2 * L[size_t(i)] - 1);
+  for (int k = 0; k < 6; ++k) N[size_t(4 + k)] = 4 * L[size_t(kTetEdges[k][0])] * L[size_t(kTetEdges[k][1])];
+  return N;
+}
+
+std::array<Vec3, kP2Nodes> p2_shape_gradients(const Vec3& xi) {
+  const std::array<double, 4> L = barycentric(xi);
+  std::array<Vec3, kP2Nodes> G{};
+  for (int i = 0; i < 4; ++i) G[size_t(i)] = (4 * L[size_t(i)] - 1) * kDL[size_t(i)];
+  for (int k = 0; k < 6; ++k) {
+    const auto i = size_t(kTetEdges[k][0]), j = size_t(kTetEdges[k][1]);
+    G[size_t(4 + k)] = 4.0 * (L[j] * kDL[i] + L[i] * kDL[j]);
+  }
+  return G;
+}
+
+Vec3 p2_node_xi(int a) {
+  static const std::array<Vec3, 4> corner = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
+  if (a < 4) return corner[size_t(a)];
+  return 0.5 * (corner[size_t(kTetEdges[a - 4][0])] + corner[size_t(kTetEdges[a - 4][1])]);
+}
+
+const std::array<QuadraturePoint, 4>& tet_quadrature_4() {
+  // Barycentric (a, b, b, b) and its permutations, a = (5 + 3 sqrt 5) / 20, b = (5 - sqrt 5) / 20.
+  static const std::array<QuadraturePoint, 4> rule = [] {
+    const double a = 0.58541019662496845446, b = 0.13819660112501051518;
+    std::array<QuadraturePoint, 4> r{};
+    r[0] = {Vec3(b, b, b), 1.0 / 24};  // L0 = a
+    r[1] = {Vec3(a, b, b), 1.0 / 24};
+    r[2] = {Vec3(b, a, b), 1.0 / 24};
+    r[3] = {Vec3(b, b, a), 1.0 / 24};
+    return r;
+  }();
+  return rule;
+}
+
+const std::array<double, kP2Nodes>& p2_lumped_mass_fractions() {
+  // The consistent mass of a straight T10 is rho V / 420 times a matrix
+  // whose diagonal is 6 at the corners and 32 at the edges (sum 216).
+  static const std::array<double, kP2Nodes> f = {6.0 / 216,  6.0 / 216,  6.0 / 216,  6.0 / 216,  32.0 / 216,
+                                                 32.0 / 216, 32.0 / 216, 32.0 / 216, 32.0 / 216, 32.0 / 216};
+  return f;
+}
+
+QuadraticNodes make_quadratic_nodes(const TetMesh& mesh) {
+  QuadraticNodes out;
+  out.X = mesh.X;
+  out.edges.resize(mesh.tets.size());
+  std::map<std::array<int32_t, 2>, int32_t> made;
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    const Tet& t = mesh.tets[e];
+    for (int k = 0; k < 6; ++k) {
+      const int32_t a = t[size_t(kTetEdges[k][0])], b = t[size_t(kTetEdges[k][1])];
+      const std::array<int32_t, 2> key{std::min(a, b), std::max(a, b)};
+      auto [it, inserted] = made.try_emplace(key, int32_t(out.X.size()));
+      if (inserted) {
+        out.X.push_back(0.5 * (mesh.X[size_t(a)] + mesh.X[size_t(b)]));
+        out.edge_corners.push_back(key);
+      }
+      out.edges[e][size_t(k)] = it->second;
+    }
+  }
+  return out;
+}
+
+}  // namespace tactile

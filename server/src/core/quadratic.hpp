@@ -1,0 +1,62 @@
+// The 10-node quadratic tetrahedron (P2, "T10"): its shape functions, the
+// quadrature its element pass integrates with, its lumped mass, and the edge
+// nodes a linear mesh gains to become one. Pure functions of plain data.
+//
+// Node order, VTK's (VTK_QUADRATIC_TETRA, so a VTU shows it as it is): the
+// corners 0-3, then the edge midpoints 4 (0-1), 5 (1-2), 6 (0-2), 7 (0-3),
+// 8 (1-3), 9 (2-3). In reference coordinates xi = (r, s, t), the barycentric
+// coordinates are L0 = 1 - r - s - t, L1 = r, L2 = s, L3 = t; a corner's
+// shape function is L_i (2 L_i - 1), an edge's 4 L_i L_j.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "core/mesh.hpp"
+
+namespace tactile {
+
+inline constexpr int kP2Nodes = 10;
+// The corners of each edge node 4..9, in VTK's order.
+inline constexpr int kTetEdges[6][2] = {{0, 1}, {1, 2}, {0, 2}, {0, 3}, {1, 3}, {2, 3}};
+using TetEdges = std::array<int32_t, 6>;  // the node ids of a tet's six edge nodes, in kTetEdges order
+
+// The ten shape functions at reference point xi.
+std::array<double, kP2Nodes> p2_shape(const Vec3& xi);
+// Their gradients in reference coordinates (d N_a / d xi).
+std::array<Vec3, kP2Nodes> p2_shape_gradients(const Vec3& xi);
+// The reference coordinates of node a (corners at the unit tet's vertices).
+Vec3 p2_node_xi(int a);
+
+// A quadrature point in reference coordinates and its weight: the weights sum
+// to 1/6, the reference tet's volume, so that a physical integral is
+// sum w_q f(xi_q) det J.
+struct QuadraturePoint {
+  Vec3 xi;
+  double weight;
+};
+// Four points, exact for polynomials of degree 2: the stiffness of linear
+// elasticity on an affine P2 tet (gradients of degree 1, their products of
+// degree 2) exactly, and the nonlinear models' stress at the points a
+// degree-2 rule needs (Keast's rule 2; Zienkiewicz, Taylor & Zhu, table 6.3).
+const std::array<QuadraturePoint, 4>& tet_quadrature_4();
+
+// The HRZ lumped mass of a straight-sided T10 as fractions of its mass
+// (Hinton, Rock & Zienkiewicz 1976): each node's diagonal of the consistent
+// mass matrix, scaled so the ten sum to the element's mass. Corners get
+// 1/36 and edges 4/27, every one positive; row-sum lumping would give the
+// corners -1/20, a negative mass no explicit step survives.
+const std::array<double, kP2Nodes>& p2_lumped_mass_fractions();
+
+// A linear mesh made quadratic: one node at the midpoint of each edge,
+// shared by every tet around the edge, appended after the corners (which keep
+// their ids). edges[e] lists tet e's six edge nodes in kTetEdges order.
+struct QuadraticNodes {
+  std::vector<Vec3> X;                               // corners, then edge midpoints [m] (n_nodes + n_edges)
+  std::vector<TetEdges> edges;                       // per tet (n_tets)
+  std::vector<std::array<int32_t, 2>> edge_corners;  // per edge node (n_edges): the corners it lies between
+};
+QuadraticNodes make_quadratic_nodes(const TetMesh& mesh);
+
+}  // namespace tactile

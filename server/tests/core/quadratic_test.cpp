@@ -1,0 +1,155 @@
+// The 10-node tetrahedron (core/quadratic.hpp): its shape functions against
+// their defining properties, its quadrature against exact integrals, its
+// lumped mass against the consistent mass integrated independently, and the
+// edge nodes a linear mesh gains.
+#include "core/quadratic.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <map>
+#include <random>
+#include <vector>
+
+#include <glm/geometric.hpp>
+
+#include "mesh/primitives.hpp"
+
+namespace tactile {
+namespace {
+
+// The reference tet's integral of f, by an 8 x 8 x 8 Gauss-Legendre product
+// on the unit cube collapsed onto the tet (Duffy): r = u, s = v (1 - u),
+// t = w (1 - u) (1 - v), dV = (1 - u)^2 (1 - v) du dv dw. Exact for the
+// polynomials of degree 8 and less that these tests integrate, and
+// independent of the rule under test.
+double integrate(const std::function<double(const Vec3&)>& f) {
+  static const double x[8] = {-0.9602898564975363, -0.7966664774136267, -0.5255324099163290, -0.1834346424956498,
+                              0.1834346424956498,  0.5255324099163290,  0.7966664774136267,  0.9602898564975363};
+  static const double w[8] = {0.1012285362903763, 0.2223810344533745, 0.3137066458778873, 0.3626837833783620,
+                              0.3626837833783620, 0.3137066458778873, 0.2223810344533745, 0.1012285362903763};
+  double sum = 0;
+  for (int i = 0; i < 8; ++i)
+    for (int j = 0; j < 8; ++j)
+      for (int k = 0; k < 8; ++k) {
+        const double u = 0.5 * (x[i] + 1), v = 0.5 * (x[j] + 1), t = 0.5 * (x[k] + 1);
+        const Vec3 xi(u, v * (1 - u), t * (1 - u) * (1 - v));
+        sum += 0.125 * w[i] * w[j] * w[k] * (1 - u) * (1 - u) * (1 - v) * f(xi);
+      }
+  return sum;
+}
+
+std::vector<Vec3> random_points(int n) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(0, 1);
+  std::vector<Vec3> out;
+  while (int(out.size()) < n) {
+    const Vec3 p(unit(rng), unit(rng), unit(rng));
+    if (p.x + p.y + p.z <= 1) out.push_back(p);
+  }
+  return out;
+}
+
+TEST(P2Shape, APartitionOfUnityWhoseGradientsSumToZero) {
+  for (const Vec3& xi : random_points(50)) {
+    const auto N = p2_shape(xi);
+    const auto G = p2_shape_gradients(xi);
+    double sum = 0;
+    Vec3 grad(0.0);
+    for (int a = 0; a < kP2Nodes; ++a) sum += N[size_t(a)], grad += G[size_t(a)];
+    EXPECT_NEAR(sum, 1.0, 1e-14);
+    EXPECT_NEAR(glm::length(grad), 0.0, 1e-13);
+  }
+}
+
+TEST(P2Shape, EachIsOneAtItsNodeAndZeroAtTheOthers) {
+  for (int b = 0; b < kP2Nodes; ++b) {
+    const auto N = p2_shape(p2_node_xi(b));
+    for (int a = 0; a < kP2Nodes; ++a) EXPECT_NEAR(N[size_t(a)], a == b ? 1.0 : 0.0, 1e-15) << a << " at " << b;
+  }
+}
+
+TEST(P2Shape, GradientsAreTheFunctionsDerivatives) {
+  const double h = 1e-6;
+  for (const Vec3& xi : random_points(20)) {
+    const auto G = p2_shape_gradients(xi);
+    for (int k = 0; k < 3; ++k) {
+      Vec3 d(0.0);
+      d[k] = h;
+      const auto Np = p2_shape(xi + d), Nm = p2_shape(xi - d);
+      for (int a = 0; a < kP2Nodes; ++a)
+        EXPECT_NEAR((Np[size_t(a)] - Nm[size_t(a)]) / (2 * h), G[size_t(a)][k], 1e-8) << a << " along " << k;
+    }
+  }
+}
+
+// Quadratic fields are reproduced exactly: the interpolant of x(xi) = q(xi)
+// through the ten nodes is q itself, for any quadratic q.
+TEST(P2Shape, InterpolatesEveryQuadraticExactly) {
+  auto q = [](const Vec3& p) { return 0.3 + p.x - 2 * p.y + 0.5 * p.z + p.x * p.y - 3 * p.z * p.z + 2 * p.x * p.z; };
+  for (const Vec3& xi : random_points(20)) {
+    const auto N = p2_shape(xi);
+    double v = 0;
+    for (int a = 0; a < kP2Nodes; ++a) v += N[size_t(a)] * q(p2_node_xi(a));
+    EXPECT_NEAR(v, q(xi), 1e-14);
+  }
+}
+
+TEST(TetQuadrature4, IntegratesEveryPolynomialOfDegreeTwoExactly) {
+  const auto& rule = tet_quadrature_4();
+  for (int i = 0; i <= 2; ++i)
+    for (int j = 0; i + j <= 2; ++j)
+      for (int k = 0; i + j + k <= 2; ++k) {
+        auto f = [&](const Vec3& p) { return std::pow(p.x, i) * std::pow(p.y, j) * std::pow(p.z, k); };
+        double sum = 0;
+        for (const QuadraturePoint& qp : rule) sum += qp.weight * f(qp.xi);
+        // Exact: i! j! k! / (i + j + k + 3)!
+        const double exact = std::tgamma(i + 1) * std::tgamma(j + 1) * std::tgamma(k + 1) / std::tgamma(i + j + k + 4);
+        EXPECT_NEAR(sum, exact, 1e-15) << i << j << k;
+        EXPECT_NEAR(integrate(f), exact, 1e-15) << "the reference integrator, " << i << j << k;
+      }
+}
+
+TEST(P2LumpedMass, TheConsistentDiagonalScaledToTheMassAndEveryNodePositive) {
+  const auto& f = p2_lumped_mass_fractions();
+  double diagonal = 0, sum = 0;
+  std::array<double, kP2Nodes> m{};
+  for (int a = 0; a < kP2Nodes; ++a) {
+    m[size_t(a)] = integrate([a](const Vec3& xi) { return std::pow(p2_shape(xi)[size_t(a)], 2); });
+    diagonal += m[size_t(a)];
+  }
+  for (int a = 0; a < kP2Nodes; ++a) {
+    EXPECT_NEAR(f[size_t(a)], m[size_t(a)] / diagonal, 1e-13) << a;
+    EXPECT_GT(f[size_t(a)], 0.0) << a;
+    sum += f[size_t(a)];
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-15);
+  // What the scheme avoids: summing rows gives each corner int N_a dV = -V / 20.
+  EXPECT_NEAR(integrate([](const Vec3& xi) { return p2_shape(xi)[0]; }) * 6, -1.0 / 20, 1e-14);
+}
+
+TEST(MakeQuadraticNodes, OneSharedNodeAtTheMidpointOfEachEdge) {
+  const TetMesh mesh = make_box(Vec3(0.0), Vec3(0.2, 0.1, 0.1), {2, 1, 1});
+  const QuadraticNodes q = make_quadratic_nodes(mesh);
+  std::map<std::array<int32_t, 2>, int> edges;
+  for (const Tet& t : mesh.tets)
+    for (const auto& e : kTetEdges) {
+      const int32_t a = t[size_t(e[0])], b = t[size_t(e[1])];
+      edges[{std::min(a, b), std::max(a, b)}] = 1;
+    }
+  ASSERT_EQ(q.X.size(), mesh.X.size() + edges.size());
+  ASSERT_EQ(q.edge_corners.size(), edges.size());
+  for (size_t i = 0; i < mesh.X.size(); ++i) EXPECT_EQ(q.X[i], mesh.X[i]) << "corners keep their ids";
+  for (size_t e = 0; e < mesh.tets.size(); ++e)
+    for (int k = 0; k < 6; ++k) {
+      const int32_t a = mesh.tets[e][size_t(kTetEdges[k][0])], b = mesh.tets[e][size_t(kTetEdges[k][1])];
+      const int32_t m = q.edges[e][size_t(k)];
+      EXPECT_EQ(q.X[size_t(m)], 0.5 * (mesh.X[size_t(a)] + mesh.X[size_t(b)]));
+      const auto& c = q.edge_corners[size_t(m) - mesh.X.size()];
+      EXPECT_EQ(c, (std::array<int32_t, 2>{std::min(a, b), std::max(a, b)})) << "one node per edge, shared";
+    }
+}
+
+}  // namespace
+}  // namespace tactile
