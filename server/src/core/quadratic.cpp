@@ -1,7 +1,11 @@
 #include "core/quadratic.hpp"
 
 #include <algorithm>
+#include <limits>
 #include <map>
+
+#include <glm/mat3x3.hpp>
+#include <glm/matrix.hpp>
 
 namespace tactile {
 
@@ -80,6 +84,47 @@ QuadraticNodes make_quadratic_nodes(const TetMesh& mesh) {
     }
   }
   return out;
+}
+
+P2Element make_p2_element(const std::array<Vec3, kP2Nodes>& X) {
+  P2Element out;
+  out.min_det = std::numeric_limits<double>::infinity();
+  const auto& rule = tet_quadrature_4();
+  for (size_t q = 0; q < rule.size(); ++q) {
+    const std::array<Vec3, kP2Nodes> G = p2_shape_gradients(rule[q].xi);
+    // J = dX / dxi (column k: d X / d xi_k), glm column-major.
+    glm::dmat3 J(0.0);
+    for (int a = 0; a < kP2Nodes; ++a)
+      for (int k = 0; k < 3; ++k) J[k] += X[size_t(a)] * G[size_t(a)][k];
+    const double det = glm::determinant(J);
+    out.min_det = std::min(out.min_det, det);
+    out.volume[q] = rule[q].weight * det;
+    // d N / d X = J^-T d N / d xi.
+    const glm::dmat3 Jinv_t = glm::transpose(glm::inverse(J));
+    for (int a = 0; a < kP2Nodes; ++a) out.grad[q][size_t(a)] = Jinv_t * G[size_t(a)];
+  }
+  return out;
+}
+
+double compute_p2_forces(const P2Element& element, const std::array<Vec3, kP2Nodes>& x, MaterialModel model,
+                         double lambda, double mu, std::array<Vec3, kP2Nodes>* f) {
+  double energy = 0;
+  if (f) f->fill(Vec3(0.0));
+  for (size_t q = 0; q < element.volume.size(); ++q) {
+    const std::array<Vec3, kP2Nodes>& g = element.grad[q];
+    double F[9] = {};
+    for (int a = 0; a < kP2Nodes; ++a)
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) F[3 * i + j] += x[size_t(a)][i] * g[size_t(a)][j];
+    double P[9] = {};  // (the run-time dispatch's default case writes none)
+    energy += element.volume[q] * material::stress(model, F, lambda, mu, P);
+    if (!f) continue;
+    for (int a = 0; a < kP2Nodes; ++a)
+      for (int i = 0; i < 3; ++i)
+        (*f)[size_t(a)][i] -= element.volume[q] * (P[3 * i] * g[size_t(a)].x + P[3 * i + 1] * g[size_t(a)].y +
+                                                   P[3 * i + 2] * g[size_t(a)].z);
+  }
+  return energy;
 }
 
 }  // namespace tactile

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/material.hpp"
 #include "core/mesh.hpp"
 
 namespace tactile {
@@ -58,5 +59,24 @@ struct QuadraticNodes {
   std::vector<std::array<int32_t, 2>> edge_corners;  // per edge node (n_edges): the corners it lies between
 };
 QuadraticNodes make_quadratic_nodes(const TetMesh& mesh);
+
+// ---- one element, scalar: the reference the lane kernels are checked against ----
+
+// The rest constants of one T10 (isoparametric: its edge nodes may sit off
+// the midpoints, on a curved boundary): per quadrature point, the shape
+// functions' gradients in rest coordinates, d N_a / d X, and the rest volume
+// the point stands for, w_q det J_q.
+struct P2Element {
+  std::array<std::array<Vec3, kP2Nodes>, 4> grad;  // [q][a]
+  std::array<double, 4> volume;                    // [m^3] per point
+  double min_det = 0;                              // the least det J_q: > 0 for a valid element
+};
+P2Element make_p2_element(const std::array<Vec3, kP2Nodes>& X);
+
+// The element's elastic energy sum_q w_q det J_q psi(F_q) [J] at positions
+// x, and each node's elastic force f_a = -dE/dx_a [N]:
+// F_q = sum_a x_a (d N_a / d X)^T, f_a = -sum_q w_q det J_q P(F_q) d N_a / d X.
+double compute_p2_forces(const P2Element& element, const std::array<Vec3, kP2Nodes>& x, MaterialModel model,
+                         double lambda, double mu, std::array<Vec3, kP2Nodes>* f);
 
 }  // namespace tactile

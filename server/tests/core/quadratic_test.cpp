@@ -14,6 +14,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/fem_fixtures.hpp"
 #include "mesh/primitives.hpp"
 
 namespace tactile {
@@ -149,6 +150,149 @@ TEST(MakeQuadraticNodes, OneSharedNodeAtTheMidpointOfEachEdge) {
       const auto& c = q.edge_corners[size_t(m) - mesh.X.size()];
       EXPECT_EQ(c, (std::array<int32_t, 2>{std::min(a, b), std::max(a, b)})) << "one node per edge, shared";
     }
+}
+
+// ---- one element (compute_p2_forces) ----
+
+// A straight T10 on four corners: its ten rest positions.
+std::array<Vec3, kP2Nodes> straight(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
+  const Vec3 corner[4] = {a, b, c, d};
+  std::array<Vec3, kP2Nodes> X{};
+  for (int i = 0; i < 4; ++i) X[size_t(i)] = corner[i];
+  for (int k = 0; k < 6; ++k) X[size_t(4 + k)] = 0.5 * (corner[kTetEdges[k][0]] + corner[kTetEdges[k][1]]);
+  return X;
+}
+
+const std::array<Vec3, kP2Nodes> kRest =
+    straight(Vec3(0.01, 0.0, 0.002), Vec3(0.05, 0.01, 0.0), Vec3(0.02, 0.045, 0.01), Vec3(0.015, 0.01, 0.04));
+
+TEST(P2Element, ItsPointsShareTheVolumeAndRestIsStressFree) {
+  const P2Element el = make_p2_element(kRest);
+  const double V = compute_tet_volume(kRest[0], kRest[1], kRest[2], kRest[3]);
+  double sum = 0;
+  for (double v : el.volume) sum += v;
+  EXPECT_NEAR(sum, V, 1e-15);
+  EXPECT_NEAR(el.min_det, 6 * V, 1e-14);
+  for (MaterialModel m : test::kAllModels) {
+    std::array<Vec3, kP2Nodes> f;
+    EXPECT_NEAR(compute_p2_forces(el, kRest, m, 1e5, 4e4, &f), 0.0, 1e-15) << to_string(m);
+    for (const Vec3& fa : f) EXPECT_LT(glm::length(fa), 1e-12) << to_string(m);
+  }
+}
+
+// A deformed state: every node moved by its own smooth-ish offset, an edge
+// node off its midpoint (a bent edge).
+std::array<Vec3, kP2Nodes> deformed(double scale) {
+  std::array<Vec3, kP2Nodes> x = kRest;
+  for (size_t a = 0; a < x.size(); ++a)
+    x[a] += scale * Vec3(std::sin(3.0 * double(a)), std::cos(2.0 * double(a) + 1), std::sin(double(a) * double(a)));
+  return x;
+}
+
+TEST(P2Element, ForcesAreMinusTheEnergysGradient) {
+  const P2Element el = make_p2_element(kRest);
+  const std::array<Vec3, kP2Nodes> x = deformed(0.003);
+  const double h = 1e-8;
+  for (MaterialModel m : test::kAllModels) {
+    std::array<Vec3, kP2Nodes> f;
+    compute_p2_forces(el, x, m, 1e5, 4e4, &f);
+    double largest = 0;
+    for (const Vec3& fa : f) largest = std::max(largest, glm::length(fa));
+    ASSERT_GT(largest, 1e-3) << to_string(m) << ": the state is deformed";
+    for (size_t a = 0; a < x.size(); ++a)
+      for (int i = 0; i < 3; ++i) {
+        std::array<Vec3, kP2Nodes> xp = x, xm = x;
+        xp[a][i] += h;
+        xm[a][i] -= h;
+        const double dE =
+            (compute_p2_forces(el, xp, m, 1e5, 4e4, nullptr) - compute_p2_forces(el, xm, m, 1e5, 4e4, nullptr)) /
+            (2 * h);
+        EXPECT_NEAR(f[a][i], -dE, 1e-5 * largest) << to_string(m) << " node " << a << " axis " << i;
+      }
+  }
+}
+
+TEST(P2Element, ARigidMotionStoresNoEnergyUnlessTheModelIsLinear) {
+  const P2Element el = make_p2_element(kRest);
+  const glm::dmat3 R = test::make_rotation(Vec3(1, 2, 3), 0.7);
+  std::array<Vec3, kP2Nodes> x;
+  for (size_t a = 0; a < x.size(); ++a) x[a] = R * kRest[a] + Vec3(0.3, -0.1, 0.2);
+  const std::array<Vec3, kP2Nodes> stretched = deformed(0.003);
+  for (MaterialModel m : test::kAllModels) {
+    std::array<Vec3, kP2Nodes> f;
+    const double E = compute_p2_forces(el, x, m, 1e5, 4e4, &f);
+    const double E_deformed = compute_p2_forces(el, stretched, m, 1e5, 4e4, nullptr);
+    if (m == MaterialModel::Linear) {
+      EXPECT_GT(E, 1e-3 * E_deformed) << "small strain distorts under rotation, the paper's point";
+      continue;
+    }
+    EXPECT_LT(std::fabs(E), 1e-9 * E_deformed) << to_string(m);
+    for (const Vec3& fa : f) EXPECT_LT(glm::length(fa), 1e-6) << to_string(m);
+  }
+}
+
+// The patch test of the quadratic element (linear elasticity): a quadratic
+// displacement field is in the element space, so at every node inside the
+// body the elements' forces balance the body force b = -div sigma that makes
+// the field an equilibrium, exactly, on an irregular mesh.
+TEST(P2Patch, AQuadraticFieldBalancesItsBodyForceAtEveryInnerNode) {
+  const Vec3 lo(0.0), hi(0.1, 0.06, 0.08);
+  const TetMesh mesh = test::make_jittered_box(lo, hi, {3, 2, 3}, 0.25);
+  const QuadraticNodes nodes = make_quadratic_nodes(mesh);
+  const double lambda = 5e4, mu = 3e4;
+  // u_i = c_i + B_ij X_j + A_ijk X_j X_k, small.
+  const Vec3 c(1e-4, -2e-4, 5e-5);
+  const double B[3][3] = {{1e-3, 2e-3, -1e-3}, {0, -2e-3, 1e-3}, {3e-3, 1e-3, 2e-3}};
+  double A[3][3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) A[i][j][k] = 0.01 * std::sin(1.0 + i + 2.0 * j * k + 0.5 * (j + k));
+  auto u = [&](const Vec3& X) {
+    Vec3 out = c;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        out[i] += B[i][j] * X[j];
+        for (int k = 0; k < 3; ++k) out[i] += A[i][j][k] * X[j] * X[k];
+      }
+    return out;
+  };
+  // H_ijk = d^2 u_i / dX_j dX_k; div sigma_i = lambda d_i (div u) + mu (lap u_i + d_i div u).
+  Vec3 b(0.0);
+  for (int i = 0; i < 3; ++i) {
+    auto H = [&](int p, int q, int r) { return A[p][q][r] + A[p][r][q]; };
+    double div_sigma = 0;
+    for (int k = 0; k < 3; ++k) div_sigma += (lambda + mu) * H(k, i, k) + mu * H(i, k, k);
+    b[i] = -div_sigma;
+  }
+  std::vector<Vec3> force(nodes.X.size(), Vec3(0.0));
+  double largest = 0;
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    std::array<int32_t, kP2Nodes> id{};
+    for (int a = 0; a < 4; ++a) id[size_t(a)] = mesh.tets[e][size_t(a)];
+    for (int k = 0; k < 6; ++k) id[size_t(4 + k)] = nodes.edges[e][size_t(k)];
+    std::array<Vec3, kP2Nodes> X, x, f;
+    for (int a = 0; a < kP2Nodes; ++a) X[size_t(a)] = nodes.X[size_t(id[size_t(a)])];
+    for (int a = 0; a < kP2Nodes; ++a) x[size_t(a)] = X[size_t(a)] + u(X[size_t(a)]);
+    const P2Element el = make_p2_element(X);
+    compute_p2_forces(el, x, MaterialModel::Linear, lambda, mu, &f);
+    for (int a = 0; a < kP2Nodes; ++a) {
+      largest = std::max(largest, glm::length(f[size_t(a)]));
+      force[size_t(id[size_t(a)])] += f[size_t(a)];
+      for (size_t q = 0; q < 4; ++q)  // the body force's share, int N_a b dV (degree 2: exact)
+        force[size_t(id[size_t(a)])] += el.volume[q] * p2_shape(tet_quadrature_4()[q].xi)[size_t(a)] * b;
+    }
+  }
+  int inner = 0;
+  const double eps = 1e-9;
+  for (size_t n = 0; n < nodes.X.size(); ++n) {
+    const Vec3& X = nodes.X[n];
+    if (!(X.x > lo.x + eps && X.x < hi.x - eps && X.y > lo.y + eps && X.y < hi.y - eps && X.z > lo.z + eps &&
+          X.z < hi.z - eps))
+      continue;
+    ++inner;
+    EXPECT_LT(glm::length(force[n]), 1e-10 * largest) << "node " << n;
+  }
+  EXPECT_GT(inner, 20);
 }
 
 }  // namespace
