@@ -1,6 +1,7 @@
 #include "core/model.hpp"
 
 #include "core/model_build.hpp"
+#include "core/symmetric_eigen.hpp"
 
 #include <algorithm>
 #include <array>
@@ -34,40 +35,6 @@ double compute_min_altitude(const Vec3& x0, const Vec3& x1, const Vec3& x2, cons
   const double a3 = glm::length(glm::cross(x1 - x0, x2 - x0));
   const double amax = std::max({a0, a1, a2, a3}) * 0.5;
   return amax > 0 ? 3.0 * V / amax : 0.0;
-}
-
-// Largest eigenvalue of a symmetric n x n matrix by cyclic Jacobi (small n).
-double max_eigenvalue_symmetric(double* A, int n) {
-  for (int sweep = 0; sweep < 30; ++sweep) {
-    double off = 0, diag = 0;
-    for (int p = 0; p < n; ++p) {
-      diag += A[p * n + p] * A[p * n + p];
-      for (int q = p + 1; q < n; ++q) off += A[p * n + q] * A[p * n + q];
-    }
-    if (off <= 1e-30 * diag) break;
-    for (int p = 0; p < n; ++p) {
-      for (int q = p + 1; q < n; ++q) {
-        const double apq = A[p * n + q];
-        if (std::fabs(apq) < 1e-300) continue;
-        const double theta = (A[q * n + q] - A[p * n + p]) / (2.0 * apq);
-        const double t = std::copysign(1.0, theta) / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
-        const double c = 1.0 / std::sqrt(t * t + 1.0), s = t * c;
-        for (int k = 0; k < n; ++k) {
-          const double akp = A[k * n + p], akq = A[k * n + q];
-          A[k * n + p] = c * akp - s * akq;
-          A[k * n + q] = s * akp + c * akq;
-        }
-        for (int k = 0; k < n; ++k) {
-          const double apk = A[p * n + k], aqk = A[q * n + k];
-          A[p * n + k] = c * apk - s * aqk;
-          A[q * n + k] = s * apk + c * aqk;
-        }
-      }
-    }
-  }
-  double best = A[0];
-  for (int p = 1; p < n; ++p) best = std::max(best, A[p * n + p]);
-  return best;
 }
 
 }  // namespace
@@ -111,7 +78,7 @@ double compute_element_critical_dt(const Vec3& X0, const Vec3& X1, const Vec3& X
         for (int l = 0; l < 6; ++l) sum += L[6 * k + i] * G[6 * k + l] * L[6 * l + j];
       S[6 * i + j] = sum;
     }
-  const double k_max = V * max_eigenvalue_symmetric(S, 6);
+  const double k_max = V * compute_max_eigenvalue_symmetric(S, 6);
   const double m_node = rho * V / 4.0;
   if (!(k_max > 0) || !(m_node > 0)) return 0.0;
   return 2.0 / std::sqrt(k_max / m_node);

@@ -7,6 +7,8 @@
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
 
+#include "core/symmetric_eigen.hpp"
+
 namespace tactile {
 
 namespace {
@@ -125,6 +127,35 @@ double compute_p2_forces(const P2Element& element, const std::array<Vec3, kP2Nod
                                                    P[3 * i + 2] * g[size_t(a)].z);
   }
   return energy;
+}
+
+double compute_p2_critical_dt(const std::array<Vec3, kP2Nodes>& X, double lambda, double mu, double rho) {
+  constexpr int n = 3 * kP2Nodes;
+  const P2Element el = make_p2_element(X);
+  double volume = 0;
+  for (double v : el.volume) volume += v;
+  if (!(el.min_det > 0) || !(volume > 0) || !(rho > 0)) return 0.0;
+  // K_(a i)(b k) = sum_q w_q [lambda g_ai g_bk + mu (delta_ik g_a . g_b + g_ak g_bi)].
+  std::array<double, n * n> K{};
+  for (size_t q = 0; q < el.volume.size(); ++q) {
+    const auto& g = el.grad[q];
+    for (int a = 0; a < kP2Nodes; ++a)
+      for (int b = 0; b < kP2Nodes; ++b) {
+        const Vec3 &ga = g[size_t(a)], &gb = g[size_t(b)];
+        const double dot = ga.x * gb.x + ga.y * gb.y + ga.z * gb.z;
+        for (int i = 0; i < 3; ++i)
+          for (int k = 0; k < 3; ++k)
+            K[size_t((3 * a + i) * n + 3 * b + k)] +=
+                el.volume[q] * (lambda * ga[i] * gb[k] + mu * ((i == k ? dot : 0.0) + ga[k] * gb[i]));
+      }
+  }
+  // M^-1/2 K M^-1/2, M the lumped masses.
+  const auto& share = p2_lumped_mass_fractions();
+  for (int r = 0; r < n; ++r)
+    for (int c = 0; c < n; ++c)
+      K[size_t(r * n + c)] /= std::sqrt(rho * volume * share[size_t(r / 3)] * rho * volume * share[size_t(c / 3)]);
+  const double omega2 = compute_max_eigenvalue_symmetric(K.data(), n);
+  return omega2 > 0 ? 2.0 / std::sqrt(omega2) : 0.0;
 }
 
 }  // namespace tactile

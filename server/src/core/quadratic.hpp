@@ -79,4 +79,12 @@ P2Element make_p2_element(const std::array<Vec3, kP2Nodes>& X);
 double compute_p2_forces(const P2Element& element, const std::array<Vec3, kP2Nodes>& x, MaterialModel model,
                          double lambda, double mu, std::array<Vec3, kP2Nodes>* f);
 
+// The critical step of one straight-sided T10 at rest [s]: 2 / omega_max of
+// its stiffness (linear elasticity, the tangent every model has at rest)
+// against its HRZ-lumped mass, the 30 x 30 element eigenproblem solved
+// exactly. By Irons' element eigenvalue theorem the assembled body's step is
+// at least the least of these, as for the linear tet
+// (compute_element_critical_dt in core/model.hpp).
+double compute_p2_critical_dt(const std::array<Vec3, kP2Nodes>& X, double lambda, double mu, double rho);
+
 }  // namespace tactile

@@ -15,6 +15,7 @@
 #include <glm/geometric.hpp>
 
 #include "core/fem_fixtures.hpp"
+#include "core/model.hpp"
 #include "mesh/primitives.hpp"
 
 namespace tactile {
@@ -229,6 +230,36 @@ TEST(P2Element, ARigidMotionStoresNoEnergyUnlessTheModelIsLinear) {
     EXPECT_LT(std::fabs(E), 1e-9 * E_deformed) << to_string(m);
     for (const Vec3& fa : f) EXPECT_LT(glm::length(fa), 1e-6) << to_string(m);
   }
+}
+
+// The critical step is the stability limit of the explicit step (v += dt a,
+// x += dt v) on one free element: a little under it, a random start stays
+// bounded; a little over it, the highest mode grows without bound. A linear
+// tet of the same corners allows a longer step.
+TEST(P2CriticalStep, TheExplicitStepIsStableJustUnderItAndNotJustOver) {
+  const double lambda = 5e4, mu = 3e4, rho = 1000;
+  const double dt_crit = compute_p2_critical_dt(kRest, lambda, mu, rho);
+  ASSERT_GT(dt_crit, 0.0);
+  EXPECT_LT(dt_crit, compute_element_critical_dt(kRest[0], kRest[1], kRest[2], kRest[3], lambda, mu, rho));
+  const P2Element el = make_p2_element(kRest);
+  double volume = 0;
+  for (double v : el.volume) volume += v;
+  auto run = [&](double dt) {
+    std::array<Vec3, kP2Nodes> x = deformed(1e-5), v{}, f;
+    double largest = 0;
+    for (int step = 0; step < 20000; ++step) {
+      compute_p2_forces(el, x, MaterialModel::Linear, lambda, mu, &f);
+      for (size_t a = 0; a < x.size(); ++a) {
+        v[a] += dt * f[a] / (rho * volume * p2_lumped_mass_fractions()[a]);
+        x[a] += dt * v[a];
+      }
+      for (size_t a = 0; a < x.size(); ++a) largest = std::max(largest, glm::length(x[a] - kRest[a]));
+    }
+    return largest;
+  };
+  const double start = 1e-5 * std::sqrt(3.0);
+  EXPECT_LT(run(0.98 * dt_crit), 100 * start) << "bounded under the critical step";
+  EXPECT_GT(run(1.02 * dt_crit), 1e4 * start) << "unbounded over it";
 }
 
 // The patch test of the quadratic element (linear elasticity): a quadratic
