@@ -7,7 +7,8 @@
 //   fem_bench            all tables, meshes up to 100 k tets (a minute or two)
 //   fem_bench --large    also 1 M and 2 M tets
 //   fem_bench --quick    small meshes and few repeats, for CI (seconds)
-//   fem_bench --only=T   one table: rates, threads, passes, effects, hand, refresh, isas, precision, invertible
+//   fem_bench --only=T   one table: rates, threads, passes, effects, hand, refresh, isas, precision, invertible,
+//                        quadratic
 //
 // Times are wall-clock medians of repeated runs of many steps, so that other
 // processes on the machine shift them less than a mean would; rates are
@@ -33,6 +34,8 @@
 #include "core/kernels/kernels.hpp"
 #include "core/material.hpp"
 #include "core/model.hpp"
+#include "core/model_build.hpp"
+#include "core/quadratic.hpp"
 #include "core/stepper.hpp"
 #include "mesh/primitives.hpp"
 #include "parallel/thread_pool.hpp"
@@ -804,15 +807,75 @@ void table_invertible(const Options& opt) {
   invertible_pass_rows<double>(opt);
 }
 
+// The element pass of quadratic tets (issue 42) against the linear one on
+// the same tets: the kernels alone over every block, from a deformed state,
+// alternated; ns per tet-step each, and their ratio. A quadratic tet has
+// four quadrature points and ten nodes where a linear one has one and four.
+template <class Real>
+void quadratic_rows(const Options& opt) {
+  const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
+  const TetMesh mesh = make_bench_box(opt.quick ? 5e3 : 2e4, 1, 0.1);
+  const QuadraticNodes nodes = make_quadratic_nodes(mesh);
+  const std::vector<MaterialSpec> materials{MaterialSpec{MaterialModel::StVK, 1e5, 0.3, 1000}};
+  const ElementConstants constants = compute_element_constants(mesh, materials);
+  const ElementOrder order = compute_element_order(mesh, constants.volume, 1);
+  LaneBlocks<Real> linear = make_lane_blocks<Real>(mesh, constants, order);
+  QuadraticLaneBlocks<Real> quadratic = make_quadratic_lane_blocks<Real>(mesh, nodes.edges, constants, order);
+  for (auto& B : linear.blocks)
+    for (auto& ids : B.node4)
+      for (int32_t& id : ids) id *= 4;
+  for (auto& B : quadratic.blocks)
+    for (auto& ids : B.node4)
+      for (int32_t& id : ids) id *= 4;
+  std::vector<Node4<Real>, CacheAlignedAllocator<Node4<Real>>> u(nodes.X.size()), f(nodes.X.size());
+  for (size_t i = 0; i < nodes.X.size(); ++i) {  // a bend and a twist, a few per cent of strain
+    const Vec3& X = nodes.X[i];
+    u[i].v[0] = Real(0.02 * X.y * X.z / 0.1);
+    u[i].v[1] = Real(-0.01 * X.x * X.x / 0.1);
+    u[i].v[2] = Real(0.015 * X.x * X.y / 0.1);
+  }
+  const int reps = opt.quick ? 5 : 15, sweeps = opt.quick ? 20 : 50;
+  for (MaterialModel model : {MaterialModel::Linear, MaterialModel::StVK, MaterialModel::Corotational,
+                              MaterialModel::NeoHookean, MaterialModel::InvertibleStVK}) {
+    const KernelTable<Real>& k = kernels<Real>();
+    std::vector<double> t1, t2;
+    for (int r = 0; r < reps; ++r) {
+      Clock::time_point t0 = Clock::now();
+      for (int s = 0; s < sweeps; ++s)
+        k.forces[int(model)](linear.blocks.data(), 0, int32_t(linear.blocks.size()), Real(5.8e4), Real(3.8e4), u.data(),
+                             f.data());
+      t1.push_back(seconds_since(t0) / sweeps);
+      t0 = Clock::now();
+      for (int s = 0; s < sweeps; ++s)
+        k.quadratic_forces[int(model)](quadratic.blocks.data(), 0, int32_t(quadratic.blocks.size()), Real(5.8e4),
+                                       Real(3.8e4), u.data(), f.data());
+      t2.push_back(seconds_since(t0) / sweeps);
+    }
+    const double p1 = median(t1) * 1e9 / mesh.n_tets(), p2 = median(t2) * 1e9 / mesh.n_tets();
+    std::printf("| %-6s | %-15s | %7d | %9.1f | %9.1f | %5.2f |\n", name_of(precision),
+                std::string(to_string(model)).c_str(), mesh.n_tets(), p1, p2, p2 / p1);
+  }
+}
+
+void table_quadratic(const Options& opt) {
+  std::printf("\n## Quadratic tets (P2, 4 points, 10 nodes) against linear ones (P1): the element pass alone\n\n");
+  std::printf("(ns per tet-step, one thread, the same tets; the accuracy each buys: docs/accuracy)\n\n");
+  std::printf("| real   | model           |    tets |    P1 ns  |    P2 ns  | P2/P1 |\n");
+  std::printf("|--------|-----------------|---------|-----------|-----------|-------|\n");
+  quadratic_rows<float>(opt);
+  quadratic_rows<double>(opt);
+}
+
 }  // namespace
 }  // namespace tactile
 
 int main(int argc, char** argv) {
   using namespace tactile;
   const std::pair<const char*, void (*)(const Options&)> tables[] = {
-      {"rates", table_rates},     {"threads", table_threads},     {"passes", table_passes},
-      {"effects", table_effects}, {"hand", table_hand},           {"refresh", table_refresh},
-      {"isas", table_isas},       {"precision", table_precision}, {"invertible", table_invertible}};
+      {"rates", table_rates},        {"threads", table_threads},     {"passes", table_passes},
+      {"effects", table_effects},    {"hand", table_hand},           {"refresh", table_refresh},
+      {"isas", table_isas},          {"precision", table_precision}, {"invertible", table_invertible},
+      {"quadratic", table_quadratic}};
   std::vector<std::string> names;
   for (const auto& [name, table] : tables) names.emplace_back(name);
   Options opt;

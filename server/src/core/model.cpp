@@ -9,6 +9,7 @@
 #include <limits>
 #include <numeric>
 #include <sstream>
+#include <type_traits>
 
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
@@ -222,14 +223,18 @@ ElementOrder compute_element_order(const TetMesh& mesh, const std::vector<double
   return out;
 }
 
+namespace {
+
 // Lane blocks, one run per part and material, in strips of kStripBlocks
-// blocks (see model.hpp).
-template <class Real>
-LaneBlocks<Real> make_lane_blocks(const TetMesh& mesh, const ElementConstants& elements, const ElementOrder& eo) {
-  constexpr int W = kLanes<Real>;
+// blocks (see model.hpp): fill(B, l, e) puts tet e in lane l of block B,
+// pad(B, l) makes lane l padding.
+template <class Block, class Fill, class Pad>
+LaneLayout<Block> lay_out_lanes(const TetMesh& mesh, const ElementConstants& elements, const ElementOrder& eo,
+                                Fill fill, Pad pad) {
+  constexpr int W = Block::W;
   const auto nt = size_t(mesh.n_tets());
   const std::vector<int32_t>& order = eo.order;
-  LaneBlocks<Real> out;
+  LaneLayout<Block> out;
   out.first_block.assign(size_t(eo.n_parts), -1);
   for (size_t i = 0; i < nt;) {
     const int32_t part = eo.part_of[size_t(order[i])];
@@ -243,28 +248,17 @@ LaneBlocks<Real> make_lane_blocks(const TetMesh& mesh, const ElementConstants& e
       const size_t count = std::min(j - k, W * size_t(kStripBlocks));  // elements in this chunk
       const size_t n_blocks = (count + W - 1) / W;
       for (size_t b = 0; b < n_blocks; ++b) {
-        ElementBlock<Real> B{};
+        Block B{};
         for (int l = 0; l < W; ++l) {
           const size_t slot = size_t(l) * n_blocks + b;  // position in the chunk
-          if (slot >= count) {                           // padding lane: zero stiffness, identity shape
-            // All corners at one node (lane 0's first; lane 0 is never
-            // padding): F = I whatever u, and a node this block touches anyway.
-            for (int c = 0; c < 4; ++c) B.node4[c][l] = B.node4[0][0];
-            for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
-            B.V[l] = Real(0);
+          if (slot >= count) {                           // padding lane (lane 0 never is)
+            pad(B, l);
             out.lane_tet.push_back(-1);
             out.lane_dt.push_back(std::numeric_limits<double>::infinity());
             continue;
           }
           const auto e = size_t(order[k + slot]);
-          const Tet& t = mesh.tets[e];
-          for (int c = 0; c < 4; ++c) B.node4[c][l] = t[size_t(c)];  // the given id until renumbered
-          const Vec3& X0 = mesh.X[size_t(t[0])];
-          const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
-          const glm::dmat3 Dinv = glm::inverse(Dm);  // glm is column-major: Dinv[col][row]
-          for (int r = 0; r < 3; ++r)
-            for (int c = 0; c < 3; ++c) B.Dinv[3 * r + c][l] = Real(Dinv[c][r]);
-          B.V[l] = Real(elements.volume[e]);
+          fill(B, l, e);
           out.lane_tet.push_back(int32_t(e));
           out.lane_dt.push_back(elements.dt[e]);
         }
@@ -279,6 +273,55 @@ LaneBlocks<Real> make_lane_blocks(const TetMesh& mesh, const ElementConstants& e
   for (size_t k = 0; k < out.lane_tet.size(); ++k)
     if (out.lane_tet[k] >= 0) out.tet_lane[size_t(out.lane_tet[k])] = int32_t(k);
   return out;
+}
+
+// A lane's shape: the corners' Dm^-1 (row-major) and the rest volume.
+template <class Block>
+void fill_shape(Block& B, int l, const TetMesh& mesh, const ElementConstants& elements, size_t e) {
+  using Real = std::remove_reference_t<decltype(B.V[0])>;
+  const Tet& t = mesh.tets[e];
+  const Vec3& X0 = mesh.X[size_t(t[0])];
+  const glm::dmat3 Dm(mesh.X[size_t(t[1])] - X0, mesh.X[size_t(t[2])] - X0, mesh.X[size_t(t[3])] - X0);
+  const glm::dmat3 Dinv = glm::inverse(Dm);  // glm is column-major: Dinv[col][row]
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) B.Dinv[3 * r + c][l] = Real(Dinv[c][r]);
+  B.V[l] = Real(elements.volume[e]);
+}
+
+// A padding lane: zero stiffness, identity shape, every node at lane 0's
+// first (F = I whatever u, and a node the block touches anyway).
+template <class Block>
+void pad_lane(Block& B, int l) {
+  using Real = std::remove_reference_t<decltype(B.V[0])>;
+  for (auto& ids : B.node4) ids[l] = B.node4[0][0];
+  for (int q = 0; q < 9; ++q) B.Dinv[q][l] = (q % 4 == 0) ? Real(1) : Real(0);
+  B.V[l] = Real(0);
+}
+
+}  // namespace
+
+template <class Real>
+LaneBlocks<Real> make_lane_blocks(const TetMesh& mesh, const ElementConstants& elements, const ElementOrder& eo) {
+  return lay_out_lanes<ElementBlock<Real>>(
+      mesh, elements, eo,
+      [&](ElementBlock<Real>& B, int l, size_t e) {
+        for (int c = 0; c < 4; ++c) B.node4[c][l] = mesh.tets[e][size_t(c)];  // the given id until renumbered
+        fill_shape(B, l, mesh, elements, e);
+      },
+      pad_lane<ElementBlock<Real>>);
+}
+
+template <class Real>
+QuadraticLaneBlocks<Real> make_quadratic_lane_blocks(const TetMesh& mesh, const std::vector<TetEdges>& edges,
+                                                     const ElementConstants& elements, const ElementOrder& eo) {
+  return lay_out_lanes<QuadraticBlock<Real>>(
+      mesh, elements, eo,
+      [&](QuadraticBlock<Real>& B, int l, size_t e) {
+        for (int c = 0; c < 4; ++c) B.node4[c][l] = mesh.tets[e][size_t(c)];
+        for (int k = 0; k < 6; ++k) B.node4[4 + k][l] = edges[e][size_t(k)];
+        fill_shape(B, l, mesh, elements, e);
+      },
+      pad_lane<QuadraticBlock<Real>>);
 }
 
 // Nodes renumbered in the order the blocks first touch them, so that the
@@ -543,6 +586,10 @@ Model<Real> build_model(const ModelSpec& spec) {
 
 template LaneBlocks<float> make_lane_blocks<float>(const TetMesh&, const ElementConstants&, const ElementOrder&);
 template LaneBlocks<double> make_lane_blocks<double>(const TetMesh&, const ElementConstants&, const ElementOrder&);
+template QuadraticLaneBlocks<float> make_quadratic_lane_blocks<float>(const TetMesh&, const std::vector<TetEdges>&,
+                                                                      const ElementConstants&, const ElementOrder&);
+template QuadraticLaneBlocks<double> make_quadratic_lane_blocks<double>(const TetMesh&, const std::vector<TetEdges>&,
+                                                                        const ElementConstants&, const ElementOrder&);
 template NodeNumbering compute_node_numbering<float>(const LaneBlocks<float>&, int32_t, int32_t);
 template NodeNumbering compute_node_numbering<double>(const LaneBlocks<double>&, int32_t, int32_t);
 template Model<float> build_model<float>(const ModelSpec&);

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "core/model.hpp"
+#include "core/quadratic.hpp"
 
 namespace tactile {
 
@@ -60,12 +61,13 @@ struct ElementOrder {
 inline constexpr size_t kMinPartElements = 4096;
 ElementOrder compute_element_order(const TetMesh& mesh, const std::vector<double>& volume, int threads);
 
-// The lane blocks with the mesh's node ids (compute_node_numbering renumbers them), one
-// run per part and material; a part's first block (-1 for a part without
-// one). lane_tet, lane_dt and tet_lane as in Model.
-template <class Real>
-struct LaneBlocks {
-  std::vector<ElementBlock<Real>> blocks;
+// The lane blocks with the mesh's node ids (compute_node_numbering renumbers
+// them), one run per part and material, in strips (model.hpp); a part's first
+// block (-1 for a part without one). lane_tet, lane_dt and tet_lane as in
+// Model. Block: ElementBlock<Real> (linear tets) or QuadraticBlock<Real>.
+template <class Block>
+struct LaneLayout {
+  std::vector<Block> blocks;
   std::vector<ElementGroup> groups;
   std::vector<int32_t> lane_tet;
   std::vector<double> lane_dt;
@@ -73,7 +75,17 @@ struct LaneBlocks {
   std::vector<int32_t> first_block;  // per part
 };
 template <class Real>
+using LaneBlocks = LaneLayout<ElementBlock<Real>>;
+template <class Real>
+using QuadraticLaneBlocks = LaneLayout<QuadraticBlock<Real>>;
+
+template <class Real>
 LaneBlocks<Real> make_lane_blocks(const TetMesh& mesh, const ElementConstants& elements, const ElementOrder& order);
+// The same tets as straight quadratic ones: each lane's ten nodes (the
+// corners, then `edges`, as make_quadratic_nodes numbers them).
+template <class Real>
+QuadraticLaneBlocks<Real> make_quadratic_lane_blocks(const TetMesh& mesh, const std::vector<TetEdges>& edges,
+                                                     const ElementConstants& elements, const ElementOrder& order);
 
 // The model's node ids: node_model[given] and node_given[model], numbered in
 // the order the blocks first touch them; cut[p] where part p's node range

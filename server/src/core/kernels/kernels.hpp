@@ -34,6 +34,20 @@ struct alignas(64) ElementBlock {
   Real V[W];        // rest volume [m^3]; 0 in padding lanes (a block's Lame parameters are its group's)
 };
 
+// A block of W straight-sided quadratic tets (core/quadratic.hpp): ten node
+// ids per lane, corners then edge nodes in VTK's order, as ElementBlock's
+// (4 x node id; padding lanes: lane 0's corner 0, all ten), the corners'
+// Dm^-1 and the rest volume. The four quadrature points' gradients follow
+// from Dm^-1 and constants (d N / d X = Dm^-T d N / d xi), so a straight
+// element streams 10 ids, 9 entries and a volume a lane.
+template <class Real>
+struct alignas(64) QuadraticBlock {
+  static constexpr int W = kLanes<Real>;
+  int32_t node4[10][W];
+  Real Dinv[9][W];  // inverse rest edge matrix of the corners, row-major
+  Real V[W];        // rest volume [m^3]; 0 in padding lanes
+};
+
 // One node's vector padded to four entries (x, y, z, 0), aligned to its size
 // so that it never straddles a cache line.
 template <class Real>
@@ -65,6 +79,13 @@ struct ElasticSums {
 template <class Real>
 using ForcesFn = ElasticSums (*)(const ElementBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu,
                                  const Node4<Real>* u, Node4<Real>* f);
+
+// The same for quadratic blocks: f -= dU/du with U = sum over the four
+// quadrature points of V/4 psi(F_q) (core/quadratic.hpp, compute_p2_forces,
+// is its scalar reference); `inverted` counts lanes with det F <= 0 at some point.
+template <class Real>
+using QuadraticForcesFn = ElasticSums (*)(const QuadraticBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda,
+                                          Real mu, const Node4<Real>* u, Node4<Real>* f);
 
 // Elastic energy V psi(F) per lane of blocks [begin, end), of one material,
 // at displacements u (n_nodes x 3), written to energy[(b - begin) * W + lane];
@@ -131,6 +152,7 @@ using CorrectFn = CorrectSums (*)(const CorrectArgs<Real>& args);
 template <class Real>
 struct KernelTable {
   ForcesFn<Real> forces[kMaterialModelCount];
+  QuadraticForcesFn<Real> quadratic_forces[kMaterialModelCount];
   EnergyFn<Real> energy[kMaterialModelCount];
   CriticalFn<Real> critical[kMaterialModelCount];
   PredictFn<Real> predict;

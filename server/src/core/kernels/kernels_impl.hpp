@@ -82,15 +82,16 @@ class FlushSubnormals {
 
 // ---- corner loads and force adds ---------------------------------------------
 
-// x[3c + i][l] = u[node[c][l]].v[i]: the corner displacements of every lane.
-template <class Real>
-TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>* u, Real (*x)[kLanes<Real>]) {
+// x[3c + i][l] = u[node[c][l]].v[i]: the displacements of every lane's C
+// nodes (4 corners, or a quadratic tet's 10 nodes).
+template <int C, class Real>
+TACTILE_INLINE void load_nodes(const int32_t (*node4)[kLanes<Real>], const Node4<Real>* u, Real (*x)[kLanes<Real>]) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
   // u0 + id[l]: corner c of lane l (id is 4 x its node, see ElementBlock).
   const Real* u0 = u[0].v;
-#pragma GCC unroll 4
-  for (int c = 0; c < 4; ++c) {
-    const int32_t* id = B.node4[c];
+#pragma GCC unroll 10
+  for (int c = 0; c < C; ++c) {
+    const int32_t* id = node4[c];
 #if defined(__AVX512F__)
     if constexpr (sizeof(Real) == 4) {
       // Chunk k of r[j] is lane 4k + j; a 4x4 transpose per chunk gives x, y, z in lane order.
@@ -169,15 +170,16 @@ TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>*
   }
 }
 
-// f[node[c][l]].v[i] += fc[3c + i][l]: one 4-wide add per lane and corner,
+// f[node[c][l]].v[i] += fc[3c + i][l]: one 4-wide add per lane and node,
 // its load folded into the add.
-template <class Real>
-TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*fc)[kLanes<Real>], Node4<Real>* f) {
+template <int C, class Real>
+TACTILE_INLINE void add_node_forces(const int32_t (*node4)[kLanes<Real>], const Real (*fc)[kLanes<Real>],
+                                    Node4<Real>* f) {
   [[maybe_unused]] constexpr int W = kLanes<Real>;
   Real* f0 = f[0].v;  // f0 + id[l]: corner c of lane l
-#pragma GCC unroll 4
-  for (int c = 0; c < 4; ++c) {
-    const int32_t* id = B.node4[c];
+#pragma GCC unroll 10
+  for (int c = 0; c < C; ++c) {
+    const int32_t* id = node4[c];
 #if defined(__AVX512F__)
     if constexpr (sizeof(Real) == 4) {
       // 4x4 transposes within each 128-bit chunk: chunk k of q[j] is lane 4k + j as (x, y, z, 0).
@@ -277,6 +279,15 @@ TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*
 
 // One block's lanes as GCC vector types, for the per-lane sums: written as
 // loops, GCC converts psiV to double lane by lane.
+template <class Real>
+TACTILE_INLINE void load_corners(const ElementBlock<Real>& B, const Node4<Real>* u, Real (*x)[kLanes<Real>]) {
+  load_nodes<4, Real>(B.node4, u, x);
+}
+template <class Real>
+TACTILE_INLINE void add_corner_forces(const ElementBlock<Real>& B, const Real (*fc)[kLanes<Real>], Node4<Real>* f) {
+  add_node_forces<4, Real>(B.node4, fc, f);
+}
+
 template <class Real>
 struct LaneVectors;
 template <>
@@ -686,6 +697,120 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
   return sums;
 }
 
+// ---- quadratic tets (core/quadratic.hpp) ---------------------------------------------------
+//
+// Per block: the ten nodes' displacements of every lane, then per quadrature
+// point q, across lanes, D = sum_a x_a g_aq^T with g_aq the reference
+// gradients (constants: the multiplications by 0 and 1 fold away),
+// F = I + D Dm^-1, the stress of V/4 (each point stands for a quarter of a
+// straight tet), and the nodes' forces f_a -= (P Dm^-T) g_aq. Every model
+// takes material::stress<M> on every lane (the SVD's models without the
+// linear tet's cheap paths: the reference first; fem_bench --only=quadratic).
+
+// The reference gradients d N_a / d xi at the four points of
+// tet_quadrature_4 (point q has barycentric coordinate a at corner q, b at
+// the others), in VTK's node order.
+struct P2Gradients {
+  double g[4][10][3];
+};
+constexpr P2Gradients make_p2_gradients() {
+  constexpr double a = 0.58541019662496845446, b = 0.13819660112501051518;
+  constexpr double dL[4][3] = {{-1, -1, -1}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  constexpr int edge[6][2] = {{0, 1}, {1, 2}, {0, 2}, {0, 3}, {1, 3}, {2, 3}};
+  P2Gradients out{};
+  for (int q = 0; q < 4; ++q) {
+    double L[4] = {b, b, b, b};
+    L[q] = a;
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < 3; ++k) out.g[q][i][k] = (4 * L[i] - 1) * dL[i][k];
+    for (int e = 0; e < 6; ++e) {
+      const int i = edge[e][0], j = edge[e][1];
+      for (int k = 0; k < 3; ++k) out.g[q][4 + e][k] = 4 * (L[j] * dL[i][k] + L[i] * dL[j][k]);
+    }
+  }
+  return out;
+}
+inline constexpr P2Gradients kP2Gradients = make_p2_gradients();
+
+template <class Real, MaterialModel M>
+ElasticSums quadratic_forces(const QuadraticBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu,
+                             const Node4<Real>* u, Node4<Real>* f) {
+  constexpr int W = kLanes<Real>;
+  FlushSubnormals flush;
+  if constexpr (uses_svd(M)) flush.engage();
+  double energy = 0;
+  int32_t inverted = 0;
+  for (int32_t b = begin; b < end; ++b) {
+    const QuadraticBlock<Real>& B = blocks[b];
+    if (b + kPrefetchBlocks < end) {
+      const char* next = reinterpret_cast<const char*>(blocks + b + kPrefetchBlocks);
+#pragma GCC unroll 16
+      for (size_t o = 0; o < sizeof(QuadraticBlock<Real>); o += 64) __builtin_prefetch(next + o, 0, 0);
+    }
+    alignas(64) Real x[30][W];   // node displacements [m]: x[3a + i][lane]
+    alignas(64) Real fc[30][W];  // node forces [N]
+    alignas(64) Real psiV[W];
+    alignas(64) Real bad[W];
+    load_nodes<10, Real>(B.node4, u, x);
+#pragma GCC unroll 1
+    for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+      for (int l = h; l < h + kMathLanes<Real>; ++l) {
+        Real fl[30] = {};
+        Real e = 0, neg = 0;
+        const Real lq = lambda * Real(0.25) * B.V[l], mq = mu * Real(0.25) * B.V[l];
+#pragma GCC unroll 4
+        for (int q = 0; q < 4; ++q) {
+          Real D[9] = {};
+#pragma GCC unroll 10
+          for (int a = 0; a < 10; ++a)
+#pragma GCC unroll 3
+            for (int k = 0; k < 3; ++k) {
+              const double g = kP2Gradients.g[q][a][k];
+              if (g == 0) continue;
+#pragma GCC unroll 3
+              for (int i = 0; i < 3; ++i) D[3 * i + k] += x[3 * a + i][l] * Real(g);
+            }
+          Real F[9], P[9];
+#pragma GCC unroll 3
+          for (int i = 0; i < 3; ++i)
+#pragma GCC unroll 3
+            for (int j = 0; j < 3; ++j)
+              F[3 * i + j] = (i == j ? Real(1) : Real(0)) + D[3 * i] * B.Dinv[j][l] + D[3 * i + 1] * B.Dinv[3 + j][l] +
+                             D[3 * i + 2] * B.Dinv[6 + j][l];
+          if constexpr (!can_invert(M)) neg = material::det(F) <= Real(0) ? Real(1) : neg;
+          e += material::stress<M>(F, lq, mq, P);
+          Real H[9];  // P Dm^-T
+#pragma GCC unroll 3
+          for (int i = 0; i < 3; ++i)
+#pragma GCC unroll 3
+            for (int k = 0; k < 3; ++k)
+              H[3 * i + k] = P[3 * i] * B.Dinv[3 * k][l] + P[3 * i + 1] * B.Dinv[3 * k + 1][l] +
+                             P[3 * i + 2] * B.Dinv[3 * k + 2][l];
+#pragma GCC unroll 10
+          for (int a = 0; a < 10; ++a)
+#pragma GCC unroll 3
+            for (int k = 0; k < 3; ++k) {
+              const double g = kP2Gradients.g[q][a][k];
+              if (g == 0) continue;
+#pragma GCC unroll 3
+              for (int i = 0; i < 3; ++i) fl[3 * a + i] -= H[3 * i + k] * Real(g);
+            }
+        }
+#pragma GCC unroll 30
+        for (int k = 0; k < 30; ++k) fc[k][l] = fl[k];
+        psiV[l] = e;
+        bad[l] = neg;
+      }
+    add_node_forces<10, Real>(B.node4, fc, f);
+    for (int l = 0; l < W; ++l) {
+      energy += double(psiV[l]);
+      inverted += bad[l] != Real(0);
+    }
+  }
+  return {energy, inverted};
+}
+
 // x[3c + i][l] = u[3 node + i] for displacements u in the state's layout
 // (n x 3): for the passes that are not hot (energies, the critical step).
 template <class Real>
@@ -1040,6 +1165,11 @@ constexpr KernelTable<Real> make_table() {
   t.forces[int(MaterialModel::Corotational)] = &forces<Real, MaterialModel::Corotational>;
   t.forces[int(MaterialModel::NeoHookean)] = &forces<Real, MaterialModel::NeoHookean>;
   t.forces[int(MaterialModel::InvertibleStVK)] = &forces<Real, MaterialModel::InvertibleStVK>;
+  t.quadratic_forces[int(MaterialModel::Linear)] = &quadratic_forces<Real, MaterialModel::Linear>;
+  t.quadratic_forces[int(MaterialModel::StVK)] = &quadratic_forces<Real, MaterialModel::StVK>;
+  t.quadratic_forces[int(MaterialModel::Corotational)] = &quadratic_forces<Real, MaterialModel::Corotational>;
+  t.quadratic_forces[int(MaterialModel::NeoHookean)] = &quadratic_forces<Real, MaterialModel::NeoHookean>;
+  t.quadratic_forces[int(MaterialModel::InvertibleStVK)] = &quadratic_forces<Real, MaterialModel::InvertibleStVK>;
   t.energy[int(MaterialModel::Linear)] = &energy<Real, MaterialModel::Linear>;
   t.energy[int(MaterialModel::StVK)] = &energy<Real, MaterialModel::StVK>;
   t.energy[int(MaterialModel::Corotational)] = &energy<Real, MaterialModel::Corotational>;
