@@ -60,6 +60,18 @@ struct QuadraticNodes {
 };
 QuadraticNodes make_quadratic_nodes(const TetMesh& mesh);
 
+// The HRZ lumped mass of each node of a straight quadratic mesh [kg]
+// (n_nodes + n_edges): each tet gives 1/36 of its mass to each corner and
+// 4/27 to each edge node. rho per tet [kg/m^3], volume per tet [m^3].
+std::vector<double> compute_quadratic_lumped_masses(const TetMesh& mesh, const QuadraticNodes& nodes,
+                                                    const std::vector<double>& rho, const std::vector<double>& volume);
+
+// The boundary of a quadratic mesh as flat triangles over all its surface
+// nodes: each boundary face of the corners (compute_boundary_faces, wound
+// outward) split at its three edge nodes into four, wound the same way.
+// What contact meets and the views draw.
+std::vector<Tri> compute_quadratic_boundary_faces(const TetMesh& mesh, const QuadraticNodes& nodes);
+
 // ---- one element, scalar: the reference the lane kernels are checked against ----
 
 // The rest constants of one T10 (isoparametric: its edge nodes may sit off

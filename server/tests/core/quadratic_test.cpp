@@ -153,6 +153,66 @@ TEST(MakeQuadraticNodes, OneSharedNodeAtTheMidpointOfEachEdge) {
     }
 }
 
+TEST(QuadraticLumpedMasses, EveryNodePositiveAndTheTotalExact) {
+  const TetMesh mesh = test::make_jittered_box(Vec3(0.0), Vec3(0.2, 0.1, 0.1), {4, 2, 2}, 0.2);
+  const QuadraticNodes nodes = make_quadratic_nodes(mesh);
+  std::vector<double> rho, volume;
+  double total = 0;
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    const Tet& t = mesh.tets[e];
+    volume.push_back(
+        compute_tet_volume(mesh.X[size_t(t[0])], mesh.X[size_t(t[1])], mesh.X[size_t(t[2])], mesh.X[size_t(t[3])]));
+    rho.push_back(e % 2 ? 1000 : 3000);
+    total += rho.back() * volume.back();
+  }
+  const std::vector<double> m = compute_quadratic_lumped_masses(mesh, nodes, rho, volume);
+  ASSERT_EQ(m.size(), nodes.X.size());
+  double sum = 0;
+  for (double mi : m) {
+    EXPECT_GT(mi, 0.0);
+    sum += mi;
+  }
+  EXPECT_NEAR(sum, total, 1e-12 * total);
+  // The box's corner at the origin: 1/36 of the mass of each tet around it.
+  double expected = 0;
+  for (size_t e = 0; e < mesh.tets.size(); ++e)
+    for (int32_t n : mesh.tets[e])
+      if (n == 0) expected += rho[e] * volume[e] / 36;
+  EXPECT_NEAR(m[0], expected, 1e-15);
+}
+
+TEST(QuadraticBoundaryFaces, FourOutwardTrianglesPerFaceCoveringTheSameArea) {
+  const TetMesh mesh = test::make_jittered_box(Vec3(0.0), Vec3(0.2, 0.1, 0.1), {4, 2, 2}, 0.2);
+  const QuadraticNodes nodes = make_quadratic_nodes(mesh);
+  const std::vector<Tri> corner_faces = compute_boundary_faces(mesh);
+  const std::vector<Tri> faces = compute_quadratic_boundary_faces(mesh, nodes);
+  ASSERT_EQ(faces.size(), 4 * corner_faces.size());
+  auto area_vector = [&](const Tri& t) {
+    const Vec3 &a = nodes.X[size_t(t[0])], &b = nodes.X[size_t(t[1])], &c = nodes.X[size_t(t[2])];
+    return 0.5 * glm::cross(b - a, c - a);
+  };
+  for (size_t f = 0; f < corner_faces.size(); ++f) {
+    const Vec3 whole = area_vector(corner_faces[f]);
+    Vec3 parts(0.0);
+    for (int k = 0; k < 4; ++k) {
+      const Vec3 part = area_vector(faces[4 * f + size_t(k)]);
+      EXPECT_GT(glm::dot(part, whole), 0.0) << "wound as the face";
+      parts += part;
+    }
+    EXPECT_NEAR(glm::length(parts - whole), 0.0, 1e-15);
+  }
+  // Every node on the box's faces is a vertex of some triangle, and no other node is.
+  std::vector<int> used(nodes.X.size(), 0);
+  for (const Tri& t : faces)
+    for (int32_t n : t) used[size_t(n)] = 1;
+  for (size_t n = 0; n < nodes.X.size(); ++n) {
+    const Vec3& X = nodes.X[n];
+    const bool on_box =
+        std::min({X.x, X.y, X.z}) < 1e-12 || X.x > 0.2 - 1e-12 || X.y > 0.1 - 1e-12 || X.z > 0.1 - 1e-12;
+    EXPECT_EQ(used[n] == 1, on_box) << "node " << n;
+  }
+}
+
 // ---- one element (compute_p2_forces) ----
 
 // A straight T10 on four corners: its ten rest positions.
