@@ -425,22 +425,20 @@ int count_near(const Real* near) {
 
 // The flagged lanes of one block, one at a time.
 template <class Real, MaterialModel M>
-__attribute__((noinline)) void svd_lanes_one_by_one(const ElementBlock<Real>& B, Real lambda, Real mu,
-                                                    BlockStress<Real>& s) {
+__attribute__((noinline)) void svd_lanes_one_by_one(const Real* V, Real lambda, Real mu, BlockStress<Real>& s) {
   for (int l = 0; l < kLanes<Real>; ++l) {
     if (s.near[l] == Real(0)) continue;
     Real Fl[9], Pl[9];
     for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
     if (!takes_svd<M>(Fl)) continue;
-    s.psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+    s.psiV[l] = material::stress<M>(Fl, lambda * V[l], mu * V[l], Pl);
     for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
   }
 }
 
 // Every lane of one block through the SVD; the flagged ones keep its result.
 template <class Real, MaterialModel M>
-__attribute__((noinline)) void svd_lanes_of_block(const ElementBlock<Real>& B, Real lambda, Real mu,
-                                                  BlockStress<Real>& s) {
+__attribute__((noinline)) void svd_lanes_of_block(const Real* V, Real lambda, Real mu, BlockStress<Real>& s) {
   constexpr int W = kLanes<Real>;
 #pragma GCC unroll 1
   for (int h = 0; h < W; h += kMathLanes<Real>)
@@ -449,7 +447,7 @@ __attribute__((noinline)) void svd_lanes_of_block(const ElementBlock<Real>& B, R
       Real Fl[9], Pl[9];
 #pragma GCC unroll 16
       for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
-      const Real psi = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
+      const Real psi = material::stress<M>(Fl, lambda * V[l], mu * V[l], Pl);
       const bool take = s.near[l] != Real(0);
       s.psiV[l] = take ? psi : s.psiV[l];
 #pragma GCC unroll 16
@@ -492,7 +490,7 @@ template <class Real>
 inline constexpr int kPolarSteps = sizeof(Real) == 4 ? 8 : 10;
 
 template <class Real>
-TACTILE_INLINE void corotational_stresses(const ElementBlock<Real>& B, Real lambda, Real mu, BlockStress<Real>& s) {
+TACTILE_INLINE void corotational_stresses(const Real* V, Real lambda, Real mu, BlockStress<Real>& s) {
   constexpr int W = kLanes<Real>;
   alignas(64) Real X[9][W];    // the iterate, per lane
   alignas(64) Real change[W];  // |X_new - X|^2 of the last step, per lane
@@ -533,7 +531,7 @@ TACTILE_INLINE void corotational_stresses(const ElementBlock<Real>& B, Real lamb
         Fl[k] = s.F[k][l];
         Rl[k] = X[k][l];
       }
-      s.psiV[l] = material::stress_corotational_of(Fl, Rl, lambda * B.V[l], mu * B.V[l], Pl);
+      s.psiV[l] = material::stress_corotational_of(Fl, Rl, lambda * V[l], mu * V[l], Pl);
       s.near[l] = change[l] > kConverged ? Real(1) : s.near[l];
 #pragma GCC unroll 16
       for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
@@ -603,7 +601,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       if (other) {
         svd_lanes_of_pair<Real, M>(blocks[held], h, *B, *other, lambda, mu);
       } else {
-        svd_lanes_of_block<Real, M>(blocks[held], lambda, mu, h);
+        svd_lanes_of_block<Real, M>(blocks[held].V, lambda, mu, h);
       }
       alignas(64) Real g[12][W];
       corner_forces(blocks[held], h.P, g);
@@ -643,7 +641,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       }
     if (kAddsAfterF && queued >= 0) add_corner_forces(blocks[queued], fc[queued & 1], f);
     if constexpr (M == MaterialModel::Corotational) {
-      corotational_stresses(B, lambda, mu, s);
+      corotational_stresses(B.V, lambda, mu, s);
     } else {
 #pragma GCC unroll 1
       for (int h = 0; h < W; h += kMathLanes<Real>)
@@ -669,7 +667,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
       if (any_above(s.near, Real(0))) {
         flush.engage();
         if (count_near(s.near) <= kScalarNearLanes) {
-          svd_lanes_one_by_one<Real, M>(B, lambda, mu, s);
+          svd_lanes_one_by_one<Real, M>(B.V, lambda, mu, s);
         } else if (held < 0) {
           // Held for a partner; its forces come with the partner's SVD.
           if (kAddsAfterF) queued = -1;
@@ -703,9 +701,10 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
 // point q, across lanes, D = sum_a x_a g_aq^T with g_aq the reference
 // gradients (constants: the multiplications by 0 and 1 fold away),
 // F = I + D Dm^-1, the stress of V/4 (each point stands for a quarter of a
-// straight tet), and the nodes' forces f_a -= (P Dm^-T) g_aq. Every model
-// takes material::stress<M> on every lane (the SVD's models without the
-// linear tet's cheap paths: the reference first; fem_bench --only=quadratic).
+// straight tet), and the nodes' forces f_a -= (P Dm^-T) g_aq. The models
+// without the SVD run the four points in one pass across lanes; the SVD's
+// take each point as the linear kernel takes a block, the SVD on the lanes
+// flagged near the floor only (fem_bench --only=quadratic; docs/perf.md).
 
 // The reference gradients d N_a / d xi at the four points of
 // tet_quadrature_4 (point q has barycentric coordinate a at corner q, b at
@@ -732,12 +731,127 @@ constexpr P2Gradients make_p2_gradients() {
 }
 inline constexpr P2Gradients kP2Gradients = make_p2_gradients();
 
+// One quadrature point q of a block: F per lane from the nodes'
+// displacements x (F = I + D Dm^-1, D = sum_a x_a g_aq^T).
+template <class Real, int q>
+TACTILE_INLINE void quadratic_point_gradient(const QuadraticBlock<Real>& B, int l, const Real (*x)[kLanes<Real>],
+                                             Real* F) {
+  Real D[9] = {};
+#pragma GCC unroll 10
+  for (int a = 0; a < 10; ++a)
+#pragma GCC unroll 3
+    for (int k = 0; k < 3; ++k) {
+      const double g = kP2Gradients.g[q][a][k];
+      if (g == 0) continue;
+#pragma GCC unroll 3
+      for (int i = 0; i < 3; ++i) D[3 * i + k] += x[3 * a + i][l] * Real(g);
+    }
+#pragma GCC unroll 3
+  for (int i = 0; i < 3; ++i)
+#pragma GCC unroll 3
+    for (int j = 0; j < 3; ++j)
+      F[3 * i + j] = (i == j ? Real(1) : Real(0)) + D[3 * i] * B.Dinv[j][l] + D[3 * i + 1] * B.Dinv[3 + j][l] +
+                     D[3 * i + 2] * B.Dinv[6 + j][l];
+}
+
+// The nodes' forces of point q from its stress P (already times V/4):
+// f_a -= (P Dm^-T) g_aq, into fl[3a + i].
+template <class Real, int q>
+TACTILE_INLINE void quadratic_point_forces(const QuadraticBlock<Real>& B, int l, const Real* P, Real* fl) {
+  Real H[9];  // P Dm^-T
+#pragma GCC unroll 3
+  for (int i = 0; i < 3; ++i)
+#pragma GCC unroll 3
+    for (int k = 0; k < 3; ++k)
+      H[3 * i + k] =
+          P[3 * i] * B.Dinv[3 * k][l] + P[3 * i + 1] * B.Dinv[3 * k + 1][l] + P[3 * i + 2] * B.Dinv[3 * k + 2][l];
+#pragma GCC unroll 10
+  for (int a = 0; a < 10; ++a)
+#pragma GCC unroll 3
+    for (int k = 0; k < 3; ++k) {
+      const double g = kP2Gradients.g[q][a][k];
+      if (g == 0) continue;
+#pragma GCC unroll 3
+      for (int i = 0; i < 3; ++i) fl[3 * a + i] -= H[3 * i + k] * Real(g);
+    }
+}
+
+// A quadratic block's lane of a model without the SVD: the four points in
+// one pass, F and P in registers.
+template <class Real, MaterialModel M, int q = 0>
+TACTILE_INLINE void quadratic_points_plain(const QuadraticBlock<Real>& B, int l, const Real (*x)[kLanes<Real>], Real lq,
+                                           Real mq, Real* fl, Real& e, Real& neg) {
+  Real F[9], P[9];
+  quadratic_point_gradient<Real, q>(B, l, x, F);
+  if constexpr (!can_invert(M)) neg = material::det(F) <= Real(0) ? Real(1) : neg;
+  e += material::stress<M>(F, lq, mq, P);
+  quadratic_point_forces<Real, q>(B, l, P, fl);
+  if constexpr (q < 3) quadratic_points_plain<Real, M, q + 1>(B, l, x, lq, mq, fl, e, neg);
+}
+
+// A quadratic block of an SVD model, point by point as the linear kernel
+// takes a block: the cheap form on every lane (StVK's stress below the
+// floor, Newton's polar iteration), the SVD on the lanes flagged only.
+template <class Real, MaterialModel M, int q = 0>
+TACTILE_INLINE void quadratic_points_svd(const QuadraticBlock<Real>& B, const Real (*x)[kLanes<Real>], const Real* Vq,
+                                         Real lambda, Real mu, Real (*fc)[kLanes<Real>], Real* psiV,
+                                         FlushSubnormals& flush) {
+  constexpr int W = kLanes<Real>;
+  BlockStress<Real> s;
+#pragma GCC unroll 1
+  for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+    for (int l = h; l < h + kMathLanes<Real>; ++l) {
+      Real Fl[9];
+      quadratic_point_gradient<Real, q>(B, l, x, Fl);
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) s.F[k][l] = Fl[k];
+    }
+  if constexpr (M == MaterialModel::Corotational) {
+    corotational_stresses(Vq, lambda, mu, s);
+  } else {
+#pragma GCC unroll 1
+    for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+      for (int l = h; l < h + kMathLanes<Real>; ++l) {
+        Real Fl[9], Pl[9];
+#pragma GCC unroll 16
+        for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
+        s.psiV[l] = material::stress_stvk_near(Fl, lambda * Vq[l], mu * Vq[l], Pl, s.near[l]);
+#pragma GCC unroll 16
+        for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
+      }
+  }
+  if (any_above(s.near, Real(0))) {
+    flush.engage();
+    if (count_near(s.near) <= kScalarNearLanes) {
+      svd_lanes_one_by_one<Real, M>(Vq, lambda, mu, s);
+    } else {
+      svd_lanes_of_block<Real, M>(Vq, lambda, mu, s);
+    }
+  }
+#pragma GCC unroll 1
+  for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+    for (int l = h; l < h + kMathLanes<Real>; ++l) {
+      Real Pl[9], fl[30];
+#pragma GCC unroll 16
+      for (int k = 0; k < 9; ++k) Pl[k] = s.P[k][l];
+#pragma GCC unroll 30
+      for (int k = 0; k < 30; ++k) fl[k] = fc[k][l];
+      quadratic_point_forces<Real, q>(B, l, Pl, fl);
+#pragma GCC unroll 30
+      for (int k = 0; k < 30; ++k) fc[k][l] = fl[k];
+      psiV[l] += s.psiV[l];
+    }
+  if constexpr (q < 3) quadratic_points_svd<Real, M, q + 1>(B, x, Vq, lambda, mu, fc, psiV, flush);
+}
+
 template <class Real, MaterialModel M>
 ElasticSums quadratic_forces(const QuadraticBlock<Real>* blocks, int32_t begin, int32_t end, Real lambda, Real mu,
                              const Node4<Real>* u, Node4<Real>* f) {
   constexpr int W = kLanes<Real>;
   FlushSubnormals flush;
-  if constexpr (uses_svd(M)) flush.engage();
   double energy = 0;
   int32_t inverted = 0;
   for (int32_t b = begin; b < end; ++b) {
@@ -752,56 +866,29 @@ ElasticSums quadratic_forces(const QuadraticBlock<Real>* blocks, int32_t begin, 
     alignas(64) Real psiV[W];
     alignas(64) Real bad[W];
     load_nodes<10, Real>(B.node4, u, x);
-#pragma GCC unroll 1
-    for (int h = 0; h < W; h += kMathLanes<Real>)
-#pragma GCC ivdep
-      for (int l = h; l < h + kMathLanes<Real>; ++l) {
-        Real fl[30] = {};
-        Real e = 0, neg = 0;
-        const Real lq = lambda * Real(0.25) * B.V[l], mq = mu * Real(0.25) * B.V[l];
-#pragma GCC unroll 4
-        for (int q = 0; q < 4; ++q) {
-          Real D[9] = {};
-#pragma GCC unroll 10
-          for (int a = 0; a < 10; ++a)
-#pragma GCC unroll 3
-            for (int k = 0; k < 3; ++k) {
-              const double g = kP2Gradients.g[q][a][k];
-              if (g == 0) continue;
-#pragma GCC unroll 3
-              for (int i = 0; i < 3; ++i) D[3 * i + k] += x[3 * a + i][l] * Real(g);
-            }
-          Real F[9], P[9];
-#pragma GCC unroll 3
-          for (int i = 0; i < 3; ++i)
-#pragma GCC unroll 3
-            for (int j = 0; j < 3; ++j)
-              F[3 * i + j] = (i == j ? Real(1) : Real(0)) + D[3 * i] * B.Dinv[j][l] + D[3 * i + 1] * B.Dinv[3 + j][l] +
-                             D[3 * i + 2] * B.Dinv[6 + j][l];
-          if constexpr (!can_invert(M)) neg = material::det(F) <= Real(0) ? Real(1) : neg;
-          e += material::stress<M>(F, lq, mq, P);
-          Real H[9];  // P Dm^-T
-#pragma GCC unroll 3
-          for (int i = 0; i < 3; ++i)
-#pragma GCC unroll 3
-            for (int k = 0; k < 3; ++k)
-              H[3 * i + k] = P[3 * i] * B.Dinv[3 * k][l] + P[3 * i + 1] * B.Dinv[3 * k + 1][l] +
-                             P[3 * i + 2] * B.Dinv[3 * k + 2][l];
-#pragma GCC unroll 10
-          for (int a = 0; a < 10; ++a)
-#pragma GCC unroll 3
-            for (int k = 0; k < 3; ++k) {
-              const double g = kP2Gradients.g[q][a][k];
-              if (g == 0) continue;
-#pragma GCC unroll 3
-              for (int i = 0; i < 3; ++i) fl[3 * a + i] -= H[3 * i + k] * Real(g);
-            }
-        }
-#pragma GCC unroll 30
-        for (int k = 0; k < 30; ++k) fc[k][l] = fl[k];
-        psiV[l] = e;
-        bad[l] = neg;
+    if constexpr (uses_svd(M)) {
+      alignas(64) Real Vq[W];  // each point stands for a quarter of the volume
+      for (int l = 0; l < W; ++l) {
+        Vq[l] = Real(0.25) * B.V[l];
+        psiV[l] = 0;
+        bad[l] = 0;
+        for (int k = 0; k < 30; ++k) fc[k][l] = 0;
       }
+      quadratic_points_svd<Real, M>(B, x, Vq, lambda, mu, fc, psiV, flush);
+    } else {
+#pragma GCC unroll 1
+      for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+        for (int l = h; l < h + kMathLanes<Real>; ++l) {
+          Real fl[30] = {};
+          Real e = 0, neg = 0;
+          quadratic_points_plain<Real, M>(B, l, x, lambda * Real(0.25) * B.V[l], mu * Real(0.25) * B.V[l], fl, e, neg);
+#pragma GCC unroll 30
+          for (int k = 0; k < 30; ++k) fc[k][l] = fl[k];
+          psiV[l] = e;
+          bad[l] = neg;
+        }
+    }
     add_node_forces<10, Real>(B.node4, fc, f);
     for (int l = 0; l < W; ++l) {
       energy += double(psiV[l]);
