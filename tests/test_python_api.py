@@ -218,7 +218,13 @@ def test_ctrl_c_stops_a_long_advance_between_two_steps() -> None:
     """advance(1e9) in a child process, sent SIGINT once the advance runs: KeyboardInterrupt within a fraction of
     a second, the simulation at the time it reached and still usable. Before: the call ran on."""
     code = (
-        "import sys, threading, time, tactile\n"
+        "import signal, sys, threading, time, tactile\n"
+        # What the child inherited from the test runner: an ignored or blocked SIGINT passes through exec.
+        "print('inherited', signal.getsignal(signal.SIGINT), sorted(signal.pthread_sigmask(signal.SIG_BLOCK, [])),\n"
+        "      file=sys.stderr, flush=True)\n"
+        # A terminal's Ctrl-C, as an interactive Python has it.
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+        "signal.pthread_sigmask(signal.SIG_UNBLOCK, [signal.SIGINT])\n"
         "sys.path.insert(0, sys.argv[1])\n"
         "from test_python_api import falling_block\n"
         "sim = tactile.Simulation(falling_block(4))\n"
