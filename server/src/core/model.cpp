@@ -329,9 +329,10 @@ QuadraticLaneBlocks<Real> make_quadratic_lane_blocks(const TetMesh& mesh, const 
 // few new cache lines a block: a stream the hardware prefetcher follows
 // with no prefetches in software (fem_bench --large --only=passes;
 // docs/perf.md, Element and node order).
-template <class Real>
-NodeNumbering compute_node_numbering(const LaneBlocks<Real>& lanes, int32_t n_parts, int32_t n_nodes) {
-  constexpr int W = kLanes<Real>;
+template <class Block>
+NodeNumbering compute_node_numbering(const LaneLayout<Block>& lanes, int32_t n_parts, int32_t n_nodes) {
+  constexpr int W = Block::W;
+  constexpr int C = int(std::extent_v<decltype(Block::node4)>);  // nodes a lane: 4, or 10 for a quadratic tet
   const auto nn = size_t(n_nodes);
   NodeNumbering out;
   out.cut.assign(size_t(n_parts) + 1, 0);
@@ -346,7 +347,7 @@ NodeNumbering compute_node_numbering(const LaneBlocks<Real>& lanes, int32_t n_pa
     if (lanes.first_block[size_t(p)] < 0) continue;
     const int32_t b1 = p + 1 < n_parts ? lanes.first_block[size_t(p) + 1] : int32_t(lanes.blocks.size());
     for (int32_t b = lanes.first_block[size_t(p)]; b < b1; ++b)
-      for (int c = 0; c < 4; ++c)
+      for (int c = 0; c < C; ++c)
         for (int l = 0; l < W; ++l) {
           int32_t& id = out.node_model[size_t(lanes.blocks[size_t(b)].node4[c][l])];
           if (id < 0) id = next++;
@@ -590,8 +591,10 @@ template QuadraticLaneBlocks<float> make_quadratic_lane_blocks<float>(const TetM
                                                                       const ElementConstants&, const ElementOrder&);
 template QuadraticLaneBlocks<double> make_quadratic_lane_blocks<double>(const TetMesh&, const std::vector<TetEdges>&,
                                                                         const ElementConstants&, const ElementOrder&);
-template NodeNumbering compute_node_numbering<float>(const LaneBlocks<float>&, int32_t, int32_t);
-template NodeNumbering compute_node_numbering<double>(const LaneBlocks<double>&, int32_t, int32_t);
+template NodeNumbering compute_node_numbering(const LaneBlocks<float>&, int32_t, int32_t);
+template NodeNumbering compute_node_numbering(const LaneBlocks<double>&, int32_t, int32_t);
+template NodeNumbering compute_node_numbering(const QuadraticLaneBlocks<float>&, int32_t, int32_t);
+template NodeNumbering compute_node_numbering(const QuadraticLaneBlocks<double>&, int32_t, int32_t);
 template Model<float> build_model<float>(const ModelSpec&);
 template Model<double> build_model<double>(const ModelSpec&);
 

@@ -88,13 +88,14 @@ QuadraticLaneBlocks<Real> make_quadratic_lane_blocks(const TetMesh& mesh, const 
                                                      const ElementConstants& elements, const ElementOrder& order);
 
 // The model's node ids: node_model[given] and node_given[model], numbered in
-// the order the blocks first touch them; cut[p] where part p's node range
-// starts (a multiple of 16 but the last, n_parts + 1 entries).
+// the order the blocks first touch them (all of a lane's nodes: the corners,
+// and a quadratic tet's edge nodes); cut[p] where part p's node range starts
+// (a multiple of 16 but the last, n_parts + 1 entries).
 struct NodeNumbering {
   std::vector<int32_t> node_model, node_given, cut;
 };
-template <class Real>
-NodeNumbering compute_node_numbering(const LaneBlocks<Real>& lanes, int32_t n_parts, int32_t n_nodes);
+template <class Block>
+NodeNumbering compute_node_numbering(const LaneLayout<Block>& lanes, int32_t n_parts, int32_t n_nodes);
 
 // The essential sets (nodes held by two of them refused) and the loads, each
 // load's weights by the nodes' masses; in model ids. `mesh` in the spec's ids,

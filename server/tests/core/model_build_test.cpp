@@ -196,6 +196,31 @@ TEST(ComputeNodeNumbering, APermutationInFirstTouchOrderCutAt16) {
   EXPECT_EQ(n.cut[2], mesh.n_nodes());
 }
 
+// A quadratic layout numbers every node a lane touches, edge nodes too: a
+// permutation of corners and edge nodes together, in first-touch order.
+TEST(ComputeNodeNumbering, QuadraticBlocksNumberTheirEdgeNodesToo) {
+  const TetMesh mesh = make_box(Vec3(0.0), Vec3(0.3, 0.1, 0.1), {30, 8, 8});
+  const QuadraticNodes nodes = make_quadratic_nodes(mesh);
+  const ElementConstants c = compute_element_constants(mesh, kSoft);
+  const ElementOrder o = compute_element_order(mesh, c.volume, 2);
+  const QuadraticLaneBlocks<double> lanes = make_quadratic_lane_blocks<double>(mesh, nodes.edges, c, o);
+  const auto n_nodes = int32_t(nodes.X.size());
+  const NodeNumbering n = compute_node_numbering(lanes, o.n_parts, n_nodes);
+  ASSERT_EQ(n.node_model.size(), nodes.X.size());
+  for (size_t i = 0; i < n.node_model.size(); ++i) ASSERT_EQ(n.node_given[size_t(n.node_model[i])], int32_t(i));
+  int32_t next = 0;
+  for (const QuadraticBlock<double>& B : lanes.blocks)
+    for (int k = 0; k < 10; ++k)
+      for (int l = 0; l < kLanes<double>; ++l) {
+        const int32_t id = n.node_model[size_t(B.node4[k][l])];
+        ASSERT_LE(id, next);
+        if (id == next) ++next;
+      }
+  EXPECT_EQ(next, n_nodes);
+  EXPECT_EQ(n.cut.back(), n_nodes);
+  EXPECT_EQ(n.cut[1] % 16, 0);
+}
+
 TEST(ComputeBoundarySets, SetsInModelIdsLoadsWeightedByMassAndOverlapsRefused) {
   ModelSpec spec = test::make_spec(make_regular_tet(), MaterialModel::StVK);
   const std::vector<int32_t> node_model{3, 2, 1, 0};  // model id of each given node
