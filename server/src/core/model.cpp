@@ -112,7 +112,8 @@ const MaterialSpec& material_of(const TetMesh& mesh, const std::vector<MaterialS
 
 }  // namespace
 
-ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials) {
+ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
+                                           const QuadraticNodes* quadratic) {
   const auto nt = size_t(mesh.n_tets());
   ElementConstants out;
   out.volume.resize(nt);
@@ -155,7 +156,13 @@ ElementConstants compute_element_constants(const TetMesh& mesh, const std::vecto
     const Vec3 &x0 = mesh.X[size_t(t[0])], &x1 = mesh.X[size_t(t[1])], &x2 = mesh.X[size_t(t[2])],
                &x3 = mesh.X[size_t(t[3])];
     out.altitude[e] = compute_min_altitude(x0, x1, x2, x3);
-    out.dt[e] = compute_element_critical_dt(x0, x1, x2, x3, lame.lambda, lame.mu, mat.rho);
+    if (quadratic) {
+      std::array<Vec3, kP2Nodes> X{x0, x1, x2, x3};
+      for (int k = 0; k < 6; ++k) X[size_t(4 + k)] = quadratic->X[size_t(quadratic->edges[e][size_t(k)])];
+      out.dt[e] = compute_p2_critical_dt(X, lame.lambda, lame.mu, mat.rho);
+    } else {
+      out.dt[e] = compute_element_critical_dt(x0, x1, x2, x3, lame.lambda, lame.mu, mat.rho);
+    }
   }
   return out;
 }

@@ -43,7 +43,10 @@ struct ElementConstants {
   std::vector<double> dt;        // critical step at rest, exact per element [s]
   bool any_non_invertible = false;
 };
-ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials);
+// With `quadratic` (make_quadratic_nodes of `mesh`), each tet's step is its
+// quadratic element's (compute_p2_critical_dt), not the linear tet's.
+ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
+                                           const QuadraticNodes* quadratic = nullptr);
 
 // Row-sum lumping, section 4.1: each tet gives a quarter of its mass to each
 // corner [kg] (n_nodes, the mesh's ids).

@@ -71,6 +71,22 @@ TEST(ComputeElementConstants, ARegularTetsVolumeAltitudeLameAndStep) {
   EXPECT_FALSE(n.any_non_invertible);
 }
 
+TEST(ComputeElementConstants, AQuadraticMeshTakesEachTetsQuadraticStep) {
+  const TetMesh mesh = test::make_jittered_box(Vec3(0.0), Vec3(0.06, 0.04, 0.02), {3, 2, 1}, 0.2);
+  const QuadraticNodes nodes = make_quadratic_nodes(mesh);
+  const ElementConstants linear = compute_element_constants(mesh, kSoft);
+  const ElementConstants quadratic = compute_element_constants(mesh, kSoft, &nodes);
+  const Lame lame = compute_lame(1e5, 0.3);
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    std::array<Vec3, kP2Nodes> X;
+    for (int a = 0; a < 4; ++a) X[size_t(a)] = mesh.X[size_t(mesh.tets[e][size_t(a)])];
+    for (int k = 0; k < 6; ++k) X[size_t(4 + k)] = nodes.X[size_t(nodes.edges[e][size_t(k)])];
+    EXPECT_EQ(quadratic.dt[e], compute_p2_critical_dt(X, lame.lambda, lame.mu, 1000)) << e;
+    EXPECT_LT(quadratic.dt[e], linear.dt[e]) << e;
+    EXPECT_EQ(quadratic.volume[e], linear.volume[e]) << e;
+  }
+}
+
 TEST(ComputeElementConstants, RefusesInvertedTetsAndRegionsWithoutAMaterialByName) {
   TetMesh mesh = two_tets_and_a_stray_node();
   std::swap(mesh.tets[1][1], mesh.tets[1][2]);
