@@ -46,9 +46,9 @@ Vec3 p2_node_xi(int a) {
 }
 
 const std::array<QuadraturePoint, 4>& tet_quadrature_4() {
-  // Barycentric (a, b, b, b) and its permutations, a = (5 + 3 sqrt 5) / 20, b = (5 - sqrt 5) / 20.
+  // Barycentric (a, b, b, b) and its permutations.
   static const std::array<QuadraturePoint, 4> rule = [] {
-    const double a = 0.58541019662496845446, b = 0.13819660112501051518;
+    const double a = kTetQuadratureA, b = kTetQuadratureB;
     std::array<QuadraturePoint, 4> r{};
     r[0] = {Vec3(b, b, b), 1.0 / 24};  // L0 = a
     r[1] = {Vec3(a, b, b), 1.0 / 24};

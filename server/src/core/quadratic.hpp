@@ -37,11 +37,38 @@ struct QuadraturePoint {
   Vec3 xi;
   double weight;
 };
+// The barycentric coordinates of tet_quadrature_4's points: point q has a at
+// corner q and b at the other three, a = (5 + 3 sqrt 5) / 20, b = (5 - sqrt 5) / 20.
+inline constexpr double kTetQuadratureA = 0.58541019662496845446, kTetQuadratureB = 0.13819660112501051518;
+
 // Four points, exact for polynomials of degree 2: the stiffness of linear
 // elasticity on an affine P2 tet (gradients of degree 1, their products of
 // degree 2) exactly, and the nonlinear models' stress at the points a
 // degree-2 rule needs (Keast's rule 2; Zienkiewicz, Taylor & Zhu, table 6.3).
 const std::array<QuadraturePoint, 4>& tet_quadrature_4();
+
+// d N_a / d xi at the four points of tet_quadrature_4 ([q][a][k]), as
+// constants the lane kernel folds (core/kernels/kernels_impl.hpp): the
+// values p2_shape_gradients gives there.
+struct P2PointGradients {
+  double g[4][kP2Nodes][3];
+};
+constexpr P2PointGradients make_p2_point_gradients() {
+  constexpr double dL[4][3] = {{-1, -1, -1}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};  // d L_i / d xi
+  P2PointGradients out{};
+  for (int q = 0; q < 4; ++q) {
+    double L[4] = {kTetQuadratureB, kTetQuadratureB, kTetQuadratureB, kTetQuadratureB};
+    L[q] = kTetQuadratureA;
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < 3; ++k) out.g[q][i][k] = (4 * L[i] - 1) * dL[i][k];
+    for (int e = 0; e < 6; ++e) {
+      const int i = kTetEdges[e][0], j = kTetEdges[e][1];
+      for (int k = 0; k < 3; ++k) out.g[q][4 + e][k] = 4 * (L[j] * dL[i][k] + L[i] * dL[j][k]);
+    }
+  }
+  return out;
+}
+inline constexpr P2PointGradients kP2PointGradients = make_p2_point_gradients();
 
 // The HRZ lumped mass of a straight-sided T10 as fractions of its mass
 // (Hinton, Rock & Zienkiewicz 1976): each node's diagonal of the consistent

@@ -96,7 +96,6 @@ class FrameRing {
   }
 
   int64_t dropped() const { return dropped_.load(std::memory_order_relaxed); }
-  size_t capacity() const { return capacity_; }
 
  private:
   static constexpr size_t kHeader = 8;

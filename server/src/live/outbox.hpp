@@ -44,9 +44,6 @@ class Outbox {
     loop.on_applied([this](const AppliedInput& a) { applied.push(reinterpret_cast<const uint8_t*>(&a), sizeof a); });
   }
 
-  // Messages the rings had no room for, all three together.
-  int64_t dropped() const { return haptics.dropped() + states.dropped() + applied.dropped(); }
-
   FrameRing haptics;  // HapticFrame Envelopes
   FrameRing states;   // StateFrame Envelopes
   FrameRing applied;  // AppliedInput, as the loop applied them

@@ -40,6 +40,20 @@ Case make_case(double amplitude) {
   return c;
 }
 
+// The case's tets as quadratic lane blocks of one material, their node ids
+// as the kernel reads them (4 x id), in the case's own numbering.
+template <class Real>
+QuadraticLaneBlocks<Real> lanes_of(const Case& c) {
+  const std::vector<MaterialSpec> materials{MaterialSpec{MaterialModel::StVK, 1e5, 0.3, 1000}};
+  const ElementConstants constants = compute_element_constants(c.mesh, materials);
+  const ElementOrder order = compute_element_order(c.mesh, constants.volume, 1);
+  QuadraticLaneBlocks<Real> lanes = make_quadratic_lane_blocks<Real>(c.mesh, c.nodes.edges, constants, order);
+  for (auto& B : lanes.blocks)
+    for (auto& ids : B.node4)
+      for (int32_t& id : ids) id *= 4;
+  return lanes;
+}
+
 // The scalar reference, tet by tet: forces per node and the total energy.
 double reference(const Case& c, MaterialModel model, double lambda, double mu, std::vector<Vec3>& f) {
   f.assign(c.nodes.X.size(), Vec3(0.0));
@@ -65,13 +79,7 @@ void check_against_reference(double squash = 0) {
   // Squashed along z by `squash` (and sheared a little): elements near the
   // floor of invertible StVK and corotational, where the SVD takes over.
   for (size_t i = 0; i < c.u.size(); ++i) c.u[i] += Vec3(0.1 * squash * c.nodes.X[i].z, 0.0, -squash * c.nodes.X[i].z);
-  const std::vector<MaterialSpec> materials{MaterialSpec{MaterialModel::StVK, 1e5, 0.3, 1000}};
-  const ElementConstants constants = compute_element_constants(c.mesh, materials);
-  const ElementOrder order = compute_element_order(c.mesh, constants.volume, 1);
-  QuadraticLaneBlocks<Real> lanes = make_quadratic_lane_blocks<Real>(c.mesh, c.nodes.edges, constants, order);
-  for (auto& B : lanes.blocks)
-    for (auto& ids : B.node4)
-      for (int32_t& id : ids) id *= 4;
+  const QuadraticLaneBlocks<Real> lanes = lanes_of<Real>(c);
   ASSERT_LT(std::count(lanes.lane_tet.begin(), lanes.lane_tet.end(), -1), kLanes<Real>) << "some padding";
   ASSERT_GT(std::count(lanes.lane_tet.begin(), lanes.lane_tet.end(), -1), 0) << "some padding";
   const size_t n = c.nodes.X.size();
@@ -114,13 +122,7 @@ TEST(QuadraticKernel, ForcesEqualTheReferenceWhereTheSvdTakesOverDouble) { check
 
 TEST(QuadraticKernel, ALaneInvertedAtAPointIsCountedForPlainStVK) {
   Case c = make_case(0.0);
-  const std::vector<MaterialSpec> materials{MaterialSpec{MaterialModel::StVK, 1e5, 0.3, 1000}};
-  const ElementConstants constants = compute_element_constants(c.mesh, materials);
-  const ElementOrder order = compute_element_order(c.mesh, constants.volume, 1);
-  QuadraticLaneBlocks<double> lanes = make_quadratic_lane_blocks<double>(c.mesh, c.nodes.edges, constants, order);
-  for (auto& B : lanes.blocks)
-    for (auto& ids : B.node4)
-      for (int32_t& id : ids) id *= 4;
+  const QuadraticLaneBlocks<double> lanes = lanes_of<double>(c);
   // Tet 0's fourth corner pushed through its opposite face: inverted there.
   const Tet& t = c.mesh.tets[0];
   const Vec3 centre = (c.mesh.X[size_t(t[0])] + c.mesh.X[size_t(t[1])] + c.mesh.X[size_t(t[2])]) / 3.0;

@@ -98,6 +98,15 @@ TEST(P2Shape, InterpolatesEveryQuadraticExactly) {
   }
 }
 
+// The constants the lane kernel folds are the gradients at the rule's points.
+TEST(P2Shape, TheKernelsConstantsAreTheGradientsAtTheQuadraturePoints) {
+  for (size_t q = 0; q < 4; ++q) {
+    const auto G = p2_shape_gradients(tet_quadrature_4()[q].xi);
+    for (int a = 0; a < kP2Nodes; ++a)
+      for (int k = 0; k < 3; ++k) EXPECT_NEAR(kP2PointGradients.g[q][a][k], G[size_t(a)][k], 1e-15) << q << a << k;
+  }
+}
+
 TEST(TetQuadrature4, IntegratesEveryPolynomialOfDegreeTwoExactly) {
   const auto& rule = tet_quadrature_4();
   for (int i = 0; i <= 2; ++i)

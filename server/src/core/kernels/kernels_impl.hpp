@@ -35,6 +35,7 @@
 #include <utility>
 
 #include "core/kernels/kernels.hpp"
+#include "core/quadratic.hpp"
 
 // Everything below is internal and inlined: the ABI of 64-byte vector
 // arguments (which -Wpsabi warns about below AVX-512) never applies.
@@ -538,6 +539,36 @@ TACTILE_INLINE void corotational_stresses(const Real* V, Real lambda, Real mu, B
     }
 }
 
+// V P and V psi of every lane of a block from its F (s.F), V per lane: the
+// cheap form for the SVD models, with their lanes near the floor flagged
+// (s.near) for the SVD. P and psi are linear in (lambda, mu) at a fixed
+// ratio, so passing (lambda V, mu V) gives V P and V psi. (One volume a lane
+// and the group's lambda and mu, rather than lambda V and mu V a lane: 4
+// bytes a tet less to stream, and a load fewer; fem_bench --only=passes.)
+template <class Real, MaterialModel M>
+TACTILE_INLINE void block_stresses(const Real* V, Real lambda, Real mu, BlockStress<Real>& s) {
+  constexpr int W = kLanes<Real>;
+  if constexpr (M == MaterialModel::Corotational) {
+    corotational_stresses(V, lambda, mu, s);
+  } else {
+#pragma GCC unroll 1
+    for (int h = 0; h < W; h += kMathLanes<Real>)
+#pragma GCC ivdep
+      for (int l = h; l < h + kMathLanes<Real>; ++l) {
+        Real Fl[9], Pl[9];
+#pragma GCC unroll 16
+        for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
+        if constexpr (M == MaterialModel::InvertibleStVK) {
+          s.psiV[l] = material::stress_stvk_near(Fl, lambda * V[l], mu * V[l], Pl, s.near[l]);
+        } else {
+          s.psiV[l] = material::stress<M>(Fl, lambda * V[l], mu * V[l], Pl);
+        }
+#pragma GCC unroll 16
+        for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
+      }
+  }
+}
+
 // [f1 f2 f3] = -V P Dm^-T, f0 = -(f1 + f2 + f3): the corner forces [N] of a
 // block's lanes, g[3c + i][lane].
 template <class Real>
@@ -640,29 +671,7 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
         for (int k = 0; k < 9; ++k) s.F[k][l] = Fl[k];
       }
     if (kAddsAfterF && queued >= 0) add_corner_forces(blocks[queued], fc[queued & 1], f);
-    if constexpr (M == MaterialModel::Corotational) {
-      corotational_stresses(B.V, lambda, mu, s);
-    } else {
-#pragma GCC unroll 1
-      for (int h = 0; h < W; h += kMathLanes<Real>)
-#pragma GCC ivdep
-        for (int l = h; l < h + kMathLanes<Real>; ++l) {
-          Real Fl[9], Pl[9];
-#pragma GCC unroll 16
-          for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
-          // P and psi are linear in (lambda, mu) at a fixed ratio, so passing
-          // (lambda V, mu V) gives V P and V psi. (One volume a lane and the
-          // group's lambda and mu, rather than lambda V and mu V a lane: 4 bytes
-          // a tet less to stream, and a load fewer; fem_bench --only=passes.)
-          if constexpr (M == MaterialModel::InvertibleStVK) {
-            s.psiV[l] = material::stress_stvk_near(Fl, lambda * B.V[l], mu * B.V[l], Pl, s.near[l]);
-          } else {
-            s.psiV[l] = material::stress<M>(Fl, lambda * B.V[l], mu * B.V[l], Pl);
-          }
-#pragma GCC unroll 16
-          for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
-        }
-    }
+    block_stresses<Real, M>(B.V, lambda, mu, s);
     if constexpr (uses_svd(M)) {
       if (any_above(s.near, Real(0))) {
         flush.engage();
@@ -706,31 +715,6 @@ ElasticSums forces(const ElementBlock<Real>* blocks, int32_t begin, int32_t end,
 // take each point as the linear kernel takes a block, the SVD on the lanes
 // flagged near the floor only (fem_bench --only=quadratic; docs/perf.md).
 
-// The reference gradients d N_a / d xi at the four points of
-// tet_quadrature_4 (point q has barycentric coordinate a at corner q, b at
-// the others), in VTK's node order.
-struct P2Gradients {
-  double g[4][10][3];
-};
-constexpr P2Gradients make_p2_gradients() {
-  constexpr double a = 0.58541019662496845446, b = 0.13819660112501051518;
-  constexpr double dL[4][3] = {{-1, -1, -1}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-  constexpr int edge[6][2] = {{0, 1}, {1, 2}, {0, 2}, {0, 3}, {1, 3}, {2, 3}};
-  P2Gradients out{};
-  for (int q = 0; q < 4; ++q) {
-    double L[4] = {b, b, b, b};
-    L[q] = a;
-    for (int i = 0; i < 4; ++i)
-      for (int k = 0; k < 3; ++k) out.g[q][i][k] = (4 * L[i] - 1) * dL[i][k];
-    for (int e = 0; e < 6; ++e) {
-      const int i = edge[e][0], j = edge[e][1];
-      for (int k = 0; k < 3; ++k) out.g[q][4 + e][k] = 4 * (L[j] * dL[i][k] + L[i] * dL[j][k]);
-    }
-  }
-  return out;
-}
-inline constexpr P2Gradients kP2Gradients = make_p2_gradients();
-
 // One quadrature point q of a block: F per lane from the nodes'
 // displacements x (F = I + D Dm^-1, D = sum_a x_a g_aq^T).
 template <class Real, int q>
@@ -741,7 +725,7 @@ TACTILE_INLINE void quadratic_point_gradient(const QuadraticBlock<Real>& B, int 
   for (int a = 0; a < 10; ++a)
 #pragma GCC unroll 3
     for (int k = 0; k < 3; ++k) {
-      const double g = kP2Gradients.g[q][a][k];
+      const double g = kP2PointGradients.g[q][a][k];
       if (g == 0) continue;
 #pragma GCC unroll 3
       for (int i = 0; i < 3; ++i) D[3 * i + k] += x[3 * a + i][l] * Real(g);
@@ -769,7 +753,7 @@ TACTILE_INLINE void quadratic_point_forces(const QuadraticBlock<Real>& B, int l,
   for (int a = 0; a < 10; ++a)
 #pragma GCC unroll 3
     for (int k = 0; k < 3; ++k) {
-      const double g = kP2Gradients.g[q][a][k];
+      const double g = kP2PointGradients.g[q][a][k];
       if (g == 0) continue;
 #pragma GCC unroll 3
       for (int i = 0; i < 3; ++i) fl[3 * a + i] -= H[3 * i + k] * Real(g);
@@ -807,21 +791,7 @@ TACTILE_INLINE void quadratic_points_svd(const QuadraticBlock<Real>& B, const Re
 #pragma GCC unroll 16
       for (int k = 0; k < 9; ++k) s.F[k][l] = Fl[k];
     }
-  if constexpr (M == MaterialModel::Corotational) {
-    corotational_stresses(Vq, lambda, mu, s);
-  } else {
-#pragma GCC unroll 1
-    for (int h = 0; h < W; h += kMathLanes<Real>)
-#pragma GCC ivdep
-      for (int l = h; l < h + kMathLanes<Real>; ++l) {
-        Real Fl[9], Pl[9];
-#pragma GCC unroll 16
-        for (int k = 0; k < 9; ++k) Fl[k] = s.F[k][l];
-        s.psiV[l] = material::stress_stvk_near(Fl, lambda * Vq[l], mu * Vq[l], Pl, s.near[l]);
-#pragma GCC unroll 16
-        for (int k = 0; k < 9; ++k) s.P[k][l] = Pl[k];
-      }
-  }
+  block_stresses<Real, M>(Vq, lambda, mu, s);
   if (any_above(s.near, Real(0))) {
     flush.engage();
     if (count_near(s.near) <= kScalarNearLanes) {
