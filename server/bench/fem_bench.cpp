@@ -815,12 +815,12 @@ template <class Real>
 void quadratic_rows(const Options& opt) {
   const Precision precision = sizeof(Real) == 4 ? Precision::Float : Precision::Double;
   const TetMesh mesh = make_bench_box(opt.quick ? 5e3 : 2e4, 1, 0.1);
-  const QuadraticNodes nodes = make_quadratic_nodes(mesh);
+  const TetMesh nodes = make_quadratic_mesh(mesh);
   const std::vector<MaterialSpec> materials{MaterialSpec{MaterialModel::StVK, 1e5, 0.3, 1000}};
   const ElementConstants constants = compute_element_constants(mesh, materials);
   const ElementOrder order = compute_element_order(mesh, constants.volume, 1);
   LaneBlocks<Real> linear = make_lane_blocks<Real>(mesh, constants, order);
-  QuadraticLaneBlocks<Real> quadratic = make_quadratic_lane_blocks<Real>(mesh, nodes.edges, constants, order);
+  QuadraticLaneBlocks<Real> quadratic = make_quadratic_lane_blocks<Real>(nodes, constants, order);
   auto address = [](auto& lanes) {  // node ids as the kernels read them, 4 x id (the mesh's own numbering)
     for (auto& B : lanes.blocks)
       for (auto& ids : B.node4)

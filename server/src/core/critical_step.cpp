@@ -13,15 +13,17 @@ CriticalStep<Real>::CriticalStep(const Model<Real>& model, const std::vector<int
   std::vector<int32_t> index(size_t(model_.n_nodes), -1);
   for (size_t k = 0; k < contact_surface.size(); ++k) index[size_t(contact_surface[k])] = int32_t(k);
   contact_tet_begin_.assign(contact_surface.size() + 1, 0);
-  for (const Tet& t : model_.mesh.tets)
-    for (int32_t i : t)
-      if (index[size_t(i)] >= 0) ++contact_tet_begin_[size_t(index[size_t(i)]) + 1];
+  const TetMesh& mesh = model_.mesh;
+  for (size_t e = 0; e < mesh.tets.size(); ++e)
+    for (int k = 0; k < mesh.nodes_per_tet(); ++k)
+      if (const int32_t i = mesh.node(e, k); index[size_t(i)] >= 0) ++contact_tet_begin_[size_t(index[size_t(i)]) + 1];
   for (size_t k = 0; k < contact_surface.size(); ++k) contact_tet_begin_[k + 1] += contact_tet_begin_[k];
   contact_tets_.assign(size_t(contact_tet_begin_.back()), 0);
   std::vector<int32_t> fill(contact_tet_begin_.begin(), contact_tet_begin_.end() - 1);
-  for (size_t e = 0; e < model_.mesh.tets.size(); ++e)
-    for (int32_t i : model_.mesh.tets[e])
-      if (index[size_t(i)] >= 0) contact_tets_[size_t(fill[size_t(index[size_t(i)])]++)] = int32_t(e);
+  for (size_t e = 0; e < mesh.tets.size(); ++e)
+    for (int k = 0; k < mesh.nodes_per_tet(); ++k)
+      if (const int32_t i = mesh.node(e, k); index[size_t(i)] >= 0)
+        contact_tets_[size_t(fill[size_t(index[size_t(i)])]++)] = int32_t(e);
   tet_mark_.assign(size_t(model_.n_tets), 0);
   examined_.reserve(contact_tets_.size());
 }

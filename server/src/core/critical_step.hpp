@@ -3,7 +3,10 @@
 // how much it has been squashed and stiffened since, through the same lane
 // kernels as the forces (core/kernels/kernels.hpp). advance() (core/stepper.hpp)
 // plans its sub-steps on it; a proxy that squashes the elements under it
-// within one interval splits the rest of that interval again.
+// within one interval splits the rest of that interval again. A quadratic
+// tet's rest step is its own (compute_p2_critical_dt), scaled by its
+// corners' squash and stiffening as a linear tet's: the same measure of
+// how far the element has left its rest shape.
 #pragma once
 
 #include <cstdint>

@@ -1,6 +1,7 @@
 #include "core/fields.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -9,6 +10,7 @@
 #include <glm/matrix.hpp>
 
 #include "core/material.hpp"
+#include "core/quadratic.hpp"
 
 namespace tactile {
 
@@ -133,33 +135,64 @@ ElementFields compute_element_fields(const Model<Real>& model, const State<Real>
   if (ask.energy_density) out.energy_density.resize(nt);
   if (ask.principal_stretches) out.principal_stretches.resize(3 * nt);
   const std::vector<Vec3>& X = model.mesh.X;
+  auto u = [&](int32_t i) {
+    const size_t j = 3 * size_t(i);
+    return Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
+  };
   for (size_t e = 0; e < nt; ++e) {
     const size_t id = tets.empty() ? e : size_t(tets[e]);
-    const Tet& t = model.mesh.tets[id];
-    // Columns: edges from corner 0 (glm is column-major).
-    const glm::dmat3 Dm(X[size_t(t[1])] - X[size_t(t[0])], X[size_t(t[2])] - X[size_t(t[0])],
-                        X[size_t(t[3])] - X[size_t(t[0])]);
-    // F = I + D_u D_m^-1 from the corners' displacements: exactly I at rest,
-    // and no cancellation of positions where the strain is small.
-    auto u = [&](int32_t i) {
-      const size_t j = 3 * size_t(i);
-      return Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
-    };
-    const Vec3 u0 = u(t[0]);
-    const glm::dmat3 Du(u(t[1]) - u0, u(t[2]) - u0, u(t[3]) - u0);
-    const glm::dmat3 Fm = glm::dmat3(1.0) + Du * glm::inverse(Dm);
-    double F[9];
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) F[3 * i + j] = Fm[j][i];
-    const TetFields f = compute_tet_fields(model.tet_model[id], F, model.tet_lambda[id], model.tet_mu[id], &ask);
-    for (int k = 0; k < 9; ++k) {
-      if (ask.cauchy_stress) out.cauchy_stress[9 * e + size_t(k)] = f.cauchy[k];
-      if (ask.green_strain) out.green_strain[9 * e + size_t(k)] = f.green[k];
+    // F at the element's points, each with the share of its volume it
+    // stands for: a linear tet's one (constant strain), a quadratic tet's
+    // four quadrature points (core/quadratic.hpp).
+    std::array<glm::dmat3, 4> Fq;
+    std::array<double, 4> share{1.0, 0.0, 0.0, 0.0};
+    int points = 1;
+    if (model.mesh.quadratic()) {
+      // F = I + sum_a u_a (d N_a / d X)^T: exactly I at rest, as below.
+      const P2Element el = make_p2_element(p2_rest_nodes(model.mesh, id));
+      const double V = el.volume[0] + el.volume[1] + el.volume[2] + el.volume[3];
+      points = 4;
+      for (size_t q = 0; q < 4; ++q) {
+        glm::dmat3 Du(0.0);  // Du[j][i] = d u_i / d X_j (glm column-major)
+        for (int a = 0; a < kP2Nodes; ++a) {
+          const Vec3 ua = u(model.mesh.node(id, a));
+          for (int j = 0; j < 3; ++j) Du[j] += ua * el.grad[q][size_t(a)][j];
+        }
+        Fq[q] = glm::dmat3(1.0) + Du;
+        share[q] = el.volume[q] / V;
+      }
+    } else {
+      const Tet& t = model.mesh.tets[id];
+      // Columns: edges from corner 0 (glm is column-major).
+      const glm::dmat3 Dm(X[size_t(t[1])] - X[size_t(t[0])], X[size_t(t[2])] - X[size_t(t[0])],
+                          X[size_t(t[3])] - X[size_t(t[0])]);
+      // F = I + D_u D_m^-1 from the corners' displacements: exactly I at rest,
+      // and no cancellation of positions where the strain is small.
+      const Vec3 u0 = u(t[0]);
+      const glm::dmat3 Du(u(t[1]) - u0, u(t[2]) - u0, u(t[3]) - u0);
+      Fq[0] = glm::dmat3(1.0) + Du * glm::inverse(Dm);
     }
-    if (ask.von_mises) out.von_mises[e] = f.von_mises;
-    if (ask.energy_density) out.energy_density[e] = f.energy_density;
-    if (ask.principal_stretches)
-      for (int k = 0; k < 3; ++k) out.principal_stretches[3 * e + size_t(k)] = f.stretches[k];
+    if (ask.cauchy_stress) std::fill_n(out.cauchy_stress.begin() + long(9 * e), 9, 0.0);
+    if (ask.green_strain) std::fill_n(out.green_strain.begin() + long(9 * e), 9, 0.0);
+    if (ask.principal_stretches) std::fill_n(out.principal_stretches.begin() + long(3 * e), 3, 0.0);
+    if (ask.von_mises) out.von_mises[e] = 0;
+    if (ask.energy_density) out.energy_density[e] = 0;
+    // A quadratic tet's value: the mean over its points, by their volume.
+    for (size_t q = 0; q < size_t(points); ++q) {
+      double F[9];
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) F[3 * i + j] = Fq[q][j][i];
+      const TetFields f = compute_tet_fields(model.tet_model[id], F, model.tet_lambda[id], model.tet_mu[id], &ask);
+      const double w = share[q];
+      for (int k = 0; k < 9; ++k) {
+        if (ask.cauchy_stress) out.cauchy_stress[9 * e + size_t(k)] += w * f.cauchy[k];
+        if (ask.green_strain) out.green_strain[9 * e + size_t(k)] += w * f.green[k];
+      }
+      if (ask.von_mises) out.von_mises[e] += w * f.von_mises;
+      if (ask.energy_density) out.energy_density[e] += w * f.energy_density;
+      if (ask.principal_stretches)
+        for (int k = 0; k < 3; ++k) out.principal_stretches[3 * e + size_t(k)] += w * f.stretches[k];
+    }
   }
   return out;
 }

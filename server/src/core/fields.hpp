@@ -2,14 +2,13 @@
 // when an output asks for them: not part of the step.
 //
 // F = I + D_u D_m^-1 per tet from the rest corner positions and their
-// displacements, in double. The models give the first Piola-Kirchhoff stress P
-// (core/material.hpp); the Cauchy stress is sigma = P F^T / det F, the Green
-// strain E = (F^T F - I) / 2 (eq. 5), and the von Mises stress
-// sqrt(3/2 s:s) with s = sigma - tr(sigma) I / 3, the strain-energy density
-// psi(F) and the principal stretches, the square roots of the eigenvalues of
-// C = F^T F (the singular values of F). The linear model's stress
-// is small-strain theory's, where P, sigma and the second Piola-Kirchhoff
-// stress coincide: it is written as it is.
+// displacements, in double; a quadratic tet's fields are the mean of those
+// at its four quadrature points, each weighted by the volume it stands for. The models give the first Piola-Kirchhoff
+// stress P (core/material.hpp); the Cauchy stress is sigma = P F^T / det F, the Green strain E = (F^T F - I) / 2 (eq.
+// 5), and the von Mises stress sqrt(3/2 s:s) with s = sigma - tr(sigma) I / 3, the strain-energy density psi(F) and the
+// principal stretches, the square roots of the eigenvalues of C = F^T F (the singular values of F). The linear model's
+// stress is small-strain theory's, where P, sigma and the second Piola-Kirchhoff stress coincide: it is written as it
+// is.
 #pragma once
 
 #include <cstdint>

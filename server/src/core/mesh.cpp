@@ -19,20 +19,45 @@ std::vector<Tri> compute_boundary_faces(const TetMesh& mesh) {
   struct Seen {
     Tri oriented;
     int count;
+    int32_t tet;
   };
   std::map<std::array<int32_t, 3>, Seen> faces;
-  for (const Tet& t : mesh.tets) {
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    const Tet& t = mesh.tets[e];
     for (const auto& f : kFace) {
       Tri tri{t[static_cast<size_t>(f[0])], t[static_cast<size_t>(f[1])], t[static_cast<size_t>(f[2])]};
       std::array<int32_t, 3> key = tri;
       std::sort(key.begin(), key.end());
-      auto [it, inserted] = faces.try_emplace(key, Seen{tri, 0});
+      auto [it, inserted] = faces.try_emplace(key, Seen{tri, 0, int32_t(e)});
       ++it->second.count;
     }
   }
   std::vector<Tri> out;
   for (const auto& [key, seen] : faces) {
-    if (seen.count == 1) out.push_back(seen.oriented);
+    if (seen.count != 1) continue;
+    if (!mesh.quadratic()) {
+      out.push_back(seen.oriented);
+      continue;
+    }
+    // The edge node between corners a and b of the face's tet.
+    const auto e = size_t(seen.tet);
+    auto mid = [&](int32_t a, int32_t b) {
+      int la = 0, lb = 0;
+      for (int c = 0; c < 4; ++c) {
+        if (mesh.tets[e][size_t(c)] == a) la = c;
+        if (mesh.tets[e][size_t(c)] == b) lb = c;
+      }
+      for (int k = 0; k < 6; ++k)
+        if ((kTetEdges[k][0] == la && kTetEdges[k][1] == lb) || (kTetEdges[k][0] == lb && kTetEdges[k][1] == la))
+          return mesh.edges[e][size_t(k)];
+      return int32_t(-1);  // (unreachable: two corners of a tet share an edge)
+    };
+    const Tri& t = seen.oriented;
+    const int32_t ab = mid(t[0], t[1]), bc = mid(t[1], t[2]), ca = mid(t[2], t[0]);
+    out.push_back({t[0], ab, ca});
+    out.push_back({ab, t[1], bc});
+    out.push_back({ca, bc, t[2]});
+    out.push_back({ab, bc, ca});
   }
   return out;
 }
@@ -79,6 +104,32 @@ std::string check_mesh_structure(const TetMesh& mesh) {
     if (t[0] == t[1] || t[0] == t[2] || t[0] == t[3] || t[1] == t[2] || t[1] == t[3] || t[2] == t[3])
       return "tet " + std::to_string(e) + " repeats a node";
   }
+  if (!mesh.quadratic()) return "";
+  if (mesh.edges.size() != mesh.tets.size())
+    return "mesh has edge nodes for " + std::to_string(mesh.edges.size()) + " tets of " +
+           std::to_string(mesh.tets.size());
+  std::vector<char> corner(mesh.X.size(), 0);
+  for (const Tet& t : mesh.tets)
+    for (int32_t id : t) corner[size_t(id)] = 1;
+  std::map<std::array<int32_t, 2>, int32_t> edge_node;  // corners (sorted) -> its node
+  std::vector<std::array<int32_t, 2>> node_edge(mesh.X.size(), {-1, -1});
+  for (size_t e = 0; e < mesh.tets.size(); ++e)
+    for (int k = 0; k < 6; ++k) {
+      const int32_t id = mesh.edges[e][size_t(k)];
+      const std::string where = "tet " + std::to_string(e) + " edge node " + std::to_string(4 + k);
+      if (id < 0 || id >= n)
+        return where + " refers to node " + std::to_string(id) + ", outside 0.." + std::to_string(n - 1);
+      if (corner[size_t(id)]) return where + " is node " + std::to_string(id) + ", a corner";
+      const int32_t a = mesh.tets[e][size_t(kTetEdges[k][0])], b = mesh.tets[e][size_t(kTetEdges[k][1])];
+      const std::array<int32_t, 2> key{std::min(a, b), std::max(a, b)};
+      auto [it, inserted] = edge_node.try_emplace(key, id);
+      if (it->second != id)
+        return where + " is node " + std::to_string(id) + ", but another tet puts node " + std::to_string(it->second) +
+               " on that edge (" + std::to_string(a) + "-" + std::to_string(b) + ")";
+      if (node_edge[size_t(id)][0] >= 0 && node_edge[size_t(id)] != key)
+        return where + " is node " + std::to_string(id) + ", which another tet puts on another edge";
+      node_edge[size_t(id)] = key;
+    }
   return "";
 }
 

@@ -112,8 +112,7 @@ const MaterialSpec& material_of(const TetMesh& mesh, const std::vector<MaterialS
 
 }  // namespace
 
-ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
-                                           const QuadraticNodes* quadratic) {
+ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials) {
   const auto nt = size_t(mesh.n_tets());
   ElementConstants out;
   out.volume.resize(nt);
@@ -129,6 +128,8 @@ ElementConstants compute_element_constants(const TetMesh& mesh, const std::vecto
       inverted.push_back(int32_t(e));
     else if (V <= 1e-9 * L * L * L)
       flat.push_back(int32_t(e));
+    else if (mesh.quadratic() && !(make_p2_element(p2_rest_nodes(mesh, e)).min_det > 1e-9 * L * L * L))
+      inverted.push_back(int32_t(e));  // an edge node so far off its edge that the map folds
     out.volume[e] = V;
   }
   if (!inverted.empty() || !flat.empty()) {
@@ -156,10 +157,8 @@ ElementConstants compute_element_constants(const TetMesh& mesh, const std::vecto
     const Vec3 &x0 = mesh.X[size_t(t[0])], &x1 = mesh.X[size_t(t[1])], &x2 = mesh.X[size_t(t[2])],
                &x3 = mesh.X[size_t(t[3])];
     out.altitude[e] = compute_min_altitude(x0, x1, x2, x3);
-    if (quadratic) {
-      std::array<Vec3, kP2Nodes> X{x0, x1, x2, x3};
-      for (int k = 0; k < 6; ++k) X[size_t(4 + k)] = quadratic->X[size_t(quadratic->edges[e][size_t(k)])];
-      out.dt[e] = compute_p2_critical_dt(X, lame.lambda, lame.mu, mat.rho);
+    if (mesh.quadratic()) {
+      out.dt[e] = compute_p2_critical_dt(p2_rest_nodes(mesh, e), lame.lambda, lame.mu, mat.rho);
     } else {
       out.dt[e] = compute_element_critical_dt(x0, x1, x2, x3, lame.lambda, lame.mu, mat.rho);
     }
@@ -170,9 +169,15 @@ ElementConstants compute_element_constants(const TetMesh& mesh, const std::vecto
 std::vector<double> compute_lumped_masses(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
                                           const std::vector<double>& volume) {
   std::vector<double> mass(size_t(mesh.n_nodes()), 0.0);
-  for (size_t e = 0; e < mesh.tets.size(); ++e) {
-    const double m4 = material_of(mesh, materials, e).rho * volume[e] / 4.0;  // section 4.1: lump by rows
-    for (int32_t id : mesh.tets[e]) mass[size_t(id)] += m4;
+  if (mesh.quadratic()) {
+    std::vector<double> rho(mesh.tets.size());
+    for (size_t e = 0; e < mesh.tets.size(); ++e) rho[e] = material_of(mesh, materials, e).rho;
+    mass = compute_quadratic_lumped_masses(mesh, rho, volume);
+  } else {
+    for (size_t e = 0; e < mesh.tets.size(); ++e) {
+      const double m4 = material_of(mesh, materials, e).rho * volume[e] / 4.0;  // section 4.1: lump by rows
+      for (int32_t id : mesh.tets[e]) mass[size_t(id)] += m4;
+    }
   }
   std::vector<int32_t> unreferenced;
   for (size_t i = 0; i < mass.size(); ++i)
@@ -319,13 +324,12 @@ LaneBlocks<Real> make_lane_blocks(const TetMesh& mesh, const ElementConstants& e
 }
 
 template <class Real>
-QuadraticLaneBlocks<Real> make_quadratic_lane_blocks(const TetMesh& mesh, const std::vector<TetEdges>& edges,
-                                                     const ElementConstants& elements, const ElementOrder& eo) {
+QuadraticLaneBlocks<Real> make_quadratic_lane_blocks(const TetMesh& mesh, const ElementConstants& elements,
+                                                     const ElementOrder& eo) {
   return lay_out_lanes<QuadraticBlock<Real>>(
       mesh, elements, eo,
       [&](QuadraticBlock<Real>& B, int l, size_t e) {
-        for (int c = 0; c < 4; ++c) B.node4[c][l] = mesh.tets[e][size_t(c)];
-        for (int k = 0; k < 6; ++k) B.node4[4 + k][l] = edges[e][size_t(k)];
+        for (int a = 0; a < kP2Nodes; ++a) B.node4[a][l] = mesh.node(e, a);
         fill_shape(B, l, mesh, elements, e);
       },
       pad_lane<QuadraticBlock<Real>>);
@@ -516,7 +520,13 @@ Model<Real> build_model(const ModelSpec& spec) {
   const std::vector<double> given_mass = compute_lumped_masses(mesh, spec.materials, elements.volume);
   const ElementOrder order = compute_element_order(mesh, elements.volume, spec.integrator.threads);
   LaneBlocks<Real> lanes = make_lane_blocks<Real>(mesh, elements, order);
-  NodeNumbering numbers = compute_node_numbering(lanes, order.n_parts, mesh.n_nodes());
+  // A quadratic mesh: its element pass runs over quadratic blocks laid out
+  // as the linear ones (the same tets in the same lanes), whose corners the
+  // critical step's estimate reads (core/critical_step.hpp).
+  QuadraticLaneBlocks<Real> quadratic;
+  if (mesh.quadratic()) quadratic = make_quadratic_lane_blocks<Real>(mesh, elements, order);
+  NodeNumbering numbers = mesh.quadratic() ? compute_node_numbering(quadratic, order.n_parts, mesh.n_nodes())
+                                           : compute_node_numbering(lanes, order.n_parts, mesh.n_nodes());
 
   Model<Real> model;
   model.n_nodes = mesh.n_nodes();
@@ -528,9 +538,15 @@ Model<Real> build_model(const ModelSpec& spec) {
   for (size_t i = 0; i < nn; ++i) model.mesh.X[size_t(numbers.node_model[i])] = mesh.X[i];
   for (Tet& t : model.mesh.tets)
     for (int32_t& id : t) id = numbers.node_model[size_t(id)];
+  for (TetEdges& t : model.mesh.edges)
+    for (int32_t& id : t) id = numbers.node_model[size_t(id)];
   for (ElementBlock<Real>& B : lanes.blocks)
     for (int c = 0; c < 4; ++c)
       for (int l = 0; l < W; ++l) B.node4[c][l] = 4 * numbers.node_model[size_t(B.node4[c][l])];
+  for (QuadraticBlock<Real>& B : quadratic.blocks)
+    for (int a = 0; a < kP2Nodes; ++a)
+      for (int l = 0; l < W; ++l) B.node4[a][l] = 4 * numbers.node_model[size_t(B.node4[a][l])];
+  model.quadratic_blocks = std::move(quadratic.blocks);
   std::vector<double> mass(nn);
   model.m.resize(nn);
   model.inv_m.resize(nn);
@@ -594,10 +610,10 @@ Model<Real> build_model(const ModelSpec& spec) {
 
 template LaneBlocks<float> make_lane_blocks<float>(const TetMesh&, const ElementConstants&, const ElementOrder&);
 template LaneBlocks<double> make_lane_blocks<double>(const TetMesh&, const ElementConstants&, const ElementOrder&);
-template QuadraticLaneBlocks<float> make_quadratic_lane_blocks<float>(const TetMesh&, const std::vector<TetEdges>&,
-                                                                      const ElementConstants&, const ElementOrder&);
-template QuadraticLaneBlocks<double> make_quadratic_lane_blocks<double>(const TetMesh&, const std::vector<TetEdges>&,
-                                                                        const ElementConstants&, const ElementOrder&);
+template QuadraticLaneBlocks<float> make_quadratic_lane_blocks<float>(const TetMesh&, const ElementConstants&,
+                                                                      const ElementOrder&);
+template QuadraticLaneBlocks<double> make_quadratic_lane_blocks<double>(const TetMesh&, const ElementConstants&,
+                                                                        const ElementOrder&);
 template NodeNumbering compute_node_numbering(const LaneBlocks<float>&, int32_t, int32_t);
 template NodeNumbering compute_node_numbering(const LaneBlocks<double>&, int32_t, int32_t);
 template NodeNumbering compute_node_numbering(const QuadraticLaneBlocks<float>&, int32_t, int32_t);

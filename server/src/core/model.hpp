@@ -69,8 +69,8 @@ template <class Real>
 struct Model {
   static constexpr int W = kLanes<Real>;
 
-  // The rest mesh (double), its nodes numbered for the element pass: in the
-  // order the blocks first touch them. Tets keep their ids. Every node id the
+  // The rest mesh (double), linear or quadratic (core/mesh.hpp), its nodes
+  // numbered for the element pass: in the order the blocks first touch them. Tets keep their ids. Every node id the
   // model holds or a State indexes is in this numbering; node sets in a spec
   // name nodes as the spec's mesh gives them, and these two translate.
   TetMesh mesh;
@@ -88,12 +88,15 @@ struct Model {
   std::vector<Real> inv_m;  // 1 / m [1/kg] (n_nodes)
   double total_mass = 0;    // [kg]
 
-  std::vector<ElementBlock<Real>> blocks;  // lane-blocked elements (n_blocks)
-  std::vector<ElementGroup> groups;        // ranges of blocks of one material model, per part
-  std::vector<ModelPart> parts;            // how the step splits over threads (integrator.threads at most)
-  std::vector<int32_t> lane_tet;           // tet id of block lane b*W+l, -1 for padding (n_blocks x W)
-  std::vector<double> lane_dt;             // tet_dt of block lane b*W+l [s], +inf for padding (n_blocks x W)
-  std::vector<int32_t> tet_lane;           // block lane b*W+l of each tet (n_tets)
+  std::vector<ElementBlock<Real>> blocks;  // lane-blocked elements (n_blocks); a quadratic mesh's corners
+  // A quadratic mesh (mesh.quadratic()): its tets as quadratic blocks, in
+  // the same lanes as `blocks` (n_blocks); empty for a linear mesh.
+  std::vector<QuadraticBlock<Real>> quadratic_blocks;
+  std::vector<ElementGroup> groups;  // ranges of blocks of one material model, per part
+  std::vector<ModelPart> parts;      // how the step splits over threads (integrator.threads at most)
+  std::vector<int32_t> lane_tet;     // tet id of block lane b*W+l, -1 for padding (n_blocks x W)
+  std::vector<double> lane_dt;       // tet_dt of block lane b*W+l [s], +inf for padding (n_blocks x W)
+  std::vector<int32_t> tet_lane;     // block lane b*W+l of each tet (n_tets)
 
   std::vector<MaterialModel> tet_model;    // material model per tet (n_tets)
   std::vector<double> tet_volume;          // rest volume [m^3] (n_tets)

@@ -43,13 +43,14 @@ struct ElementConstants {
   std::vector<double> dt;        // critical step at rest, exact per element [s]
   bool any_non_invertible = false;
 };
-// With `quadratic` (make_quadratic_nodes of `mesh`), each tet's step is its
-// quadratic element's (compute_p2_critical_dt), not the linear tet's.
-ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
-                                           const QuadraticNodes* quadratic = nullptr);
+// A quadratic mesh's tets take their quadratic element's step
+// (compute_p2_critical_dt), not the linear tet's, and one whose edge nodes
+// fold it (det J <= 0 at a quadrature point) is refused as inverted.
+ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials);
 
 // Row-sum lumping, section 4.1: each tet gives a quarter of its mass to each
-// corner [kg] (n_nodes, the mesh's ids).
+// corner [kg] (n_nodes, the mesh's ids); a quadratic mesh, HRZ lumping
+// (compute_quadratic_lumped_masses).
 std::vector<double> compute_lumped_masses(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
                                           const std::vector<double>& volume);
 
@@ -84,11 +85,11 @@ using QuadraticLaneBlocks = LaneLayout<QuadraticBlock<Real>>;
 
 template <class Real>
 LaneBlocks<Real> make_lane_blocks(const TetMesh& mesh, const ElementConstants& elements, const ElementOrder& order);
-// The same tets as straight quadratic ones: each lane's ten nodes (the
-// corners, then `edges`, as make_quadratic_nodes numbers them).
+// A quadratic mesh's tets, as straight quadratic ones: each lane's ten nodes
+// (the corners, then the edge nodes).
 template <class Real>
-QuadraticLaneBlocks<Real> make_quadratic_lane_blocks(const TetMesh& mesh, const std::vector<TetEdges>& edges,
-                                                     const ElementConstants& elements, const ElementOrder& order);
+QuadraticLaneBlocks<Real> make_quadratic_lane_blocks(const TetMesh& mesh, const ElementConstants& elements,
+                                                     const ElementOrder& order);
 
 // The model's node ids: node_model[given] and node_given[model], numbered in
 // the order the blocks first touch them (all of a lane's nodes: the corners,

@@ -67,53 +67,38 @@ const std::array<double, kP2Nodes>& p2_lumped_mass_fractions() {
   return f;
 }
 
-QuadraticNodes make_quadratic_nodes(const TetMesh& mesh) {
-  QuadraticNodes out;
-  out.X = mesh.X;
-  out.edges.resize(mesh.tets.size());
+TetMesh make_quadratic_mesh(const TetMesh& linear) {
+  TetMesh out = linear;
+  out.edges.resize(linear.tets.size());
   std::map<std::array<int32_t, 2>, int32_t> made;
-  for (size_t e = 0; e < mesh.tets.size(); ++e) {
-    const Tet& t = mesh.tets[e];
+  for (size_t e = 0; e < linear.tets.size(); ++e) {
+    const Tet& t = linear.tets[e];
     for (int k = 0; k < 6; ++k) {
       const int32_t a = t[size_t(kTetEdges[k][0])], b = t[size_t(kTetEdges[k][1])];
       const std::array<int32_t, 2> key{std::min(a, b), std::max(a, b)};
       auto [it, inserted] = made.try_emplace(key, int32_t(out.X.size()));
-      if (inserted) {
-        out.X.push_back(0.5 * (mesh.X[size_t(a)] + mesh.X[size_t(b)]));
-        out.edge_corners.push_back(key);
-      }
+      if (inserted) out.X.push_back(0.5 * (linear.X[size_t(a)] + linear.X[size_t(b)]));
       out.edges[e][size_t(k)] = it->second;
     }
   }
   return out;
 }
 
-std::vector<double> compute_quadratic_lumped_masses(const TetMesh& mesh, const QuadraticNodes& nodes,
-                                                    const std::vector<double>& rho, const std::vector<double>& volume) {
-  const auto& share = p2_lumped_mass_fractions();
-  std::vector<double> mass(nodes.X.size(), 0.0);
-  for (size_t e = 0; e < mesh.tets.size(); ++e) {
-    const double m = rho[e] * volume[e];
-    for (int a = 0; a < 4; ++a) mass[size_t(mesh.tets[e][size_t(a)])] += share[size_t(a)] * m;
-    for (int k = 0; k < 6; ++k) mass[size_t(nodes.edges[e][size_t(k)])] += share[size_t(4 + k)] * m;
-  }
-  return mass;
+std::array<Vec3, kP2Nodes> p2_rest_nodes(const TetMesh& mesh, size_t e) {
+  std::array<Vec3, kP2Nodes> X;
+  for (int a = 0; a < kP2Nodes; ++a) X[size_t(a)] = mesh.X[size_t(mesh.node(e, a))];
+  return X;
 }
 
-std::vector<Tri> compute_quadratic_boundary_faces(const TetMesh& mesh, const QuadraticNodes& nodes) {
-  std::map<std::array<int32_t, 2>, int32_t> edge_node;
-  const auto n_corners = int32_t(mesh.X.size());
-  for (size_t k = 0; k < nodes.edge_corners.size(); ++k) edge_node[nodes.edge_corners[k]] = n_corners + int32_t(k);
-  auto mid = [&](int32_t a, int32_t b) { return edge_node.at({std::min(a, b), std::max(a, b)}); };
-  std::vector<Tri> out;
-  for (const Tri& t : compute_boundary_faces(mesh)) {
-    const int32_t ab = mid(t[0], t[1]), bc = mid(t[1], t[2]), ca = mid(t[2], t[0]);
-    out.push_back({t[0], ab, ca});
-    out.push_back({ab, t[1], bc});
-    out.push_back({ca, bc, t[2]});
-    out.push_back({ab, bc, ca});
+std::vector<double> compute_quadratic_lumped_masses(const TetMesh& mesh, const std::vector<double>& rho,
+                                                    const std::vector<double>& volume) {
+  const auto& share = p2_lumped_mass_fractions();
+  std::vector<double> mass(mesh.X.size(), 0.0);
+  for (size_t e = 0; e < mesh.tets.size(); ++e) {
+    const double m = rho[e] * volume[e];
+    for (int a = 0; a < kP2Nodes; ++a) mass[size_t(mesh.node(e, a))] += share[size_t(a)] * m;
   }
-  return out;
+  return mass;
 }
 
 P2Element make_p2_element(const std::array<Vec3, kP2Nodes>& X) {

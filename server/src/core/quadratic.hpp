@@ -19,9 +19,6 @@
 namespace tactile {
 
 inline constexpr int kP2Nodes = 10;
-// The corners of each edge node 4..9, in VTK's order.
-inline constexpr int kTetEdges[6][2] = {{0, 1}, {1, 2}, {0, 2}, {0, 3}, {1, 3}, {2, 3}};
-using TetEdges = std::array<int32_t, 6>;  // the node ids of a tet's six edge nodes, in kTetEdges order
 
 // The ten shape functions at reference point xi.
 std::array<double, kP2Nodes> p2_shape(const Vec3& xi);
@@ -77,27 +74,19 @@ inline constexpr P2PointGradients kP2PointGradients = make_p2_point_gradients();
 // corners -1/20, a negative mass no explicit step survives.
 const std::array<double, kP2Nodes>& p2_lumped_mass_fractions();
 
-// A linear mesh made quadratic: one node at the midpoint of each edge,
-// shared by every tet around the edge, appended after the corners (which keep
-// their ids). edges[e] lists tet e's six edge nodes in kTetEdges order.
-struct QuadraticNodes {
-  std::vector<Vec3> X;                               // corners, then edge midpoints [m] (n_nodes + n_edges)
-  std::vector<TetEdges> edges;                       // per tet (n_tets)
-  std::vector<std::array<int32_t, 2>> edge_corners;  // per edge node (n_edges): the corners it lies between
-};
-QuadraticNodes make_quadratic_nodes(const TetMesh& mesh);
+// A linear mesh made quadratic (TetMesh::edges): one node at the midpoint
+// of each edge, shared by every tet around the edge, appended after the
+// corners (which keep their ids) in the order the tets first meet them.
+TetMesh make_quadratic_mesh(const TetMesh& linear);
+
+// The ten rest positions of quadratic tet e [m].
+std::array<Vec3, kP2Nodes> p2_rest_nodes(const TetMesh& mesh, size_t e);
 
 // The HRZ lumped mass of each node of a straight quadratic mesh [kg]
-// (n_nodes + n_edges): each tet gives 1/36 of its mass to each corner and
-// 4/27 to each edge node. rho per tet [kg/m^3], volume per tet [m^3].
-std::vector<double> compute_quadratic_lumped_masses(const TetMesh& mesh, const QuadraticNodes& nodes,
-                                                    const std::vector<double>& rho, const std::vector<double>& volume);
-
-// The boundary of a quadratic mesh as flat triangles over all its surface
-// nodes: each boundary face of the corners (compute_boundary_faces, wound
-// outward) split at its three edge nodes into four, wound the same way.
-// What contact meets and the views draw.
-std::vector<Tri> compute_quadratic_boundary_faces(const TetMesh& mesh, const QuadraticNodes& nodes);
+// (n_nodes): each tet gives 1/36 of its mass to each corner and 4/27 to
+// each edge node. rho per tet [kg/m^3], volume per tet [m^3].
+std::vector<double> compute_quadratic_lumped_masses(const TetMesh& mesh, const std::vector<double>& rho,
+                                                    const std::vector<double>& volume);
 
 // ---- one element, scalar: the reference the lane kernels are checked against ----
 

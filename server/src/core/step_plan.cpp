@@ -38,12 +38,15 @@ StepPlan make_step_plan(const Model<Real>& model, bool parallel) {
   // The nodes each block touches, rounded out to 16.
   const auto n_blocks = static_cast<int32_t>(model.blocks.size());
   std::vector<int32_t> lo(size_t(n_blocks), model.n_nodes), hi(size_t(n_blocks), 0);
+  const bool quadratic = !model.quadratic_blocks.empty();  // (the same lanes, ten nodes a lane)
   for (int32_t b = 0; b < n_blocks; ++b) {
     for (int l = 0; l < kLanes<Real>; ++l) {
       if (model.lane_tet[size_t(b) * kLanes<Real> + size_t(l)] < 0) continue;  // padding adds only zeros
-      for (int c = 0; c < 4; ++c) {
-        lo[size_t(b)] = std::min(lo[size_t(b)], model.blocks[size_t(b)].node4[c][l] / 4 / 16 * 16);
-        hi[size_t(b)] = std::max(hi[size_t(b)], (model.blocks[size_t(b)].node4[c][l] / 4 + 16) / 16 * 16);
+      for (int c = 0; c < (quadratic ? 10 : 4); ++c) {
+        const int32_t node4 =
+            quadratic ? model.quadratic_blocks[size_t(b)].node4[c][l] : model.blocks[size_t(b)].node4[c][l];
+        lo[size_t(b)] = std::min(lo[size_t(b)], node4 / 4 / 16 * 16);
+        hi[size_t(b)] = std::max(hi[size_t(b)], (node4 / 4 + 16) / 16 * 16);
       }
     }
   }

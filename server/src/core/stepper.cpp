@@ -1,6 +1,7 @@
 #include "core/stepper.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -9,6 +10,8 @@
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
+
+#include "core/quadratic.hpp"
 
 namespace tactile {
 
@@ -143,7 +146,10 @@ void Stepper<Real>::elastic_blocks(int32_t begin, int32_t end, int32_t r) {
     const int32_t b0 = std::max(g.begin, begin), b1 = std::min(g.end, end);
     if (b0 >= b1) continue;
     const ElasticSums s =
-        kernels_.forces[int(g.model)](model_.blocks.data(), b0, b1, Real(g.lambda), Real(g.mu), u4_.data(), f);
+        model_.quadratic_blocks.empty()
+            ? kernels_.forces[int(g.model)](model_.blocks.data(), b0, b1, Real(g.lambda), Real(g.mu), u4_.data(), f)
+            : kernels_.quadratic_forces[int(g.model)](model_.quadratic_blocks.data(), b0, b1, Real(g.lambda),
+                                                      Real(g.mu), u4_.data(), f);
     sums.energy += s.energy;
     sums.inverted += s.inverted;
   }
@@ -668,6 +674,20 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt, const std:
 template <class Real>
 std::vector<double> Stepper<Real>::compute_element_energy(const State<Real>& s) const {
   std::vector<double> out(size_t(model_.n_tets), 0.0);
+  if (model_.mesh.quadratic()) {
+    // Element by element in double (core/quadratic.hpp): this is for
+    // output and fault reports, not the step, whose kernel sums the energy.
+    for (size_t e = 0; e < out.size(); ++e) {
+      const P2Element el = make_p2_element(p2_rest_nodes(model_.mesh, e));
+      std::array<Vec3, kP2Nodes> x;
+      for (int a = 0; a < kP2Nodes; ++a) {
+        const auto i = size_t(model_.mesh.node(e, a));
+        x[size_t(a)] = model_.mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
+      }
+      out[e] = compute_p2_forces(el, x, model_.tet_model[e], model_.tet_lambda[e], model_.tet_mu[e], nullptr);
+    }
+    return out;
+  }
   std::vector<double> lane(size_t(kLanes<Real>));
   for (const ElementGroup& g : model_.groups) {
     for (int32_t b = g.begin; b < g.end; ++b) {
@@ -711,7 +731,8 @@ std::vector<int32_t> Stepper<Real>::find_nonfinite_elements(const State<Real>& s
   std::vector<int32_t> out;
   for (const bool positions_only : {true, false}) {
     for (size_t e = 0; e < size_t(model_.n_tets) && out.size() < 50; ++e) {
-      for (int32_t i : model_.mesh.tets[e]) {
+      for (int k = 0; k < model_.mesh.nodes_per_tet(); ++k) {
+        const int32_t i = model_.mesh.node(e, k);
         bool bad = false;
         for (size_t d = 0; d < 3; ++d) {
           const size_t j = 3 * size_t(i) + d;
@@ -735,6 +756,15 @@ std::vector<int32_t> Stepper<Real>::find_inverted_elements(const State<Real>& s)
   const TetMesh& mesh = model_.mesh;
   for (size_t e = 0; e < size_t(model_.n_tets) && out.size() < 50; ++e) {
     if (can_invert(model_.tet_model[e])) continue;
+    if (mesh.quadratic()) {  // det F <= 0 at a quadrature point, as the kernel counts it
+      std::array<Vec3, kP2Nodes> x;
+      for (int a = 0; a < kP2Nodes; ++a) {
+        const auto i = size_t(mesh.node(e, a));
+        x[size_t(a)] = mesh.X[i] + Vec3(double(s.u[3 * i]), double(s.u[3 * i + 1]), double(s.u[3 * i + 2]));
+      }
+      if (!(make_p2_element(x).min_det > 0)) out.push_back(int32_t(e));
+      continue;
+    }
     const Tet& t = mesh.tets[e];
     Vec3 x[4];
     for (int c = 0; c < 4; ++c) {

@@ -15,6 +15,7 @@
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 
+#include "core/quadratic.hpp"
 #include "scene/json_fields.hpp"
 #include "scene/scene_mesh.hpp"
 
@@ -585,7 +586,7 @@ bool same_mesh_kind(const Json& base, const Json& patch) {
 Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   const Origin& o = ctx.origin;
   const Fields root(j, "", o,
-                    {"$schema", "name", "description", "mesh", "surface", "material", "materials", "regions",
+                    {"$schema", "name", "description", "mesh", "element", "surface", "material", "materials", "regions",
                      "boundary", "loads", "proxies", "hands", "effects", "integrator", "run", "view", "variants"});
   Scene scene;
   scene.path = path;
@@ -600,14 +601,25 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   }
   scene.description = root.string_or("description", "");
 
-  // Mesh first: selectors and tracked points are checked against it.
-  const std::string mesh_key = root.at("mesh").dump();
+  // Mesh first: selectors and tracked points are checked against it. The
+  // element order: linear tets as meshed, or quadratic ones, each edge of
+  // the mesh given a node (core/quadratic.hpp), the selectors then picking
+  // edge nodes as corners.
+  const bool quadratic =
+      root.has("element") && scene_json::read_choice(root.at("element"), "element", o, {"p1", "p2"}) == "p2";
+  const std::string mesh_key = root.at("mesh").dump() + (quadratic ? "\np2" : "");
   auto cached = ctx.mesh_cache->find(mesh_key);
-  if (cached == ctx.mesh_cache->end())
-    cached = ctx.mesh_cache->emplace(mesh_key, build_scene_mesh(root.at("mesh"), "mesh", o, ctx.scene_dir)).first;
+  if (cached == ctx.mesh_cache->end()) {
+    SceneMesh built = build_scene_mesh(root.at("mesh"), "mesh", o, ctx.scene_dir);
+    if (quadratic && !built.mesh.quadratic()) built.mesh = make_quadratic_mesh(built.mesh);
+    cached = ctx.mesh_cache->emplace(mesh_key, std::move(built)).first;
+  }
   scene.spec.mesh = cached->second.mesh;
   scene.quality = cached->second.quality;
   TetMesh& mesh = scene.spec.mesh;
+  if (root.has("surface") && mesh.quadratic())
+    o.fail("surface",
+           "a fine surface is carried by linear tets only so far; drop \"surface\" or set \"element\": \"p1\"");
   if (const Json* s = root.find("surface")) {
     // Bound once per mesh and surface: variants that share both share the binding.
     const std::string key = mesh_key + "\n" + s->dump();

@@ -15,6 +15,7 @@
 #include "core/contact.hpp"
 #include "core/embedding.hpp"
 #include "core/model.hpp"
+#include "core/quadratic.hpp"
 #include "core/stepper.hpp"
 #include "mesh/primitives.hpp"
 
@@ -240,35 +241,40 @@ TEST(Contact, PenetrationStopsGrowingWithinTwoSteps) {
 
 // Without gravity or damping, the body's momentum changes only by the contact
 // impulses: P_{n+1} - P_n = -dt/2 (F_n + F_{n+1}) with F the force on the
-// proxies, every step (eq. 9 applied to all nodes and summed).
+// proxies, every step (eq. 9 applied to all nodes and summed); on linear
+// and on quadratic tets (whose surface nodes include the edge nodes).
 TEST(Contact, ReactionEqualsTheMomentumTheContactsGave) {
-  ModelSpec spec = block_spec();
-  spec.proxies = {sphere_proxy("tip", "left", Vec3(0.02, 0.03, 0.02), 0.01)};
-  const Model<double> model = build_model<double>(spec);
-  Stepper<double> stepper(model);
-  State<double> s = stepper.make_state();
-  const double dt = 0.5 * model.dt_rest;
-  Pose pose = model.proxies[0].pose;
-  const Vec3 velocity(0.0, -0.2, 0.05);  // down into the top face, and sideways
-  Vec3 F_prev(0.0);
-  int in_contact = 0;
-  double push = 0;
-  for (int k = 0; k < 600; ++k) {
-    move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
-    const Vec3 P0 = momentum(model, s);
-    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
-    const Vec3 F = s.contact.reports[0].force;
-    const Vec3 dP = momentum(model, s) - P0;
-    const Vec3 expected = -0.5 * dt * (F_prev + F);
-    const double scale = 1e-9 * glm::length(expected) + 1e-15;  // elastic forces cancel to round-off
-    for (int c = 0; c < 3; ++c) EXPECT_NEAR(dP[c], expected[c], scale) << "step " << k << " component " << c;
-    if (s.contact.reports[0].contacts > 0) ++in_contact;
-    push = std::max(push, F.y);
-    F_prev = F;
-    pose.position += velocity * dt;
+  for (const bool quadratic : {false, true}) {
+    SCOPED_TRACE(quadratic ? "quadratic" : "linear");
+    ModelSpec spec = block_spec(quadratic ? std::array<int, 3>{4, 2, 4} : std::array<int, 3>{8, 4, 8});
+    if (quadratic) spec.mesh = make_quadratic_mesh(spec.mesh);
+    spec.proxies = {sphere_proxy("tip", "left", Vec3(0.02, 0.03, 0.02), 0.01)};
+    const Model<double> model = build_model<double>(spec);
+    Stepper<double> stepper(model);
+    State<double> s = stepper.make_state();
+    const double dt = 0.5 * model.dt_rest;
+    Pose pose = model.proxies[0].pose;
+    const Vec3 velocity(0.0, -0.2, 0.05);  // down into the top face, and sideways
+    Vec3 F_prev(0.0);
+    int in_contact = 0;
+    double push = 0;
+    for (int k = 0; k < 600; ++k) {
+      move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
+      const Vec3 P0 = momentum(model, s);
+      ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+      const Vec3 F = s.contact.reports[0].force;
+      const Vec3 dP = momentum(model, s) - P0;
+      const Vec3 expected = -0.5 * dt * (F_prev + F);
+      const double scale = 1e-9 * glm::length(expected) + 1e-15;  // elastic forces cancel to round-off
+      for (int c = 0; c < 3; ++c) EXPECT_NEAR(dP[c], expected[c], scale) << "step " << k << " component " << c;
+      if (s.contact.reports[0].contacts > 0) ++in_contact;
+      push = std::max(push, F.y);
+      F_prev = F;
+      pose.position += velocity * dt;
+    }
+    EXPECT_GT(in_contact, 100);  // (the free block is knocked away in the end)
+    EXPECT_GT(push, 0.0);        // the body pushed the proxy back up
   }
-  EXPECT_GT(in_contact, 100);  // (the free block is knocked away in the end)
-  EXPECT_GT(push, 0.0);        // the body pushed the proxy back up
 }
 
 // The per-node contact forces an output asks for (VTU point data) are the

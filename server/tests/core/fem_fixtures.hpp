@@ -142,4 +142,24 @@ void compute_momenta(const Model<Real>& model, const State<Real>& s, Vec3* p, Ve
   }
 }
 
+// Runs a pass's parts one after another on the calling thread, first to
+// last, last to first, or in turns each way, while telling the stepper it
+// has two workers: the part that runs first claims all of its pair's middle
+// chunks, from its own end, and the other finds none left.
+class OneAfterTheOther final : public ParallelFor {
+ public:
+  enum class Order { Forward, Backward, InTurns };
+  explicit OneAfterTheOther(Order order) : order_(order) {}
+  int32_t workers() const override { return 2; }
+  void run(int32_t n, void (*fn)(void* ctx, int32_t i), void* ctx) override {
+    const bool backwards = order_ == Order::Backward || (order_ == Order::InTurns && turn_);
+    for (int32_t k = 0; k < n; ++k) fn(ctx, backwards ? n - 1 - k : k);
+    turn_ = !turn_;
+  }
+
+ private:
+  Order order_;
+  bool turn_ = false;
+};
+
 }  // namespace tactile::test

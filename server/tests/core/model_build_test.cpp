@@ -73,9 +73,9 @@ TEST(ComputeElementConstants, ARegularTetsVolumeAltitudeLameAndStep) {
 
 TEST(ComputeElementConstants, AQuadraticMeshTakesEachTetsQuadraticStep) {
   const TetMesh mesh = test::make_jittered_box(Vec3(0.0), Vec3(0.06, 0.04, 0.02), {3, 2, 1}, 0.2);
-  const QuadraticNodes nodes = make_quadratic_nodes(mesh);
+  const TetMesh nodes = make_quadratic_mesh(mesh);
   const ElementConstants linear = compute_element_constants(mesh, kSoft);
-  const ElementConstants quadratic = compute_element_constants(mesh, kSoft, &nodes);
+  const ElementConstants quadratic = compute_element_constants(nodes, kSoft);
   const Lame lame = compute_lame(1e5, 0.3);
   for (size_t e = 0; e < mesh.tets.size(); ++e) {
     std::array<Vec3, kP2Nodes> X;
@@ -216,10 +216,10 @@ TEST(ComputeNodeNumbering, APermutationInFirstTouchOrderCutAt16) {
 // permutation of corners and edge nodes together, in first-touch order.
 TEST(ComputeNodeNumbering, QuadraticBlocksNumberTheirEdgeNodesToo) {
   const TetMesh mesh = make_box(Vec3(0.0), Vec3(0.3, 0.1, 0.1), {30, 8, 8});
-  const QuadraticNodes nodes = make_quadratic_nodes(mesh);
-  const ElementConstants c = compute_element_constants(mesh, kSoft);
+  const TetMesh nodes = make_quadratic_mesh(mesh);
+  const ElementConstants c = compute_element_constants(mesh, kSoft);  // (the linear tets' steps: unread here)
   const ElementOrder o = compute_element_order(mesh, c.volume, 2);
-  const QuadraticLaneBlocks<double> lanes = make_quadratic_lane_blocks<double>(mesh, nodes.edges, c, o);
+  const QuadraticLaneBlocks<double> lanes = make_quadratic_lane_blocks<double>(nodes, c, o);
   const auto n_nodes = int32_t(nodes.X.size());
   const NodeNumbering n = compute_node_numbering(lanes, o.n_parts, n_nodes);
   ASSERT_EQ(n.node_model.size(), nodes.X.size());

@@ -86,7 +86,7 @@ struct Problem {
   Problem(int cells, bool q) : quadratic(q) {
     const TetMesh mesh = make_box(Vec3(0.0), Vec3(1.0), {cells, cells, cells});
     if (q) {
-      const QuadraticNodes nodes = make_quadratic_nodes(mesh);
+      const TetMesh nodes = make_quadratic_mesh(mesh);
       X = nodes.X;
       for (size_t e = 0; e < mesh.tets.size(); ++e) {
         std::vector<int32_t> ids(mesh.tets[e].begin(), mesh.tets[e].end());

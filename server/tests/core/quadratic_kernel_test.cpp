@@ -24,14 +24,14 @@ constexpr const char* kIsas[] = {"baseline", "v3", "v4"};
 
 struct Case {
   TetMesh mesh;
-  QuadraticNodes nodes;
+  TetMesh nodes;        // mesh made quadratic
   std::vector<Vec3> u;  // displacement per node [m]
 };
 
 Case make_case(double amplitude) {
   Case c;
   c.mesh = test::make_jittered_box(Vec3(0.0), Vec3(0.06, 0.04, 0.02), {3, 2, 1}, 0.2);  // 36 tets: padding lanes
-  c.nodes = make_quadratic_nodes(c.mesh);
+  c.nodes = make_quadratic_mesh(c.mesh);
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
   for (const Vec3& X : c.nodes.X)
@@ -47,7 +47,7 @@ QuadraticLaneBlocks<Real> lanes_of(const Case& c) {
   const std::vector<MaterialSpec> materials{MaterialSpec{MaterialModel::StVK, 1e5, 0.3, 1000}};
   const ElementConstants constants = compute_element_constants(c.mesh, materials);
   const ElementOrder order = compute_element_order(c.mesh, constants.volume, 1);
-  QuadraticLaneBlocks<Real> lanes = make_quadratic_lane_blocks<Real>(c.mesh, c.nodes.edges, constants, order);
+  QuadraticLaneBlocks<Real> lanes = make_quadratic_lane_blocks<Real>(c.nodes, constants, order);
   for (auto& B : lanes.blocks)
     for (auto& ids : B.node4)
       for (int32_t& id : ids) id *= 4;

@@ -20,6 +20,7 @@ using test::make_jittered_box;
 using test::make_rotation;
 using test::make_spec;
 using test::node_vec;
+using test::OneAfterTheOther;
 
 // A cube of side 1 m on an irregular mesh; E = 1e5 Pa, rho = 1000 kg/m^3:
 // the dilatational wave speed is 11.6 m/s.
@@ -626,26 +627,6 @@ TEST(EssentialBc, PrescribedRotationIsFollowedExactlyAndItsWorkBalances) {
   EXPECT_LT(b1, 1e-2);
   EXPECT_LT(b2, 0.5 * b1);
 }
-
-// Runs a pass's parts one after another on the calling thread, first to
-// last, last to first, or in turns each way, while telling the stepper it
-// has two workers: the part that runs first claims all of its pair's middle
-// chunks, from its own end, and the other finds none left.
-class OneAfterTheOther final : public ParallelFor {
- public:
-  enum class Order { Forward, Backward, InTurns };
-  explicit OneAfterTheOther(Order order) : order_(order) {}
-  int32_t workers() const override { return 2; }
-  void run(int32_t n, void (*fn)(void* ctx, int32_t i), void* ctx) override {
-    const bool backwards = order_ == Order::Backward || (order_ == Order::InTurns && turn_);
-    for (int32_t k = 0; k < n; ++k) fn(ctx, backwards ? n - 1 - k : k);
-    turn_ = !turn_;
-  }
-
- private:
-  Order order_;
-  bool turn_ = false;
-};
 
 // Two parts share the middle of their blocks in chunks (stepper.cpp,
 // elastic_part): whichever thread claims which chunk, every element's forces

@@ -442,6 +442,26 @@ TEST(SceneErrors, OutOfRangeValues) {
   expect_scene_error(dir, "s.json", j, {"integrator.safety: must lie in (0, 1]"});
 }
 
+// "element": "p2" makes the mesh quadratic: a node on each edge, which the
+// selectors pick as they pick corners; "p1" (the default) keeps it linear.
+TEST(Scene, ElementP2GivesEveryEdgeANodeTheSelectorsReach) {
+  SceneDir dir;
+  json j = make_beam_scene();
+  const Scene linear = load_scene(dir.write_json("p1.json", j)).at(0);
+  j["element"] = "p2";
+  const Scene quadratic = load_scene(dir.write_json("p2.json", j)).at(0);
+  ASSERT_FALSE(linear.spec.mesh.quadratic());
+  ASSERT_TRUE(quadratic.spec.mesh.quadratic());
+  EXPECT_EQ(quadratic.spec.mesh.tets, linear.spec.mesh.tets);
+  EXPECT_GT(quadratic.spec.mesh.n_nodes(), linear.spec.mesh.n_nodes());
+  EXPECT_EQ(check_mesh_structure(quadratic.spec.mesh), "");
+  // The clamp's face x = 0: 3 x 3 corners and, on its 2 x 2 split cells, 16 edges.
+  EXPECT_EQ(select_nodes(linear.spec.mesh, linear.spec.essential.at(0).where).size(), 9u);
+  EXPECT_EQ(select_nodes(quadratic.spec.mesh, quadratic.spec.essential.at(0).where).size(), 25u);
+  j["element"] = "p3";
+  expect_scene_error(dir, "s.json", j, {"element: must be one of \"p1\", \"p2\", got \"p3\""});
+}
+
 TEST(SceneErrors, MissingMesh) {
   SceneDir dir;
   json j = make_beam_scene();
