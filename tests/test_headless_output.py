@@ -64,6 +64,39 @@ def test_frames_read_back_with_meshio_and_agree_with_the_summary(default_run):
     assert (vol > 0).all()
 
 
+def test_a_quadratic_body_reads_back_as_vtk_quadratic_tetra_with_its_fields(tmp_path):
+    """The default beam on quadratic tets ("element": "p2"): meshio reads VTK_QUADRATIC_TETRA ("tetra10"), the
+    corners then the edge nodes, every edge node at the midpoint of its corners at rest, and the cell fields one
+    per tet; the beam sags with every quadratic element unfolded (det J > 0 at its corners' tet)."""
+    scene = json.loads((ROOT / "server/scenes/default.json").read_text())
+    scene["element"] = "p2"
+    scene["mesh"]["cells"] = [8, 1, 1]
+    scene["run"]["vtu_fields"] = ["von_mises", "principal_stretches"]
+    path = tmp_path / "p2.json"
+    path.write_text(json.dumps(scene))
+    result = subprocess.run([SIM, "run", str(path), "--out", str(tmp_path / "out"), "--duration", "0.3", "--quiet"],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    folder = tmp_path / "out" / "default" / "run"
+    summary = json.loads((folder / "summary.json").read_text())
+    last = meshio.read(sorted(folder.glob("frame_*.vtu"))[-1])
+    assert [b.type for b in last.cells] == ["tetra10"]
+    tets = last.cells[0].data
+    assert tets.shape == (summary["mesh"]["tets"], 10) == (8 * 24, 10)
+    assert last.points.shape == (summary["mesh"]["nodes"], 3) and tets.max() == len(last.points) - 1
+    X = last.points
+    for k, (a, b) in enumerate([(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)]):
+        np.testing.assert_allclose(X[tets[:, 4 + k]], 0.5 * (X[tets[:, a]] + X[tets[:, b]]), atol=1e-12)
+    assert last.cell_data["von_mises"][0].shape == (len(tets),)
+    assert (last.cell_data["von_mises"][0] > 0).all()
+    u = last.point_data["displacement"]
+    assert u[:, 1].min() < -1e-3 and u[:, 1].max() <= 1e-9
+    p = X + u
+    vol = np.einsum("ij,ij->i", p[tets[:, 1]] - p[tets[:, 0]],
+                    np.cross(p[tets[:, 2]] - p[tets[:, 0]], p[tets[:, 3]] - p[tets[:, 0]]))
+    assert (vol > 0).all()
+
+
 def test_a_bad_scene_is_refused_with_exit_code_2_naming_the_field(tmp_path):
     scene = json.loads((ROOT / "server/scenes/default.json").read_text())
     scene["integrator"] = {"dt": -1}

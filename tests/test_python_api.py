@@ -118,6 +118,17 @@ def test_a_view_shows_the_step_it_was_read_at_and_cannot_be_written() -> None:
     assert sim.tets.shape == (sim.n_tets, 4) and sim.tets.max() == sim.n_nodes - 1
 
 
+def test_a_quadratic_bodys_tets_list_ten_nodes_each() -> None:
+    data = json.loads((SCENES / "fig3_cantilever.json").read_text())
+    data["element"] = "p2"
+    sim = tactile.Simulation(tactile.parse_scene(data, SCENES / "fig3_cantilever.json", variant="stvk"))
+    tets, X = sim.tets, sim.rest_positions
+    assert tets.shape == (sim.n_tets, 10) and tets.max() == sim.n_nodes - 1
+    np.testing.assert_allclose(X[tets[:, 4]], 0.5 * (X[tets[:, 0]] + X[tets[:, 1]]), atol=1e-12)
+    assert sim.advance(0.05)["fault"] is None
+    assert sim.displacements[:, 1].min() < -1e-5
+
+
 def test_the_views_are_in_the_meshs_numbering_whatever_the_precision() -> None:
     scene_d = tactile.load_scene(SCENES / "fig3_cantilever.json", variant="stvk")
     data = json.loads((SCENES / "fig3_cantilever.json").read_text())

@@ -209,8 +209,11 @@ class Published {
 class PySimulation {
  public:
   explicit PySimulation(const Scene& scene) : scene_(scene), sim_(scene.spec) {
-    tets_.reserve(4 * size_t(sim_.n_tets()));
-    for (const Tet& t : sim_.mesh().tets) tets_.insert(tets_.end(), t.begin(), t.end());
+    const TetMesh& mesh = sim_.mesh();
+    per_tet_ = size_t(mesh.nodes_per_tet());
+    tets_.reserve(per_tet_ * size_t(sim_.n_tets()));
+    for (size_t e = 0; e < mesh.tets.size(); ++e)
+      for (int k = 0; k < mesh.nodes_per_tet(); ++k) tets_.push_back(mesh.node(e, k));
   }
 
   py::dict advance(double seconds) {
@@ -279,8 +282,8 @@ class PySimulation {
     return view(&X.data()->x, X.size(), 3, self);
   }
   py::array tets(py::object self) {
-    py::array a(py::dtype::of<int32_t>(), {tets_.size() / 4, size_t(4)}, {4 * sizeof(int32_t), sizeof(int32_t)},
-                tets_.data(), self);
+    py::array a(py::dtype::of<int32_t>(), {tets_.size() / per_tet_, per_tet_},
+                {per_tet_ * sizeof(int32_t), sizeof(int32_t)}, tets_.data(), self);
     a.attr("setflags")(py::arg("write") = false);
     return a;
   }
@@ -388,7 +391,8 @@ class PySimulation {
   Simulation sim_;
   Published positions_, displacements_, velocities_;  // mesh order (n_nodes x 3)
   uint64_t generation_ = 0;                           // advance() calls so far: a view's array is of one
-  std::vector<int32_t> tets_;                         // (n_tets x 4)
+  std::vector<int32_t> tets_;                         // (n_tets x per_tet_)
+  size_t per_tet_ = 4;                                // 10 for quadratic tets (corners, then edge nodes)
 };
 
 }  // namespace
@@ -651,7 +655,8 @@ void bind_simulation(py::module_& m) {
           "X [m] (n_nodes x 3), read-only")
       .def_property_readonly(
           "tets", [](py::object self) { return self.cast<PySimulation&>().tets(self); },
-          "node ids of each tet (n_tets x 4), read-only")
+          "node ids of each tet (n_tets x 4; quadratic tets n_tets x 10: corners, then edge nodes in VTK's order), "
+          "read-only")
       .def_property_readonly("energy", [](PySimulation& s) { return energy_dict(s.sim()->energy()); })
       .def("compute_energy", [](PySimulation& s) { return energy_dict(s.sim()->compute_energy()); })
       .def_property_readonly("fault", [](PySimulation& s) { return fault_object(s.sim()->fault()); })

@@ -98,9 +98,12 @@ void write_vtu(const std::string& path, const VtuFrame& f) {
   std::vector<double> points(3 * nn);
   for (size_t i = 0; i < nn; ++i)
     for (size_t d = 0; d < 3; ++d) points[3 * i + d] = mesh.X[i][int(d)];
-  std::vector<int32_t> connectivity(4 * nt), material(nt);
+  // A quadratic mesh as VTK_QUADRATIC_TETRA (24), whose node order is ours
+  // (core/mesh.hpp): ParaView draws its curved faces as they are.
+  const auto per = size_t(mesh.nodes_per_tet());
+  std::vector<int32_t> connectivity(per * nt), material(nt);
   for (size_t e = 0; e < nt; ++e) {
-    for (size_t k = 0; k < 4; ++k) connectivity[4 * e + k] = mesh.tets[e][k];
+    for (size_t k = 0; k < per; ++k) connectivity[per * e + k] = mesh.node(e, int(k));
     material[e] = mesh.region_of(int32_t(e));
   }
 
@@ -125,7 +128,7 @@ void write_vtu(const std::string& path, const VtuFrame& f) {
     write_array(out, "Float64", "principal_stretches", 3, fields->principal_stretches);
   write_array(out, "Int32", "material", 1, material);
   out << "      </CellData>\n";
-  write_piece(out, points, connectivity, 4, 10);  // VTK_TETRA
+  write_piece(out, points, connectivity, int(per), mesh.quadratic() ? 24 : 10);  // VTK_QUADRATIC_TETRA, VTK_TETRA
   close(out, path);
 }
 

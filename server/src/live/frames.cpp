@@ -179,8 +179,8 @@ void FrameEncoder::build_field_map() {
   field_start_.assign(surface_.nodes.size() + 1, 0);
   for (size_t e = 0; e < mesh.tets.size(); ++e) {
     bool touches = false;
-    for (int32_t n : mesh.tets[e])
-      if (vertex_of[size_t(n)] >= 0) {
+    for (int k = 0; k < mesh.nodes_per_tet(); ++k)
+      if (const int32_t n = mesh.node(e, k); vertex_of[size_t(n)] >= 0) {
         ++field_start_[size_t(vertex_of[size_t(n)]) + 1];
         touches = true;
       }
@@ -192,8 +192,8 @@ void FrameEncoder::build_field_map() {
   std::vector<uint32_t> next(field_start_.begin(), field_start_.end() - 1);
   std::vector<double> total(surface_.nodes.size(), 0.0);
   for (size_t i = 0; i < field_tets_.size(); ++i)
-    for (int32_t n : mesh.tets[size_t(field_tets_[i])])
-      if (const int32_t v = vertex_of[size_t(n)]; v >= 0) {
+    for (int k = 0; k < mesh.nodes_per_tet(); ++k)
+      if (const int32_t v = vertex_of[size_t(mesh.node(size_t(field_tets_[i]), k))]; v >= 0) {
         field_entry_[next[size_t(v)]] = uint32_t(i);
         field_weight_[next[size_t(v)]++] = float(volume[size_t(field_tets_[i])]);
         total[size_t(v)] += volume[size_t(field_tets_[i])];
