@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/section.hpp"
+#include "core/quadratic.hpp"
 #include "core/spec.hpp"
 #include "mesh/primitives.hpp"
 #include "scene/scene.hpp"
@@ -29,6 +30,13 @@ constexpr MaterialModel kModels[] = {MaterialModel::Linear, MaterialModel::StVK,
 constexpr Precision kPrecisions[] = {Precision::Float, Precision::Double};
 
 const char* name_of(Precision p) { return p == Precision::Float ? "float" : "double"; }
+
+// The element order of a run: a primitive's linear mesh as it is, or made quadratic.
+struct Element {
+  bool quadratic = false;
+  const char* name() const { return quadratic ? "p2" : "p1"; }
+  TetMesh mesh(TetMesh linear) const { return quadratic ? make_quadratic_mesh(linear) : linear; }
+};
 
 // Steps a simulation in intervals to `duration`, timing only the stepping; `each` sees it after every interval.
 struct Stepped {
@@ -59,8 +67,10 @@ AccuracyRecord make_record(std::string problem, MaterialModel m, int32_t level, 
   AccuracyRecord r;
   r.problem = std::move(problem);
   r.material = std::string(to_string(m));
+  r.element = sim.mesh().quadratic() ? "p2" : "p1";
   r.level = level;
   r.tets = sim.n_tets();
+  r.nodes = sim.n_nodes();
   r.safety = safety;
   r.precision = name_of(p);
   r.steps = s.steps;
@@ -90,9 +100,9 @@ double mean_displacement(const Simulation& sim, const std::vector<int32_t>& node
 // Length L along x, square section h = L / 10, clamped at x = 0; 10 n x n x n cells (the centred split, which
 // bends without the Kuhn split's bias).
 struct Beam : CantileverTheory {
-  ModelSpec spec(MaterialModel m, int n, Precision p, double safety) const {
+  ModelSpec spec(Element el, MaterialModel m, int n, Precision p, double safety) const {
     ModelSpec s;
-    s.mesh = make_box(Vec3(0.0), Vec3(L, h, h), {10 * n, n, n}, BoxSplit::centred24);
+    s.mesh = el.mesh(make_box(Vec3(0.0), Vec3(L, h, h), {10 * n, n, n}, BoxSplit::centred24));
     s.materials = {MaterialSpec{m, E, nu, rho}};
     s.integrator.precision = p;
     s.integrator.safety = safety;
@@ -109,12 +119,12 @@ struct Beam : CantileverTheory {
   }
 };
 
-AccuracyRecord cantilever_deflection(MaterialModel m, int n, Precision p) {
+AccuracyRecord cantilever_deflection(Element el, MaterialModel m, int n, Precision p) {
   // A tip load that bends the beam by L / 1000 (the linear range), settled by damping critical for the first
   // mode: its error falls as (1 + w t) exp(-w t), 5e-4 at w t = 10.
   const Beam beam;
   const double P = 3 * beam.E * beam.I() * 1e-3 / (beam.L * beam.L);
-  ModelSpec spec = beam.spec(m, n, p, 0.9);
+  ModelSpec spec = beam.spec(el, m, n, p, 0.9);
   NaturalLoad load;
   load.name = "tip";
   load.where.kind = NodeSelector::Kind::Plane;
@@ -134,11 +144,11 @@ AccuracyRecord cantilever_deflection(MaterialModel m, int n, Precision p) {
   return r;
 }
 
-AccuracyRecord cantilever_frequency(MaterialModel m, int n, Precision p, double safety) {
+AccuracyRecord cantilever_frequency(Element el, MaterialModel m, int n, Precision p, double safety) {
   // Free vibration from the first Euler-Bernoulli mode shape (the sections turned by w'), undamped; the
   // frequency from the zero crossings of the tip's deflection over two periods.
   const Beam beam;
-  Simulation sim(beam.spec(m, n, p, safety));
+  Simulation sim(beam.spec(el, m, n, p, safety));
   const double bL = 1.8751040687, sigma = (std::cosh(bL) + std::cos(bL)) / (std::sinh(bL) + std::sin(bL));
   const double k = bL / beam.L;
   auto w = [&](double x) { return std::cosh(k * x) - std::cos(k * x) - sigma * (std::sinh(k * x) - std::sin(k * x)); };
@@ -170,13 +180,13 @@ AccuracyRecord cantilever_frequency(MaterialModel m, int n, Precision p, double 
   return r;
 }
 
-AccuracyRecord wave_speed(MaterialModel m, int n, Precision p, double safety) {
+AccuracyRecord wave_speed(Element el, MaterialModel m, int n, Precision p, double safety) {
   // A free bar 1 m long, 5 cm square, given a smooth axial velocity pulse (10 cm wide, much longer than the
   // section: the bar velocity sqrt(E / rho) holds); its speed from when the pulse's peak passes two sections
   // 0.4 m apart.
   const double E = 1e6, rho = 1000, h = 0.05;
   ModelSpec spec;
-  spec.mesh = make_box(Vec3(0.0), Vec3(1.0, h, h), {20 * n, n, n}, BoxSplit::centred24);
+  spec.mesh = el.mesh(make_box(Vec3(0.0), Vec3(1.0, h, h), {20 * n, n, n}, BoxSplit::centred24));
   spec.materials = {MaterialSpec{m, E, 0.3, rho}};
   spec.integrator.precision = p;
   spec.integrator.safety = safety;
@@ -226,7 +236,7 @@ AccuracyRecord wave_speed(MaterialModel m, int n, Precision p, double safety) {
 // ---- the paper's figures against converged runs -------------------------------------------------------------
 
 // A shipped scene with its mesh cells and material model replaced (no variants).
-Scene scene_at(const std::string& path, const nlohmann::json& cells, MaterialModel m, Precision p,
+Scene scene_at(const std::string& path, const nlohmann::json& cells, Element el, MaterialModel m, Precision p,
                const std::function<void(nlohmann::json&)>& edit = {}) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error("accuracy study: cannot read " + path + " (--scenes names the folder)");
@@ -237,6 +247,7 @@ Scene scene_at(const std::string& path, const nlohmann::json& cells, MaterialMod
   j["material"]["model"] = std::string(to_string(m == MaterialModel::InvertibleStVK ? MaterialModel::StVK : m));
   j["material"]["invertible"] = m == MaterialModel::InvertibleStVK;
   j["integrator"]["precision"] = name_of(p);
+  j["element"] = el.name();
   if (edit) edit(j);
   return parse_scene(j, path).at(0);
 }
@@ -245,10 +256,10 @@ struct Fig3Run {
   AccuracyRecord record;
   Vec3 tip;  // displacement of the tip's centre [m]
 };
-Fig3Run fig3(const std::string& scenes, MaterialModel m, int n, Precision p) {
+Fig3Run fig3(const std::string& scenes, Element el, MaterialModel m, int n, Precision p) {
   // The paper's Fig. 3 beam (1 x 0.1 x 0.1 m, E = 3 MPa) sagging under gravity by half its length: settled
   // by damping critical for its first mode (alpha = 2 w1 = 11 1/s) over 2 s.
-  const Scene sc = scene_at(scenes + "/fig3_cantilever.json", {10 * n, n, n}, m, p,
+  const Scene sc = scene_at(scenes + "/fig3_cantilever.json", {10 * n, n, n}, el, m, p,
                             [](nlohmann::json& j) { j["effects"]["damping"]["alpha"] = 11.1; });
   Simulation sim(sc.spec);
   const Stepped s = step_for(sim, 2.0, 0.01);
@@ -263,10 +274,10 @@ Fig3Run fig3(const std::string& scenes, MaterialModel m, int n, Precision p) {
   return out;
 }
 
-AccuracyRecord fig2(const std::string& scenes, MaterialModel m, int n, Precision p) {
+AccuracyRecord fig2(const std::string& scenes, Element el, MaterialModel m, int n, Precision p) {
   // The paper's Fig. 2 column, its lid turned 90 degrees over 1 s and held, as shipped: the mid-height
   // section's area over its rest area at 2.5 s.
-  const Scene sc = scene_at(scenes + "/fig2_twist.json", {2 * n, 6 * n, 2 * n}, m, p);
+  const Scene sc = scene_at(scenes + "/fig2_twist.json", {2 * n, 6 * n, 2 * n}, el, m, p);
   Simulation sim(sc.spec);
   const Stepped s = step_for(sim, sc.run.duration, 0.01);
   const SectionCut cut = make_section_cut(sim.mesh(), sc.run.sections.at(0));
@@ -280,13 +291,13 @@ AccuracyRecord fig2(const std::string& scenes, MaterialModel m, int n, Precision
 
 // ---- invariance under rigid rotation --------------------------------------------------------------------------
 
-std::pair<AccuracyRecord, AccuracyRecord> rotation(MaterialModel m, int n, Precision p) {
+std::pair<AccuracyRecord, AccuracyRecord> rotation(Element el, MaterialModel m, int n, Precision p) {
   // A free 10 cm cube turned rigidly by 90 degrees about z, at rest: no strain, so no elastic energy, no
   // force, and its volume kept as it is left to move for 50 ms. The energy is shown per unit of E V (the
   // energy density of a unit strain, order 1), the volume change relative.
   const double a = 0.1, E = 1e5;
   ModelSpec spec;
-  spec.mesh = make_box(Vec3(-a / 2), Vec3(a / 2), {3 * n, 3 * n, 3 * n});
+  spec.mesh = el.mesh(make_box(Vec3(-a / 2), Vec3(a / 2), {3 * n, 3 * n, 3 * n}));
   spec.materials = {MaterialSpec{m, E, 0.3, 1000}};
   spec.integrator.precision = p;
   Simulation sim(spec);
@@ -316,17 +327,18 @@ std::pair<AccuracyRecord, AccuracyRecord> rotation(MaterialModel m, int n, Preci
 
 // ---- real time ------------------------------------------------------------------------------------------------
 
-RealtimeRecord realtime(MaterialModel m, Precision p, bool quick) {
+RealtimeRecord realtime(Element el, MaterialModel m, Precision p, bool quick) {
   // The poke scene's block (8 x 4 x 8 cm, 30 kPa, damped, a sphere over it: the contact pass runs) at growing
   // resolutions, each stepped in 1 ms intervals as the live loop's haptic rate needs; the median wall time
   // of an interval against 1 ms.
   RealtimeRecord out;
   out.material = std::string(to_string(m));
   out.precision = name_of(p);
+  out.element = el.name();
   const int k_max = quick ? 3 : 10;
   for (int k = 1; k <= k_max; ++k) {
     ModelSpec spec;
-    spec.mesh = make_box(Vec3(-0.04, 0, -0.04), Vec3(0.04, 0.04, 0.04), {4 * k, 2 * k, 4 * k});
+    spec.mesh = el.mesh(make_box(Vec3(-0.04, 0, -0.04), Vec3(0.04, 0.04, 0.04), {4 * k, 2 * k, 4 * k}));
     spec.materials = {MaterialSpec{m, 30e3, 0.3, 1000}};
     spec.integrator.precision = p;
     spec.effects.damping = true;
@@ -395,88 +407,105 @@ std::vector<AccuracyCase> list_accuracy_cases(const AccuracyOptions& o) {
   std::vector<AccuracyCase> cases;
   auto wants = [&](const char* problem) { return o.only.empty() || o.only == problem; };
   const bool q = o.quick;
-  const std::vector<int> static_levels = q ? std::vector<int>{1, 2} : std::vector<int>{1, 2, 3, 4};
-  const std::vector<int> dynamic_levels = q ? std::vector<int>{1} : std::vector<int>{1, 2, 3};
-  const std::vector<double> safeties = q ? std::vector<double>{0.9, 0.3} : std::vector<double>{0.9, 0.6, 0.3};
-  const std::vector<int> figure_levels = q ? std::vector<int>{1, 2} : std::vector<int>{1, 2, 3};
+  // Per element order: a quadratic tet has ten nodes and a step about a third of the linear one's, so its
+  // levels stop earlier, where they already pass the linear tets' finest; and its time step is the
+  // linear tets' finding (0.9 of the critical step), not a variation of its own.
+  struct Levels {
+    std::vector<int> statics, dynamics, figures;
+    std::vector<double> safeties;
+  };
+  const Levels p1 =
+      q ? Levels{{1, 2}, {1}, {1, 2}, {0.9, 0.3}} : Levels{{1, 2, 3, 4}, {1, 2, 3}, {1, 2, 3}, {0.9, 0.6, 0.3}};
+  const Levels p2 = q ? Levels{{1}, {1}, {1}, {0.9}} : Levels{{1, 2, 3}, {1, 2}, {1, 2}, {0.9}};
   const int reference_level = q ? 3 : 5;
-  auto add = [&](const char* problem, MaterialModel m, int n, Precision p, double safety = 0) {
+  auto add = [&](const char* problem, const char* element, MaterialModel m, int n, Precision p, double safety = 0) {
     AccuracyCase c;
     c.problem = problem;
     c.material = to_string(m);
+    c.element = element;
     c.level = n;
     c.precision = name_of(p);
     c.safety = safety;
     c.quick = q;
-    c.label = c.problem + " " + c.material + " level " + std::to_string(n) + " " + c.precision;
+    c.label = c.problem + " " + c.element + " " + c.material + " level " + std::to_string(n) + " " + c.precision;
     if (safety > 0) c.label += " dt " + std::to_string(safety).substr(0, 3);
     cases.push_back(std::move(c));
   };
-  for (MaterialModel m : kModels)
-    for (Precision p : kPrecisions) {
-      if (wants("cantilever_deflection"))
-        for (int n : static_levels) add("cantilever_deflection", m, n, p);
-      for (double safety : safeties) {
-        if (wants("cantilever_frequency"))
-          for (int n : dynamic_levels) add("cantilever_frequency", m, n, p, safety);
-        if (wants("wave_speed"))
-          for (int n : static_levels) add("wave_speed", m, n, p, safety);
-      }
-      if (wants("rotation"))
-        for (int n : static_levels) add("rotation", m, n, p);
-    }
-  // The figures: a converged StVK run in double, then every choice measured against it.
-  if (wants("fig3_tip")) {
-    add("fig3_reference", MaterialModel::StVK, reference_level, Precision::Double);
-    for (MaterialModel m : kModels)
-      for (Precision p : kPrecisions)
-        for (int n : figure_levels) add("fig3_tip", m, n, p);
-  }
-  if (wants("fig2_area")) {
-    add("fig2_reference", MaterialModel::StVK, reference_level - 1, Precision::Double);
-    for (MaterialModel m : kModels)
-      for (Precision p : kPrecisions)
-        for (int n : figure_levels)
-          if (n < reference_level - 1) add("fig2_area", m, n, p);
-  }
-  if (wants("realtime"))
+  for (const char* el : {"p1", "p2"}) {
+    const Levels& L = std::string(el) == "p1" ? p1 : p2;
     for (MaterialModel m : kModels)
       for (Precision p : kPrecisions) {
-        add("realtime", m, 0, p);
-        cases.back().label = "realtime " + cases.back().material + " " + cases.back().precision;
+        if (wants("cantilever_deflection"))
+          for (int n : L.statics) add("cantilever_deflection", el, m, n, p);
+        for (double safety : L.safeties) {
+          if (wants("cantilever_frequency"))
+            for (int n : L.dynamics) add("cantilever_frequency", el, m, n, p, safety);
+          if (wants("wave_speed"))
+            for (int n : (std::string(el) == "p1" ? L.statics : L.dynamics)) add("wave_speed", el, m, n, p, safety);
+        }
+        if (wants("rotation"))
+          for (int n : (std::string(el) == "p1" ? L.statics : std::vector<int>{1})) add("rotation", el, m, n, p);
       }
+  }
+  // The figures: a converged StVK run in double (linear tets), then every choice measured against it.
+  if (wants("fig3_tip")) {
+    add("fig3_reference", "p1", MaterialModel::StVK, reference_level, Precision::Double);
+    for (const char* el : {"p1", "p2"})
+      for (MaterialModel m : kModels)
+        for (Precision p : kPrecisions)
+          for (int n : (std::string(el) == "p1" ? p1 : p2).figures) add("fig3_tip", el, m, n, p);
+  }
+  if (wants("fig2_area")) {
+    add("fig2_reference", "p1", MaterialModel::StVK, reference_level - 1, Precision::Double);
+    for (const char* el : {"p1", "p2"})
+      for (MaterialModel m : kModels)
+        for (Precision p : kPrecisions)
+          for (int n : (std::string(el) == "p1" ? p1 : p2).figures)
+            if (n < reference_level - 1) add("fig2_area", el, m, n, p);
+  }
+  if (wants("realtime"))
+    for (const char* el : {"p1", "p2"})
+      for (MaterialModel m : kModels)
+        for (Precision p : kPrecisions) {
+          add("realtime", el, m, 0, p);
+          cases.back().label =
+              "realtime " + cases.back().element + " " + cases.back().material + " " + cases.back().precision;
+        }
   return cases;
 }
 
 AccuracyResults run_accuracy_case(const AccuracyCase& c, const std::string& scenes) {
   const MaterialModel m = material_named(c.material);
   const Precision p = precision_named(c.precision);
+  if (c.element != "p1" && c.element != "p2")
+    throw std::invalid_argument("accuracy case: element must be p1 or p2, got '" + c.element + "'");
+  const Element el{c.element == "p2"};
   const int n = c.level;
   AccuracyResults out;
   auto fig3_record = [&](const char* problem) {
-    Fig3Run run = fig3(scenes, m, n, p);
+    Fig3Run run = fig3(scenes, el, m, n, p);
     run.record.problem = problem;
     run.record.tip = {run.tip.x, run.tip.y, run.tip.z};
     out.records.push_back(run.record);
   };
   if (c.problem == "cantilever_deflection") {
-    out.records.push_back(cantilever_deflection(m, n, p));
+    out.records.push_back(cantilever_deflection(el, m, n, p));
   } else if (c.problem == "cantilever_frequency") {
-    out.records.push_back(cantilever_frequency(m, n, p, c.safety));
+    out.records.push_back(cantilever_frequency(el, m, n, p, c.safety));
   } else if (c.problem == "wave_speed") {
-    out.records.push_back(wave_speed(m, n, p, c.safety));
+    out.records.push_back(wave_speed(el, m, n, p, c.safety));
   } else if (c.problem == "rotation") {
-    auto [e, v] = rotation(m, n, p);
+    auto [e, v] = rotation(el, m, n, p);
     out.records.push_back(e);
     out.records.push_back(v);
   } else if (c.problem == "fig3_tip" || c.problem == "fig3_reference") {
     fig3_record(c.problem == "fig3_tip" ? "fig3_tip" : "fig3_reference");
   } else if (c.problem == "fig2_area" || c.problem == "fig2_reference") {
-    AccuracyRecord r = fig2(scenes, m, n, p);
+    AccuracyRecord r = fig2(scenes, el, m, n, p);
     r.problem = c.problem;
     out.records.push_back(r);
   } else if (c.problem == "realtime") {
-    out.realtime.push_back(realtime(m, p, c.quick));
+    out.realtime.push_back(realtime(el, m, p, c.quick));
   } else {
     throw std::invalid_argument("accuracy case: no problem '" + c.problem + "'");
   }
@@ -527,8 +556,10 @@ std::string accuracy_json(const AccuracyResults& results, bool quick) {
   for (const AccuracyRecord& r : results.records) {
     nlohmann::json j = {{"problem", r.problem},
                         {"material", r.material},
+                        {"element", r.element},
                         {"level", r.level},
                         {"tets", r.tets},
+                        {"nodes", r.nodes},
                         {"safety", r.safety},
                         {"precision", r.precision},
                         {"value", r.value},
@@ -547,6 +578,7 @@ std::string accuracy_json(const AccuracyResults& results, bool quick) {
   for (const RealtimeRecord& r : results.realtime)
     realtime.push_back({{"material", r.material},
                         {"precision", r.precision},
+                        {"element", r.element},
                         {"tets", r.tets},
                         {"interval_ms", r.interval_ms},
                         {"substeps", r.substeps},
@@ -562,8 +594,10 @@ AccuracyResults accuracy_from_json(const std::string& text) {
     AccuracyRecord a;
     a.problem = r.at("problem");
     a.material = r.at("material");
+    a.element = r.value("element", "p1");
     a.level = r.at("level");
     a.tets = r.at("tets");
+    a.nodes = r.value("nodes", 0);
     a.safety = r.at("safety");
     a.precision = r.at("precision");
     a.value = r.at("value");
@@ -583,6 +617,7 @@ AccuracyResults accuracy_from_json(const std::string& text) {
     RealtimeRecord t;
     t.material = r.at("material");
     t.precision = r.at("precision");
+    t.element = r.value("element", "p1");
     t.tets = r.at("tets").get<std::vector<int32_t>>();
     t.interval_ms = r.at("interval_ms").get<std::vector<double>>();
     t.substeps = r.at("substeps").get<std::vector<int32_t>>();

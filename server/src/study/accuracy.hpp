@@ -1,6 +1,7 @@
-// What accuracy costs in time: the error of each choice -- material model,
-// mesh resolution, time step (as a fraction of the critical step) and
-// precision -- against references, beside what the choice costs to run.
+// What accuracy costs in time: the error of each choice -- element order
+// (linear P1 or quadratic P2 tets), material model, mesh resolution, time
+// step (as a fraction of the critical step) and precision -- against
+// references, beside what the choice costs to run.
 //
 // Problems and their references:
 //   cantilever_deflection  small tip load, static: Timoshenko beam theory
@@ -30,8 +31,10 @@ namespace tactile::study {
 struct AccuracyRecord {
   std::string problem;
   std::string material;
-  int32_t level = 0;  // mesh resolution (1 coarsest)
+  std::string element = "p1";  // "p1" (linear tets) or "p2" (quadratic)
+  int32_t level = 0;           // mesh resolution (1 coarsest)
   int32_t tets = 0;
+  int32_t nodes = 0;
   double safety = 0.9;    // time step as a fraction of the critical step
   std::string precision;  // "float" or "double"
   double value = 0;       // what was measured (the problem's own unit)
@@ -50,6 +53,7 @@ struct AccuracyRecord {
 
 struct RealtimeRecord {
   std::string material, precision;
+  std::string element = "p1";
   // Per mesh tried, smallest first: tets, the median wall time of a 1 ms interval [ms], its sub-steps.
   std::vector<int32_t> tets;
   std::vector<double> interval_ms;
@@ -80,6 +84,7 @@ struct AccuracyCase {
   std::string label;    // what a progress bar shows
   std::string problem;  // a problem above, or "fig3_reference", "fig2_reference", "realtime"
   std::string material;
+  std::string element = "p1";
   int32_t level = 0;
   std::string precision;
   double safety = 0;  // the time step's fraction of the critical step; 0: the problem's own
