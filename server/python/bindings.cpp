@@ -553,6 +553,7 @@ void bind_studies(py::module_& m) {
           d["label"] = c.label;
           d["problem"] = c.problem;
           d["material"] = c.material;
+          d["element"] = c.element;
           d["level"] = c.level;
           d["precision"] = c.precision;
           d["safety"] = c.safety;
@@ -570,6 +571,7 @@ void bind_studies(py::module_& m) {
         c.label = d["label"].cast<std::string>();
         c.problem = d["problem"].cast<std::string>();
         c.material = d["material"].cast<std::string>();
+        if (d.contains("element")) c.element = d["element"].cast<std::string>();
         c.level = d["level"].cast<int32_t>();
         c.precision = d["precision"].cast<std::string>();
         c.safety = d["safety"].cast<double>();

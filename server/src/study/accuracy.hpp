@@ -8,7 +8,7 @@
 //   cantilever_frequency   first bending mode, free: Euler-Bernoulli
 //   wave_speed             a long pulse along a free bar: the bar velocity sqrt(E / rho)
 //   fig3_tip               the paper's Fig. 3 beam sagging under gravity (large deflection): a converged
-//                          fine-mesh StVK run in double
+//                          fine-mesh StVK run in double, on quadratic tets
 //   fig2_area              the paper's Fig. 2 column twisted 90 degrees, mid-height section area: likewise
 //   rotation               a body turned rigidly by 90 degrees: elastic energy and volume change, which
 //                          should be zero (the invariance the paper is about)
