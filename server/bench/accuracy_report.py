@@ -7,8 +7,9 @@
   .venv/bin/python server/bench/accuracy_report.py --scheduler tcp://HOST:8786 --out docs/accuracy   # on a cluster
 
 It runs, each printing its progress:
-  tactile-batch accuracy              the FEM's error against references, and its cost, per material model, mesh
-                                      level, time step (fraction of the critical one) and precision; and the
+  tactile-batch accuracy              the FEM's error against references, and its cost, per element order (P1,
+                                      P2), material model, mesh level, time step (fraction of the critical one)
+                                      and precision; and the
                                       largest block that keeps 1 kHz real time (server/src/study/accuracy.hpp):
                                       the runs of `tactile-accuracy`, each a task on Dask (an embedded cluster
                                       of one worker per core, --workers N, or --scheduler's), into the same
@@ -42,6 +43,21 @@ COLOURS = {"linear": "tab:gray", "stvk": "tab:blue", "corotational": "tab:orange
            "invertible_stvk": "tab:purple"}
 STYLE = {"double": "-", "float": "--"}
 MARKER = {"double": "o", "float": "^"}
+# Quadratic (P2) tets drawn apart from linear (P1) ones: squares and diamonds, dotted lines.
+P2_STYLE = {"double": "-.", "float": ":"}
+P2_MARKER = {"double": "s", "float": "D"}
+
+
+def element(r: dict[str, Any]) -> str:
+    return r.get("element", "p1")
+
+
+def style(r: dict[str, Any]) -> str:
+    return (P2_STYLE if element(r) == "p2" else STYLE)[r["precision"]]
+
+
+def marker(r: dict[str, Any]) -> str:
+    return (P2_MARKER if element(r) == "p2" else MARKER)[r["precision"]]
 TITLES = {
     "cantilever_deflection": "cantilever, small tip load: deflection vs Timoshenko",
     "cantilever_frequency": "cantilever: first frequency vs Euler-Bernoulli",
@@ -102,7 +118,8 @@ def pareto(points: list[tuple[float, float, Any]]) -> list[tuple[float, float, A
 
 
 def label(r: dict[str, Any]) -> str:
-    return f"{r['material']} L{r['level']} ({r['tets']} tets) {r['precision']} dt {r['safety']:.1f}"
+    return (f"{element(r).upper()} {r['material']} L{r['level']} ({r['tets']} tets) {r['precision']} "
+            f"dt {r['safety']:.1f}")
 
 
 # ---- plots -------------------------------------------------------------------------------------------------------
@@ -111,16 +128,18 @@ def plot_convergence(records: list[dict[str, Any]], path: pathlib.Path) -> None:
     problems = [p for p in TITLES if any(r["problem"] == p for r in records)]
     fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
     for ax, problem in zip(axes.flat, problems, strict=False):
-        for m in MATERIALS:
-            for prec in ("double", "float"):
-                rs = sorted((r for r in records if r["problem"] == problem and r["material"] == m
-                             and r["precision"] == prec and abs(r["safety"] - 0.9) < 1e-9 and not r["fault"]),
-                            key=lambda r: r["tets"])
-                if rs:
-                    ax.loglog([r["tets"] for r in rs], [max(abs(r["error"]), 1e-9) for r in rs], STYLE[prec],
-                              marker=MARKER[prec], color=COLOURS[m], label=f"{m} {prec}")
+        for el in ("p1", "p2"):
+            for m in MATERIALS:
+                for prec in ("double", "float"):
+                    rs = sorted((r for r in records if r["problem"] == problem and r["material"] == m
+                                 and element(r) == el and r["precision"] == prec and abs(r["safety"] - 0.9) < 1e-9
+                                 and not r["fault"]), key=lambda r: r["nodes"] or r["tets"])
+                    if rs:
+                        ax.loglog([r["nodes"] or r["tets"] for r in rs], [max(abs(r["error"]), 1e-9) for r in rs],
+                                  style(rs[0]), marker=marker(rs[0]), color=COLOURS[m],
+                                  label=f"{el.upper()} {m} {prec}")
         ax.set_title(TITLES[problem], fontsize=10)
-        ax.set_xlabel("tets")
+        ax.set_xlabel("nodes")
         ax.set_ylabel("|relative error|" if problem != "fig2_area" else "|area ratio - reference|")
         ax.grid(True, which="both", alpha=0.3)
     ax = axes.flat[len(problems)]
@@ -132,7 +151,7 @@ def plot_convergence(records: list[dict[str, Any]], path: pathlib.Path) -> None:
         for m in MATERIALS:
             for p in ("double", "float"):
                 rs = [abs(r["value"]) for r in rot
-                      if r["problem"] == problem and r["material"] == m and r["precision"] == p]
+                      if r["problem"] == problem and r["material"] == m and r["precision"] == p]  # P1 and P2
                 vals.append(max(max(rs), 1e-35) if rs else np.nan)
         ax.bar(x + (k - 0.5) * 0.4, vals, 0.4, color=colour,
                label="elastic energy / (E V)" if k == 0 else "|volume change| / V")
@@ -142,8 +161,10 @@ def plot_convergence(records: list[dict[str, Any]], path: pathlib.Path) -> None:
     ax.legend(fontsize=7)
     for a in axes.flat[len(problems) + 1:]:
         a.axis("off")
-    axes.flat[0].legend(fontsize=7, ncol=2)
-    fig.suptitle("Error against mesh size, per material (double solid, float dashed; dt = 0.9 of the critical step)")
+    axes.flat[0].legend(fontsize=6, ncol=2)
+    fig.suptitle("Error against mesh size (nodes), per element order and material (P1: circles and triangles, "
+                 "solid double, dashed float; P2: squares and diamonds, dash-dot double, dotted float; dt = 0.9 of the "
+                 "critical step)", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -157,7 +178,7 @@ def plot_pareto(records: list[dict[str, Any]], path: pathlib.Path) -> dict[str, 
     for ax, problem in zip(axes[0], problems, strict=True):
         rs = [r for r in records if r["problem"] == problem and not r["fault"]]
         for r in rs:
-            ax.loglog(cost_per_sim_second(r), max(abs(r["error"]), 1e-9), MARKER[r["precision"]],
+            ax.loglog(cost_per_sim_second(r), max(abs(r["error"]), 1e-9), marker(r),
                       color=COLOURS[r["material"]], alpha=0.75, ms=5)
         front = pareto([(cost_per_sim_second(r), max(abs(r["error"]), 1e-9), r) for r in rs])
         fronts[problem] = front
@@ -168,11 +189,14 @@ def plot_pareto(records: list[dict[str, Any]], path: pathlib.Path) -> dict[str, 
         ax.set_ylabel("|error|")
         ax.grid(True, which="both", alpha=0.3)
     handles = [plt.Line2D([], [], color=COLOURS[m], marker="o", ls="", label=m) for m in MATERIALS]
-    handles += [plt.Line2D([], [], color="k", marker=MARKER[p], ls="", label=p) for p in ("double", "float")]
+    handles += [plt.Line2D([], [], color="k", marker=MARKER[p], ls="", label=f"P1 {p}") for p in ("double", "float")]
+    handles += [plt.Line2D([], [], color="k", marker=P2_MARKER[p], ls="", label=f"P2 {p}")
+                for p in ("double", "float")]
     handles += [plt.Line2D([], [], color="k", label="Pareto front"),
                 plt.Line2D([], [], color="red", ls=":", label="real time")]
     axes[0][0].legend(handles=handles, fontsize=7)
-    fig.suptitle("Error against cost: every choice (material, mesh, time step, precision); the front is what to pick")
+    fig.suptitle("Error against cost: every choice (element order, material, mesh, time step, precision); the front is "
+                 "what to pick")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -182,7 +206,8 @@ def plot_pareto(records: list[dict[str, Any]], path: pathlib.Path) -> dict[str, 
 def plot_timestep(records: list[dict[str, Any]], path: pathlib.Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, problem in zip(axes, ("cantilever_frequency", "wave_speed"), strict=True):
-        rs = [r for r in records if r["problem"] == problem and r["precision"] == "double" and not r["fault"]]
+        rs = [r for r in records if r["problem"] == problem and r["precision"] == "double" and element(r) == "p1"
+              and not r["fault"]]
         if not rs:
             continue
         level = max(r["level"] for r in rs)
@@ -191,7 +216,7 @@ def plot_timestep(records: list[dict[str, Any]], path: pathlib.Path) -> None:
             if pts:
                 ax.plot([r["safety"] for r in pts], [100 * r["error"] for r in pts], marker="o", color=COLOURS[m],
                         label=m)
-        ax.set_title(f"{TITLES[problem]} (level {level}, double)", fontsize=9)
+        ax.set_title(f"{TITLES[problem]} (P1 level {level}, double)", fontsize=9)
         ax.set_xlabel("time step / critical step")
         ax.set_ylabel("error %")
         ax.grid(True, alpha=0.3)
@@ -204,8 +229,8 @@ def plot_timestep(records: list[dict[str, Any]], path: pathlib.Path) -> None:
 def plot_realtime(realtime: list[dict[str, Any]], path: pathlib.Path) -> None:
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     for r in realtime:
-        ax.loglog(r["tets"], r["interval_ms"], STYLE[r["precision"]], marker=MARKER[r["precision"]],
-                  color=COLOURS[r["material"]], label=f"{r['material']} {r['precision']}")
+        ax.loglog(r["tets"], r["interval_ms"], style(r), marker=marker(r),
+                  color=COLOURS[r["material"]], label=f"{element(r).upper()} {r['material']} {r['precision']}")
     ax.axhline(1.0, color="red", ls=":", lw=1, label="1 ms: 1 kHz real time")
     ax.set_xlabel("tets (the poke block, 8 x 4 x 8 cm, 30 kPa)")
     ax.set_ylabel("wall time of 1 ms of simulation [ms], median")
@@ -278,7 +303,7 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
                  f"StVK, corotational and Neo-Hookean store at most {nonlin:.1e} E V in double, "
                  f"{nonlin_f:.1e} in float "
                  "(round-off).")
-    f2 = pick(records, problem="fig2_area", precision="double")
+    f2 = pick(records, problem="fig2_area", precision="double", element="p1")
     if f2:
         lvl = max(r["level"] for r in f2)
         by = {r["material"]: r for r in f2 if r["level"] == lvl}
@@ -286,29 +311,49 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
                  "answer by " + ", ".join(f"{m} {100 * by[m]['error']:+.1f} %" for m in MATERIALS if m in by) +
                  ": linear strain's error is the model's and does not shrink with the mesh (corotational and "
                  "Neo-Hookean differ from StVK by their own models at these strains as well).")
-    f3 = pick(records, problem="fig3_tip", precision="double")
+    f3 = pick(records, problem="fig3_tip", precision="double", element="p1")
     if f3:
         lvl = max(r["level"] for r in f3)
         by = {r["material"]: r for r in f3 if r["level"] == lvl}
-        L.append(f"- **Fig. 3.** The sagging beam's tip, level {lvl}: " + ", ".join(
+        L.append(f"- **Fig. 3.** The sagging beam's tip, linear tets, level {lvl}: " + ", ".join(
             f"{m} {100 * by[m]['error']:.1f} %" for m in MATERIALS if m in by) + " from the converged StVK tip "
-            f"({by['stvk']['reference']:.3f} m)." if "stvk" in by else "")
+            f"({by['stvk']['reference']:.3f} m, quadratic tets)." if "stvk" in by else "")
     same = defaultdict(dict)  # invertible StVK against StVK, case by case
     for r in records:
         e = r.get("error")
         if r["material"] in ("stvk", "invertible_stvk") and not r["fault"] and isinstance(e, float) and np.isfinite(e):
-            same[(r["problem"], r["level"], r["precision"], r.get("safety"))][r["material"]] = e
+            same[(r["problem"], element(r), r["level"], r["precision"], r.get("safety"))][r["material"]] = e
     diffs = [abs(v["invertible_stvk"] - v["stvk"]) for v in same.values() if len(v) == 2]
     if diffs:
         within = "to the last bit" if max(diffs) == 0 else f"within {100 * max(diffs):.1g} percentage points"
         L.append(f"- **Invertible StVK** has StVK's error on every case here, {within} ({len(diffs)} cases, both "
                  "precisions): where no element is compressed past its floor the two are one function.")
-    cd = pick(records, problem="cantilever_deflection", precision="double", material="stvk")
+    cd = pick(records, problem="cantilever_deflection", precision="double", material="stvk", element="p1")
+    cd2 = sorted(pick(records, problem="cantilever_deflection", precision="double", material="stvk", element="p2"),
+                 key=lambda r: r["tets"])
     if cd:
         cd.sort(key=lambda r: r["tets"])
         L.append(f"- **Mesh.** The small-load cantilever's deflection error falls from {100 * cd[0]['error']:+.1f} % "
                  f"({cd[0]['tets']} tets) to {100 * cd[-1]['error']:+.1f} % ({cd[-1]['tets']} tets): linear tets are "
-                 "stiff in bending until several span the thickness.")
+                 "stiff in bending until several span the thickness" + (
+                     f"; quadratic tets are {100 * cd2[0]['error']:+.1f} % off with {cd2[0]['tets']} and "
+                     f"{100 * cd2[-1]['error']:+.1f} % with {cd2[-1]['tets']} (what is left is beam theory's own "
+                     "difference from the 3D clamped beam)." if cd2 else "."))
+    # The element order at a real-time budget: the best choice of each within one core in real time.
+    for problem in ("cantilever_deflection", "fig3_tip", "fig2_area", "wave_speed"):
+        best = {}
+        for el in ("p1", "p2"):
+            rs = [r for r in records if r["problem"] == problem and element(r) == el and not r["fault"]
+                  and cost_per_sim_second(r) <= 1.0 and (problem != "fig3_tip" or r["material"] != "linear")]
+            if rs:
+                best[el] = min(rs, key=lambda r: abs(r["error"]))
+        if len(best) == 2:
+            a, b = best["p1"], best["p2"]
+            ratio = abs(a["error"]) / max(abs(b["error"]), 1e-12)
+            L.append(f"- **Element order, {problem}.** The best choice within one core in real time: {label(a)}, "
+                     f"{abs(a['error']):.2e} off at {cost_per_sim_second(a):.3g} s/s; {label(b)}, "
+                     f"{abs(b['error']):.2e} off at {cost_per_sim_second(b):.3g} s/s: P2 {ratio:.1f} times as "
+                     "accurate.")
     fr = pick(records, problem="cantilever_frequency", precision="double", material="stvk")
     if fr:
         lvl = max(r["level"] for r in fr)
@@ -321,7 +366,7 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
     pairs = defaultdict(dict)
     for r in records:
         if r["problem"] in ("cantilever_deflection", "fig3_tip") and not r["fault"]:
-            pairs[(r["problem"], r["material"], r["level"])][r["precision"]] = r
+            pairs[(r["problem"], element(r), r["material"], r["level"])][r["precision"]] = r
     dd = [abs(v["float"]["error"] - v["double"]["error"]) for v in pairs.values() if len(v) == 2]
     sp = [v["double"]["us_per_step"] / v["float"]["us_per_step"] for v in pairs.values()
           if len(v) == 2 and v["float"]["us_per_step"] > 0]
@@ -331,15 +376,17 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
     rates = defaultdict(list)
     for r in records:
         if r["tets"] >= 1000 and r["tet_steps_per_s"] > 0 and not r["fault"]:
-            rates[(r["material"], r["precision"])].append(r["tet_steps_per_s"])
-    if rates:
-        L.append("- **Cost per material** (median tet-steps per second, meshes of 1000 tets and more): " + "; ".join(
-            f"{m} {np.median(rates[(m, 'double')]) / 1e6:.0f} M (double), "
-            f"{np.median(rates[(m, 'float')]) / 1e6:.0f} M (float)"
-            for m in MATERIALS if (m, "double") in rates and (m, "float") in rates) + ".")
+            rates[(element(r), r["material"], r["precision"])].append(r["tet_steps_per_s"])
+    for el, what in (("p1", "linear tets"), ("p2", "quadratic tets")):
+        if any(k[0] == el for k in rates):
+            L.append(f"- **Cost per material, {what}** (median tet-steps per second, meshes of 1000 tets and more): " +
+                     "; ".join(f"{m} {np.median(rates[(el, m, 'double')]) / 1e6:.1f} M (double), "
+                               f"{np.median(rates[(el, m, 'float')]) / 1e6:.1f} M (float)"
+                               for m in MATERIALS if (el, m, "double") in rates and (el, m, "float") in rates) + ".")
     if realtime:
         L.append("- **Real time.** The largest poke block (30 kPa, contact on) that steps 1 ms in under 1 ms on one "
-                 "core: " + "; ".join(f"{r['material']} {r['precision']} {r['largest_realtime_tets']} tets "
+                 "core: " + "; ".join(f"{element(r).upper()} {r['material']} {r['precision']} "
+                                        f"{r['largest_realtime_tets']} tets "
                                         f"(~{r['estimated_max_tets']:.0f} interpolated)" for r in realtime) + ".")
     if haptic:
         for obj in ("soft", "stiff"):
@@ -367,7 +414,7 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
                 L.append(f"| {problem} | <= {budget:g} | none fits | | |")
     L += [""]
     for problem, front in fronts.items():
-        kinds = sorted({f"{r['material']} {r['precision']}" for _, _, r in front})
+        kinds = sorted({f"{element(r).upper()} {r['material']} {r['precision']}" for _, _, r in front})
         L.append(f"- {problem}: the front is made of {', '.join(kinds)}.")
     for problem in ("fig3_tip", "fig2_area"):
         rs = [r for r in records if r["problem"] == problem and not r["fault"]]
@@ -382,9 +429,10 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
           "## Error against cost", "", "![pareto](pareto.png)", "",
           "## The time step", "", "![timestep](timestep.png)", "",
           "## Real time", "", "![realtime](realtime.png)", "",
-          "| material | precision | tets tried | ms per 1 ms | largest real-time |", "|---|---|---|---|---|"]
+          "| element | material | precision | tets tried | ms per 1 ms | largest real-time |",
+          "|---|---|---|---|---|---|"]
     for r in realtime:
-        L.append(f"| {r['material']} | {r['precision']} | {', '.join(map(str, r['tets']))} | "
+        L.append(f"| {element(r).upper()} | {r['material']} | {r['precision']} | {', '.join(map(str, r['tets']))} | "
                  f"{', '.join(f'{v:.3f}' for v in r['interval_ms'])} | {r['largest_realtime_tets']} |")
     if haptic:
         L += ["", "## The haptic side", "",
@@ -413,11 +461,12 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
               "them. Differences under a few percent are this machine's noise (compare the bare step timed twice).",
               "", (out / "effects.md").read_text().strip()]
     L += ["", "## All records", "",
-          "| problem | material | level | tets | dt | precision | value | reference | error | us/step "
+          "| problem | element | material | level | tets | dt | precision | value | reference | error | us/step "
           "| M tet-steps/s | fault |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in records:
-        L.append(f"| {r['problem']} | {r['material']} | {r['level']} | {r['tets']} | {r['safety']:.1f} | "
+        L.append(f"| {r['problem']} | {element(r).upper()} | {r['material']} | {r['level']} | {r['tets']} | "
+                 f"{r['safety']:.1f} | "
                  f"{r['precision']} | {r['value']:.6g} | {r['reference']:.6g} | {r['error']:+.3e} | "
                  f"{r['us_per_step']:.1f} | {r['tet_steps_per_s'] / 1e6:.1f} | {r['fault'][:60]} |")
     path = out / "REPORT.md"
