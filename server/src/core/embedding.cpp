@@ -108,6 +108,74 @@ double distance_to_tet(const TetMesh& mesh, int32_t e, const Vec3& p, const std:
   return best;
 }
 
+// A quadratic tet's eight linear sub-tets over its ten nodes (core/mesh.hpp's
+// order): the four at its corners, and the inner octahedron of its edge
+// nodes cut along its shortest diagonal (between two opposite edges' nodes)
+// into four around it.
+std::array<Tet, 8> make_sub_tets(const TetMesh& mesh, size_t e) {
+  std::array<Tet, 8> out{Tet{0, 4, 6, 7}, Tet{4, 1, 5, 8}, Tet{6, 5, 2, 9}, Tet{7, 8, 9, 3}};
+  constexpr int kDiagonals[3][2] = {{4, 9}, {6, 8}, {7, 5}};  // 01-23, 02-13, 03-12
+  int best = 0;
+  double shortest = std::numeric_limits<double>::infinity();
+  for (int d = 0; d < 3; ++d) {
+    const double l =
+        glm::length(mesh.X[size_t(mesh.node(e, kDiagonals[d][0]))] - mesh.X[size_t(mesh.node(e, kDiagonals[d][1]))]);
+    if (l < shortest) {
+      shortest = l;
+      best = d;
+    }
+  }
+  const int p = kDiagonals[best][0], q = kDiagonals[best][1];
+  // The other four edge nodes in a ring: neighbours share a corner.
+  std::array<int, 4> ring{};
+  int n = 0;
+  for (int a = 4; a < 10; ++a)
+    if (a != p && a != q) ring[size_t(n++)] = a;
+  auto share = [](int a, int b) {
+    const int* ea = kTetEdges[a - 4];
+    const int* eb = kTetEdges[b - 4];
+    return ea[0] == eb[0] || ea[0] == eb[1] || ea[1] == eb[0] || ea[1] == eb[1];
+  };
+  if (!share(ring[0], ring[1])) std::swap(ring[1], ring[2]);
+  if (!share(ring[1], ring[2])) std::swap(ring[2], ring[3]);
+  for (size_t k = 0; k < 4; ++k) out[4 + k] = Tet{p, q, ring[k], ring[(k + 1) % 4]};
+  return out;
+}
+
+// The sub-tet of quadratic tet e that holds the point of barycentric
+// coordinates L in e (the one it is deepest in), and the point's barycentric
+// coordinates there: its nodes (local, 0..9) and weights.
+std::pair<Tet, std::array<double, 4>> locate_in_sub_tet(const TetMesh& mesh, size_t e, const std::array<double, 4>& L) {
+  auto node_L = [](int a) {  // a node's barycentric coordinates in its tet
+    std::array<double, 4> b{};
+    if (a < 4) {
+      b[size_t(a)] = 1;
+    } else {
+      b[size_t(kTetEdges[a - 4][0])] = b[size_t(kTetEdges[a - 4][1])] = 0.5;
+    }
+    return b;
+  };
+  std::pair<Tet, std::array<double, 4>> best{};
+  double best_min = -std::numeric_limits<double>::infinity();
+  for (const Tet& sub : make_sub_tets(mesh, e)) {
+    // Solve L = sum_k lambda_k B_k with sum lambda = 1, in L1..L3: B_0 + [B_k - B_0] lambda_(1..3).
+    const std::array<double, 4> b0 = node_L(sub[0]);
+    glm::dmat3 A;
+    for (int k = 1; k < 4; ++k) {
+      const std::array<double, 4> bk = node_L(sub[size_t(k)]);
+      A[k - 1] = Vec3(bk[1] - b0[1], bk[2] - b0[2], bk[3] - b0[3]);
+    }
+    const Vec3 l = glm::inverse(A) * Vec3(L[1] - b0[1], L[2] - b0[2], L[3] - b0[3]);
+    const std::array<double, 4> lambda{1.0 - l.x - l.y - l.z, l.x, l.y, l.z};
+    const double lowest = *std::min_element(lambda.begin(), lambda.end());
+    if (lowest > best_min) {
+      best_min = lowest;
+      best = {sub, lambda};
+    }
+  }
+  return best;
+}
+
 std::string format_point(const Vec3& p) {
   char buf[96];
   std::snprintf(buf, sizeof buf, "(%.6g, %.6g, %.6g)", p.x, p.y, p.z);
@@ -233,6 +301,11 @@ EmbeddedSurface embed_surface(const TetMesh& mesh, SurfaceMesh surface, double m
     out.tet[size_t(v)] = best;
     out.nodes[size_t(v)] = mesh.tets[size_t(best)];
     out.weights[size_t(v)] = barycentric(mesh, inverse, best, p);
+    if (mesh.quadratic()) {  // the sub-tet of the ten nodes that holds it
+      const auto [sub, lambda] = locate_in_sub_tet(mesh, size_t(best), out.weights[size_t(v)]);
+      for (size_t k = 0; k < 4; ++k) out.nodes[size_t(v)][k] = mesh.node(size_t(best), sub[k]);
+      out.weights[size_t(v)] = lambda;
+    }
     out.outside[size_t(v)] = best_distance;
   }
   out.rest = std::move(surface);

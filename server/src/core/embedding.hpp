@@ -8,6 +8,14 @@
 // rigid motion of the body moves the surface rigidly, and a vertex outside
 // its tet (weights below 0) still moves with that tet's deformation. Pure: no
 // I/O; the scene loader reads the file and binds it (scene/scene.hpp).
+//
+// On quadratic tets a vertex follows the linear sub-tet of its tet (one of
+// eight over the ten nodes, the inner octahedron cut along its shortest
+// diagonal) that holds it: the quadratic field interpolated
+// linearly on a mesh of half the size, four carriers a vertex as on linear
+// tets (so that contact, the wire and the views take it as they are). Its
+// distance from the quadratic shape functions' own interpolation is
+// O((h/2)^2 |grad^2 u|): embedding_error.py prints both.
 #pragma once
 
 #include <array>
@@ -27,7 +35,7 @@ struct EmbeddingError : std::runtime_error {
 struct EmbeddedSurface {
   SurfaceMesh rest;                            // the fine surface at rest, wound outward where closed [m]
   std::vector<Tet> nodes;                      // the four mesh nodes each vertex follows (n_vertices)
-  std::vector<std::array<double, 4>> weights;  // its barycentric coordinates in their tet, summing to 1
+  std::vector<std::array<double, 4>> weights;  // its barycentric coordinates in their (sub-)tet, summing to 1
   std::vector<int32_t> tet;                    // that tet (n_vertices)
   std::vector<double> outside;                 // how far the vertex is outside the body at rest [m] (0: inside)
 

@@ -617,9 +617,6 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   scene.spec.mesh = cached->second.mesh;
   scene.quality = cached->second.quality;
   TetMesh& mesh = scene.spec.mesh;
-  if (root.has("surface") && mesh.quadratic())
-    o.fail("surface",
-           "a fine surface is carried by linear tets only so far; drop \"surface\" or set \"element\": \"p1\"");
   if (const Json* s = root.find("surface")) {
     // Bound once per mesh and surface: variants that share both share the binding.
     const std::string key = mesh_key + "\n" + s->dump();

@@ -14,6 +14,7 @@
 #include <glm/mat3x3.hpp>
 
 #include "core/embedding.hpp"
+#include "core/quadratic.hpp"
 #include "fem_fixtures.hpp"
 #include "surface_fixtures.hpp"
 
@@ -138,6 +139,60 @@ TEST(OrientSurface, WindsAClosedSurfaceConsistentlyAndOutward) {
     EXPECT_EQ(n, 1);
     EXPECT_EQ(runs.count({edge.second, edge.first}), 1u);  // each edge run once each way
   }
+}
+
+}  // namespace
+}  // namespace tactile
+
+namespace tactile {
+namespace {
+
+// On quadratic tets a vertex follows the linear sub-tet of its tet that holds
+// it: every rest vertex comes back, weights sum to 1 and are barycentric
+// (non-negative inside), its nodes are among its tet's ten; and under a
+// bending field the quadratic tets carry exactly (u_y = k x^2 / 2, quadratic
+// in X), each vertex lands within its sub-tet's linear interpolation error,
+// k d^2 / 8 for a sub-tet d wide in x, and the surface at least twice as close
+// as the linear tets carry it.
+TEST_F(Embedded, OnQuadraticTetsAVertexFollowsItsSubTetWithinItsInterpolationError) {
+  const TetMesh quad = make_quadratic_mesh(mesh);
+  const EmbeddedSurface e = embed_surface(quad, inside, 0.005);
+  const EmbeddedSurface lin = embed_surface(mesh, inside, 0.005);
+  std::vector<Vec3> x(inside.vertices.size());
+  compute_embedded_positions(e, quad.X, x);
+  for (size_t v = 0; v < x.size(); ++v) {
+    EXPECT_LT(glm::length(x[v] - inside.vertices[v]), 1e-14) << v;
+    const auto& w = e.weights[v];
+    EXPECT_NEAR(w[0] + w[1] + w[2] + w[3], 1.0, 1e-13) << v;
+    for (double wi : w) EXPECT_GE(wi, -1e-12) << v;
+    for (int32_t n : e.nodes[v]) {
+      bool ours = false;
+      for (int k = 0; k < 10; ++k) ours |= quad.node(size_t(e.tet[v]), k) == n;
+      EXPECT_TRUE(ours) << v;
+    }
+  }
+  const double kappa = 0.5;  // [1/m]
+  auto bend = [&](const Vec3& X) { return X + Vec3(0.0, 0.5 * kappa * X.x * X.x, 0.0); };
+  std::vector<Vec3> xq(quad.X.size()), xl(mesh.X.size());
+  for (size_t i = 0; i < xq.size(); ++i) xq[i] = bend(quad.X[i]);
+  for (size_t i = 0; i < xl.size(); ++i) xl[i] = bend(mesh.X[i]);
+  std::vector<Vec3> on_quad(x.size()), on_lin(x.size());
+  compute_embedded_positions(e, xq, on_quad);
+  compute_embedded_positions(lin, xl, on_lin);
+  double worst_quad = 0, worst_lin = 0;
+  for (size_t v = 0; v < x.size(); ++v) {
+    const double off = glm::length(on_quad[v] - bend(inside.vertices[v]));
+    double lo = 1e9, hi = -1e9;
+    for (int32_t n : e.nodes[v]) {
+      lo = std::min(lo, quad.X[size_t(n)].x);
+      hi = std::max(hi, quad.X[size_t(n)].x);
+    }
+    EXPECT_LE(off, kappa * (hi - lo) * (hi - lo) / 8 * (1 + 1e-9) + 1e-15) << v;
+    worst_quad = std::max(worst_quad, off);
+    worst_lin = std::max(worst_lin, glm::length(on_lin[v] - bend(inside.vertices[v])));
+  }
+  EXPECT_GT(worst_quad, 0.0);
+  EXPECT_LT(2 * worst_quad, worst_lin);
 }
 
 }  // namespace
