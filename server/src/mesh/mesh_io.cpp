@@ -1,6 +1,7 @@
 #include "mesh/mesh_io.hpp"
 
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -14,6 +15,8 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 #include <assimp/Importer.hpp>
+
+#include <glm/geometric.hpp>
 
 #include "mesh/mesh_error.hpp"
 
@@ -370,8 +373,8 @@ void read_ele_file(const std::string& path, const NodeFile& nodes, const std::st
   const int64_t corners = head.words.size() > 1 ? p.integer(head, 1, "nodes per tet") : 4;
   const int64_t n_attr = head.words.size() > 2 ? p.integer(head, 2, "attribute count") : 0;
   if (n < 1 || n > std::numeric_limits<int32_t>::max()) p.fail(head, "tet count " + std::to_string(n) + " is not >= 1");
-  if (corners == 10) p.fail(head, "second-order (10-node) tets are not supported; mesh without TetGen -o2");
-  if (corners != 4) p.fail(head, "nodes per tet is " + std::to_string(corners) + "; must be 4");
+  if (corners != 4 && corners != 10)
+    p.fail(head, "nodes per tet is " + std::to_string(corners) + "; must be 4, or 10 (quadratic, TetGen -o2)");
   if (n_attr < 0) p.fail(head, "invalid attribute count");
   if (lines.size() < size_t(n) + 1)
     throw MeshError(path + ": ends after " + std::to_string(lines.size() - 1) + " of the " + std::to_string(n) +
@@ -385,11 +388,12 @@ void read_ele_file(const std::string& path, const NodeFile& nodes, const std::st
   for (int64_t e = 0; e < n; ++e) {
     const Line& line = lines[size_t(e) + 1];
     const int64_t id = p.integer(line, 0, "tet id");
-    if (line.words.size() != size_t(5 + n_attr))
-      p.fail(line, "expected " + std::to_string(5 + n_attr) + " fields (id, 4 nodes, " + std::to_string(n_attr) +
-                       " attributes), found " + std::to_string(line.words.size()));
-    Tet t{};
-    for (size_t k = 0; k < 4; ++k) {
+    const auto fields = size_t(1 + corners + n_attr);
+    if (line.words.size() != fields)
+      p.fail(line, "expected " + std::to_string(fields) + " fields (id, " + std::to_string(corners) + " nodes, " +
+                       std::to_string(n_attr) + " attributes), found " + std::to_string(line.words.size()));
+    std::array<int32_t, 10> t{};
+    for (size_t k = 0; k < size_t(corners); ++k) {
       const int64_t node = p.integer(line, 1 + k, "node id");
       if (node < nodes.first || node >= nodes.first + nn)
         p.fail(line, "tet " + std::to_string(id) + " refers to node " + std::to_string(node) + ", but " + node_path +
@@ -399,11 +403,38 @@ void read_ele_file(const std::string& path, const NodeFile& nodes, const std::st
     if (compute_tet_volume(nodes.X[size_t(t[0])], nodes.X[size_t(t[1])], nodes.X[size_t(t[2])], nodes.X[size_t(t[3])]) <
         0.0)
       std::swap(t[1], t[2]);
-    mesh.tets.push_back(t);
+    mesh.tets.push_back({t[0], t[1], t[2], t[3]});
+    if (corners == 10) {
+      // The six edge nodes, each put on the edge whose midpoint it sits at (whatever order the writer
+      // used): a quadratic tet here is straight, so one off its midpoint is refused, naming it.
+      TetEdges edges{};
+      std::array<bool, 6> used{};
+      for (int k = 0; k < 6; ++k) {
+        const Vec3 a = nodes.X[size_t(t[size_t(kTetEdges[k][0])])], b = nodes.X[size_t(t[size_t(kTetEdges[k][1])])];
+        int best = -1;
+        double best_d = std::numeric_limits<double>::infinity();
+        for (int j = 0; j < 6; ++j) {
+          const double d = glm::length(nodes.X[size_t(t[size_t(4 + j)])] - 0.5 * (a + b));
+          if (!used[size_t(j)] && d < best_d) {
+            best = j;
+            best_d = d;
+          }
+        }
+        if (!(best_d <= 1e-6 * glm::length(b - a)))
+          p.fail(line, "tet " + std::to_string(id) + ": no edge node at the midpoint of its edge " +
+                           std::to_string(t[size_t(kTetEdges[k][0])] + nodes.first) + "-" +
+                           std::to_string(t[size_t(kTetEdges[k][1])] + nodes.first) + " (nearest " +
+                           std::to_string(best_d) + " m off); curved quadratic tets are not supported");
+        used[size_t(best)] = true;
+        edges[size_t(k)] = t[size_t(4 + best)];
+      }
+      mesh.edges.push_back(edges);
+    }
     if (n_attr > 0) {
-      const double r = p.real(line, 5, "region attribute");
+      const auto at = size_t(1 + corners);
+      const double r = p.real(line, at, "region attribute");
       if (!(r == std::floor(r) && std::abs(r) <= double(std::numeric_limits<int32_t>::max())))
-        p.fail(line, "region attribute " + std::string(line.words[5]) + " of tet " + std::to_string(id) +
+        p.fail(line, "region attribute " + std::string(line.words[at]) + " of tet " + std::to_string(id) +
                          " is not an integer");
       mesh.region.push_back(int32_t(r));
     }
@@ -476,10 +507,10 @@ void write_tetgen(const TetMesh& mesh, const std::string& base) {
     const bool regions = !mesh.region.empty();
     std::ofstream out = open_for_writing(ele_path);
     out << "# tactile TetMesh: <tet count> <nodes per tet> <attributes (region id)>\n";
-    out << mesh.n_tets() << " 4 " << (regions ? 1 : 0) << '\n';
+    out << mesh.n_tets() << ' ' << mesh.nodes_per_tet() << ' ' << (regions ? 1 : 0) << '\n';
     for (int32_t e = 0; e < mesh.n_tets(); ++e) {
-      const Tet& t = mesh.tets[size_t(e)];
-      out << e << ' ' << t[0] << ' ' << t[1] << ' ' << t[2] << ' ' << t[3];
+      out << e;
+      for (int k = 0; k < mesh.nodes_per_tet(); ++k) out << ' ' << mesh.node(size_t(e), k);
       if (regions) out << ' ' << mesh.region_of(e);
       out << '\n';
     }

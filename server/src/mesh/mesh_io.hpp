@@ -28,10 +28,14 @@ SurfaceMesh read_surface(const std::string& path);
 // when present, becomes the region id (it must be an integer). Tets of
 // negative volume are reoriented (files from other tools may use the other
 // handedness); flat tets are kept as read, for the quality check to report.
+// Ten nodes a tet (TetGen -o2) make a quadratic mesh (core/mesh.hpp): the
+// corners first, then the edge nodes in any order, each matched to the edge
+// whose midpoint it sits at; one off every midpoint (a curved tet) is refused.
 TetMesh read_tetgen(const std::string& path);
 
 // Writes base + ".node" and base + ".ele", numbered from 0, with the region id
-// as the one tet attribute when the mesh has regions. Coordinates round-trip
+// as the one tet attribute when the mesh has regions; a quadratic mesh's tets
+// with ten nodes, the corners then the edge nodes in core/mesh.hpp's order. Coordinates round-trip
 // exactly (17 significant digits).
 void write_tetgen(const TetMesh& mesh, const std::string& base);
 

@@ -107,6 +107,9 @@ MeshQuality compute_quality(const TetMesh& mesh, const QualityThresholds& t) {
   q.max_volume = or_zero(max_volume);
   q.min_edge = or_zero(min_edge);
   q.max_edge = or_zero(max_edge);
+  for (const TetEdges& edges : mesh.edges)  // a quadratic mesh's edge nodes are its tets' too
+    for (int32_t id : edges)
+      if (id >= 0 && id < mesh.n_nodes()) referenced[size_t(id)] = 1;
   for (int32_t i = 0; i < mesh.n_nodes(); ++i)
     if (!referenced[size_t(i)]) q.unreferenced.push_back(i);
   return q;

@@ -611,6 +611,8 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   auto cached = ctx.mesh_cache->find(mesh_key);
   if (cached == ctx.mesh_cache->end()) {
     SceneMesh built = build_scene_mesh(root.at("mesh"), "mesh", o, ctx.scene_dir);
+    if (built.mesh.quadratic() && !quadratic)
+      o.fail("element", "the mesh file's tets are quadratic (10 nodes each): set \"element\": \"p2\"");
     if (quadratic && !built.mesh.quadratic()) built.mesh = make_quadratic_mesh(built.mesh);
     cached = ctx.mesh_cache->emplace(mesh_key, std::move(built)).first;
   }

@@ -3,8 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <sstream>
 #include <string>
 
+#include "core/quadratic.hpp"
 #include "mesh/primitives.hpp"
 #include "mesh/test_files.hpp"
 
@@ -264,6 +266,49 @@ TEST(TetgenFiles, ReadsOneBasedNumberingAttributesMarkersAndRegions) {
   EXPECT_EQ(test::count_nonpositive_tets(m), 0);  // reoriented
   EXPECT_EQ(m.region, (std::vector<int32_t>{3, -2}));
   EXPECT_EQ(check_mesh_structure(m), "");
+}
+
+// Ten nodes a tet (TetGen -o2): a quadratic mesh, written and read back; the
+// edge nodes found by where they sit, whatever order a writer lists them in;
+// one off its edge's midpoint (a curved tet) refused, naming the tet and edge.
+TEST(TetgenFiles, TenNodeTetsReadAsAQuadraticMeshInAnyEdgeOrder) {
+  const TempDir dir;
+  TetMesh m = make_quadratic_mesh(make_box(Vec3(0.0), Vec3(0.3, 0.2, 0.1), {3, 2, 1}));
+  write_tetgen(m, dir.file("q"));
+  const TetMesh r = read_tetgen(dir.file("q"));
+  EXPECT_EQ(r.X, m.X);
+  EXPECT_EQ(r.tets, m.tets);
+  EXPECT_EQ(r.edges, m.edges);
+  EXPECT_EQ(check_mesh_structure(r), "");
+  // 1-based, the edge nodes listed in another order (TetGen's own differs from VTK's).
+  auto node_file = [&] {
+    std::ostringstream out;
+    out << m.n_nodes() << " 3 0 0\n";
+    for (int32_t i = 0; i < m.n_nodes(); ++i)
+      out << i + 1 << ' ' << m.X[size_t(i)].x << ' ' << m.X[size_t(i)].y << ' ' << m.X[size_t(i)].z << '\n';
+    return out.str();
+  };
+  std::ostringstream ele;
+  ele << m.n_tets() << " 10 0\n";
+  constexpr int kShuffled[6] = {3, 0, 5, 1, 4, 2};
+  for (int32_t e = 0; e < m.n_tets(); ++e) {
+    ele << e + 1;
+    for (int k = 0; k < 4; ++k) ele << ' ' << m.tets[size_t(e)][size_t(k)] + 1;
+    for (int k : kShuffled) ele << ' ' << m.edges[size_t(e)][size_t(k)] + 1;
+    ele << '\n';
+  }
+  write_file(dir.file("t.node"), node_file());
+  write_file(dir.file("t.ele"), ele.str());
+  EXPECT_EQ(read_tetgen(dir.file("t")).edges, m.edges);
+  // An edge node moved off its midpoint.
+  m.X[size_t(m.edges[0][3])] += Vec3(0.0, 0.004, 0.0);
+  write_file(dir.file("c.node"), node_file());
+  write_file(dir.file("c.ele"), ele.str());
+  expect_mesh_error([&] { read_tetgen(dir.file("c")); },
+                    {"c.ele:2", "tet 1: no edge node at the midpoint of its edge", "curved quadratic tets"});
+  write_file(dir.file("n.node"), node_file());
+  write_file(dir.file("n.ele"), "1 8 0\n0 0 1 2 3 4 5 6 7\n");
+  expect_mesh_error([&] { read_tetgen(dir.file("n")); }, {"nodes per tet is 8"});
 }
 
 TEST(TetgenFiles, RefusesAnOutOfRangeNodeNamingTheLine) {

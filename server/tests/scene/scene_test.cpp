@@ -11,6 +11,9 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/quadratic.hpp"
+#include "mesh/mesh_io.hpp"
+#include "mesh/primitives.hpp"
 #include "scene/scene.hpp"
 #include "scene/scene_mesh.hpp"
 #include "scene_fixtures.hpp"
@@ -460,6 +463,21 @@ TEST(Scene, ElementP2GivesEveryEdgeANodeTheSelectorsReach) {
   EXPECT_EQ(select_nodes(quadratic.spec.mesh, quadratic.spec.essential.at(0).where).size(), 25u);
   j["element"] = "p3";
   expect_scene_error(dir, "s.json", j, {"element: must be one of \"p1\", \"p2\", got \"p3\""});
+}
+
+// A ten-node .ele file is a quadratic mesh as it is; a scene that reads one
+// says "element": "p2", or is told to.
+TEST(Scene, ATenNodeMeshFileAsksForElementP2) {
+  SceneDir dir;
+  const TetMesh q = make_quadratic_mesh(make_box(Vec3(0.0), Vec3(0.4, 0.1, 0.1), {8, 2, 2}));
+  write_tetgen(q, dir.file("beam"));
+  json j = make_beam_scene();
+  j["mesh"] = json{{"file", "beam.node"}};
+  expect_scene_error(dir, "s.json", j, {"element: the mesh file's tets are quadratic", "\"element\": \"p2\""});
+  j["element"] = "p2";
+  const Scene scene = load_scene(dir.write_json("p2.json", j)).at(0);
+  EXPECT_EQ(scene.spec.mesh.edges, q.edges);
+  EXPECT_EQ(scene.spec.mesh.X, q.X);
 }
 
 TEST(SceneErrors, MissingMesh) {
