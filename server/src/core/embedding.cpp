@@ -94,18 +94,21 @@ Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3
   return a + ab * (vb * denom) + ac * (vc * denom);
 }
 
-// Distance from p to tet e (0 inside), given p's barycentric coordinates there.
-double distance_to_tet(const TetMesh& mesh, int32_t e, const Vec3& p, const std::array<double, 4>& w) {
+// Distance from p to the tet of corners x (0 inside), given p's barycentric coordinates there.
+double distance_to_tet(const std::array<Vec3, 4>& x, const Vec3& p, const std::array<double, 4>& w) {
   if (*std::min_element(w.begin(), w.end()) >= 0) return 0;
-  const Tet& t = mesh.tets[size_t(e)];
   static constexpr int kFaces[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
   double best = std::numeric_limits<double>::infinity();
   for (const auto& f : kFaces) {
-    const Vec3 q = closest_on_triangle(p, mesh.X[size_t(t[size_t(f[0])])], mesh.X[size_t(t[size_t(f[1])])],
-                                       mesh.X[size_t(t[size_t(f[2])])]);
+    const Vec3 q = closest_on_triangle(p, x[size_t(f[0])], x[size_t(f[1])], x[size_t(f[2])]);
     best = std::min(best, glm::length(p - q));
   }
   return best;
+}
+double distance_to_tet(const TetMesh& mesh, int32_t e, const Vec3& p, const std::array<double, 4>& w) {
+  const Tet& t = mesh.tets[size_t(e)];
+  return distance_to_tet({mesh.X[size_t(t[0])], mesh.X[size_t(t[1])], mesh.X[size_t(t[2])], mesh.X[size_t(t[3])]}, p,
+                         w);
 }
 
 // A quadratic tet's eight linear sub-tets over its ten nodes (core/mesh.hpp's
@@ -301,12 +304,19 @@ EmbeddedSurface embed_surface(const TetMesh& mesh, SurfaceMesh surface, double m
     out.tet[size_t(v)] = best;
     out.nodes[size_t(v)] = mesh.tets[size_t(best)];
     out.weights[size_t(v)] = barycentric(mesh, inverse, best, p);
+    out.outside[size_t(v)] = best_distance;
     if (mesh.quadratic()) {  // the sub-tet of the ten nodes that holds it
       const auto [sub, lambda] = locate_in_sub_tet(mesh, size_t(best), out.weights[size_t(v)]);
-      for (size_t k = 0; k < 4; ++k) out.nodes[size_t(v)][k] = mesh.node(size_t(best), sub[k]);
+      std::array<Vec3, 4> x;
+      for (size_t k = 0; k < 4; ++k) {
+        out.nodes[size_t(v)][k] = mesh.node(size_t(best), sub[k]);
+        x[k] = mesh.X[size_t(out.nodes[size_t(v)][k])];
+      }
       out.weights[size_t(v)] = lambda;
+      // (Outside the body, a vertex may stand farther from its sub-tet than from the tet: contact's broad
+      // phase pads the nodes' box by this.)
+      out.outside[size_t(v)] = distance_to_tet(x, p, lambda);
     }
-    out.outside[size_t(v)] = best_distance;
   }
   out.rest = std::move(surface);
   return out;

@@ -37,7 +37,7 @@ struct EmbeddedSurface {
   std::vector<Tet> nodes;                      // the four mesh nodes each vertex follows (n_vertices)
   std::vector<std::array<double, 4>> weights;  // its barycentric coordinates in their (sub-)tet, summing to 1
   std::vector<int32_t> tet;                    // that tet (n_vertices)
-  std::vector<double> outside;                 // how far the vertex is outside the body at rest [m] (0: inside)
+  std::vector<double> outside;                 // how far the vertex is outside its (sub-)tet at rest [m] (0: inside)
 
   int32_t n_vertices() const { return static_cast<int32_t>(rest.vertices.size()); }
 };

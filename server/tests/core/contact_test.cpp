@@ -537,48 +537,52 @@ std::shared_ptr<const EmbeddedSurface> skin(const TetMesh& block, std::array<int
 // that surface, 1 mm above the block's own: its vertices are what the proxy meets, neither the block's
 // nodes nor its faces.
 TEST(Contact, AnEmbeddedSurfaceStopsABallWhereItIsSeen) {
-  ModelSpec spec = block_spec({2, 1, 2});  // 2 cm cells
-  spec.essential = {held_box("base", Vec3(0.0), Vec3(0.04, 0.0, 0.04))};
-  spec.surface = skin(spec.mesh, {17, 9, 17});
-  const double r = 0.003, top = 0.021;             // the skin's top
-  const Vec3 above(0.01, top + r + 0.0005, 0.01);  // over the middle of a coarse cell's top
-  spec.proxies = {sphere_proxy("tip", "left", above, r)};
-  const Model<double> model = build_model<double>(spec);
-  Stepper<double> stepper(model);
-  State<double> s = stepper.make_state();
-  const double dt = 0.5 * model.dt_rest;
-  Pose pose = model.proxies[0].pose;
-  const Vec3 velocity(0.0, -0.05, 0.0);
-  double first_force_bottom = -1;
-  int32_t embedded = 0;
-  for (int k = 0; k < 100000 && pose.position.y - r > top - 0.0015; ++k) {
-    move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
-    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
-    pose.position += velocity * dt;
-    EXPECT_EQ(stepper.contact().node_contacts() + stepper.contact().face_contacts(), 0);
-    embedded = std::max(embedded, stepper.contact().embedded_contacts());
-    if (s.contact.reports[0].force.y > 0 && first_force_bottom < 0) first_force_bottom = pose.position.y - r;
-    EXPECT_GE(s.contact.reports[0].force.y, 0.0);
+  for (const bool quadratic : {false, true}) {
+    SCOPED_TRACE(quadratic ? "quadratic" : "linear");
+    ModelSpec spec = block_spec({2, 1, 2});  // 2 cm cells
+    if (quadratic) spec.mesh = make_quadratic_mesh(spec.mesh);
+    spec.essential = {held_box("base", Vec3(0.0), Vec3(0.04, 0.0, 0.04))};
+    spec.surface = skin(spec.mesh, {17, 9, 17});
+    const double r = 0.003, top = 0.021;             // the skin's top
+    const Vec3 above(0.01, top + r + 0.0005, 0.01);  // over the middle of a coarse cell's top
+    spec.proxies = {sphere_proxy("tip", "left", above, r)};
+    const Model<double> model = build_model<double>(spec);
+    Stepper<double> stepper(model);
+    State<double> s = stepper.make_state();
+    const double dt = 0.5 * model.dt_rest;
+    Pose pose = model.proxies[0].pose;
+    const Vec3 velocity(0.0, -0.05, 0.0);
+    double first_force_bottom = -1;
+    int32_t embedded = 0;
+    for (int k = 0; k < 100000 && pose.position.y - r > top - 0.0015; ++k) {
+      move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
+      ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+      pose.position += velocity * dt;
+      EXPECT_EQ(stepper.contact().node_contacts() + stepper.contact().face_contacts(), 0);
+      embedded = std::max(embedded, stepper.contact().embedded_contacts());
+      if (s.contact.reports[0].force.y > 0 && first_force_bottom < 0) first_force_bottom = pose.position.y - r;
+      EXPECT_GE(s.contact.reports[0].force.y, 0.0);
+    }
+    // The skin under the ball went down with it, none of its vertices deep inside the ball.
+    std::vector<Vec3> x(size_t(model.n_nodes)), fine(spec.surface->rest.vertices.size());
+    std::vector<Vec3> given(size_t(model.n_nodes));
+    for (int32_t i = 0; i < model.n_nodes; ++i) given[size_t(model.node_given[size_t(i)])] = node_position(model, s, i);
+    compute_embedded_positions(*spec.surface, given, fine);
+    double deepest = 0, under = 1;
+    for (size_t v = 0; v < fine.size(); ++v) {
+      deepest = std::max(deepest, r - glm::length(fine[v] - pose.position));
+      const Vec3& X = spec.surface->rest.vertices[v];
+      if (X.y == top && std::hypot(X.x - above.x, X.z - above.z) < 0.002) under = std::min(under, fine[v].y);
+    }
+    std::printf(
+        "  ball r = 3 mm on a skin 1 mm over 2 cm cells: first force with its bottom at %.3f mm (skin at %.1f), "
+        "up to %d skin points; the skin under it at %.2f mm, deepest vertex %.3f mm inside\n",
+        first_force_bottom * 1e3, top * 1e3, embedded, under * 1e3, deepest * 1e3);
+    EXPECT_GT(embedded, 0);
+    EXPECT_GT(first_force_bottom, top - 0.0006);  // stopped at the skin: 1 mm above the block's top (20 mm)
+    EXPECT_LT(under, top - 0.001);                // and the skin went down with the ball
+    EXPECT_LT(deepest, 0.0003);
   }
-  // The skin under the ball went down with it, none of its vertices deep inside the ball.
-  std::vector<Vec3> x(size_t(model.n_nodes)), fine(spec.surface->rest.vertices.size());
-  std::vector<Vec3> given(size_t(model.n_nodes));
-  for (int32_t i = 0; i < model.n_nodes; ++i) given[size_t(model.node_given[size_t(i)])] = node_position(model, s, i);
-  compute_embedded_positions(*spec.surface, given, fine);
-  double deepest = 0, under = 1;
-  for (size_t v = 0; v < fine.size(); ++v) {
-    deepest = std::max(deepest, r - glm::length(fine[v] - pose.position));
-    const Vec3& X = spec.surface->rest.vertices[v];
-    if (X.y == top && std::hypot(X.x - above.x, X.z - above.z) < 0.002) under = std::min(under, fine[v].y);
-  }
-  std::printf(
-      "  ball r = 3 mm on a skin 1 mm over 2 cm cells: first force with its bottom at %.3f mm (skin at %.1f), "
-      "up to %d skin points; the skin under it at %.2f mm, deepest vertex %.3f mm inside\n",
-      first_force_bottom * 1e3, top * 1e3, embedded, under * 1e3, deepest * 1e3);
-  EXPECT_GT(embedded, 0);
-  EXPECT_GT(first_force_bottom, top - 0.0006);  // stopped at the skin: 1 mm above the block's top (20 mm)
-  EXPECT_LT(under, top - 0.001);                // and the skin went down with the ball
-  EXPECT_LT(deepest, 0.0003);
 }
 
 // The momentum an embedded surface's points give the nodes (w_k J / m_k each, weights summing to 1, some

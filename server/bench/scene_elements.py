@@ -1,0 +1,115 @@
+"""The default live scene on linear (P1) and quadratic (P2) tets: what each mesh gets right, and at what cost.
+
+  .venv/bin/python server/bench/scene_elements.py            # the default scene (a couple of minutes)
+
+The scene is run headless (`tactile-sim`) on candidate meshes of either element order, against a fine
+quadratic reference, on what a hand meets there: the force on the stylus sphere pressed into the sagging
+beam's top 0.6 m from the clamp and held (the mean over the last quarter of the run), and the beam's tip (at
+rest after 3 s of damping, the sphere holding it). The cost is wall seconds of stepping per simulated second
+on one core (under 1 is real time), from the run's own summary. Figures in docs/perf.md (Quadratic tets in
+the live scenes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import pathlib
+import subprocess
+import sys
+import tempfile
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+SCENES = ROOT / "server" / "scenes"
+
+
+def _sim() -> str:
+    exe = ROOT / "build" / "release" / "tactile-sim"
+    if not exe.exists():
+        sys.exit(f"{exe} is not built: run scripts/setup.sh")
+    return str(exe)
+
+
+def run(folder: pathlib.Path, scene: dict, name: str) -> dict:
+    """Runs `scene` headless; its summary, and the stylus proxy's last force [N]."""
+    scene = dict(scene, name=name)
+    path = SCENES / f"_bench_{name}.json"  # beside the shipped scenes: their meshes are relative to it
+    path.write_text(json.dumps(scene))
+    try:
+        out = subprocess.run([_sim(), "run", str(path), "--out", str(folder), "--no-vtu", "--quiet"],
+                             capture_output=True, text=True, check=False)
+    finally:
+        path.unlink()
+    if out.returncode != 0:
+        sys.exit(f"{name}: {out.stderr}")
+    folder = folder / name / "run"
+    summary = json.loads((folder / "summary.json").read_text())
+    rows = [r for r in csv.DictReader((folder / "forces.csv").open()) if r["device"] == "stylus"]
+    t_end = float(rows[-1]["sim_time_s"])
+    hold = [abs(float(r["fy_N"])) for r in rows if float(r["sim_time_s"]) >= 0.75 * t_end]
+    summary["stylus_force_N"] = sum(hold) / len(hold)  # the mean over the last quarter, held
+    return summary
+
+
+def variant(base: dict, element: str, precision: str, mesh: dict) -> dict:
+    s = json.loads(json.dumps(base))
+    s["element"] = element
+    s["integrator"]["precision"] = precision
+    s["mesh"] = dict(s["mesh"], **mesh)
+    return s
+
+
+def press(scene: dict, at: list[float], depth_y: float, duration: float) -> dict:
+    """The stylus scripted down to `depth_y` over half the run and held; the other proxies removed."""
+    s = json.loads(json.dumps(scene))
+    s["proxies"] = [dict({k: v for k, v in p.items() if k != "position"}, script={"easing": "smooth", "keyframes": [
+        {"t": 0.0, "position": at}, {"t": duration / 2, "position": [at[0], depth_y, at[2]]}]})
+        for p in s["proxies"] if p["device"] == "stylus"]
+    s["run"] = dict(s["run"], duration=duration)
+    return s
+
+
+def cases(only: str | None) -> list[tuple[str, dict, list[tuple[str, dict]]]]:
+    out = []
+    if only in (None, "default"):
+        base = json.loads((SCENES / "default.json").read_text())
+        base["effects"]["damping"] = {"alpha": 14.0}  # about critical for the first mode: at rest within 3 s
+        pressed = press(base, [0.6, 0.62, 0.0], 0.37, 3.0)  # the top, 0.55, sags ~17 cm there: the sphere ~3 cm in
+        meshes = [("P1 24 x 3 x 3 double", "p1", "double", {"cells": [24, 3, 3]}),
+                  ("P2 8 x 1 x 1 float", "p2", "float", {"cells": [8, 1, 1]}),
+                  ("P2 8 x 2 x 2 float", "p2", "float", {"cells": [8, 2, 2]}),
+                  ("P2 12 x 2 x 2 double", "p2", "double", {"cells": [12, 2, 2]}),
+                  ("reference: P2 24 x 3 x 3 double", "p2", "double", {"cells": [24, 3, 3]})]
+        out.append(("default", pressed, [(label, variant(pressed, el, prec, mesh)) for label, el, prec, mesh in
+                                         meshes]))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--only", choices=("default",))
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        for scene, _, runs in cases(args.only):
+            results = [(label, run(pathlib.Path(tmp), s, f"{scene}_{k}")) for k, (label, s) in enumerate(runs)]
+            ref = results[-1][1]
+            track = ref["tracked"][0]["name"]
+
+            def sag(r: dict, track: str = track) -> float:
+                t = next(t for t in r["tracked"] if t["name"] == track)
+                return float(t["displacement_m"][1])
+
+            print(f"\n{scene}: stylus pressed in and held; {track} tracked\n")
+            print("| mesh | tets | nodes | stylus force N | error | tracked sag mm | error | wall s per simulated s |")
+            print("|---|---|---|---|---|---|---|---|")
+            for label, r in results:
+                cost = r["performance"]["wall_s"] / r["run"]["t_end_s"]
+                f, s = r["stylus_force_N"], sag(r)
+                print(f"| {label} | {r['mesh']['tets']} | {r['mesh']['nodes']} | {f:.4f} | "
+                      f"{100 * (f / ref['stylus_force_N'] - 1):+.1f} % | {1e3 * s:.2f} | "
+                      f"{100 * (s / sag(ref) - 1):+.1f} % | {cost:.3f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
