@@ -183,10 +183,12 @@ def test_the_accuracy_study_on_the_cluster_gives_tactile_accuracys_records(
         return [{k: v for k, v in r.items() if k not in timing} for r in data["records"]]
 
     on_dask, own = records(tmp_path / "dask.json"), records(tmp_path / "cli.json")
-    assert len(own) == 20 and all(r["problem"] == "fig3_tip" and r["error"] > 0 for r in own)
+    # Linear tets: five models, two precisions, two levels; quadratic: StVK, two precisions, two levels.
+    assert len(own) == 24 and all(r["problem"] == "fig3_tip" and r["error"] > 0 for r in own)
+    assert sum(r["element"] == "p2" for r in own) == 4
     assert on_dask == own
     runs = pd.read_parquet(tmp_path / "dask-runs.parquet")
-    assert len(runs) == 21 and runs["worker"].nunique() == 2  # 20 runs and the reference, on both workers
+    assert len(runs) == 25 and runs["worker"].nunique() == 2  # 24 runs and the reference, on both workers
 
 
 def test_the_stability_suite_on_the_cluster_gives_tactile_stabilitys_outcomes(
