@@ -412,15 +412,17 @@ std::vector<AccuracyCase> list_accuracy_cases(const AccuracyOptions& o) {
   // linear tets' finding (0.9 of the critical step), not a variation of its own.
   // Quick, the quadratic tets run StVK only: the element order is the axis there, not the model.
   struct Levels {
-    std::vector<int> statics, dynamics, figures;
+    const char* element;
+    std::vector<int> statics, dynamics, waves, rotations, figures;
     std::vector<double> safeties;
     std::vector<MaterialModel> models;
   };
   const std::vector<MaterialModel> all(std::begin(kModels), std::end(kModels));
-  const Levels p1 = q ? Levels{{1, 2}, {1}, {1, 2}, {0.9, 0.3}, all}
-                      : Levels{{1, 2, 3, 4}, {1, 2, 3}, {1, 2, 3}, {0.9, 0.6, 0.3}, all};
-  const Levels p2 =
-      q ? Levels{{1, 2}, {1}, {1, 2}, {0.9}, {MaterialModel::StVK}} : Levels{{1, 2, 3}, {1, 2}, {1, 2}, {0.9}, all};
+  const Levels p1 =
+      q ? Levels{"p1", {1, 2}, {1}, {1, 2}, {1, 2}, {1, 2}, {0.9, 0.3}, all}
+        : Levels{"p1", {1, 2, 3, 4}, {1, 2, 3}, {1, 2, 3, 4}, {1, 2, 3, 4}, {1, 2, 3}, {0.9, 0.6, 0.3}, all};
+  const Levels p2 = q ? Levels{"p2", {1, 2}, {1}, {1, 2}, {1}, {1, 2}, {0.9}, {MaterialModel::StVK}}
+                      : Levels{"p2", {1, 2, 3}, {1, 2}, {1, 2}, {1}, {1, 2}, {0.9}, all};
   auto add = [&](const char* problem, const char* element, MaterialModel m, int n, Precision p, double safety = 0) {
     AccuracyCase c;
     c.problem = problem;
@@ -434,47 +436,39 @@ std::vector<AccuracyCase> list_accuracy_cases(const AccuracyOptions& o) {
     if (safety > 0) c.label += " dt " + std::to_string(safety).substr(0, 3);
     cases.push_back(std::move(c));
   };
-  for (const char* el : {"p1", "p2"}) {
-    const Levels& L = std::string(el) == "p1" ? p1 : p2;
-    for (MaterialModel m : L.models)
+  for (const Levels* L : {&p1, &p2})
+    for (MaterialModel m : L->models)
       for (Precision p : kPrecisions) {
         if (wants("cantilever_deflection"))
-          for (int n : L.statics) add("cantilever_deflection", el, m, n, p);
-        for (double safety : L.safeties) {
+          for (int n : L->statics) add("cantilever_deflection", L->element, m, n, p);
+        for (double safety : L->safeties) {
           if (wants("cantilever_frequency"))
-            for (int n : L.dynamics) add("cantilever_frequency", el, m, n, p, safety);
+            for (int n : L->dynamics) add("cantilever_frequency", L->element, m, n, p, safety);
           if (wants("wave_speed"))
-            for (int n : (std::string(el) == "p1" || q ? L.statics : L.dynamics))
-              add("wave_speed", el, m, n, p, safety);
+            for (int n : L->waves) add("wave_speed", L->element, m, n, p, safety);
         }
         if (wants("rotation"))
-          for (int n : (std::string(el) == "p1" ? L.statics : std::vector<int>{1})) add("rotation", el, m, n, p);
+          for (int n : L->rotations) add("rotation", L->element, m, n, p);
       }
-  }
   // The figures: a converged StVK run in double, on quadratic tets (linear ones still lock in bending at
-  // the finest level affordable: theirs is no reference), then every choice measured against it.
-  const int fig3_reference = q ? 3 : 4, fig2_reference = q ? 2 : 3;
-  if (wants("fig3_tip")) {
-    add("fig3_reference", "p2", MaterialModel::StVK, fig3_reference, Precision::Double);
-    for (const char* el : {"p1", "p2"})
-      for (MaterialModel m : (std::string(el) == "p1" ? p1 : p2).models)
+  // the finest level affordable: theirs is no reference), then every choice measured against it (quadratic
+  // ones below the reference's level).
+  auto figure = [&](const char* problem, const char* reference, int reference_level) {
+    if (!wants(problem)) return;
+    add(reference, "p2", MaterialModel::StVK, reference_level, Precision::Double);
+    for (const Levels* L : {&p1, &p2})
+      for (MaterialModel m : L->models)
         for (Precision p : kPrecisions)
-          for (int n : (std::string(el) == "p1" ? p1 : p2).figures)
-            if (std::string(el) == "p1" || n < fig3_reference) add("fig3_tip", el, m, n, p);
-  }
-  if (wants("fig2_area")) {
-    add("fig2_reference", "p2", MaterialModel::StVK, fig2_reference, Precision::Double);
-    for (const char* el : {"p1", "p2"})
-      for (MaterialModel m : (std::string(el) == "p1" ? p1 : p2).models)
-        for (Precision p : kPrecisions)
-          for (int n : (std::string(el) == "p1" ? p1 : p2).figures)
-            if (std::string(el) == "p1" || n < fig2_reference) add("fig2_area", el, m, n, p);
-  }
+          for (int n : L->figures)
+            if (L == &p1 || n < reference_level) add(problem, L->element, m, n, p);
+  };
+  figure("fig3_tip", "fig3_reference", q ? 3 : 4);
+  figure("fig2_area", "fig2_reference", q ? 2 : 3);
   if (wants("realtime"))
-    for (const char* el : {"p1", "p2"})
-      for (MaterialModel m : (std::string(el) == "p1" ? p1 : p2).models)
+    for (const Levels* L : {&p1, &p2})
+      for (MaterialModel m : L->models)
         for (Precision p : kPrecisions) {
-          add("realtime", el, m, 0, p);
+          add("realtime", L->element, m, 0, p);
           cases.back().label =
               "realtime " + cases.back().element + " " + cases.back().material + " " + cases.back().precision;
         }
