@@ -31,6 +31,19 @@ TetMesh linear_box(std::array<int, 3> cells = {3, 2, 2}) {
 }
 TetMesh quadratic_box(std::array<int, 3> cells = {3, 2, 2}) { return make_quadratic_mesh(linear_box(cells)); }
 
+// A bar along x held at x = 0 and pulled by `force` [N] spread over its end x = `length`.
+void hold_and_load(ModelSpec& spec, double length, const Vec3& force) {
+  EssentialBc held;
+  held.where.kind = NodeSelector::Kind::Plane;
+  held.where.normal = Vec3(1.0, 0.0, 0.0);
+  NaturalLoad tip;
+  tip.where = held.where;
+  tip.where.point = Vec3(length, 0.0, 0.0);
+  tip.force = force;
+  spec.essential = {held};
+  spec.loads = {tip};
+}
+
 double total_volume(const TetMesh& mesh) {
   double V = 0;
   for (const Tet& t : mesh.tets)
@@ -76,16 +89,7 @@ TEST(QuadraticModel, KeepsEveryNodeWithAPositiveMassAndASplitOutwardSurface) {
 // spreads over both by their (HRZ) masses.
 TEST(QuadraticModel, SelectionsAndLoadsReachEdgeNodes) {
   ModelSpec spec = make_spec(quadratic_box(), MaterialModel::StVK);
-  EssentialBc held;
-  held.where.kind = NodeSelector::Kind::Plane;
-  held.where.normal = Vec3(1.0, 0.0, 0.0);
-  NaturalLoad tip;
-  tip.where.kind = NodeSelector::Kind::Plane;
-  tip.where.point = Vec3(0.06, 0.0, 0.0);
-  tip.where.normal = Vec3(1.0, 0.0, 0.0);
-  tip.force = Vec3(0.0, -1.0, 0.0);
-  spec.essential = {held};
-  spec.loads = {tip};
+  hold_and_load(spec, 0.06, Vec3(0.0, -1.0, 0.0));
   const Model<double> model = build_model<double>(spec);
   // On x = 0: the face's 3 x 3 corners and its edge nodes, 5 x 5 in all (a
   // face of 2 x 2 cells split into triangles: 16 edges, and the corners 9).
@@ -171,16 +175,7 @@ TEST(QuadraticModel, PartsMoveItAsOnePartDoes) {
   ModelSpec spec =
       make_spec(make_quadratic_mesh(make_box(Vec3(0.0), Vec3(0.4, 0.05, 0.05), {96, 4, 4})), MaterialModel::NeoHookean);
   spec.integrator.threads = 2;
-  EssentialBc held;
-  held.where.kind = NodeSelector::Kind::Plane;
-  held.where.normal = Vec3(1.0, 0.0, 0.0);
-  NaturalLoad tip;
-  tip.where.kind = NodeSelector::Kind::Plane;
-  tip.where.point = Vec3(0.4, 0.0, 0.0);
-  tip.where.normal = Vec3(1.0, 0.0, 0.0);
-  tip.force = Vec3(0.0, -2.0, 1.0);
-  spec.essential = {held};
-  spec.loads = {tip};
+  hold_and_load(spec, 0.4, Vec3(0.0, -2.0, 1.0));
   const Model<double> model = build_model<double>(spec);
   ASSERT_EQ(model.parts.size(), 2u);
   using Order = OneAfterTheOther::Order;
