@@ -54,8 +54,8 @@ def test_the_default_scene_runs_a_minute_in_closed_loop_without_a_clip_or_a_faul
     # The trace keeps 9 significant digits (tick.py, %.9g): a force held at the limit reads up to 1e-9 over it.
     assert f.max() <= 6.0 * (1 + 1e-8), f"the device got {f.max():.12g} N against its 6 N limit"
     # Every press (one each 4 s of the arm's script, after 2 s at home) is felt: in its hold, more than half a
-    # newton (the beam on quadratic tets, which do not lock, gives about 0.8 N where the locked linear mesh gave
-    # about 1.5 N).
+    # newton (the beam is on quadratic tets, which do not lock in bending: it gives under the press as a
+    # converged beam does, and pushes back less than a locked mesh would).
     t = tr["t_s"] - tr["t_s"][0]
     held = [f[(t > 2 + k * 4 + 1.5) & (t < 2 + k * 4 + 2.5)].mean() for k in range(0, 13)]
     assert min(held) > 0.5, [round(h, 2) for h in held]

@@ -719,8 +719,8 @@ std::vector<StabilityCase> stability_cases(const SuiteOptions& o) {
   std::vector<Level> levels{kCoarse};
   if (!quick) levels.push_back(kFine);
   // On quadratic tets, the hard cases the linear ones run: quick, those that squash, invert and strike the
-  // body, shake it, on slivers and at too long a step (the pinch, a quarter of a minute a material, in full
-  // only); in full, every case.
+  // body, shake it, on slivers and at too long a step (the pinch, the slowest of all,
+  // in full only); in full, every case.
   const std::vector<std::string> quadratic_quick{
       "twist_450deg", "compress_90pct_release", "inverted_start", "impact_10m_s",
       "slivers",      "dt_3x_refuse",           "random_velocity"};
