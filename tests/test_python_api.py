@@ -318,6 +318,31 @@ def test_a_proxy_moved_from_python_presses_and_the_force_points_out_of_the_body(
     assert mesh.cell_data["von_mises"][0].max() > 0
 
 
+def test_proxy_forces_is_an_array_of_its_own_that_outlives_its_report() -> None:
+    # In a child: an array freed under Python's feet crashes the interpreter at its next collection.
+    code = """
+import gc, sys
+import numpy as np
+import tactile
+sim = tactile.Simulation(tactile.load_scene(sys.argv[1]))
+sim.move_proxy(0, (0, 0.047, 0), duration=0.2)
+sim.advance(0.25)
+forces = []
+for _ in range(50):
+    sim.advance(0.001)
+    forces.append(sim.proxy_forces)
+    assert np.array_equal(forces[-1], sim.proxy_reports["force"]), (forces[-1], sim.proxy_reports["force"])
+gc.collect()
+f = forces[-1]
+assert f.shape == (1, 3) and f[np.isfinite(f)].shape == (3,), f
+assert max(g[0, 1] for g in forces) > 0, forces
+print("ok")
+"""
+    run = subprocess.run([sys.executable, "-c", code, str(SCENES / "poke.json")], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0 and run.stdout.strip() == "ok", (run.returncode, run.stdout, run.stderr)
+
+
 def public(node: ast.ClassDef | ast.Module) -> set[str]:
     names = set()
     for item in node.body:

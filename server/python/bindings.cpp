@@ -690,8 +690,10 @@ void bind_simulation(py::module_& m) {
       .def_property_readonly("devices", [](PySimulation& s) { return s.sim()->devices(); })
       .def_property_readonly("proxy_reports", [](PySimulation& s) { return s.reports(s.sim()->proxy_reports()); })
       .def_property_readonly("device_reports", [](PySimulation& s) { return s.reports(s.sim()->device_reports()); })
+      // The report dict is a temporary: take the array out of it as an
+      // object before it dies (an item accessor would outlive its dict).
       .def_property_readonly("proxy_forces",
-                             [](PySimulation& s) { return s.reports(s.sim()->proxy_reports())["force"]; })
+                             [](PySimulation& s) -> py::object { return s.reports(s.sim()->proxy_reports())["force"]; })
       .def("clear_impulses", [](PySimulation& s) { s.sim()->clear_impulses(); })
       .def(
           "proxy_pose", [](PySimulation& s, int32_t j) { return from_pose(s.sim()->proxy_pose(j)); }, py::arg("proxy"))
