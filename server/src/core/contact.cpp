@@ -133,7 +133,7 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   dv_.assign(free_nodes_.size(), Vec3(0.0));
   moved_flag_.assign(free_nodes_.size(), 0);
   moved_.reserve(free_nodes_.size());
-  points_.reserve((free_nodes_.size() + faces_.size() + emb_slot_.size()) * n_proxies);
+  points_.reserve((free_nodes_.size() + faces_.size() + emb_slot_.size() + emb_faces_.size()) * n_proxies);
   point_order_.reserve(points_.capacity());
   // Solve groups: one per proxy, then one per coupled body (at most one per proxy and hand).
   proxy_begin_.assign(2 * n_proxies + model.hands.size() + 1, 0);
@@ -146,37 +146,103 @@ void Contact<Real>::build_embedded(const std::vector<int32_t>& slot_of, const Or
   // The vertices in Morton order of their rest positions, each with its four slots.
   const EmbeddedSurface& e = *model_.embedded;
   std::vector<double> outside;
+  std::vector<int32_t> index_of(e.rest.vertices.size());
   for (size_t v : morton_order(e.rest.vertices)) {
     const Tet& t = model_.embedded_nodes[v];
+    index_of[v] = int32_t(emb_slot_.size());
     emb_slot_.push_back({slot_of[size_t(t[0])], slot_of[size_t(t[1])], slot_of[size_t(t[2])], slot_of[size_t(t[3])]});
     emb_w_.push_back(e.weights[v]);
     outside.push_back(e.outside[v]);
   }
-  const auto n = static_cast<int32_t>(emb_slot_.size());
-  emb_cluster_slot_begin_.push_back(0);
+  // A vertex inside its tet lies in its nodes' box; one outside, within its rest distance of the tet, grown
+  // with the tet's stretch (twice, as far as the stability suite lets a body stretch).
+  emb_x_.resize(emb_slot_.size());
+  emb_stamp_.assign(emb_slot_.size(), 0u);
+  emb_vertices_ = cluster_embedded(int32_t(emb_slot_.size()), [&](int32_t v, std::vector<int32_t>& slots) {
+    slots.insert(slots.end(), emb_slot_[size_t(v)].begin(), emb_slot_[size_t(v)].end());
+    return 2.0 * outside[size_t(v)];
+  });
+
+  // The triangles, in Morton order of their rest centroids; an edge's
+  // contacts belong to the first that has it. One whose vertices all follow
+  // held nodes only has nothing to push.
+  std::vector<Tri> tris;
+  std::vector<Vec3> centroids;
+  for (const Tri& t : e.rest.triangles) {
+    const Tri v{index_of[size_t(t[0])], index_of[size_t(t[1])], index_of[size_t(t[2])]};
+    bool free = false;
+    for (int32_t i : v)
+      for (int32_t k : emb_slot_[size_t(i)]) free = free || size_t(k) < free_nodes_.size();
+    if (!free) continue;
+    tris.push_back(v);
+    centroids.push_back(
+        (e.rest.vertices[size_t(t[0])] + e.rest.vertices[size_t(t[1])] + e.rest.vertices[size_t(t[2])]) / 3.0);
+  }
+  std::set<std::pair<int32_t, int32_t>> claimed;
+  for (size_t k : morton_order(centroids)) {
+    Face f{tris[k], 0};
+    for (int c = 0; c < 3; ++c) {
+      const int32_t a = f.slot[size_t((c + 1) % 3)], b = f.slot[size_t((c + 2) % 3)];
+      if (claimed.insert({std::min(a, b), std::max(a, b)}).second) f.owns_edge = uint8_t(f.owns_edge | (1u << c));
+    }
+    emb_faces_.push_back(f);
+  }
+  emb_face_clusters_ = cluster_embedded(int32_t(emb_faces_.size()), [&](int32_t f, std::vector<int32_t>& slots) {
+    double pad = 0;
+    for (int32_t v : emb_faces_[size_t(f)].slot) {
+      slots.insert(slots.end(), emb_slot_[size_t(v)].begin(), emb_slot_[size_t(v)].end());
+      pad = std::max(pad, 2.0 * outside[size_t(v)]);
+    }
+    return pad;
+  });
+}
+
+template <class Real>
+template <class Of>
+typename Contact<Real>::EmbeddedClusters Contact<Real>::cluster_embedded(int32_t n, const Of& of) const {
+  EmbeddedClusters ec;
+  ec.slot_begin.push_back(0);
   for (int32_t b = 0; b < n; b += kClusterNodes) {
     const int32_t end = std::min(n, b + kClusterNodes);
-    emb_clusters_.push_back({b, end, {}, {}});
-    // A vertex inside its tet lies in its nodes' box; one outside, within its rest distance of the tet, grown
-    // with the tet's stretch (twice, as far as the stability suite lets a body stretch).
+    ec.clusters.push_back({b, end, {}, {}});
     double pad = 0;
     std::vector<int32_t> slots;
-    for (int32_t v = b; v < end; ++v) {
-      pad = std::max(pad, 2.0 * outside[size_t(v)]);
-      slots.insert(slots.end(), emb_slot_[size_t(v)].begin(), emb_slot_[size_t(v)].end());
-    }
+    for (int32_t i = b; i < end; ++i) pad = std::max(pad, of(i, slots));
     std::sort(slots.begin(), slots.end());
     slots.erase(std::unique(slots.begin(), slots.end()), slots.end());
-    emb_cluster_slots_.insert(emb_cluster_slots_.end(), slots.begin(), slots.end());
-    emb_cluster_slot_begin_.push_back(int32_t(emb_cluster_slots_.size()));
-    emb_pad_.push_back(pad);
+    ec.slots.insert(ec.slots.end(), slots.begin(), slots.end());
+    ec.slot_begin.push_back(int32_t(ec.slots.size()));
+    ec.pad.push_back(pad);
     Vec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
     for (int32_t k : slots) {
       lo = glm::min(lo, model_.mesh.X[size_t(slot_node_[size_t(k)])]);
       hi = glm::max(hi, model_.mesh.X[size_t(slot_node_[size_t(k)])]);
     }
-    emb_rest_lo_.push_back(lo - Vec3(pad));
-    emb_rest_hi_.push_back(hi + Vec3(pad));
+    ec.rest_lo.push_back(lo - Vec3(pad));
+    ec.rest_hi.push_back(hi + Vec3(pad));
+  }
+  return ec;
+}
+
+template <class Real>
+void Contact<Real>::sweep_embedded(EmbeddedClusters& ec, const ContactState& cs, double reach) const {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const size_t n_proxies = model_.proxies.size();
+  for (size_t j = 0; j < ec.clusters.size(); ++j) {
+    Cluster& c = ec.clusters[j];
+    c.lo = Vec3(inf);
+    c.hi = Vec3(-inf);
+    bool near = false;
+    for (size_t p = 0; p < n_proxies && !near; ++p)
+      near = boxes_meet(ec.rest_lo[j] - Vec3(reach), ec.rest_hi[j] + Vec3(reach), lo_[p], hi_[p]);
+    if (!near) continue;
+    for (int32_t m = ec.slot_begin[j]; m < ec.slot_begin[j + 1]; ++m) {
+      const auto k = size_t(ec.slots[size_t(m)]);
+      c.lo = glm::min(c.lo, glm::min(x_now_[k], cs.x_prev[k]));
+      c.hi = glm::max(c.hi, glm::max(x_now_[k], cs.x_prev[k]));
+    }
+    c.lo -= Vec3(ec.pad[j]);
+    c.hi += Vec3(ec.pad[j]);
   }
 }
 
@@ -239,6 +305,7 @@ void Contact<Real>::init(ContactState& cs) const {
   cs.memory.assign(free_nodes_.size(), Memory{});
   cs.face_memory.assign(faces_.size(), Memory{});
   cs.embedded_memory.assign(emb_slot_.size(), Memory{});
+  cs.embedded_face_memory.assign(emb_faces_.size(), Memory{});
   cs.fit.resize(n_proxies);
   cs.device_fit.resize(model_.devices.size());
   cs.device_felt.assign(model_.devices.size(), glm::dmat3(0.0));
@@ -293,6 +360,7 @@ void Contact<Real>::start(State<Real>& s) const {
   std::fill(cs.memory.begin(), cs.memory.end(), Memory{});
   std::fill(cs.face_memory.begin(), cs.face_memory.end(), Memory{});
   std::fill(cs.embedded_memory.begin(), cs.embedded_memory.end(), Memory{});
+  std::fill(cs.embedded_face_memory.begin(), cs.embedded_face_memory.end(), Memory{});
   for (Fit& f : cs.fit) f = Fit{};
   for (Fit& f : cs.device_fit) f = Fit{};
   std::fill(cs.device_felt.begin(), cs.device_felt.end(), glm::dmat3(0.0));
@@ -433,7 +501,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   for (size_t k = 0; k < slot_node_.size(); ++k) {
     const Vec3& X = model_.mesh.X[size_t(slot_node_[k])];
     x_now_[k] = position(s, X, slot_node_[k]);
-    if (!emb_clusters_.empty())
+    if (!emb_vertices_.clusters.empty())
       reach2 = std::max({reach2, glm::dot(x_now_[k] - X, x_now_[k] - X), glm::dot(cs.x_prev[k] - X, cs.x_prev[k] - X)});
   }
   const auto sweep = [&](Cluster& c, int32_t k) {
@@ -492,19 +560,12 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   // clusters, so exact boxes for all of them cost most of the embedding's
   // step; embedding_bench guards this).
   const double reach = std::sqrt(reach2);
-  for (size_t j = 0; j < emb_clusters_.size(); ++j) {
-    Cluster& c = emb_clusters_[j];
-    c.lo = Vec3(inf);
-    c.hi = Vec3(-inf);
-    bool near = false;
-    for (size_t p = 0; p < n_proxies && !near; ++p)
-      near = boxes_meet(emb_rest_lo_[j] - Vec3(reach), emb_rest_hi_[j] + Vec3(reach), lo_[p], hi_[p]);
-    if (!near) continue;
-    for (int32_t m = emb_cluster_slot_begin_[j]; m < emb_cluster_slot_begin_[j + 1]; ++m)
-      sweep(c, emb_cluster_slots_[size_t(m)]);
-    c.lo -= Vec3(emb_pad_[j]);
-    c.hi += Vec3(emb_pad_[j]);
+  if (++stamp_ == 0) {  // (wrapped: no vertex may keep a stamp that looks current)
+    std::fill(emb_stamp_.begin(), emb_stamp_.end(), 0u);
+    stamp_ = 1;
   }
+  sweep_embedded(emb_vertices_, cs, reach);
+  sweep_embedded(emb_face_clusters_, cs, reach);
   node_contacts_ = face_contacts_ = embedded_contacts_ = 0;
   points_.clear();
   for (const Cluster& c : clusters_)
@@ -541,11 +602,16 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
       }
     }
 
-  // The embedded surface's vertices (in place of the nodes and faces above, which it then has none of).
-  for (const Cluster& c : emb_clusters_)
+  // The embedded surface's vertices and triangles (in place of the nodes and faces above, which it then has none of).
+  for (const Cluster& c : emb_vertices_.clusters)
     for (size_t j = 0; j < n_proxies; ++j) {
       if (!boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
       for (int32_t e = c.begin; e < c.end; ++e) find_embedded_contact(cs, e, int32_t(j), pose0_[j], pose1_[j], dt);
+    }
+  for (const Cluster& c : emb_face_clusters_.clusters)
+    for (size_t j = 0; j < n_proxies; ++j) {
+      if (model_.proxies[j].geometry.shape == ProxyShape::Plane || !boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
+      for (int32_t f = c.begin; f < c.end; ++f) find_embedded_face_contact(cs, f, int32_t(j), pose0_[j], pose1_[j], dt);
     }
 
   // The impulses, then the velocity changes they make: by eq. (9),
@@ -712,11 +778,9 @@ void Contact<Real>::find_node_contact(ContactState& cs, int32_t k, int32_t proxy
     return;
   }
   // Inside at t_{n+1}: which way is out?
-  Point c;
-  c.proxy = proxy;
-  c.body = cs.proxy_body[size_t(proxy)];
-  c.slot = {k, -1, -1, -1};
-  c.w = {1, 0, 0, 0};
+  Point c = empty_point(proxy, cs.proxy_body[size_t(proxy)]);
+  c.slot[0] = k;
+  c.w[0] = 1;
   c.x = x1;
   c.n = p1.orientation * outward(g, p0.to_local(cs.x_prev[size_t(k)]), q1, at1, mem, proxy);
   c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], x1 - p1.position);
@@ -758,14 +822,7 @@ void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy
     return;
   }
   if (zeros == 1 && !(face.owns_edge & (1u << (w.x == 0 ? 0 : w.y == 0 ? 1 : 2)))) return;  // its edge's other face's
-  Point c;
-  c.proxy = proxy;
-  c.body = cs.proxy_body[size_t(proxy)];
-  c.slot = {-1, -1, -1, -1};
-  c.w = {0, 0, 0, 0};
-  c.x = Vec3(0.0);
-  c.v_held = Vec3(0.0);
-  c.inv_mass = 0;
+  Point c = empty_point(proxy, cs.proxy_body[size_t(proxy)]);
   Vec3 x0(0.0);
   int free = 0;
   for (size_t j = 0; j < 3; ++j) {
@@ -783,6 +840,19 @@ void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy
   c.mu = friction_ ? spec.friction : 0.0;
   points_.push_back(c);
   ++face_contacts_;
+}
+
+template <class Real>
+typename Contact<Real>::Point Contact<Real>::empty_point(int32_t proxy, int32_t body) {
+  Point c;
+  c.proxy = proxy;
+  c.body = body;
+  c.slot.fill(-1);
+  c.w.fill(0);
+  c.x = Vec3(0.0);
+  c.v_held = Vec3(0.0);
+  c.inv_mass = 0;
+  return c;
 }
 
 template <class Real>
@@ -804,11 +874,7 @@ void Contact<Real>::find_embedded_contact(ContactState& cs, int32_t e, int32_t p
   Memory& mem = cs.embedded_memory[size_t(e)];
   const std::array<int32_t, 4>& slots = emb_slot_[size_t(e)];
   const std::array<double, 4>& w = emb_w_[size_t(e)];
-  Vec3 x0(0.0), x1(0.0);
-  for (size_t k = 0; k < 4; ++k) {
-    x0 += w[k] * cs.x_prev[size_t(slots[k])];
-    x1 += w[k] * x_now_[size_t(slots[k])];
-  }
+  const auto& [x0, x1] = embedded_position(cs, size_t(e));
   // The vertex's own path over the step against the proxy's swept box, then the proxy itself.
   if (!boxes_meet(glm::min(x0, x1), glm::max(x0, x1), lo_[size_t(proxy)], hi_[size_t(proxy)])) {
     if (mem.proxy == proxy) mem.proxy = -1;
@@ -820,14 +886,8 @@ void Contact<Real>::find_embedded_contact(ContactState& cs, int32_t e, int32_t p
     if (mem.proxy == proxy) mem.proxy = -1;
     return;
   }
-  Point c;
-  c.proxy = proxy;
-  c.body = cs.proxy_body[size_t(proxy)];
-  c.slot = {-1, -1, -1, -1};
-  c.w = {0, 0, 0, 0};
+  Point c = empty_point(proxy, cs.proxy_body[size_t(proxy)]);
   c.x = x1;
-  c.v_held = Vec3(0.0);
-  c.inv_mass = 0;
   int free = 0;
   for (size_t k = 0; k < 4; ++k)
     if (w[k] != 0) add_corner(cs, c, free, size_t(slots[k]), w[k], dt);
@@ -841,9 +901,95 @@ void Contact<Real>::find_embedded_contact(ContactState& cs, int32_t e, int32_t p
 }
 
 template <class Real>
+const std::array<Vec3, 2>& Contact<Real>::embedded_position(const ContactState& cs, size_t v) {
+  std::array<Vec3, 2>& x = emb_x_[v];
+  if (emb_stamp_[v] == stamp_) return x;
+  emb_stamp_[v] = stamp_;
+  x = {Vec3(0.0), Vec3(0.0)};
+  for (size_t k = 0; k < 4; ++k) {
+    x[0] += emb_w_[v][k] * cs.x_prev[size_t(emb_slot_[v][k])];
+    x[1] += emb_w_[v][k] * x_now_[size_t(emb_slot_[v][k])];
+  }
+  return x;
+}
+
+template <class Real>
+void Contact<Real>::find_embedded_face_contact(ContactState& cs, int32_t f, int32_t proxy, const Pose& p0,
+                                               const Pose& p1, double dt) {
+  const ProxySpec& spec = model_.proxies[size_t(proxy)];
+  const ProxyGeometry& g = spec.geometry;
+  const Face& face = emb_faces_[size_t(f)];
+  Memory& mem = cs.embedded_face_memory[size_t(f)];
+  std::array<Vec3, 3> x0, x1, q;
+  Vec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+  for (size_t j = 0; j < 3; ++j) {
+    const std::array<Vec3, 2>& x = embedded_position(cs, size_t(face.slot[j]));
+    x0[j] = x[0];
+    x1[j] = x[1];
+    lo = glm::min(lo, glm::min(x0[j], x1[j]));
+    hi = glm::max(hi, glm::max(x0[j], x1[j]));
+  }
+  // As a boundary face (find_face_contact): one all inside is held by its
+  // vertices' contacts, one deepest at a vertex is that vertex's.
+  if (!boxes_meet(lo, hi, lo_[size_t(proxy)], hi_[size_t(proxy)])) {
+    if (mem.proxy == proxy) mem.proxy = -1;
+    return;
+  }
+  for (size_t j = 0; j < 3; ++j) q[j] = p1.to_local(x1[j]);
+  if (locate(g, q[0]).phi <= 0 && locate(g, q[1]).phi <= 0 && locate(g, q[2]).phi <= 0) return;
+  if (g.shape == ProxyShape::Box)
+    for (int k = 0; k < 3; ++k) {
+      const double reach = g.half_extents[k] + g.radius;
+      if (std::min({q[0][k], q[1][k], q[2][k]}) > reach || std::max({q[0][k], q[1][k], q[2][k]}) < -reach) {
+        if (mem.proxy == proxy) mem.proxy = -1;
+        return;
+      }
+    }
+  const Vec3 b = deepest_on_triangle(g, q[0], q[1], q[2]);
+  const int zeros = int(b.x == 0) + int(b.y == 0) + int(b.z == 0);
+  const Vec3 q1 = b.x * q[0] + b.y * q[1] + b.z * q[2];
+  const SurfacePoint at1 = locate(g, q1);
+  if (at1.phi > 0 || zeros >= 2) {
+    if (mem.proxy == proxy) mem.proxy = -1;
+    return;
+  }
+  if (zeros == 1 && !(face.owns_edge & (1u << (b.x == 0 ? 0 : b.y == 0 ? 1 : 2)))) return;
+  // Its nodes, each once: a node two vertices follow takes the sum of their weights.
+  std::array<int32_t, kPointCarriers> slot;
+  std::array<double, kPointCarriers> w{};
+  size_t n = 0;
+  for (size_t j = 0; j < 3; ++j) {
+    const auto v = size_t(face.slot[j]);
+    if (b[int(j)] == 0) continue;
+    for (size_t k = 0; k < 4; ++k) {
+      const int32_t s = emb_slot_[v][k];
+      size_t m = 0;
+      while (m < n && slot[m] != s) ++m;
+      if (m == n) {
+        slot[n] = s;
+        w[n++] = 0;
+      }
+      w[m] += b[int(j)] * emb_w_[v][k];
+    }
+  }
+  Point c = empty_point(proxy, cs.proxy_body[size_t(proxy)]);
+  int free = 0;
+  for (size_t m = 0; m < n; ++m)
+    if (w[m] != 0) add_corner(cs, c, free, size_t(slot[m]), w[m], dt);
+  if (!(c.inv_mass > 0)) return;
+  c.x = b.x * x1[0] + b.y * x1[1] + b.z * x1[2];
+  c.n = p1.orientation * outward(g, p0.to_local(b.x * x0[0] + b.y * x0[1] + b.z * x0[2]), q1, at1, mem, proxy);
+  c.vp = velocity_[size_t(proxy)] + glm::cross(spin_[size_t(proxy)], c.x - p1.position);
+  c.r = c.body >= 0 ? c.x - cs.bodies[size_t(c.body)].next.pose.position : Vec3(0.0);
+  c.mu = friction_ ? spec.friction : 0.0;
+  points_.push_back(c);
+  ++embedded_contacts_;
+}
+
+template <class Real>
 Vec3 Contact<Real>::point_velocity(const State<Real>& s, const Point& c) const {
   Vec3 v = c.v_held;
-  for (size_t j = 0; j < 4 && c.slot[j] >= 0; ++j) {
+  for (size_t j = 0; j < kPointCarriers && c.slot[j] >= 0; ++j) {
     const auto k = size_t(c.slot[j]);
     const size_t i = size_t(free_nodes_[k]);
     v += c.w[j] * (Vec3(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2])) + dv_[k]);
@@ -853,7 +999,7 @@ Vec3 Contact<Real>::point_velocity(const State<Real>& s, const Point& c) const {
 
 template <class Real>
 void Contact<Real>::give(ContactState& cs, Point& c, const Vec3& J) {
-  for (size_t j = 0; j < 4 && c.slot[j] >= 0; ++j) {
+  for (size_t j = 0; j < kPointCarriers && c.slot[j] >= 0; ++j) {
     const auto k = size_t(c.slot[j]);
     if (!moved_flag_[k]) {
       moved_flag_[k] = 1;

@@ -41,8 +41,12 @@
 // is a contact point x = sum w_k x_k over the four nodes of its tet (interior
 // nodes too), given its impulse by the same rule as a face's point, dv_k =
 // w_k J / m_k, and its opposite summed back to the proxy. A tool smaller than
-// a coarse cell then stops at the surface the user sees; one smaller than
-// the fine surface's spacing can still pass between its vertices.
+// a coarse cell then stops at the surface the user sees. Its triangles are
+// tested as the boundary's are, at their deepest point in the proxy: a small
+// tool pressed deep stretches the triangles around it (on quadratic tets,
+// several times their rest size) and would pass between their vertices. Such
+// a point is sum_j b_j x_j over the triangle's vertices, so sum_j b_j w_jk
+// over up to twelve nodes (kPointCarriers), each node once.
 //
 // Broad phase: surface nodes in clusters of 32 (Morton order of rest
 // positions), each with a box around its nodes' motion over the step; only
@@ -131,7 +135,7 @@ class Contact {
   // Contact points inside proxies in the latest apply(): on surface nodes, and on faces between them.
   int32_t node_contacts() const { return node_contacts_; }
   int32_t face_contacts() const { return face_contacts_; }
-  int32_t embedded_contacts() const { return embedded_contacts_; }
+  int32_t embedded_contacts() const { return embedded_contacts_; }  // on the embedded surface's vertices and triangles
 
   // Per-node contact force for an output that asks (VTU point data), summed
   // only while tracking is on: the impulse q dv each free surface node took
@@ -153,20 +157,23 @@ class Contact {
   // A contact point inside a proxy at t_{n+1}: a free surface node, a
   // point of a face, x = sum w_c x_c over its corners, or a vertex of an
   // embedded surface over its tet's four nodes.
+  // The most nodes a contact point moves: an embedded triangle's three
+  // vertices, four nodes each.
+  static constexpr size_t kPointCarriers = 12;
   struct Point {
     int32_t proxy;
-    int32_t body;                 // its proxy's coupled body, -1 for a kinematic proxy
-    Vec3 r;                       // from the body's origin to x (coupled) [m]
-    std::array<int32_t, 4> slot;  // its free corners' slots, -1 for none (a node: slot[0] alone, weight 1)
-    std::array<double, 4> w;      // their weights
-    Vec3 x;                       // world position [m]
-    Vec3 n;                       // outward normal (world)
-    Vec3 vp;                      // the proxy's velocity at x [m/s]
-    Vec3 v_held;                  // velocity its held corners give it (sum w_c v_c) [m/s]
-    double inv_mass;              // sum w_c^2 / m_c over its free corners [1/kg]
-    double mu;                    // Coulomb friction coefficient, 0 without
-    double jn = 0;                // normal impulse given so far [N s] (never negative)
-    Vec3 jt{0.0};                 // tangential impulse so far (|jt| <= mu jn)
+    int32_t body;                              // its proxy's coupled body, -1 for a kinematic proxy
+    Vec3 r;                                    // from the body's origin to x (coupled) [m]
+    std::array<int32_t, kPointCarriers> slot;  // its free corners' slots, -1 past the last (a node: slot[0], weight 1)
+    std::array<double, kPointCarriers> w;      // their weights
+    Vec3 x;                                    // world position [m]
+    Vec3 n;                                    // outward normal (world)
+    Vec3 vp;                                   // the proxy's velocity at x [m/s]
+    Vec3 v_held;                               // velocity its held corners give it (sum w_c v_c) [m/s]
+    double inv_mass;                           // sum w_c^2 / m_c over its free corners [1/kg]
+    double mu;                                 // Coulomb friction coefficient, 0 without
+    double jn = 0;                             // normal impulse given so far [N s] (never negative)
+    Vec3 jt{0.0};                              // tangential impulse so far (|jt| <= mu jn)
   };
   using Body = CoupledBodyState;
   using Memory = ContactMemory;
@@ -174,6 +181,10 @@ class Contact {
   void find_node_contact(ContactState& cs, int32_t k, int32_t proxy, const Pose& p0, const Pose& p1);
   void find_face_contact(ContactState& cs, int32_t f, int32_t proxy, const Pose& p0, const Pose& p1, double dt);
   void find_embedded_contact(ContactState& cs, int32_t e, int32_t proxy, const Pose& p0, const Pose& p1, double dt);
+  void find_embedded_face_contact(ContactState& cs, int32_t f, int32_t proxy, const Pose& p0, const Pose& p1,
+                                  double dt);
+  // A point with no corners yet.
+  static Point empty_point(int32_t proxy, int32_t body);
   // A corner of a face's or an embedded vertex's point, of weight w: a free
   // node takes its share of the impulse, a held one moves as prescribed.
   void add_corner(const ContactState& cs, Point& c, int& free, size_t slot, double w, double dt) const;
@@ -208,15 +219,34 @@ class Contact {
   std::vector<Face> faces_;          // surface triangles with a free corner, in Morton order of rest centroids
   std::vector<Cluster> face_clusters_;
   std::vector<int32_t> face_cluster_slots_, face_cluster_slot_begin_;  // each face cluster's corners, once each
+  // Clusters of 32 items of the embedded surface (vertices, or triangles),
+  // each cluster's box its items' slots' grown by its pad.
+  struct EmbeddedClusters {
+    std::vector<Cluster> clusters;
+    std::vector<double> pad;             // per cluster: how far its items may stand outside their slots' box [m]
+    std::vector<Vec3> rest_lo, rest_hi;  // per cluster: its slots' box at rest, grown by its pad
+    std::vector<int32_t> slots, slot_begin;
+  };
+  // Items [0, n) in clusters of kClusterNodes: item i's slots and pad from `of(i, slots)` (returns the pad).
+  template <class Of>
+  EmbeddedClusters cluster_embedded(int32_t n, const Of& of) const;
+  // Sets each cluster's box for the step; one whose rest box grown by `reach` meets no proxy's is left empty.
+  void sweep_embedded(EmbeddedClusters& ec, const ContactState& cs, double reach) const;
   // The embedded surface's vertices (instead of nodes and faces), in Morton
-  // order of their rest positions: each one's four slots and weights, in
-  // clusters of 32 whose box is their slots' grown by emb_pad_.
+  // order of their rest positions: each one's four slots and weights; its
+  // triangles in Morton order of their rest centroids, as those vertices,
+  // with the edges whose contacts are theirs (Face::owns_edge).
   std::vector<std::array<int32_t, 4>> emb_slot_;
   std::vector<std::array<double, 4>> emb_w_;
-  std::vector<Cluster> emb_clusters_;
-  std::vector<double> emb_pad_;  // per cluster: how far its vertices may stand outside their slots' box [m]
-  std::vector<Vec3> emb_rest_lo_, emb_rest_hi_;  // per cluster: its slots' box at rest, grown by its pad
-  std::vector<int32_t> emb_cluster_slots_, emb_cluster_slot_begin_;
+  EmbeddedClusters emb_vertices_;
+  std::vector<Face> emb_faces_;  // (slot: its vertices, in emb_slot_'s order)
+  EmbeddedClusters emb_face_clusters_;
+  // Each vertex's positions at t_n and t_{n+1}, worked out once in a step
+  // (when emb_stamp_ is the step's) for its own test and its triangles'.
+  std::vector<std::array<Vec3, 2>> emb_x_;
+  std::vector<uint32_t> emb_stamp_;
+  uint32_t stamp_ = 0;
+  const std::array<Vec3, 2>& embedded_position(const ContactState& cs, size_t v);
   // Workspace of one step.
   std::vector<Vec3> x_now_;                        // world position at t_{n+1} per slot [m]
   std::vector<Vec3> f_now_;                        // contact force on each free slot over this step [N]

@@ -123,12 +123,13 @@ struct ContactState {
 
   // Per surface slot (Contact's numbering: the free surface nodes in Morton
   // order, then the held ones) and per face with a free corner.
-  std::vector<Vec3> x_prev;                    // world position at t_n per slot [m]
-  std::vector<Vec3> f_prev;                    // contact force on each free slot over the previous step [N]
-  std::vector<int32_t> pushed;                 // free slots with a force in the latest step
-  std::vector<ContactMemory> memory;           // per free slot
-  std::vector<ContactMemory> face_memory;      // per face
-  std::vector<ContactMemory> embedded_memory;  // per embedded surface vertex (contact's order)
+  std::vector<Vec3> x_prev;                         // world position at t_n per slot [m]
+  std::vector<Vec3> f_prev;                         // contact force on each free slot over the previous step [N]
+  std::vector<int32_t> pushed;                      // free slots with a force in the latest step
+  std::vector<ContactMemory> memory;                // per free slot
+  std::vector<ContactMemory> face_memory;           // per face
+  std::vector<ContactMemory> embedded_memory;       // per embedded surface vertex (contact's order)
+  std::vector<ContactMemory> embedded_face_memory;  // per embedded surface triangle (contact's order)
 
   std::vector<StiffnessFit> fit;  // per proxy
   // Per device: the fit of a coupled device's force against its own pose,

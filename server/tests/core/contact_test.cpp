@@ -585,6 +585,61 @@ TEST(Contact, AnEmbeddedSurfaceStopsABallWhereItIsSeen) {
   }
 }
 
+// A ball that fits between an embedded surface's vertices (3 mm against a skin 14 mm apart, as a small tool
+// meets a fine surface stretched around it) is stopped by the skin's triangles from the first touch: no
+// vertex is inside it, no triangle lets it through, and the force pushes it back.
+TEST(Contact, AnEmbeddedSurfacesTrianglesHoldABallThatFitsBetweenItsVertices) {
+  for (const bool quadratic : {false, true}) {
+    SCOPED_TRACE(quadratic ? "quadratic" : "linear");
+    ModelSpec spec = block_spec({2, 1, 2});  // 2 cm cells
+    if (quadratic) spec.mesh = make_quadratic_mesh(spec.mesh);
+    spec.essential = {held_box("base", Vec3(0.0), Vec3(0.04, 0.0, 0.04))};
+    spec.surface = skin(spec.mesh, {3, 2, 3});
+    const double r = 0.003, top = 0.021;
+    const Vec3 above(-0.001 + 0.014 * 0.3, top + r + 0.0005, -0.001 + 0.014 * 0.6);  // inside a top triangle
+    spec.proxies = {sphere_proxy("tip", "left", above, r)};
+    const Model<double> model = build_model<double>(spec);
+    Stepper<double> stepper(model);
+    State<double> s = stepper.make_state();
+    const double dt = 0.5 * model.dt_rest;
+    Pose pose = model.proxies[0].pose;
+    const Vec3 velocity(0.0, -0.05, 0.0);
+    double first_force_bottom = -1, force = 0;
+    int32_t embedded = 0;
+    for (int k = 0; k < 100000 && pose.position.y - r > top - 0.0015; ++k) {
+      move_proxy(stepper, s, 0, pose, velocity, s.t, dt);
+      ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+      pose.position += velocity * dt;
+      embedded = std::max(embedded, stepper.contact().embedded_contacts());
+      force = std::max(force, s.contact.reports[0].force.y);
+      if (force > 0 && first_force_bottom < 0) first_force_bottom = pose.position.y - r;
+      EXPECT_GE(s.contact.reports[0].force.y, 0.0);
+    }
+    std::vector<Vec3> given(size_t(model.n_nodes)), fine(spec.surface->rest.vertices.size());
+    for (int32_t i = 0; i < model.n_nodes; ++i) given[size_t(model.node_given[size_t(i)])] = node_position(model, s, i);
+    compute_embedded_positions(*spec.surface, given, fine);
+    // How deep any point of the skin is inside the ball: each triangle sampled on a fine grid.
+    double nearest_vertex = 1, deepest = -1;
+    for (const Vec3& x : fine) nearest_vertex = std::min(nearest_vertex, glm::length(x - pose.position));
+    constexpr int kGrid = 60;
+    for (const Tri& t : spec.surface->rest.triangles)
+      for (int i = 0; i <= kGrid; ++i)
+        for (int j = 0; i + j <= kGrid; ++j) {
+          const double a = double(i) / kGrid, b = double(j) / kGrid;
+          const Vec3 x = (1 - a - b) * fine[size_t(t[0])] + a * fine[size_t(t[1])] + b * fine[size_t(t[2])];
+          deepest = std::max(deepest, r - glm::length(x - pose.position));
+        }
+    std::printf(
+        "  ball r = 3 mm on a skin 14 mm apart: first force with its bottom at %.3f mm (skin at %.1f), peak %.4f N, "
+        "up to %d skin points; nearest vertex %.2f mm from its centre, deepest skin point %.3f mm inside\n",
+        first_force_bottom * 1e3, top * 1e3, force, embedded, nearest_vertex * 1e3, deepest * 1e3);
+    EXPECT_GT(nearest_vertex, r);                 // no vertex inside: the triangles held it
+    EXPECT_GT(first_force_bottom, top - 0.0006);  // from the first touch
+    EXPECT_GT(force, 0.0);
+    EXPECT_LT(deepest, 0.0003);  // and none let it through
+  }
+}
+
 // The momentum an embedded surface's points give the nodes (w_k J / m_k each, weights summing to 1, some
 // negative for the skin outside its tets) is the proxy's reaction, every step: P_{n+1} - P_n =
 // -dt/2 (F_n + F_{n+1}) on a free block, as for nodes and faces.
