@@ -38,8 +38,10 @@ Carried carry_out(const State<Real>& s, std::span<const int32_t> node_given) {
   // elastic energy is another), critical (the new model's own estimate),
   // fault (a body at fault is not carried: live/director.cpp starts anew).
   [[maybe_unused]] const auto& [motion, hand_motion, reports, device_reports, bodies, proxy_body, x_prev, f_prev,
-                                pushed, memory, face_memory, embedded_memory, embedded_face_memory, fit, device_fit,
-                                device_felt, track_nodes, node_impulse, impulse_slots, node_elapsed] = s.contact;
+                                pushed, memory, face_memory, embedded_memory, embedded_face_memory, embedded_lo,
+                                embedded_hi, embedded_group_lo, embedded_group_hi, embedded_refit_at, embedded_drift,
+                                fit, device_fit, device_felt, track_nodes, node_impulse, impulse_slots, node_elapsed] =
+      s.contact;
   // Carried: the motions set for the proxies and hands, and the coupled
   // bodies (Contact::take_bodies re-couples them). Not carried: reports and
   // fits (the next step's), proxy_body (made by coupling), the contact

@@ -145,28 +145,25 @@ template <class Order>
 void Contact<Real>::build_embedded(const std::vector<int32_t>& slot_of, const Order& morton_order) {
   // The vertices in Morton order of their rest positions, each with its four slots.
   const EmbeddedSurface& e = *model_.embedded;
-  std::vector<double> outside;
   std::vector<int32_t> index_of(e.rest.vertices.size());
   for (size_t v : morton_order(e.rest.vertices)) {
     const Tet& t = model_.embedded_nodes[v];
     index_of[v] = int32_t(emb_slot_.size());
     emb_slot_.push_back({slot_of[size_t(t[0])], slot_of[size_t(t[1])], slot_of[size_t(t[2])], slot_of[size_t(t[3])]});
     emb_w_.push_back(e.weights[v]);
-    outside.push_back(e.outside[v]);
   }
-  // A vertex inside its tet lies in its nodes' box; one outside, within its rest distance of the tet, grown
-  // with the tet's stretch (twice, as far as the stability suite lets a body stretch).
+  // A refit when the slots have drifted half a percent of the body's size.
+  const Aabb box = compute_aabb(model_.mesh.X);
+  refit_drift_ = 0.005 * glm::length(box.size());
   emb_x_.resize(emb_slot_.size());
   emb_stamp_.assign(emb_slot_.size(), 0u);
-  emb_vertices_ = cluster_embedded(int32_t(emb_slot_.size()), [&](int32_t v, std::vector<int32_t>& slots) {
-    slots.insert(slots.end(), emb_slot_[size_t(v)].begin(), emb_slot_[size_t(v)].end());
-    return 2.0 * outside[size_t(v)];
-  });
+  emb_vertices_ = cluster_embedded(int32_t(emb_slot_.size()),
+                                   [&](int32_t v, std::vector<int32_t>& vertices) { vertices.push_back(v); });
 
   // The triangles, in Morton order of their rest centroids; an edge's
   // contacts belong to the first that has it. One whose vertices all follow
   // held nodes only has nothing to push.
-  std::vector<Tri> tris;
+  std::vector<Tri> tris, t_of;  // (as the vertices here, and as the surface's)
   std::vector<Vec3> centroids;
   for (const Tri& t : e.rest.triangles) {
     const Tri v{index_of[size_t(t[0])], index_of[size_t(t[1])], index_of[size_t(t[2])]};
@@ -175,6 +172,7 @@ void Contact<Real>::build_embedded(const std::vector<int32_t>& slot_of, const Or
       for (int32_t k : emb_slot_[size_t(i)]) free = free || size_t(k) < free_nodes_.size();
     if (!free) continue;
     tris.push_back(v);
+    t_of.push_back(t);
     centroids.push_back(
         (e.rest.vertices[size_t(t[0])] + e.rest.vertices[size_t(t[1])] + e.rest.vertices[size_t(t[2])]) / 3.0);
   }
@@ -186,14 +184,14 @@ void Contact<Real>::build_embedded(const std::vector<int32_t>& slot_of, const Or
       if (claimed.insert({std::min(a, b), std::max(a, b)}).second) f.owns_edge = uint8_t(f.owns_edge | (1u << c));
     }
     emb_faces_.push_back(f);
+    double longest = 0;
+    for (int c = 0; c < 3; ++c)
+      longest = std::max(longest, glm::length(e.rest.vertices[size_t(t_of[k][size_t(c)])] -
+                                              e.rest.vertices[size_t(t_of[k][size_t((c + 1) % 3)])]));
+    emb_face_slack_.push_back(kEmbeddedFaceSlack * longest);
   }
-  emb_face_clusters_ = cluster_embedded(int32_t(emb_faces_.size()), [&](int32_t f, std::vector<int32_t>& slots) {
-    double pad = 0;
-    for (int32_t v : emb_faces_[size_t(f)].slot) {
-      slots.insert(slots.end(), emb_slot_[size_t(v)].begin(), emb_slot_[size_t(v)].end());
-      pad = std::max(pad, 2.0 * outside[size_t(v)]);
-    }
-    return pad;
+  emb_face_clusters_ = cluster_embedded(int32_t(emb_faces_.size()), [&](int32_t f, std::vector<int32_t>& vertices) {
+    vertices.insert(vertices.end(), emb_faces_[size_t(f)].slot.begin(), emb_faces_[size_t(f)].slot.end());
   });
 }
 
@@ -201,48 +199,84 @@ template <class Real>
 template <class Of>
 typename Contact<Real>::EmbeddedClusters Contact<Real>::cluster_embedded(int32_t n, const Of& of) const {
   EmbeddedClusters ec;
-  ec.slot_begin.push_back(0);
-  for (int32_t b = 0; b < n; b += kClusterNodes) {
-    const int32_t end = std::min(n, b + kClusterNodes);
+  ec.group_begin.push_back(0);
+  ec.vertex_begin.push_back(0);
+  for (int32_t b = 0; b < n; b += kEmbeddedClusterItems) {
+    const int32_t end = std::min(n, b + kEmbeddedClusterItems);
     ec.clusters.push_back({b, end, {}, {}});
-    double pad = 0;
-    std::vector<int32_t> slots;
-    for (int32_t i = b; i < end; ++i) pad = std::max(pad, of(i, slots));
-    std::sort(slots.begin(), slots.end());
-    slots.erase(std::unique(slots.begin(), slots.end()), slots.end());
-    ec.slots.insert(ec.slots.end(), slots.begin(), slots.end());
-    ec.slot_begin.push_back(int32_t(ec.slots.size()));
-    ec.pad.push_back(pad);
-    Vec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
-    for (int32_t k : slots) {
-      lo = glm::min(lo, model_.mesh.X[size_t(slot_node_[size_t(k)])]);
-      hi = glm::max(hi, model_.mesh.X[size_t(slot_node_[size_t(k)])]);
+    double gain = 0;
+    for (int32_t gb = b; gb < end; gb += kGroupItems) {
+      const int32_t ge = std::min(end, gb + kGroupItems);
+      std::vector<int32_t> vertices;
+      for (int32_t i = gb; i < ge; ++i) of(i, vertices);
+      std::sort(vertices.begin(), vertices.end());
+      vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
+      for (int32_t v : vertices) {
+        double sum = 0;
+        for (double w : emb_w_[size_t(v)]) sum += std::fabs(w);
+        gain = std::max(gain, sum);
+      }
+      ec.group_items.push_back({gb, ge});
+      ec.vertices.insert(ec.vertices.end(), vertices.begin(), vertices.end());
+      ec.vertex_begin.push_back(int32_t(ec.vertices.size()));
     }
-    ec.rest_lo.push_back(lo - Vec3(pad));
-    ec.rest_hi.push_back(hi + Vec3(pad));
+    ec.group_begin.push_back(int32_t(ec.group_items.size()));
+    ec.gain.push_back(gain);
   }
   return ec;
 }
 
 template <class Real>
-void Contact<Real>::sweep_embedded(EmbeddedClusters& ec, const ContactState& cs, double reach) const {
+void Contact<Real>::sweep_embedded(EmbeddedClusters& ec, ContactState& cs, size_t first, size_t first_group) {
   constexpr double inf = std::numeric_limits<double>::infinity();
   const size_t n_proxies = model_.proxies.size();
   for (size_t j = 0; j < ec.clusters.size(); ++j) {
-    Cluster& c = ec.clusters[j];
-    c.lo = Vec3(inf);
-    c.hi = Vec3(-inf);
-    bool near = false;
-    for (size_t p = 0; p < n_proxies && !near; ++p)
-      near = boxes_meet(ec.rest_lo[j] - Vec3(reach), ec.rest_hi[j] + Vec3(reach), lo_[p], hi_[p]);
-    if (!near) continue;
-    for (int32_t m = ec.slot_begin[j]; m < ec.slot_begin[j + 1]; ++m) {
-      const auto k = size_t(ec.slots[size_t(m)]);
-      c.lo = glm::min(c.lo, glm::min(x_now_[k], cs.x_prev[k]));
-      c.hi = glm::max(c.hi, glm::max(x_now_[k], cs.x_prev[k]));
+    Vec3& lo = cs.embedded_lo[first + j];
+    Vec3& hi = cs.embedded_hi[first + j];
+    double& at = cs.embedded_refit_at[first + j];
+    // A vertex moves at most sum_k |w_k| times as far as its nodes.
+    Vec3 grow(ec.gain[j] * (cs.embedded_drift - at));
+    if (!(cs.embedded_drift - at <= refit_drift_)) {
+      bool near = false;
+      for (size_t p = 0; p < n_proxies && !near; ++p) near = boxes_meet(lo - grow, hi + grow, lo_[p], hi_[p]);
+      if (near) {  // refitted to both ends of this step
+        at = cs.embedded_drift;
+        grow = Vec3(0.0);
+        lo = Vec3(inf);
+        hi = Vec3(-inf);
+        for (int32_t g = ec.group_begin[j]; g < ec.group_begin[j + 1]; ++g) {
+          Vec3& glo = cs.embedded_group_lo[first_group + size_t(g)];
+          Vec3& ghi = cs.embedded_group_hi[first_group + size_t(g)];
+          glo = Vec3(inf);
+          ghi = Vec3(-inf);
+          for (int32_t m = ec.vertex_begin[size_t(g)]; m < ec.vertex_begin[size_t(g) + 1]; ++m) {
+            const std::array<Vec3, 2>& x = embedded_position(cs, size_t(ec.vertices[size_t(m)]));
+            glo = glm::min(glo, glm::min(x[0], x[1]));
+            ghi = glm::max(ghi, glm::max(x[0], x[1]));
+          }
+          lo = glm::min(lo, glo);
+          hi = glm::max(hi, ghi);
+        }
+      }
     }
-    c.lo -= Vec3(ec.pad[j]);
-    c.hi += Vec3(ec.pad[j]);
+    ec.clusters[j].lo = lo - grow;
+    ec.clusters[j].hi = hi + grow;
+  }
+}
+
+template <class Real>
+template <class Visit>
+void Contact<Real>::visit_embedded(const EmbeddedClusters& ec, const ContactState& cs, size_t first, size_t first_group,
+                                   size_t proxy, const Visit& visit) const {
+  for (size_t j = 0; j < ec.clusters.size(); ++j) {
+    const Cluster& c = ec.clusters[j];
+    if (!boxes_meet(c.lo, c.hi, lo_[proxy], hi_[proxy])) continue;
+    const Vec3 grow(ec.gain[j] * (cs.embedded_drift - cs.embedded_refit_at[first + j]));
+    for (int32_t g = ec.group_begin[j]; g < ec.group_begin[j + 1]; ++g) {
+      const size_t k = first_group + size_t(g);
+      if (!boxes_meet(cs.embedded_group_lo[k] - grow, cs.embedded_group_hi[k] + grow, lo_[proxy], hi_[proxy])) continue;
+      for (int32_t i = ec.group_items[size_t(g)][0]; i < ec.group_items[size_t(g)][1]; ++i) visit(i);
+    }
   }
 }
 
@@ -306,6 +340,12 @@ void Contact<Real>::init(ContactState& cs) const {
   cs.face_memory.assign(faces_.size(), Memory{});
   cs.embedded_memory.assign(emb_slot_.size(), Memory{});
   cs.embedded_face_memory.assign(emb_faces_.size(), Memory{});
+  cs.embedded_lo.assign(emb_vertices_.clusters.size() + emb_face_clusters_.clusters.size(), Vec3(0.0));
+  cs.embedded_hi = cs.embedded_lo;
+  cs.embedded_group_lo.assign(emb_vertices_.group_items.size() + emb_face_clusters_.group_items.size(), Vec3(0.0));
+  cs.embedded_group_hi = cs.embedded_group_lo;
+  cs.embedded_refit_at.assign(cs.embedded_lo.size(), -std::numeric_limits<double>::infinity());
+  cs.embedded_drift = 0;
   cs.fit.resize(n_proxies);
   cs.device_fit.resize(model_.devices.size());
   cs.device_felt.assign(model_.devices.size(), glm::dmat3(0.0));
@@ -361,6 +401,7 @@ void Contact<Real>::start(State<Real>& s) const {
   std::fill(cs.face_memory.begin(), cs.face_memory.end(), Memory{});
   std::fill(cs.embedded_memory.begin(), cs.embedded_memory.end(), Memory{});
   std::fill(cs.embedded_face_memory.begin(), cs.embedded_face_memory.end(), Memory{});
+  std::fill(cs.embedded_refit_at.begin(), cs.embedded_refit_at.end(), -std::numeric_limits<double>::infinity());
   for (Fit& f : cs.fit) f = Fit{};
   for (Fit& f : cs.device_fit) f = Fit{};
   std::fill(cs.device_felt.begin(), cs.device_felt.end(), glm::dmat3(0.0));
@@ -495,14 +536,12 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   }
 
   // Positions at t_{n+1}, and boxes around each cluster's motion over the step.
-  // With an embedded surface, also how far any slot has moved from rest, at
-  // either end of the step: the bound its clusters' boxes are culled by.
-  double reach2 = 0;
+  // With an embedded surface, also the largest move of any slot over the step.
+  double move2 = 0;
   for (size_t k = 0; k < slot_node_.size(); ++k) {
-    const Vec3& X = model_.mesh.X[size_t(slot_node_[k])];
-    x_now_[k] = position(s, X, slot_node_[k]);
+    x_now_[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
     if (!emb_vertices_.clusters.empty())
-      reach2 = std::max({reach2, glm::dot(x_now_[k] - X, x_now_[k] - X), glm::dot(cs.x_prev[k] - X, cs.x_prev[k] - X)});
+      move2 = std::max(move2, glm::dot(x_now_[k] - cs.x_prev[k], x_now_[k] - cs.x_prev[k]));
   }
   const auto sweep = [&](Cluster& c, int32_t k) {
     c.lo = glm::min(c.lo, glm::min(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
@@ -554,18 +593,20 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     lo_[j] = glm::min(b0.lo, b1.lo);
     hi_[j] = glm::max(b0.hi, b1.hi);
   }
-  // The embedded surface's clusters: a cluster's slots lie within `reach` of
-  // their rest box, so one whose rest box so grown meets no proxy's box is
-  // left empty without a look at its slots (each slot is in several
-  // clusters, so exact boxes for all of them cost most of the embedding's
-  // step; embedding_bench guards this).
-  const double reach = std::sqrt(reach2);
+  // The embedded surface's clusters: each slot is in several, so exact
+  // boxes every step would cost most of the embedding's step. A cluster's
+  // box is grown each step by the largest move of any slot (so that no
+  // vertex can have left it), and refitted to its vertices when it has grown
+  // by refit_drift_ and meets a proxy's box.
   if (++stamp_ == 0) {  // (wrapped: no vertex may keep a stamp that looks current)
     std::fill(emb_stamp_.begin(), emb_stamp_.end(), 0u);
     stamp_ = 1;
   }
-  sweep_embedded(emb_vertices_, cs, reach);
-  sweep_embedded(emb_face_clusters_, cs, reach);
+  if (!emb_vertices_.clusters.empty()) {
+    cs.embedded_drift += std::sqrt(move2);
+    sweep_embedded(emb_vertices_, cs, 0, 0);
+    sweep_embedded(emb_face_clusters_, cs, emb_vertices_.clusters.size(), emb_vertices_.group_items.size());
+  }
   node_contacts_ = face_contacts_ = embedded_contacts_ = 0;
   points_.clear();
   for (const Cluster& c : clusters_)
@@ -603,16 +644,15 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     }
 
   // The embedded surface's vertices and triangles (in place of the nodes and faces above, which it then has none of).
-  for (const Cluster& c : emb_vertices_.clusters)
-    for (size_t j = 0; j < n_proxies; ++j) {
-      if (!boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
-      for (int32_t e = c.begin; e < c.end; ++e) find_embedded_contact(cs, e, int32_t(j), pose0_[j], pose1_[j], dt);
-    }
-  for (const Cluster& c : emb_face_clusters_.clusters)
-    for (size_t j = 0; j < n_proxies; ++j) {
-      if (model_.proxies[j].geometry.shape == ProxyShape::Plane || !boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
-      for (int32_t f = c.begin; f < c.end; ++f) find_embedded_face_contact(cs, f, int32_t(j), pose0_[j], pose1_[j], dt);
-    }
+  // Each in clusters of 32, and in those in groups of 8 (core/contact.hpp).
+  const size_t face_groups = emb_vertices_.group_items.size();
+  for (size_t j = 0; j < n_proxies; ++j) {
+    visit_embedded(emb_vertices_, cs, 0, 0, j,
+                   [&](int32_t e) { find_embedded_contact(cs, e, int32_t(j), pose0_[j], pose1_[j], dt); });
+    if (model_.proxies[j].geometry.shape == ProxyShape::Plane) continue;  // (deepest at a vertex)
+    visit_embedded(emb_face_clusters_, cs, emb_vertices_.clusters.size(), face_groups, j,
+                   [&](int32_t f) { find_embedded_face_contact(cs, f, int32_t(j), pose0_[j], pose1_[j], dt); });
+  }
 
   // The impulses, then the velocity changes they make: by eq. (9),
   // v_{n+1} = v_half + dt/2 a_{n+1}, so a moves by 2 dv / dt; by eq. (10)
@@ -935,8 +975,12 @@ void Contact<Real>::find_embedded_face_contact(ContactState& cs, int32_t f, int3
     if (mem.proxy == proxy) mem.proxy = -1;
     return;
   }
-  for (size_t j = 0; j < 3; ++j) q[j] = p1.to_local(x1[j]);
-  if (locate(g, q[0]).phi <= 0 && locate(g, q[1]).phi <= 0 && locate(g, q[2]).phi <= 0) return;
+  std::array<double, 3> phi;
+  for (size_t j = 0; j < 3; ++j) {
+    q[j] = p1.to_local(x1[j]);
+    phi[j] = locate(g, q[j]).phi;
+  }
+  if (phi[0] <= 0 && phi[1] <= 0 && phi[2] <= 0) return;
   if (g.shape == ProxyShape::Box)
     for (int k = 0; k < 3; ++k) {
       const double reach = g.half_extents[k] + g.radius;
@@ -953,6 +997,9 @@ void Contact<Real>::find_embedded_face_contact(ContactState& cs, int32_t f, int3
     if (mem.proxy == proxy) mem.proxy = -1;
     return;
   }
+  // Within its slack of a vertex inside the proxy, that vertex's contact holds it.
+  const double held = std::max({-phi[0], -phi[1], -phi[2]});
+  if (held >= 0 && -at1.phi <= held + emb_face_slack_[size_t(f)]) return;
   if (zeros == 1 && !(face.owns_edge & (1u << (b.x == 0 ? 0 : b.y == 0 ? 1 : 2)))) return;
   // Its nodes, each once: a node two vertices follow takes the sum of their weights.
   std::array<int32_t, kPointCarriers> slot;

@@ -42,11 +42,12 @@
 // nodes too), given its impulse by the same rule as a face's point, dv_k =
 // w_k J / m_k, and its opposite summed back to the proxy. A tool smaller than
 // a coarse cell then stops at the surface the user sees. Its triangles are
-// tested as the boundary's are, at their deepest point in the proxy: a small
-// tool pressed deep stretches the triangles around it (on quadratic tets,
-// several times their rest size) and would pass between their vertices. Such
-// a point is sum_j b_j x_j over the triangle's vertices, so sum_j b_j w_jk
-// over up to twelve nodes (kPointCarriers), each node once.
+// tested as the boundary's are, at their deepest point in the proxy (where a
+// vertex is inside too: deeper than it by a tenth of their size): a small tool
+// pressed deep stretches the triangles around it (on quadratic tets, several
+// times their rest size) and would pass between their vertices. Such a point
+// is sum_j b_j x_j over the triangle's vertices, so sum_j b_j w_jk over up to
+// twelve nodes (kPointCarriers), each node once.
 //
 // Broad phase: surface nodes in clusters of 32 (Morton order of rest
 // positions), each with a box around its nodes' motion over the step; only
@@ -219,19 +220,30 @@ class Contact {
   std::vector<Face> faces_;          // surface triangles with a free corner, in Morton order of rest centroids
   std::vector<Cluster> face_clusters_;
   std::vector<int32_t> face_cluster_slots_, face_cluster_slot_begin_;  // each face cluster's corners, once each
-  // Clusters of 32 items of the embedded surface (vertices, or triangles),
-  // each cluster's box its items' slots' grown by its pad.
+  // Items of the embedded surface (vertices, or triangles) in clusters of
+  // 128, each in groups of 8: a cluster's box is its groups', a group's its
+  // items' vertices'. A cluster near a proxy has its groups tested, a group
+  // near it its items.
+  static constexpr int32_t kEmbeddedClusterItems = 128, kGroupItems = 8;
   struct EmbeddedClusters {
     std::vector<Cluster> clusters;
-    std::vector<double> pad;             // per cluster: how far its items may stand outside their slots' box [m]
-    std::vector<Vec3> rest_lo, rest_hi;  // per cluster: its slots' box at rest, grown by its pad
-    std::vector<int32_t> slots, slot_begin;
+    std::vector<int32_t> group_begin;                 // per cluster: its first group (one more at the end)
+    std::vector<std::array<int32_t, 2>> group_items;  // per group: its items [begin, end)
+    std::vector<int32_t> vertices, vertex_begin;      // per group: its items' vertices, once each
+    std::vector<double> gain;                         // per cluster: the most sum_k |w_k| of those vertices
   };
-  // Items [0, n) in clusters of kClusterNodes: item i's slots and pad from `of(i, slots)` (returns the pad).
+  // Items [0, n): item i's vertices from `of(i, vertices)`.
   template <class Of>
   EmbeddedClusters cluster_embedded(int32_t n, const Of& of) const;
-  // Sets each cluster's box for the step; one whose rest box grown by `reach` meets no proxy's is left empty.
-  void sweep_embedded(EmbeddedClusters& ec, const ContactState& cs, double reach) const;
+  // Sets each cluster's box for the step: its box at its last refit (first,
+  // first_group: its clusters' and groups' indices in cs.embedded_lo and
+  // cs.embedded_group_lo), grown by the drift since; refits one that has
+  // drifted refit_drift_ and meets a proxy's box.
+  void sweep_embedded(EmbeddedClusters& ec, ContactState& cs, size_t first, size_t first_group);
+  // Calls visit(item) for each item in a group whose grown box meets proxy's.
+  template <class Visit>
+  void visit_embedded(const EmbeddedClusters& ec, const ContactState& cs, size_t first, size_t first_group,
+                      size_t proxy, const Visit& visit) const;
   // The embedded surface's vertices (instead of nodes and faces), in Morton
   // order of their rest positions: each one's four slots and weights; its
   // triangles in Morton order of their rest centroids, as those vertices,
@@ -240,12 +252,25 @@ class Contact {
   std::vector<std::array<double, 4>> emb_w_;
   EmbeddedClusters emb_vertices_;
   std::vector<Face> emb_faces_;  // (slot: its vertices, in emb_slot_'s order)
+  // A triangle with a vertex inside the proxy has its point added where it
+  // is deeper than that vertex by more than this fraction of its longest
+  // edge at rest: short of that, the vertex's contact holds it within a
+  // tenth of its size (as the vertices alone did), and a point on every
+  // triangle of a held press would only slow the solve, each sharing its
+  // nodes with its vertices' points.
+  static constexpr double kEmbeddedFaceSlack = 0.1;
+  std::vector<double> emb_face_slack_;  // per triangle [m]
   EmbeddedClusters emb_face_clusters_;
   // Each vertex's positions at t_n and t_{n+1}, worked out once in a step
   // (when emb_stamp_ is the step's) for its own test and its triangles'.
   std::vector<std::array<Vec3, 2>> emb_x_;
   std::vector<uint32_t> emb_stamp_;
   uint32_t stamp_ = 0;
+  // The drift past which a cluster's box is refitted [m]: each step grows
+  // the boxes by the largest move of any slot, so that they need their
+  // vertices only now and then, and only near a proxy (embedding_bench
+  // guards this).
+  double refit_drift_ = 0;
   const std::array<Vec3, 2>& embedded_position(const ContactState& cs, size_t v);
   // Workspace of one step.
   std::vector<Vec3> x_now_;                        // world position at t_{n+1} per slot [m]

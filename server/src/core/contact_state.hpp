@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include <glm/mat3x3.hpp>
@@ -130,6 +131,15 @@ struct ContactState {
   std::vector<ContactMemory> face_memory;           // per face
   std::vector<ContactMemory> embedded_memory;       // per embedded surface vertex (contact's order)
   std::vector<ContactMemory> embedded_face_memory;  // per embedded surface triangle (contact's order)
+  // The embedded surface's clusters (its vertices', then its triangles'):
+  // each one's box at its last refit (its vertices at both ends of that
+  // step), its groups' likewise, and the drift then; the drift is the sum of
+  // each step's largest move of any slot since the state started [m], so a
+  // box has to grow by the difference (-infinity: refit at the next step).
+  std::vector<Vec3> embedded_lo, embedded_hi;
+  std::vector<Vec3> embedded_group_lo, embedded_group_hi;
+  std::vector<double> embedded_refit_at;
+  double embedded_drift = 0;
 
   std::vector<StiffnessFit> fit;  // per proxy
   // Per device: the fit of a coupled device's force against its own pose,
