@@ -3,6 +3,7 @@ surface holds it, the force it rises to, and the cost.
 
   .venv/bin/python server/bench/organ_press.py            # three presses (about a minute)
   .venv/bin/python server/bench/organ_press.py --sim OTHER/tactile-sim   # another build's, to compare
+  .venv/bin/python server/bench/organ_press.py --study     # P1 and P2 on a coarser organ (about 2 minutes)
 
 Each case runs organ.json headless (`tactile-sim`) with its mesh and element changed and the stylus scripted
 straight down from where it waits, at a constant speed, to a depth, and held there for a tenth of the time;
@@ -10,12 +11,19 @@ the mouse's sphere is removed. A press goes through when the force, having risen
 time on while the stylus is still inside the organ's rest shape. The cost is wall seconds of stepping per
 simulated second on one core (under 1 is real time), from the run's own summary. Figures in docs/perf.md (A
 small tool pressed deep into a fine surface).
+
+--study: which element the organ should run on. TetGen cannot mesh the shipped coarse surface (icosphere level
+2) below about 2 900 tets; level 1 (80 triangles, its radii scaled to enclose the fine surface's volume:
+make_organ.py's volume_matched_scale) goes down to about 500. On it, the stylus is pressed 1 cm and held, on
+P1 and P2 meshes of several sizes, against P2 on the finest: the mean force over the hold, its error, and the
+cost.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import importlib.util
 import json
 import pathlib
 import subprocess
@@ -29,6 +37,15 @@ START = [0.03, 0.115, 0.0]  # where organ.json's stylus waits, 2 cm above the or
 
 
 SIM = ROOT / "build" / "release" / "tactile-sim"
+
+
+def make_organ() -> Any:
+    """server/scenes/meshes/make_organ.py, as a module."""
+    spec = importlib.util.spec_from_file_location("make_organ", SCENES / "meshes" / "make_organ.py")
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def case(element: str, max_volume: float, to_y: float, seconds: float) -> dict[str, Any]:
@@ -70,13 +87,48 @@ CASES = [("P2, max_volume 1.2e-5, 1 cm press", "p2", 1.2e-5, 0.079, 1.0),
          ("P1, shipped max_volume 3e-6, 3.5 cm press", "p1", 3e-6, 0.060, 2.0)]
 
 
+# --study: (label, element, max_volume); the last is the reference.
+STUDY = [("P1, max_volume 3e-6", "p1", 3e-6), ("P1, max_volume 1e-6", "p1", 1e-6),
+         ("P1, max_volume 3e-7", "p1", 3e-7), ("P2, max_volume 1e-4", "p2", 1e-4),
+         ("P2, max_volume 3e-5", "p2", 3e-5), ("P2, max_volume 1e-5", "p2", 1e-5),
+         ("reference: P2, max_volume 1e-6", "p2", 1e-6)]
+
+
+def study(sim: pathlib.Path) -> None:
+    organ = make_organ()
+    scale = organ.volume_matched_scale(1)
+    print(f"\norgan on icosphere level 1 (radii x {scale:.4f}): the stylus pressed 1 cm in 1 s and held 0.5 s\n")
+    print("| mesh | tets | nodes | force N (the hold's mean) | error | wall s per simulated s |")
+    print("|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        coarse = pathlib.Path(tmp) / "organ_coarse_level1.obj"
+        organ.write(coarse, 1, scale)
+        rows = []
+        for k, (label, element, max_volume) in enumerate(STUDY):
+            s = case(element, max_volume, 0.079, 1.0)
+            s["mesh"]["file"] = str(coarse)
+            s["run"]["duration"] = 1.5
+            r = run(sim, pathlib.Path(tmp), s, f"organ_study_{k}")
+            hold = [f for t, f in r["force"] if t >= 1.1]
+            rows.append((label, r, sum(hold) / len(hold)))
+        ref = rows[-1][2]
+        for label, r, force in rows:
+            cost = r["performance"]["wall_s"] / r["run"]["t_end_s"]
+            print(f"| {label} | {r['mesh']['tets']} | {r['mesh']['nodes']} | {force:.3f} | "
+                  f"{100 * (force / ref - 1):+.0f} % | {cost:.2f} |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sim", type=pathlib.Path, default=SIM, help="the tactile-sim to run (default: this build's)")
+    parser.add_argument("--study", action="store_true", help="P1 and P2 on a coarser organ, against a reference")
     args = parser.parse_args()
     if not args.sim.exists():
         sys.exit(f"{args.sim} is not built: run scripts/setup.sh")
     print(f"\n{args.sim}")
+    if args.study:
+        study(args.sim)
+        return
     print("\norgan: the stylus (6 mm) scripted straight down into the fine surface\n")
     print("| case | tets | held | peak force N | mean force over the last fifth N | wall s per simulated s |")
     print("|---|---|---|---|---|---|")

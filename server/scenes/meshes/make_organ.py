@@ -58,16 +58,42 @@ def normalize(v: tuple[float, float, float]) -> tuple[float, float, float]:
     return (v[0] / n, v[1] / n, v[2] / n)
 
 
-def write(path: pathlib.Path, level: int) -> None:
+def points(level: int, scale: float = 1.0) -> tuple[list[list[float]], list[tuple[int, int, int]]]:
+    """The surface sampled at icosphere `level`, its radii times `scale`: vertices [m] and triangles."""
     verts, faces = icosphere(level)
-    lines = [f"# organ-like lobe, icosphere level {level}: {len(verts)} vertices, {len(faces)} triangles",
-             "# written by make_organ.py (a formula: no scan)"]
+    pts = []
     for d in verts:
-        s = radius_scale(d)
-        p = [CENTRE[i] + SEMI_AXES[i] * s * d[i] for i in range(3)]
+        s = radius_scale(d) if scale == 1.0 else radius_scale(d) * scale
+        pts.append([CENTRE[i] + SEMI_AXES[i] * s * d[i] for i in range(3)])
+    return pts, faces
+
+
+def volume(level: int, scale: float = 1.0) -> float:
+    """The volume the surface sampled at `level` encloses [m^3] (a coarse sampling's is less: it is inscribed)."""
+    pts, faces = points(level, scale)
+    total = 0.0
+    for a, b, c in faces:
+        p, q, r = pts[a], pts[b], pts[c]
+        total += (p[0] * (q[1] * r[2] - q[2] * r[1]) - p[1] * (q[0] * r[2] - q[2] * r[0])
+                  + p[2] * (q[0] * r[1] - q[1] * r[0]))
+    return total / 6.0
+
+
+def write(path: pathlib.Path, level: int, scale: float = 1.0) -> None:
+    """Writes the surface at `level`, its radii times `scale` (volume_matched_scale: as much volume as FINE's)."""
+    pts, faces = points(level, scale)
+    lines = [f"# organ-like lobe, icosphere level {level}: {len(pts)} vertices, {len(faces)} triangles"
+             + (f", radii x {scale:.5f}" if scale != 1.0 else ""),
+             "# written by make_organ.py (a formula: no scan)"]
+    for p in pts:
         lines.append("v %.7f %.7f %.7f" % tuple(p))
     lines += ["f %d %d %d" % (a + 1, b + 1, c + 1) for a, b, c in faces]  # wound outward, as the icosphere is
     path.write_text("\n".join(lines) + "\n")
+
+
+def volume_matched_scale(level: int) -> float:
+    """The factor on the radii that gives the surface at `level` the fine surface's volume."""
+    return (volume(FINE) / volume(level)) ** (1.0 / 3.0)
 
 
 def main() -> None:
