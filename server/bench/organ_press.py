@@ -22,21 +22,16 @@ cost.
 from __future__ import annotations
 
 import argparse
-import csv
 import importlib.util
 import json
 import pathlib
-import subprocess
 import sys
 import tempfile
 from typing import Any
 
-ROOT = pathlib.Path(__file__).resolve().parents[2]
-SCENES = ROOT / "server" / "scenes"
+from headless import SCENES, SIM, run_scene
+
 START = [0.03, 0.115, 0.0]  # where organ.json's stylus waits, 2 cm above the organ's top
-
-
-SIM = ROOT / "build" / "release" / "tactile-sim"
 
 
 def make_organ() -> Any:
@@ -64,19 +59,7 @@ def case(element: str, max_volume: float, to_y: float, seconds: float) -> dict[s
 
 def run(sim: pathlib.Path, folder: pathlib.Path, scene: dict[str, Any], name: str) -> dict[str, Any]:
     """Runs `scene` headless: its summary, and the stylus's force over time."""
-    scene = dict(scene, name=name)
-    path = SCENES / f"_bench_{name}.json"  # beside the shipped scenes: their meshes are relative to it
-    path.write_text(json.dumps(scene))
-    try:
-        out = subprocess.run([str(sim), "run", str(path), "--out", str(folder), "--no-vtu", "--quiet"],
-                             capture_output=True, text=True, check=False)
-    finally:
-        path.unlink()
-    if out.returncode != 0:
-        sys.exit(f"{name}: {out.stderr}")
-    folder = folder / name / "run"
-    summary: dict[str, Any] = json.loads((folder / "summary.json").read_text())
-    rows = [r for r in csv.DictReader((folder / "forces.csv").open()) if r["device"] == "stylus"]
+    summary, rows = run_scene(folder, scene, name, sim)
     summary["force"] = [(float(r["sim_time_s"]), abs(float(r["fy_N"]))) for r in rows]
     return summary
 

@@ -13,43 +13,20 @@ the live scenes).
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import pathlib
-import subprocess
-import sys
 import tempfile
 from typing import Any
 
-ROOT = pathlib.Path(__file__).resolve().parents[2]
-SCENES = ROOT / "server" / "scenes"
-
-
-def _sim() -> str:
-    exe = ROOT / "build" / "release" / "tactile-sim"
-    if not exe.exists():
-        sys.exit(f"{exe} is not built: run scripts/setup.sh")
-    return str(exe)
+from headless import SCENES, run_scene
 
 
 def run(folder: pathlib.Path, scene: dict[str, Any], name: str) -> dict[str, Any]:
-    """Runs `scene` headless; its summary, and the stylus proxy's last force [N]."""
-    scene = dict(scene, name=name)
-    path = SCENES / f"_bench_{name}.json"  # beside the shipped scenes: their meshes are relative to it
-    path.write_text(json.dumps(scene))
-    try:
-        out = subprocess.run([_sim(), "run", str(path), "--out", str(folder), "--no-vtu", "--quiet"],
-                             capture_output=True, text=True, check=False)
-    finally:
-        path.unlink()
-    if out.returncode != 0:
-        sys.exit(f"{name}: {out.stderr}")
-    folder = folder / name / "run"
-    summary = json.loads((folder / "summary.json").read_text())
-    rows = [r for r in csv.DictReader((folder / "forces.csv").open()) if r["device"] == "stylus"]
+    """Runs `scene` headless; its summary, and the stylus proxy's force held (the mean over the last quarter)."""
+    summary, rows = run_scene(folder, scene, name)
     t_end = float(rows[-1]["sim_time_s"])
     hold = [abs(float(r["fy_N"])) for r in rows if float(r["sim_time_s"]) >= 0.75 * t_end]
-    summary["stylus_force_N"] = sum(hold) / len(hold)  # the mean over the last quarter, held
+    summary["stylus_force_N"] = sum(hold) / len(hold)
     return summary
 
 

@@ -833,6 +833,34 @@ void Contact<Real>::find_node_contact(ContactState& cs, int32_t k, int32_t proxy
 }
 
 template <class Real>
+bool Contact<Real>::triangle_point(const ProxyGeometry& g, const std::array<Vec3, 3>& q,
+                                   const std::array<double, 3>& phi, uint8_t owns_edge, Memory& mem, int32_t proxy,
+                                   TrianglePoint& out) {
+  // Cheap ways out first. A triangle whose corners are all inside lies inside
+  // (the shape is convex): its corners' contacts hold it. A box whose slab
+  // (with its rounding) leaves all three corners on one side cannot reach it.
+  if (phi[0] <= 0 && phi[1] <= 0 && phi[2] <= 0) return false;
+  if (g.shape == ProxyShape::Box)
+    for (int k = 0; k < 3; ++k) {
+      const double reach = g.half_extents[k] + g.radius;
+      if (std::min({q[0][k], q[1][k], q[2][k]}) > reach || std::max({q[0][k], q[1][k], q[2][k]}) < -reach) {
+        if (mem.proxy == proxy) mem.proxy = -1;
+        return false;
+      }
+    }
+  out.b = deepest_on_triangle(g, q[0], q[1], q[2]);
+  const Vec3& b = out.b;
+  const int zeros = int(b.x == 0) + int(b.y == 0) + int(b.z == 0);
+  out.q = b.x * q[0] + b.y * q[1] + b.z * q[2];
+  out.at = locate(g, out.q);
+  if (out.at.phi > 0 || zeros >= 2) {  // outside, or deepest at a corner: the corner's own contact
+    if (mem.proxy == proxy) mem.proxy = -1;
+    return false;
+  }
+  return zeros == 0 || (owns_edge & (1u << (b.x == 0 ? 0 : b.y == 0 ? 1 : 2)));  // else its edge's other triangle's
+}
+
+template <class Real>
 void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy, const Pose& p0, const Pose& p1,
                                       double dt) {
   const ProxySpec& spec = model_.proxies[size_t(proxy)];
@@ -840,28 +868,16 @@ void Contact<Real>::find_face_contact(ContactState& cs, int32_t f, int32_t proxy
   const Face& face = faces_[size_t(f)];
   Memory& mem = cs.face_memory[size_t(f)];
   std::array<Vec3, 3> q;
-  for (size_t c = 0; c < 3; ++c) q[c] = p1.to_local(x_now_[size_t(face.slot[c])]);
-  // Cheap ways out first. A face whose corners are all inside lies inside
-  // (the shape is convex): its nodes' contacts hold it. A box whose slab
-  // (with its rounding) leaves all three corners on one side cannot reach it.
-  if (locate(g, q[0]).phi <= 0 && locate(g, q[1]).phi <= 0 && locate(g, q[2]).phi <= 0) return;
-  if (g.shape == ProxyShape::Box)
-    for (int k = 0; k < 3; ++k) {
-      const double reach = g.half_extents[k] + g.radius;
-      if (std::min({q[0][k], q[1][k], q[2][k]}) > reach || std::max({q[0][k], q[1][k], q[2][k]}) < -reach) {
-        if (mem.proxy == proxy) mem.proxy = -1;
-        return;
-      }
-    }
-  const Vec3 w = deepest_on_triangle(g, q[0], q[1], q[2]);
-  const int zeros = int(w.x == 0) + int(w.y == 0) + int(w.z == 0);
-  const Vec3 q1 = w.x * q[0] + w.y * q[1] + w.z * q[2];
-  const SurfacePoint at1 = locate(g, q1);
-  if (at1.phi > 0 || zeros >= 2) {  // outside, or deepest at a corner: the node's own contact
-    if (mem.proxy == proxy) mem.proxy = -1;
-    return;
+  std::array<double, 3> phi;
+  for (size_t c = 0; c < 3; ++c) {
+    q[c] = p1.to_local(x_now_[size_t(face.slot[c])]);
+    phi[c] = locate(g, q[c]).phi;
   }
-  if (zeros == 1 && !(face.owns_edge & (1u << (w.x == 0 ? 0 : w.y == 0 ? 1 : 2)))) return;  // its edge's other face's
+  TrianglePoint tp;
+  if (!triangle_point(g, q, phi, face.owns_edge, mem, proxy, tp)) return;
+  const Vec3& w = tp.b;
+  const Vec3& q1 = tp.q;
+  const SurfacePoint& at1 = tp.at;
   Point c = empty_point(proxy, cs.proxy_body[size_t(proxy)]);
   Vec3 x0(0.0);
   int free = 0;
@@ -980,27 +996,14 @@ void Contact<Real>::find_embedded_face_contact(ContactState& cs, int32_t f, int3
     q[j] = p1.to_local(x1[j]);
     phi[j] = locate(g, q[j]).phi;
   }
-  if (phi[0] <= 0 && phi[1] <= 0 && phi[2] <= 0) return;
-  if (g.shape == ProxyShape::Box)
-    for (int k = 0; k < 3; ++k) {
-      const double reach = g.half_extents[k] + g.radius;
-      if (std::min({q[0][k], q[1][k], q[2][k]}) > reach || std::max({q[0][k], q[1][k], q[2][k]}) < -reach) {
-        if (mem.proxy == proxy) mem.proxy = -1;
-        return;
-      }
-    }
-  const Vec3 b = deepest_on_triangle(g, q[0], q[1], q[2]);
-  const int zeros = int(b.x == 0) + int(b.y == 0) + int(b.z == 0);
-  const Vec3 q1 = b.x * q[0] + b.y * q[1] + b.z * q[2];
-  const SurfacePoint at1 = locate(g, q1);
-  if (at1.phi > 0 || zeros >= 2) {
-    if (mem.proxy == proxy) mem.proxy = -1;
-    return;
-  }
+  TrianglePoint tp;
+  if (!triangle_point(g, q, phi, face.owns_edge, mem, proxy, tp)) return;
   // Within its slack of a vertex inside the proxy, that vertex's contact holds it.
   const double held = std::max({-phi[0], -phi[1], -phi[2]});
-  if (held >= 0 && -at1.phi <= held + emb_face_slack_[size_t(f)]) return;
-  if (zeros == 1 && !(face.owns_edge & (1u << (b.x == 0 ? 0 : b.y == 0 ? 1 : 2)))) return;
+  if (held >= 0 && -tp.at.phi <= held + emb_face_slack_[size_t(f)]) return;
+  const Vec3& b = tp.b;
+  const Vec3& q1 = tp.q;
+  const SurfacePoint& at1 = tp.at;
   // Its nodes, each once: a node two vertices follow takes the sum of their weights.
   std::array<int32_t, kPointCarriers> slot;
   std::array<double, kPointCarriers> w{};

@@ -53,7 +53,11 @@
 // positions), each with a box around its nodes' motion over the step; only
 // clusters whose box meets a proxy's swept bounding box are examined node by
 // node; surface triangles likewise, in clusters of 32 by their rest
-// centroids. A proxy far from the body costs one box test per cluster.
+// centroids. A proxy far from the body costs one box test per cluster. An
+// embedded surface's vertices and triangles are in clusters of 128, each in
+// groups of 8, whose boxes are kept between steps in the ContactState: grown
+// each step by the largest move of any node, refitted to their vertices
+// when they have grown by half a percent of the body's size and meet a proxy.
 //
 // Coupled proxies (core/coupling.hpp): a device's proxy, or its hand, may be
 // a rigid body of its own that the device's pose pulls through a spring. Its
@@ -186,6 +190,19 @@ class Contact {
                                   double dt);
   // A point with no corners yet.
   static Point empty_point(int32_t proxy, int32_t body);
+  // Where a triangle (corners q in the proxy's frame at t_{n+1}, phi their
+  // distances out of it) is deepest in the proxy: its barycentric
+  // coordinates b, the point q and its place on the proxy. False where the
+  // triangle needs no point of its own (all inside, deepest at a corner, or
+  // on an edge another triangle owns) or misses the proxy (then its memory
+  // of this proxy is dropped). For the boundary's faces and an embedded
+  // surface's triangles alike.
+  struct TrianglePoint {
+    Vec3 b, q;
+    SurfacePoint at;
+  };
+  static bool triangle_point(const ProxyGeometry& g, const std::array<Vec3, 3>& q, const std::array<double, 3>& phi,
+                             uint8_t owns_edge, Memory& mem, int32_t proxy, TrianglePoint& out);
   // A corner of a face's or an embedded vertex's point, of weight w: a free
   // node takes its share of the impulse, a held one moves as prescribed.
   void add_corner(const ContactState& cs, Point& c, int& free, size_t slot, double w, double dt) const;
