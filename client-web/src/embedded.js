@@ -108,6 +108,8 @@ export class EmbeddedSurfaceView {
         m[3 * v + k - 1] = dot;
       }
     }
+    this.carriers = carriers;
+    this.weights = weights;
     geometry.setAttribute('carriers', new THREE.BufferAttribute(carriers, 4));
     geometry.setAttribute('weights', new THREE.BufferAttribute(weights, 4));
     geometry.setAttribute('restNormalM', new THREE.BufferAttribute(m, 3));
@@ -186,6 +188,25 @@ export class EmbeddedSurfaceView {
     slot.p.needsUpdate = true;
     slot.colours.set(colours.subarray(0, 4 * this.frameVertices));
     slot.c.needsUpdate = true;
+  }
+
+  // The fine vertices placed on the CPU from the frame vertices' positions [m] (n x 3), as the shader places
+  // them: what the camera frames (the frame vertices reach past the fine surface where the coarse mesh
+  // encloses it, as a coarse TetGen mesh scaled to the fine surface's volume does).
+  /** @param {ArrayLike<number>} positions @returns {Float32Array} */
+  place(positions) {
+    const { carriers, weights } = this;
+    const out = new Float32Array((carriers.length / 4) * 3);
+    for (let v = 0; v < carriers.length / 4; v++) {
+      for (let k = 0; k < 4; k++) {
+        const i = 3 * carriers[4 * v + k];
+        const w = weights[4 * v + k];
+        out[3 * v] += w * positions[i];
+        out[3 * v + 1] += w * positions[i + 1];
+        out[3 * v + 2] += w * positions[i + 2];
+      }
+    }
+    return out;
   }
 
   // Which slots the screen mixes: the older and the newer state.

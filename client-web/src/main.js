@@ -219,12 +219,12 @@ function resize() {
 window.addEventListener('resize', resize);
 $('telemetry').addEventListener('toggle', () => telemetry.resize());
 
-// Frames the body's bounding sphere (its newest state's) from `direction` (camera - centre; the current
-// one by default).
+// Frames the bounding sphere of the body as drawn (its newest state's: the fine surface where the scene has
+// one) from `direction` (camera - centre; the current one by default).
 /** @param {ArrayLike<number>} [direction] */
 function frameBody(direction = viewDirection(camera, controls)) {
   if (!view) return;
-  const sphere = computeBoundingSphere(view.positions);
+  const sphere = computeBoundingSphere(view.embedded ? view.embedded.place(view.positions) : view.positions);
   const d = Math.hypot(direction[0], direction[1], direction[2]) > 0 ? direction : START;
   applyFraming(camera, controls, sphere, d);
   framed = true;
