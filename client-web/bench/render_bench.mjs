@@ -13,7 +13,7 @@
 // the server has.
 // --wire 1 or 0: the simulation mesh's wireframe on or off (the page's default: on over a bare boundary,
 // as these plates are).
-// --embedded 5,6,7: instead of plates, the organ scene (3662 tets) carrying fine surfaces that
+// --embedded 5,6,7: instead of plates, the organ scene (510 quadratic tets) carrying fine surfaces that
 // server/scenes/meshes/make_organ.py makes at these subdivision levels (20 480, 81 920 and 327 680
 // triangles), each placed and shaded on the GPU from the 939 frame vertices (src/embedded.js).
 //   node client-web/bench/render_bench.mjs [--seconds S] [--sizes 50,100,157] [--quality low|high]

@@ -11,11 +11,12 @@
 
   .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
   loop       the closed haptic loop per case (the default scene, a soft and a stiff block poked and held, a stroke
-             with friction, the hand twisting the Fig. 1 beam, strokes in free space), coupled against direct, with
-             haptic states 0.25, 1 and 4 ms apart (and --loaded: beside two busy processes): the peak force sent and
-             commanded against the device's limit, clip events, ripple in holds, contact continuity, the work done on
-             the hand per cycle and passivity's share, the stiffness felt against what it should be, drag in free
-             space, the latency from the hand's motion to force, faults.
+             with friction, the hand twisting the Fig. 1 beam, the organ's fine surface pressed, strokes in free
+             space), coupled against direct, with haptic states 0.25, 1 and 4 ms apart (and --loaded: beside two
+             busy processes): the peak force sent and commanded against the device's limit, clip events, ripple in
+             holds, contact continuity, the work done on the hand per cycle and passivity's share, the stiffness
+             felt against what it should be, drag in free space, the latency from the hand's motion to force,
+             faults.
 
   .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
   .venv/bin/python device-bridge/bench/bridge_bench.py modes --seconds 12 [--object stiff] [--json modes.json]
@@ -331,9 +332,13 @@ def block_scene(E: float, friction: bool = False) -> dict[str, Any]:
 
 
 def shipped(name: str) -> dict[str, Any]:
-    scene = json.loads((ROOT / "server" / "scenes" / f"{name}.json").read_text())
+    scenes = ROOT / "server" / "scenes"
+    scene = json.loads((scenes / f"{name}.json").read_text())
     scene.pop("$schema", None)
     scene["mesh"].pop("file", None) if "primitive" in scene["mesh"] else None
+    for part in ("mesh", "surface"):  # the scene is written elsewhere: its files named from where they are
+        if "file" in scene.get(part, {}):
+            scene[part]["file"] = str(scenes / scene[part]["file"])
     return scene
 
 
@@ -354,6 +359,11 @@ LOOP_CASES: dict[str, dict[str, Any]] = {
                "arm": dict(ox=0.0, oy=0.05, oz=0.0, script="stroke", depth=0.02, period=3.0, stroke=0.02, twist=0.0)},
     "twist": {"holds": True, "scene": lambda: shipped("hand_twist"), "channel": "glove", "poke": False,
               "arm": dict(ox=0.8, oy=0.564, oz=0.0, script="twist", depth=0.025, period=4.0, stroke=0.0, twist=-25.0)},
+    # The organ's stylus pressed into its fine surface 3 cm right of the middle and held, as the sim_organ profile
+    # does (its top settles near y = 0.09; the tip, 6 mm, touches with the device near y = 0.096).
+    "organ": {"holds": True, "scene": lambda: shipped("organ"), "channel": "stylus", "poke": False,
+              "arm": dict(ox=0.03, oy=0.115, oz=0.0, script="poke", depth=0.032, period=4.0, stroke=0.0, twist=0.0,
+                          start=1.0)},
     # The stiff block held pressed while the hand steps 2 mm further in and back (the sim arm's "tap"): the
     # latency from the hand's own motion to force.
     "tap": {"holds": False, "scene": lambda: block_scene(1e6), "channel": "stylus", "poke": False, "tap": True,

@@ -1,20 +1,21 @@
 """The organ pressed deep by its stylus (a 6 mm sphere), on linear (P1) and quadratic (P2) tets: whether the fine
 surface holds it, the force it rises to, and the cost.
 
-  .venv/bin/python server/bench/organ_press.py            # three presses (about a minute)
+  .venv/bin/python server/bench/organ_press.py            # four presses (about a minute)
   .venv/bin/python server/bench/organ_press.py --sim OTHER/tactile-sim   # another build's, to compare
   .venv/bin/python server/bench/organ_press.py --study     # P1 and P2 on a coarser organ (about 2 minutes)
 
-Each case runs organ.json headless (`tactile-sim`) with its mesh and element changed and the stylus scripted
-straight down from where it waits, at a constant speed, to a depth, and held there for a tenth of the time;
-the mouse's sphere is removed. A press goes through when the force, having risen past 0.2 N, is zero from some
-time on while the stylus is still inside the organ's rest shape. The cost is wall seconds of stepping per
-simulated second on one core (under 1 is real time), from the run's own summary. Figures in docs/perf.md (A
-small tool pressed deep into a fine surface).
+Each case runs organ.json headless (`tactile-sim`) with its coarse surface (make_organ.py's icosphere level 1,
+radii scaled to enclose the fine surface's volume, as shipped; or level 2, unscaled, as shipped before), TetGen
+size and element changed and the stylus scripted straight down from where it waits, at a constant speed, to a
+depth, and held there for a tenth of the time; the mouse's sphere is removed. A press goes through when the force,
+having risen past 0.2 N, is zero from some time on while the stylus is still inside the organ's rest shape. The
+cost is wall seconds of stepping per simulated second on one core (under 1 is real time), from the run's own
+summary. Figures in docs/perf.md (A small tool pressed deep into a fine surface).
 
---study: which element the organ should run on. TetGen cannot mesh the shipped coarse surface (icosphere level
-2) below about 2 900 tets; level 1 (80 triangles, its radii scaled to enclose the fine surface's volume:
-make_organ.py's volume_matched_scale) goes down to about 500. On it, the stylus is pressed 1 cm and held, on
+--study: which element the organ should run on (it chose the shipped P2 mesh). TetGen cannot mesh the level-2
+coarse surface below about 2 900 tets; level 1 (80 triangles, its radii scaled to enclose the fine surface's
+volume: make_organ.py's volume_matched_scale) goes down to about 500. On it, the stylus is pressed 1 cm and held, on
 P1 and P2 meshes of several sizes, against P2 on the finest: the mean force over the hold, its error, and the
 cost.
 """
@@ -43,6 +44,14 @@ def make_organ() -> Any:
     return module
 
 
+def coarse_surface(folder: pathlib.Path, level: int) -> pathlib.Path:
+    """make_organ.py's coarse surface at icosphere `level` in `folder`: level 1 scaled as shipped, 2 unscaled."""
+    organ = make_organ()
+    path = folder / f"organ_coarse_level{level}.obj"
+    organ.write(path, level, organ.volume_matched_scale(level) if level == 1 else 1.0)
+    return path
+
+
 def case(element: str, max_volume: float, to_y: float, seconds: float) -> dict[str, Any]:
     """organ.json on `element` tets of TetGen's `max_volume`, the stylus scripted down to `to_y` over `seconds`."""
     s: dict[str, Any] = json.loads((SCENES / "organ.json").read_text())
@@ -64,10 +73,11 @@ def run(sim: pathlib.Path, folder: pathlib.Path, scene: dict[str, Any], name: st
     return summary
 
 
-# (label, element, max_volume, stylus centre's lowest y [m], seconds to get there)
-CASES = [("P2, max_volume 1.2e-5, 1 cm press", "p2", 1.2e-5, 0.079, 1.0),
-         ("P2, shipped max_volume 3e-6, 3.5 cm press", "p2", 3e-6, 0.060, 2.0),
-         ("P1, shipped max_volume 3e-6, 3.5 cm press", "p1", 3e-6, 0.060, 2.0)]
+# (label, element, coarse surface's level, max_volume, stylus centre's lowest y [m], seconds to get there)
+CASES = [("P2, shipped (level 1, max_volume 1e-4), 3.5 cm press", "p2", 1, 1e-4, 0.060, 2.0),
+         ("P2, level 2, max_volume 1.2e-5, 1 cm press", "p2", 2, 1.2e-5, 0.079, 1.0),
+         ("P2, level 2, max_volume 3e-6, 3.5 cm press", "p2", 2, 3e-6, 0.060, 2.0),
+         ("P1, level 2, max_volume 3e-6 (shipped before), 3.5 cm press", "p1", 2, 3e-6, 0.060, 2.0)]
 
 
 # --study: (label, element, max_volume); the last is the reference.
@@ -84,8 +94,7 @@ def study(sim: pathlib.Path) -> None:
     print("| mesh | tets | nodes | force N (the hold's mean) | error | wall s per simulated s |")
     print("|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
-        coarse = pathlib.Path(tmp) / "organ_coarse_level1.obj"
-        organ.write(coarse, 1, scale)
+        coarse = coarse_surface(pathlib.Path(tmp), 1)
         rows = []
         for k, (label, element, max_volume) in enumerate(STUDY):
             s = case(element, max_volume, 0.079, 1.0)
@@ -116,8 +125,10 @@ def main() -> None:
     print("| case | tets | held | peak force N | mean force over the last fifth N | wall s per simulated s |")
     print("|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
-        for k, (label, element, max_volume, to_y, seconds) in enumerate(CASES):
-            r = run(args.sim, pathlib.Path(tmp), case(element, max_volume, to_y, seconds), f"organ_press_{k}")
+        for k, (label, element, level, max_volume, to_y, seconds) in enumerate(CASES):
+            s = case(element, max_volume, to_y, seconds)
+            s["mesh"]["file"] = str(coarse_surface(pathlib.Path(tmp), level))
+            r = run(args.sim, pathlib.Path(tmp), s, f"organ_press_{k}")
             force = r["force"]
             t_end = force[-1][0]
             peak = max(f for _, f in force)

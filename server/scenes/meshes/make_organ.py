@@ -3,7 +3,8 @@
 a shallow hilum and low bumps), as a fine surface to see and touch and a coarse one for TetGen to mesh.
 
 Usage: python3 make_organ.py [OUT_DIR [FINE]]. Both are the same star-shaped surface, r(direction) around a centre,
-sampled on an icosphere: the fine one subdivided FINE times (20 x 4^FINE triangles), the coarse one COARSE times.
+sampled on an icosphere: the fine one subdivided FINE times (20 x 4^FINE triangles), the coarse one COARSE times,
+its radii scaled to enclose as much volume as the fine one (a coarse sampling is inscribed, so smaller).
 The shipped files are this script's output with the defaults below; rerun it after changing them. A FINE
 argument makes a finer or coarser fine surface (client-web/bench/render_bench.mjs --embedded draws 5, 6 and 7). The shape is
 made here, from a formula: no scan, no third party's data.
@@ -13,7 +14,7 @@ import pathlib
 import sys
 
 FINE = 5  # 20 480 triangles
-COARSE = 2  # 320 triangles, for TetGen
+COARSE = 1  # 80 triangles, for TetGen (its radii scaled by volume_matched_scale)
 SEMI_AXES = (0.09, 0.045, 0.055)  # x (long), y (up), z [m]
 CENTRE = (0.0, 0.05, 0.0)  # the lowest point sits near y = 0.005
 
@@ -99,7 +100,7 @@ def volume_matched_scale(level: int) -> float:
 def main() -> None:
     out = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else pathlib.Path(__file__).parent)
     write(out / "organ_fine.obj", int(sys.argv[2]) if len(sys.argv) > 2 else FINE)
-    write(out / "organ_coarse.obj", COARSE)
+    write(out / "organ_coarse.obj", COARSE, volume_matched_scale(COARSE))
 
 
 if __name__ == "__main__":
