@@ -4,7 +4,7 @@
 // is a rigid body of the simulation with a mass and an inertia. The device's
 // pose pulls it through a spring-damper whose force and torque saturate at
 // what the device can render; the body stops it through the paper's contact
-// (core/contact.hpp), which now changes the proxy's velocity as well as the
+// (core/contact/contact.hpp), which now changes the proxy's velocity as well as the
 // nodes': the impulse J on a node is -J on the proxy, so momentum passes
 // between them and none is made. The hand feels the coupling's force, never
 // the body's stiffness at whatever depth the device has reached: a device

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "core/contact_state.hpp"
+#include "core/contact/contact_state.hpp"
 
 namespace tactile {
 

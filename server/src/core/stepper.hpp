@@ -5,7 +5,7 @@
 // velocity (eq. 7), impose essential BCs, elastic forces R(u) (lane-blocked
 // kernels), natural loads, then the diagonal solve of eq. (10) with gravity
 // and damping only if present, proxy contact only if there are proxies
-// (core/contact.hpp), and the essential BCs' velocities and accelerations.
+// (core/contact/contact.hpp), and the essential BCs' velocities and accelerations.
 // Each step also checks for non-finite values, inverted elements (for models
 // that cannot take them) and energy growth beyond the work done
 // (core/energy_ledger.hpp), and reports a Fault instead of going on;
@@ -26,7 +26,7 @@
 #include <string>
 #include <vector>
 
-#include "core/contact.hpp"
+#include "core/contact/contact.hpp"
 #include "core/critical_step.hpp"
 #include "core/energy_ledger.hpp"
 #include "core/model.hpp"

@@ -71,7 +71,7 @@ class Simulation {
   // |u| [m] (n; not written when null), in float.
   void gather(std::span<const uint32_t> nodes, float* positions, float* displacement_norm) const;
 
-  // Rigid proxies (core/contact.hpp) as the model holds them: a hand's
+  // Rigid proxies (core/contact/contact.hpp) as the model holds them: a hand's
   // proxies carry the hand's device.
   const std::vector<ProxySpec>& proxies() const;     // (n_proxies)
   const std::vector<HandSpec>& hands() const;        // (n_hands)

@@ -16,7 +16,7 @@
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
 
-#include "core/contact.hpp"
+#include "core/contact/contact.hpp"
 #include "core/coupling.hpp"
 #include "core/model.hpp"
 #include "core/stepper.hpp"

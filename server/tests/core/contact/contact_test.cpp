@@ -12,7 +12,7 @@
 
 #include <glm/geometric.hpp>
 
-#include "core/contact.hpp"
+#include "core/contact/contact.hpp"
 #include "core/embedding.hpp"
 #include "core/model.hpp"
 #include "core/quadratic.hpp"

@@ -1,4 +1,4 @@
-#include "core/contact.hpp"
+#include "core/contact/contact.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -15,59 +15,10 @@ namespace tactile {
 namespace {
 
 constexpr int32_t kClusterNodes = 32;
-// Weight of the previous segments in the stiffness fit, per segment: about
-// the last 10 count. A segment closes after an even number of steps once the
-// proxy has moved kFitMinMotion from where it began, or after kFitMaxSteps.
-constexpr double kFitMemory = 0.9;
-constexpr double kFitMinMotion = 5e-6;  // [m]
-constexpr int32_t kFitMaxSteps = 64;
-// A coupled device's fit: segments of at least 2 ms and 20 um (or 50 ms),
-// so that it gives the stiffness felt over the milliseconds a bridge
-// renders between states (the hand's motion), not the coupling's spring
-// alone that a device's encoder noise meets before the proxy can follow
-// (free space would then read as the coupling's 2000 N/m).
-constexpr double kDeviceFitMinTime = 2e-3, kDeviceFitMaxTime = 50e-3;  // [s]
-constexpr double kDeviceFitMinMotion = 20e-6;                          // [m]
-constexpr double kDeviceFitGain = 0.3;                                 // of each segment's secant, along its motion
-constexpr int32_t kFitIdleSteps = 16;  // a proxy's fit ends after this many steps without contact
-
 template <class Real>
 Vec3 position(const State<Real>& s, const Vec3& X, int32_t node) {
   const size_t j = 3 * size_t(node);
   return X + Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
-}
-
-// The nearest symmetric negative semidefinite matrix to K (Frobenius norm):
-// its symmetric part with every positive eigenvalue set to zero. A passive
-// contact's dF/dx on the proxy is one (minus the Hessian of the body's
-// energy in the proxy's position): the body pushes back harder as the proxy
-// presses in, never pulls it further in, and stores what it is given.
-// With `stiffest`, every eigenvalue is also held at or above -stiffest.
-glm::dmat3 nearest_passive(const glm::dmat3& K, double stiffest = std::numeric_limits<double>::infinity()) {
-  glm::dmat3 A = 0.5 * (K + glm::transpose(K));
-  glm::dmat3 V(1.0);  // columns: eigenvectors (cyclic Jacobi rotations)
-  for (int sweep = 0; sweep < 12; ++sweep) {
-    const double off = A[0][1] * A[0][1] + A[0][2] * A[0][2] + A[1][2] * A[1][2];
-    const double diag = A[0][0] * A[0][0] + A[1][1] * A[1][1] + A[2][2] * A[2][2];
-    if (off <= 1e-30 * diag || off == 0) break;
-    for (int p = 0; p < 2; ++p)
-      for (int q = p + 1; q < 3; ++q) {
-        if (A[p][q] == 0) continue;
-        const double theta = 0.5 * (A[q][q] - A[p][p]) / A[p][q];
-        const double t = (theta >= 0 ? 1.0 : -1.0) / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
-        const double c = 1.0 / std::sqrt(t * t + 1.0), sn = t * c;
-        glm::dmat3 J(1.0);  // rotation in the (p, q) plane: A <- J^T A J
-        J[p][p] = c;
-        J[q][q] = c;
-        J[q][p] = sn;   // column q, row p
-        J[p][q] = -sn;  // column p, row q
-        A = glm::transpose(J) * A * J;
-        V = V * J;
-      }
-  }
-  glm::dmat3 D(0.0);
-  for (int k = 0; k < 3; ++k) D[k][k] = std::clamp(A[k][k], -stiffest, 0.0);
-  return V * D * glm::transpose(V);
 }
 
 bool boxes_meet(const Vec3& alo, const Vec3& ahi, const Vec3& blo, const Vec3& bhi) {
@@ -130,14 +81,11 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   x_now_.assign(slot_node_.size(), Vec3(0.0));
   f_now_.assign(free_nodes_.size(), Vec3(0.0));
   touched_now_.reserve(free_nodes_.size());
-  dv_.assign(free_nodes_.size(), Vec3(0.0));
-  moved_flag_.assign(free_nodes_.size(), 0);
-  moved_.reserve(free_nodes_.size());
   points_.reserve((free_nodes_.size() + faces_.size() + emb_slot_.size() + emb_faces_.size()) * n_proxies);
-  point_order_.reserve(points_.capacity());
   // Solve groups: one per proxy, then one per coupled body (at most one per proxy and hand).
-  proxy_begin_.assign(2 * n_proxies + model.hands.size() + 1, 0);
-  proxy_fill_.assign(proxy_begin_.size() - 1, 0);
+  solve_.reserve(free_nodes_.size(), 2 * n_proxies + model.hands.size(), points_.capacity());
+  slot_v_.assign(free_nodes_.size(), Vec3(0.0));
+  slot_m_.assign(free_nodes_.size(), 0.0);
 }
 
 template <class Real>
@@ -644,7 +592,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     }
 
   // The embedded surface's vertices and triangles (in place of the nodes and faces above, which it then has none of).
-  // Each in clusters of 32, and in those in groups of 8 (core/contact.hpp).
+  // Each in clusters of 128, and in those in groups of 8 (core/contact/contact.hpp).
   const size_t face_groups = emb_vertices_.group_items.size();
   for (size_t j = 0; j < n_proxies; ++j) {
     visit_embedded(emb_vertices_, cs, 0, 0, j,
@@ -666,12 +614,10 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     b.now = b.next;
   }
   for (Point& c : points_)
-    if (c.body >= 0) c.vp = proxy_velocity(cs, c);
+    if (c.body >= 0) c.vp = proxy_velocity(cs.bodies, c);
   const double to_force = (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt;  // from an impulse to its force over the step
-  for (int32_t k : moved_) {
-    const Vec3 dv = dv_[size_t(k)];
-    dv_[size_t(k)] = Vec3(0.0);
-    moved_flag_[size_t(k)] = 0;
+  for (int32_t k : solve_.moved()) {
+    const Vec3 dv = solve_.dv(k);
     const size_t i = size_t(free_nodes_[size_t(k)]);
     const double m = double(model_.m[i]);
     const Vec3 v(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2]));
@@ -690,7 +636,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
       cs.node_impulse[size_t(k)] += f_now_[size_t(k)] * dt;
     }
   }
-  moved_.clear();
+  solve_.clear();
   for (const Point& c : points_) {
     ProxyReport& r = cs.reports[size_t(c.proxy)];
     ++r.contacts;
@@ -1037,157 +983,16 @@ void Contact<Real>::find_embedded_face_contact(ContactState& cs, int32_t f, int3
 }
 
 template <class Real>
-Vec3 Contact<Real>::point_velocity(const State<Real>& s, const Point& c) const {
-  Vec3 v = c.v_held;
-  for (size_t j = 0; j < kPointCarriers && c.slot[j] >= 0; ++j) {
-    const auto k = size_t(c.slot[j]);
-    const size_t i = size_t(free_nodes_[k]);
-    v += c.w[j] * (Vec3(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2])) + dv_[k]);
-  }
-  return v;
-}
-
-template <class Real>
-void Contact<Real>::give(ContactState& cs, Point& c, const Vec3& J) {
-  for (size_t j = 0; j < kPointCarriers && c.slot[j] >= 0; ++j) {
-    const auto k = size_t(c.slot[j]);
-    if (!moved_flag_[k]) {
-      moved_flag_[k] = 1;
-      moved_.push_back(int32_t(k));  // (reserved: never allocates)
-    }
-    dv_[k] += (c.w[j] / double(model_.m[size_t(free_nodes_[k])])) * J;
-  }
-  if (c.body >= 0) {  // and the opposite to the proxy's body
-    Body& b = cs.bodies[size_t(c.body)];
-    b.next.v -= J / b.c.mass;
-    b.next.w -= glm::cross(c.r, J) / b.c.inertia;
-  }
-}
-
-template <class Real>
-Vec3 Contact<Real>::proxy_velocity(const ContactState& cs, const Point& c) const {
-  if (c.body < 0) return c.vp;
-  const Body& b = cs.bodies[size_t(c.body)];
-  return b.next.v + glm::cross(b.next.w, c.r);
-}
-
-template <class Real>
 void Contact<Real>::solve(State<Real>& s) {
-  ContactState& cs = s.contact;
-  // Each point in turn takes the impulse that stops its normal motion into
-  // the proxy (eq. (11)), its running sum kept at or above zero; friction's
-  // tangential impulse stops its sliding, its sum held within mu times the
-  // normal one (stick, or slide at the bound). A point alone, or points
-  // sharing no node, settle in the first sweep, as the paper's rule; a
-  // proxy's points that share nodes (a face and its corner) are swept again
-  // until no velocity changes by more than a millionth of the first sweep's
-  // largest change. One proxy's points can always all be met (the nodes
-  // moving with it), so the sweeps converge; two proxies pinching a node
-  // cannot both be, and they are solved one after the other, as before.
-  //
-  // A coupled body's points are one group: each impulse changes the body's
-  // velocity, which all of them see, so they are swept together, each with
-  // the body's mass and inertia in series with its nodes' (the effective
-  // inverse mass along a direction e: sum w^2/m + 1/M + |r x e|^2 / I).
-  // They take more sweeps to settle than a kinematic proxy's.
-  constexpr int kMaxSweeps = 32, kMaxBodySweeps = 128;
-  // The points in group order (stable: each group's in the order found).
-  const size_t n_proxies = cs.motion.size();
-  const auto group = [&](const Point& c) { return c.body >= 0 ? n_proxies + size_t(c.body) : size_t(c.proxy); };
-  const size_t n_groups = n_proxies + cs.bodies.size();
-  std::fill(proxy_begin_.begin(), proxy_begin_.begin() + ptrdiff_t(n_groups + 1), 0);
-  for (const Point& c : points_) ++proxy_begin_[group(c) + 1];
-  for (size_t g = 0; g < n_groups; ++g) proxy_begin_[g + 1] += proxy_begin_[g];
-  point_order_.resize(points_.size());  // (reserved: never allocates)
-  std::copy(proxy_begin_.begin(), proxy_begin_.begin() + ptrdiff_t(n_groups), proxy_fill_.begin());
-  for (size_t m = 0; m < points_.size(); ++m) point_order_[size_t(proxy_fill_[group(points_[m])]++)] = int32_t(m);
-  for (size_t g = 0; g < n_groups; ++g) {
-    if (proxy_begin_[g] == proxy_begin_[g + 1]) continue;
-    const Body* body = g >= n_proxies ? &cs.bodies[g - n_proxies] : nullptr;
-    // The inverse mass the point sees along unit e: its nodes', and its body's.
-    const auto inv_mass = [&](const Point& c, const Vec3& e) {
-      if (!body) return c.inv_mass;
-      const Vec3 re = glm::cross(c.r, e);
-      return c.inv_mass + 1.0 / body->c.mass + glm::dot(re, re) / body->c.inertia;
-    };
-    double first = 0;
-    for (int sweep = 0; sweep < (body ? kMaxBodySweeps : kMaxSweeps); ++sweep) {
-      double largest = 0;
-      for (int32_t m = proxy_begin_[g]; m < proxy_begin_[g + 1]; ++m) {
-        Point& c = points_[size_t(point_order_[size_t(m)])];
-        const Vec3 rel = point_velocity(s, c) - proxy_velocity(cs, c);
-        const double vn = glm::dot(rel, c.n);
-        const double kn = inv_mass(c, c.n);
-        const double jn = std::max(0.0, c.jn - vn / kn);
-        const double djn = jn - c.jn;
-        Vec3 J = djn * c.n;
-        c.jn = jn;
-        double change = std::fabs(djn) * kn;
-        if (c.mu > 0) {
-          const Vec3 vt = rel - vn * c.n;  // the normal impulse moves the point along n alone
-          const double vt_len = glm::length(vt);
-          const double kt = vt_len > 0 ? inv_mass(c, vt / vt_len) : c.inv_mass;
-          Vec3 jt = c.jt - vt / kt;
-          const double bound = c.mu * c.jn, len = glm::length(jt);
-          if (len > bound) jt *= bound / len;
-          J += jt - c.jt;
-          change = std::max(change, glm::length(jt - c.jt) * kt);
-          c.jt = jt;
-        }
-        if (J != Vec3(0.0)) give(cs, c, J);
-        largest = std::max(largest, change);
-      }
-      if (sweep == 0) first = largest;
-      if (largest <= 1e-6 * first) break;
+  // The free slots the points move: their velocities and masses, gathered for the solve.
+  for (const Point& c : points_)
+    for (size_t j = 0; j < kPointCarriers && c.slot[j] >= 0; ++j) {
+      const auto k = size_t(c.slot[j]);
+      const size_t i = size_t(free_nodes_[k]);
+      slot_v_[k] = Vec3(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2]));
+      slot_m_[k] = double(model_.m[i]);
     }
-  }
-}
-
-template <class Real>
-void Contact<Real>::fit_stiffness(Fit& f, FitWindow window, const Vec3& position, const Vec3& force, double dt,
-                                  glm::dmat3& stiffness) {
-  if (f.seg_steps == 0) f.seg_start = position;
-  f.seg_impulse += force * dt;
-  f.seg_moment += position * dt;
-  f.seg_time += dt;
-  ++f.seg_steps;
-  if (f.seg_steps % 2 != 0) return;
-  const Vec3 moved = position - f.seg_start;
-  const double moved2 = glm::dot(moved, moved);
-  const bool device = window == FitWindow::Device;
-  if (device ? f.seg_time < kDeviceFitMaxTime &&
-                   (f.seg_time < kDeviceFitMinTime || moved2 < kDeviceFitMinMotion * kDeviceFitMinMotion)
-             : moved2 < kFitMinMotion * kFitMinMotion && f.seg_steps < kFitMaxSteps)
-    return;
-  const Vec3 mean_force = f.seg_impulse / f.seg_time;
-  const Vec3 mean_position = f.seg_moment / f.seg_time;
-  f.seg_impulse = f.seg_moment = Vec3(0.0);
-  f.seg_time = 0;
-  f.seg_steps = 0;
-  if (f.has_last) {
-    const Vec3 dx = mean_position - f.last_position;
-    const Vec3 dF = mean_force - f.last_force;
-    const double dx2 = glm::dot(dx, dx);
-    if (device) {
-      // Along the motion alone (a damped Broyden update): a device moves
-      // along a line for milliseconds, and across it only by its encoder's
-      // noise, whose dF/dx is the coupling's spring before the proxy follows.
-      if (dx2 >= kDeviceFitMinMotion * kDeviceFitMinMotion) {
-        f.fx += kDeviceFitGain * glm::outerProduct(dF - f.fx * dx, dx) / dx2;
-        stiffness = nearest_passive(f.fx);
-      }
-    } else if (dx2 > 0) {
-      f.fx = kFitMemory * f.fx + glm::outerProduct(dF, dx);
-      f.xx = kFitMemory * f.xx + glm::outerProduct(dx, dx);
-      // K = S_fx (S_xx + eps I)^-1; eps keeps directions never moved along at
-      // zero stiffness instead of dividing by nothing.
-      const double eps = 1e-6 * (f.xx[0][0] + f.xx[1][1] + f.xx[2][2]) + 1e-300;
-      stiffness = nearest_passive(f.fx * glm::inverse(f.xx + glm::dmat3(eps)));
-    }
-  }
-  f.last_position = mean_position;
-  f.last_force = mean_force;
-  f.has_last = true;
+  solve_.solve(points_, s.contact.motion.size(), s.contact.bodies, slot_v_, slot_m_);
 }
 
 template class Contact<float>;

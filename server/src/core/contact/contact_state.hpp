@@ -2,7 +2,7 @@
 // (core/state.hpp): the proxies' and hands' motions, the coupled bodies, each
 // surface node's and face's memory of the proxy it is inside, the previous
 // step's positions and forces for the work trapezoid, the stiffness fits,
-// and the reports with their impulse sums. The Contact pass (core/contact.hpp)
+// and the reports with their impulse sums. The Contact pass (core/contact/contact.hpp)
 // owns only what it derives from the model and its per-step workspace, so
 // copying a State copies all a step depends on.
 #pragma once

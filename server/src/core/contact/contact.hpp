@@ -32,9 +32,11 @@
 // under an essential BC takes none: it moves as prescribed). Its momentum
 // change is J, and the forces and the proxy's reaction follow as for nodes.
 //
-// The impulses: per proxy, by projected Gauss-Seidel (Contact::solve), so
-// that points sharing nodes (a face and its corner) push no more than they
-// need; one proxy's contacts can always be met together.
+// The impulses: per proxy, by projected Gauss-Seidel (ImpulseSolve,
+// core/contact/impulse_solve.hpp), so that points sharing nodes (a face and
+// its corner) push no more than they need; one proxy's contacts can always be
+// met together. The stiffness each proxy and device feels is fitted to the
+// forces of the latest steps (core/contact/stiffness_fit.hpp).
 //
 // An embedded surface (core/embedding.hpp), when the model has one, is what
 // proxies meet instead of the boundary: each of its vertices inside a proxy
@@ -74,6 +76,8 @@
 
 #include <glm/mat3x3.hpp>
 
+#include "core/contact/impulse_solve.hpp"
+#include "core/contact/stiffness_fit.hpp"
 #include "core/coupling.hpp"
 #include "core/model.hpp"
 #include "core/proxy.hpp"
@@ -159,27 +163,8 @@ class Contact {
     std::array<int32_t, 3> slot;  // its corners, as slots (below)
     uint8_t owns_edge = 0;        // bit c: the contacts on the edge opposite corner c are this face's
   };
-  // A contact point inside a proxy at t_{n+1}: a free surface node, a
-  // point of a face, x = sum w_c x_c over its corners, or a vertex of an
-  // embedded surface over its tet's four nodes.
-  // The most nodes a contact point moves: an embedded triangle's three
-  // vertices, four nodes each.
-  static constexpr size_t kPointCarriers = 12;
-  struct Point {
-    int32_t proxy;
-    int32_t body;                              // its proxy's coupled body, -1 for a kinematic proxy
-    Vec3 r;                                    // from the body's origin to x (coupled) [m]
-    std::array<int32_t, kPointCarriers> slot;  // its free corners' slots, -1 past the last (a node: slot[0], weight 1)
-    std::array<double, kPointCarriers> w;      // their weights
-    Vec3 x;                                    // world position [m]
-    Vec3 n;                                    // outward normal (world)
-    Vec3 vp;                                   // the proxy's velocity at x [m/s]
-    Vec3 v_held;                               // velocity its held corners give it (sum w_c v_c) [m/s]
-    double inv_mass;                           // sum w_c^2 / m_c over its free corners [1/kg]
-    double mu;                                 // Coulomb friction coefficient, 0 without
-    double jn = 0;                             // normal impulse given so far [N s] (never negative)
-    Vec3 jt{0.0};                              // tangential impulse so far (|jt| <= mu jn)
-  };
+  // A contact point (core/contact/impulse_solve.hpp); its slots are this pass's.
+  using Point = ContactPoint;
   using Body = CoupledBodyState;
   using Memory = ContactMemory;
   using Fit = StiffnessFit;
@@ -214,14 +199,9 @@ class Contact {
   // Which way is out of the proxy, for a point at q1 (proxy frame at t_{n+1}) that was at q0 (at t_n).
   Vec3 outward(const ProxyGeometry& g, const Vec3& q0, const Vec3& q1, const SurfacePoint& at1, Memory& mem,
                int32_t proxy) const;
-  // Projected Gauss-Seidel over the points: the impulses that leave no
-  // point moving into its proxy, with friction bounded by mu times the
-  // normal impulse, as velocity changes per free slot (dv_).
+  // The step's impulses (ImpulseSolve) on the free slots' velocities and
+  // masses: solve_.moved() and solve_.dv() hold the velocity changes.
   void solve(State<Real>& s);
-  Vec3 point_velocity(const State<Real>& s, const Point& c) const;
-  void give(ContactState& cs, Point& c, const Vec3& J);
-  // The proxy's velocity at c.x: its body's, as the solve has it so far, or its motion's.
-  Vec3 proxy_velocity(const ContactState& cs, const Point& c) const;
   // A hand's or a proxy's pose composed with a proxy's offset in it.
   Pose body_proxy_pose(const Body& b, const Pose& body_pose, int32_t proxy) const;
   // Which body each proxy belongs to, after `bodies` changed.
@@ -290,25 +270,18 @@ class Contact {
   double refit_drift_ = 0;
   const std::array<Vec3, 2>& embedded_position(const ContactState& cs, size_t v);
   // Workspace of one step.
-  std::vector<Vec3> x_now_;                        // world position at t_{n+1} per slot [m]
-  std::vector<Vec3> f_now_;                        // contact force on each free slot over this step [N]
-  std::vector<int32_t> touched_now_;               // free slots with a force in this step
-  std::vector<Point> points_;                      // this step's contact points
-  std::vector<int32_t> point_order_;               // their indices, by proxy
-  std::vector<int32_t> proxy_begin_, proxy_fill_;  // per proxy: its range in point_order_
-  std::vector<Vec3> dv_;                           // velocity change per free slot, this step [m/s]
-  std::vector<int32_t> moved_;                     // free slots given a dv_ this step
-  std::vector<uint8_t> moved_flag_;                // per free slot: in moved_
+  std::vector<Vec3> x_now_;           // world position at t_{n+1} per slot [m]
+  std::vector<Vec3> f_now_;           // contact force on each free slot over this step [N]
+  std::vector<int32_t> touched_now_;  // free slots with a force in this step
+  std::vector<Point> points_;         // this step's contact points
+  ImpulseSolve solve_;                // their impulses
+  std::vector<Vec3> slot_v_;          // per free slot: its velocity before contact [m/s]
+  std::vector<double> slot_m_;        // and its mass [kg] (the slots points name)
   int32_t node_contacts_ = 0, face_contacts_ = 0, embedded_contacts_ = 0;
   std::vector<Pose> pose0_, pose1_;    // per proxy at t_n and t_{n+1}
   std::vector<Vec3> velocity_, spin_;  // per proxy over the step: velocity [m/s], angular velocity [rad/s]
   std::vector<Vec3> lo_, hi_;          // per proxy: box its bounding sphere sweeps over the step
-  // Adds one step (the proxy or device at `position`, under `force`) to the
-  // fit; where a segment closes with motion, sets `stiffness` to the fit.
-  enum class FitWindow { Proxy, Device };  // segments of kFitMinMotion; of kDeviceFitMinTime and kDeviceFitMinMotion
-  static void fit_stiffness(Fit& f, FitWindow window, const Vec3& position, const Vec3& force, double dt,
-                            glm::dmat3& stiffness);
-  double alpha_ = 0;  // Rayleigh mass damping [1/s], for q = m (1 + alpha dt / 2)
+  double alpha_ = 0;                   // Rayleigh mass damping [1/s], for q = m (1 + alpha dt / 2)
   bool friction_ = false;
 };
 
