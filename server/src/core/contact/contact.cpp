@@ -465,10 +465,24 @@ void Contact<Real>::take_bodies(State<Real>& s, const std::vector<CoupledBodySta
 
 template <class Real>
 ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt) {
-  ContactState& cs = s.contact;
   ContactSums sums;
-  const size_t n_proxies = cs.motion.size();
-  if (n_proxies == 0) return sums;
+  if (s.contact.motion.empty()) return sums;
+  begin_reports(s.contact, dt);
+  const double largest_move = sweep_slots(s);
+  move_proxies(s.contact, t0, t1, dt);
+  find_points(s.contact, largest_move, dt);
+  // The impulses, then the velocity changes they make: by eq. (9),
+  // v_{n+1} = v_half + dt/2 a_{n+1}, so a moves by 2 dv / dt; by eq. (10)
+  // that is the force q 2 dv / dt on a node, q = m (1 + alpha dt / 2).
+  solve(s);
+  apply_impulses(s, dt, sums);
+  close_step(s.contact, sums);
+  report(s.contact, t1, dt);
+  return sums;
+}
+
+template <class Real>
+void Contact<Real>::begin_reports(ContactState& cs, double dt) {
   if (cs.track_nodes) cs.node_elapsed += dt;
   for (ProxyReport& r : cs.reports) {
     r.force = r.torque = Vec3(0.0);
@@ -482,7 +496,11 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     d.elapsed = kept.elapsed;
     d.contacts_peak = kept.contacts_peak;
   }
+}
 
+template <class Real>
+double Contact<Real>::sweep_slots(const State<Real>& s) {
+  const ContactState& cs = s.contact;
   // Positions at t_{n+1}, and boxes around each cluster's motion over the step.
   // With an embedded surface, also the largest move of any slot over the step.
   double move2 = 0;
@@ -508,7 +526,12 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     for (int32_t m = face_cluster_slot_begin_[j]; m < face_cluster_slot_begin_[j + 1]; ++m)
       sweep(c, face_cluster_slots_[size_t(m)]);
   }
+  return std::sqrt(move2);
+}
 
+template <class Real>
+void Contact<Real>::move_proxies(ContactState& cs, double t0, double t1, double dt) {
+  const size_t n_proxies = cs.motion.size();
   // The coupled bodies' prediction and coupling (core/coupling.hpp): their
   // motion is the device's.
   for (Body& b : cs.bodies) {
@@ -541,6 +564,12 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     lo_[j] = glm::min(b0.lo, b1.lo);
     hi_[j] = glm::max(b0.hi, b1.hi);
   }
+}
+
+template <class Real>
+void Contact<Real>::find_points(ContactState& cs, double largest_move, double dt) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const size_t n_proxies = cs.motion.size();
   // The embedded surface's clusters: each slot is in several, so exact
   // boxes every step would cost most of the embedding's step. A cluster's
   // box is grown each step by the largest move of any slot (so that no
@@ -551,7 +580,7 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     stamp_ = 1;
   }
   if (!emb_vertices_.clusters.empty()) {
-    cs.embedded_drift += std::sqrt(move2);
+    cs.embedded_drift += largest_move;
     sweep_embedded(emb_vertices_, cs, 0, 0);
     sweep_embedded(emb_face_clusters_, cs, emb_vertices_.clusters.size(), emb_vertices_.group_items.size());
   }
@@ -601,11 +630,11 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     visit_embedded(emb_face_clusters_, cs, emb_vertices_.clusters.size(), face_groups, j,
                    [&](int32_t f) { find_embedded_face_contact(cs, f, int32_t(j), pose0_[j], pose1_[j], dt); });
   }
+}
 
-  // The impulses, then the velocity changes they make: by eq. (9),
-  // v_{n+1} = v_half + dt/2 a_{n+1}, so a moves by 2 dv / dt; by eq. (10)
-  // that is the force q 2 dv / dt on a node, q = m (1 + alpha dt / 2).
-  solve(s);
+template <class Real>
+void Contact<Real>::apply_impulses(State<Real>& s, double dt, ContactSums& sums) {
+  ContactState& cs = s.contact;
   // The bodies: the contact's velocity change raises their acceleration as a
   // node's (eq. 9), and the step's end becomes their present.
   for (Body& b : cs.bodies) {
@@ -647,7 +676,10 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     r.work += w;
     sums.proxy_work += std::fabs(w);
   }
+}
 
+template <class Real>
+void Contact<Real>::close_step(ContactState& cs, ContactSums& sums) {
   // Work of the contact forces on the body (trapezoid, as for the loads) and
   // by each proxy; then this step's positions and forces become the previous.
   // Only the nodes pushed in this step or the one before carry a force.
@@ -665,6 +697,11 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
   cs.pushed.assign(touched_now_.begin(), touched_now_.end());  // (the workspace keeps its reserve)
   touched_now_.clear();
   cs.x_prev.swap(x_now_);
+}
+
+template <class Real>
+void Contact<Real>::report(ContactState& cs, double t1, double dt) {
+  const size_t n_proxies = cs.motion.size();
   // A proxy resting on the body is pushed every other step or so (eq. 13):
   // its fit goes on through steps without contact, their force zero, and
   // ends only when it has not touched for kFitIdleSteps.
@@ -726,7 +763,6 @@ ContactSums Contact<Real>::apply(State<Real>& s, double t0, double t1, double dt
     d.stiffness = nearest_passive(cs.device_felt[i], d.coupling_stiffness);
   }
   for (DeviceReport& d : cs.device_reports) d.add_step(dt);
-  return sums;
 }
 
 template <class Real>

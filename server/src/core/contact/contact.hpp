@@ -199,9 +199,31 @@ class Contact {
   // Which way is out of the proxy, for a point at q1 (proxy frame at t_{n+1}) that was at q0 (at t_n).
   Vec3 outward(const ProxyGeometry& g, const Vec3& q0, const Vec3& q1, const SurfacePoint& at1, Memory& mem,
                int32_t proxy) const;
-  // The step's impulses (ImpulseSolve) on the free slots' velocities and
-  // masses: solve_.moved() and solve_.dv() hold the velocity changes.
+  // apply()'s passes, in order. Clears the proxies' and devices' reports of
+  // the step before (a device keeps its impulse sums).
+  void begin_reports(ContactState& cs, double dt);
+  // Each slot's position at t_{n+1} (x_now_) and the boxes around the node
+  // and face clusters' motion over the step; returns the largest move of any
+  // slot (with an embedded surface, else 0) [m].
+  double sweep_slots(const State<Real>& s);
+  // The coupled bodies' prediction and coupling, then each proxy's poses at
+  // t_n and t_{n+1}, velocity, and the box it sweeps (pose0_, pose1_, lo_, hi_).
+  void move_proxies(ContactState& cs, double t0, double t1, double dt);
+  // The step's contact points (points_): the nodes' and faces' near each
+  // proxy, or the embedded surface's vertices' and triangles'.
+  void find_points(ContactState& cs, double largest_move, double dt);
+  // Their impulses (ImpulseSolve) on the free slots' velocities and masses:
+  // solve_.moved() and solve_.dv() hold the velocity changes.
   void solve(State<Real>& s);
+  // The changes into the nodes' velocities and accelerations (eq. 9) and the
+  // bodies', and the contact forces into the proxies' reports.
+  void apply_impulses(State<Real>& s, double dt, ContactSums& sums);
+  // The contact forces' work over the step (trapezoid); this step's
+  // positions and forces become the previous.
+  void close_step(ContactState& cs, ContactSums& sums);
+  // The proxies' and devices' reports: stiffness fits, and per device its
+  // proxies' sums or its coupling's force.
+  void report(ContactState& cs, double t1, double dt);
   // A hand's or a proxy's pose composed with a proxy's offset in it.
   Pose body_proxy_pose(const Body& b, const Pose& body_pose, int32_t proxy) const;
   // Which body each proxy belongs to, after `bodies` changed.
