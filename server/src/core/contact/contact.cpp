@@ -14,15 +14,12 @@ namespace tactile {
 
 namespace {
 
-constexpr int32_t kClusterNodes = 32;
+constexpr int32_t kClusterItems = 32;  // nodes or faces in a cluster (one group)
+
 template <class Real>
 Vec3 position(const State<Real>& s, const Vec3& X, int32_t node) {
   const size_t j = 3 * size_t(node);
   return X + Vec3(double(s.u[j]), double(s.u[j + 1]), double(s.u[j + 2]));
-}
-
-bool boxes_meet(const Vec3& alo, const Vec3& ahi, const Vec3& blo, const Vec3& bhi) {
-  return alo.x <= bhi.x && blo.x <= ahi.x && alo.y <= bhi.y && blo.y <= ahi.y && alo.z <= bhi.z && blo.z <= ahi.z;
 }
 
 }  // namespace
@@ -105,8 +102,9 @@ void Contact<Real>::build_embedded(const std::vector<int32_t>& slot_of, const Or
   refit_drift_ = 0.005 * glm::length(box.size());
   emb_x_.resize(emb_slot_.size());
   emb_stamp_.assign(emb_slot_.size(), 0u);
-  emb_vertices_ = cluster_embedded(int32_t(emb_slot_.size()),
-                                   [&](int32_t v, std::vector<int32_t>& vertices) { vertices.push_back(v); });
+  emb_vertices_ = ClusterSet::build(int32_t(emb_slot_.size()), kEmbeddedClusterItems, kGroupItems,
+                                    [&](int32_t v, std::vector<int32_t>& vertices) { vertices.push_back(v); });
+  emb_vertex_gain_ = embedded_gain(emb_vertices_);
 
   // The triangles, in Morton order of their rest centroids; an edge's
   // contacts belong to the first that has it. One whose vertices all follow
@@ -138,58 +136,44 @@ void Contact<Real>::build_embedded(const std::vector<int32_t>& slot_of, const Or
                                               e.rest.vertices[size_t(t_of[k][size_t((c + 1) % 3)])]));
     emb_face_slack_.push_back(kEmbeddedFaceSlack * longest);
   }
-  emb_face_clusters_ = cluster_embedded(int32_t(emb_faces_.size()), [&](int32_t f, std::vector<int32_t>& vertices) {
-    vertices.insert(vertices.end(), emb_faces_[size_t(f)].slot.begin(), emb_faces_[size_t(f)].slot.end());
-  });
+  emb_face_clusters_ = ClusterSet::build(
+      int32_t(emb_faces_.size()), kEmbeddedClusterItems, kGroupItems, [&](int32_t f, std::vector<int32_t>& vertices) {
+        vertices.insert(vertices.end(), emb_faces_[size_t(f)].slot.begin(), emb_faces_[size_t(f)].slot.end());
+      });
+  emb_face_gain_ = embedded_gain(emb_face_clusters_);
 }
 
 template <class Real>
-template <class Of>
-typename Contact<Real>::EmbeddedClusters Contact<Real>::cluster_embedded(int32_t n, const Of& of) const {
-  EmbeddedClusters ec;
-  ec.group_begin.push_back(0);
-  ec.vertex_begin.push_back(0);
-  for (int32_t b = 0; b < n; b += kEmbeddedClusterItems) {
-    const int32_t end = std::min(n, b + kEmbeddedClusterItems);
-    ec.clusters.push_back({b, end, {}, {}});
-    double gain = 0;
-    for (int32_t gb = b; gb < end; gb += kGroupItems) {
-      const int32_t ge = std::min(end, gb + kGroupItems);
-      std::vector<int32_t> vertices;
-      for (int32_t i = gb; i < ge; ++i) of(i, vertices);
-      std::sort(vertices.begin(), vertices.end());
-      vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
-      for (int32_t v : vertices) {
-        double sum = 0;
-        for (double w : emb_w_[size_t(v)]) sum += std::fabs(w);
-        gain = std::max(gain, sum);
-      }
-      ec.group_items.push_back({gb, ge});
-      ec.vertices.insert(ec.vertices.end(), vertices.begin(), vertices.end());
-      ec.vertex_begin.push_back(int32_t(ec.vertices.size()));
+std::vector<double> Contact<Real>::embedded_gain(const ClusterSet& set) const {
+  std::vector<double> gain(set.clusters(), 0.0);
+  for (size_t c = 0; c < set.clusters(); ++c)
+    for (int32_t m = set.vertex_begin[size_t(set.group_begin[c])]; m < set.vertex_begin[size_t(set.group_begin[c + 1])];
+         ++m) {
+      double sum = 0;
+      for (double w : emb_w_[size_t(set.vertices[size_t(m)])]) sum += std::fabs(w);
+      gain[c] = std::max(gain[c], sum);
     }
-    ec.group_begin.push_back(int32_t(ec.group_items.size()));
-    ec.gain.push_back(gain);
-  }
-  return ec;
+  return gain;
 }
 
 template <class Real>
-void Contact<Real>::sweep_embedded(EmbeddedClusters& ec, ContactState& cs, size_t first, size_t first_group) {
+void Contact<Real>::sweep_embedded(ClusterSet& ec, const std::vector<double>& gain, ContactState& cs, size_t first,
+                                   size_t first_group) {
   constexpr double inf = std::numeric_limits<double>::infinity();
   const size_t n_proxies = model_.proxies.size();
-  for (size_t j = 0; j < ec.clusters.size(); ++j) {
+  for (size_t j = 0; j < ec.clusters(); ++j) {
     Vec3& lo = cs.embedded_lo[first + j];
     Vec3& hi = cs.embedded_hi[first + j];
     double& at = cs.embedded_refit_at[first + j];
     // A vertex moves at most sum_k |w_k| times as far as its nodes.
-    Vec3 grow(ec.gain[j] * (cs.embedded_drift - at));
+    double grow = gain[j] * (cs.embedded_drift - at);
     if (!(cs.embedded_drift - at <= refit_drift_)) {
       bool near = false;
-      for (size_t p = 0; p < n_proxies && !near; ++p) near = boxes_meet(lo - grow, hi + grow, lo_[p], hi_[p]);
+      for (size_t p = 0; p < n_proxies && !near; ++p)
+        near = boxes_meet(lo - Vec3(grow), hi + Vec3(grow), lo_[p], hi_[p]);
       if (near) {  // refitted to both ends of this step
         at = cs.embedded_drift;
-        grow = Vec3(0.0);
+        grow = 0;
         lo = Vec3(inf);
         hi = Vec3(-inf);
         for (int32_t g = ec.group_begin[j]; g < ec.group_begin[j + 1]; ++g) {
@@ -207,24 +191,9 @@ void Contact<Real>::sweep_embedded(EmbeddedClusters& ec, ContactState& cs, size_
         }
       }
     }
-    ec.clusters[j].lo = lo - grow;
-    ec.clusters[j].hi = hi + grow;
-  }
-}
-
-template <class Real>
-template <class Visit>
-void Contact<Real>::visit_embedded(const EmbeddedClusters& ec, const ContactState& cs, size_t first, size_t first_group,
-                                   size_t proxy, const Visit& visit) const {
-  for (size_t j = 0; j < ec.clusters.size(); ++j) {
-    const Cluster& c = ec.clusters[j];
-    if (!boxes_meet(c.lo, c.hi, lo_[proxy], hi_[proxy])) continue;
-    const Vec3 grow(ec.gain[j] * (cs.embedded_drift - cs.embedded_refit_at[first + j]));
-    for (int32_t g = ec.group_begin[j]; g < ec.group_begin[j + 1]; ++g) {
-      const size_t k = first_group + size_t(g);
-      if (!boxes_meet(cs.embedded_group_lo[k] - grow, cs.embedded_group_hi[k] + grow, lo_[proxy], hi_[proxy])) continue;
-      for (int32_t i = ec.group_items[size_t(g)][0]; i < ec.group_items[size_t(g)][1]; ++i) visit(i);
-    }
+    ec.lo[j] = lo - Vec3(grow);
+    ec.hi[j] = hi + Vec3(grow);
+    ec.grow[j] = grow;
   }
 }
 
@@ -233,7 +202,8 @@ template <class Order>
 void Contact<Real>::build_boundary(const std::vector<int32_t>& slot_of, const Order& morton_order) {
   const Model<Real>& model = model_;
   const auto n = static_cast<int32_t>(free_nodes_.size());
-  for (int32_t b = 0; b < n; b += kClusterNodes) clusters_.push_back({b, std::min(n, b + kClusterNodes), {}, {}});
+  node_clusters_ = ClusterSet::build(n, kClusterItems, kClusterItems,
+                                     [](int32_t k, std::vector<int32_t>& slots) { slots.push_back(k); });
 
   // Faces with a free corner, in Morton order of their rest centroids; an
   // edge's contacts belong to the first face (in that order) that has it.
@@ -254,20 +224,11 @@ void Contact<Real>::build_boundary(const std::vector<int32_t>& slot_of, const Or
     }
     faces_.push_back(f);
   }
-  const auto n_faces = static_cast<int32_t>(faces_.size());
-  for (int32_t b = 0; b < n_faces; b += kClusterNodes)
-    face_clusters_.push_back({b, std::min(n_faces, b + kClusterNodes), {}, {}});
-  // Each face cluster's corners, once each: its box is theirs.
-  face_cluster_slot_begin_.push_back(0);
-  for (const Cluster& c : face_clusters_) {
-    std::vector<int32_t> corners;
-    for (int32_t f = c.begin; f < c.end; ++f)
-      corners.insert(corners.end(), faces_[size_t(f)].slot.begin(), faces_[size_t(f)].slot.end());
-    std::sort(corners.begin(), corners.end());
-    corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
-    face_cluster_slots_.insert(face_cluster_slots_.end(), corners.begin(), corners.end());
-    face_cluster_slot_begin_.push_back(int32_t(face_cluster_slots_.size()));
-  }
+  // Each face cluster's box is its corners'.
+  face_clusters_ = ClusterSet::build(
+      int32_t(faces_.size()), kClusterItems, kClusterItems, [&](int32_t f, std::vector<int32_t>& slots) {
+        slots.insert(slots.end(), faces_[size_t(f)].slot.begin(), faces_[size_t(f)].slot.end());
+      });
 }
 
 template <class Real>
@@ -288,9 +249,9 @@ void Contact<Real>::init(ContactState& cs) const {
   cs.face_memory.assign(faces_.size(), Memory{});
   cs.embedded_memory.assign(emb_slot_.size(), Memory{});
   cs.embedded_face_memory.assign(emb_faces_.size(), Memory{});
-  cs.embedded_lo.assign(emb_vertices_.clusters.size() + emb_face_clusters_.clusters.size(), Vec3(0.0));
+  cs.embedded_lo.assign(emb_vertices_.clusters() + emb_face_clusters_.clusters(), Vec3(0.0));
   cs.embedded_hi = cs.embedded_lo;
-  cs.embedded_group_lo.assign(emb_vertices_.group_items.size() + emb_face_clusters_.group_items.size(), Vec3(0.0));
+  cs.embedded_group_lo.assign(emb_vertices_.groups() + emb_face_clusters_.groups(), Vec3(0.0));
   cs.embedded_group_hi = cs.embedded_group_lo;
   cs.embedded_refit_at.assign(cs.embedded_lo.size(), -std::numeric_limits<double>::infinity());
   cs.embedded_drift = 0;
@@ -506,26 +467,10 @@ double Contact<Real>::sweep_slots(const State<Real>& s) {
   double move2 = 0;
   for (size_t k = 0; k < slot_node_.size(); ++k) {
     x_now_[k] = position(s, model_.mesh.X[size_t(slot_node_[k])], slot_node_[k]);
-    if (!emb_vertices_.clusters.empty())
-      move2 = std::max(move2, glm::dot(x_now_[k] - cs.x_prev[k], x_now_[k] - cs.x_prev[k]));
+    if (!emb_vertices_.empty()) move2 = std::max(move2, glm::dot(x_now_[k] - cs.x_prev[k], x_now_[k] - cs.x_prev[k]));
   }
-  const auto sweep = [&](Cluster& c, int32_t k) {
-    c.lo = glm::min(c.lo, glm::min(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
-    c.hi = glm::max(c.hi, glm::max(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
-  };
-  constexpr double inf = std::numeric_limits<double>::infinity();
-  for (Cluster& c : clusters_) {
-    c.lo = Vec3(inf);
-    c.hi = Vec3(-inf);
-    for (int32_t k = c.begin; k < c.end; ++k) sweep(c, k);
-  }
-  for (size_t j = 0; j < face_clusters_.size(); ++j) {
-    Cluster& c = face_clusters_[j];
-    c.lo = Vec3(inf);
-    c.hi = Vec3(-inf);
-    for (int32_t m = face_cluster_slot_begin_[j]; m < face_cluster_slot_begin_[j + 1]; ++m)
-      sweep(c, face_cluster_slots_[size_t(m)]);
-  }
+  node_clusters_.fit(cs.x_prev, x_now_);
+  face_clusters_.fit(cs.x_prev, x_now_);
   return std::sqrt(move2);
 }
 
@@ -579,33 +524,33 @@ void Contact<Real>::find_points(ContactState& cs, double largest_move, double dt
     std::fill(emb_stamp_.begin(), emb_stamp_.end(), 0u);
     stamp_ = 1;
   }
-  if (!emb_vertices_.clusters.empty()) {
+  if (!emb_vertices_.empty()) {
     cs.embedded_drift += largest_move;
-    sweep_embedded(emb_vertices_, cs, 0, 0);
-    sweep_embedded(emb_face_clusters_, cs, emb_vertices_.clusters.size(), emb_vertices_.group_items.size());
+    sweep_embedded(emb_vertices_, emb_vertex_gain_, cs, 0, 0);
+    sweep_embedded(emb_face_clusters_, emb_face_gain_, cs, emb_vertices_.clusters(), emb_vertices_.groups());
   }
   node_contacts_ = face_contacts_ = embedded_contacts_ = 0;
   points_.clear();
-  for (const Cluster& c : clusters_)
-    for (size_t j = 0; j < n_proxies; ++j) {
-      if (!boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
-      for (int32_t k = c.begin; k < c.end; ++k) {
-        // The node's own path over the step against the proxy's swept box.
+  // The nodes, cluster by cluster, each near a proxy then tested along its own path over the step.
+  const ClusterSet& nc = node_clusters_;
+  for (size_t c = 0; c < nc.clusters(); ++c)
+    for (size_t j = 0; j < n_proxies; ++j)
+      nc.visit_cluster(c, nc.group_lo.data(), nc.group_hi.data(), lo_[j], hi_[j], [&](int32_t k) {
         const Vec3& x = x_now_[size_t(k)];
         const Vec3& xp = cs.x_prev[size_t(k)];
         if (!boxes_meet(glm::min(x, xp), glm::max(x, xp), lo_[j], hi_[j])) {
           Memory& mem = cs.memory[size_t(k)];
           if (mem.proxy == int32_t(j)) mem.proxy = -1;
-          continue;
+          return;
         }
         find_node_contact(cs, k, int32_t(j), pose0_[j], pose1_[j]);
-      }
-    }
+      });
   // Then the faces. A plane meets a triangle deepest at a corner: its nodes are all it needs.
-  for (const Cluster& c : face_clusters_)
+  const ClusterSet& fc = face_clusters_;
+  for (size_t c = 0; c < fc.clusters(); ++c)
     for (size_t j = 0; j < n_proxies; ++j) {
-      if (model_.proxies[j].geometry.shape == ProxyShape::Plane || !boxes_meet(c.lo, c.hi, lo_[j], hi_[j])) continue;
-      for (int32_t f = c.begin; f < c.end; ++f) {
+      if (model_.proxies[j].geometry.shape == ProxyShape::Plane) continue;
+      fc.visit_cluster(c, fc.group_lo.data(), fc.group_hi.data(), lo_[j], hi_[j], [&](int32_t f) {
         Vec3 lo(inf), hi(-inf);
         for (int32_t k : faces_[size_t(f)].slot) {
           lo = glm::min(lo, glm::min(x_now_[size_t(k)], cs.x_prev[size_t(k)]));
@@ -614,21 +559,26 @@ void Contact<Real>::find_points(ContactState& cs, double largest_move, double dt
         if (!boxes_meet(lo, hi, lo_[j], hi_[j])) {
           Memory& mem = cs.face_memory[size_t(f)];
           if (mem.proxy == int32_t(j)) mem.proxy = -1;
-          continue;
+          return;
         }
         find_face_contact(cs, f, int32_t(j), pose0_[j], pose1_[j], dt);
-      }
+      });
     }
 
-  // The embedded surface's vertices and triangles (in place of the nodes and faces above, which it then has none of).
-  // Each in clusters of 128, and in those in groups of 8 (core/contact/contact.hpp).
-  const size_t face_groups = emb_vertices_.group_items.size();
+  // The embedded surface's vertices and triangles (in place of the nodes and faces above, which it then has none
+  // of), their groups' boxes kept in the state: the vertices' clusters', then the triangles'.
+  const ClusterSet& ev = emb_vertices_;
+  const ClusterSet& ef = emb_face_clusters_;
+  const Vec3* ef_lo = cs.embedded_group_lo.data() + ev.groups();
+  const Vec3* ef_hi = cs.embedded_group_hi.data() + ev.groups();
   for (size_t j = 0; j < n_proxies; ++j) {
-    visit_embedded(emb_vertices_, cs, 0, 0, j,
-                   [&](int32_t e) { find_embedded_contact(cs, e, int32_t(j), pose0_[j], pose1_[j], dt); });
+    for (size_t c = 0; c < ev.clusters(); ++c)
+      ev.visit_cluster(c, cs.embedded_group_lo.data(), cs.embedded_group_hi.data(), lo_[j], hi_[j],
+                       [&](int32_t e) { find_embedded_contact(cs, e, int32_t(j), pose0_[j], pose1_[j], dt); });
     if (model_.proxies[j].geometry.shape == ProxyShape::Plane) continue;  // (deepest at a vertex)
-    visit_embedded(emb_face_clusters_, cs, emb_vertices_.clusters.size(), face_groups, j,
-                   [&](int32_t f) { find_embedded_face_contact(cs, f, int32_t(j), pose0_[j], pose1_[j], dt); });
+    for (size_t c = 0; c < ef.clusters(); ++c)
+      ef.visit_cluster(c, ef_lo, ef_hi, lo_[j], hi_[j],
+                       [&](int32_t f) { find_embedded_face_contact(cs, f, int32_t(j), pose0_[j], pose1_[j], dt); });
   }
 }
 

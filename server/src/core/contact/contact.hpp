@@ -51,8 +51,9 @@
 // is sum_j b_j x_j over the triangle's vertices, so sum_j b_j w_jk over up to
 // twelve nodes (kPointCarriers), each node once.
 //
-// Broad phase: surface nodes in clusters of 32 (Morton order of rest
-// positions), each with a box around its nodes' motion over the step; only
+// Broad phase (ClusterSet, core/contact/cluster_set.hpp): surface nodes in
+// clusters of 32 (Morton order of rest positions), each with a box around its
+// nodes' motion over the step; only
 // clusters whose box meets a proxy's swept bounding box are examined node by
 // node; surface triangles likewise, in clusters of 32 by their rest
 // centroids. A proxy far from the body costs one box test per cluster. An
@@ -76,6 +77,7 @@
 
 #include <glm/mat3x3.hpp>
 
+#include "core/contact/cluster_set.hpp"
 #include "core/contact/impulse_solve.hpp"
 #include "core/contact/stiffness_fit.hpp"
 #include "core/coupling.hpp"
@@ -155,10 +157,6 @@ class Contact {
   double take_node_impulses(State<Real>& s, std::vector<double>& impulse) const;
 
  private:
-  struct Cluster {
-    int32_t begin, end;  // range in free_nodes_ (node clusters) or faces_ (face clusters)
-    Vec3 lo, hi;         // box around its nodes' motion over the step
-  };
   struct Face {
     std::array<int32_t, 3> slot;  // its corners, as slots (below)
     uint8_t owns_edge = 0;        // bit c: the contacts on the edge opposite corner c are this face's
@@ -235,41 +233,31 @@ class Contact {
   // essential BC (faces' corners, never pushed).
   std::vector<int32_t> slot_node_;   // node id per slot
   std::vector<int32_t> free_nodes_;  // the first free_count slots' nodes
-  std::vector<Cluster> clusters_;    // of free nodes
+  ClusterSet node_clusters_;         // of free slots, 32 a cluster (one group), their boxes fitted each step
   std::vector<Face> faces_;          // surface triangles with a free corner, in Morton order of rest centroids
-  std::vector<Cluster> face_clusters_;
-  std::vector<int32_t> face_cluster_slots_, face_cluster_slot_begin_;  // each face cluster's corners, once each
+  ClusterSet face_clusters_;         // of faces, likewise, over their corners
   // Items of the embedded surface (vertices, or triangles) in clusters of
   // 128, each in groups of 8: a cluster's box is its groups', a group's its
   // items' vertices'. A cluster near a proxy has its groups tested, a group
   // near it its items.
   static constexpr int32_t kEmbeddedClusterItems = 128, kGroupItems = 8;
-  struct EmbeddedClusters {
-    std::vector<Cluster> clusters;
-    std::vector<int32_t> group_begin;                 // per cluster: its first group (one more at the end)
-    std::vector<std::array<int32_t, 2>> group_items;  // per group: its items [begin, end)
-    std::vector<int32_t> vertices, vertex_begin;      // per group: its items' vertices, once each
-    std::vector<double> gain;                         // per cluster: the most sum_k |w_k| of those vertices
-  };
-  // Items [0, n): item i's vertices from `of(i, vertices)`.
-  template <class Of>
-  EmbeddedClusters cluster_embedded(int32_t n, const Of& of) const;
+  // Per cluster of an embedded set: the most sum_k |w_k| of its vertices,
+  // how much farther than a node a vertex can move.
+  std::vector<double> embedded_gain(const ClusterSet& set) const;
   // Sets each cluster's box for the step: its box at its last refit (first,
   // first_group: its clusters' and groups' indices in cs.embedded_lo and
   // cs.embedded_group_lo), grown by the drift since; refits one that has
   // drifted refit_drift_ and meets a proxy's box.
-  void sweep_embedded(EmbeddedClusters& ec, ContactState& cs, size_t first, size_t first_group);
-  // Calls visit(item) for each item in a group whose grown box meets proxy's.
-  template <class Visit>
-  void visit_embedded(const EmbeddedClusters& ec, const ContactState& cs, size_t first, size_t first_group,
-                      size_t proxy, const Visit& visit) const;
+  void sweep_embedded(ClusterSet& ec, const std::vector<double>& gain, ContactState& cs, size_t first,
+                      size_t first_group);
   // The embedded surface's vertices (instead of nodes and faces), in Morton
   // order of their rest positions: each one's four slots and weights; its
   // triangles in Morton order of their rest centroids, as those vertices,
   // with the edges whose contacts are theirs (Face::owns_edge).
   std::vector<std::array<int32_t, 4>> emb_slot_;
   std::vector<std::array<double, 4>> emb_w_;
-  EmbeddedClusters emb_vertices_;
+  ClusterSet emb_vertices_;
+  std::vector<double> emb_vertex_gain_;
   std::vector<Face> emb_faces_;  // (slot: its vertices, in emb_slot_'s order)
   // A triangle with a vertex inside the proxy has its point added where it
   // is deeper than that vertex by more than this fraction of its longest
@@ -279,7 +267,8 @@ class Contact {
   // nodes with its vertices' points.
   static constexpr double kEmbeddedFaceSlack = 0.1;
   std::vector<double> emb_face_slack_;  // per triangle [m]
-  EmbeddedClusters emb_face_clusters_;
+  ClusterSet emb_face_clusters_;
+  std::vector<double> emb_face_gain_;
   // Each vertex's positions at t_n and t_{n+1}, worked out once in a step
   // (when emb_stamp_ is the step's) for its own test and its triangles'.
   std::vector<std::array<Vec3, 2>> emb_x_;
