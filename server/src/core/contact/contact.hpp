@@ -296,4 +296,19 @@ class Contact {
   bool friction_ = false;
 };
 
+// (Here, not in a .cpp: the broad phase's refits and the candidate points
+// both call it per vertex.)
+template <class Real>
+inline const std::array<Vec3, 2>& Contact<Real>::embedded_position(const ContactState& cs, size_t v) {
+  std::array<Vec3, 2>& x = emb_x_[v];
+  if (emb_stamp_[v] == stamp_) return x;
+  emb_stamp_[v] = stamp_;
+  x = {Vec3(0.0), Vec3(0.0)};
+  for (size_t k = 0; k < 4; ++k) {
+    x[0] += emb_w_[v][k] * cs.x_prev[size_t(emb_slot_[v][k])];
+    x[1] += emb_w_[v][k] * x_now_[size_t(emb_slot_[v][k])];
+  }
+  return x;
+}
+
 }  // namespace tactile
