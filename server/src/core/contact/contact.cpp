@@ -82,7 +82,25 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   // Solve groups: one per proxy, then one per coupled body (at most one per proxy and hand).
   solve_.reserve(free_nodes_.size(), 2 * n_proxies + model.hands.size(), points_.capacity());
   slot_v_.assign(free_nodes_.size(), Vec3(0.0));
-  slot_m_.assign(free_nodes_.size(), 0.0);
+  slot_m_.resize(free_nodes_.size());
+  for (size_t k = 0; k < free_nodes_.size(); ++k) slot_m_[k] = double(model.m[size_t(free_nodes_[k])]);
+}
+
+template <class Real>
+std::vector<typename Contact<Real>::Face> Contact<Real>::claim_edges(const std::vector<Tri>& tris,
+                                                                     const std::vector<size_t>& order) {
+  std::vector<Face> faces;
+  faces.reserve(order.size());
+  std::set<std::pair<int32_t, int32_t>> claimed;
+  for (size_t k : order) {
+    Face f{tris[k], 0};
+    for (int c = 0; c < 3; ++c) {
+      const int32_t a = f.slot[size_t((c + 1) % 3)], b = f.slot[size_t((c + 2) % 3)];
+      if (claimed.insert({std::min(a, b), std::max(a, b)}).second) f.owns_edge = uint8_t(f.owns_edge | (1u << c));
+    }
+    faces.push_back(f);
+  }
+  return faces;
 }
 
 template <class Real>
@@ -122,14 +140,9 @@ void Contact<Real>::build_embedded(const std::vector<int32_t>& slot_of, const Or
     centroids.push_back(
         (e.rest.vertices[size_t(t[0])] + e.rest.vertices[size_t(t[1])] + e.rest.vertices[size_t(t[2])]) / 3.0);
   }
-  std::set<std::pair<int32_t, int32_t>> claimed;
-  for (size_t k : morton_order(centroids)) {
-    Face f{tris[k], 0};
-    for (int c = 0; c < 3; ++c) {
-      const int32_t a = f.slot[size_t((c + 1) % 3)], b = f.slot[size_t((c + 2) % 3)];
-      if (claimed.insert({std::min(a, b), std::max(a, b)}).second) f.owns_edge = uint8_t(f.owns_edge | (1u << c));
-    }
-    emb_faces_.push_back(f);
+  const std::vector<size_t> order = morton_order(centroids);
+  emb_faces_ = claim_edges(tris, order);
+  for (size_t k : order) {
     double longest = 0;
     for (int c = 0; c < 3; ++c)
       longest = std::max(longest, glm::length(e.rest.vertices[size_t(t_of[k][size_t(c)])] -
@@ -215,15 +228,7 @@ void Contact<Real>::build_boundary(const std::vector<int32_t>& slot_of, const Or
     tris.push_back(sl);
     centroids.push_back((model.mesh.X[size_t(t[0])] + model.mesh.X[size_t(t[1])] + model.mesh.X[size_t(t[2])]) / 3.0);
   }
-  std::set<std::pair<int32_t, int32_t>> claimed;
-  for (size_t k : morton_order(centroids)) {
-    Face f{tris[k], 0};
-    for (int c = 0; c < 3; ++c) {
-      const int32_t a = f.slot[size_t((c + 1) % 3)], b = f.slot[size_t((c + 2) % 3)];
-      if (claimed.insert({std::min(a, b), std::max(a, b)}).second) f.owns_edge = uint8_t(f.owns_edge | (1u << c));
-    }
-    faces_.push_back(f);
-  }
+  faces_ = claim_edges(tris, morton_order(centroids));
   // Each face cluster's box is its corners'.
   face_clusters_ = ClusterSet::build(
       int32_t(faces_.size()), kClusterItems, kClusterItems, [&](int32_t f, std::vector<int32_t>& slots) {
@@ -610,13 +615,12 @@ void Contact<Real>::close_step(ContactState& cs, ContactSums& sums) {
 
 template <class Real>
 void Contact<Real>::solve(State<Real>& s) {
-  // The free slots the points move: their velocities and masses, gathered for the solve.
+  // The free slots the points move: their velocities, gathered for the solve (their masses are the model's).
   for (const Point& c : points_)
     for (size_t j = 0; j < kPointCarriers && c.slot[j] >= 0; ++j) {
       const auto k = size_t(c.slot[j]);
       const size_t i = size_t(free_nodes_[k]);
       slot_v_[k] = Vec3(double(s.v[3 * i]), double(s.v[3 * i + 1]), double(s.v[3 * i + 2]));
-      slot_m_[k] = double(model_.m[i]);
     }
   solve_.solve(points_, s.contact.motion.size(), s.contact.bodies, slot_v_, slot_m_);
 }

@@ -189,6 +189,9 @@ class Contact {
   // A corner of a face's or an embedded vertex's point, of weight w: a free
   // node takes its share of the impulse, a held one moves as prescribed.
   void add_corner(const ContactState& cs, Point& c, int& free, size_t slot, double w, double dt) const;
+  // Triangles (as slots or embedded vertices) as faces, in `order`: an edge's
+  // contacts belong to the first face in that order that has it.
+  static std::vector<Face> claim_edges(const std::vector<Tri>& tris, const std::vector<size_t>& order);
   // The constructor's two ways: the embedded surface's vertices, or the boundary's nodes and faces.
   template <class Order>
   void build_embedded(const std::vector<int32_t>& slot_of, const Order& morton_order);
@@ -287,7 +290,7 @@ class Contact {
   std::vector<Point> points_;         // this step's contact points
   ImpulseSolve solve_;                // their impulses
   std::vector<Vec3> slot_v_;          // per free slot: its velocity before contact [m/s]
-  std::vector<double> slot_m_;        // and its mass [kg] (the slots points name)
+  std::vector<double> slot_m_;        // and its mass [kg], the model's
   int32_t node_contacts_ = 0, face_contacts_ = 0, embedded_contacts_ = 0;
   std::vector<Pose> pose0_, pose1_;    // per proxy at t_n and t_{n+1}
   std::vector<Vec3> velocity_, spin_;  // per proxy over the step: velocity [m/s], angular velocity [rad/s]
