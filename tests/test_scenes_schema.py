@@ -114,6 +114,29 @@ def proxy_change(change: Callable[[dict[str, Any]], None]) -> dict[str, Any]:
     return scene
 
 
+def two_bodies(scene: dict[str, Any]) -> None:
+    """The beam as the first of two bodies, a soft block resting on it (touching, not overlapping) the second."""
+    beam = {key: scene.pop(key) for key in ("mesh", "material", "boundary")}
+    beam["track"] = scene["run"].pop("track")
+    scene["bodies"] = [
+        {"name": "beam", **beam},
+        {
+            "name": "block",
+            "mesh": {"primitive": "box", "lo": [0.3, 0.1, 0], "hi": [0.4, 0.15, 0.1], "cells": [2, 1, 2]},
+            "material": {"model": "neohookean", "E": 2e4, "nu": 0.4, "rho": 900},
+            "loads": [{"name": "push", "select": {"box": {"lo": [0.3, 0.15, 0], "hi": [0.4, 0.15, 0.1]}},
+                       "force": [0, -1, 0]}],
+            "track": [{"name": "block_top", "point": [0.35, 0.15, 0.05]}],
+        },
+    ]
+
+
+def bodies_change(change: Callable[[dict[str, Any]], None]) -> dict[str, Any]:
+    scene = amended(two_bodies)
+    change(scene)
+    return scene
+
+
 GOOD: dict[str, dict[str, Any]] = {
     "beam": BEAM,
     "cylinder": amended(
@@ -140,6 +163,9 @@ GOOD: dict[str, dict[str, Any]] = {
     "proxies": amended(with_proxies),
     "friction_variants": proxy_change(set_path(["variants"], [{"name": "dry"},
                                                               {"name": "wet", "effects": {"friction": False}}])),
+    "two_bodies": amended(two_bodies),
+    "bodies_p2": bodies_change(lambda s: [b.update(element="p2") for b in s["bodies"]]),
+    "bodies_variants": bodies_change(set_path(["variants"], [{"name": "f32", "integrator": {"precision": "float"}}])),
 }
 
 BAD: dict[str, dict[str, Any]] = {
@@ -200,6 +226,12 @@ BAD: dict[str, dict[str, Any]] = {
     "no_keyframes": proxy_change(set_path(["proxies", 0, "script", "keyframes"], [])),
     "hand_without_device": proxy_change(lambda s: s["hands"][0].pop("device")),
     "friction_not_a_boolean": proxy_change(set_path(["effects", "friction"], 1)),
+    "bodies_and_mesh": bodies_change(set_path(["mesh"], BEAM["mesh"])),
+    "bodies_and_material": bodies_change(set_path(["material"], BEAM["material"])),
+    "body_without_material": bodies_change(lambda s: s["bodies"][1].pop("material")),
+    "body_without_name": bodies_change(lambda s: s["bodies"][1].pop("name")),
+    "body_unknown_field": bodies_change(set_path(["bodies", 1, "proxies"], [])),
+    "no_bodies": bodies_change(set_path(["bodies"], [])),
 }
 
 # Scenes the schema cannot refuse but the loader does, naming the field.
@@ -216,6 +248,15 @@ LOADER_ONLY: dict[str, tuple[dict[str, Any], str]] = {
     ),
     "proxy_names_twice": (proxy_change(set_path(["proxies", 1, "name"], "tip")), "proxies[1].name"),
     "position_off_the_script": (proxy_change(set_path(["proxies", 0, "position"], [0, 0, 0])), "proxies[0].position"),
+    "bodies_overlap": (bodies_change(set_path(["bodies", 1, "mesh", "lo"], [0.3, 0.09, 0])), "bodies"),
+    "body_names_twice": (bodies_change(set_path(["bodies", 1, "name"], "beam")), "bodies[1].name"),
+    "bodies_of_two_orders": (bodies_change(set_path(["bodies", 1, "element"], "p2")), "bodies[1].element"),
+    "body_selects_another_bodys_nodes": (
+        bodies_change(set_path(["bodies", 1, "loads", 0, "select", "box"], {"lo": [0, 0, 0], "hi": [0.1, 0.1, 0.1]})),
+        "bodies[1].loads[0].select",
+    ),
+    "bodies_and_run_track": (bodies_change(set_path(["run", "track"], [{"name": "t", "point": [0, 0, 0]}])),
+                             "run.track"),
 }
 
 
@@ -251,7 +292,7 @@ def test_there_are_shipped_scenes_of_each_kind() -> None:
     names = {p.stem for p in shipped_scenes()}
     assert {"default", "fig2_twist", "fig3_cantilever", "poke", "stroke", "pinch", "hand_twist"} <= names
     files = [json.load(open(p, encoding="utf-8")) for p in shipped_scenes()]
-    assert any("file" in s["mesh"] and s["mesh"]["file"].endswith(".obj") for s in files)
+    assert any("file" in s.get("mesh", {}) and s["mesh"]["file"].endswith(".obj") for s in files)
     # Proxy contact: scripted proxies, two devices at once, a hand, friction.
     assert any(len({p["device"] for p in s.get("proxies", []) if "device" in p}) >= 2 for s in files)
     assert any(s.get("hands") and len([p for p in s["proxies"] if "hand" in p]) >= 5 for s in files)

@@ -7,14 +7,17 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <sstream>
 #include <type_traits>
 
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/matrix.hpp>
 #include <glm/vec4.hpp>
+#include <glm/vector_relational.hpp>
 
 namespace tactile {
 
@@ -508,6 +511,141 @@ std::vector<Tet> compute_embedded_nodes(const EmbeddedSurface& surface, const st
   return out;
 }
 
+namespace {
+
+std::string body_name(const std::vector<BodySpec>& bodies, size_t b) {
+  return "body " + std::to_string(b) + " ('" + bodies[b].name + "')";
+}
+
+// The barycentric coordinates of p in tet t (corners), or false for a flat tet.
+bool barycentric(const TetMesh& mesh, const Tet& t, const Vec3& p, std::array<double, 4>& w) {
+  const Vec3 &x0 = mesh.X[size_t(t[0])], &x1 = mesh.X[size_t(t[1])], &x2 = mesh.X[size_t(t[2])],
+             &x3 = mesh.X[size_t(t[3])];
+  const double V = compute_tet_volume(x0, x1, x2, x3);
+  if (!(V > 0)) return false;
+  w = {compute_tet_volume(p, x1, x2, x3) / V, compute_tet_volume(x0, p, x2, x3) / V,
+       compute_tet_volume(x0, x1, p, x3) / V, compute_tet_volume(x0, x1, x2, p) / V};
+  return true;
+}
+
+std::array<int32_t, 3> face_key(const Tet& t, int skip) {
+  std::array<int32_t, 3> k{};
+  for (int c = 0, i = 0; c < 4; ++c)
+    if (c != skip) k[size_t(i++)] = t[size_t(c)];
+  std::sort(k.begin(), k.end());
+  return k;
+}
+
+// The first boundary node of body a inside body b, or -1. Inside: in one of
+// b's tets (to rounding) and on none of b's boundary faces, so that bodies
+// that touch are not caught. b's tets are binned in a grid of about one tet
+// a cell.
+int32_t find_node_inside(const TetMesh& mesh, const BodySpec& a, const std::vector<int32_t>& boundary,
+                         const BodySpec& b) {
+  std::map<std::array<int32_t, 3>, int> face_count;  // b's corner faces, boundary ones counted once
+  std::vector<Vec3> corners;
+  for (int32_t e = b.tet_begin; e < b.tet_end; ++e) {
+    for (int c = 0; c < 4; ++c) ++face_count[face_key(mesh.tets[size_t(e)], c)];
+    for (int32_t n : mesh.tets[size_t(e)]) corners.push_back(mesh.X[size_t(n)]);
+  }
+  const Aabb box = compute_aabb(corners);
+  const Vec3 size = glm::max(box.size(), Vec3(1e-12));
+  const double cell = std::cbrt(size.x * size.y * size.z / double(b.tet_end - b.tet_begin));
+  const glm::ivec3 cells = glm::clamp(glm::ivec3(glm::ceil(size / cell)), glm::ivec3(1), glm::ivec3(256));
+  const auto cell_of = [&](const Vec3& p) {
+    return glm::clamp(glm::ivec3((p - box.lo) / size * Vec3(cells)), glm::ivec3(0), cells - 1);
+  };
+  std::vector<std::vector<int32_t>> grid(size_t(cells.x) * size_t(cells.y) * size_t(cells.z));
+  for (int32_t e = b.tet_begin; e < b.tet_end; ++e) {
+    Vec3 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+    for (int32_t n : mesh.tets[size_t(e)]) lo = glm::min(lo, mesh.X[size_t(n)]), hi = glm::max(hi, mesh.X[size_t(n)]);
+    const glm::ivec3 c0 = cell_of(lo), c1 = cell_of(hi);
+    for (int z = c0.z; z <= c1.z; ++z)
+      for (int y = c0.y; y <= c1.y; ++y)
+        for (int x = c0.x; x <= c1.x; ++x) grid[size_t((z * cells.y + y) * cells.x + x)].push_back(e);
+  }
+  const double margin = 1e-6;  // of a tet's size: on a face
+  for (int32_t n : boundary) {
+    if (n < a.node_begin || n >= a.node_end) continue;
+    const Vec3& p = mesh.X[size_t(n)];
+    if (glm::any(glm::lessThan(p, box.lo)) || glm::any(glm::greaterThan(p, box.hi))) continue;
+    const glm::ivec3 c = cell_of(p);
+    bool in = false, on_boundary = false;
+    for (int32_t e : grid[size_t((c.z * cells.y + c.y) * cells.x + c.x)]) {
+      const Tet& t = mesh.tets[size_t(e)];
+      std::array<double, 4> w{};
+      if (!barycentric(mesh, t, p, w) || *std::min_element(w.begin(), w.end()) < -margin) continue;
+      in = true;
+      for (int k = 0; k < 4; ++k)
+        if (w[size_t(k)] <= margin && face_count[face_key(t, k)] == 1) on_boundary = true;
+    }
+    if (in && !on_boundary) return n;
+  }
+  return -1;
+}
+
+}  // namespace
+
+std::vector<BodySpec> check_bodies(const ModelSpec& spec) {
+  const TetMesh& mesh = spec.mesh;
+  const int32_t n_fine = spec.surface ? spec.surface->n_vertices() : 0;
+  const int32_t n_fine_tris = spec.surface ? int32_t(spec.surface->rest.triangles.size()) : 0;
+  if (spec.bodies.empty()) return {BodySpec{"body", 0, mesh.n_nodes(), 0, mesh.n_tets(), 0, n_fine, 0, n_fine_tris}};
+  const std::vector<BodySpec>& bodies = spec.bodies;
+  BodySpec end{};  // where the previous body ended
+  for (size_t b = 0; b < bodies.size(); ++b) {
+    const BodySpec& body = bodies[b];
+    const std::string name = body_name(bodies, b);
+    if (body.name.empty()) throw ModelError("body " + std::to_string(b) + " has no name");
+    for (size_t c = 0; c < b; ++c)
+      if (bodies[c].name == body.name) throw ModelError(name + ": the name is also body " + std::to_string(c) + "'s");
+    if (body.node_begin != end.node_end || body.node_end <= body.node_begin || body.tet_begin != end.tet_end ||
+        body.tet_end <= body.tet_begin || body.fine_vertex_begin != end.fine_vertex_end ||
+        body.fine_vertex_end < body.fine_vertex_begin || body.fine_triangle_begin != end.fine_triangle_end ||
+        body.fine_triangle_end < body.fine_triangle_begin)
+      throw ModelError(name + ": its nodes, tets and surface must follow the previous body's, and be some");
+    end = body;
+    for (int32_t e = body.tet_begin; e < body.tet_end && e < mesh.n_tets(); ++e)
+      for (int k = 0; k < mesh.nodes_per_tet(); ++k) {
+        const int32_t n = mesh.node(size_t(e), k);
+        if (n < body.node_begin || n >= body.node_end)
+          throw ModelError(name + ": tet " + std::to_string(e) + " uses node " + std::to_string(n) +
+                           ", which is not the body's");
+      }
+    for (int32_t v = body.fine_vertex_begin; v < body.fine_vertex_end && v < n_fine; ++v)
+      for (int32_t n : spec.surface->nodes[size_t(v)])
+        if (n < body.node_begin || n >= body.node_end)
+          throw ModelError(name + ": surface vertex " + std::to_string(v) + " follows node " + std::to_string(n) +
+                           ", which is not the body's");
+    for (int32_t t = body.fine_triangle_begin; t < body.fine_triangle_end && t < n_fine_tris; ++t)
+      for (int32_t v : spec.surface->rest.triangles[size_t(t)])
+        if (v < body.fine_vertex_begin || v >= body.fine_vertex_end)
+          throw ModelError(name + ": surface triangle " + std::to_string(t) + " uses vertex " + std::to_string(v) +
+                           ", which is not the body's");
+  }
+  if (end.node_end != mesh.n_nodes() || end.tet_end != mesh.n_tets() || end.fine_vertex_end != n_fine ||
+      end.fine_triangle_end != n_fine_tris)
+    throw ModelError("the bodies hold " + std::to_string(end.node_end) + " nodes and " + std::to_string(end.tet_end) +
+                     " tets of the mesh's " + std::to_string(mesh.n_nodes()) + " and " + std::to_string(mesh.n_tets()) +
+                     " (and their surfaces " + std::to_string(end.fine_vertex_end) + " of " + std::to_string(n_fine) +
+                     " fine vertices)");
+  if (bodies.size() > 1) {
+    const std::vector<int32_t> boundary = compute_boundary_nodes(compute_boundary_faces(mesh));
+    for (size_t a = 0; a < bodies.size(); ++a)
+      for (size_t b = 0; b < bodies.size(); ++b) {
+        if (a == b) continue;
+        const int32_t n = find_node_inside(mesh, bodies[a], boundary, bodies[b]);
+        if (n >= 0) {
+          const Vec3& p = mesh.X[size_t(n)];
+          throw ModelError(body_name(bodies, a) + " overlaps " + body_name(bodies, b) + " at rest: its node " +
+                           std::to_string(n - bodies[a].node_begin) + " (" + std::to_string(p.x) + ", " +
+                           std::to_string(p.y) + ", " + std::to_string(p.z) + ") is inside it");
+        }
+      }
+  }
+  return bodies;
+}
+
 // ---- the model -------------------------------------------------------------------------------
 
 template <class Real>
@@ -516,6 +654,7 @@ Model<Real> build_model(const ModelSpec& spec) {
   const TetMesh& mesh = spec.mesh;
   if (std::string err = check_mesh_structure(mesh); !err.empty()) throw ModelError("mesh: " + err);
   check_materials(spec.materials);
+  const std::vector<BodySpec> bodies = check_bodies(spec);
   ElementConstants elements = compute_element_constants(mesh, spec.materials);
   const std::vector<double> given_mass = compute_lumped_masses(mesh, spec.materials, elements.volume);
   const ElementOrder order = compute_element_order(mesh, elements.volume, spec.integrator.threads);
@@ -599,6 +738,20 @@ Model<Real> build_model(const ModelSpec& spec) {
   model.effects = spec.effects;
   model.integrator = spec.integrator;
   model.surface = compute_boundary_faces(model.mesh);
+  // The boundary faces body by body, each body's in the order they came.
+  model.node_body.assign(nn, 0);
+  for (size_t b = 0; b < bodies.size(); ++b)
+    for (int32_t n = bodies[b].node_begin; n < bodies[b].node_end; ++n)
+      model.node_body[size_t(numbers.node_model[size_t(n)])] = int32_t(b);
+  std::stable_sort(model.surface.begin(), model.surface.end(), [&](const Tri& x, const Tri& y) {
+    return model.node_body[size_t(x[0])] < model.node_body[size_t(y[0])];
+  });
+  for (size_t b = 0, f = 0; b < bodies.size(); ++b) {
+    ModelBody body{bodies[b], int32_t(f), 0};
+    while (f < model.surface.size() && model.node_body[size_t(model.surface[f][0])] == int32_t(b)) ++f;
+    body.face_end = int32_t(f);
+    model.bodies.push_back(body);
+  }
   if (spec.surface) {
     model.embedded = spec.surface;
     model.embedded_nodes = compute_embedded_nodes(*spec.surface, numbers.node_model);

@@ -65,6 +65,13 @@ struct LoadSet {
   std::vector<double> weight;  // share of the total force, sums to 1 (n_set)
 };
 
+// A body of the model (BodySpec): its ranges of the spec's mesh and fine
+// surface (given numbering), and of the model's boundary faces.
+struct ModelBody {
+  BodySpec spec;
+  int32_t face_begin = 0, face_end = 0;  // Model::surface, grouped by body
+};
+
 template <class Real>
 struct Model {
   static constexpr int W = kLanes<Real>;
@@ -76,7 +83,9 @@ struct Model {
   TetMesh mesh;
   std::vector<int32_t> node_model;  // model id of each given node (n_nodes)
   std::vector<int32_t> node_given;  // given id of each model node (n_nodes)
-  std::vector<Tri> surface;         // boundary triangles, outward (n_faces x 3)
+  std::vector<Tri> surface;         // boundary triangles, outward, body by body (n_faces x 3)
+  std::vector<ModelBody> bodies;    // at least one; the spec's order
+  std::vector<int32_t> node_body;   // body of each model node (n_nodes)
   // A fine surface the body carries (core/embedding.hpp): contact then
   // meets its vertices, not the boundary's. Null when the spec has none.
   std::shared_ptr<const EmbeddedSurface> embedded;

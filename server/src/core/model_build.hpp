@@ -19,6 +19,8 @@
 //   check_proxies              the proxies, their hands and devices
 //   check_settings             damping and the integrator's settings
 //   compute_embedded_nodes     a fine surface's nodes, in model ids
+//   check_bodies               the bodies tile the mesh and surface, none
+//                              uses another's nodes or lies inside another
 //
 // A ModelError names what is refused.
 #pragma once
@@ -126,5 +128,12 @@ void check_settings(const Effects& effects, const IntegratorSpec& integrator);
 
 // The four nodes each vertex of a fine surface follows, in model ids.
 std::vector<Tet> compute_embedded_nodes(const EmbeddedSurface& surface, const std::vector<int32_t>& node_model);
+
+// The spec's bodies (one covering everything when it names none), checked:
+// their node, tet and fine-surface ranges tile the mesh and surface in order,
+// a body's tets and fine vertices use its own nodes only, names are unique,
+// and no body's boundary node lies inside another body's tet at rest (two
+// bodies may touch, not overlap). The ModelError names the body.
+std::vector<BodySpec> check_bodies(const ModelSpec& spec);
 
 }  // namespace tactile

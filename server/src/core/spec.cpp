@@ -36,9 +36,11 @@ ProfileValue compute_profile(const MotionProfile& p, double t) {
 
 std::vector<int32_t> select_nodes(const TetMesh& mesh, const NodeSelector& s) {
   std::vector<int32_t> out;
+  const int32_t first = std::clamp(s.first, 0, mesh.n_nodes());
+  const int32_t end = s.count < 0 ? mesh.n_nodes() : std::min(mesh.n_nodes(), first + s.count);
   switch (s.kind) {
     case NodeSelector::Kind::Box:
-      for (int32_t i = 0; i < mesh.n_nodes(); ++i) {
+      for (int32_t i = first; i < end; ++i) {
         const Vec3& p = mesh.X[static_cast<size_t>(i)];
         if (p.x >= s.lo.x - s.tolerance && p.x <= s.hi.x + s.tolerance && p.y >= s.lo.y - s.tolerance &&
             p.y <= s.hi.y + s.tolerance && p.z >= s.lo.z - s.tolerance && p.z <= s.hi.z + s.tolerance)
@@ -49,14 +51,14 @@ std::vector<int32_t> select_nodes(const TetMesh& mesh, const NodeSelector& s) {
       const double len = glm::length(s.normal);
       if (!(len > 0.0)) break;
       const Vec3 n = s.normal / len;
-      for (int32_t i = 0; i < mesh.n_nodes(); ++i) {
+      for (int32_t i = first; i < end; ++i) {
         if (std::fabs(glm::dot(mesh.X[static_cast<size_t>(i)] - s.point, n)) <= s.tolerance) out.push_back(i);
       }
       break;
     }
     case NodeSelector::Kind::Nodes:
       for (int32_t i : s.nodes)
-        if (i >= 0 && i < mesh.n_nodes()) out.push_back(i);
+        if (i >= 0 && first + i < end) out.push_back(first + i);
       std::sort(out.begin(), out.end());
       out.erase(std::unique(out.begin(), out.end()), out.end());
       break;

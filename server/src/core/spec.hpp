@@ -33,7 +33,11 @@ struct NodeSelector {
   Vec3 point{0.0};             // Plane: a point on it [m]
   Vec3 normal{0.0, 1.0, 0.0};  // Plane: its normal (any length)
   double tolerance = 1e-9;     // Plane: max distance [m]; Box: slack [m]
-  std::vector<int32_t> nodes;  // Nodes: explicit ids
+  std::vector<int32_t> nodes;  // Nodes: explicit ids, counted from `first`
+  // The nodes it may pick: ids [first, first + count), one body's in a scene
+  // of several (count < 0: every node from first on).
+  int32_t first = 0;
+  int32_t count = -1;
 };
 
 // A scalar s(t) with its first two derivatives, used as an angle [rad] or a
@@ -121,8 +125,23 @@ struct IntegratorSpec {
   double energy_window = 1.0;
 };
 
+// One body of a scene of several. The spec's mesh holds them all, one after
+// another: a body's nodes and tets are ranges of it, each in its own mesh's
+// order (so that node first + i is the body's node i), and its fine surface's
+// vertices and triangles ranges of the spec's surface (empty ranges when the
+// scene has none). A body's tets use its nodes only.
+struct BodySpec {
+  std::string name;
+  int32_t node_begin = 0, node_end = 0;
+  int32_t tet_begin = 0, tet_end = 0;
+  int32_t fine_vertex_begin = 0, fine_vertex_end = 0;
+  int32_t fine_triangle_begin = 0, fine_triangle_end = 0;
+};
+
 struct ModelSpec {
   TetMesh mesh;
+  // Empty: one body, the whole mesh (and surface), named "body".
+  std::vector<BodySpec> bodies;
   // A fine surface carried by the mesh (core/embedding.hpp), shown and
   // touched instead of the mesh's own boundary; null when the scene has none.
   std::shared_ptr<const EmbeddedSurface> surface;

@@ -15,6 +15,8 @@
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 
+#include "core/bodies.hpp"
+#include "core/model_build.hpp"
 #include "core/quadratic.hpp"
 #include "scene/json_fields.hpp"
 #include "scene/scene_mesh.hpp"
@@ -69,12 +71,12 @@ MaterialSpec read_material(const Json& j, const std::string& path, const Origin&
 std::vector<MaterialSpec> read_materials(const Fields& root, const Origin& o) {
   const Json* one = root.find("material");
   const Json* many = root.find("materials");
-  if (one && many) o.fail("materials", "give \"material\" or \"materials\", not both");
-  if (!one && !many) o.fail("material", "required field missing (give \"material\" or \"materials\")");
-  if (one) return {read_material(*one, "material", o)};
-  const Json& arr = scene_json::read_array(*many, "materials", o, 1);
+  if (one && many) o.fail(root.path("materials"), "give \"material\" or \"materials\", not both");
+  if (!one && !many) o.fail(root.path("material"), "required field missing (give \"material\" or \"materials\")");
+  if (one) return {read_material(*one, root.path("material"), o)};
+  const Json& arr = scene_json::read_array(*many, root.path("materials"), o, 1);
   std::vector<MaterialSpec> out;
-  for (size_t i = 0; i < arr.size(); ++i) out.push_back(read_material(arr[i], join("materials", i), o));
+  for (size_t i = 0; i < arr.size(); ++i) out.push_back(read_material(arr[i], join(root.path("materials"), i), o));
   return out;
 }
 
@@ -483,6 +485,30 @@ void read_view(const Json& j, const Origin& o, Scene& scene) {
   }
 }
 
+// Tracked points of body `body`, whose nodes start at `first` (its own mesh: `mesh`).
+void read_track(const Json& j, const std::string& at, const Origin& o, const TetMesh& mesh, int32_t body, int32_t first,
+                Scene& scene) {
+  const Json& arr = scene_json::read_array(j, at, o, 0);
+  for (size_t i = 0; i < arr.size(); ++i) {
+    const std::string path = join(at, i);
+    const Fields g(arr[i], path, o, {"name", "point"});
+    TrackedPoint p;
+    p.name = scene_json::read_name(g.at("name"), g.path("name"), o);
+    for (const TrackedPoint& q : scene.track)
+      if (q.name == p.name) o.fail(g.path("name"), "'" + p.name + "' is tracked twice");
+    p.point = g.vec3("point");
+    double best = std::numeric_limits<double>::infinity();
+    for (int32_t k = 0; k < mesh.n_nodes(); ++k) {
+      const double d = glm::length(mesh.X[size_t(k)] - p.point);
+      if (d < best) best = d, p.node = k;
+    }
+    p.X = mesh.X[size_t(p.node)];
+    p.node += first;
+    p.body = body;
+    scene.track.push_back(p);
+  }
+}
+
 void read_run(const Json& j, const Origin& o, const TetMesh& mesh, Scene& scene) {
   const Fields f(j, "run", o, {"duration", "frame_rate", "vtu_every", "vtu_fields", "track", "sections"});
   RunSettings& r = scene.run;
@@ -509,23 +535,9 @@ void read_run(const Json& j, const Origin& o, const TetMesh& mesh, Scene& scene)
     }
   }
   if (const Json* t = f.find("track")) {
-    const Json& arr = scene_json::read_array(*t, f.path("track"), o, 0);
-    for (size_t i = 0; i < arr.size(); ++i) {
-      const std::string path = join(f.path("track"), i);
-      const Fields g(arr[i], path, o, {"name", "point"});
-      TrackedPoint p;
-      p.name = scene_json::read_name(g.at("name"), g.path("name"), o);
-      for (const TrackedPoint& q : scene.track)
-        if (q.name == p.name) o.fail(g.path("name"), "'" + p.name + "' is tracked twice");
-      p.point = g.vec3("point");
-      double best = std::numeric_limits<double>::infinity();
-      for (int32_t k = 0; k < mesh.n_nodes(); ++k) {
-        const double d = glm::length(mesh.X[size_t(k)] - p.point);
-        if (d < best) best = d, p.node = k;
-      }
-      p.X = mesh.X[size_t(p.node)];
-      scene.track.push_back(p);
-    }
+    if (!scene.spec.bodies.empty())
+      o.fail(f.path("track"), "in a scene of \"bodies\", each body tracks its own points (bodies[i].track)");
+    read_track(*t, f.path("track"), o, mesh, 0, 0, scene);
   }
   if (const Json* s = f.find("sections")) {
     const Json& arr = scene_json::read_array(*s, f.path("sections"), o, 0);
@@ -545,11 +557,11 @@ void read_run(const Json& j, const Origin& o, const TetMesh& mesh, Scene& scene)
 }
 
 // Region ids by tet centroid: later entries win over earlier ones and over the mesh's own ids.
-void apply_regions(const Json& j, const Origin& o, size_t n_materials, TetMesh& mesh) {
-  const Json& arr = scene_json::read_array(j, "regions", o, 1);
+void apply_regions(const Json& j, const std::string& at, const Origin& o, size_t n_materials, TetMesh& mesh) {
+  const Json& arr = scene_json::read_array(j, at, o, 1);
   if (mesh.region.empty()) mesh.region.assign(mesh.tets.size(), 0);
   for (size_t i = 0; i < arr.size(); ++i) {
-    const std::string path = join("regions", i);
+    const std::string path = join(at, i);
     const Fields f(arr[i], path, o, {"box", "material"});
     NodeSelector box;
     read_box(f.at("box"), f.path("box"), o, false, box);
@@ -583,11 +595,82 @@ bool same_mesh_kind(const Json& base, const Json& patch) {
   return true;
 }
 
+// A body's own fields (at the top of a one-body scene, or one of "bodies"),
+// read against its own mesh: selectors and node ids in its own numbering.
+// `quality` (one body): the mesh's, as built.
+BodyParts read_body(const Fields& root, const Context& ctx, MeshQuality* quality) {
+  const Origin& o = ctx.origin;
+  BodyParts body;
+  // Mesh first: selectors and tracked points are checked against it. The
+  // element order: linear tets as meshed, or quadratic ones, each edge of
+  // the mesh given a node (core/quadratic.hpp), the selectors then picking
+  // edge nodes as corners.
+  const bool quadratic =
+      root.has("element") && scene_json::read_choice(root.at("element"), root.path("element"), o, {"p1", "p2"}) == "p2";
+  const std::string mesh_key = root.at("mesh").dump() + (quadratic ? "\np2" : "");
+  auto cached = ctx.mesh_cache->find(mesh_key);
+  if (cached == ctx.mesh_cache->end()) {
+    SceneMesh built = build_scene_mesh(root.at("mesh"), root.path("mesh"), o, ctx.scene_dir);
+    if (built.mesh.quadratic() && !quadratic)
+      o.fail(root.path("element"), "the mesh file's tets are quadratic (10 nodes each): set \"element\": \"p2\"");
+    if (quadratic && !built.mesh.quadratic()) built.mesh = make_quadratic_mesh(built.mesh);
+    cached = ctx.mesh_cache->emplace(mesh_key, std::move(built)).first;
+  }
+  body.mesh = cached->second.mesh;
+  if (quality) *quality = cached->second.quality;
+  TetMesh& mesh = body.mesh;
+  if (const Json* s = root.find("surface")) {
+    // Bound once per mesh and surface: variants that share both share the binding.
+    const std::string key = mesh_key + "\n" + s->dump();
+    auto bound = ctx.surface_cache->find(key);
+    if (bound == ctx.surface_cache->end())
+      bound = ctx.surface_cache->emplace(key, build_embedded_surface(*s, root.path("surface"), o, ctx.scene_dir, mesh))
+                  .first;
+    body.surface = bound->second;
+  }
+
+  body.materials = read_materials(root, o);
+  if (const Json* r = root.find("regions")) apply_regions(*r, root.path("regions"), o, body.materials.size(), mesh);
+  for (int32_t e = 0; e < mesh.n_tets(); ++e) {
+    const int32_t r = mesh.region_of(e);
+    if (r < 0 || size_t(r) >= body.materials.size())
+      o.fail(root.has("regions") ? root.path("regions") : root.path("mesh"),
+             "tet " + std::to_string(e) + " is in region " + std::to_string(r) + " but there " +
+                 (body.materials.size() == 1 ? "is 1 material"
+                                             : "are " + std::to_string(body.materials.size()) + " materials") +
+                 " (indices from 0); give more \"materials\" or assign \"regions\"");
+  }
+
+  std::vector<int32_t> held_by(size_t(mesh.n_nodes()), -1);
+  if (const Json* b = root.find("boundary")) {
+    const Json& arr = scene_json::read_array(*b, root.path("boundary"), o, 0);
+    for (size_t i = 0; i < arr.size(); ++i) {
+      const std::string at = join(root.path("boundary"), i);
+      EssentialBc bc = read_boundary(arr[i], at, o, mesh);
+      for (int32_t n : select_nodes(mesh, bc.where)) {
+        if (held_by[size_t(n)] >= 0)
+          o.fail(join(at, "select"), "node " + std::to_string(n) + " is also held by " +
+                                         join(root.path("boundary"), size_t(held_by[size_t(n)])) +
+                                         "; a node may follow one essential condition only");
+        held_by[size_t(n)] = int32_t(i);
+      }
+      body.essential.push_back(std::move(bc));
+    }
+  }
+  if (const Json* l = root.find("loads")) {
+    const Json& arr = scene_json::read_array(*l, root.path("loads"), o, 0);
+    for (size_t i = 0; i < arr.size(); ++i)
+      body.loads.push_back(read_load(arr[i], join(root.path("loads"), i), o, mesh));
+  }
+  return body;
+}
+
 Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   const Origin& o = ctx.origin;
-  const Fields root(j, "", o,
-                    {"$schema", "name", "description", "mesh", "element", "surface", "material", "materials", "regions",
-                     "boundary", "loads", "proxies", "hands", "effects", "integrator", "run", "view", "variants"});
+  const Fields root(
+      j, "", o,
+      {"$schema", "name", "description", "mesh", "element", "surface", "material", "materials", "regions", "boundary",
+       "loads", "bodies", "proxies", "hands", "effects", "integrator", "run", "view", "variants"});
   Scene scene;
   scene.path = path;
   if (const Json* s = root.find("$schema")) scene_json::read_string(*s, "$schema", o);
@@ -601,65 +684,50 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   }
   scene.description = root.string_or("description", "");
 
-  // Mesh first: selectors and tracked points are checked against it. The
-  // element order: linear tets as meshed, or quadratic ones, each edge of
-  // the mesh given a node (core/quadratic.hpp), the selectors then picking
-  // edge nodes as corners.
-  const bool quadratic =
-      root.has("element") && scene_json::read_choice(root.at("element"), "element", o, {"p1", "p2"}) == "p2";
-  const std::string mesh_key = root.at("mesh").dump() + (quadratic ? "\np2" : "");
-  auto cached = ctx.mesh_cache->find(mesh_key);
-  if (cached == ctx.mesh_cache->end()) {
-    SceneMesh built = build_scene_mesh(root.at("mesh"), "mesh", o, ctx.scene_dir);
-    if (built.mesh.quadratic() && !quadratic)
-      o.fail("element", "the mesh file's tets are quadratic (10 nodes each): set \"element\": \"p2\"");
-    if (quadratic && !built.mesh.quadratic()) built.mesh = make_quadratic_mesh(built.mesh);
-    cached = ctx.mesh_cache->emplace(mesh_key, std::move(built)).first;
-  }
-  scene.spec.mesh = cached->second.mesh;
-  scene.quality = cached->second.quality;
-  TetMesh& mesh = scene.spec.mesh;
-  if (const Json* s = root.find("surface")) {
-    // Bound once per mesh and surface: variants that share both share the binding.
-    const std::string key = mesh_key + "\n" + s->dump();
-    auto bound = ctx.surface_cache->find(key);
-    if (bound == ctx.surface_cache->end())
-      bound = ctx.surface_cache->emplace(key, build_embedded_surface(*s, "surface", o, ctx.scene_dir, mesh)).first;
-    scene.spec.surface = bound->second;
-  }
-
-  scene.spec.materials = read_materials(root, o);
-  if (const Json* r = root.find("regions")) apply_regions(*r, o, scene.spec.materials.size(), mesh);
-  for (int32_t e = 0; e < mesh.n_tets(); ++e) {
-    const int32_t r = mesh.region_of(e);
-    if (r < 0 || size_t(r) >= scene.spec.materials.size())
-      o.fail(
-          root.has("regions") ? "regions" : "mesh",
-          "tet " + std::to_string(e) + " is in region " + std::to_string(r) + " but there " +
-              (scene.spec.materials.size() == 1 ? "is 1 material"
-                                                : "are " + std::to_string(scene.spec.materials.size()) + " materials") +
-              " (indices from 0); give more \"materials\" or assign \"regions\"");
-  }
-
-  std::vector<int32_t> held_by(size_t(mesh.n_nodes()), -1);
-  if (const Json* b = root.find("boundary")) {
-    const Json& arr = scene_json::read_array(*b, "boundary", o, 0);
+  if (const Json* b = root.find("bodies")) {
+    for (const char* key : {"mesh", "element", "surface", "material", "materials", "regions", "boundary", "loads"})
+      if (root.has(key)) o.fail(key, "a scene of \"bodies\" gives each body its own; move it into bodies[i]");
+    const Json& arr = scene_json::read_array(*b, "bodies", o, 1);
+    std::vector<BodyParts> parts;
+    std::vector<TetMesh> meshes;
     for (size_t i = 0; i < arr.size(); ++i) {
-      EssentialBc bc = read_boundary(arr[i], join("boundary", i), o, mesh);
-      for (int32_t n : select_nodes(mesh, bc.where)) {
-        if (held_by[size_t(n)] >= 0)
-          o.fail(join(join("boundary", i), "select"), "node " + std::to_string(n) + " is also held by boundary[" +
-                                                          std::to_string(held_by[size_t(n)]) +
-                                                          "]; a node may follow one essential condition only");
-        held_by[size_t(n)] = int32_t(i);
-      }
-      scene.spec.essential.push_back(std::move(bc));
+      const Fields f(
+          arr[i], join("bodies", i), o,
+          {"name", "mesh", "element", "surface", "material", "materials", "regions", "boundary", "loads", "track"});
+      BodyParts body = read_body(f, ctx, nullptr);
+      body.name = scene_json::read_name(f.at("name"), f.path("name"), o);
+      for (size_t k = 0; k < parts.size(); ++k)
+        if (parts[k].name == body.name) o.fail(f.path("name"), "'" + body.name + "' names two bodies");
+      if (i > 0 && body.mesh.quadratic() != parts[0].mesh.quadratic())
+        o.fail(f.path("element"), "must be bodies[0]'s (\"" + std::string(parts[0].mesh.quadratic() ? "p2" : "p1") +
+                                      "\"): the bodies of a scene share one element order");
+      parts.push_back(std::move(body));
     }
+    for (const BodyParts& body : parts) meshes.push_back(body.mesh);
+    try {
+      add_bodies(scene.spec, std::move(parts));
+      check_bodies(scene.spec);
+    } catch (const ModelError& e) {
+      o.fail("bodies", e.what());
+    }
+    for (size_t i = 0; i < arr.size(); ++i) {
+      const Fields f(
+          arr[i], join("bodies", i), o,
+          {"name", "mesh", "element", "surface", "material", "materials", "regions", "boundary", "loads", "track"});
+      if (const Json* t = f.find("track"))
+        read_track(*t, f.path("track"), o, meshes[i], int32_t(i), scene.spec.bodies[i].node_begin, scene);
+    }
+    scene.quality = compute_quality(scene.spec.mesh);
+  } else {
+    // One body: its fields at the top, read as they always were.
+    BodyParts body = read_body(root, ctx, &scene.quality);
+    scene.spec.mesh = std::move(body.mesh);
+    scene.spec.surface = std::move(body.surface);
+    scene.spec.materials = std::move(body.materials);
+    scene.spec.essential = std::move(body.essential);
+    scene.spec.loads = std::move(body.loads);
   }
-  if (const Json* l = root.find("loads")) {
-    const Json& arr = scene_json::read_array(*l, "loads", o, 0);
-    for (size_t i = 0; i < arr.size(); ++i) scene.spec.loads.push_back(read_load(arr[i], join("loads", i), o, mesh));
-  }
+  const TetMesh& mesh = scene.spec.mesh;
   if (const Json* h = root.find("hands")) read_hands(*h, o, scene);
   read_proxies(root.has("proxies") ? root.at("proxies") : Json::array(), o, scene);  // checks that each hand has one
   if (const Json* e = root.find("effects")) scene.spec.effects = read_effects(*e, o);
@@ -709,7 +777,7 @@ std::vector<Scene> parse_scene(const Json& j, const std::string& path) {
   const auto variants = j.find("variants");
   if (variants == j.end()) return {parse_one(j, path, ctx)};
   // The scene itself names its material, so that variants amend rather than supply it (as the schema says).
-  if (!j.contains("material") && !j.contains("materials"))
+  if (!j.contains("material") && !j.contains("materials") && !j.contains("bodies"))
     ctx.origin.fail("material", "required field missing (give \"material\" or \"materials\")");
 
   const Json& arr = scene_json::read_array(*variants, "variants", ctx.origin, 1);
@@ -725,6 +793,11 @@ std::vector<Scene> parse_scene(const Json& j, const std::string& path) {
     if (f.has("material") && f.has("materials"))
       ctx.origin.fail(f.path("materials"), "give \"material\" or \"materials\", not both");
     if (f.has("description")) scene_json::read_string(f.at("description"), f.path("description"), ctx.origin);
+    if (j.contains("bodies"))
+      for (const char* key : {"material", "materials", "mesh"})
+        if (f.has(key))
+          ctx.origin.fail(f.path(key),
+                          "a scene of \"bodies\" has no top-level " + std::string(key) + " for a variant to change");
     names.push_back(name);
   }
   std::vector<Scene> out;

@@ -1,6 +1,7 @@
 // Scene files: JSON (schema: server/scenes/scene.schema.json), SI units, y up.
 //
-// A scene names a mesh, materials, boundary conditions, loads, rigid proxies
+// A scene names one body (a mesh, materials, boundary conditions, loads) or
+// several ("bodies", each with its own), rigid proxies
 // and hands (with their scripted motions), the effects it wants, integrator
 // settings and what a headless run records. Loading is
 // strict: an unknown field, a wrong type or an out-of-range value throws
@@ -28,11 +29,12 @@ struct SceneError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// A point whose motion a run reports: the mesh node nearest to `point`.
+// A point whose motion a run reports: the node of its body nearest to `point`.
 struct TrackedPoint {
   std::string name;
   Vec3 point{0.0};    // as asked [m]
-  int32_t node = -1;  // nearest node id
+  int32_t body = 0;   // index into spec.bodies (0 in a one-body scene)
+  int32_t node = -1;  // nearest node id, in the spec's mesh (the body's first node + its own id)
   Vec3 X{0.0};        // rest position of that node [m]
 };
 

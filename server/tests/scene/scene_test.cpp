@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <functional>
 #include <numbers>
+#include <set>
 
 #include <glm/geometric.hpp>
 
@@ -126,6 +127,51 @@ TEST(SceneMapping, FieldsBecomeTheCoreSpec) {
   EXPECT_EQ(s.track[0].X, Vec3(0.4, 0.05, 0.05));
   EXPECT_EQ(s.run.frame_rate, 100);
   EXPECT_EQ(s.run.vtu_every, 1);
+}
+
+// A scene of bodies: each read in its own numbering, then one after another.
+TEST(SceneMapping, BodiesFollowEachOtherEachInItsOwnNumbering) {
+  SceneDir dir;
+  json j = make_beam_scene();
+  json beam = json::object();
+  for (const char* key : {"mesh", "material", "boundary"}) beam[key] = j[key], j.erase(key);
+  beam["name"] = "beam";
+  beam["track"] = j["run"]["track"];
+  j["run"].erase("track");
+  json block = json::parse(R"({
+    "name": "block",
+    "mesh": { "primitive": "box", "lo": [0.3, 0.1, 0], "hi": [0.4, 0.15, 0.1], "cells": [2, 1, 2] },
+    "materials": [ { "model": "neohookean", "E": 2e4, "nu": 0.4, "rho": 900 },
+                   { "model": "linear", "E": 3e4, "nu": 0.3, "rho": 900 } ],
+    "regions": [ { "box": { "lo": [0.35, 0, 0], "hi": [1, 1, 1] }, "material": 1 } ],
+    "loads": [ { "name": "push", "select": { "nodes": [0, 1] }, "force": [0, -1, 0] } ],
+    "track": [ { "name": "corner", "point": [0.3, 0.1, 0] } ] })");
+  j["bodies"] = json::array({beam, block});
+  const Scene s = load_scene(dir.write_json("bodies.json", j)).at(0);
+  ASSERT_EQ(s.spec.bodies.size(), 2u);
+  const BodySpec& b = s.spec.bodies[1];
+  EXPECT_EQ(s.spec.bodies[0].name, "beam");
+  EXPECT_EQ(b.name, "block");
+  EXPECT_EQ(b.node_begin, 9 * 3 * 3);
+  EXPECT_EQ(b.tet_begin, 8 * 2 * 2 * 6);
+  EXPECT_EQ(b.tet_end - b.tet_begin, 2 * 1 * 2 * 6);
+  ASSERT_EQ(s.spec.materials.size(), 3u);  // the beam's, then the block's two
+  std::set<int32_t> block_regions;
+  for (int32_t e = b.tet_begin; e < b.tet_end; ++e) block_regions.insert(s.spec.mesh.region_of(e));
+  EXPECT_EQ(block_regions, (std::set<int32_t>{1, 2}));
+  // The block's nodes 0 and 1 are the spec's first two of the block.
+  EXPECT_EQ(select_nodes(s.spec.mesh, s.spec.loads.at(0).where),
+            (std::vector<int32_t>{b.node_begin, b.node_begin + 1}));
+  EXPECT_EQ(select_nodes(s.spec.mesh, s.spec.essential.at(0).where).size(), 9u);
+  ASSERT_EQ(s.track.size(), 2u);
+  EXPECT_EQ(s.track[0].body, 0);
+  EXPECT_EQ(s.track[1].body, 1);
+  EXPECT_EQ(s.track[1].node, b.node_begin);  // the block's node 0 is at its lowest corner
+  EXPECT_EQ(s.spec.mesh.X[size_t(s.track[1].node)], Vec3(0.3, 0.1, 0));
+
+  // A body without a material is refused naming it.
+  j["bodies"][1].erase("materials");
+  expect_scene_error(dir, "nomat.json", j, {"nomat.json: bodies[1].material: required field missing"});
 }
 
 TEST(SceneMapping, AbsentEffectsAreOffAndAutoStepIsZero) {
