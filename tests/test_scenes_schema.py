@@ -166,6 +166,10 @@ GOOD: dict[str, dict[str, Any]] = {
     "two_bodies": amended(two_bodies),
     "bodies_p2": bodies_change(lambda s: [b.update(element="p2") for b in s["bodies"]]),
     "bodies_variants": bodies_change(set_path(["variants"], [{"name": "f32", "integrator": {"precision": "float"}}])),
+    "bodies_in_contact": bodies_change(
+        set_path(["effects"], {"gravity": [0, -9.81, 0], "body_contact": {"friction": 0.3}, "self_contact": True})
+    ),
+    "body_contact_true": bodies_change(set_path(["effects", "body_contact"], True)),
 }
 
 BAD: dict[str, dict[str, Any]] = {
@@ -232,6 +236,8 @@ BAD: dict[str, dict[str, Any]] = {
     "body_without_name": bodies_change(lambda s: s["bodies"][1].pop("name")),
     "body_unknown_field": bodies_change(set_path(["bodies", 1, "proxies"], [])),
     "no_bodies": bodies_change(set_path(["bodies"], [])),
+    "body_friction_negative": bodies_change(set_path(["effects", "body_contact"], {"friction": -1})),
+    "self_contact_not_a_boolean": bodies_change(set_path(["effects", "self_contact"], 1)),
 }
 
 # Scenes the schema cannot refuse but the loader does, naming the field.
@@ -255,6 +261,7 @@ LOADER_ONLY: dict[str, tuple[dict[str, Any], str]] = {
         bodies_change(set_path(["bodies", 1, "loads", 0, "select", "box"], {"lo": [0, 0, 0], "hi": [0.1, 0.1, 0.1]})),
         "bodies[1].loads[0].select",
     ),
+    "body_contact_of_one_body": (amended(set_path(["effects", "body_contact"], True)), "effects.body_contact"),
     "bodies_and_run_track": (bodies_change(set_path(["run", "track"], [{"name": "t", "point": [0, 0, 0]}])),
                              "run.track"),
 }

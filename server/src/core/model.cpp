@@ -488,6 +488,8 @@ ProxySetup check_proxies(const std::vector<ProxySpec>& proxies, const std::vecto
 void check_settings(const Effects& effects, const IntegratorSpec& integrator) {
   if (effects.damping && !(effects.alpha >= 0))
     throw ModelError("damping alpha must be >= 0 1/s, got " + std::to_string(effects.alpha));
+  if (!(effects.body_friction >= 0 && std::isfinite(effects.body_friction)))
+    throw ModelError("body contact friction must be finite and >= 0, got " + std::to_string(effects.body_friction));
   if (!(integrator.safety > 0 && integrator.safety <= 1))
     throw ModelError("integrator.safety must lie in (0, 1], got " + std::to_string(integrator.safety));
   if (integrator.dt < 0) throw ModelError("integrator.dt must be >= 0 s");

@@ -107,6 +107,10 @@ struct Effects {
   Vec3 g{0.0, -9.81, 0.0};  // [m/s^2]
   bool damping = false;
   double alpha = 0.0;  // Rayleigh mass damping D = alpha M [1/s], eq. (10)
+  // Contact between bodies, and of a body with itself (core/contact/body_contact.hpp).
+  bool body_contact = false;
+  bool self_contact = false;
+  double body_friction = 0.0;  // Coulomb mu at those contacts
 };
 
 enum class Precision : uint8_t { Float, Double };

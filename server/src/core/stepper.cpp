@@ -34,6 +34,7 @@ const char* to_string(Pass p) {
     case Pass::Loads: return "loads";
     case Pass::Correct: return "correct";
     case Pass::Contact: return "contact";
+    case Pass::BodyContact: return "body_contact";
     case Pass::Guard: return "guard";
   }
   return "?";
@@ -82,6 +83,7 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
       parallel_(parallel),
       kernels_(kernels<Real>()),
       contact_(model),
+      body_contact_(model),
       critical_(model, model.proxies.empty() ? std::vector<int32_t>{} : contact_.surface_nodes()),
       // One part covering everything without a pool to run them on.
       plan_(make_step_plan(model, parallel && parallel->workers() >= 2)) {
@@ -409,14 +411,21 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   cur_t1_ = s.t + dt;
   open_energy_account(s, dt);
   keep_work_positions(s);
-  predict_and_add_elastic_forces(s);                 // eq. (7), essential positions, R(u_{n+1})
-  correct(s);                                        // F_{n+1}, eqs. (8)-(10), then (9)
-  const ContactSums contact = apply_contact(s, dt);  // section 5.1
+  predict_and_add_elastic_forces(s);           // eq. (7), essential positions, R(u_{n+1})
+  correct(s);                                  // F_{n+1}, eqs. (8)-(10), then (9)
+  ContactSums contact = apply_contact(s, dt);  // section 5.1
   essential_mv2_delta_ = essential_ma2_delta_ = 0;
   if (!model_.essential.empty()) {
     enter(Pass::Essential);
     apply_essential_rates(s, cur_t1_, dt);
     leave(Pass::Essential);
+  }
+  if (body_contact_.active()) {  // after the held nodes' velocities are set: they move as prescribed
+    enter(Pass::BodyContact);
+    const ContactSums between = body_contact_.apply(s, dt);
+    contact.mv2_delta += between.mv2_delta;
+    contact.ma2_delta += between.ma2_delta;
+    leave(Pass::BodyContact);
   }
   enter(Pass::Guard);
   close_energy_account(s, dt, contact);

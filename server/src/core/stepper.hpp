@@ -5,7 +5,9 @@
 // velocity (eq. 7), impose essential BCs, elastic forces R(u) (lane-blocked
 // kernels), natural loads, then the diagonal solve of eq. (10) with gravity
 // and damping only if present, proxy contact only if there are proxies
-// (core/contact/contact.hpp), and the essential BCs' velocities and accelerations.
+// (core/contact/contact.hpp), the essential BCs' velocities and
+// accelerations, and contact between bodies or within one only if the
+// effects ask for it (core/contact/body_contact.hpp).
 // Each step also checks for non-finite values, inverted elements (for models
 // that cannot take them) and energy growth beyond the work done
 // (core/energy_ledger.hpp), and reports a Fault instead of going on;
@@ -26,6 +28,7 @@
 #include <string>
 #include <vector>
 
+#include "core/contact/body_contact.hpp"
 #include "core/contact/contact.hpp"
 #include "core/critical_step.hpp"
 #include "core/energy_ledger.hpp"
@@ -46,8 +49,8 @@ class ParallelFor {
 };
 
 // The passes of a step, for cost accounting by a StepProbe.
-enum class Pass : uint8_t { Predict, Essential, Elastic, Loads, Correct, Contact, Guard };
-inline constexpr int kPassCount = 7;
+enum class Pass : uint8_t { Predict, Essential, Elastic, Loads, Correct, Contact, BodyContact, Guard };
+inline constexpr int kPassCount = 8;
 const char* to_string(Pass p);
 
 // Told when each pass of a step starts and ends; the application layer times
@@ -113,6 +116,8 @@ class Stepper {
   // latest step is in s.contact.
   Contact<Real>& contact() { return contact_; }
   const Contact<Real>& contact() const { return contact_; }
+  // Contact between bodies and within one, when the effects ask for it.
+  const BodyContact<Real>& body_contact() const { return body_contact_; }
 
  private:
   using Part = StepPlan::Part;
@@ -171,6 +176,7 @@ class Stepper {
   const KernelTable<Real>& kernels_;
   CorrectFn<Real> correct_;
   Contact<Real> contact_;
+  BodyContact<Real> body_contact_;
   CriticalStep<Real> critical_;
   StepPlan plan_;  // how the step's work splits over threads (core/step_plan.hpp)
   int32_t n_parts_ = 1;

@@ -398,8 +398,23 @@ void read_proxies(const Json& j, const Origin& o, Scene& scene) {
 }
 
 Effects read_effects(const Json& j, const Origin& o) {
-  const Fields f(j, "effects", o, {"gravity", "damping", "friction"});
+  const Fields f(j, "effects", o, {"gravity", "damping", "friction", "body_contact", "self_contact"});
   Effects e;
+  if (const Json* b = f.find("body_contact")) {
+    if (b->is_boolean()) {
+      e.body_contact = b->get<bool>();
+    } else if (b->is_object()) {
+      const Fields g(*b, f.path("body_contact"), o, {"friction"});
+      e.body_contact = true;
+      e.body_friction = g.non_negative_or("friction", 0.0);
+    } else {
+      o.fail(f.path("body_contact"), "must be true, false or {\"friction\": mu}, got " + scene_json::describe(*b));
+    }
+  }
+  if (const Json* c = f.find("self_contact")) {
+    if (!c->is_boolean()) o.fail(f.path("self_contact"), "must be true or false, got " + scene_json::describe(*c));
+    e.self_contact = c->get<bool>();
+  }
   if (const Json* fr = f.find("friction")) {
     if (!fr->is_boolean()) o.fail(f.path("friction"), "must be true or false, got " + scene_json::describe(*fr));
     e.friction = fr->get<bool>();
@@ -731,6 +746,8 @@ Scene parse_one(const Json& j, const std::string& path, const Context& ctx) {
   if (const Json* h = root.find("hands")) read_hands(*h, o, scene);
   read_proxies(root.has("proxies") ? root.at("proxies") : Json::array(), o, scene);  // checks that each hand has one
   if (const Json* e = root.find("effects")) scene.spec.effects = read_effects(*e, o);
+  if (scene.spec.effects.body_contact && scene.spec.bodies.size() < 2)
+    o.fail("effects.body_contact", "the scene has one body; contact between bodies needs \"bodies\" of two or more");
   if (const Json* g = root.find("integrator")) scene.spec.integrator = read_integrator(*g, o);
   read_run(root.at("run"), o, mesh, scene);
   if (const Json* v = root.find("view")) read_view(*v, o, scene);

@@ -33,8 +33,8 @@
 namespace tactile {
 
 // The most nodes a contact point moves: an embedded triangle's three
-// vertices, four nodes each.
-constexpr size_t kPointCarriers = 12;
+// vertices, four nodes each, and (between bodies) the vertex's four.
+constexpr size_t kPointCarriers = 16;
 
 // A contact point inside a proxy at t_{n+1}: a free surface node, a point
 // of a face, x = sum w_c x_c over its corners, or of an embedded surface,

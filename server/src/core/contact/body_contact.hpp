@@ -1,0 +1,131 @@
+// Contact between bodies, and of a body with itself: the proxies' rule
+// (section 5.1, eq. (11)) with both sides deformable. A surface vertex of
+// one body that is inside another's surface at t_{n+1}, moving into it, has
+// its normal velocity relative to the point of the other surface it is
+// nearest set to zero, by an impulse J n on the vertex's nodes and -J n on
+// the triangle's, shared by their effective masses: one contact point whose
+// carriers are the vertex's nodes with weights w_k and the triangle's with
+// weights -b_j w_jk, whose velocity is the relative one and whose inverse
+// mass is sum w^2 / m over both (ImpulseSolve, with no proxy). Since each
+// side's weights sum to one, the momentum one body gains the other loses,
+// exactly; the projection is inelastic, so it never adds kinetic energy, and
+// the accelerations follow by eq. (9) as for proxies. Coulomb friction, when
+// asked, acts in the same impulse.
+//
+// Why vertex-face, both ways, on the surfaces contact meets (the fine
+// surfaces, else the boundaries): it is what SOFA's and Bridson et al.'s
+// (2002) deformable contact start from, the fine surface is what the user
+// sees touch, and it costs one test per vertex near a triangle. Edge-edge
+// contact is left out: with both surfaces' vertices tested against the
+// other's faces, two convex edges can cross between vertices by at most
+// the surfaces' cell size.
+//
+// Found without tunnelling: a vertex counts when it is behind the
+// triangle's plane at t_{n+1} over the triangle (its projection inside it)
+// and either was in front of it at t_n (it crossed the triangle this step,
+// at any depth: a thin body hit fast) or is no deeper than half the
+// triangle's longest edge (it is resting in contact). Positions at t_n
+// need no memory: the step's half-step velocity gives them,
+// x_n = x_{n+1} - dt (v_{n+1} - dt/2 a_{n+1}), which the velocity
+// projection leaves unchanged (it moves a by 2 dv / dt).
+//
+// Self contact excludes a vertex's own neighbourhood: a triangle of its own
+// body whose rest distance from the vertex is under twice its longest edge
+// (a face never touches its neighbours, which it meets by construction).
+//
+// Broad phase: per body, the vertices in Morton order in clusters of 32 and
+// the triangles likewise (ClusterSet), each box fitted to the step's both
+// ends; clusters are swept and pruned along x, and only the vertex-triangle
+// cluster pairs whose boxes meet (of two bodies, or of one with self
+// contact) are tested item by item.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "core/contact/cluster_set.hpp"
+#include "core/contact/contact.hpp"
+#include "core/contact/impulse_solve.hpp"
+#include "core/model.hpp"
+#include "core/state.hpp"
+
+namespace tactile {
+
+template <class Real>
+class BodyContact {
+ public:
+  // Inactive (apply() does nothing) unless the model's effects ask for body
+  // or self contact.
+  explicit BodyContact(const Model<Real>& model);
+  bool active() const { return active_; }
+
+  // The pass for the step ending at s.t + dt: after the essential BCs have
+  // set their nodes' velocities (held nodes take no impulse; they move as
+  // prescribed). Changes v_{n+1} and a_{n+1} of the nodes it pushes; returns
+  // what it changed for the energy account (no work: what the projection
+  // takes out shows as a drop of the balance).
+  ContactSums apply(State<Real>& s, double dt);
+  // Contact points in the latest apply(): between bodies, and within one.
+  int32_t body_contacts() const { return body_contacts_; }
+  int32_t self_contacts() const { return self_contacts_; }
+  // The impulse the latest apply() gave between bodies, to the body of the
+  // lower index of each pair, the other taking its opposite [N s]. (By eq.
+  // (9) it acts once more through the accelerations it set, over the next
+  // half step.)
+  const Vec3& exchanged() const { return exchanged_; }
+
+ private:
+  struct Vertex {
+    std::array<int32_t, 4> node;  // model ids; -1 past the last
+    std::array<double, 4> w;
+    int32_t body;
+    Vec3 X;  // at rest
+  };
+  void find(const State<Real>& s, double dt);
+  void test(int32_t v, int32_t t, double dt);
+
+  const Model<Real>& model_;
+  bool active_ = false;
+  bool self_ = false, between_ = false;
+  double mu_ = 0;
+  std::vector<Vertex> vertices_;
+  std::vector<Tri> triangles_;                      // vertex ids, outward
+  std::vector<int32_t> tri_body_;                   // per triangle
+  std::vector<double> tri_edge_;                    // longest rest edge per triangle [m]
+  std::vector<ClusterSet> vertex_sets_, tri_sets_;  // per body
+  std::vector<int32_t> vertex_first_, tri_first_;   // per body: its first vertex, triangle
+  std::vector<int32_t> nodes_;                      // every node a vertex follows
+  // Per step.
+  std::vector<Vec3> node_x1_, node_x0_;  // per node of nodes_ (indexed like the model's, sparse)
+  std::vector<Vec3> x1_, x0_;            // per vertex
+  struct Best {
+    int32_t t = -1;
+    double depth = 0;
+    Vec3 b{0.0}, n{0.0};
+  };
+  std::vector<Best> best_;  // per vertex
+  std::vector<int32_t> touched_;
+  struct Box {
+    double lo_x, hi_x;
+    int32_t set;    // body
+    int32_t c;      // cluster
+    bool vertices;  // a vertex cluster (else triangles)
+  };
+  std::vector<Box> boxes_;
+  std::vector<ContactPoint> points_;
+  std::vector<double> point_sign_;  // per point: +1, -1 as exchanged() counts it, 0 within a body
+  std::vector<int32_t> slot_of_;    // per model node, -1
+  std::vector<int32_t> slot_node_;
+  std::vector<Vec3> slot_v_;
+  std::vector<double> slot_m_;
+  ImpulseSolve solve_;
+  std::vector<CoupledBodyState> no_bodies_;
+  int32_t body_contacts_ = 0, self_contacts_ = 0;
+  Vec3 exchanged_{0.0};
+};
+
+extern template class BodyContact<float>;
+extern template class BodyContact<double>;
+
+}  // namespace tactile

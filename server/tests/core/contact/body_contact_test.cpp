@@ -1,0 +1,192 @@
+// Contact between bodies and within one (core/contact/body_contact.hpp),
+// against laws: momentum passes between the bodies and is conserved,
+// contact never adds energy, a thin body hit fast is not tunnelled through,
+// and a body resting on another comes to rest on it.
+#include "core/contact/body_contact.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <glm/geometric.hpp>
+
+#include "core/bodies.hpp"
+#include "core/stepper.hpp"
+#include "mesh/primitives.hpp"
+
+namespace tactile {
+namespace {
+
+BodyParts block(const std::string& name, const Vec3& lo, const Vec3& hi, std::array<int, 3> cells, double E = 5e4) {
+  BodyParts b;
+  b.name = name;
+  b.mesh = make_box(lo, hi, cells);
+  b.materials = {MaterialSpec{MaterialModel::NeoHookean, E, 0.3, 1000}};
+  return b;
+}
+
+EssentialBc hold_box(const Vec3& lo, const Vec3& hi) {
+  EssentialBc bc;
+  bc.name = "held";
+  bc.where.kind = NodeSelector::Kind::Box;
+  bc.where.lo = lo;
+  bc.where.hi = hi;
+  return bc;
+}
+
+ModelSpec scene(std::vector<BodyParts> parts, bool gravity, double alpha = 0) {
+  ModelSpec spec;
+  add_bodies(spec, std::move(parts));
+  spec.effects.gravity = gravity;
+  spec.effects.damping = alpha > 0;
+  spec.effects.alpha = alpha;
+  spec.effects.body_contact = true;
+  return spec;
+}
+
+// Sum of m v over body b's nodes [N s], and its centre of mass [m].
+struct BodySums {
+  Vec3 momentum{0.0}, centre{0.0};
+  double mass = 0;
+};
+BodySums sums_of(const Model<double>& m, const State<double>& s, int32_t b) {
+  BodySums out;
+  for (int32_t n = 0; n < m.n_nodes; ++n) {
+    if (m.node_body[size_t(n)] != b) continue;
+    const size_t j = 3 * size_t(n);
+    const double mass = m.m[size_t(n)];
+    out.momentum += mass * Vec3(s.v[j], s.v[j + 1], s.v[j + 2]);
+    out.centre += mass * (m.mesh.X[size_t(n)] + Vec3(s.u[j], s.u[j + 1], s.u[j + 2]));
+    out.mass += mass;
+  }
+  out.centre /= out.mass;
+  return out;
+}
+
+void set_velocity(const Model<double>& m, State<double>& s, int32_t b, const Vec3& v) {
+  for (int32_t n = 0; n < m.n_nodes; ++n)
+    if (m.node_body[size_t(n)] == b)
+      for (int d = 0; d < 3; ++d) s.v[3 * size_t(n) + size_t(d)] = v[d];
+}
+
+// The lowest point of body b minus the highest of body c along y [m]:
+// negative when they overlap along y over the whole run (a coarse gap).
+double lowest_y(const Model<double>& m, const State<double>& s, int32_t b) {
+  double y = 1e30;
+  for (int32_t n = 0; n < m.n_nodes; ++n)
+    if (m.node_body[size_t(n)] == b) y = std::min(y, m.mesh.X[size_t(n)].y + s.u[3 * size_t(n) + 1]);
+  return y;
+}
+
+TEST(BodyContact, TwoFreeBodiesExchangeMomentumAndConserveItsSum) {
+  const Model<double> m =
+      build_model<double>(scene({block("a", Vec3(0.0), Vec3(0.02), {2, 2, 2}),
+                                 block("b", Vec3(0.0205, 0.005, 0.003), Vec3(0.0405, 0.025, 0.023), {2, 2, 2})},
+                                false));
+  Stepper<double> stepper(m);
+  State<double> s = stepper.make_state();
+  set_velocity(m, s, 0, Vec3(1.0, 0.1, 0.0));
+  const Vec3 p0 = sums_of(m, s, 0).momentum + sums_of(m, s, 1).momentum;
+  const double dt = 0.9 * m.dt_rest;
+  // Each step's impulses J act twice: at once on v_{n+1}, and through the
+  // acceleration they set (eq. 9) over the next half step.
+  Vec3 given(0.0), last(0.0);
+  int contact_steps = 0;
+  const Vec3 pa0 = sums_of(m, s, 0).momentum;
+  for (int k = 0; k < int(0.01 / dt); ++k) {
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    contact_steps += stepper.body_contact().body_contacts() > 0;
+    last = stepper.body_contact().exchanged();
+    given += 2.0 * last;
+    const Vec3 sum = sums_of(m, s, 0).momentum + sums_of(m, s, 1).momentum;
+    ASSERT_LT(glm::length(sum - p0), 1e-9 * glm::length(p0)) << "step " << k;
+  }
+  EXPECT_GT(contact_steps, 3);
+  EXPECT_LT(glm::length(sums_of(m, s, 0).momentum - pa0 - (given - last)), 1e-9 * glm::length(p0));
+  EXPECT_GT(sums_of(m, s, 1).momentum.x, 0.3 * p0.x);  // b was pushed along x
+  EXPECT_LT(sums_of(m, s, 0).momentum.x, p0.x);
+}
+
+// A soft cube dropped on a block held at its base: contact takes energy, so
+// it bounces no higher than it fell from; and it never sinks into the block
+// by more than a step's travel.
+TEST(BodyContact, ADroppedCubeBouncesNoHigherThanItFellAndDoesNotSinkIn) {
+  BodyParts base = block("base", Vec3(-0.03, 0, -0.03), Vec3(0.03, 0.02, 0.03), {3, 1, 3}, 2e5);
+  base.essential.push_back(hold_box(Vec3(-1), Vec3(1, 0.0001, 1)));
+  const double drop = 0.01;
+  const Model<double> m = build_model<double>(scene(
+      {base, block("cube", Vec3(-0.01, 0.02 + drop, -0.01), Vec3(0.01, 0.04 + drop, 0.01), {2, 2, 2}, 2e5)}, true));
+  Stepper<double> stepper(m);
+  State<double> s = stepper.make_state();
+  const double y0 = sums_of(m, s, 1).centre.y;
+  const double dt = 0.9 * m.dt_rest;
+  double lowest = 1e30, after = -1e30;
+  bool touched = false;
+  for (int k = 0; k < int(0.2 / dt); ++k) {
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    touched = touched || stepper.body_contact().body_contacts() > 0;
+    lowest = std::min(lowest, lowest_y(m, s, 1));
+    if (touched) after = std::max(after, sums_of(m, s, 1).centre.y);
+  }
+  ASSERT_TRUE(touched);
+  EXPECT_LE(after, y0);                                   // no higher than it fell from
+  EXPECT_GT(lowest, 0.02 - 0.5e-3);                       // into the block by under half a millimetre
+  EXPECT_LT(sums_of(m, s, 1).centre.y, y0 - 0.5 * drop);  // and it did fall
+}
+
+// A cube at 5 m/s against a plate 2 mm thick, held at its rim: the cube
+// stays on its side.
+TEST(BodyContact, AThinPlateHitAtFiveMetresASecondIsNotTunnelled) {
+  BodyParts plate = block("plate", Vec3(-0.03, 0, -0.03), Vec3(0.03, 0.002, 0.03), {6, 1, 6}, 1e7);
+  plate.essential.push_back(hold_box(Vec3(-1), Vec3(-0.0299, 1, 1)));
+  plate.essential.push_back(hold_box(Vec3(0.0299, -1, -1), Vec3(1)));
+  const Model<double> m = build_model<double>(
+      scene({plate, block("cube", Vec3(-0.005, 0.003, -0.005), Vec3(0.005, 0.013, 0.005), {1, 1, 1}, 1e6)}, false));
+  Stepper<double> stepper(m);
+  State<double> s = stepper.make_state();
+  set_velocity(m, s, 1, Vec3(0, -5, 0));
+  const double dt = 0.9 * m.dt_rest;
+  double lowest = 1e30;
+  for (int k = 0; k < int(0.01 / dt); ++k) {
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    lowest = std::min(lowest, lowest_y(m, s, 1));
+  }
+  EXPECT_GT(lowest, 0.0);                       // never through the plate
+  EXPECT_GT(sums_of(m, s, 1).centre.y, 0.002);  // and still above it
+}
+
+// A cube resting on a block under gravity, with damping, comes to rest.
+TEST(BodyContact, ABodyRestingOnAnotherComesToRest) {
+  BodyParts base = block("base", Vec3(-0.03, 0, -0.03), Vec3(0.03, 0.02, 0.03), {3, 1, 3}, 1e5);
+  base.essential.push_back(hold_box(Vec3(-1), Vec3(1, 0.0001, 1)));
+  const Model<double> m = build_model<double>(
+      scene({base, block("cube", Vec3(-0.01, 0.0201, -0.01), Vec3(0.01, 0.0401, 0.01), {2, 2, 2}, 1e5)}, true, 20.0));
+  Stepper<double> stepper(m);
+  State<double> s = stepper.make_state();
+  const double dt = 0.9 * m.dt_rest;
+  for (int k = 0; k < int(0.5 / dt); ++k) ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+  double fastest = 0;
+  for (int k = 0; k < int(0.05 / dt); ++k) {
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    fastest = std::max(fastest, glm::length(sums_of(m, s, 1).momentum) / sums_of(m, s, 1).mass);
+  }
+  EXPECT_GT(stepper.body_contact().body_contacts(), 0);  // resting on it, not hovering
+  EXPECT_LT(fastest, 1e-3);                              // its centre's jitter [m/s]
+  EXPECT_GT(lowest_y(m, s, 1), 0.02 - 0.2e-3);
+}
+
+TEST(BodyContact, AbsentItCostsNothingAndBodiesPassThrough) {
+  ModelSpec spec = scene({block("a", Vec3(0.0), Vec3(0.02), {1, 1, 1}),
+                          block("b", Vec3(0.0205, 0, 0), Vec3(0.0405, 0.02, 0.02), {1, 1, 1})},
+                         false);
+  spec.effects.body_contact = false;
+  const Model<double> m = build_model<double>(spec);
+  Stepper<double> stepper(m);
+  EXPECT_FALSE(stepper.body_contact().active());
+}
+
+}  // namespace
+}  // namespace tactile
