@@ -264,6 +264,8 @@ def test_decoded_values_are_the_written_ones():
     scene = tp.decode(golden("scene_description")[1]).message
     assert scene.dt == 0.0001 and scene.proxies[0].hand is None and scene.proxies[1].hand == "hand"
     assert scene.triangles.dtype == np.uint32 and list(scene.triangles[:3]) == [0, 2, 1]
+    assert [b.name for b in scene.bodies] == ["beam"]
+    assert scene.bodies[0].vertexEnd == 4 and scene.bodies[0].triangleEnd == 4  # (1.9)
     control = tp.decode(golden("control_set_parameter")[1]).message
     assert control.commandType == ControlCommand.SetParameter
     assert (control.command.name, control.command.value) == ("damping.alpha", 2.5)

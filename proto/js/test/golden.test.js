@@ -109,4 +109,9 @@ test('typed reads of the vectors see the written values', () => {
   assert.equal(byName.control_set_parameter.command.value, 2.5);
   assert.equal(byName.error.code, proto.ErrorCode.VersionMismatch);
   assert.equal(byName.scene_description.proxies[0].hand, null); // absent; the plain form reads it as ""
+  const body = byName.scene_description.bodies[0]; // (1.9)
+  assert.ok(body instanceof proto.BodyInfoT);
+  assert.equal(body.name, 'beam');
+  assert.equal(body.vertexEnd, 4);
+  assert.equal(body.triangleEnd, 4);
 });

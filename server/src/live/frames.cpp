@@ -16,34 +16,51 @@ namespace wire = proto;
 Surface extract_surface(const Simulation& sim) {
   const TetMesh& mesh = sim.mesh();
   const std::vector<Tri> faces = compute_boundary_faces(mesh);
-  std::vector<int32_t> nodes = compute_boundary_nodes(faces);
-  // Vertices in the order of the scene's mesh: two runs of one mesh send the
-  // same vertex in the same place, as a re-simulation compares them.
-  std::sort(nodes.begin(), nodes.end());
+  const std::vector<int32_t> boundary = compute_boundary_nodes(faces);  // sorted
+  const std::shared_ptr<const EmbeddedSurface>& e = sim.surface();
   Surface s;
   std::vector<int32_t> vertex_of(size_t(mesh.n_nodes()), -1);
-  for (size_t k = 0; k < nodes.size(); ++k) {
-    vertex_of[size_t(nodes[k])] = int32_t(k);
-    s.nodes.push_back(uint32_t(nodes[k]));
-  }
-  s.triangles.reserve(3 * faces.size());
-  for (const Tri& f : faces)
-    for (int32_t i : f) s.triangles.push_back(uint32_t(vertex_of[size_t(i)]));
-  s.boundary = s.nodes.size();
-  if (const auto& e = sim.surface()) {
-    // The interior nodes the fine surface follows, in the mesh's order after the boundary's.
-    std::vector<int32_t> interior;
-    for (const Tet& t : e->nodes)
-      for (int32_t n : t)
-        if (vertex_of[size_t(n)] == -1) {
-          vertex_of[size_t(n)] = -2;  // listed
-          interior.push_back(n);
-        }
-    std::sort(interior.begin(), interior.end());
-    for (int32_t n : interior) {
-      vertex_of[size_t(n)] = int32_t(s.nodes.size());
-      s.nodes.push_back(uint32_t(n));
+  // Body by body: its boundary nodes, then the interior nodes its fine
+  // surface follows, each in the order of the scene's mesh: two runs of one
+  // mesh send the same vertex in the same place, as a re-simulation compares them.
+  for (const ModelBody& mb : sim.bodies()) {
+    const BodySpec& body = mb.spec;
+    Surface::Body out;
+    out.name = body.name;
+    out.node_begin = uint32_t(body.node_begin);
+    out.vertex_begin = uint32_t(s.nodes.size());
+    for (int32_t n : boundary)
+      if (n >= body.node_begin && n < body.node_end) {
+        vertex_of[size_t(n)] = int32_t(s.nodes.size());
+        s.nodes.push_back(uint32_t(n));
+      }
+    if (e) {
+      std::vector<int32_t> interior;
+      for (int32_t v = body.fine_vertex_begin; v < body.fine_vertex_end; ++v)
+        for (int32_t n : e->nodes[size_t(v)])
+          if (vertex_of[size_t(n)] == -1) {
+            vertex_of[size_t(n)] = -2;  // listed
+            interior.push_back(n);
+          }
+      std::sort(interior.begin(), interior.end());
+      for (int32_t n : interior) {
+        vertex_of[size_t(n)] = int32_t(s.nodes.size());
+        s.nodes.push_back(uint32_t(n));
+      }
     }
+    out.vertex_end = uint32_t(s.nodes.size());
+    out.triangle_begin = uint32_t(s.triangles.size() / 3);
+    for (const Tri& f : faces)
+      if (f[0] >= body.node_begin && f[0] < body.node_end)
+        for (int32_t i : f) s.triangles.push_back(uint32_t(vertex_of[size_t(i)]));
+    out.triangle_end = uint32_t(s.triangles.size() / 3);
+    out.fine_vertex_begin = uint32_t(body.fine_vertex_begin);
+    out.fine_vertex_end = uint32_t(body.fine_vertex_end);
+    out.fine_triangle_begin = uint32_t(body.fine_triangle_begin);
+    out.fine_triangle_end = uint32_t(body.fine_triangle_end);
+    s.bodies.push_back(out);
+  }
+  if (e) {
     s.carriers.reserve(4 * e->nodes.size());
     s.weights.reserve(4 * e->nodes.size());
     for (size_t v = 0; v < e->nodes.size(); ++v)
@@ -164,10 +181,16 @@ std::span<const uint8_t> FrameEncoder::scene_description(std::span<const Paramet
     const ViewFieldInfo& f = view_field_info(ViewField(k));
     fields.push_back(wire::CreateFieldInfoDirect(b, f.name, f.unit, f.description));
   }
-  return seal(
-      b, wire::Message::SceneDescription,
-      wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
-                                         &surface_.nodes, "", &proxies, &devices, &params, &names, embedded, &fields));
+  std::vector<fb::Offset<wire::BodyInfo>> bodies;
+  for (const Surface::Body& body : surface_.bodies)
+    bodies.push_back(wire::CreateBodyInfoDirect(b, body.name.c_str(), body.vertex_begin, body.vertex_end,
+                                                body.triangle_begin, body.triangle_end, body.fine_vertex_begin,
+                                                body.fine_vertex_end, body.fine_triangle_begin, body.fine_triangle_end,
+                                                body.node_begin));
+  return seal(b, wire::Message::SceneDescription,
+              wire::CreateSceneDescriptionDirect(b, scene_name_.c_str(), scene_id_, dt_, &rest, &surface_.triangles,
+                                                 &surface_.nodes, "", &proxies, &devices, &params, &names, embedded,
+                                                 &fields, &bodies));
 }
 
 void FrameEncoder::build_field_map() {

@@ -21,16 +21,27 @@
 
 namespace tactile {
 
-// The body as the viewers see it: the frame's vertices (the boundary nodes,
-// then the interior nodes an embedded surface follows), renumbered densely,
-// the boundary triangles in that numbering, and the embedded surface's
-// binding to the frame's vertices.
+// The bodies as the viewers see them: the frame's vertices, body by body
+// (each body's boundary nodes, then the interior nodes its embedded surface
+// follows), renumbered densely, the boundary triangles in that numbering,
+// and the embedded surface's binding to the frame's vertices.
 struct Surface {
+  // A body's slices (protocol BodyInfo): [begin, end) of the frame
+  // vertices, of the triangles (counted in triangles), of the embedded
+  // surface's vertices and triangles; its first node in the scene's mesh.
+  struct Body {
+    std::string name;
+    uint32_t vertex_begin = 0, vertex_end = 0;
+    uint32_t triangle_begin = 0, triangle_end = 0;
+    uint32_t fine_vertex_begin = 0, fine_vertex_end = 0;
+    uint32_t fine_triangle_begin = 0, fine_triangle_end = 0;
+    uint32_t node_begin = 0;
+  };
   std::vector<uint32_t> nodes;      // simulation node per frame vertex (n_vertices)
-  std::vector<uint32_t> triangles;  // outward (n_triangles x 3), frame vertex ids
-  size_t boundary = 0;              // the first this many vertices are the boundary's
+  std::vector<uint32_t> triangles;  // outward (n_triangles x 3), frame vertex ids, body by body
   std::vector<uint32_t> carriers;   // embedded: four frame vertices per fine vertex (n_fine x 4)
   std::vector<float> weights;       // embedded: their weights (n_fine x 4)
+  std::vector<Body> bodies;         // the scene's order (one for a scene of one body)
 };
 Surface extract_surface(const Simulation& sim);
 

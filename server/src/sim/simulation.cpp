@@ -76,6 +76,9 @@ Precision Simulation::precision() const { return precision_; }
 const TetMesh& Simulation::mesh() const {
   return visit([](const auto& b) -> const TetMesh& { return b.mesh; });
 }
+const std::vector<ModelBody>& Simulation::bodies() const {
+  return visit([](const auto& b) -> const std::vector<ModelBody>& { return b.model->bodies; });
+}
 int32_t Simulation::n_nodes() const {
   return visit([](const auto& b) { return b.model->n_nodes; });
 }

@@ -38,6 +38,9 @@ class Simulation {
   const TetMesh& mesh() const;  // the spec's rest mesh
   // The fine surface the body carries (core/embedding.hpp); null when none.
   const std::shared_ptr<const EmbeddedSurface>& surface() const { return surface_; }
+  // The bodies (one for a scene of one): their ranges of the spec's mesh and
+  // surface (BodySpec), and of the model's boundary faces.
+  const std::vector<ModelBody>& bodies() const;
   int32_t n_nodes() const;
   int32_t n_tets() const;
   double total_mass() const;                      // [kg]

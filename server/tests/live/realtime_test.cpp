@@ -19,6 +19,7 @@
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
 
+#include "core/bodies.hpp"
 #include "core/embedding.hpp"
 #include "core/fields.hpp"
 #include "core/material.hpp"
@@ -259,7 +260,8 @@ TEST(FrameEncoder, AnEmbeddedSurfaceComesOnceAndFollowsTheFrameVertices) {
   ASSERT_FALSE(sim.advance(0.02).fault);
   FrameEncoder frames(sim, "poke", 1, 2e-4);
   const Surface& s = frames.surface();
-  EXPECT_EQ(s.boundary, boundary);
+  ASSERT_EQ(s.bodies.size(), 1u);
+  EXPECT_EQ(s.bodies[0].vertex_end, s.nodes.size());
   ASSERT_GT(s.nodes.size(), boundary) << "the sphere follows no interior node, so this shows less";
   // Each node once: the frame grows by the interior nodes, never by more than the body has.
   std::vector<uint32_t> sorted = s.nodes;
@@ -800,6 +802,67 @@ TEST(FrameEncoder, SceneDescriptionMapsTheSurfaceToNodes) {
   ASSERT_EQ(d->proxies()->size(), 1u);
   EXPECT_STREQ(d->proxies()->Get(0)->device()->c_str(), "stylus");
   EXPECT_STREQ(d->devices()->Get(0)->c_str(), "stylus");
+  // One body, over everything.
+  ASSERT_EQ(d->bodies()->size(), 1u);
+  EXPECT_EQ(d->bodies()->Get(0)->vertex_end(), 18u);
+  EXPECT_EQ(d->bodies()->Get(0)->triangle_end(), d->triangles()->size() / 3);
+}
+
+// Two bodies, one with a fine surface: each body's frame vertices, triangles
+// and fine surface are slices of the description's arrays, and each slice
+// refers to its own body's only.
+TEST(FrameEncoder, EachBodyIsASliceOfTheDescription) {
+  BodyParts block;
+  block.name = "block";
+  block.mesh = make_box(Vec3(0.0), Vec3(0.04, 0.02, 0.04), {4, 2, 4});
+  block.materials = {MaterialSpec{MaterialModel::StVK, 3e4, 0.3, 1000}};
+  block.surface = std::make_shared<const EmbeddedSurface>(
+      embed_surface(block.mesh, test::make_uv_sphere(Vec3(0.02, 0.01, 0.02), 0.0085, 16, 8), 0.001));
+  BodyParts lid;
+  lid.name = "lid";
+  lid.mesh = make_box(Vec3(0.0, 0.03, 0.0), Vec3(0.04, 0.035, 0.04), {2, 1, 2});
+  lid.materials = block.materials;
+  ModelSpec spec;
+  add_bodies(spec, {block, lid});
+  Simulation sim(spec);
+  FrameEncoder frames(sim, "two", 1, 2e-4);
+  const auto* d = proto::GetEnvelope(frames.scene_description().data())->message_as_SceneDescription();
+  ASSERT_NE(d, nullptr);
+  ASSERT_EQ(d->bodies()->size(), 2u);
+  uint32_t vertices = 0, triangles = 0, fine = 0, fine_triangles = 0;
+  for (uint32_t b = 0; b < 2; ++b) {
+    const proto::BodyInfo& info = *d->bodies()->Get(b);
+    const BodySpec& body = spec.bodies[b];
+    EXPECT_EQ(info.name()->str(), body.name);
+    EXPECT_EQ(info.node_begin(), uint32_t(body.node_begin));
+    EXPECT_EQ(info.vertex_begin(), vertices);  // slices follow each other
+    EXPECT_EQ(info.triangle_begin(), triangles);
+    EXPECT_EQ(info.fine_vertex_begin(), fine);
+    EXPECT_EQ(info.fine_triangle_begin(), fine_triangles);
+    EXPECT_GT(info.triangle_end(), info.triangle_begin());
+    for (uint32_t v = info.vertex_begin(); v < info.vertex_end(); ++v) {
+      const uint32_t n = d->surface_nodes()->Get(v);
+      EXPECT_GE(n, uint32_t(body.node_begin));
+      EXPECT_LT(n, uint32_t(body.node_end));
+    }
+    for (uint32_t k = 3 * info.triangle_begin(); k < 3 * info.triangle_end(); ++k) {
+      EXPECT_GE(d->triangles()->Get(k), info.vertex_begin());
+      EXPECT_LT(d->triangles()->Get(k), info.vertex_end());
+    }
+    for (uint32_t k = 4 * info.fine_vertex_begin(); k < 4 * info.fine_vertex_end(); ++k) {
+      EXPECT_GE(d->embedded()->carriers()->Get(k), info.vertex_begin());
+      EXPECT_LT(d->embedded()->carriers()->Get(k), info.vertex_end());
+    }
+    vertices = info.vertex_end();
+    triangles = info.triangle_end();
+    fine = info.fine_vertex_end();
+    fine_triangles = info.fine_triangle_end();
+  }
+  EXPECT_EQ(vertices, d->surface_nodes()->size());
+  EXPECT_EQ(triangles, d->triangles()->size() / 3);
+  EXPECT_EQ(fine, d->embedded()->rest_positions()->size() / 3);  // the lid's boundary is its fine surface
+  EXPECT_EQ(fine_triangles, d->embedded()->triangles()->size() / 3);
+  EXPECT_GT(d->bodies()->Get(1)->fine_vertex_end(), d->bodies()->Get(1)->fine_vertex_begin());
 }
 
 }  // namespace

@@ -123,6 +123,14 @@ TEST(ProtoGolden, GeneratedAccessorsReadTheWrittenValues) {
   EXPECT_TRUE(h->device_limits()->Get(1)->direct());
   EXPECT_FALSE(h->device_limits()->Get(0)->direct());
 
+  const std::string scene = load("scene_description.tctl");
+  const SceneDescription* d = GetEnvelope(scene.data())->message_as_SceneDescription();
+  ASSERT_NE(d, nullptr);
+  ASSERT_EQ(d->bodies()->size(), 1u);  // (1.9)
+  EXPECT_STREQ(d->bodies()->Get(0)->name()->c_str(), "beam");
+  EXPECT_EQ(d->bodies()->Get(0)->vertex_end(), d->surface_nodes()->size());
+  EXPECT_EQ(d->bodies()->Get(0)->triangle_end(), d->triangles()->size() / 3);
+
   const std::string state = load("state_frame.tctl");
   const StateFrame* s = GetEnvelope(state.data())->message_as_StateFrame();
   ASSERT_NE(s, nullptr);

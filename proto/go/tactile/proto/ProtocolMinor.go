@@ -7,7 +7,7 @@ import "strconv"
 type ProtocolMinor uint16
 
 const (
-	ProtocolMinorCurrent ProtocolMinor = 8
+	ProtocolMinorCurrent ProtocolMinor = 9
 )
 
 var EnumNamesProtocolMinor = map[ProtocolMinor]string{

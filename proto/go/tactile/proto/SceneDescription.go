@@ -258,8 +258,28 @@ func (rcv *SceneDescription) FieldsLength() int {
 	return 0
 }
 
+func (rcv *SceneDescription) Bodies(obj *BodyInfo, j int) bool {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(30))
+	if o != 0 {
+		x := rcv._tab.Vector(o)
+		x += flatbuffers.UOffsetT(j) * 4
+		x = rcv._tab.Indirect(x)
+		obj.Init(rcv._tab.Bytes, x)
+		return true
+	}
+	return false
+}
+
+func (rcv *SceneDescription) BodiesLength() int {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(30))
+	if o != 0 {
+		return rcv._tab.VectorLen(o)
+	}
+	return 0
+}
+
 func SceneDescriptionStart(builder *flatbuffers.Builder) {
-	builder.StartObject(13)
+	builder.StartObject(14)
 }
 func SceneDescriptionAddSceneName(builder *flatbuffers.Builder, sceneName flatbuffers.UOffsetT) {
 	builder.PrependUOffsetTSlot(0, flatbuffers.UOffsetT(sceneName), 0)
@@ -322,6 +342,12 @@ func SceneDescriptionAddFields(builder *flatbuffers.Builder, fields flatbuffers.
 	builder.PrependUOffsetTSlot(12, flatbuffers.UOffsetT(fields), 0)
 }
 func SceneDescriptionStartFieldsVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
+	return builder.StartVector(4, numElems, 4)
+}
+func SceneDescriptionAddBodies(builder *flatbuffers.Builder, bodies flatbuffers.UOffsetT) {
+	builder.PrependUOffsetTSlot(13, flatbuffers.UOffsetT(bodies), 0)
+}
+func SceneDescriptionStartBodiesVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
 	return builder.StartVector(4, numElems, 4)
 }
 func SceneDescriptionEnd(builder *flatbuffers.Builder) flatbuffers.UOffsetT {

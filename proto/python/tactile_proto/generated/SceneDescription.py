@@ -263,7 +263,32 @@ class SceneDescription(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(28))
         return o == 0
 
-def SceneDescriptionStart(builder): builder.StartObject(13)
+    # SceneDescription
+    def Bodies(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(30))
+        if o != 0:
+            x = self._tab.Vector(o)
+            x += flatbuffers.number_types.UOffsetTFlags.py_type(j) * 4
+            x = self._tab.Indirect(x)
+            from tactile_proto.generated.BodyInfo import BodyInfo
+            obj = BodyInfo()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+    # SceneDescription
+    def BodiesLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(30))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # SceneDescription
+    def BodiesIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(30))
+        return o == 0
+
+def SceneDescriptionStart(builder): builder.StartObject(14)
 def Start(builder):
     return SceneDescriptionStart(builder)
 def SceneDescriptionAddSceneName(builder, sceneName): builder.PrependUOffsetTRelativeSlot(0, flatbuffers.number_types.UOffsetTFlags.py_type(sceneName), 0)
@@ -329,9 +354,16 @@ def AddFields(builder, fields):
 def SceneDescriptionStartFieldsVector(builder, numElems): return builder.StartVector(4, numElems, 4)
 def StartFieldsVector(builder, numElems):
     return SceneDescriptionStartFieldsVector(builder, numElems)
+def SceneDescriptionAddBodies(builder, bodies): builder.PrependUOffsetTRelativeSlot(13, flatbuffers.number_types.UOffsetTFlags.py_type(bodies), 0)
+def AddBodies(builder, bodies):
+    return SceneDescriptionAddBodies(builder, bodies)
+def SceneDescriptionStartBodiesVector(builder, numElems): return builder.StartVector(4, numElems, 4)
+def StartBodiesVector(builder, numElems):
+    return SceneDescriptionStartBodiesVector(builder, numElems)
 def SceneDescriptionEnd(builder): return builder.EndObject()
 def End(builder):
     return SceneDescriptionEnd(builder)
+import tactile_proto.generated.BodyInfo
 import tactile_proto.generated.EmbeddedSurface
 import tactile_proto.generated.FieldInfo
 import tactile_proto.generated.Parameter
@@ -358,6 +390,7 @@ class SceneDescriptionT(object):
         self.scenes = None  # type: List[str]
         self.embedded = None  # type: Optional[tactile_proto.generated.EmbeddedSurface.EmbeddedSurfaceT]
         self.fields = None  # type: List[tactile_proto.generated.FieldInfo.FieldInfoT]
+        self.bodies = None  # type: List[tactile_proto.generated.BodyInfo.BodyInfoT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -434,6 +467,14 @@ class SceneDescriptionT(object):
                 else:
                     fieldInfo_ = tactile_proto.generated.FieldInfo.FieldInfoT.InitFromObj(sceneDescription.Fields(i))
                     self.fields.append(fieldInfo_)
+        if not sceneDescription.BodiesIsNone():
+            self.bodies = []
+            for i in range(sceneDescription.BodiesLength()):
+                if sceneDescription.Bodies(i) is None:
+                    self.bodies.append(None)
+                else:
+                    bodyInfo_ = tactile_proto.generated.BodyInfo.BodyInfoT.InitFromObj(sceneDescription.Bodies(i))
+                    self.bodies.append(bodyInfo_)
 
     # SceneDescriptionT
     def Pack(self, builder):
@@ -507,6 +548,14 @@ class SceneDescriptionT(object):
             for i in reversed(range(len(self.fields))):
                 builder.PrependUOffsetTRelative(fieldslist[i])
             fields = builder.EndVector()
+        if self.bodies is not None:
+            bodieslist = []
+            for i in range(len(self.bodies)):
+                bodieslist.append(self.bodies[i].Pack(builder))
+            SceneDescriptionStartBodiesVector(builder, len(self.bodies))
+            for i in reversed(range(len(self.bodies))):
+                builder.PrependUOffsetTRelative(bodieslist[i])
+            bodies = builder.EndVector()
         SceneDescriptionStart(builder)
         if self.sceneName is not None:
             SceneDescriptionAddSceneName(builder, sceneName)
@@ -532,5 +581,7 @@ class SceneDescriptionT(object):
             SceneDescriptionAddEmbedded(builder, embedded)
         if self.fields is not None:
             SceneDescriptionAddFields(builder, fields)
+        if self.bodies is not None:
+            SceneDescriptionAddBodies(builder, bodies)
         sceneDescription = SceneDescriptionEnd(builder)
         return sceneDescription

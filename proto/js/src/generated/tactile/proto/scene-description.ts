@@ -2,6 +2,7 @@
 
 import * as flatbuffers from 'flatbuffers';
 
+import { BodyInfo, BodyInfoT } from '../../tactile/proto/body-info';
 import { EmbeddedSurface, EmbeddedSurfaceT } from '../../tactile/proto/embedded-surface';
 import { FieldInfo, FieldInfoT } from '../../tactile/proto/field-info';
 import { Parameter, ParameterT } from '../../tactile/proto/parameter';
@@ -154,8 +155,18 @@ fieldsLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+bodies(index: number, obj?:BodyInfo):BodyInfo|null {
+  const offset = this.bb!.__offset(this.bb_pos, 30);
+  return offset ? (obj || new BodyInfo()).__init(this.bb!.__indirect(this.bb!.__vector(this.bb_pos + offset) + index * 4), this.bb!) : null;
+}
+
+bodiesLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 30);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startSceneDescription(builder:flatbuffers.Builder) {
-  builder.startObject(13);
+  builder.startObject(14);
 }
 
 static addSceneName(builder:flatbuffers.Builder, sceneNameOffset:flatbuffers.Offset) {
@@ -321,6 +332,22 @@ static startFieldsVector(builder:flatbuffers.Builder, numElems:number) {
   builder.startVector(4, numElems, 4);
 }
 
+static addBodies(builder:flatbuffers.Builder, bodiesOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(13, bodiesOffset, 0);
+}
+
+static createBodiesVector(builder:flatbuffers.Builder, data:flatbuffers.Offset[]):flatbuffers.Offset {
+  builder.startVector(4, data.length, 4);
+  for (let i = data.length - 1; i >= 0; i--) {
+    builder.addOffset(data[i]!);
+  }
+  return builder.endVector();
+}
+
+static startBodiesVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(4, numElems, 4);
+}
+
 static endSceneDescription(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
@@ -341,7 +368,8 @@ unpack(): SceneDescriptionT {
     this.bb!.createObjList(this.parameters.bind(this), this.parametersLength()),
     this.bb!.createScalarList(this.scenes.bind(this), this.scenesLength()),
     (this.embedded() !== null ? this.embedded()!.unpack() : null),
-    this.bb!.createObjList(this.fields.bind(this), this.fieldsLength())
+    this.bb!.createObjList(this.fields.bind(this), this.fieldsLength()),
+    this.bb!.createObjList(this.bodies.bind(this), this.bodiesLength())
   );
 }
 
@@ -360,6 +388,7 @@ unpackTo(_o: SceneDescriptionT): void {
   _o.scenes = this.bb!.createScalarList(this.scenes.bind(this), this.scenesLength());
   _o.embedded = (this.embedded() !== null ? this.embedded()!.unpack() : null);
   _o.fields = this.bb!.createObjList(this.fields.bind(this), this.fieldsLength());
+  _o.bodies = this.bb!.createObjList(this.bodies.bind(this), this.bodiesLength());
 }
 }
 
@@ -377,7 +406,8 @@ constructor(
   public parameters: (ParameterT)[] = [],
   public scenes: (string)[] = [],
   public embedded: EmbeddedSurfaceT|null = null,
-  public fields: (FieldInfoT)[] = []
+  public fields: (FieldInfoT)[] = [],
+  public bodies: (BodyInfoT)[] = []
 ){}
 
 
@@ -393,6 +423,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const scenes = SceneDescription.createScenesVector(builder, builder.createObjectOffsetList(this.scenes));
   const embedded = (this.embedded !== null ? this.embedded!.pack(builder) : 0);
   const fields = SceneDescription.createFieldsVector(builder, builder.createObjectOffsetList(this.fields));
+  const bodies = SceneDescription.createBodiesVector(builder, builder.createObjectOffsetList(this.bodies));
 
   SceneDescription.startSceneDescription(builder);
   SceneDescription.addSceneName(builder, sceneName);
@@ -408,6 +439,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   SceneDescription.addScenes(builder, scenes);
   SceneDescription.addEmbedded(builder, embedded);
   SceneDescription.addFields(builder, fields);
+  SceneDescription.addBodies(builder, bodies);
 
   return SceneDescription.endSceneDescription(builder);
 }
