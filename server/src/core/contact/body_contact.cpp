@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numeric>
 
@@ -12,6 +13,11 @@ namespace tactile {
 namespace {
 
 constexpr int32_t kClusterItems = 32, kGroupItems = 8;
+// How deep behind a triangle a vertex that did not cross it this step still
+// counts as touching it, in its longest edge: a resting contact sinks a
+// fraction of a step's travel; a vertex deeper than this is in the body
+// beyond the triangle's reach (its far side).
+constexpr double kBand = 0.25;
 
 // The order of `points` by Morton code within their box.
 std::vector<size_t> morton_order(const std::vector<Vec3>& points) {
@@ -82,7 +88,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
       for (int c = 0; c < 3; ++c)
         longest = std::max(
             longest, glm::length(vertices_[size_t(t[size_t(c)])].X - vertices_[size_t(t[size_t((c + 1) % 3)])].X));
-      tri_edge_.push_back(longest);
+      tri_band_.push_back(kBand * longest);
     }
     vertex_first_.push_back(first);
     tri_first_.push_back(tri_first);
@@ -99,11 +105,56 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
       if (n >= 0) nodes_.push_back(n);
   std::sort(nodes_.begin(), nodes_.end());
   nodes_.erase(std::unique(nodes_.begin(), nodes_.end()), nodes_.end());
-  node_x1_.assign(size_t(model.n_nodes), Vec3(0.0));
+  node_x1_.assign(size_t(model.n_nodes), Vec3(0.0));  // (sparse: only nodes_ are written)
   node_x0_.assign(size_t(model.n_nodes), Vec3(0.0));
-  x1_.assign(vertices_.size(), Vec3(0.0));
-  x0_.assign(vertices_.size(), Vec3(0.0));
+  x_.assign(vertices_.size(), {Vec3(0.0), Vec3(0.0)});
+  vertex_stamp_.assign(vertices_.size(), 0u);
+  tri_stamp_.assign(triangles_.size(), 0u);
+  plane_stamp_.assign(triangles_.size(), 0u);
+  planes_.assign(triangles_.size(), Plane{});
+  for (int32_t n : nodes_) nodes_body_.push_back(model.node_body[size_t(n)]);
+  const size_t n_bodies = vertex_sets_.size();
+  move_.assign(n_bodies, 0.0);
+  drift_.assign(n_bodies, 0.0);
+  node_lo_.assign(n_bodies, Vec3(0.0));
+  node_hi_.assign(n_bodies, Vec3(0.0));
+  gain_max_.assign(n_bodies, 1.0);
+  const auto gains = [&](const ClusterSet& set) {
+    std::vector<double> gain(set.clusters(), 0.0);
+    for (size_t c = 0; c < set.clusters(); ++c)
+      for (int32_t m = set.vertex_begin[size_t(set.group_begin[c])];
+           m < set.vertex_begin[size_t(set.group_begin[c + 1])]; ++m) {
+        double sum = 0;
+        for (double w : vertices_[size_t(set.vertices[size_t(m)])].w) sum += std::fabs(w);
+        gain[c] = std::max(gain[c], sum);
+      }
+    return gain;
+  };
+  for (size_t b = 0; b < n_bodies; ++b) {
+    vertex_gain_.push_back(gains(vertex_sets_[b]));
+    tri_gain_.push_back(gains(tri_sets_[b]));
+    for (double g : vertex_gain_[b]) gain_max_[b] = std::max(gain_max_[b], g);
+    std::vector<double> band(tri_sets_[b].clusters(), 0.0);  // the most of its triangles'
+    for (size_t c = 0; c < band.size(); ++c)
+      for (int32_t g = tri_sets_[b].group_begin[c]; g < tri_sets_[b].group_begin[c + 1]; ++g)
+        for (int32_t i = tri_sets_[b].group_items[size_t(g)][0]; i < tri_sets_[b].group_items[size_t(g)][1]; ++i)
+          band[c] = std::max(band[c], tri_band_[size_t(tri_first_[b] + i)]);
+    band_max_.push_back(band.empty() ? 0.0 : *std::max_element(band.begin(), band.end()));
+    tri_band_of_.push_back(std::move(band));
+    vertex_refit_.emplace_back(vertex_sets_[b].clusters(), -std::numeric_limits<double>::infinity());
+    tri_refit_.emplace_back(tri_sets_[b].clusters(), -std::numeric_limits<double>::infinity());
+    std::vector<Vec3> rest;
+    for (int32_t v = vertex_first_[b]; v < (b + 1 < n_bodies ? vertex_first_[b + 1] : int32_t(vertices_.size())); ++v)
+      rest.push_back(vertices_[size_t(v)].X);
+    refit_drift_.push_back(0.005 * glm::length(compute_aabb(rest).size()));
+  }
   best_.assign(vertices_.size(), Best{});
+  tri_lo_.assign(triangles_.size(), Vec3(0.0));
+  body_lo_.assign(vertex_sets_.size(), Vec3(0.0));
+  margin_ = *std::min_element(refit_drift_.begin(), refit_drift_.end());
+  listed_at_.assign(vertex_sets_.size(), 0.0);
+  body_hi_ = body_lo_;
+  tri_hi_.assign(triangles_.size(), Vec3(0.0));
   slot_of_.assign(size_t(model.n_nodes), -1);
   solve_.reserve(nodes_.size(), 1, vertices_.size());
 }
@@ -111,21 +162,13 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
 template <class Real>
 void BodyContact<Real>::test(int32_t v, int32_t t, double dt) {
   (void)dt;
-  const Vertex& vx = vertices_[size_t(v)];
+  const Plane& pl = plane(t);
+  if (!pl.valid) return;
   const Tri& tri = triangles_[size_t(t)];
-  if (tri_body_[size_t(t)] == vx.body) {
-    // Self contact: not within the triangle's own neighbourhood at rest.
-    const double reach = 2.0 * tri_edge_[size_t(t)];
-    for (int32_t c : tri)
-      if (glm::length(vertices_[size_t(c)].X - vx.X) < reach) return;
-  }
-  const Vec3 &a = x1_[size_t(tri[0])], &b = x1_[size_t(tri[1])], &c = x1_[size_t(tri[2])];
-  const Vec3 e1 = b - a, e2 = c - a;
-  const Vec3 nn = glm::cross(e1, e2);
-  const double area2 = glm::length(nn);
-  if (!(area2 > 0)) return;
-  const Vec3 n = nn / area2;
-  const Vec3 p = x1_[size_t(v)];
+  const Vec3& a = x_[size_t(tri[0])][1];
+  const Vec3 e1 = x_[size_t(tri[1])][1] - a, e2 = x_[size_t(tri[2])][1] - a;
+  const Vec3& n = pl.n1;
+  const Vec3 p = x_[size_t(v)][1];
   const double d1 = glm::dot(p - a, n);
   if (!(d1 < 0)) return;
   // Barycentric coordinates of p's projection on the triangle.
@@ -137,11 +180,9 @@ void BodyContact<Real>::test(int32_t v, int32_t t, double dt) {
   constexpr double eps = -1e-9;
   if (ba < eps || bb < eps || bc < eps) return;
   const double depth = -d1;
-  if (depth > 0.5 * tri_edge_[size_t(t)]) {
+  if (depth > tri_band_[size_t(t)]) {
     // Deep: only a vertex that crossed the triangle this step.
-    const Vec3 &a0 = x0_[size_t(tri[0])], &b0 = x0_[size_t(tri[1])], &c0 = x0_[size_t(tri[2])];
-    const Vec3 n0 = glm::cross(b0 - a0, c0 - a0);
-    if (!(glm::dot(x0_[size_t(v)] - a0, n0) >= 0)) return;
+    if (!(glm::dot(x_[size_t(v)][0] - x_[size_t(tri[0])][0], pl.n0) >= 0)) return;
   }
   Best& best = best_[size_t(v)];
   if (best.t >= 0 && best.depth <= depth) return;
@@ -150,61 +191,239 @@ void BodyContact<Real>::test(int32_t v, int32_t t, double dt) {
 }
 
 template <class Real>
-void BodyContact<Real>::find(const State<Real>& s, double dt) {
-  const Real* u = s.u.data();
-  const Real* vel = s.v.data();
-  const Real* acc = s.a.data();
-  for (int32_t n : nodes_) {
-    const size_t j = 3 * size_t(n);
-    const Vec3 x1 = model_.mesh.X[size_t(n)] + Vec3(double(u[j]), double(u[j + 1]), double(u[j + 2]));
-    const Vec3 vh = Vec3(double(vel[j]), double(vel[j + 1]), double(vel[j + 2])) -
-                    (0.5 * dt) * Vec3(double(acc[j]), double(acc[j + 1]), double(acc[j + 2]));
-    node_x1_[size_t(n)] = x1;
-    node_x0_[size_t(n)] = x1 - dt * vh;
+bool BodyContact<Real>::near_at_rest(int32_t v, int32_t t) const {
+  // Self contact: not within the triangle's own neighbourhood at rest,
+  // twice its longest edge.
+  const double reach = 2.0 * tri_band_[size_t(t)] / kBand;
+  for (int32_t c : triangles_[size_t(t)])
+    if (glm::length(vertices_[size_t(c)].X - vertices_[size_t(v)].X) < reach) return true;
+  return false;
+}
+
+template <class Real>
+const typename BodyContact<Real>::Plane& BodyContact<Real>::plane(int32_t t) {
+  Plane& pl = planes_[size_t(t)];
+  if (plane_stamp_[size_t(t)] != stamp_) {
+    plane_stamp_[size_t(t)] = stamp_;
+    const Tri& tri = triangles_[size_t(t)];
+    for (int32_t c : tri) vertex_at(c);
+    const auto unit = [](const Vec3& a, const Vec3& b, const Vec3& c, bool& ok) {
+      const Vec3 nn = glm::cross(b - a, c - a);
+      const double len = glm::length(nn);
+      ok = ok && len > 0;
+      return len > 0 ? nn / len : Vec3(0.0);
+    };
+    pl.valid = true;
+    pl.n1 = unit(x_[size_t(tri[0])][1], x_[size_t(tri[1])][1], x_[size_t(tri[2])][1], pl.valid);
+    pl.n0 = unit(x_[size_t(tri[0])][0], x_[size_t(tri[1])][0], x_[size_t(tri[2])][0], pl.valid);
   }
-  for (size_t k = 0; k < vertices_.size(); ++k) {
-    const Vertex& v = vertices_[k];
-    Vec3 x1(0.0), x0(0.0);
-    for (size_t c = 0; c < 4 && v.node[c] >= 0; ++c) {
-      x1 += v.w[c] * node_x1_[size_t(v.node[c])];
-      x0 += v.w[c] * node_x0_[size_t(v.node[c])];
+  return pl;
+}
+
+template <class Real>
+const std::array<Vec3, 2>& BodyContact<Real>::vertex_at(int32_t v) {
+  if (vertex_stamp_[size_t(v)] != stamp_) {
+    vertex_stamp_[size_t(v)] = stamp_;
+    const Vertex& vx = vertices_[size_t(v)];
+    Vec3 x0(0.0), x1(0.0);
+    for (size_t c = 0; c < 4 && vx.node[c] >= 0; ++c) {
+      x0 += vx.w[c] * node_x0_[size_t(vx.node[c])];
+      x1 += vx.w[c] * node_x1_[size_t(vx.node[c])];
     }
-    x1_[k] = x1;
-    x0_[k] = x0;
+    x_[size_t(v)] = {x0, x1};
   }
-  boxes_.clear();
-  for (size_t b = 0; b < vertex_sets_.size(); ++b) {
-    vertex_sets_[b].fit(x0_, x1_);
-    tri_sets_[b].fit(x0_, x1_);
-    for (size_t c = 0; c < vertex_sets_[b].clusters(); ++c)
-      boxes_.push_back({vertex_sets_[b].lo[c].x, vertex_sets_[b].hi[c].x, int32_t(b), int32_t(c), true});
-    for (size_t c = 0; c < tri_sets_[b].clusters(); ++c)
-      boxes_.push_back({tri_sets_[b].lo[c].x, tri_sets_[b].hi[c].x, int32_t(b), int32_t(c), false});
-  }
-  // Sweep and prune along x: each pair of a vertex cluster and a triangle
-  // cluster whose boxes meet, of two bodies or (self contact) of one.
-  std::sort(boxes_.begin(), boxes_.end(), [](const Box& x, const Box& y) { return x.lo_x < y.lo_x; });
-  for (size_t i = 0; i < boxes_.size(); ++i)
-    for (size_t j = i + 1; j < boxes_.size() && boxes_[j].lo_x <= boxes_[i].hi_x; ++j) {
-      if (boxes_[i].vertices == boxes_[j].vertices) continue;
-      const Box& vb = boxes_[i].vertices ? boxes_[i] : boxes_[j];
-      const Box& tb = boxes_[i].vertices ? boxes_[j] : boxes_[i];
-      if (vb.set == tb.set ? !self_ : !between_) continue;
-      const ClusterSet& vs = vertex_sets_[size_t(vb.set)];
-      const ClusterSet& ts = tri_sets_[size_t(tb.set)];
-      const auto vc = size_t(vb.c), tc = size_t(tb.c);
-      if (!boxes_meet(vs.lo[vc], vs.hi[vc], ts.lo[tc], ts.hi[tc])) continue;
-      for (int32_t gv = vs.group_begin[vc]; gv < vs.group_begin[vc + 1]; ++gv) {
-        const Vec3 &vlo = vs.group_lo[size_t(gv)], &vhi = vs.group_hi[size_t(gv)];
-        if (!boxes_meet(vlo, vhi, ts.lo[tc], ts.hi[tc])) continue;
-        for (int32_t gt = ts.group_begin[tc]; gt < ts.group_begin[tc + 1]; ++gt) {
-          if (!boxes_meet(vlo, vhi, ts.group_lo[size_t(gt)], ts.group_hi[size_t(gt)])) continue;
-          for (int32_t iv = vs.group_items[size_t(gv)][0]; iv < vs.group_items[size_t(gv)][1]; ++iv)
-            for (int32_t it = ts.group_items[size_t(gt)][0]; it < ts.group_items[size_t(gt)][1]; ++it)
-              test(vertex_first_[size_t(vb.set)] + iv, tri_first_[size_t(tb.set)] + it, dt);
+  return x_[size_t(v)];
+}
+
+template <class Real>
+void BodyContact<Real>::keep_boxes(ClusterSet& set, std::vector<double>& refit_at, const std::vector<double>& gain,
+                                   const std::vector<double>& band, size_t body) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const double drift = drift_[body];
+  for (size_t c = 0; c < set.clusters(); ++c) {
+    // A vertex moves at most sum_k |w_k| times as far as its nodes.
+    double grow = gain[c] * (drift - refit_at[c]);
+    if (!(drift - refit_at[c] <= refit_drift_[body])) {
+      bool near = false;
+      for (size_t o = 0; o < vertex_sets_.size() && !near; ++o)
+        if (o == body ? self_ : between_)
+          near = boxes_meet(set.lo[c] - Vec3(grow), set.hi[c] + Vec3(grow), body_lo_[o], body_hi_[o]);
+      if (near) {  // refitted to its vertices at both ends of this step
+        refit_at[c] = drift;
+        grow = 0;
+        set.lo[c] = Vec3(inf);
+        set.hi[c] = Vec3(-inf);
+        for (int32_t g = set.group_begin[c]; g < set.group_begin[c + 1]; ++g) {
+          Vec3 glo(inf), ghi(-inf);
+          for (int32_t m = set.vertex_begin[size_t(g)]; m < set.vertex_begin[size_t(g) + 1]; ++m) {
+            const std::array<Vec3, 2>& x = vertex_at(set.vertices[size_t(m)]);
+            glo = glm::min(glo, glm::min(x[0], x[1]));
+            ghi = glm::max(ghi, glm::max(x[0], x[1]));
+          }
+          set.group_lo[size_t(g)] = glo;
+          set.group_hi[size_t(g)] = ghi;
+          set.lo[c] = glm::min(set.lo[c], glo);
+          set.hi[c] = glm::max(set.hi[c], ghi);
         }
       }
     }
+    set.grow[c] = grow + (band.empty() ? 0.0 : band[c] + margin_);
+  }
+}
+
+template <class Real>
+void BodyContact<Real>::find(const State<Real>& s, double dt) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const Real* u = s.u.data();
+  const Real* vel = s.v.data();
+  const Real* acc = s.a.data();
+  const size_t n_bodies = vertex_sets_.size();
+  // The nodes at both ends of the step, each body's largest move since the
+  // step before (over it, and any jump between them) and a box around all its vertices (its nodes' box, widened by the
+  // largest sum_k |w_k| of its vertices about its centre).
+  std::fill(move_.begin(), move_.end(), 0.0);
+  std::fill(node_lo_.begin(), node_lo_.end(), Vec3(inf));
+  std::fill(node_hi_.begin(), node_hi_.end(), Vec3(-inf));
+  for (size_t k = 0; k < nodes_.size(); ++k) {
+    const int32_t n = nodes_[k];
+    const size_t b = size_t(nodes_body_[k]), j = 3 * size_t(n);
+    const Vec3 x1 = model_.mesh.X[size_t(n)] + Vec3(double(u[j]), double(u[j + 1]), double(u[j + 2]));
+    const Vec3 vh = Vec3(double(vel[j]), double(vel[j + 1]), double(vel[j + 2])) -
+                    (0.5 * dt) * Vec3(double(acc[j]), double(acc[j + 1]), double(acc[j + 2]));
+    const Vec3 x0 = x1 - dt * vh;
+    // (Where the step before ended: x0 to rounding, unless the state was
+    // reset or replaced since; the kept boxes grow by that jump too.)
+    const double jump = glm::length(x0 - node_x1_[size_t(n)]);
+    node_x1_[size_t(n)] = x1;
+    node_x0_[size_t(n)] = x0;
+    move_[b] = std::max(move_[b], glm::length(x1 - x0) + jump);
+    node_lo_[b] = glm::min(node_lo_[b], glm::min(x0, x1));
+    node_hi_[b] = glm::max(node_hi_[b], glm::max(x0, x1));
+  }
+  for (size_t b = 0; b < n_bodies; ++b) {
+    drift_[b] += move_[b];
+    const Vec3 c = 0.5 * (node_lo_[b] + node_hi_[b]), half = 0.5 * (node_hi_[b] - node_lo_[b]);
+    body_lo_[b] = c - gain_max_[b] * half - Vec3(band_max_[b] + margin_);
+    body_hi_[b] = c + gain_max_[b] * half + Vec3(band_max_[b] + margin_);
+  }
+  if (++stamp_ == 0) {  // (wrapped: no vertex or triangle may keep a stamp that looks current)
+    std::fill(vertex_stamp_.begin(), vertex_stamp_.end(), 0u);
+    std::fill(tri_stamp_.begin(), tri_stamp_.end(), 0u);
+    std::fill(plane_stamp_.begin(), plane_stamp_.end(), 0u);
+    stamp_ = 1;
+  }
+  // The candidate pairs, kept while no vertex and no triangle can have moved
+  // by half the margin since they were listed: a pair left out then was
+  // farther apart than the margin, so it cannot touch yet.
+  bool rebuild = !listed_;
+  for (size_t b = 0; b < n_bodies; ++b)
+    rebuild = rebuild || 2.0 * gain_max_[b] * (drift_[b] - listed_at_[b]) >= margin_;
+  if (rebuild) {
+    list_candidates(dt);
+    listed_at_ = drift_;
+    listed_ = true;
+  }
+  for (const std::array<int32_t, 2>& c : candidates_) {
+    vertex_at(c[0]);
+    for (int32_t k : triangles_[size_t(c[1])]) vertex_at(k);
+    test(c[0], c[1], dt);
+  }
+}
+
+template <class Real>
+void BodyContact<Real>::list_candidates(double dt) {
+  (void)dt;
+  const size_t n_bodies = vertex_sets_.size();
+  candidates_.clear();
+  // The clusters' boxes, kept between steps: grown each step by how far
+  // their vertices can have moved, and refitted when they have grown by
+  // half a percent of their body's size and meet a body they may touch.
+  for (size_t b = 0; b < n_bodies; ++b) {
+    keep_boxes(vertex_sets_[b], vertex_refit_[b], vertex_gain_[b], {}, b);
+    keep_boxes(tri_sets_[b], tri_refit_[b], tri_gain_[b], tri_band_of_[b], b);
+  }
+  // Per pair of a body's vertices and a body's triangles (two bodies, or one
+  // with self contact): the clusters of each that meet the other's whole box,
+  // swept and pruned along x; each vertex cluster and triangle cluster whose
+  // boxes meet is tested group by group, then item by item.
+  for (size_t a = 0; a < n_bodies; ++a)
+    for (size_t b = 0; b < n_bodies; ++b) {
+      if (a == b ? !self_ : !between_) continue;
+      const ClusterSet& vs = vertex_sets_[a];
+      const ClusterSet& ts = tri_sets_[b];
+      boxes_.clear();
+      for (size_t c = 0; c < vs.clusters(); ++c) {
+        const Vec3 g(vs.grow[c]);
+        if (a == b || boxes_meet(vs.lo[c] - g, vs.hi[c] + g, body_lo_[b], body_hi_[b]))
+          boxes_.push_back({vs.lo[c].x - g.x, vs.hi[c].x + g.x, int32_t(c), true});
+      }
+      if (boxes_.empty()) continue;
+      const size_t n_vertex_boxes = boxes_.size();
+      for (size_t c = 0; c < ts.clusters(); ++c) {
+        const Vec3 g(ts.grow[c]);
+        if (a == b || boxes_meet(ts.lo[c] - g, ts.hi[c] + g, body_lo_[a], body_hi_[a]))
+          boxes_.push_back({ts.lo[c].x - g.x, ts.hi[c].x + g.x, int32_t(c), false});
+      }
+      if (boxes_.size() == n_vertex_boxes) continue;
+      std::sort(boxes_.begin(), boxes_.end(), [](const Box& x, const Box& y) { return x.lo_x < y.lo_x; });
+      for (size_t i = 0; i < boxes_.size(); ++i)
+        for (size_t j = i + 1; j < boxes_.size() && boxes_[j].lo_x <= boxes_[i].hi_x; ++j) {
+          if (boxes_[i].vertices == boxes_[j].vertices) continue;
+          const auto vc = size_t(boxes_[i].vertices ? boxes_[i].c : boxes_[j].c);
+          const auto tc = size_t(boxes_[i].vertices ? boxes_[j].c : boxes_[i].c);
+          const Vec3 gv(vs.grow[vc]), gt(ts.grow[tc]);
+          if (boxes_meet(vs.lo[vc] - gv, vs.hi[vc] + gv, ts.lo[tc] - gt, ts.hi[tc] + gt)) test_clusters(a, vc, b, tc);
+        }
+    }
+}
+
+template <class Real>
+void BodyContact<Real>::test_clusters(size_t a, size_t vc, size_t b, size_t tc) {
+  const ClusterSet& vs = vertex_sets_[a];
+  const ClusterSet& ts = tri_sets_[b];
+  const Vec3 grow_v(vs.grow[vc]), grow_t(ts.grow[tc]);
+  for (int32_t gv = vs.group_begin[vc]; gv < vs.group_begin[vc + 1]; ++gv) {
+    const Vec3 vlo = vs.group_lo[size_t(gv)] - grow_v, vhi = vs.group_hi[size_t(gv)] + grow_v;
+    for (int32_t gt = ts.group_begin[tc]; gt < ts.group_begin[tc + 1]; ++gt) {
+      const Vec3 tlo = ts.group_lo[size_t(gt)] - grow_t, thi = ts.group_hi[size_t(gt)] + grow_t;
+      if (!boxes_meet(vlo, vhi, tlo, thi)) continue;
+      // Vertex by vertex against the group's box, then each triangle's
+      // own (its corners over the step): most pairs end here.
+      for (int32_t iv = vs.group_items[size_t(gv)][0]; iv < vs.group_items[size_t(gv)][1]; ++iv) {
+        const int32_t v = vertex_first_[a] + iv;
+        const std::array<Vec3, 2>& x = vertex_at(v);
+        const Vec3 plo = glm::min(x[0], x[1]), phi = glm::max(x[0], x[1]);
+        if (!boxes_meet(plo, phi, tlo, thi)) continue;
+        for (int32_t it = ts.group_items[size_t(gt)][0]; it < ts.group_items[size_t(gt)][1]; ++it) {
+          const int32_t t = tri_first_[b] + it;
+          if (tri_stamp_[size_t(t)] != stamp_) {
+            tri_stamp_[size_t(t)] = stamp_;
+            const Tri& tri = triangles_[size_t(t)];
+            Vec3 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+            for (int32_t c : tri) {
+              const std::array<Vec3, 2>& y = vertex_at(c);
+              lo = glm::min(lo, glm::min(y[0], y[1]));
+              hi = glm::max(hi, glm::max(y[0], y[1]));
+            }
+            tri_lo_[size_t(t)] = lo - Vec3(tri_band_[size_t(t)] + margin_);
+            tri_hi_[size_t(t)] = hi + Vec3(tri_band_[size_t(t)] + margin_);
+          }
+          if (!boxes_meet(plo, phi, tri_lo_[size_t(t)], tri_hi_[size_t(t)])) continue;
+          // Only a vertex near the triangle's plane at either end of the
+          // step: in front by at most the margin, behind by at most its
+          // band and the margin (until the list is renewed each moves less
+          // than that towards the other).
+          const Plane& pl = plane(t);
+          if (!pl.valid) continue;
+          const double d0 = glm::dot(x[0] - x_[size_t(triangles_[size_t(t)][0])][0], pl.n0);
+          const double d1 = glm::dot(x[1] - x_[size_t(triangles_[size_t(t)][0])][1], pl.n1);
+          if (std::min(d0, d1) > margin_ || std::max(d0, d1) < -(tri_band_[size_t(t)] + margin_)) continue;
+          if (tri_body_[size_t(t)] == int32_t(a) && near_at_rest(v, t)) continue;
+          candidates_.push_back({v, t});
+        }
+      }
+    }
+  }
 }
 
 template <class Real>
@@ -257,7 +476,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     p.r = Vec3(0.0);
     p.slot.fill(-1);
     p.w.fill(0);
-    p.x = x1_[size_t(v)];
+    p.x = x_[size_t(v)][1];
     p.n = best.n;
     p.vp = Vec3(0.0);
     p.v_held = Vec3(0.0);

@@ -23,7 +23,7 @@
 // Found without tunnelling: a vertex counts when it is behind the
 // triangle's plane at t_{n+1} over the triangle (its projection inside it)
 // and either was in front of it at t_n (it crossed the triangle this step,
-// at any depth: a thin body hit fast) or is no deeper than half the
+// at any depth: a thin body hit fast) or is no deeper than a quarter of the
 // triangle's longest edge (it is resting in contact). Positions at t_n
 // need no memory: the step's half-step velocity gives them,
 // x_n = x_{n+1} - dt (v_{n+1} - dt/2 a_{n+1}), which the velocity
@@ -34,10 +34,18 @@
 // (a face never touches its neighbours, which it meets by construction).
 //
 // Broad phase: per body, the vertices in Morton order in clusters of 32 and
-// the triangles likewise (ClusterSet), each box fitted to the step's both
-// ends; clusters are swept and pruned along x, and only the vertex-triangle
-// cluster pairs whose boxes meet (of two bodies, or of one with self
-// contact) are tested item by item.
+// the triangles likewise (ClusterSet), in groups of 8. Their boxes are kept
+// between steps as the proxies' embedded surface's are (contact.hpp): grown
+// each step by how far any vertex can have moved (its body's nodes' largest
+// move times the cluster's largest sum_k |w_k|), and refitted to their
+// vertices at both ends of the step when they have grown by half a percent
+// of the body's size and meet a body they may touch; a vertex's position is
+// worked out only there. The pairs are listed with a margin and kept, as
+// molecular dynamics keeps its Verlet lists, until a body has moved half
+// the margin; each step tests the listed pairs only. Per pair of bodies, the clusters of each that meet the other's
+// whole box are swept and pruned along x, and only the vertex-triangle
+// cluster pairs whose boxes meet are tested, group by group, then item by
+// item against each triangle's box.
 #pragma once
 
 #include <array>
@@ -83,22 +91,66 @@ class BodyContact {
     Vec3 X;  // at rest
   };
   void find(const State<Real>& s, double dt);
+  const std::array<Vec3, 2>& vertex_at(int32_t v);
+  // A triangle's unit normals at t_n and t_{n+1} (stamped per step).
+  struct Plane {
+    Vec3 n0{0.0}, n1{0.0};
+    bool valid = false;  // not degenerate at either end
+  };
+  const Plane& plane(int32_t t);
+  // Whether vertex v lies within triangle t's own neighbourhood at rest (self contact skips it).
+  bool near_at_rest(int32_t v, int32_t t) const;
+  // A set's kept boxes for this step: grown by how far its vertices can have
+  // moved, refitted where that is much and it is near a body it may touch.
+  // A triangle set's boxes are grown by its triangles' band as well (`band`,
+  // per cluster; empty for vertices).
+  void keep_boxes(ClusterSet& set, std::vector<double>& refit_at, const std::vector<double>& gain,
+                  const std::vector<double>& band, size_t body);
   void test(int32_t v, int32_t t, double dt);
+  // The broad phase: every vertex and triangle whose boxes, the triangle's
+  // grown by its band and the margin, meet (candidates_).
+  void list_candidates(double dt);
+  // Vertex cluster vc of body a against triangle cluster tc of body b.
+  void test_clusters(size_t a, size_t vc, size_t b, size_t tc);
 
   const Model<Real>& model_;
   bool active_ = false;
   bool self_ = false, between_ = false;
   double mu_ = 0;
   std::vector<Vertex> vertices_;
-  std::vector<Tri> triangles_;                      // vertex ids, outward
-  std::vector<int32_t> tri_body_;                   // per triangle
-  std::vector<double> tri_edge_;                    // longest rest edge per triangle [m]
+  std::vector<Tri> triangles_;     // vertex ids, outward
+  std::vector<int32_t> tri_body_;  // per triangle
+  std::vector<double>
+      tri_band_;  // per triangle: how deep behind it a vertex touches it [m] (kBand of its longest edge)
   std::vector<ClusterSet> vertex_sets_, tri_sets_;  // per body
   std::vector<int32_t> vertex_first_, tri_first_;   // per body: its first vertex, triangle
   std::vector<int32_t> nodes_;                      // every node a vertex follows
   // Per step.
+  std::vector<int32_t> nodes_body_;      // body of each of nodes_
   std::vector<Vec3> node_x1_, node_x0_;  // per node of nodes_ (indexed like the model's, sparse)
-  std::vector<Vec3> x1_, x0_;            // per vertex
+  // Per vertex, its positions at t_n and t_{n+1}, worked out only near
+  // another body (vertex_at): current where its stamp is the step's.
+  std::vector<std::array<Vec3, 2>> x_;
+  std::vector<uint32_t> vertex_stamp_, tri_stamp_, plane_stamp_;
+  std::vector<Plane> planes_;
+  uint32_t stamp_ = 0;
+  std::vector<Vec3> tri_lo_, tri_hi_;  // per triangle: the box of its corners over the step (stamped)
+  // Per body: its nodes' largest move this step, the sum of those since the
+  // start (drift_), its nodes' box, the largest sum_k |w_k| of its vertices,
+  // the drift after which a kept box is refitted (half a percent of its size).
+  std::vector<double> move_, drift_, gain_max_, refit_drift_;
+  std::vector<Vec3> node_lo_, node_hi_;
+  // Per body, per cluster: sum_k |w_k| at most, and the drift at its last refit.
+  std::vector<std::vector<double>> vertex_gain_, tri_gain_, vertex_refit_, tri_refit_;
+  std::vector<std::vector<double>> tri_band_of_;  // per body, per triangle cluster: its triangles' largest band
+  std::vector<double> band_max_;                  // per body: its largest band
+  // The candidate pairs (vertex, triangle), listed with a margin (the
+  // smallest body's refit drift) and kept until some body has moved half of
+  // it since (listed_at_: each body's drift then).
+  std::vector<std::array<int32_t, 2>> candidates_;
+  std::vector<double> listed_at_;
+  double margin_ = 0;
+  bool listed_ = false;
   struct Best {
     int32_t t = -1;
     double depth = 0;
@@ -108,10 +160,10 @@ class BodyContact {
   std::vector<int32_t> touched_;
   struct Box {
     double lo_x, hi_x;
-    int32_t set;    // body
     int32_t c;      // cluster
     bool vertices;  // a vertex cluster (else triangles)
   };
+  std::vector<Vec3> body_lo_, body_hi_;  // per body: a box around all its vertices over the step
   std::vector<Box> boxes_;
   std::vector<ContactPoint> points_;
   std::vector<double> point_sign_;  // per point: +1, -1 as exchanged() counts it, 0 within a body
