@@ -152,7 +152,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
   tri_lo_.assign(triangles_.size(), Vec3(0.0));
   body_lo_.assign(vertex_sets_.size(), Vec3(0.0));
   margin_ = *std::min_element(refit_drift_.begin(), refit_drift_.end());
-  listed_at_.assign(vertex_sets_.size(), 0.0);
+  node_listed_.assign(nodes_.size(), Vec3(0.0));
   body_hi_ = body_lo_;
   tri_hi_.assign(triangles_.size(), Vec3(0.0));
   slot_of_.assign(size_t(model.n_nodes), -1);
@@ -182,7 +182,9 @@ void BodyContact<Real>::test(int32_t v, int32_t t, double dt) {
   const double depth = -d1;
   if (depth > tri_band_[size_t(t)]) {
     // Deep: only a vertex that crossed the triangle this step.
-    if (!(glm::dot(x_[size_t(v)][0] - x_[size_t(tri[0])][0], pl.n0) >= 0)) return;
+    const Vec3& a0 = x_[size_t(tri[0])][0];
+    const Vec3 n0 = glm::cross(x_[size_t(tri[1])][0] - a0, x_[size_t(tri[2])][0] - a0);
+    if (!(glm::dot(x_[size_t(v)][0] - a0, n0) >= 0)) return;
   }
   Best& best = best_[size_t(v)];
   if (best.t >= 0 && best.depth <= depth) return;
@@ -207,15 +209,12 @@ const typename BodyContact<Real>::Plane& BodyContact<Real>::plane(int32_t t) {
     plane_stamp_[size_t(t)] = stamp_;
     const Tri& tri = triangles_[size_t(t)];
     for (int32_t c : tri) vertex_at(c);
-    const auto unit = [](const Vec3& a, const Vec3& b, const Vec3& c, bool& ok) {
-      const Vec3 nn = glm::cross(b - a, c - a);
-      const double len = glm::length(nn);
-      ok = ok && len > 0;
-      return len > 0 ? nn / len : Vec3(0.0);
-    };
-    pl.valid = true;
-    pl.n1 = unit(x_[size_t(tri[0])][1], x_[size_t(tri[1])][1], x_[size_t(tri[2])][1], pl.valid);
-    pl.n0 = unit(x_[size_t(tri[0])][0], x_[size_t(tri[1])][0], x_[size_t(tri[2])][0], pl.valid);
+    const Vec3& a = x_[size_t(tri[0])][1];
+    const Vec3 nn = glm::cross(x_[size_t(tri[1])][1] - a, x_[size_t(tri[2])][1] - a);
+    const double len = glm::length(nn);
+    pl.valid = len > 0;
+    pl.n1 = pl.valid ? nn / len : Vec3(0.0);
+    pl.off1 = glm::dot(pl.n1, a);
   }
   return pl;
 }
@@ -315,18 +314,35 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
   // The candidate pairs, kept while no vertex and no triangle can have moved
   // by half the margin since they were listed: a pair left out then was
   // farther apart than the margin, so it cannot touch yet.
+  // (How far each node is from where it was then: an oscillation does not
+  // add up, as the drift of the kept boxes does.)
   bool rebuild = !listed_;
-  for (size_t b = 0; b < n_bodies; ++b)
-    rebuild = rebuild || 2.0 * gain_max_[b] * (drift_[b] - listed_at_[b]) >= margin_;
+  if (!rebuild) {
+    std::fill(move_.begin(), move_.end(), 0.0);
+    for (size_t k = 0; k < nodes_.size(); ++k) {
+      const auto n = size_t(nodes_[k]);
+      const size_t b = size_t(nodes_body_[k]);
+      move_[b] =
+          std::max({move_[b], glm::length(node_x1_[n] - node_listed_[k]), glm::length(node_x0_[n] - node_listed_[k])});
+    }
+    for (size_t b = 0; b < n_bodies; ++b) rebuild = rebuild || 2.0 * gain_max_[b] * move_[b] >= margin_;
+  }
   if (rebuild) {
     list_candidates(dt);
-    listed_at_ = drift_;
+    std::sort(candidates_.begin(), candidates_.end());
+    for (size_t k = 0; k < nodes_.size(); ++k) node_listed_[k] = node_x1_[size_t(nodes_[k])];
     listed_ = true;
   }
-  for (const std::array<int32_t, 2>& c : candidates_) {
-    vertex_at(c[0]);
-    for (int32_t k : triangles_[size_t(c[1])]) vertex_at(k);
-    test(c[0], c[1], dt);
+  // The listed pairs, vertex by vertex; most end at the plane test (the
+  // vertex in front of the triangle at t_{n+1}).
+  for (size_t i = 0; i < candidates_.size();) {
+    const int32_t v = candidates_[i][0];
+    const Vec3 p = vertex_at(v)[1];
+    for (; i < candidates_.size() && candidates_[i][0] == v; ++i) {
+      const int32_t t = candidates_[i][1];
+      const Plane& pl = plane(t);
+      if (pl.valid && glm::dot(p, pl.n1) < pl.off1) test(v, t, dt);
+    }
   }
 }
 
@@ -415,8 +431,12 @@ void BodyContact<Real>::test_clusters(size_t a, size_t vc, size_t b, size_t tc) 
           // than that towards the other).
           const Plane& pl = plane(t);
           if (!pl.valid) continue;
-          const double d0 = glm::dot(x[0] - x_[size_t(triangles_[size_t(t)][0])][0], pl.n0);
-          const double d1 = glm::dot(x[1] - x_[size_t(triangles_[size_t(t)][0])][1], pl.n1);
+          const Tri& tri = triangles_[size_t(t)];
+          const Vec3& a0 = x_[size_t(tri[0])][0];
+          const Vec3 n0 = glm::cross(x_[size_t(tri[1])][0] - a0, x_[size_t(tri[2])][0] - a0);
+          const double len0 = glm::length(n0);
+          const double d0 = len0 > 0 ? glm::dot(x[0] - a0, n0) / len0 : 0.0;
+          const double d1 = glm::dot(x[1], pl.n1) - pl.off1;
           if (std::min(d0, d1) > margin_ || std::max(d0, d1) < -(tri_band_[size_t(t)] + margin_)) continue;
           if (tri_body_[size_t(t)] == int32_t(a) && near_at_rest(v, t)) continue;
           candidates_.push_back({v, t});
@@ -434,6 +454,9 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   if (!active_) return sums;
   find(s, dt);
   if (touched_.empty()) return sums;
+  // In vertex order, whatever order the candidates were listed in: the
+  // solve's sweeps (and so its last digits) see the same points the same way.
+  std::sort(touched_.begin(), touched_.end());
 
   // The points: the vertex's nodes (+w) against the triangle's (-b_j w_jk),
   // each node once; a held node adds its prescribed velocity.

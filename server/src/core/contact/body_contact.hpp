@@ -41,8 +41,9 @@
 // vertices at both ends of the step when they have grown by half a percent
 // of the body's size and meet a body they may touch; a vertex's position is
 // worked out only there. The pairs are listed with a margin and kept, as
-// molecular dynamics keeps its Verlet lists, until a body has moved half
-// the margin; each step tests the listed pairs only. Per pair of bodies, the clusters of each that meet the other's
+// molecular dynamics keeps its Verlet lists, until a vertex can have moved
+// half the margin from where it was then; each step tests the listed pairs
+// only. Per pair of bodies, the clusters of each that meet the other's
 // whole box are swept and pruned along x, and only the vertex-triangle
 // cluster pairs whose boxes meet are tested, group by group, then item by
 // item against each triangle's box.
@@ -92,10 +93,11 @@ class BodyContact {
   };
   void find(const State<Real>& s, double dt);
   const std::array<Vec3, 2>& vertex_at(int32_t v);
-  // A triangle's unit normals at t_n and t_{n+1} (stamped per step).
+  // A triangle's plane at t_{n+1}: unit normal n1, n1 . x = off1 on it (stamped per step).
   struct Plane {
-    Vec3 n0{0.0}, n1{0.0};
-    bool valid = false;  // not degenerate at either end
+    Vec3 n1{0.0};
+    double off1 = 0;
+    bool valid = false;  // not degenerate
   };
   const Plane& plane(int32_t t);
   // Whether vertex v lies within triangle t's own neighbourhood at rest (self contact skips it).
@@ -145,10 +147,11 @@ class BodyContact {
   std::vector<std::vector<double>> tri_band_of_;  // per body, per triangle cluster: its triangles' largest band
   std::vector<double> band_max_;                  // per body: its largest band
   // The candidate pairs (vertex, triangle), listed with a margin (the
-  // smallest body's refit drift) and kept until some body has moved half of
-  // it since (listed_at_: each body's drift then).
+  // smallest body's refit drift) and kept until some vertex can have moved
+  // half of it since: a node by more than that over its body's largest sum
+  // |w| from where it was then (node_listed_, per node of nodes_).
   std::vector<std::array<int32_t, 2>> candidates_;
-  std::vector<double> listed_at_;
+  std::vector<Vec3> node_listed_;
   double margin_ = 0;
   bool listed_ = false;
   struct Best {
