@@ -18,6 +18,7 @@ constexpr int32_t kClusterItems = 32, kGroupItems = 8;
 // fraction of a step's travel; a vertex deeper than this is in the body
 // beyond the triangle's reach (its far side).
 constexpr double kBand = 0.25;
+constexpr double kSolveTolerance = 1e-3;
 
 // The order of `points` by Morton code within their box.
 std::vector<size_t> morton_order(const std::vector<Vec3>& points) {
@@ -190,6 +191,29 @@ void BodyContact<Real>::test(int32_t v, int32_t t, double dt) {
   if (best.t >= 0 && best.depth <= depth) return;
   if (best.t < 0) touched_.push_back(v);
   best = {t, depth, Vec3(ba, bb, bc), n};
+}
+
+template <class Real>
+double BodyContact<Real>::outside_edges(const Vec3& p, int32_t t) const {
+  const Tri& tri = triangles_[size_t(t)];
+  const Vec3 &a = x_[size_t(tri[0])][1], &b = x_[size_t(tri[1])][1], &c = x_[size_t(tri[2])][1];
+  const Vec3 n = glm::cross(b - a, c - a);
+  const double len = glm::length(n);
+  if (!(len > 0)) return 0.0;
+  // The in-plane distance of p's projection out of each edge (positive outside).
+  double out = -std::numeric_limits<double>::infinity();
+  const Vec3* corner[3] = {&a, &b, &c};
+  for (int k = 0; k < 3; ++k) {
+    const Vec3& u = *corner[k];
+    const Vec3& w = *corner[(k + 1) % 3];
+    const Vec3 edge = w - u;
+    const double el = glm::length(edge);
+    if (!(el > 0)) continue;
+    // Outward in-plane normal of edge u-w: edge x n (n points out of the body, the corners run counter-clockwise about
+    // it).
+    out = std::max(out, glm::dot(p - u, glm::cross(edge, n)) / (el * len));
+  }
+  return out;
 }
 
 template <class Real>
@@ -438,6 +462,10 @@ void BodyContact<Real>::test_clusters(size_t a, size_t vc, size_t b, size_t tc) 
           const double d0 = len0 > 0 ? glm::dot(x[0] - a0, n0) / len0 : 0.0;
           const double d1 = glm::dot(x[1], pl.n1) - pl.off1;
           if (std::min(d0, d1) > margin_ || std::max(d0, d1) < -(tri_band_[size_t(t)] + margin_)) continue;
+          // And over the triangle at t_{n+1}: its projection no farther out
+          // of any edge than the two margins and its distance from the plane
+          // (what the vertex and the triangle's tilt can still change).
+          if (outside_edges(x[1], t) > 2.0 * margin_ + std::fabs(d1)) continue;
           if (tri_body_[size_t(t)] == int32_t(a) && near_at_rest(v, t)) continue;
           candidates_.push_back({v, t});
         }
@@ -533,7 +561,10 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   }
   touched_.clear();
 
-  solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_);
+  // To a thousandth of the first sweep's change: a resting contact's
+  // impulses are a step's weight, and a thousandth of that is far below
+  // what moves a vertex by a rounding of its position.
+  solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_, kSolveTolerance);
   for (int32_t k : solve_.moved()) {
     const int32_t n = slot_node_[size_t(k)];
     const Vec3& dv = solve_.dv(k);

@@ -100,6 +100,9 @@ class BodyContact {
     bool valid = false;  // not degenerate
   };
   const Plane& plane(int32_t t);
+  // How far p's projection on triangle t's plane (at t_{n+1}) lies out of
+  // its farthest edge [m]; negative inside.
+  double outside_edges(const Vec3& p, int32_t t) const;
   // Whether vertex v lies within triangle t's own neighbourhood at rest (self contact skips it).
   bool near_at_rest(int32_t v, int32_t t) const;
   // A set's kept boxes for this step: grown by how far its vertices can have

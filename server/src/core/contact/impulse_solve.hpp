@@ -11,7 +11,8 @@
 // Points that share nodes (a face's point and its corner's) or a coupled
 // body (each impulse changes the body's velocity that the others see) are
 // solved together by projected Gauss-Seidel: swept until no velocity changes
-// by more than a millionth of the first sweep's largest change. One group is
+// by more than a given fraction (a millionth for proxies) of the first
+// sweep's largest change. One group is
 // a kinematic proxy's points, or a coupled body's; one proxy's points can
 // always all be met (the nodes moving with it), so the sweeps converge; two
 // proxies pinching a node cannot both be, and they are solved one after the
@@ -72,8 +73,10 @@ class ImpulseSolve {
   // the slots the points name). Sums each point's impulse into its jn and
   // jt, each slot's velocity change into dv(k) (the slots in moved()), and
   // each body's reaction into its next.v and next.w.
+  // The sweeps stop when no velocity changes by more than `tolerance` times
+  // the first sweep's largest change.
   void solve(std::vector<ContactPoint>& points, size_t n_proxies, std::vector<CoupledBodyState>& bodies,
-             const std::vector<Vec3>& v, const std::vector<double>& mass);
+             const std::vector<Vec3>& v, const std::vector<double>& mass, double tolerance = 1e-6);
 
   // The slots given a velocity change since the last clear(), and each one's.
   const std::vector<int32_t>& moved() const { return moved_; }
