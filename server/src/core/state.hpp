@@ -85,7 +85,7 @@ struct State {
   // Energy accounting, accumulated by the stepper [J].
   double work_loads = 0;       // work of natural loads (gravity is a potential, not here)
   double work_essential = 0;   // work of essential BCs (prescribed motions) on the body
-  double work_contact = 0;     // work of proxy contacts on the body
+  double work_contact = 0;     // work of contact on the bodies (proxies, and between bodies)
   double dissipated = 0;       // energy removed by Rayleigh damping
   std::vector<Real> reaction;  // force the essential BCs exert on each constrained node [N] (n_constrained x 3)
 

@@ -423,6 +423,7 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   if (body_contact_.active()) {  // after the held nodes' velocities are set: they move as prescribed
     enter(Pass::BodyContact);
     const ContactSums between = body_contact_.apply(s, dt);
+    s.work_contact += between.work;
     contact.mv2_delta += between.mv2_delta;
     contact.ma2_delta += between.ma2_delta;
     leave(Pass::BodyContact);

@@ -40,6 +40,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
   self_ = model.effects.self_contact;
   active_ = between_ || self_;
   mu_ = model.effects.body_friction;
+  alpha_ = model.effects.damping ? model.effects.alpha : 0.0;
   if (!active_) return;
   // Each body's surface contact meets: its fine surface's vertices and
   // triangles, else its boundary's nodes and faces; vertices in Morton order.
@@ -481,6 +482,12 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   exchanged_ = Vec3(0.0);
   if (!active_) return sums;
   find(s, dt);
+  // The work of the forces between bodies over the step, by the trapezoid
+  // as the proxies' (contact.cpp): the previous step's forces on this
+  // step's displacements now, this step's below.
+  std::vector<std::pair<int32_t, Vec3>>& pushed = s.contact.body_pushed;
+  for (const auto& [n, f] : pushed) sums.work += 0.5 * glm::dot(f, node_x1_[size_t(n)] - node_x0_[size_t(n)]);
+  pushed.clear();
   if (touched_.empty()) return sums;
   // In vertex order, whatever order the candidates were listed in: the
   // solve's sweeps (and so its last digits) see the same points the same way.
@@ -565,10 +572,15 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   // impulses are a step's weight, and a thousandth of that is far below
   // what moves a vertex by a rounding of its position.
   solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_, kSolveTolerance);
+  // The velocity change as a force over the step, eq. (10): q 2 dv / dt, q = m (1 + alpha dt / 2).
+  const double to_force = (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt;
   for (int32_t k : solve_.moved()) {
     const int32_t n = slot_node_[size_t(k)];
     const Vec3& dv = solve_.dv(k);
     const double m = slot_m_[size_t(k)];
+    const Vec3 f = (m * to_force) * dv;
+    sums.work += 0.5 * glm::dot(f, node_x1_[size_t(n)] - node_x0_[size_t(n)]);
+    pushed.emplace_back(n, f);
     const size_t j = 3 * size_t(n);
     for (size_t d = 0; d < 3; ++d) {
       const double v0 = double(s.v[j + d]), a0 = double(s.a[j + d]);

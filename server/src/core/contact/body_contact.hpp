@@ -72,8 +72,9 @@ class BodyContact {
   // The pass for the step ending at s.t + dt: after the essential BCs have
   // set their nodes' velocities (held nodes take no impulse; they move as
   // prescribed). Changes v_{n+1} and a_{n+1} of the nodes it pushes; returns
-  // what it changed for the energy account (no work: what the projection
-  // takes out shows as a drop of the balance).
+  // what it changed for the energy account and the work of its forces on
+  // the bodies over the step (the trapezoid, as the proxies'; the forces of
+  // this step are kept in s.contact.body_pushed for the next).
   ContactSums apply(State<Real>& s, double dt);
   // Contact points in the latest apply(): between bodies, and within one.
   int32_t body_contacts() const { return body_contacts_; }
@@ -122,6 +123,7 @@ class BodyContact {
   bool active_ = false;
   bool self_ = false, between_ = false;
   double mu_ = 0;
+  double alpha_ = 0;  // Rayleigh mass damping, for the force of a velocity change (eq. 10)
   std::vector<Vertex> vertices_;
   std::vector<Tri> triangles_;     // vertex ids, outward
   std::vector<int32_t> tri_body_;  // per triangle

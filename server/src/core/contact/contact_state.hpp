@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <limits>
+#include <utility>
 #include <vector>
 
 #include <glm/mat3x3.hpp>
@@ -153,6 +154,11 @@ struct ContactState {
   std::vector<Vec3> node_impulse;      // per free slot, while tracking [N s]
   std::vector<int32_t> impulse_slots;  // free slots with a nonzero node_impulse
   double node_elapsed = 0;             // [s]
+
+  // Contact between bodies (core/contact/body_contact.hpp): the nodes it
+  // pushed in the latest step and the force on each over it [N], for the
+  // next step's work trapezoid.
+  std::vector<std::pair<int32_t, Vec3>> body_pushed;
 
   // Starts the impulse sums of every proxy and device report again.
   void clear_impulses() {

@@ -90,6 +90,7 @@ TEST(BodyContact, TwoFreeBodiesExchangeMomentumAndConserveItsSum) {
   State<double> s = stepper.make_state();
   set_velocity(m, s, 0, Vec3(1.0, 0.1, 0.0));
   const Vec3 p0 = sums_of(m, s, 0).momentum + sums_of(m, s, 1).momentum;
+  const Energy e0 = stepper.compute_energy(s);
   const double dt = 0.9 * m.dt_rest;
   // Each step's impulses J act twice: at once on v_{n+1}, and through the
   // acceleration they set (eq. 9) over the next half step.
@@ -106,6 +107,11 @@ TEST(BodyContact, TwoFreeBodiesExchangeMomentumAndConserveItsSum) {
   }
   EXPECT_GT(contact_steps, 3);
   EXPECT_LT(glm::length(sums_of(m, s, 0).momentum - pa0 - (given - last)), 1e-9 * glm::length(p0));
+  // The energy account closes: the contact's work between the bodies is counted, and what the
+  // projection took out of the kinetic energy shows in it, not as a drift.
+  const Energy e = stepper.compute_energy(s);
+  EXPECT_LT(e.kinetic, e0.kinetic);  // some went into vibration and some was taken
+  EXPECT_LT(std::fabs(e.balance() - e0.balance()), 0.05 * e0.kinetic);  // (the guard's tolerance)
   EXPECT_GT(sums_of(m, s, 1).momentum.x, 0.3 * p0.x);  // b was pushed along x
   EXPECT_LT(sums_of(m, s, 0).momentum.x, p0.x);
 }
