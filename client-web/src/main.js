@@ -18,6 +18,7 @@ import {
 } from '@tactile/proto';
 import 'uplot/dist/uPlot.min.css'; // (esbuild writes it to dist/app.css, which index.html links)
 
+import { describeBodies } from './bodies.js';
 import { PRESETS, START, applyFraming, computeBoundingSphere, viewDirection } from './camera.js';
 import { cssGradient } from './colormap.js';
 import { ClosedError, ServerError, connect } from './connection.js';
@@ -290,9 +291,12 @@ function onScene(d) {
   stats.sceneName = /** @type {string | null} */ (d.sceneName) || '';
   showFault([]);
   stats.vertices = view.positions.length / 3;
-  $('scene').textContent = view.embedded
-    ? `${stats.sceneName}: ${view.embedded.triangles} triangles on ${stats.vertices} frame vertices, step ${(d.dt * 1e3).toFixed(3)} ms`
-    : `${stats.sceneName}: ${stats.vertices} surface vertices, step ${(d.dt * 1e3).toFixed(3)} ms`;
+  const bodies = describeBodies(d.bodies);
+  $('scene').textContent =
+    (view.embedded
+      ? `${stats.sceneName}: ${view.embedded.triangles} triangles on ${stats.vertices} frame vertices, step ${(d.dt * 1e3).toFixed(3)} ms`
+      : `${stats.sceneName}: ${stats.vertices} surface vertices, step ${(d.dt * 1e3).toFixed(3)} ms`) +
+    (bodies ? `; ${bodies}` : '');
   fieldChoice.setDescription(d);
   showFieldChoice();
   askFields();
