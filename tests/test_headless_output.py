@@ -368,3 +368,45 @@ def test_the_fine_surface_is_a_block_of_its_own_warped_with_the_body(embedded_se
     assert not surface.point_data["outside"].any()
     # At rest the surface is where the file put it.
     assert not meshio.read(by_time[0.0]["surface"]).point_data["displacement"].any()
+
+
+def test_each_body_is_a_block_of_its_own_in_its_own_numbering(tmp_path):
+    """Two bodies (the schema test's beam, here held along its base, and a block resting on it, contact between
+    them): each body is a block of the series, its VTU its own nodes and tets numbered from 0, its displacement
+    its own, and the block stays on the beam (body contact)."""
+    from test_scenes_schema import GOOD
+
+    scene = json.loads(json.dumps(GOOD["bodies_in_contact"]))
+    scene["bodies"][0]["boundary"][0]["select"] = {"plane": {"point": [0, 0, 0], "normal": [0, 1, 0]}}
+    # (Its edges off the beam's: two edges on each other need edge-edge contact, which body contact leaves out.)
+    scene["bodies"][1]["mesh"].update(lo=[0.31, 0.1, 0.02], hi=[0.39, 0.15, 0.08])
+    scene["bodies"][1]["loads"][0]["select"]["box"].update(lo=[0.31, 0.15, 0.02], hi=[0.39, 0.15, 0.08])
+    scene["run"]["vtu_fields"] = ["von_mises"]
+    path = tmp_path / "two.json"
+    path.write_text(json.dumps(scene))
+    result = subprocess.run([SIM, "run", str(path), "--out", str(tmp_path), "--duration", "0.3", "--quiet"],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    folder = tmp_path / "beam" / "run"
+    datasets = ET.parse(folder / "series.pvd").getroot().findall("./Collection/DataSet")
+    assert {(d.get("part"), d.get("name")) for d in datasets} == {("0", "beam"), ("1", "block")}
+    last = {part: [d.get("file") for d in datasets if d.get("part") == part][-1] for part in ("0", "1")}
+    beam, block = meshio.read(folder / last["0"]), meshio.read(folder / last["1"])
+    # The beam: 9 x 3 x 3 nodes, 8 x 2 x 2 x 6 tets; the block: 3 x 2 x 3 nodes, 2 x 1 x 2 x 6 tets.
+    assert len(beam.points) == 81 and sum(len(c.data) for c in beam.cells) == 192
+    assert len(block.points) == 18 and sum(len(c.data) for c in block.cells) == 24
+    assert block.cells[0].data.min() == 0 and block.cells[0].data.max() == 17  # its own numbering
+    assert block.cell_data["von_mises"][0].shape == (24,)
+    np.testing.assert_allclose(block.points.min(axis=0), [0.31, 0.1, 0.02], atol=1e-12)
+    # The block's bottom stays on the beam's top (body contact): each bottom node no lower than a millimetre below
+    # the beam's top nodes around it, where without contact it falls through the beam.
+    x_beam = beam.points + beam.point_data["displacement"]
+    x_block = block.points + block.point_data["displacement"]
+    top = np.flatnonzero(np.abs(beam.points[:, 1] - 0.1) < 1e-9)
+    bottom = np.flatnonzero(np.abs(block.points[:, 1] - 0.1) < 1e-9)
+    assert len(bottom) == 9
+    for k in bottom:
+        near = top[np.linalg.norm((x_beam[top] - x_block[k])[:, [0, 2]], axis=1) < 0.06]
+        assert len(near) > 0
+        assert x_block[k, 1] > x_beam[near, 1].min() - 1e-3, (block.points[k], x_block[k])
+    assert x_block[bottom, 1].min() < 0.1 - 1e-4  # (it pressed the beam down)

@@ -297,8 +297,9 @@ void HeadlessRun::record_frame(int32_t frame, const AdvanceReport* report, bool 
   if (vtu) write_vtu_frame(frame);
 }
 
-// The body at rest with its displacement and fields, each proxy a block of
-// its own (its surface where it is, and what it felt), then the fine surface.
+// The body at rest with its displacement and fields (each body a block of its
+// own, in a scene of several), each proxy a block of its own (its surface
+// where it is, and what it felt), then the fine surfaces.
 void HeadlessRun::write_vtu_frame(int32_t frame) {
   sim_.copy_velocity(v_);
   density_ = sim_.compute_element_energy();
@@ -308,22 +309,33 @@ void HeadlessRun::write_vtu_frame(int32_t frame) {
     const double span = sim_.take_contact_impulses(contact_);
     for (double& x : contact_) x = span > 0 ? x / span : 0.0;
   }
-  const std::string name = frame_name("frame", frame);
-  write_vtu((dir_ / name).string(), VtuFrame{&scene_.spec.mesh, &u_, &v_, &fixed_,
-                                             run_.vtu_contact_force ? &contact_ : nullptr, &density_, &fields});
-  pvd_.push_back({sim_.time(), name, 0, "body"});
+  // A scene of several bodies: each its own block, in its own numbering.
+  const std::vector<BodySpec>& bodies = scene_.spec.bodies;
+  const size_t n_bodies = std::max<size_t>(1, bodies.size());
+  for (size_t b = 0; b < n_bodies; ++b) {
+    const BodySpec* body = bodies.empty() ? nullptr : &bodies[b];
+    const std::string name = frame_name(body ? "frame-" + body->name : "frame", frame);
+    write_vtu((dir_ / name).string(), VtuFrame{&scene_.spec.mesh, &u_, &v_, &fixed_,
+                                               run_.vtu_contact_force ? &contact_ : nullptr, &density_, &fields, body});
+    pvd_.push_back({sim_.time(), name, int32_t(b), body ? body->name : "body"});
+  }
   for (size_t j = 0; j < sim_.proxies().size(); ++j) {
     const ProxySpec& p = sim_.proxies()[j];
     const ProxySurface surface = make_proxy_surface(p.geometry, sim_.proxy_pose(int32_t(j)), plane_half_size_);
     const ContactResult& c = result.proxies[j];
     const std::string proxy_file = frame_name("proxy-" + p.name, frame);
     write_vtu((dir_ / proxy_file).string(), VtuProxy{&surface, c.force, c.torque, c.contacts});
-    pvd_.push_back({sim_.time(), proxy_file, int32_t(1 + j), p.name});
+    pvd_.push_back({sim_.time(), proxy_file, int32_t(n_bodies + j), p.name});
   }
   if (sim_.surface()) {
-    const std::string surface_file = frame_name("surface", frame);
-    write_vtu((dir_ / surface_file).string(), VtuSurface{sim_.surface().get(), &u_});
-    pvd_.push_back({sim_.time(), surface_file, int32_t(1 + sim_.proxies().size()), "surface"});
+    int32_t part = int32_t(n_bodies + sim_.proxies().size());
+    for (size_t b = 0; b < n_bodies; ++b) {
+      const BodySpec* body = bodies.empty() ? nullptr : &bodies[b];
+      if (body && body->fine_triangle_end == body->fine_triangle_begin) continue;
+      const std::string surface_file = frame_name(body ? "surface-" + body->name : "surface", frame);
+      write_vtu((dir_ / surface_file).string(), VtuSurface{sim_.surface().get(), &u_, body});
+      pvd_.push_back({sim_.time(), surface_file, part++, body ? "surface-" + body->name : "surface"});
+    }
   }
 }
 

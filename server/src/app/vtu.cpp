@@ -94,38 +94,50 @@ void write_piece(std::ofstream& out, const std::vector<double>& points, const st
 
 void write_vtu(const std::string& path, const VtuFrame& f) {
   const TetMesh& mesh = *f.mesh;
-  const auto nn = size_t(mesh.n_nodes()), nt = size_t(mesh.n_tets());
+  // The nodes and tets written: the whole mesh, or one body's ranges.
+  const auto n0 = size_t(f.body ? f.body->node_begin : 0), n1 = size_t(f.body ? f.body->node_end : mesh.n_nodes());
+  const auto t0 = size_t(f.body ? f.body->tet_begin : 0), t1 = size_t(f.body ? f.body->tet_end : mesh.n_tets());
+  const size_t nn = n1 - n0, nt = t1 - t0;
   std::vector<double> points(3 * nn);
   for (size_t i = 0; i < nn; ++i)
-    for (size_t d = 0; d < 3; ++d) points[3 * i + d] = mesh.X[i][int(d)];
+    for (size_t d = 0; d < 3; ++d) points[3 * i + d] = mesh.X[n0 + i][int(d)];
   // A quadratic mesh as VTK_QUADRATIC_TETRA (24), whose node order is ours
   // (core/mesh.hpp): ParaView draws its curved faces as they are.
   const auto per = size_t(mesh.nodes_per_tet());
   std::vector<int32_t> connectivity(per * nt), material(nt);
   for (size_t e = 0; e < nt; ++e) {
-    for (size_t k = 0; k < per; ++k) connectivity[per * e + k] = mesh.node(e, int(k));
-    material[e] = mesh.region_of(int32_t(e));
+    for (size_t k = 0; k < per; ++k) connectivity[per * e + k] = mesh.node(t0 + e, int(k)) - int32_t(n0);
+    material[e] = mesh.region_of(int32_t(t0 + e));
   }
+  // An array's entries of the written nodes or tets (`width` values each).
+  const auto nodes = [&](const auto& a, size_t width) {
+    return std::vector<typename std::decay_t<decltype(a)>::value_type>(a.begin() + ptrdiff_t(width * n0),
+                                                                       a.begin() + ptrdiff_t(width * n1));
+  };
+  const auto tets = [&](const std::vector<double>& a, size_t width) {
+    return std::vector<double>(a.begin() + ptrdiff_t(width * t0), a.begin() + ptrdiff_t(width * t1));
+  };
 
   std::ofstream out = open(path);
   begin_grid(out);
   out << "    <Piece NumberOfPoints=\"" << nn << "\" NumberOfCells=\"" << nt << "\">\n";
   out << "      <PointData" << (f.u ? " Vectors=\"displacement\"" : "") << ">\n";
-  if (f.u) write_array(out, "Float64", "displacement", 3, *f.u);
-  if (f.v) write_array(out, "Float64", "velocity", 3, *f.v);
-  if (f.fixed) write_array(out, "UInt8", "fixed", 1, *f.fixed);
-  if (f.contact_force) write_array(out, "Float64", "contact_force", 3, *f.contact_force);
+  if (f.u) write_array(out, "Float64", "displacement", 3, nodes(*f.u, 3));
+  if (f.v) write_array(out, "Float64", "velocity", 3, nodes(*f.v, 3));
+  if (f.fixed) write_array(out, "UInt8", "fixed", 1, nodes(*f.fixed, 1));
+  if (f.contact_force) write_array(out, "Float64", "contact_force", 3, nodes(*f.contact_force, 3));
   out << "      </PointData>\n";
   const ElementFields* fields = f.fields;
   const bool stress = fields && !fields->cauchy_stress.empty();
   out << "      <CellData Scalars=\"" << (fields && !fields->von_mises.empty() ? "von_mises" : "strain_energy_density")
       << "\"" << (stress ? " Tensors=\"cauchy_stress\"" : "") << ">\n";
-  if (f.energy_density) write_array(out, "Float64", "strain_energy_density", 1, *f.energy_density);
-  if (stress) write_array(out, "Float64", "cauchy_stress", 9, fields->cauchy_stress);
-  if (fields && !fields->green_strain.empty()) write_array(out, "Float64", "green_strain", 9, fields->green_strain);
-  if (fields && !fields->von_mises.empty()) write_array(out, "Float64", "von_mises", 1, fields->von_mises);
+  if (f.energy_density) write_array(out, "Float64", "strain_energy_density", 1, tets(*f.energy_density, 1));
+  if (stress) write_array(out, "Float64", "cauchy_stress", 9, tets(fields->cauchy_stress, 9));
+  if (fields && !fields->green_strain.empty())
+    write_array(out, "Float64", "green_strain", 9, tets(fields->green_strain, 9));
+  if (fields && !fields->von_mises.empty()) write_array(out, "Float64", "von_mises", 1, tets(fields->von_mises, 1));
   if (fields && !fields->principal_stretches.empty())
-    write_array(out, "Float64", "principal_stretches", 3, fields->principal_stretches);
+    write_array(out, "Float64", "principal_stretches", 3, tets(fields->principal_stretches, 3));
   write_array(out, "Int32", "material", 1, material);
   out << "      </CellData>\n";
   write_piece(out, points, connectivity, int(per), mesh.quadratic() ? 24 : 10);  // VTK_QUADRATIC_TETRA, VTK_TETRA
@@ -135,23 +147,35 @@ void write_vtu(const std::string& path, const VtuFrame& f) {
 void write_vtu(const std::string& path, const VtuSurface& f) {
   const EmbeddedSurface& e = *f.surface;
   const std::vector<double>& u = *f.u;
-  const auto nv = size_t(e.n_vertices());
-  std::vector<double> points(3 * nv), displacement(3 * nv, 0.0);
-  for (size_t i = 0; i < nv; ++i)
+  // The vertices and triangles written: all, or one body's ranges (its own numbering).
+  const auto v0 = size_t(f.body ? f.body->fine_vertex_begin : 0);
+  const auto v1 = size_t(f.body ? f.body->fine_vertex_end : e.n_vertices());
+  const auto r0 = size_t(f.body ? f.body->fine_triangle_begin : 0);
+  const auto r1 = size_t(f.body ? f.body->fine_triangle_end : e.rest.triangles.size());
+  const size_t nv = v1 - v0;
+  std::vector<double> points(3 * nv), displacement(3 * nv, 0.0), outside(nv);
+  std::vector<int32_t> tet(nv);
+  const int32_t first_tet = f.body ? f.body->tet_begin : 0;
+  for (size_t i = 0; i < nv; ++i) {
     for (size_t d = 0; d < 3; ++d) {
-      points[3 * i + d] = e.rest.vertices[i][int(d)];
-      for (size_t k = 0; k < 4; ++k) displacement[3 * i + d] += e.weights[i][k] * u[3 * size_t(e.nodes[i][k]) + d];
+      points[3 * i + d] = e.rest.vertices[v0 + i][int(d)];
+      for (size_t k = 0; k < 4; ++k)
+        displacement[3 * i + d] += e.weights[v0 + i][k] * u[3 * size_t(e.nodes[v0 + i][k]) + d];
     }
+    tet[i] = e.tet[v0 + i] - first_tet;
+    outside[i] = e.outside[v0 + i];
+  }
   std::vector<int32_t> connectivity;
-  connectivity.reserve(3 * e.rest.triangles.size());
-  for (const auto& t : e.rest.triangles) connectivity.insert(connectivity.end(), t.begin(), t.end());
+  connectivity.reserve(3 * (r1 - r0));
+  for (size_t t = r0; t < r1; ++t)
+    for (int32_t v : e.rest.triangles[t]) connectivity.push_back(v - int32_t(v0));
   std::ofstream out = open(path);
   begin_grid(out);
   out << "    <Piece NumberOfPoints=\"" << nv << "\" NumberOfCells=\"" << connectivity.size() / 3 << "\">\n"
       << "      <PointData Vectors=\"displacement\">\n";
   write_array(out, "Float64", "displacement", 3, displacement);
-  write_array(out, "Int32", "tet", 1, e.tet);
-  write_array(out, "Float64", "outside", 1, e.outside);
+  write_array(out, "Int32", "tet", 1, tet);
+  write_array(out, "Float64", "outside", 1, outside);
   out << "      </PointData>\n";
   write_piece(out, points, connectivity, 3, 5);  // VTK_TRIANGLE
   close(out, path);

@@ -20,11 +20,14 @@
 #include "core/fields.hpp"
 #include "core/mesh.hpp"
 #include "core/proxy.hpp"
+#include "core/spec.hpp"
 
 namespace tactile {
 
 // One frame of a body; node arrays (n_nodes x 3) in the mesh's numbering.
-// Arrays left null are not written.
+// Arrays left null are not written. With `body` set, only that body of a
+// scene of several: its nodes and tets, in its own numbering (node i of the
+// file is the body's node i), every array sliced to them.
 struct VtuFrame {
   const TetMesh* mesh = nullptr;                // rest positions: the points written
   const std::vector<double>* u = nullptr;       // displacement [m]
@@ -33,6 +36,7 @@ struct VtuFrame {
   const std::vector<double>* contact_force = nullptr;   // mean contact force on the node over the frame [N]
   const std::vector<double>* energy_density = nullptr;  // strain-energy density per tet [J/m^3] (n_tets)
   const ElementFields* fields = nullptr;                // stress and strain per tet, those computed
+  const BodySpec* body = nullptr;                       // null: the whole mesh
 };
 
 // Writes `path` (throws std::runtime_error when it cannot).
@@ -66,13 +70,14 @@ void write_vtu(const std::string& path, const VtuProxy& proxy);
 struct VtuSurface {
   const EmbeddedSurface* surface = nullptr;
   const std::vector<double>* u = nullptr;  // the body's node displacement [m] (n_nodes x 3)
+  const BodySpec* body = nullptr;          // only its fine vertices and triangles (null: all)
 };
 void write_vtu(const std::string& path, const VtuSurface& surface);
 
 struct PvdEntry {
   double t;          // [s]
   std::string file;  // relative to the .pvd
-  int32_t part = 0;  // block: 0 the body, 1 + k proxy k, then the fine surface
+  int32_t part = 0;  // block: the bodies (0 for one), then proxy k, then the fine surfaces
   std::string name;  // the block's name ("" for none)
 };
 void write_pvd(const std::string& path, const std::vector<PvdEntry>& entries);
