@@ -375,3 +375,27 @@ def test_the_fig3_example_bends_stvk_and_stretches_linear_strain(tmp_path: pathl
     assert lengths["stvk"] == pytest.approx(1.0, abs=0.01)  # bent, not stretched
     assert lengths["linear"] > lengths["stvk"] + 0.02       # linear strain stretches the rotated beam
     assert out.stat().st_size > 10_000
+
+
+def test_each_body_is_a_slice_of_the_arrays_in_its_own_node_order() -> None:
+    """A scene of two bodies (the schema test's beam held along its base and a block on it): Scene.bodies and
+    Simulation.bodies name each with slices of the node and tet arrays; a body's tets use its nodes only, and its
+    slice of the rest positions is its own mesh's nodes in their order."""
+    from test_scenes_schema import GOOD
+    from test_scenes_schema import SCENES as SCHEMA_SCENES
+
+    data = json.loads(json.dumps(GOOD["bodies_in_contact"]))
+    scene = tactile.parse_scene(data, SCHEMA_SCENES / "two.json")
+    one = tactile.load_scene(SCENES / "fig3_cantilever.json", variant="stvk")
+    assert [b["name"] for b in one.bodies] == ["body"] and one.bodies[0]["nodes"] == slice(0, one.n_nodes, 1)
+    assert [b["name"] for b in scene.bodies] == ["beam", "block"]
+    sim = tactile.Simulation(scene)
+    beam, block = sim.bodies
+    assert beam["nodes"].stop == block["nodes"].start and block["nodes"].stop == sim.n_nodes
+    assert block["tets"].stop == sim.n_tets
+    tets = sim.tets[block["tets"]]
+    assert tets.min() >= block["nodes"].start and tets.max() < block["nodes"].stop
+    # The block's own node 0 is its mesh's first: the lowest corner of its box, [0.3, 0.1, 0].
+    np.testing.assert_allclose(sim.rest_positions[block["nodes"]][0], [0.3, 0.1, 0.0], atol=1e-12)
+    sim.advance(0.05)
+    assert np.abs(sim.displacements[block["nodes"]]).max() > 0  # it moves (gravity, its load)

@@ -50,6 +50,22 @@ namespace py = pybind11;
 namespace tactile {
 namespace {
 
+// A scene's bodies as Python sees them: name, and numpy-ready slices of the
+// node, tet and fine-surface arrays (one body over everything in a scene of one).
+py::list bodies_list(const std::vector<BodySpec>& bodies) {
+  py::list out;
+  for (const BodySpec& b : bodies) {
+    py::dict d;
+    d["name"] = b.name;
+    d["nodes"] = py::slice(b.node_begin, b.node_end, 1);
+    d["tets"] = py::slice(b.tet_begin, b.tet_end, 1);
+    d["fine_vertices"] = py::slice(b.fine_vertex_begin, b.fine_vertex_end, 1);
+    d["fine_triangles"] = py::slice(b.fine_triangle_begin, b.fine_triangle_end, 1);
+    out.append(d);
+  }
+  return out;
+}
+
 using PoseTuple = std::pair<std::array<double, 3>, std::array<double, 4>>;  // position, quaternion (w, x, y, z)
 
 Pose to_pose(const std::array<double, 3>& position, const std::optional<std::array<double, 4>>& orientation) {
@@ -435,6 +451,17 @@ void bind_scene(py::module_& m) {
       .def_property_readonly("frame_rate", [](const Scene& s) { return s.run.frame_rate; })
       .def_property_readonly("n_nodes", [](const Scene& s) { return s.spec.mesh.n_nodes(); })
       .def_property_readonly("n_tets", [](const Scene& s) { return int32_t(s.spec.mesh.tets.size()); })
+      .def_property_readonly(
+          "bodies",
+          [](const Scene& s) {
+            if (!s.spec.bodies.empty()) return bodies_list(s.spec.bodies);
+            const int32_t fine = s.spec.surface ? s.spec.surface->n_vertices() : 0;
+            const auto fine_tris = int32_t(s.spec.surface ? s.spec.surface->rest.triangles.size() : 0);
+            return bodies_list(
+                {BodySpec{"body", 0, s.spec.mesh.n_nodes(), 0, s.spec.mesh.n_tets(), 0, fine, 0, fine_tris}});
+          },
+          "the bodies (one for a scene of one): dicts of name, and slices nodes, tets, fine_vertices, "
+          "fine_triangles into the arrays a Simulation gives (a body's node i is nodes.start + i)")
       .def_property_readonly("proxies",
                              [](const Scene& s) {
                                std::vector<std::string> out;
@@ -640,6 +667,15 @@ void bind_simulation(py::module_& m) {
       .def_property_readonly("n_nodes", [](PySimulation& s) { return s.sim()->n_nodes(); })
       .def_property_readonly("n_tets", [](PySimulation& s) { return s.sim()->n_tets(); })
       .def_property_readonly("dt_rest", [](PySimulation& s) { return s.sim()->dt_rest(); })
+      .def_property_readonly(
+          "bodies",
+          [](PySimulation& s) {
+            std::vector<BodySpec> specs;
+            for (const ModelBody& b : s.sim()->bodies()) specs.push_back(b.spec);
+            return bodies_list(specs);
+          },
+          "the bodies, as Scene.bodies: dicts of name and slices nodes, tets, fine_vertices, fine_triangles; "
+          "e.g. sim.displacements[b['nodes']] is body b's own displacement, in its own node order")
       .def_property_readonly(
           "precision", [](PySimulation& s) { return s.sim()->precision() == Precision::Float ? "float" : "double"; })
       .def("critical_dt", [](PySimulation& s) { return s.sim()->compute_critical_dt(); })
