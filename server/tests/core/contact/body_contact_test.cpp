@@ -110,9 +110,9 @@ TEST(BodyContact, TwoFreeBodiesExchangeMomentumAndConserveItsSum) {
   // The energy account closes: the contact's work between the bodies is counted, and what the
   // projection took out of the kinetic energy shows in it, not as a drift.
   const Energy e = stepper.compute_energy(s);
-  EXPECT_LT(e.kinetic, e0.kinetic);  // some went into vibration and some was taken
+  EXPECT_LT(e.kinetic, e0.kinetic);                                     // some went into vibration and some was taken
   EXPECT_LT(std::fabs(e.balance() - e0.balance()), 0.05 * e0.kinetic);  // (the guard's tolerance)
-  EXPECT_GT(sums_of(m, s, 1).momentum.x, 0.3 * p0.x);  // b was pushed along x
+  EXPECT_GT(sums_of(m, s, 1).momentum.x, 0.3 * p0.x);                   // b was pushed along x
   EXPECT_LT(sums_of(m, s, 0).momentum.x, p0.x);
 }
 
