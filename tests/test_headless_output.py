@@ -410,3 +410,22 @@ def test_each_body_is_a_block_of_its_own_in_its_own_numbering(tmp_path):
         assert len(near) > 0
         assert x_block[k, 1] > x_beam[near, 1].min() - 1e-3, (block.points[k], x_block[k])
     assert x_block[bottom, 1].min() < 0.1 - 1e-4  # (it pressed the beam down)
+
+
+def test_a_body_squashed_flat_stops_with_a_fault_not_an_endless_run(tmp_path):
+    """The beam fold with its palm left in the path of the fold: the held end is driven into the palm, the elements
+    between are squashed flat and the critical step falls without bound. The run stops with a fault naming it (it
+    ran for over 15 minutes, subdividing ever more, before the stepper had a floor)."""
+    scene = json.loads((ROOT / "server/scenes/beam_fold.json").read_text())
+    for key in scene["proxies"][0]["script"]["keyframes"][:2]:
+        key["position"] = [0.06, 0.1, 0]  # where the turning end passes
+    scene["run"]["duration"] = 1.6
+    path = tmp_path / "fold.json"
+    path.write_text(json.dumps(scene))
+    result = subprocess.run([SIM, "run", str(path), "--out", str(tmp_path), "--no-vtu", "--quiet"],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 1, result.stdout + result.stderr
+    fault = json.loads((tmp_path / "beam_fold" / "run" / "summary.json").read_text())["fault"]
+    assert fault["kind"] == "step-too-large"
+    assert "squashed nearly flat" in fault["message"]
+    assert 1.0 < fault["sim_time_s"] < 1.6

@@ -611,6 +611,20 @@ void Stepper<Real>::clear_fault(State<Real>& s) const {
   s.critical.refreshed_at = -1;
 }
 
+// Elements squashed nearly flat (a held node driven into a proxy, say) make
+// the critical step fall without bound, and advance() would split each
+// interval into ever more steps: a run that never ends rather than a fault.
+// Below a hundredth of the step at rest it is a fault.
+template <class Real>
+Fault Stepper<Real>::check_collapse(State<Real>& s, double dt_critical) {
+  if (!(dt_critical < kCollapsedStep * model_.dt_rest)) return {};
+  std::ostringstream msg;
+  msg << "the critical step fell to " << dt_critical << " s, under " << kCollapsedStep << " of its " << model_.dt_rest
+      << " s at rest: elements are squashed nearly flat (a prescribed motion driving the body "
+      << "into a proxy or another body?)";
+  return make_fault(Fault::Kind::StepTooLarge, s, msg.str(), {});
+}
+
 template <class Real>
 AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt, const std::function<bool()>& interrupt) {
   AdvanceReport report;
@@ -624,6 +638,10 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt, const std:
   }
   critical_.refresh(s);  // a sixteenth of the body, and the elements contact pushed
   report.dt_critical = s.critical.dt;
+  if (Fault f = check_collapse(s, s.critical.dt)) {
+    report.fault = std::move(f);
+    return report;
+  }
   const double fixed = model_.integrator.dt;
   int64_t n = 1;
   if (fixed > 0) {
@@ -663,6 +681,10 @@ AdvanceReport Stepper<Real>::advance(State<Real>& s, double frame_dt, const std:
     const double dc = critical_.compute_contact(s);
     if (dc >= s.critical.dt) continue;
     s.critical.dt = report.dt_critical = dc;
+    if (Fault f = check_collapse(s, dc)) {
+      report.fault = std::move(f);
+      break;
+    }
     if (dt <= model_.integrator.safety * dc) continue;
     if (fixed > 0 && model_.integrator.unstable == UnstablePolicy::Refuse) {
       std::ostringstream msg;

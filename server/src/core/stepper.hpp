@@ -51,6 +51,9 @@ class ParallelFor {
 // The passes of a step, for cost accounting by a StepProbe.
 enum class Pass : uint8_t { Predict, Essential, Elastic, Loads, Correct, Contact, BodyContact, Guard };
 inline constexpr int kPassCount = 8;
+// The least fraction of the critical step at rest the critical step may fall
+// to before advance() stops with a fault (Stepper::check_collapse).
+inline constexpr double kCollapsedStep = 1e-2;
 const char* to_string(Pass p);
 
 // Told when each pass of a step starts and ends; the application layer times
@@ -147,6 +150,8 @@ class Stepper {
   void predict_and_add_elastic_forces(State<Real>& s);
   void correct(State<Real>& s);
   ContactSums apply_contact(State<Real>& s, double dt);
+  // A fault when the critical step has collapsed below kCollapsedStep of the step at rest.
+  Fault check_collapse(State<Real>& s, double dt_critical);
   void close_energy_account(State<Real>& s, double dt, const ContactSums& contact);
   Fault check_step(State<Real>& s);
 
