@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <numeric>
 
 #include <glm/geometric.hpp>
 
@@ -19,18 +18,6 @@ constexpr int32_t kClusterItems = 32, kGroupItems = 8;
 // beyond the triangle's reach (its far side).
 constexpr double kBand = 0.25;
 constexpr double kSolveTolerance = 1e-3;
-
-// The order of `points` by Morton code within their box.
-std::vector<size_t> morton_order(const std::vector<Vec3>& points) {
-  const Aabb box = compute_aabb(points);
-  const Vec3 extent = glm::max(box.size(), Vec3(1e-30));
-  std::vector<uint32_t> key(points.size());
-  for (size_t k = 0; k < points.size(); ++k) key[k] = compute_morton_code((points[k] - box.lo) / extent);
-  std::vector<size_t> order(points.size());
-  std::iota(order.begin(), order.end(), size_t(0));
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key[a] < key[b]; });
-  return order;
-}
 
 }  // namespace
 
@@ -69,7 +56,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
     }
     std::vector<Vec3> rest(vs.size());
     for (size_t k = 0; k < vs.size(); ++k) rest[k] = vs[k].X;
-    const std::vector<size_t> order = morton_order(rest);
+    const std::vector<size_t> order = morton_order(rest, compute_aabb(rest));
     std::vector<int32_t> renumber(vs.size());
     const auto first = int32_t(vertices_.size());
     for (size_t k = 0; k < order.size(); ++k) {
@@ -82,7 +69,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
       centroids.push_back((vertices_[size_t(t[0])].X + vertices_[size_t(t[1])].X + vertices_[size_t(t[2])].X) / 3.0);
     }
     const auto tri_first = int32_t(triangles_.size());
-    for (size_t k : morton_order(centroids)) {
+    for (size_t k : morton_order(centroids, compute_aabb(centroids))) {
       const Tri& t = ts[k];
       triangles_.push_back(t);
       tri_body_.push_back(int32_t(b));
@@ -162,8 +149,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
 }
 
 template <class Real>
-void BodyContact<Real>::test(int32_t v, int32_t t, double dt) {
-  (void)dt;
+void BodyContact<Real>::test(int32_t v, int32_t t) {
   const Plane& pl = plane(t);
   if (!pl.valid) return;
   const Tri& tri = triangles_[size_t(t)];
@@ -353,7 +339,7 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
     for (size_t b = 0; b < n_bodies; ++b) rebuild = rebuild || 2.0 * gain_max_[b] * move_[b] >= margin_;
   }
   if (rebuild) {
-    list_candidates(dt);
+    list_candidates();
     std::sort(candidates_.begin(), candidates_.end());
     for (size_t k = 0; k < nodes_.size(); ++k) node_listed_[k] = node_x1_[size_t(nodes_[k])];
     listed_ = true;
@@ -366,14 +352,13 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
     for (; i < candidates_.size() && candidates_[i][0] == v; ++i) {
       const int32_t t = candidates_[i][1];
       const Plane& pl = plane(t);
-      if (pl.valid && glm::dot(p, pl.n1) < pl.off1) test(v, t, dt);
+      if (pl.valid && glm::dot(p, pl.n1) < pl.off1) test(v, t);
     }
   }
 }
 
 template <class Real>
-void BodyContact<Real>::list_candidates(double dt) {
-  (void)dt;
+void BodyContact<Real>::list_candidates() {
   const size_t n_bodies = vertex_sets_.size();
   candidates_.clear();
   // The clusters' boxes, kept between steps: grown each step by how far
@@ -413,13 +398,13 @@ void BodyContact<Real>::list_candidates(double dt) {
           const auto vc = size_t(boxes_[i].vertices ? boxes_[i].c : boxes_[j].c);
           const auto tc = size_t(boxes_[i].vertices ? boxes_[j].c : boxes_[i].c);
           const Vec3 gv(vs.grow[vc]), gt(ts.grow[tc]);
-          if (boxes_meet(vs.lo[vc] - gv, vs.hi[vc] + gv, ts.lo[tc] - gt, ts.hi[tc] + gt)) test_clusters(a, vc, b, tc);
+          if (boxes_meet(vs.lo[vc] - gv, vs.hi[vc] + gv, ts.lo[tc] - gt, ts.hi[tc] + gt)) list_pairs(a, vc, b, tc);
         }
     }
 }
 
 template <class Real>
-void BodyContact<Real>::test_clusters(size_t a, size_t vc, size_t b, size_t tc) {
+void BodyContact<Real>::list_pairs(size_t a, size_t vc, size_t b, size_t tc) {
   const ClusterSet& vs = vertex_sets_[a];
   const ClusterSet& ts = tri_sets_[b];
   const Vec3 grow_v(vs.grow[vc]), grow_t(ts.grow[tc]);

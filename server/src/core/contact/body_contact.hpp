@@ -112,12 +112,13 @@ class BodyContact {
   // per cluster; empty for vertices).
   void keep_boxes(ClusterSet& set, std::vector<double>& refit_at, const std::vector<double>& gain,
                   const std::vector<double>& band, size_t body);
-  void test(int32_t v, int32_t t, double dt);
+  void test(int32_t v, int32_t t);
   // The broad phase: every vertex and triangle whose boxes, the triangle's
   // grown by its band and the margin, meet (candidates_).
-  void list_candidates(double dt);
-  // Vertex cluster vc of body a against triangle cluster tc of body b.
-  void test_clusters(size_t a, size_t vc, size_t b, size_t tc);
+  void list_candidates();
+  // Lists the candidate pairs of vertex cluster vc of body a and triangle
+  // cluster tc of body b.
+  void list_pairs(size_t a, size_t vc, size_t b, size_t tc);
 
   const Model<Real>& model_;
   bool active_ = false;

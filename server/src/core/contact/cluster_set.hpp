@@ -19,6 +19,7 @@
 #include <array>
 #include <cstdint>
 #include <limits>
+#include <numeric>
 #include <vector>
 
 #include <glm/common.hpp>
@@ -29,6 +30,18 @@ namespace tactile {
 
 inline bool boxes_meet(const Vec3& alo, const Vec3& ahi, const Vec3& blo, const Vec3& bhi) {
   return alo.x <= bhi.x && blo.x <= ahi.x && alo.y <= bhi.y && blo.y <= ahi.y && alo.z <= bhi.z && blo.z <= ahi.z;
+}
+
+// The order of `points` by the Morton code of their place in `box`: items
+// near each other in space end up near each other in a cluster.
+inline std::vector<size_t> morton_order(const std::vector<Vec3>& points, const Aabb& box) {
+  const Vec3 extent = glm::max(box.size(), Vec3(1e-30));
+  std::vector<uint32_t> key(points.size());
+  for (size_t k = 0; k < points.size(); ++k) key[k] = compute_morton_code((points[k] - box.lo) / extent);
+  std::vector<size_t> order(points.size());
+  std::iota(order.begin(), order.end(), size_t(0));
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key[a] < key[b]; });
+  return order;
 }
 
 struct ClusterSet {

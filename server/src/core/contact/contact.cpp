@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <numeric>
 #include <set>
 #include <utility>
 
@@ -53,27 +52,19 @@ Contact<Real>::Contact(const Model<Real>& model) : model_(model) {
   std::set_intersection(nodes.begin(), nodes.end(), model.constrained.begin(), model.constrained.end(),
                         std::back_inserter(held));
   const Aabb box = compute_aabb(model.mesh.X);
-  const Vec3 extent = glm::max(box.size(), Vec3(1e-30));
-  const auto morton_order = [&](const std::vector<Vec3>& points) {
-    std::vector<uint32_t> key(points.size());
-    for (size_t k = 0; k < points.size(); ++k) key[k] = compute_morton_code((points[k] - box.lo) / extent);
-    std::vector<size_t> order(points.size());
-    std::iota(order.begin(), order.end(), size_t(0));
-    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return key[a] < key[b]; });
-    return order;
-  };
+  const auto order = [&](const std::vector<Vec3>& points) { return morton_order(points, box); };
   std::vector<Vec3> rest(free.size());
   for (size_t k = 0; k < free.size(); ++k) rest[k] = model.mesh.X[size_t(free[k])];
   free_nodes_.reserve(free.size());
-  for (size_t k : morton_order(rest)) free_nodes_.push_back(free[k]);
+  for (size_t k : order(rest)) free_nodes_.push_back(free[k]);
   slot_node_ = free_nodes_;
   slot_node_.insert(slot_node_.end(), held.begin(), held.end());
   std::vector<int32_t> slot_of(model.mesh.X.size(), -1);
   for (size_t k = 0; k < slot_node_.size(); ++k) slot_of[size_t(slot_node_[k])] = int32_t(k);
   if (model.embedded)
-    build_embedded(slot_of, morton_order);
+    build_embedded(slot_of, order);
   else
-    build_boundary(slot_of, morton_order);
+    build_boundary(slot_of, order);
 
   x_now_.assign(slot_node_.size(), Vec3(0.0));
   f_now_.assign(free_nodes_.size(), Vec3(0.0));
