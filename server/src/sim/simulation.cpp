@@ -218,6 +218,19 @@ bool Simulation::device_coupled(int32_t device) const {
 const std::vector<ProxyReport>& Simulation::proxy_reports() const {
   return visit([](const auto& b) -> const std::vector<ProxyReport>& { return b.state.contact.reports; });
 }
+Simulation::BodyContactReport Simulation::body_contact_report() const {
+  return visit([](const auto& b) {
+    const auto& c = b.stepper.body_contact();
+    BodyContactReport r;
+    if (!c.active()) return r;
+    r.between = c.body_contacts();
+    r.within = c.self_contacts();
+    r.given = c.given();
+    r.held = c.held_given();
+    r.impulses = c.impulse_sum();
+    return r;
+  });
+}
 const std::vector<DeviceReport>& Simulation::device_reports() const {
   return visit([](const auto& b) -> const std::vector<DeviceReport>& { return b.state.contact.device_reports; });
 }

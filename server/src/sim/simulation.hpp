@@ -104,6 +104,18 @@ class Simulation {
   // overwritten) with the time they cover [s] returned; the mean force over
   // it is impulse / time.
   void track_contact_forces(bool on);
+  // Contact between bodies and within one in the latest step
+  // (core/contact/body_contact.hpp): its points, and the momentum it gave
+  // each body [N s] (per body; empty when the scene asks for neither) and
+  // the held nodes' constraints [N s]: these sum to zero; and the sum of its
+  // points' impulses' sizes [N s].
+  struct BodyContactReport {
+    int32_t between = 0, within = 0;
+    std::vector<Vec3> given;
+    Vec3 held{0.0};
+    double impulses = 0;
+  };
+  BodyContactReport body_contact_report() const;
   double take_contact_impulses(std::vector<double>& impulse);
 
   // Takes over another simulation's body and proxies: displacements,

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 
 #include <glm/geometric.hpp>
@@ -18,6 +17,10 @@ constexpr int32_t kClusterItems = 32, kGroupItems = 8;
 // beyond the triangle's reach (its far side).
 constexpr double kBand = 0.25;
 constexpr double kSolveTolerance = 1e-3;
+// The least depth, in the shortest edge of any surface, that a vertex
+// ahead of a face must be bound for by the next step to be given a point
+// now.
+constexpr double kAheadSlop = 0.01;
 
 }  // namespace
 
@@ -74,9 +77,12 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
       triangles_.push_back(t);
       tri_body_.push_back(int32_t(b));
       double longest = 0;
-      for (int c = 0; c < 3; ++c)
-        longest = std::max(
-            longest, glm::length(vertices_[size_t(t[size_t(c)])].X - vertices_[size_t(t[size_t((c + 1) % 3)])].X));
+      for (int c = 0; c < 3; ++c) {
+        const double edge =
+            glm::length(vertices_[size_t(t[size_t(c)])].X - vertices_[size_t(t[size_t((c + 1) % 3)])].X);
+        longest = std::max(longest, edge);
+        if (edge > 0) slop_ = std::min(slop_, kAheadSlop * edge);
+      }
       tri_band_.push_back(kBand * longest);
     }
     vertex_first_.push_back(first);
@@ -96,7 +102,8 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
   nodes_.erase(std::unique(nodes_.begin(), nodes_.end()), nodes_.end());
   node_x1_.assign(size_t(model.n_nodes), Vec3(0.0));  // (sparse: only nodes_ are written)
   node_x0_.assign(size_t(model.n_nodes), Vec3(0.0));
-  x_.assign(vertices_.size(), {Vec3(0.0), Vec3(0.0)});
+  node_x2_.assign(size_t(model.n_nodes), Vec3(0.0));
+  x_.assign(vertices_.size(), {Vec3(0.0), Vec3(0.0), Vec3(0.0)});
   vertex_stamp_.assign(vertices_.size(), 0u);
   tri_stamp_.assign(triangles_.size(), 0u);
   plane_stamp_.assign(triangles_.size(), 0u);
@@ -104,6 +111,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
   for (int32_t n : nodes_) nodes_body_.push_back(model.node_body[size_t(n)]);
   const size_t n_bodies = vertex_sets_.size();
   move_.assign(n_bodies, 0.0);
+  ahead_.assign(n_bodies, 0.0);
   drift_.assign(n_bodies, 0.0);
   node_lo_.assign(n_bodies, Vec3(0.0));
   node_hi_.assign(n_bodies, Vec3(0.0));
@@ -149,35 +157,53 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
 }
 
 template <class Real>
-void BodyContact<Real>::test(int32_t v, int32_t t) {
-  const Plane& pl = plane(t);
-  if (!pl.valid) return;
+bool BodyContact<Real>::over(int32_t t, size_t end, const Vec3& p, double depth, Vec3& b, double* off) const {
   const Tri& tri = triangles_[size_t(t)];
-  const Vec3& a = x_[size_t(tri[0])][1];
-  const Vec3 e1 = x_[size_t(tri[1])][1] - a, e2 = x_[size_t(tri[2])][1] - a;
-  const Vec3& n = pl.n1;
-  const Vec3 p = x_[size_t(v)][1];
-  const double d1 = glm::dot(p - a, n);
-  if (!(d1 < 0)) return;
-  // Barycentric coordinates of p's projection on the triangle.
+  const Vec3& a = x_[size_t(tri[0])][end];
+  const Vec3 e1 = x_[size_t(tri[1])][end] - a, e2 = x_[size_t(tri[2])][end] - a;
   const Vec3 q = p - a;
   const double d00 = glm::dot(e1, e1), d01 = glm::dot(e1, e2), d11 = glm::dot(e2, e2);
   const double d20 = glm::dot(q, e1), d21 = glm::dot(q, e2);
   const double den = d00 * d11 - d01 * d01;
-  const double bb = (d11 * d20 - d01 * d21) / den, bc = (d00 * d21 - d01 * d20) / den, ba = 1.0 - bb - bc;
-  constexpr double eps = -1e-9;
-  if (ba < eps || bb < eps || bc < eps) return;
-  const double depth = -d1;
-  if (depth > tri_band_[size_t(t)]) {
-    // Deep: only a vertex that crossed the triangle this step.
-    const Vec3& a0 = x_[size_t(tri[0])][0];
-    const Vec3 n0 = glm::cross(x_[size_t(tri[1])][0] - a0, x_[size_t(tri[2])][0] - a0);
-    if (!(glm::dot(x_[size_t(v)][0] - a0, n0) >= 0)) return;
+  if (!(den > 0)) return false;
+  b[1] = (d11 * d20 - d01 * d21) / den;
+  b[2] = (d00 * d21 - d01 * d20) / den;
+  b[0] = 1.0 - b[1] - b[2];
+  if (off) *off = 0;
+  if (b[0] >= 0 && b[1] >= 0 && b[2] >= 0) return true;
+  // Out of it by no more than the depth: behind a corner or an edge where
+  // the surface bends (a dent, a rim, two bodies' nodes meeting), the
+  // projection falls between the faces that meet there, out of each by
+  // about the depth times the bend, and the vertex must still count. Its
+  // point is then the triangle's nearest (the coordinates clamped).
+  const Vec3 n = glm::cross(e1, e2);
+  const double len = glm::length(n);
+  const Vec3 c[3] = {a, a + e1, a + e2};
+  double out = 0;
+  for (int k = 0; k < 3; ++k) {  // in the plane, out of each edge (outward normal edge x n)
+    const Vec3 edge = c[(k + 1) % 3] - c[k];
+    out = std::max(out, glm::dot(p - c[k], glm::cross(edge, n)) / (glm::length(edge) * len));
   }
-  Best& best = best_[size_t(v)];
-  if (best.t >= 0 && best.depth <= depth) return;
-  if (best.t < 0) touched_.push_back(v);
-  best = {t, depth, Vec3(ba, bb, bc), n};
+  if (out > depth) return false;
+  if (off) *off = out;
+  b = glm::max(b, Vec3(0.0));
+  b /= b[0] + b[1] + b[2];
+  return true;
+}
+
+template <class Real>
+bool BodyContact<Real>::comes_behind(int32_t v, int32_t t, Vec3& b) const {
+  const Tri& tri = triangles_[size_t(t)];
+  const Vec3& a = x_[size_t(tri[0])][2];
+  const Vec3 n2 = glm::cross(x_[size_t(tri[1])][2] - a, x_[size_t(tri[2])][2] - a);
+  const double len = glm::length(n2);
+  if (!(len > 0)) return false;
+  const Vec3& p2 = x_[size_t(v)][2];
+  const double depth = -glm::dot(p2 - a, n2) / len;
+  // (Not for a sink far under the surface's accuracy: a resting vertex's
+  // step of weight, which the paper's rule takes up the step after; points
+  // for those would cost most of the solve and change nothing one can see.)
+  return depth > slop_ && over(t, 2, p2, depth, b);
 }
 
 template <class Real>
@@ -231,16 +257,17 @@ const typename BodyContact<Real>::Plane& BodyContact<Real>::plane(int32_t t) {
 }
 
 template <class Real>
-const std::array<Vec3, 2>& BodyContact<Real>::vertex_at(int32_t v) {
+const std::array<Vec3, 3>& BodyContact<Real>::vertex_at(int32_t v) {
   if (vertex_stamp_[size_t(v)] != stamp_) {
     vertex_stamp_[size_t(v)] = stamp_;
     const Vertex& vx = vertices_[size_t(v)];
-    Vec3 x0(0.0), x1(0.0);
+    Vec3 x0(0.0), x1(0.0), x2(0.0);
     for (size_t c = 0; c < 4 && vx.node[c] >= 0; ++c) {
       x0 += vx.w[c] * node_x0_[size_t(vx.node[c])];
       x1 += vx.w[c] * node_x1_[size_t(vx.node[c])];
+      x2 += vx.w[c] * node_x2_[size_t(vx.node[c])];
     }
-    x_[size_t(v)] = {x0, x1};
+    x_[size_t(v)] = {x0, x1, x2};
   }
   return x_[size_t(v)];
 }
@@ -266,7 +293,7 @@ void BodyContact<Real>::keep_boxes(ClusterSet& set, std::vector<double>& refit_a
         for (int32_t g = set.group_begin[c]; g < set.group_begin[c + 1]; ++g) {
           Vec3 glo(inf), ghi(-inf);
           for (int32_t m = set.vertex_begin[size_t(g)]; m < set.vertex_begin[size_t(g) + 1]; ++m) {
-            const std::array<Vec3, 2>& x = vertex_at(set.vertices[size_t(m)]);
+            const std::array<Vec3, 3>& x = vertex_at(set.vertices[size_t(m)]);
             glo = glm::min(glo, glm::min(x[0], x[1]));
             ghi = glm::max(ghi, glm::max(x[0], x[1]));
           }
@@ -277,7 +304,7 @@ void BodyContact<Real>::keep_boxes(ClusterSet& set, std::vector<double>& refit_a
         }
       }
     }
-    set.grow[c] = grow + (band.empty() ? 0.0 : band[c] + margin_);
+    set.grow[c] = grow + (band.empty() ? 0.0 : band[c] + margin_ + ahead_listed_);
   }
 }
 
@@ -292,6 +319,7 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
   // step before (over it, and any jump between them) and a box around all its vertices (its nodes' box, widened by the
   // largest sum_k |w_k| of its vertices about its centre).
   std::fill(move_.begin(), move_.end(), 0.0);
+  std::fill(ahead_.begin(), ahead_.end(), 0.0);
   std::fill(node_lo_.begin(), node_lo_.end(), Vec3(inf));
   std::fill(node_hi_.begin(), node_hi_.end(), Vec3(-inf));
   for (size_t k = 0; k < nodes_.size(); ++k) {
@@ -301,20 +329,27 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
     const Vec3 vh = Vec3(double(vel[j]), double(vel[j + 1]), double(vel[j + 2])) -
                     (0.5 * dt) * Vec3(double(acc[j]), double(acc[j + 1]), double(acc[j + 2]));
     const Vec3 x0 = x1 - dt * vh;
+    // Where the next step takes it under this one's velocity and forces, as
+    // eq. (7) will: x_{n+2} = x_{n+1} + dt v_{n+1} + dt^2/2 a_{n+1}.
+    const Vec3 x2 = x1 + dt * Vec3(double(vel[j]), double(vel[j + 1]), double(vel[j + 2])) +
+                    (0.5 * dt * dt) * Vec3(double(acc[j]), double(acc[j + 1]), double(acc[j + 2]));
     // (Where the step before ended: x0 to rounding, unless the state was
     // reset or replaced since; the kept boxes grow by that jump too.)
     const double jump = glm::length(x0 - node_x1_[size_t(n)]);
     node_x1_[size_t(n)] = x1;
     node_x0_[size_t(n)] = x0;
+    node_x2_[size_t(n)] = x2;
+    ahead_[b] = std::max(ahead_[b], glm::length(x2 - x1));
     move_[b] = std::max(move_[b], glm::length(x1 - x0) + jump);
     node_lo_[b] = glm::min(node_lo_[b], glm::min(x0, x1));
     node_hi_[b] = glm::max(node_hi_[b], glm::max(x0, x1));
   }
+  // How far a vertex may come towards a triangle over the next step: what
+  // the pairs are listed ahead for (twice the fastest body's, by either side).
+  double ahead = 0;
   for (size_t b = 0; b < n_bodies; ++b) {
     drift_[b] += move_[b];
-    const Vec3 c = 0.5 * (node_lo_[b] + node_hi_[b]), half = 0.5 * (node_hi_[b] - node_lo_[b]);
-    body_lo_[b] = c - gain_max_[b] * half - Vec3(band_max_[b] + margin_);
-    body_hi_[b] = c + gain_max_[b] * half + Vec3(band_max_[b] + margin_);
+    ahead = std::max(ahead, 2.0 * gain_max_[b] * ahead_[b]);
   }
   if (++stamp_ == 0) {  // (wrapped: no vertex or triangle may keep a stamp that looks current)
     std::fill(vertex_stamp_.begin(), vertex_stamp_.end(), 0u);
@@ -337,23 +372,93 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
           std::max({move_[b], glm::length(node_x1_[n] - node_listed_[k]), glm::length(node_x0_[n] - node_listed_[k])});
     }
     for (size_t b = 0; b < n_bodies; ++b) rebuild = rebuild || 2.0 * gain_max_[b] * move_[b] >= margin_;
+    // (And while they were listed far enough ahead for this step's speeds.)
+    rebuild = rebuild || ahead > ahead_listed_;
   }
   if (rebuild) {
+    // Half as far again ahead as now needs, and never less than half the
+    // margin: a body speeding up, or at rest and trembling, renews them once
+    // in a while, not each step.
+    ahead_listed_ = 1.5 * ahead;
+    for (size_t b = 0; b < n_bodies; ++b) {
+      const Vec3 c = 0.5 * (node_lo_[b] + node_hi_[b]), half = 0.5 * (node_hi_[b] - node_lo_[b]);
+      const Vec3 reach(band_max_[b] + margin_ + ahead_listed_);
+      body_lo_[b] = c - gain_max_[b] * half - reach;
+      body_hi_[b] = c + gain_max_[b] * half + reach;
+    }
     list_candidates();
     std::sort(candidates_.begin(), candidates_.end());
     for (size_t k = 0; k < nodes_.size(); ++k) node_listed_[k] = node_x1_[size_t(nodes_[k])];
     listed_ = true;
   }
-  // The listed pairs, vertex by vertex; most end at the plane test (the
-  // vertex in front of the triangle at t_{n+1}).
+  // The listed pairs, vertex by vertex. Of the faces whose projection holds
+  // the vertex, the nearest says where it is: behind it, the vertex is in
+  // the body and touches it (eq. 11); in front of it, the vertex is
+  // outside, whatever faces meeting that one at a rim it is also behind, and
+  // can only come to touch a face it is in front of: the nearest that the
+  // next step, as this one's velocities and forces have it, takes it behind,
+  // its projection over the face then (speculative contact). A face it is
+  // behind by more than its band, not having crossed it this step, is the
+  // body's far side and says nothing.
   for (size_t i = 0; i < candidates_.size();) {
     const int32_t v = candidates_[i][0];
-    const Vec3 p = vertex_at(v)[1];
-    for (; i < candidates_.size() && candidates_[i][0] == v; ++i) {
-      const int32_t t = candidates_[i][1];
-      const Plane& pl = plane(t);
-      if (pl.valid && glm::dot(p, pl.n1) < pl.off1) test(v, t);
+    const std::array<Vec3, 3>& x = vertex_at(v);
+    const size_t first = i;
+    while (i < candidates_.size() && candidates_[i][0] == v) ++i;
+    // Where it is: the nearest face that holds it (none nearer than its
+    // plane). In front of every plane, it is outside whichever holds it.
+    const auto gap = [&](size_t k) {
+      const Plane& pl = plane(candidates_[k][1]);
+      return pl.valid ? glm::dot(x[1], pl.n1) - pl.off1 : inf;
+    };
+    bool behind_some = false;
+    for (size_t k = first; k < i && !behind_some; ++k) behind_some = gap(k) < 0;
+    Best nearest;
+    double nearest_distance = inf;
+    for (size_t k = first; k < i && behind_some; ++k) {
+      const int32_t t = candidates_[k][1];
+      const double d1 = gap(k);
+      if (d1 > ahead_listed_ || std::fabs(d1) >= nearest_distance) continue;
+      if (-d1 > tri_band_[size_t(t)]) {  // deep: only a vertex that crossed the face this step
+        const Tri& tri = triangles_[size_t(t)];
+        const Vec3& a0 = x_[size_t(tri[0])][0];
+        const Vec3 n0 = glm::cross(x_[size_t(tri[1])][0] - a0, x_[size_t(tri[2])][0] - a0);
+        if (!(glm::dot(x[0] - a0, n0) >= 0)) continue;
+      }
+      Vec3 b(0.0);
+      double off = 0;
+      if (!over(t, 1, x[1], std::fabs(d1), b, &off)) continue;
+      // (How far from the face itself, not its plane: the face of a rim
+      // that holds the vertex only by the rim's allowance is farther.)
+      const double distance = std::hypot(d1, off);
+      if (distance < nearest_distance) {
+        nearest = {t, d1, b, planes_[size_t(t)].n1};
+        nearest_distance = distance;
+      }
     }
+    if (nearest.t >= 0 && nearest.gap < 0) {
+      touched_.push_back(v);
+      best_[size_t(v)] = nearest;
+      continue;
+    }
+    // Outside: the nearest face it is in front of that the next step takes
+    // it behind by more than the slop. (Not one farther than the vertex and
+    // the face's body can come together in the step, twice over for the
+    // face's tilt.)
+    const double reach = glm::length(x[2] - x[1]);
+    Best coming;
+    for (size_t k = first; k < i; ++k) {
+      const int32_t t = candidates_[k][1];
+      const double d1 = gap(k);
+      if (d1 < 0 || d1 > ahead_listed_ || (coming.t >= 0 && d1 >= coming.gap)) continue;
+      const auto tb = size_t(tri_body_[size_t(t)]);
+      if (2.0 * (reach + gain_max_[tb] * ahead_[tb]) - d1 <= slop_) continue;
+      Vec3 b(0.0);
+      if (comes_behind(v, t, b)) coming = {t, d1, b, planes_[size_t(t)].n1};
+    }
+    if (coming.t < 0) continue;
+    touched_.push_back(v);
+    best_[size_t(v)] = coming;
   }
 }
 
@@ -417,7 +522,7 @@ void BodyContact<Real>::list_pairs(size_t a, size_t vc, size_t b, size_t tc) {
       // own (its corners over the step): most pairs end here.
       for (int32_t iv = vs.group_items[size_t(gv)][0]; iv < vs.group_items[size_t(gv)][1]; ++iv) {
         const int32_t v = vertex_first_[a] + iv;
-        const std::array<Vec3, 2>& x = vertex_at(v);
+        const std::array<Vec3, 3>& x = vertex_at(v);
         const Vec3 plo = glm::min(x[0], x[1]), phi = glm::max(x[0], x[1]);
         if (!boxes_meet(plo, phi, tlo, thi)) continue;
         for (int32_t it = ts.group_items[size_t(gt)][0]; it < ts.group_items[size_t(gt)][1]; ++it) {
@@ -427,12 +532,13 @@ void BodyContact<Real>::list_pairs(size_t a, size_t vc, size_t b, size_t tc) {
             const Tri& tri = triangles_[size_t(t)];
             Vec3 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
             for (int32_t c : tri) {
-              const std::array<Vec3, 2>& y = vertex_at(c);
+              const std::array<Vec3, 3>& y = vertex_at(c);
               lo = glm::min(lo, glm::min(y[0], y[1]));
               hi = glm::max(hi, glm::max(y[0], y[1]));
             }
-            tri_lo_[size_t(t)] = lo - Vec3(tri_band_[size_t(t)] + margin_);
-            tri_hi_[size_t(t)] = hi + Vec3(tri_band_[size_t(t)] + margin_);
+            const Vec3 reach(tri_band_[size_t(t)] + margin_ + ahead_listed_);
+            tri_lo_[size_t(t)] = lo - reach;
+            tri_hi_[size_t(t)] = hi + reach;
           }
           if (!boxes_meet(plo, phi, tri_lo_[size_t(t)], tri_hi_[size_t(t)])) continue;
           // Only a vertex near the triangle's plane at either end of the
@@ -447,11 +553,12 @@ void BodyContact<Real>::list_pairs(size_t a, size_t vc, size_t b, size_t tc) {
           const double len0 = glm::length(n0);
           const double d0 = len0 > 0 ? glm::dot(x[0] - a0, n0) / len0 : 0.0;
           const double d1 = glm::dot(x[1], pl.n1) - pl.off1;
-          if (std::min(d0, d1) > margin_ || std::max(d0, d1) < -(tri_band_[size_t(t)] + margin_)) continue;
+          if (std::min(d0, d1) > margin_ + ahead_listed_ || std::max(d0, d1) < -(tri_band_[size_t(t)] + margin_))
+            continue;
           // And over the triangle at t_{n+1}: its projection no farther out
           // of any edge than the two margins and its distance from the plane
           // (what the vertex and the triangle's tilt can still change).
-          if (outside_edges(x[1], t) > 2.0 * margin_ + std::fabs(d1)) continue;
+          if (outside_edges(x[1], t) > 2.0 * margin_ + ahead_listed_ + std::fabs(d1)) continue;
           if (tri_body_[size_t(t)] == int32_t(a) && near_at_rest(v, t)) continue;
           candidates_.push_back({v, t});
         }
@@ -466,6 +573,9 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   body_contacts_ = self_contacts_ = 0;
   exchanged_ = Vec3(0.0);
   if (!active_) return sums;
+  given_.assign(model_.bodies.size(), Vec3(0.0));
+  held_given_ = Vec3(0.0);
+  impulse_sum_ = 0;
   find(s, dt);
   // The work of the forces between bodies over the step, by the trapezoid
   // as the proxies' (contact.cpp): the previous step's forces on this
@@ -482,6 +592,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   // each node once; a held node adds its prescribed velocity.
   points_.clear();
   point_sign_.clear();
+  point_held_.clear();
   slot_node_.clear();
   slot_v_.clear();
   slot_m_.clear();
@@ -491,6 +602,10 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   const auto velocity = [&](int32_t n) {
     const size_t j = 3 * size_t(n);
     return Vec3(double(s.v[j]), double(s.v[j + 1]), double(s.v[j + 2]));
+  };
+  const auto acceleration = [&](int32_t n) {
+    const size_t j = 3 * size_t(n);
+    return Vec3(double(s.a[j]), double(s.a[j + 1]), double(s.a[j + 2]));
   };
   for (int32_t v : touched_) {
     Best& best = best_[size_t(v)];
@@ -521,15 +636,35 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     p.w.fill(0);
     p.x = x_[size_t(v)][1];
     p.n = best.n;
-    p.vp = Vec3(0.0);
     p.v_held = Vec3(0.0);
     p.inv_mass = 0;
     p.mu = mu_;
+    // The least relative normal velocity the point may keep: in contact, the
+    // paper's zero (eq. 11). Ahead of the triangle (speculative contact, as
+    // rigid-body engines use it), what brings it to the triangle's plane by
+    // the end of the next step and no farther: a velocity change dv moves
+    // x_{n+2} by 2 dt dv (the step's, and eq. (9)'s through a), so the gap
+    // then is g + dt (v_n + 2 dv_n) + dt^2 a_n / 2, zero for v_n + dv_n =
+    // v_n / 2 - g / (2 dt) - dt a_n / 4. (The acceleration term holds a
+    // surface that the body behind it still pushes; in contact it would feed
+    // a stiff surface's own oscillation, so it is left to the ahead case,
+    // which the paper's rule follows once the vertex is behind.)
+    p.vp = Vec3(0.0);
+    if (best.gap >= 0) {
+      Vec3 rel_v(0.0), rel_a(0.0);
+      for (size_t k = 0; k < count; ++k) {
+        rel_v += w[k] * velocity(node[k]);
+        rel_a += w[k] * acceleration(node[k]);
+      }
+      p.vp = (0.5 * glm::dot(rel_v, p.n) - 0.5 * best.gap / dt - 0.25 * dt * glm::dot(rel_a, p.n)) * p.n;
+    }
     size_t free = 0;
+    double held_w = 0;
     for (size_t k = 0; k < count; ++k) {
       if (w[k] == 0) continue;
       if (held(node[k])) {
         p.v_held += w[k] * velocity(node[k]);
+        held_w += w[k];
         continue;
       }
       int32_t& slot = slot_of_[size_t(node[k])];
@@ -548,6 +683,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       const int32_t tb = tri_body_[size_t(best.t)];
       (vx.body == tb ? self_contacts_ : body_contacts_) += 1;
       point_sign_.push_back(vx.body == tb ? 0.0 : vx.body < tb ? 1.0 : -1.0);
+      point_held_.push_back(held_w);
     }
     best = Best{};
   }
@@ -564,6 +700,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     const Vec3& dv = solve_.dv(k);
     const double m = slot_m_[size_t(k)];
     const Vec3 f = (m * to_force) * dv;
+    given_[size_t(model_.node_body[size_t(n)])] += m * dv;
     sums.work += 0.5 * glm::dot(f, node_x1_[size_t(n)] - node_x0_[size_t(n)]);
     pushed.emplace_back(n, f);
     const size_t j = 3 * size_t(n);
@@ -576,8 +713,12 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       sums.ma2_delta += m * (double(a1) * double(a1) - a0 * a0);
     }
   }
-  for (size_t k = 0; k < points_.size(); ++k)
-    exchanged_ += point_sign_[k] * (points_[k].jn * points_[k].n + points_[k].jt);
+  for (size_t k = 0; k < points_.size(); ++k) {
+    const Vec3 J = points_[k].jn * points_[k].n + points_[k].jt;
+    exchanged_ += point_sign_[k] * J;
+    held_given_ += point_held_[k] * J;
+    impulse_sum_ += glm::length(J);
+  }
   solve_.clear();
   for (int32_t n : slot_node_) slot_of_[size_t(n)] = -1;
   return sums;

@@ -51,6 +51,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "core/contact/cluster_set.hpp"
@@ -84,6 +85,16 @@ class BodyContact {
   // (9) it acts once more through the accelerations it set, over the next
   // half step.)
   const Vec3& exchanged() const { return exchanged_; }
+  // The momentum the latest apply() gave each body, sum m dv over its nodes
+  // [N s] (per body). Between free nodes these sum to zero to rounding: each
+  // point's weights on the two sides sum to one each.
+  const std::vector<Vec3>& given() const { return given_; }
+  // What the held nodes of the latest apply()'s points would have taken
+  // (sum J times their weights) [N s]: the constraint holding them takes it,
+  // and given() sums to its opposite.
+  const Vec3& held_given() const { return held_given_; }
+  // The sum of the latest apply()'s points' |J| [N s].
+  double impulse_sum() const { return impulse_sum_; }
 
  private:
   struct Vertex {
@@ -93,7 +104,7 @@ class BodyContact {
     Vec3 X;  // at rest
   };
   void find(const State<Real>& s, double dt);
-  const std::array<Vec3, 2>& vertex_at(int32_t v);
+  const std::array<Vec3, 3>& vertex_at(int32_t v);
   // A triangle's plane at t_{n+1}: unit normal n1, n1 . x = off1 on it (stamped per step).
   struct Plane {
     Vec3 n1{0.0};
@@ -112,7 +123,6 @@ class BodyContact {
   // per cluster; empty for vertices).
   void keep_boxes(ClusterSet& set, std::vector<double>& refit_at, const std::vector<double>& gain,
                   const std::vector<double>& band, size_t body);
-  void test(int32_t v, int32_t t);
   // The broad phase: every vertex and triangle whose boxes, the triangle's
   // grown by its band and the margin, meet (candidates_).
   void list_candidates();
@@ -134,11 +144,13 @@ class BodyContact {
   std::vector<int32_t> vertex_first_, tri_first_;   // per body: its first vertex, triangle
   std::vector<int32_t> nodes_;                      // every node a vertex follows
   // Per step.
-  std::vector<int32_t> nodes_body_;      // body of each of nodes_
-  std::vector<Vec3> node_x1_, node_x0_;  // per node of nodes_ (indexed like the model's, sparse)
+  std::vector<int32_t> nodes_body_;  // body of each of nodes_
+  // Per node of nodes_ (indexed like the model's, sparse): at t_{n+1}, t_n,
+  // and where the next step takes it without contact.
+  std::vector<Vec3> node_x1_, node_x0_, node_x2_;
   // Per vertex, its positions at t_n and t_{n+1}, worked out only near
   // another body (vertex_at): current where its stamp is the step's.
-  std::vector<std::array<Vec3, 2>> x_;
+  std::vector<std::array<Vec3, 3>> x_;
   std::vector<uint32_t> vertex_stamp_, tri_stamp_, plane_stamp_;
   std::vector<Plane> planes_;
   uint32_t stamp_ = 0;
@@ -147,6 +159,9 @@ class BodyContact {
   // start (drift_), its nodes' box, the largest sum_k |w_k| of its vertices,
   // the drift after which a kept box is refitted (half a percent of its size).
   std::vector<double> move_, drift_, gain_max_, refit_drift_;
+  std::vector<double> ahead_;  // per body: its nodes' largest move over the next step without contact
+  double ahead_listed_ = 0;    // how far ahead of a triangle the pairs were listed [m]
+  double slop_ = std::numeric_limits<double>::infinity();  // a depth too small for a point ahead [m] (kAheadSlop)
   std::vector<Vec3> node_lo_, node_hi_;
   // Per body, per cluster: sum_k |w_k| at most, and the drift at its last refit.
   std::vector<std::vector<double>> vertex_gain_, tri_gain_, vertex_refit_, tri_refit_;
@@ -162,9 +177,18 @@ class BodyContact {
   bool listed_ = false;
   struct Best {
     int32_t t = -1;
-    double depth = 0;
+    double gap = 0;  // at t_{n+1} [m]: negative behind the triangle (in contact), else ahead of it
     Vec3 b{0.0}, n{0.0};
   };
+  // Whether p's projection on triangle t's plane at end `end` (0: t_n, 1:
+  // t_{n+1}, 2: the next step's) is over the triangle, or out of it by no
+  // more than `depth`; its barycentric coordinates (clamped to it) in b, and
+  // how far out in *off (0 over it) when off is given.
+  bool over(int32_t t, size_t end, const Vec3& p, double depth, Vec3& b, double* off = nullptr) const;
+  // Whether the next step, as this one's velocities and forces have it,
+  // takes vertex v behind triangle t's plane then, its projection over the
+  // triangle there (coordinates in b).
+  bool comes_behind(int32_t v, int32_t t, Vec3& b) const;
   std::vector<Best> best_;  // per vertex
   std::vector<int32_t> touched_;
   struct Box {
@@ -176,6 +200,7 @@ class BodyContact {
   std::vector<Box> boxes_;
   std::vector<ContactPoint> points_;
   std::vector<double> point_sign_;  // per point: +1, -1 as exchanged() counts it, 0 within a body
+  std::vector<double> point_held_;  // per point: the sum of its held carriers' weights
   std::vector<int32_t> slot_of_;    // per model node, -1
   std::vector<int32_t> slot_node_;
   std::vector<Vec3> slot_v_;
@@ -184,6 +209,9 @@ class BodyContact {
   std::vector<CoupledBodyState> no_bodies_;
   int32_t body_contacts_ = 0, self_contacts_ = 0;
   Vec3 exchanged_{0.0};
+  std::vector<Vec3> given_;
+  Vec3 held_given_{0.0};
+  double impulse_sum_ = 0;
 };
 
 extern template class BodyContact<float>;
