@@ -49,10 +49,10 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "tactile-stability: no case matches '%s'\n", options.filter.c_str());
     return 2;
   }
-  std::printf("%-44s %-9s %-5s %6s %9s %7s %6s %7s %7s %8s %6s  %s\n", "case", "expects", "pass", "tets", "steps",
-              "size", "drift", "depth", "force", "substeps", "wall", "outcome");
-  std::printf("%-44s %-9s %-5s %6s %9s %7s %6s %7s %7s %8s %6s\n", "", "", "", "", "", "x rest", "%", "mm", "N", "max",
-              "s");
+  std::printf("%-44s %-9s %-5s %6s %9s %7s %6s %7s %7s %7s %8s %6s  %s\n", "case", "expects", "pass", "tets", "steps",
+              "size", "drift", "depth", "force", "bodies", "substeps", "wall", "outcome");
+  std::printf("%-44s %-9s %-5s %6s %9s %7s %6s %7s %7s %7s %8s %6s\n", "", "", "", "", "", "x rest", "%", "mm", "N",
+              "mm", "max", "s");
   nlohmann::json all = nlohmann::json::array();
   int failed = 0;
   tactile::ProgressBar bar(stderr, progress, "stability");
@@ -61,12 +61,13 @@ int main(int argc, char** argv) {
     const CaseOutcome r = cases[k].run();
     bar.finish();
     if (!r.pass) ++failed;
-    std::printf("%-44s %-9s %-5s %6d %9lld %7s %6s %7s %7s %8d %6.1f  %s%s%s\n", r.name.c_str(), to_string(r.expect),
-                r.pass ? "pass" : "FAIL", r.tets, static_cast<long long>(r.steps), figure(r.size_ratio, "%.2f").c_str(),
+    std::printf("%-44s %-9s %-5s %6d %9lld %7s %6s %7s %7s %7s %8d %6.1f  %s%s%s\n", r.name.c_str(),
+                to_string(r.expect), r.pass ? "pass" : "FAIL", r.tets, static_cast<long long>(r.steps),
+                figure(r.size_ratio, "%.2f").c_str(),
                 figure(r.energy_drift < 0 ? -1 : 100 * r.energy_drift, "%.2f").c_str(),
                 figure(r.peak_force_N < 0 ? -1 : r.penetration_mm, "%.2f").c_str(),
-                figure(r.peak_force_N, "%.2f").c_str(), r.substeps_max, r.wall_s, r.outcome.c_str(),
-                r.pass ? "" : " -- ", r.why.c_str());
+                figure(r.peak_force_N, "%.2f").c_str(), figure(r.body_depth_mm, "%.3f").c_str(), r.substeps_max,
+                r.wall_s, r.outcome.c_str(), r.pass ? "" : " -- ", r.why.c_str());
     std::fflush(stdout);
     all.push_back(nlohmann::json::parse(outcome_json(r)));
   }

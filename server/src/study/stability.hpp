@@ -2,11 +2,13 @@
 // breaks -- large twists and spins, compression past StVK's limit, inverted
 // and flattened elements, near-incompressible, very soft and stiff
 // materials, time steps above the critical one, fast and pinching proxies,
-// sliver meshes, random velocities and a long run of random device input --
-// each case at two mesh resolutions and for every material it applies to,
-// and on the coarse meshes made quadratic (P2; the quick suite runs the
-// hard ones there: twist, squash past inversion, inverted start, strike,
-// slivers, too long a step, random velocities).
+// sliver meshes, random velocities, a long run of random device input, and
+// soft bodies meeting soft bodies (a stack dropped, a ball thrown at a block,
+// a beam folded onto itself) -- each case at two mesh resolutions and for
+// every material it applies to, and on the coarse meshes made quadratic (P2;
+// the quick suite runs the hard ones there: twist, squash past inversion,
+// inverted start, strike, slivers, too long a step, random velocities, the
+// stack and the fold).
 //
 // A case passes when
 //   - every position and velocity stays finite, at every control interval;
@@ -17,6 +19,11 @@
 //   - no surface node tunnels through a proxy (goes deeper than the proxy's
 //     trust depth and comes out on the side opposite its way in); how deep
 //     nodes sit is reported, the contact's accuracy rather than stability;
+//   - in a scene of several bodies, or with self contact, no surface node
+//     goes deeper into another body (or into its own, away from its own
+//     neighbourhood) than 0.5 mm or 2 % of the smallest surface edge,
+//     whichever is smaller, and the momentum body contact gives the bodies
+//     sums to zero (1e-9 of what it gives);
 //   - what it expects happens: `Runs` ends without a fault; `Caught` has a
 //     step above the critical one subdivided or refused, never run. A fault
 //     must name its kind and the elements at fault, and the simulation stays
@@ -56,7 +63,14 @@ struct CaseOutcome {
   double energy_drift = -1;   // |balance change| / energy in play; -1 when the run is not conservative
   double penetration_mm = 0;  // deepest surface node inside a proxy at a control instant [mm]
   double peak_force_N = -1;   // largest mean force on a device over a control interval; -1 without proxies
-  int32_t substeps_max = 0;   // most sub-steps in one control interval
+  // Scenes of several bodies, or with self contact: the deepest a surface node of one body was inside another
+  // (or inside its own body, away from its own neighbourhood) at a control instant [mm], what the case
+  // allows, and the largest |sum of the momentum body contact gave the bodies in a step| over the sum of
+  // its sizes (0 exactly: it passes between them); -1 where the case has no body contact.
+  double body_depth_mm = -1;
+  double body_depth_limit_mm = -1;
+  double momentum_residual = -1;
+  int32_t substeps_max = 0;  // most sub-steps in one control interval
 };
 
 struct SuiteOptions {
