@@ -170,6 +170,9 @@ GOOD: dict[str, dict[str, Any]] = {
         set_path(["effects"], {"gravity": [0, -9.81, 0], "body_contact": {"friction": 0.3}, "self_contact": True})
     ),
     "body_contact_true": bodies_change(set_path(["effects", "body_contact"], True)),
+    "body_contact_depth_tolerance": bodies_change(
+        set_path(["effects", "body_contact"], {"friction": 0.3, "depth_tolerance": 1e-4})
+    ),
 }
 
 BAD: dict[str, dict[str, Any]] = {
@@ -237,6 +240,7 @@ BAD: dict[str, dict[str, Any]] = {
     "body_unknown_field": bodies_change(set_path(["bodies", 1, "proxies"], [])),
     "no_bodies": bodies_change(set_path(["bodies"], [])),
     "body_friction_negative": bodies_change(set_path(["effects", "body_contact"], {"friction": -1})),
+    "body_depth_tolerance_negative": bodies_change(set_path(["effects", "body_contact"], {"depth_tolerance": -1e-4})),
     "self_contact_not_a_boolean": bodies_change(set_path(["effects", "self_contact"], 1)),
 }
 

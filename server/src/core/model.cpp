@@ -490,6 +490,9 @@ void check_settings(const Effects& effects, const IntegratorSpec& integrator) {
     throw ModelError("damping alpha must be >= 0 1/s, got " + std::to_string(effects.alpha));
   if (!(effects.body_friction >= 0 && std::isfinite(effects.body_friction)))
     throw ModelError("body contact friction must be finite and >= 0, got " + std::to_string(effects.body_friction));
+  if (!(effects.body_depth_tolerance >= 0 && std::isfinite(effects.body_depth_tolerance)))
+    throw ModelError("body contact depth tolerance must be finite and >= 0, got " +
+                     std::to_string(effects.body_depth_tolerance));
   if (!(integrator.safety > 0 && integrator.safety <= 1))
     throw ModelError("integrator.safety must lie in (0, 1], got " + std::to_string(integrator.safety));
   if (integrator.dt < 0) throw ModelError("integrator.dt must be >= 0 s");

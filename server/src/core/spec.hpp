@@ -111,6 +111,10 @@ struct Effects {
   bool body_contact = false;
   bool self_contact = false;
   double body_friction = 0.0;  // Coulomb mu at those contacts
+  // How deep [m] a vertex may be bound for by the next step before the
+  // contact acts ahead of it (its speculative points); 0: 1 % of the
+  // shortest surface edge. Larger costs less where surfaces rest together.
+  double body_depth_tolerance = 0.0;
 };
 
 enum class Precision : uint8_t { Float, Double };

@@ -30,6 +30,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
   self_ = model.effects.self_contact;
   active_ = between_ || self_;
   mu_ = model.effects.body_friction;
+  if (model.effects.body_depth_tolerance > 0) slop_ = model.effects.body_depth_tolerance;
   alpha_ = model.effects.damping ? model.effects.alpha : 0.0;
   if (!active_) return;
   // Each body's surface contact meets: its fine surface's vertices and
@@ -81,7 +82,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
         const double edge =
             glm::length(vertices_[size_t(t[size_t(c)])].X - vertices_[size_t(t[size_t((c + 1) % 3)])].X);
         longest = std::max(longest, edge);
-        if (edge > 0) slop_ = std::min(slop_, kAheadSlop * edge);
+        if (edge > 0 && !(model.effects.body_depth_tolerance > 0)) slop_ = std::min(slop_, kAheadSlop * edge);
       }
       tri_band_.push_back(kBand * longest);
     }

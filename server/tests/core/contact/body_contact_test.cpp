@@ -143,6 +143,35 @@ TEST(BodyContact, ADroppedCubeBouncesNoHigherThanItFellAndDoesNotSinkIn) {
   EXPECT_LT(sums_of(m, s, 1).centre.y, y0 - 0.5 * drop);  // and it did fall
 }
 
+// A cube thrown at 2 m/s onto a block: told it may let a vertex come 1 mm
+// deep before it acts ahead of it, the contact lets the cube's lowest point
+// get lower than with its default (1 % of the shortest edge, 0.1 mm). (The
+// block's top dents under both; the stability suite measures the depth
+// itself, body against body.)
+TEST(BodyContact, ALargerDepthToleranceLetsVerticesSinkFurther) {
+  const auto deepest = [](double tolerance) {
+    BodyParts base = block("base", Vec3(-0.03, 0, -0.03), Vec3(0.03, 0.02, 0.03), {3, 1, 3}, 2e5);
+    base.essential.push_back(hold_box(Vec3(-1), Vec3(1, 0.0001, 1)));
+    ModelSpec spec = scene({base, block("cube", Vec3(-0.012, 0.021, -0.007), Vec3(0.008, 0.041, 0.013), {2, 2, 2}, 2e5)},
+                           false, 20.0);
+    spec.effects.body_depth_tolerance = tolerance;
+    const Model<double> m = build_model<double>(spec);
+    Stepper<double> stepper(m);
+    State<double> s = stepper.make_state();
+    set_velocity(m, s, 1, Vec3(0, -2, 0));
+    const double dt = 0.9 * m.dt_rest;
+    double lowest = 1e30;
+    for (int k = 0; k < int(0.02 / dt); ++k) {
+      EXPECT_FALSE(stepper.step(s, dt)) << s.fault.message;
+      lowest = std::min(lowest, lowest_y(m, s, 1));
+    }
+    return 0.02 - lowest;
+  };
+  const double held = deepest(0.0), loose = deepest(1e-3);
+  EXPECT_GT(held, 0.0);
+  EXPECT_GT(loose, held + 0.2e-3);
+}
+
 // A cube at 5 m/s against a plate 2 mm thick, held at its rim: the cube
 // stays on its side.
 TEST(BodyContact, AThinPlateHitAtFiveMetresASecondIsNotTunnelled) {
