@@ -409,7 +409,8 @@ Effects read_effects(const Json& j, const Origin& o) {
       e.body_friction = g.non_negative_or("friction", 0.0);
       e.body_depth_tolerance = g.non_negative_or("depth_tolerance", 0.0);
     } else {
-      o.fail(f.path("body_contact"), "must be true, false or {\"friction\": mu, \"depth_tolerance\": m}, got " + scene_json::describe(*b));
+      o.fail(f.path("body_contact"),
+             "must be true, false or {\"friction\": mu, \"depth_tolerance\": m}, got " + scene_json::describe(*b));
     }
   }
   if (const Json* c = f.find("self_contact")) {

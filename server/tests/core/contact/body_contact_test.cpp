@@ -152,8 +152,8 @@ TEST(BodyContact, ALargerDepthToleranceLetsVerticesSinkFurther) {
   const auto deepest = [](double tolerance) {
     BodyParts base = block("base", Vec3(-0.03, 0, -0.03), Vec3(0.03, 0.02, 0.03), {3, 1, 3}, 2e5);
     base.essential.push_back(hold_box(Vec3(-1), Vec3(1, 0.0001, 1)));
-    ModelSpec spec = scene({base, block("cube", Vec3(-0.012, 0.021, -0.007), Vec3(0.008, 0.041, 0.013), {2, 2, 2}, 2e5)},
-                           false, 20.0);
+    ModelSpec spec = scene(
+        {base, block("cube", Vec3(-0.012, 0.021, -0.007), Vec3(0.008, 0.041, 0.013), {2, 2, 2}, 2e5)}, false, 20.0);
     spec.effects.body_depth_tolerance = tolerance;
     const Model<double> m = build_model<double>(spec);
     Stepper<double> stepper(m);
