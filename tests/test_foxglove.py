@@ -112,3 +112,31 @@ def test_an_embedded_surface_is_drawn_for_foxglove_once_a_second(tmp_path: pathl
     duration_s = states["messages"] / 30.0
     assert 2 <= surface["messages"] <= duration_s + 2, (surface["messages"], states["messages"])
     assert "entities[0].triangles[0].points[0].x" in surface["numeric_fields"]
+
+
+def test_a_scene_of_several_bodies_draws_each_as_an_entity_of_its_own(tmp_path: pathlib.Path) -> None:
+    """The organ on its bed, recorded for about 2 s: each /foxglove/body message holds the organ, the bed and
+    the proxies as three entities, and each /foxglove/surface the two fine surfaces as two, every one decoded
+    by Foxglove's own libraries."""
+    scene = json.loads((ROOT / "server/scenes/organ_bed.json").read_text())
+    meshes = ROOT / "server/scenes"
+    for body in scene["bodies"]:
+        for part in ("mesh", "surface"):
+            if part in body and "file" in body[part]:
+                body[part]["file"] = str(meshes / body[part]["file"])
+    path = tmp_path / "organ_bed.mcap"
+
+    async def watch(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as view:
+            await hello(view, Role.Viewer)
+            for _ in range(30):
+                await next_of(view, "StateFrameT", 10.0)
+
+    with server_process(tmp_path, scene, TOKEN, "--record", str(path), file_name="organ_bed.json") as (port, _):
+        asyncio.run(watch(port))
+    report = decode_with_foxglove_libraries(path)
+    body, surface = report["/foxglove/body"], report["/foxglove/surface"]
+    assert body["error"] is None and body["decoded"] == body["messages"] >= 30, body
+    assert body["entity_ids"] == ["body/organ", "body/bed", "proxies"], body["entity_ids"]
+    assert surface["error"] is None and surface["decoded"] == surface["messages"] >= 1, surface
+    assert surface["entity_ids"] == ["surface/organ", "surface/bed"], surface["entity_ids"]

@@ -103,7 +103,11 @@ for await (const message of reader.readMessages()) {
   if (!decode) continue;
   try {
     const object = decode(message.data);
-    if (entry.decoded === 0) entry.numeric_fields = numericPaths(object);
+    if (entry.decoded === 0) {
+      entry.numeric_fields = numericPaths(object);
+      // A SceneUpdate's entities, by id (a scene of several bodies has one per body).
+      if (Array.isArray(object?.entities)) entry.entity_ids = object.entities.map((e) => e.id);
+    }
     entry.decoded += 1;
   } catch (e) {
     if (!entry.error) entry.error = String(e.message ?? e);

@@ -28,23 +28,44 @@ json pose(const proto::ProxyPose* p) {
 
 json colour(double r, double g, double b, double a) { return {{"r", r}, {"g", g}, {"b", b}, {"a", a}}; }
 
-// A SceneUpdate of one entity `id` in frame `scene`, lasting until replaced.
-std::string scene_update(int64_t log_ns, const char* id, json triangles, json spheres, json cubes) {
-  json entity = {{"timestamp", time_of(log_ns)},
-                 {"frame_id", "scene"},
-                 {"id", id},
-                 {"lifetime", {{"sec", 0}, {"nsec", 0}}},
-                 {"frame_locked", false},
-                 {"metadata", json::array()},
-                 {"arrows", json::array()},
-                 {"cubes", std::move(cubes)},
-                 {"spheres", std::move(spheres)},
-                 {"cylinders", json::array()},
-                 {"lines", json::array()},
-                 {"triangles", std::move(triangles)},
-                 {"texts", json::array()},
-                 {"models", json::array()}};
-  return json{{"deletions", json::array()}, {"entities", json::array({std::move(entity)})}}.dump();
+// An entity `id` in frame `scene`, lasting until replaced.
+json entity(int64_t log_ns, const std::string& id, json triangles, json spheres, json cubes) {
+  return {{"timestamp", time_of(log_ns)},
+          {"frame_id", "scene"},
+          {"id", id},
+          {"lifetime", {{"sec", 0}, {"nsec", 0}}},
+          {"frame_locked", false},
+          {"metadata", json::array()},
+          {"arrows", json::array()},
+          {"cubes", std::move(cubes)},
+          {"spheres", std::move(spheres)},
+          {"cylinders", json::array()},
+          {"lines", json::array()},
+          {"triangles", std::move(triangles)},
+          {"texts", json::array()},
+          {"models", json::array()}};
+}
+
+std::string scene_update(json entities) {
+  return json{{"deletions", json::array()}, {"entities", std::move(entities)}}.dump();
+}
+
+// Body b's colour in a scene of several: a palette the eye tells apart, the
+// first body the colour a scene of one has.
+json body_colour(size_t b) {
+  static constexpr double kPalette[][3] = {
+      {0.85, 0.55, 0.45}, {0.45, 0.65, 0.85}, {0.55, 0.80, 0.50}, {0.85, 0.75, 0.40}, {0.70, 0.55, 0.85}};
+  const double* c = kPalette[b % (sizeof kPalette / sizeof kPalette[0])];
+  return colour(c[0], c[1], c[2], 1.0);
+}
+
+// A triangle list of the points and indices, in colour c.
+json triangle_list(json points, const std::vector<uint32_t>& indices, json c) {
+  return json::array({{{"pose", pose(nullptr)},
+                       {"points", std::move(points)},
+                       {"color", std::move(c)},
+                       {"colors", json::array()},
+                       {"indices", indices}}});
 }
 
 }  // namespace
@@ -90,6 +111,38 @@ void FoxgloveViews::scene(const proto::SceneDescription& s) {
       weights_.assign(fine->weights()->begin(), fine->weights()->end());
     }
   }
+  // The bodies of a scene of several, when their slices fit the frame and
+  // each triangle lies in its body's vertices (else one entity, as a scene
+  // of one).
+  bodies_.clear();
+  if (s.bodies() && s.bodies()->size() > 1) {
+    const size_t n_triangles = triangles_.size() / 3, n_fine_triangles = fine_triangles_.size() / 3;
+    const size_t n_fine = carriers_.size() / 4;
+    bool fits = true;
+    for (const proto::BodyInfo* b : *s.bodies()) {
+      Body body{b->name() ? b->name()->str() : "",
+                b->vertex_begin(),
+                b->vertex_end(),
+                b->triangle_begin(),
+                b->triangle_end(),
+                b->fine_vertex_begin(),
+                b->fine_vertex_end(),
+                b->fine_triangle_begin(),
+                b->fine_triangle_end()};
+      fits = fits && body.vertex_begin <= body.vertex_end && body.vertex_end <= n_vertices_ &&
+             body.triangle_begin <= body.triangle_end && body.triangle_end <= n_triangles;
+      for (size_t k = 3 * size_t(body.triangle_begin); fits && k < 3 * size_t(body.triangle_end); ++k)
+        fits = triangles_[k] >= body.vertex_begin && triangles_[k] < body.vertex_end;
+      if (!carriers_.empty()) {
+        fits = fits && body.fine_vertex_begin <= body.fine_vertex_end && body.fine_vertex_end <= n_fine &&
+               body.fine_triangle_begin <= body.fine_triangle_end && body.fine_triangle_end <= n_fine_triangles;
+        for (size_t k = 3 * size_t(body.fine_triangle_begin); fits && k < 3 * size_t(body.fine_triangle_end); ++k)
+          fits = fine_triangles_[k] >= body.fine_vertex_begin && fine_triangles_[k] < body.fine_vertex_end;
+      }
+      bodies_.push_back(std::move(body));
+    }
+    if (!fits) bodies_.clear();
+  }
   proxies_.clear();
   if (s.proxies())
     for (const proto::ProxyInfo* p : *s.proxies()) {
@@ -107,15 +160,11 @@ std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64
   if (!described_ || f.scene_id() != scene_id_ || !f.positions() || f.positions()->size() != 3 * n_vertices_)
     return std::nullopt;
   const auto* x = f.positions();
-  json points = json::array();
-  for (uint32_t v = 0; v < uint32_t(n_vertices_); ++v)
-    points.push_back(point(x->Get(3 * v), x->Get(3 * v + 1), x->Get(3 * v + 2)));
-  json triangles = json::array();
-  triangles.push_back({{"pose", pose(nullptr)},
-                       {"points", std::move(points)},
-                       {"color", colour(0.85, 0.55, 0.45, 1.0)},
-                       {"colors", json::array()},
-                       {"indices", triangles_}});
+  const auto points = [&](uint32_t begin, uint32_t end) {
+    json out = json::array();
+    for (uint32_t v = begin; v < end; ++v) out.push_back(point(x->Get(3 * v), x->Get(3 * v + 1), x->Get(3 * v + 2)));
+    return out;
+  };
   json spheres = json::array(), cubes = json::array();
   for (size_t k = 0; k < proxies_.size(); ++k) {
     const proto::ProxyPose* p = f.proxies() && k < f.proxies()->size() ? f.proxies()->Get(uint32_t(k)) : nullptr;
@@ -129,7 +178,25 @@ std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64
       spheres.push_back({{"pose", pose(p)}, {"size", point(d, d, d)}, {"color", colour(0.3, 0.6, 0.9, 0.8)}});
     }
   }
-  return scene_update(log_ns, "body", std::move(triangles), std::move(spheres), std::move(cubes));
+  if (bodies_.empty())
+    return scene_update(
+        json::array({entity(log_ns, "body", triangle_list(points(0, uint32_t(n_vertices_)), triangles_, body_colour(0)),
+                            std::move(spheres), std::move(cubes))}));
+  // A scene of several: an entity per body ("body/<name>", its own vertices
+  // and colour), and one for the proxies.
+  json entities = json::array();
+  std::vector<uint32_t> indices;
+  for (size_t b = 0; b < bodies_.size(); ++b) {
+    const Body& body = bodies_[b];
+    indices.assign(triangles_.begin() + ptrdiff_t(3 * size_t(body.triangle_begin)),
+                   triangles_.begin() + ptrdiff_t(3 * size_t(body.triangle_end)));
+    for (uint32_t& v : indices) v -= body.vertex_begin;
+    entities.push_back(entity(log_ns, "body/" + body.name,
+                              triangle_list(points(body.vertex_begin, body.vertex_end), indices, body_colour(b)),
+                              json::array(), json::array()));
+  }
+  entities.push_back(entity(log_ns, "proxies", json::array(), std::move(spheres), std::move(cubes)));
+  return scene_update(std::move(entities));
 }
 
 std::optional<std::string> FoxgloveViews::surface(const proto::StateFrame& f, int64_t log_ns) {
@@ -139,20 +206,33 @@ std::optional<std::string> FoxgloveViews::surface(const proto::StateFrame& f, in
   last_surface_ns_ = log_ns;
   // Where the browser draws it: x = sum_k w_k x_{c_k}.
   const auto* x = f.positions();
-  json points = json::array();
-  for (size_t v = 0; v < carriers_.size(); v += 4) {
-    double p[3] = {0, 0, 0};
-    for (size_t k = 0; k < 4; ++k)
-      for (uint32_t d = 0; d < 3; ++d) p[d] += double(weights_[v + k]) * x->Get(3 * carriers_[v + k] + d);
-    points.push_back(point(p[0], p[1], p[2]));
+  const auto points = [&](size_t begin, size_t end) {
+    json out = json::array();
+    for (size_t v = 4 * begin; v < 4 * end; v += 4) {
+      double p[3] = {0, 0, 0};
+      for (size_t k = 0; k < 4; ++k)
+        for (uint32_t d = 0; d < 3; ++d) p[d] += double(weights_[v + k]) * x->Get(3 * carriers_[v + k] + d);
+      out.push_back(point(p[0], p[1], p[2]));
+    }
+    return out;
+  };
+  if (bodies_.empty())
+    return scene_update(json::array(
+        {entity(log_ns, "surface", triangle_list(points(0, carriers_.size() / 4), fine_triangles_, body_colour(0)),
+                json::array(), json::array())}));
+  json entities = json::array();
+  std::vector<uint32_t> indices;
+  for (size_t b = 0; b < bodies_.size(); ++b) {
+    const Body& body = bodies_[b];
+    indices.assign(fine_triangles_.begin() + ptrdiff_t(3 * size_t(body.fine_triangle_begin)),
+                   fine_triangles_.begin() + ptrdiff_t(3 * size_t(body.fine_triangle_end)));
+    for (uint32_t& v : indices) v -= body.fine_vertex_begin;
+    entities.push_back(
+        entity(log_ns, "surface/" + body.name,
+               triangle_list(points(body.fine_vertex_begin, body.fine_vertex_end), indices, body_colour(b)),
+               json::array(), json::array()));
   }
-  json triangles = json::array();
-  triangles.push_back({{"pose", pose(nullptr)},
-                       {"points", std::move(points)},
-                       {"color", colour(0.85, 0.55, 0.45, 1.0)},
-                       {"colors", json::array()},
-                       {"indices", fine_triangles_}});
-  return scene_update(log_ns, "surface", std::move(triangles), json::array(), json::array());
+  return scene_update(std::move(entities));
 }
 
 std::string FoxgloveViews::log(const proto::SafetyEvent& e, int64_t log_ns) {

@@ -3,10 +3,13 @@
 // schemas, which its panels recognise by schema name:
 //   /foxglove/body  foxglove.SceneUpdate, one per StateFrame: the body's
 //                   boundary as a triangle list, each proxy as a sphere,
-//                   capsule (a sphere at its centre) or box, for the 3D panel;
+//                   capsule (a sphere at its centre) or box, for the 3D panel
+//                   (a scene of several bodies: an entity "body/<name>" per
+//                   body, in its own vertices and colour, and "proxies");
 //   /foxglove/surface  foxglove.SceneUpdate, for a scene with an embedded
 //                   surface: the fine surface, placed by its binding as the
-//                   browser places it, once a second of log time (20 k
+//                   browser places it (an entity "surface/<name>" per body
+//                   in a scene of several), once a second of log time (20 k
 //                   triangles are some 0.8 MB of JSON a message: at every
 //                   state they were nine tenths of a recording's bytes);
 //   /foxglove/log   foxglove.Log, one per SafetyEvent and Error, for the Log
@@ -59,6 +62,14 @@ class FoxgloveViews {
   std::vector<float> weights_;
   std::optional<int64_t> last_surface_ns_;
   std::vector<Proxy> proxies_;
+  // A scene of several bodies: each one's slices (proto BodyInfo); empty
+  // for a scene of one.
+  struct Body {
+    std::string name;
+    uint32_t vertex_begin, vertex_end, triangle_begin, triangle_end;
+    uint32_t fine_vertex_begin, fine_vertex_end, fine_triangle_begin, fine_triangle_end;
+  };
+  std::vector<Body> bodies_;
 };
 
 }  // namespace tactile

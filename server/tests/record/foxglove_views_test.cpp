@@ -100,5 +100,59 @@ TEST(FoxgloveViews, NoSurfaceWithoutOneOrWithABindingThatReadsPastTheFrame) {
   EXPECT_EQ(triangles_of(bad.views.body(bad.frame(), 1))["points"].size(), 4u);
 }
 
+// Two tetrahedra, "a" then "b", each a body of its own; the second moved by 10 along x.
+proto::SceneDescriptionT two_bodies() {
+  proto::SceneDescriptionT s = tetrahedron_scene();
+  const std::vector<float> rest = s.rest_positions;
+  const std::vector<uint32_t> triangles = s.triangles;
+  for (size_t k = 0; k < rest.size(); ++k) s.rest_positions.push_back(rest[k] + (k % 3 == 0 ? 10.0f : 0.0f));
+  for (uint32_t v : triangles) s.triangles.push_back(v + 4);
+  for (uint32_t b = 0; b < 2; ++b) {
+    auto body = std::make_unique<proto::BodyInfoT>();
+    body->name = std::string(1, char('a' + b));
+    body->vertex_begin = 4 * b;
+    body->vertex_end = 4 * b + 4;
+    body->triangle_begin = 4 * b;
+    body->triangle_end = 4 * b + 4;
+    s.bodies.push_back(std::move(body));
+  }
+  return s;
+}
+
+proto::StateFrameT two_bodies_frame() {
+  proto::StateFrameT f;
+  f.scene_id = 7;
+  f.positions = two_bodies().rest_positions;
+  f.positions[3 * 5 + 1] = 2.0f;  // b's second vertex moved up
+  return f;
+}
+
+TEST(FoxgloveViews, ASceneOfSeveralBodiesHasAnEntityPerBodyInItsOwnVertices) {
+  Views v(two_bodies(), two_bodies_frame());
+  const std::optional<std::string> text = v.views.body(v.frame(), 1);
+  ASSERT_TRUE(text.has_value());
+  const nlohmann::json entities = nlohmann::json::parse(*text)["entities"];
+  ASSERT_EQ(entities.size(), 3u);
+  EXPECT_EQ(entities[0]["id"], "body/a");
+  EXPECT_EQ(entities[1]["id"], "body/b");
+  EXPECT_EQ(entities[2]["id"], "proxies");
+  const nlohmann::json b = entities[1]["triangles"][0];
+  ASSERT_EQ(b["points"].size(), 4u);
+  EXPECT_DOUBLE_EQ(b["points"][0]["x"].get<double>(), 10.0);
+  EXPECT_DOUBLE_EQ(b["points"][1]["y"].get<double>(), 2.0);
+  EXPECT_EQ(b["indices"].get<std::vector<uint32_t>>(), tetrahedron_scene().triangles);  // in b's own numbering
+  EXPECT_NE(entities[0]["triangles"][0]["color"], b["color"]);
+}
+
+TEST(FoxgloveViews, BodiesWhoseSlicesDoNotFitAreDrawnAsOne) {
+  proto::SceneDescriptionT s = two_bodies();
+  s.triangles[0] = 5;  // a's first triangle reaches into b
+  Views v(s, two_bodies_frame());
+  const nlohmann::json entities = nlohmann::json::parse(*v.views.body(v.frame(), 1))["entities"];
+  ASSERT_EQ(entities.size(), 1u);
+  EXPECT_EQ(entities[0]["id"], "body");
+  EXPECT_EQ(entities[0]["triangles"][0]["points"].size(), 8u);
+}
+
 }  // namespace
 }  // namespace tactile
