@@ -51,6 +51,8 @@ void add_bodies(ModelSpec& spec, std::vector<BodyParts> bodies) {
     body.node_end = spec.mesh.n_nodes();
     body.tet_end = spec.mesh.n_tets();
     spec.materials.insert(spec.materials.end(), b.materials.begin(), b.materials.end());
+    body.material_begin = region0;
+    body.material_end = int32_t(spec.materials.size());
     for (EssentialBc bc : b.essential) {
       bc.where.first = body.node_begin;
       bc.where.count = body.node_end - body.node_begin;

@@ -595,7 +595,9 @@ std::vector<BodySpec> check_bodies(const ModelSpec& spec) {
   const TetMesh& mesh = spec.mesh;
   const int32_t n_fine = spec.surface ? spec.surface->n_vertices() : 0;
   const int32_t n_fine_tris = spec.surface ? int32_t(spec.surface->rest.triangles.size()) : 0;
-  if (spec.bodies.empty()) return {BodySpec{"body", 0, mesh.n_nodes(), 0, mesh.n_tets(), 0, n_fine, 0, n_fine_tris}};
+  if (spec.bodies.empty())
+    return {BodySpec{"body", 0, mesh.n_nodes(), 0, mesh.n_tets(), 0, n_fine, 0, n_fine_tris, 0,
+                     int32_t(spec.materials.size())}};
   const std::vector<BodySpec>& bodies = spec.bodies;
   BodySpec end{};  // where the previous body ended
   for (size_t b = 0; b < bodies.size(); ++b) {

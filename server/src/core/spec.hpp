@@ -144,6 +144,7 @@ struct BodySpec {
   int32_t tet_begin = 0, tet_end = 0;
   int32_t fine_vertex_begin = 0, fine_vertex_end = 0;
   int32_t fine_triangle_begin = 0, fine_triangle_end = 0;
+  int32_t material_begin = 0, material_end = 0;  // its materials in ModelSpec::materials (its region ids, offset)
 };
 
 struct ModelSpec {

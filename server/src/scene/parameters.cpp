@@ -1,5 +1,6 @@
 #include "scene/parameters.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string_view>
@@ -88,7 +89,23 @@ std::vector<Parameter> list_parameters(const ModelSpec& spec) {
   auto add = [&](std::string name, double value, const Range& r) {
     out.push_back({std::move(name), value, r.min, r.max, r.unit});
   };
-  if (spec.materials.size() == 1) {
+  const auto add_material = [&](const std::string& p, const MaterialSpec& m) {
+    add(p + "E", m.E, kE);
+    add(p + "nu", m.nu, kNu);
+    add(p + "rho", m.rho, kRho);
+  };
+  if (spec.bodies.size() > 1) {
+    for (size_t b = 0; b < spec.bodies.size(); ++b) {
+      const BodySpec& body = spec.bodies[b];
+      const std::string p = "bodies[" + std::to_string(b) + "].";
+      if (body.material_end - body.material_begin == 1) {
+        add_material(p + "material.", spec.materials[size_t(body.material_begin)]);
+      } else {
+        for (int32_t i = body.material_begin; i < body.material_end; ++i)
+          add_material(p + "materials[" + std::to_string(i - body.material_begin) + "].", spec.materials[size_t(i)]);
+      }
+    }
+  } else if (spec.materials.size() == 1) {
     add("material.E", spec.materials[0].E, kE);
     add("material.nu", spec.materials[0].nu, kNu);
     add("material.rho", spec.materials[0].rho, kRho);
@@ -122,6 +139,24 @@ void apply_parameter(ModelSpec& spec, const std::string& name, double value) {
   if (name.rfind("material.", 0) == 0) {
     if (spec.materials.empty()) fail(name, "this scene has no material");
     for (MaterialSpec& m : spec.materials) set_material(m, name, std::string_view(name).substr(9), value);
+  } else if (indexed(name, "bodies", &i, &rest)) {
+    if (i >= spec.bodies.size())
+      fail(name, "no body " + std::to_string(i) + " (this scene has " +
+                     std::to_string(std::max<size_t>(spec.bodies.size(), 1)) + ")");
+    const BodySpec& body = spec.bodies[i];
+    size_t k = 0;
+    std::string_view field;
+    if (rest.substr(0, 9) == "material.") {
+      for (int32_t m = body.material_begin; m < body.material_end; ++m)
+        set_material(spec.materials[size_t(m)], name, rest.substr(9), value);
+    } else if (indexed(rest, "materials", &k, &field)) {
+      if (k >= size_t(body.material_end - body.material_begin))
+        fail(name, "no material " + std::to_string(k) + " in body " + std::to_string(i) + " (it has " +
+                       std::to_string(body.material_end - body.material_begin) + ")");
+      set_material(spec.materials[size_t(body.material_begin) + k], name, field, value);
+    } else {
+      fail(name, "a body's parameters are material.E, .nu, .rho and materials[i].E, .nu, .rho");
+    }
   } else if (indexed(name, "materials", &i, &rest)) {
     if (i >= spec.materials.size())
       fail(name,

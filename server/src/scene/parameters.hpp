@@ -2,6 +2,8 @@
 //
 //   material.E | material.nu | material.rho      every material [Pa, -, kg/m^3]
 //   materials[i].E | .nu | .rho                  material of region i
+//   bodies[b].material.E | .nu | .rho            every material of body b (a scene of several bodies)
+//   bodies[b].materials[i].E | .nu | .rho        material of body b's region i
 //   damping.alpha                                Rayleigh mass damping [1/s], eq. (10); 0 turns damping off
 //   gravity.x | gravity.y | gravity.z            [m/s^2]; all zero turns gravity off
 //   friction.mu                                  every proxy's Coulomb coefficient; 0 on all turns friction off
@@ -31,8 +33,8 @@ struct Parameter {
 };
 
 // The parameters of this spec with their current values, in a stable order
-// (per-material entries only when there is more than one material; friction
-// only when there are proxies).
+// (per-material entries only when there is more than one material, named by
+// body in a scene of several; friction only when there are proxies).
 std::vector<Parameter> list_parameters(const ModelSpec& spec);
 
 // Sets one parameter; throws SceneError (scene/scene.hpp) naming what is wrong.

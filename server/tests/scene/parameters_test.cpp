@@ -3,10 +3,13 @@
 // a message naming it.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
 
+#include "core/bodies.hpp"
+#include "mesh/primitives.hpp"
 #include "scene/parameters.hpp"
 #include "scene/scene.hpp"
 
@@ -105,6 +108,51 @@ TEST(Parameters, ListShowsCurrentValuesAndEveryNameApplies) {
   const std::vector<Parameter> l1 = list_parameters(one);
   EXPECT_EQ(l1.front().name, "material.E");
   for (const Parameter& p : l1) EXPECT_EQ(p.name.find("friction"), std::string::npos) << "no proxies, no friction";
+}
+
+// Two bodies: "a" of one material, "b" of two (its second on its upper half).
+ModelSpec two_bodies() {
+  BodyParts a, b;
+  a.name = "a";
+  a.mesh = make_box(Vec3(0.0), Vec3(0.01), {1, 1, 1});
+  a.materials = {MaterialSpec{MaterialModel::NeoHookean, 1e4, 0.3, 1000}};
+  b.name = "b";
+  b.mesh = make_box(Vec3(0.02, 0, 0), Vec3(0.03, 0.01, 0.01), {1, 2, 1});
+  for (int32_t e = 0; e < b.mesh.n_tets(); ++e) b.mesh.region.push_back(e < b.mesh.n_tets() / 2 ? 0 : 1);
+  b.materials = {MaterialSpec{MaterialModel::NeoHookean, 2e4, 0.3, 1000},
+                 MaterialSpec{MaterialModel::NeoHookean, 3e4, 0.4, 1100}};
+  ModelSpec s;
+  add_bodies(s, {a, b});
+  return s;
+}
+
+TEST(Parameters, ABodysMaterialsAreNamedByBodyAndLandInItsOwn) {
+  ModelSpec s = two_bodies();
+  const std::vector<Parameter> list = list_parameters(s);
+  std::vector<std::string> names;
+  for (const Parameter& p : list) names.push_back(p.name);
+  for (const char* n : {"bodies[0].material.E", "bodies[1].materials[0].E", "bodies[1].materials[1].rho"})
+    EXPECT_NE(std::find(names.begin(), names.end(), n), names.end()) << n;
+  EXPECT_EQ(std::find(names.begin(), names.end(), "materials[2].E"), names.end()) << "named by body, not globally";
+  for (const Parameter& p : list) {
+    if (p.name.rfind("bodies[", 0) != 0) continue;
+    ModelSpec copy = s;
+    EXPECT_NO_THROW(apply_parameter(copy, p.name, p.max)) << p.name;
+  }
+  apply_parameter(s, "bodies[1].materials[1].E", 5e4);
+  EXPECT_EQ(s.materials[2].E, 5e4);
+  EXPECT_EQ(s.materials[1].E, 2e4);
+  apply_parameter(s, "bodies[0].material.nu", 0.45);
+  EXPECT_EQ(s.materials[0].nu, 0.45);
+  EXPECT_EQ(s.materials[1].nu, 0.3);
+  apply_parameter(s, "bodies[1].material.rho", 1200);  // every material of body b
+  EXPECT_EQ(s.materials[1].rho, 1200);
+  EXPECT_EQ(s.materials[2].rho, 1200);
+  EXPECT_EQ(s.materials[0].rho, 1000);
+  expect_refused(s, "bodies[2].material.E", 1e4, "no body 2");
+  expect_refused(s, "bodies[1].materials[2].E", 1e4, "no material 2 in body 1");
+  expect_refused(s, "bodies[0].colour.r", 1, "a body's parameters are");
+  expect_refused(s, "bodies[0].material.E", -1, "must be in");
 }
 
 TEST(Parameters, BadNamesAndValuesAreRefusedByName) {
