@@ -73,34 +73,13 @@ std::array<double, 4> barycentric(const TetMesh& mesh, const std::vector<glm::dm
   return {1.0 - l.x - l.y - l.z, l.x, l.y, l.z};
 }
 
-// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
-Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
-  if (d1 <= 0 && d2 <= 0) return a;
-  const Vec3 bp = p - b;
-  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
-  if (d3 >= 0 && d4 <= d3) return b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
-  const Vec3 cp = p - c;
-  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
-  if (d6 >= 0 && d5 <= d6) return c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-  const double denom = 1.0 / (va + vb + vc);
-  return a + ab * (vb * denom) + ac * (vc * denom);
-}
-
 // Distance from p to the tet of corners x (0 inside), given p's barycentric coordinates there.
 double distance_to_tet(const std::array<Vec3, 4>& x, const Vec3& p, const std::array<double, 4>& w) {
   if (*std::min_element(w.begin(), w.end()) >= 0) return 0;
   static constexpr int kFaces[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
   double best = std::numeric_limits<double>::infinity();
   for (const auto& f : kFaces) {
-    const Vec3 q = closest_on_triangle(p, x[size_t(f[0])], x[size_t(f[1])], x[size_t(f[2])]);
+    const Vec3 q = compute_closest_on_triangle(p, x[size_t(f[0])], x[size_t(f[1])], x[size_t(f[2])]);
     best = std::min(best, glm::length(p - q));
   }
   return best;

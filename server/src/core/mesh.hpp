@@ -50,6 +50,10 @@ struct TetMesh {
 // Signed volume of tet e at positions x [m^3]; positive when positively oriented.
 double compute_tet_volume(const Vec3& x0, const Vec3& x1, const Vec3& x2, const Vec3& x3);
 
+// The point of triangle (a, b, c) nearest p (Ericson, Real-Time Collision
+// Detection, 5.1.5). (core/proxy.cpp has the same as barycentric weights.)
+Vec3 compute_closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
 // Boundary triangles (faces that belong to exactly one tet), wound so that
 // their normal points out of the body (n_faces x 3). A quadratic mesh's
 // boundary face is split at its three edge nodes into four, wound the same

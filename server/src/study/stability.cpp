@@ -158,27 +158,6 @@ class ProxyWatch {
   int64_t tunnelled_ = 0;
 };
 
-// The closest point to p on triangle (a, b, c) (by the Voronoi region p's projection falls in).
-Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
-  if (d1 <= 0 && d2 <= 0) return a;
-  const Vec3 bp = p - b;
-  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
-  if (d3 >= 0 && d4 <= d3) return b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + (d1 / (d1 - d3)) * ab;
-  const Vec3 cp = p - c;
-  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
-  if (d6 >= 0 && d5 <= d6) return c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + (d2 / (d2 - d6)) * ac;
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
-  const double den = 1.0 / (va + vb + vc);
-  return a + ab * (vb * den) + ac * (vc * den);
-}
-
 // The solid angle triangle (a, b, c) subtends at the origin, signed: positive when the origin is behind it
 // (its corners counter-clockwise seen from outside) [sr] (Van Oosterom & Strackee 1983).
 double solid_angle(const Vec3& a, const Vec3& b, const Vec3& c) {
@@ -258,7 +237,7 @@ class BodyWatch {
                            glm::length(rest_[size_t(f[1])] - rest_[size_t(n)]) < into.reach[k] ||
                            glm::length(rest_[size_t(f[2])] - rest_[size_t(n)]) < into.reach[k]))
               continue;
-            depth = std::min(depth, glm::length(p - closest_on_triangle(p, at(f[0]), at(f[1]), at(f[2]))));
+            depth = std::min(depth, glm::length(p - compute_closest_on_triangle(p, at(f[0]), at(f[1]), at(f[2]))));
           }
           if (std::isfinite(depth)) deepest = std::max(deepest, depth);
         }
@@ -934,8 +913,8 @@ Scenario stack_drop(MaterialModel m, Level l, bool quick) {
   const TetMesh base = make_box(Vec3(-w, 0, -w), Vec3(w, w, w), {4 * l.k, 2 * l.k, 4 * l.k});
   std::vector<BodyParts> parts;
   parts.push_back(body_part("base", base, m, l, {fixed_bc("base", plane_y(0))}));
-  // (Off each other's rims by a few millimetres, as blocks stacked by hand are: rims that meet to the
-  // micrometre meet edge to edge, which vertex-face contact holds only to about 0.1 mm; see docs/perf.md.)
+  // (A millimetre off each other's rims, as blocks stacked by hand are: rims that meet exactly meet edge to
+  // edge, which vertex-face contact holds less well; see docs/perf.md.)
   const Vec3 mid(0.001, w + gap, 0.0005), top(-0.0005, 2 * w + 2 * gap, 0.001);
   const Vec3 up(0, w, 0);
   parts.push_back(body_part("middle", make_box(mid - half, mid + half + up, {3 * l.k, 3 * l.k, 3 * l.k}), m, l));

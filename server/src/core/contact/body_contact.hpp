@@ -27,7 +27,18 @@
 // triangle's longest edge (it is resting in contact). Positions at t_n
 // need no memory: the step's half-step velocity gives them,
 // x_n = x_{n+1} - dt (v_{n+1} - dt/2 a_{n+1}), which the velocity
-// projection leaves unchanged (it moves a by 2 dv / dt).
+// projection leaves unchanged (it moves a by 2 dv / dt). Of the triangles
+// whose projection holds a vertex (or misses it by no more than its depth,
+// behind a corner or a rim), the nearest says whether it is inside; one
+// outside gets a point only ahead of the crossing (below).
+//
+// Stopped short (speculative contact, as rigid-body engines use it): a
+// vertex in front of a triangle that the next step, eq. (7) from this
+// step's velocity and acceleration, would take behind it by more than the
+// slop (effects.body_depth_tolerance, or 1 % of the shortest surface edge)
+// is slowed now to arrive at the triangle's plane. It only slows an
+// approach, so it adds no energy; the stability suite's body cases
+// (study/stability.hpp) measure the depths it leaves.
 //
 // Self contact excludes a vertex's own neighbourhood: a triangle of its own
 // body whose rest distance from the vertex is under twice its longest edge
