@@ -83,7 +83,7 @@ Stepper<Real>::Stepper(const Model<Real>& model, ParallelFor* parallel)
       parallel_(parallel),
       kernels_(kernels<Real>()),
       contact_(model),
-      body_contact_(model),
+      body_contact_(model, parallel),
       critical_(model, model.proxies.empty() ? std::vector<int32_t>{} : contact_.surface_nodes()),
       // One part covering everything without a pool to run them on.
       plan_(make_step_plan(model, parallel && parallel->workers() >= 2)) {

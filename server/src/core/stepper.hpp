@@ -33,20 +33,12 @@
 #include "core/critical_step.hpp"
 #include "core/energy_ledger.hpp"
 #include "core/model.hpp"
+#include "core/parallel_for.hpp"
 #include "core/state.hpp"
 #include "core/step_plan.hpp"
 #include "core/step_sync.hpp"
 
 namespace tactile {
-
-// Runs fn(ctx, i) for i in [0, n) and returns when all calls are done.
-// Implemented by the application layer (a thread pool); the core stays pure.
-class ParallelFor {
- public:
-  virtual ~ParallelFor() = default;
-  virtual int32_t workers() const = 0;
-  virtual void run(int32_t n, void (*fn)(void* ctx, int32_t i), void* ctx) = 0;
-};
 
 // The passes of a step, for cost accounting by a StepProbe.
 enum class Pass : uint8_t { Predict, Essential, Elastic, Loads, Correct, Contact, BodyContact, Guard };

@@ -17,15 +17,25 @@ constexpr int32_t kClusterItems = 32, kGroupItems = 8;
 // beyond the triangle's reach (its far side).
 constexpr double kBand = 0.25;
 constexpr double kSolveTolerance = 1e-3;
+// Or until no velocity changes by more than would move a vertex this part of
+// the slop over a step: points that share nodes both ways (a vertex on a
+// face whose corner is on the vertex's faces) converge slowly, and what is
+// left then is far below any depth the contact allows. (The stability
+// suite's body cases keep their depths with it; ten times it lets the U fold
+// past its limit.)
+constexpr double kSweepDepth = 0.01;
 // The least depth, in the shortest edge of any surface, that a vertex
 // ahead of a face must be bound for by the next step to be given a point
 // now.
 constexpr double kAheadSlop = 0.01;
+// The least nodes, listed vertices or candidate pairs a part of a pass split
+// over threads takes.
+constexpr size_t kPartItems = 256;
 
 }  // namespace
 
 template <class Real>
-BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
+BodyContact<Real>::BodyContact(const Model<Real>& model, ParallelFor* parallel) : model_(model) {
   between_ = model.effects.body_contact && model.bodies.size() > 1;
   self_ = model.effects.self_contact;
   active_ = between_ || self_;
@@ -107,8 +117,8 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
   x_.assign(vertices_.size(), {Vec3(0.0), Vec3(0.0), Vec3(0.0)});
   vertex_stamp_.assign(vertices_.size(), 0u);
   tri_stamp_.assign(triangles_.size(), 0u);
-  plane_stamp_.assign(triangles_.size(), 0u);
-  planes_.assign(triangles_.size(), Plane{});
+  frame_stamp_.assign(triangles_.size(), 0u);
+  frames_.assign(triangles_.size(), Frame{});
   for (int32_t n : nodes_) nodes_body_.push_back(model.node_body[size_t(n)]);
   const size_t n_bodies = vertex_sets_.size();
   move_.assign(n_bodies, 0.0);
@@ -154,7 +164,21 @@ BodyContact<Real>::BodyContact(const Model<Real>& model) : model_(model) {
   body_hi_ = body_lo_;
   tri_hi_.assign(triangles_.size(), Vec3(0.0));
   slot_of_.assign(size_t(model.n_nodes), -1);
+  held_.assign(size_t(model.n_nodes), 0);
+  for (int32_t n : model.constrained) held_[size_t(n)] = 1;
   solve_.reserve(nodes_.size(), 1, vertices_.size());
+  // Threads only where a part has enough to do to pay for the hand-off.
+  if (parallel && parallel->workers() > 1 && nodes_.size() >= 2 * kPartItems) {
+    parallel_ = parallel;
+    node_parts_ = int32_t(std::min<size_t>(size_t(parallel->workers()), nodes_.size() / kPartItems));
+  }
+  node_sums_.resize(size_t(node_parts_));
+  for (NodeSums& sums : node_sums_) {
+    sums.move.assign(n_bodies, 0.0);
+    sums.ahead = sums.listed = sums.jump = sums.move;
+    sums.lo.assign(n_bodies, Vec3(0.0));
+    sums.hi = sums.lo;
+  }
 }
 
 template <class Real>
@@ -209,25 +233,27 @@ bool BodyContact<Real>::comes_behind(int32_t v, int32_t t, Vec3& b) const {
 
 template <class Real>
 double BodyContact<Real>::outside_edges(const Vec3& p, int32_t t) const {
-  const Tri& tri = triangles_[size_t(t)];
-  const Vec3 &a = x_[size_t(tri[0])][1], &b = x_[size_t(tri[1])][1], &c = x_[size_t(tri[2])][1];
-  const Vec3 n = glm::cross(b - a, c - a);
-  const double len = glm::length(n);
-  if (!(len > 0)) return 0.0;
-  // The in-plane distance of p's projection out of each edge (positive outside).
+  const Frame& f = frames_[size_t(t)];
+  if (!f.valid) return 0.0;
   double out = -std::numeric_limits<double>::infinity();
-  const Vec3* corner[3] = {&a, &b, &c};
-  for (int k = 0; k < 3; ++k) {
-    const Vec3& u = *corner[k];
-    const Vec3& w = *corner[(k + 1) % 3];
-    const Vec3 edge = w - u;
-    const double el = glm::length(edge);
-    if (!(el > 0)) continue;
-    // Outward in-plane normal of edge u-w: edge x n (n points out of the body, the corners run counter-clockwise about
-    // it).
-    out = std::max(out, glm::dot(p - u, glm::cross(edge, n)) / (el * len));
-  }
+  for (size_t k = 0; k < 3; ++k) out = std::max(out, (glm::dot(p, f.m[k]) - f.mo[k]) / glm::length(f.m[k]));
   return out;
+}
+
+template <class Real>
+bool BodyContact<Real>::over_now(int32_t t, const Vec3& p, double depth, Vec3& b, double& off) const {
+  // over() at t_{n+1}, from the frame: the corner across edge k is k + 2,
+  // its coordinate the area p makes with the edge over the triangle's.
+  const Frame& f = frames_[size_t(t)];
+  if (!f.valid) return false;
+  for (size_t k = 0; k < 3; ++k) b[int((k + 2) % 3)] = (f.mo[k] - glm::dot(p, f.m[k])) * f.inv_area2;
+  off = 0;
+  if (b[0] >= 0 && b[1] >= 0 && b[2] >= 0) return true;
+  for (size_t k = 0; k < 3; ++k) off = std::max(off, (glm::dot(p, f.m[k]) - f.mo[k]) / glm::length(f.m[k]));
+  if (off > depth) return false;
+  b = glm::max(b, Vec3(0.0));
+  b /= b[0] + b[1] + b[2];
+  return true;
 }
 
 template <class Real>
@@ -241,20 +267,37 @@ bool BodyContact<Real>::near_at_rest(int32_t v, int32_t t) const {
 }
 
 template <class Real>
-const typename BodyContact<Real>::Plane& BodyContact<Real>::plane(int32_t t) {
-  Plane& pl = planes_[size_t(t)];
-  if (plane_stamp_[size_t(t)] != stamp_) {
-    plane_stamp_[size_t(t)] = stamp_;
-    const Tri& tri = triangles_[size_t(t)];
-    for (int32_t c : tri) vertex_at(c);
-    const Vec3& a = x_[size_t(tri[0])][1];
-    const Vec3 nn = glm::cross(x_[size_t(tri[1])][1] - a, x_[size_t(tri[2])][1] - a);
-    const double len = glm::length(nn);
-    pl.valid = len > 0;
-    pl.n1 = pl.valid ? nn / len : Vec3(0.0);
-    pl.off1 = glm::dot(pl.n1, a);
+const typename BodyContact<Real>::Frame& BodyContact<Real>::frame(int32_t t) {
+  if (frame_stamp_[size_t(t)] != stamp_) {
+    for (int32_t c : triangles_[size_t(t)]) vertex_at(c);
+    make_frame(t);
   }
-  return pl;
+  return frames_[size_t(t)];
+}
+
+template <class Real>
+void BodyContact<Real>::make_frame(int32_t t) {
+  frame_stamp_[size_t(t)] = stamp_;
+  Frame& f = frames_[size_t(t)];
+  const Tri& tri = triangles_[size_t(t)];
+  const Vec3& a = x_[size_t(tri[0])][1];
+  const Vec3& b = x_[size_t(tri[1])][1];
+  const Vec3& c = x_[size_t(tri[2])][1];
+  const Vec3 nn = glm::cross(b - a, c - a);
+  const double len2 = glm::dot(nn, nn);
+  f.valid = len2 > 0;
+  if (!f.valid) return;
+  f.inv_area2 = 1.0 / std::sqrt(len2);
+  f.n = nn * f.inv_area2;
+  f.off = glm::dot(f.n, a);
+  // Out of the body is n; the corners run counter-clockwise about it, so
+  // edge x n points out of the triangle, |edge| long.
+  f.m[0] = glm::cross(b - a, f.n);
+  f.m[1] = glm::cross(c - b, f.n);
+  f.m[2] = glm::cross(a - c, f.n);
+  f.mo[0] = glm::dot(f.m[0], a);
+  f.mo[1] = glm::dot(f.m[1], b);
+  f.mo[2] = glm::dot(f.m[2], c);
 }
 
 template <class Real>
@@ -310,40 +353,94 @@ void BodyContact<Real>::keep_boxes(ClusterSet& set, std::vector<double>& refit_a
 }
 
 template <class Real>
-void BodyContact<Real>::find(const State<Real>& s, double dt) {
-  constexpr double inf = std::numeric_limits<double>::infinity();
-  const Real* u = s.u.data();
-  const Real* vel = s.v.data();
-  const Real* acc = s.a.data();
-  const size_t n_bodies = vertex_sets_.size();
-  // The nodes at both ends of the step, each body's largest move since the
-  // step before (over it, and any jump between them) and a box around all its vertices (its nodes' box, widened by the
-  // largest sum_k |w_k| of its vertices about its centre).
-  std::fill(move_.begin(), move_.end(), 0.0);
-  std::fill(ahead_.begin(), ahead_.end(), 0.0);
-  std::fill(node_lo_.begin(), node_lo_.end(), Vec3(inf));
-  std::fill(node_hi_.begin(), node_hi_.end(), Vec3(-inf));
-  for (size_t k = 0; k < nodes_.size(); ++k) {
+void BodyContact<Real>::place_nodes(int32_t p) {
+  // Nodes [k0, k1): where each is at both ends of the step and where the
+  // next takes it, and the part's per-body largest moves and box.
+  const size_t k0 = nodes_.size() * size_t(p) / size_t(node_parts_);
+  const size_t k1 = nodes_.size() * size_t(p + 1) / size_t(node_parts_);
+  const Real* u = cur_->u.data();
+  const Real* vel = cur_->v.data();
+  const Real* acc = cur_->a.data();
+  const double dt = cur_dt_;
+  NodeSums& sums = node_sums_[size_t(p)];
+  std::fill(sums.move.begin(), sums.move.end(), 0.0);
+  std::fill(sums.ahead.begin(), sums.ahead.end(), 0.0);
+  std::fill(sums.listed.begin(), sums.listed.end(), 0.0);
+  std::fill(sums.jump.begin(), sums.jump.end(), 0.0);
+  std::fill(sums.lo.begin(), sums.lo.end(), Vec3(std::numeric_limits<double>::infinity()));
+  std::fill(sums.hi.begin(), sums.hi.end(), Vec3(-std::numeric_limits<double>::infinity()));
+  for (size_t k = k0; k < k1; ++k) {
     const int32_t n = nodes_[k];
     const size_t b = size_t(nodes_body_[k]), j = 3 * size_t(n);
     const Vec3 x1 = model_.mesh.X[size_t(n)] + Vec3(double(u[j]), double(u[j + 1]), double(u[j + 2]));
-    const Vec3 vh = Vec3(double(vel[j]), double(vel[j + 1]), double(vel[j + 2])) -
-                    (0.5 * dt) * Vec3(double(acc[j]), double(acc[j + 1]), double(acc[j + 2]));
-    const Vec3 x0 = x1 - dt * vh;
+    const Vec3 v1(double(vel[j]), double(vel[j + 1]), double(vel[j + 2]));
+    const Vec3 a1(double(acc[j]), double(acc[j + 1]), double(acc[j + 2]));
+    const Vec3 x0 = x1 - dt * (v1 - (0.5 * dt) * a1);
     // Where the next step takes it under this one's velocity and forces, as
     // eq. (7) will: x_{n+2} = x_{n+1} + dt v_{n+1} + dt^2/2 a_{n+1}.
-    const Vec3 x2 = x1 + dt * Vec3(double(vel[j]), double(vel[j + 1]), double(vel[j + 2])) +
-                    (0.5 * dt * dt) * Vec3(double(acc[j]), double(acc[j + 1]), double(acc[j + 2]));
+    const Vec3 x2 = x1 + dt * v1 + (0.5 * dt * dt) * a1;
     // (Where the step before ended: x0 to rounding, unless the state was
     // reset or replaced since; the kept boxes grow by that jump too.)
-    const double jump = glm::length(x0 - node_x1_[size_t(n)]);
+    // (Squares, their roots taken once per body: the largest move plus the
+    // largest jump bounds any node's sum.)
+    const Vec3 jump = x0 - node_x1_[size_t(n)], step = x1 - x0, next = x2 - x1;
+    const Vec3 from_listed1 = x1 - node_listed_[k], from_listed0 = x0 - node_listed_[k];
     node_x1_[size_t(n)] = x1;
     node_x0_[size_t(n)] = x0;
     node_x2_[size_t(n)] = x2;
-    ahead_[b] = std::max(ahead_[b], glm::length(x2 - x1));
-    move_[b] = std::max(move_[b], glm::length(x1 - x0) + jump);
-    node_lo_[b] = glm::min(node_lo_[b], glm::min(x0, x1));
-    node_hi_[b] = glm::max(node_hi_[b], glm::max(x0, x1));
+    sums.ahead[b] = std::max(sums.ahead[b], glm::dot(next, next));
+    sums.move[b] = std::max(sums.move[b], glm::dot(step, step));
+    sums.jump[b] = std::max(sums.jump[b], glm::dot(jump, jump));
+    sums.listed[b] =
+        std::max({sums.listed[b], glm::dot(from_listed1, from_listed1), glm::dot(from_listed0, from_listed0)});
+    sums.lo[b] = glm::min(sums.lo[b], glm::min(x0, x1));
+    sums.hi[b] = glm::max(sums.hi[b], glm::max(x0, x1));
+  }
+}
+
+template <class Real>
+void BodyContact<Real>::place_listed(int32_t p) {
+  const size_t n = listed_vertices_.size();
+  for (size_t k = n * size_t(p) / size_t(node_parts_); k < n * size_t(p + 1) / size_t(node_parts_); ++k)
+    vertex_at(listed_vertices_[k]);
+}
+
+template <class Real>
+void BodyContact<Real>::frame_listed(int32_t p) {
+  const size_t n = listed_tris_.size();
+  for (size_t k = n * size_t(p) / size_t(node_parts_); k < n * size_t(p + 1) / size_t(node_parts_); ++k)
+    make_frame(listed_tris_[k]);  // (its corners are listed vertices, placed: this writes the frame alone)
+}
+
+template <class Real>
+void BodyContact<Real>::find(const State<Real>& s, double dt) {
+  const size_t n_bodies = vertex_sets_.size();
+  cur_ = &s;
+  cur_dt_ = dt;
+  // The nodes at both ends of the step, each body's largest move since the
+  // step before (over it, and any jump between them) and a box around all
+  // its vertices (its nodes' box, widened by the largest sum_k |w_k| of its
+  // vertices about its centre).
+  run_parallel(
+      parallel_, node_parts_, [](void* self, int32_t p) { static_cast<BodyContact*>(self)->place_nodes(p); }, this);
+  std::fill(move_.begin(), move_.end(), 0.0);
+  std::fill(ahead_.begin(), ahead_.end(), 0.0);
+  std::vector<double>& listed_move = node_sums_[0].listed;  // (gathered into part 0's)
+  for (size_t b = 0; b < n_bodies; ++b) {
+    node_lo_[b] = node_sums_[0].lo[b];
+    node_hi_[b] = node_sums_[0].hi[b];
+    double jump = 0;
+    for (const NodeSums& part : node_sums_) {
+      move_[b] = std::max(move_[b], part.move[b]);
+      jump = std::max(jump, part.jump[b]);
+      ahead_[b] = std::max(ahead_[b], part.ahead[b]);
+      listed_move[b] = std::max(listed_move[b], part.listed[b]);
+      node_lo_[b] = glm::min(node_lo_[b], part.lo[b]);
+      node_hi_[b] = glm::max(node_hi_[b], part.hi[b]);
+    }
+    move_[b] = std::sqrt(move_[b]) + std::sqrt(jump);
+    ahead_[b] = std::sqrt(ahead_[b]);
+    listed_move[b] = std::sqrt(listed_move[b]);
   }
   // How far a vertex may come towards a triangle over the next step: what
   // the pairs are listed ahead for (twice the fastest body's, by either side).
@@ -355,7 +452,7 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
   if (++stamp_ == 0) {  // (wrapped: no vertex or triangle may keep a stamp that looks current)
     std::fill(vertex_stamp_.begin(), vertex_stamp_.end(), 0u);
     std::fill(tri_stamp_.begin(), tri_stamp_.end(), 0u);
-    std::fill(plane_stamp_.begin(), plane_stamp_.end(), 0u);
+    std::fill(frame_stamp_.begin(), frame_stamp_.end(), 0u);
     stamp_ = 1;
   }
   // The candidate pairs, kept while no vertex and no triangle can have moved
@@ -364,18 +461,9 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
   // (How far each node is from where it was then: an oscillation does not
   // add up, as the drift of the kept boxes does.)
   bool rebuild = !listed_;
-  if (!rebuild) {
-    std::fill(move_.begin(), move_.end(), 0.0);
-    for (size_t k = 0; k < nodes_.size(); ++k) {
-      const auto n = size_t(nodes_[k]);
-      const size_t b = size_t(nodes_body_[k]);
-      move_[b] =
-          std::max({move_[b], glm::length(node_x1_[n] - node_listed_[k]), glm::length(node_x0_[n] - node_listed_[k])});
-    }
-    for (size_t b = 0; b < n_bodies; ++b) rebuild = rebuild || 2.0 * gain_max_[b] * move_[b] >= margin_;
-    // (And while they were listed far enough ahead for this step's speeds.)
-    rebuild = rebuild || ahead > ahead_listed_;
-  }
+  for (size_t b = 0; b < n_bodies; ++b) rebuild = rebuild || 2.0 * gain_max_[b] * listed_move[b] >= margin_;
+  // (And while they were listed far enough ahead for this step's speeds.)
+  rebuild = rebuild || ahead > ahead_listed_;
   if (rebuild) {
     // Half as far again ahead as now needs, and never less than half the
     // margin: a body speeding up, or at rest and trembling, renews them once
@@ -391,7 +479,49 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
     std::sort(candidates_.begin(), candidates_.end());
     for (size_t k = 0; k < nodes_.size(); ++k) node_listed_[k] = node_x1_[size_t(nodes_[k])];
     listed_ = true;
+    // What the pairs read each step, and the parts they are tested in: about
+    // kPartItems pairs each, four a thread so that uneven parts even out.
+    listed_vertices_.clear();
+    listed_tris_.clear();
+    for (const auto& [v, t] : candidates_) {
+      listed_vertices_.push_back(v);
+      listed_tris_.push_back(t);
+      listed_vertices_.insert(listed_vertices_.end(), triangles_[size_t(t)].begin(), triangles_[size_t(t)].end());
+    }
+    for (std::vector<int32_t>* list : {&listed_vertices_, &listed_tris_}) {
+      std::sort(list->begin(), list->end());
+      list->erase(std::unique(list->begin(), list->end()), list->end());
+    }
+    const size_t parts =
+        parallel_ ? std::clamp<size_t>(candidates_.size() / kPartItems, 1, 4 * size_t(parallel_->workers())) : 1;
+    narrow_begin_.assign(1, 0);
+    for (size_t p = 1; p < parts; ++p) {
+      auto k = int32_t(candidates_.size() * p / parts);
+      while (k > narrow_begin_.back() && k < int32_t(candidates_.size()) &&
+             candidates_[size_t(k)][0] == candidates_[size_t(k) - 1][0])
+        ++k;
+      if (k > narrow_begin_.back() && k < int32_t(candidates_.size())) narrow_begin_.push_back(k);
+    }
+    narrow_begin_.push_back(int32_t(candidates_.size()));
+    narrow_touched_.resize(narrow_begin_.size() - 1);
   }
+  // The listed pairs' vertices placed and their triangles framed, then the
+  // pairs tested vertex by vertex, each part on its own vertices.
+  run_parallel(
+      parallel_, node_parts_, [](void* self, int32_t p) { static_cast<BodyContact*>(self)->place_listed(p); }, this);
+  run_parallel(
+      parallel_, node_parts_, [](void* self, int32_t p) { static_cast<BodyContact*>(self)->frame_listed(p); }, this);
+  run_parallel(
+      parallel_, int32_t(narrow_touched_.size()),
+      [](void* self, int32_t p) { static_cast<BodyContact*>(self)->narrow(p); }, this);
+  for (const std::vector<int32_t>& part : narrow_touched_) touched_.insert(touched_.end(), part.begin(), part.end());
+}
+
+template <class Real>
+void BodyContact<Real>::narrow(int32_t p) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  std::vector<int32_t>& touched = narrow_touched_[size_t(p)];
+  touched.clear();
   // The listed pairs, vertex by vertex. Of the faces whose projection holds
   // the vertex, the nearest says where it is: behind it, the vertex is in
   // the body and touches it (eq. 11); in front of it, the vertex is
@@ -401,16 +531,17 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
   // its projection over the face then (speculative contact). A face it is
   // behind by more than its band, not having crossed it this step, is the
   // body's far side and says nothing.
-  for (size_t i = 0; i < candidates_.size();) {
+  const auto end = size_t(narrow_begin_[size_t(p) + 1]);
+  for (auto i = size_t(narrow_begin_[size_t(p)]); i < end;) {
     const int32_t v = candidates_[i][0];
-    const std::array<Vec3, 3>& x = vertex_at(v);
+    const std::array<Vec3, 3>& x = x_[size_t(v)];
     const size_t first = i;
-    while (i < candidates_.size() && candidates_[i][0] == v) ++i;
+    while (i < end && candidates_[i][0] == v) ++i;
     // Where it is: the nearest face that holds it (none nearer than its
     // plane). In front of every plane, it is outside whichever holds it.
     const auto gap = [&](size_t k) {
-      const Plane& pl = plane(candidates_[k][1]);
-      return pl.valid ? glm::dot(x[1], pl.n1) - pl.off1 : inf;
+      const Frame& f = frames_[size_t(candidates_[k][1])];
+      return f.valid ? glm::dot(x[1], f.n) - f.off : inf;
     };
     bool behind_some = false;
     for (size_t k = first; k < i && !behind_some; ++k) behind_some = gap(k) < 0;
@@ -428,17 +559,17 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
       }
       Vec3 b(0.0);
       double off = 0;
-      if (!over(t, 1, x[1], std::fabs(d1), b, &off)) continue;
+      if (!over_now(t, x[1], std::fabs(d1), b, off)) continue;
       // (How far from the face itself, not its plane: the face of a rim
       // that holds the vertex only by the rim's allowance is farther.)
-      const double distance = std::hypot(d1, off);
+      const double distance = off > 0 ? std::hypot(d1, off) : std::fabs(d1);
       if (distance < nearest_distance) {
-        nearest = {t, d1, b, planes_[size_t(t)].n1};
+        nearest = {t, d1, b, frames_[size_t(t)].n};
         nearest_distance = distance;
       }
     }
     if (nearest.t >= 0 && nearest.gap < 0) {
-      touched_.push_back(v);
+      touched.push_back(v);
       best_[size_t(v)] = nearest;
       continue;
     }
@@ -455,10 +586,10 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
       const auto tb = size_t(tri_body_[size_t(t)]);
       if (2.0 * (reach + gain_max_[tb] * ahead_[tb]) - d1 <= slop_) continue;
       Vec3 b(0.0);
-      if (comes_behind(v, t, b)) coming = {t, d1, b, planes_[size_t(t)].n1};
+      if (comes_behind(v, t, b)) coming = {t, d1, b, frames_[size_t(t)].n};
     }
     if (coming.t < 0) continue;
-    touched_.push_back(v);
+    touched.push_back(v);
     best_[size_t(v)] = coming;
   }
 }
@@ -546,14 +677,14 @@ void BodyContact<Real>::list_pairs(size_t a, size_t vc, size_t b, size_t tc) {
           // step: in front by at most the margin, behind by at most its
           // band and the margin (until the list is renewed each moves less
           // than that towards the other).
-          const Plane& pl = plane(t);
+          const Frame& pl = frame(t);
           if (!pl.valid) continue;
           const Tri& tri = triangles_[size_t(t)];
           const Vec3& a0 = x_[size_t(tri[0])][0];
           const Vec3 n0 = glm::cross(x_[size_t(tri[1])][0] - a0, x_[size_t(tri[2])][0] - a0);
           const double len0 = glm::length(n0);
           const double d0 = len0 > 0 ? glm::dot(x[0] - a0, n0) / len0 : 0.0;
-          const double d1 = glm::dot(x[1], pl.n1) - pl.off1;
+          const double d1 = glm::dot(x[1], pl.n) - pl.off;
           if (std::min(d0, d1) > margin_ + ahead_listed_ || std::max(d0, d1) < -(tri_band_[size_t(t)] + margin_))
             continue;
           // And over the triangle at t_{n+1}: its projection no farther out
@@ -597,9 +728,6 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   slot_node_.clear();
   slot_v_.clear();
   slot_m_.clear();
-  const auto held = [&](int32_t n) {
-    return std::binary_search(model_.constrained.begin(), model_.constrained.end(), n);
-  };
   const auto velocity = [&](int32_t n) {
     const size_t j = 3 * size_t(n);
     return Vec3(double(s.v[j]), double(s.v[j + 1]), double(s.v[j + 2]));
@@ -629,7 +757,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       const Vertex& ty = vertices_[size_t(tri[j])];
       for (size_t c = 0; c < 4 && ty.node[c] >= 0; ++c) add(ty.node[c], -best.b[int(j)] * ty.w[c]);
     }
-    ContactPoint p;
+    ContactPoint& p = points_.emplace_back();  // (dropped below if it moves no free node)
     p.proxy = 0;
     p.body = -1;
     p.r = Vec3(0.0);
@@ -663,7 +791,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     double held_w = 0;
     for (size_t k = 0; k < count; ++k) {
       if (w[k] == 0) continue;
-      if (held(node[k])) {
+      if (held_[size_t(node[k])]) {
         p.v_held += w[k] * velocity(node[k]);
         held_w += w[k];
         continue;
@@ -679,8 +807,9 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       p.w[free++] = w[k];
       p.inv_mass += w[k] * w[k] / slot_m_[size_t(slot)];
     }
-    if (p.inv_mass > 0) {
-      points_.push_back(p);
+    if (!(p.inv_mass > 0)) {
+      points_.pop_back();
+    } else {
       const int32_t tb = tri_body_[size_t(best.t)];
       (vx.body == tb ? self_contacts_ : body_contacts_) += 1;
       point_sign_.push_back(vx.body == tb ? 0.0 : vx.body < tb ? 1.0 : -1.0);
@@ -690,10 +819,12 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   }
   touched_.clear();
 
-  // To a thousandth of the first sweep's change: a resting contact's
+  // To a thousandth of the first sweep's change (a resting contact's
   // impulses are a step's weight, and a thousandth of that is far below
-  // what moves a vertex by a rounding of its position.
-  solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_, kSolveTolerance);
+  // what moves a vertex by a rounding of its position), or to kSweepDepth of
+  // the slop a step. Started from no impulse, each sweep only lowers the
+  // kinetic energy the points see, so stopping early adds none.
+  solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_, kSolveTolerance, kSweepDepth * slop_ / dt);
   // The velocity change as a force over the step, eq. (10): q 2 dv / dt, q = m (1 + alpha dt / 2).
   const double to_force = (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt;
   for (int32_t k : solve_.moved()) {

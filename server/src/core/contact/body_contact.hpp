@@ -58,6 +58,12 @@
 // whole box are swept and pruned along x, and only the vertex-triangle
 // cluster pairs whose boxes meet are tested, group by group, then item by
 // item against each triangle's box.
+//
+// Split over threads (a ParallelFor, as the elastic pass): the nodes' places
+// over the step, then the listed vertices' places and triangles' frames,
+// then the listed pairs vertex by vertex, each part writing only its own
+// vertices' results, gathered in vertex order so that any split gives the
+// same points. The listing and the solve stay on one thread.
 #pragma once
 
 #include <array>
@@ -69,6 +75,7 @@
 #include "core/contact/contact.hpp"
 #include "core/contact/impulse_solve.hpp"
 #include "core/model.hpp"
+#include "core/parallel_for.hpp"
 #include "core/state.hpp"
 
 namespace tactile {
@@ -77,8 +84,8 @@ template <class Real>
 class BodyContact {
  public:
   // Inactive (apply() does nothing) unless the model's effects ask for body
-  // or self contact.
-  explicit BodyContact(const Model<Real>& model);
+  // or self contact. `parallel` (optional) splits the per-step passes.
+  explicit BodyContact(const Model<Real>& model, ParallelFor* parallel = nullptr);
   bool active() const { return active_; }
 
   // The pass for the step ending at s.t + dt: after the essential BCs have
@@ -115,17 +122,34 @@ class BodyContact {
     Vec3 X;  // at rest
   };
   void find(const State<Real>& s, double dt);
+  // The per-step passes find() splits over threads, part `p` of each.
+  void place_nodes(int32_t p);
+  void place_listed(int32_t p);
+  void frame_listed(int32_t p);
+  void narrow(int32_t p);
   const std::array<Vec3, 3>& vertex_at(int32_t v);
-  // A triangle's plane at t_{n+1}: unit normal n1, n1 . x = off1 on it (stamped per step).
-  struct Plane {
-    Vec3 n1{0.0};
-    double off1 = 0;
+  // A triangle at t_{n+1} (stamped per step): its unit normal n, n . x = off
+  // on its plane; per edge k (corner k to k+1) its outward normal in the
+  // plane m[k], as long as the edge, m[k] . x = mo[k] along it; one over
+  // twice its area. A point's projection is out of edge k by (m[k] . p -
+  // mo[k]) / |m[k]|, and its barycentric coordinate of the corner across
+  // is (mo[k] - m[k] . p) * inv_area2.
+  struct Frame {
+    Vec3 n{0.0};
+    double off = 0;
+    std::array<Vec3, 3> m{};
+    std::array<double, 3> mo{};
+    double inv_area2 = 0;
     bool valid = false;  // not degenerate
   };
-  const Plane& plane(int32_t t);
+  const Frame& frame(int32_t t);  // placing its corners first
+  void make_frame(int32_t t);     // its corners placed
   // How far p's projection on triangle t's plane (at t_{n+1}) lies out of
-  // its farthest edge [m]; negative inside.
+  // its farthest edge [m]; negative inside (its frame placed).
   double outside_edges(const Vec3& p, int32_t t) const;
+  // Whether p's projection on triangle t's plane at t_{n+1} is over the
+  // triangle, or out of it by no more than `depth`: over(), from its frame.
+  bool over_now(int32_t t, const Vec3& p, double depth, Vec3& b, double& off) const;
   // Whether vertex v lies within triangle t's own neighbourhood at rest (self contact skips it).
   bool near_at_rest(int32_t v, int32_t t) const;
   // A set's kept boxes for this step: grown by how far its vertices can have
@@ -162,8 +186,8 @@ class BodyContact {
   // Per vertex, its positions at t_n and t_{n+1}, worked out only near
   // another body (vertex_at): current where its stamp is the step's.
   std::vector<std::array<Vec3, 3>> x_;
-  std::vector<uint32_t> vertex_stamp_, tri_stamp_, plane_stamp_;
-  std::vector<Plane> planes_;
+  std::vector<uint32_t> vertex_stamp_, tri_stamp_, frame_stamp_;
+  std::vector<Frame> frames_;
   uint32_t stamp_ = 0;
   std::vector<Vec3> tri_lo_, tri_hi_;  // per triangle: the box of its corners over the step (stamped)
   // Per body: its nodes' largest move this step, the sum of those since the
@@ -183,6 +207,10 @@ class BodyContact {
   // half of it since: a node by more than that over its body's largest sum
   // |w| from where it was then (node_listed_, per node of nodes_).
   std::vector<std::array<int32_t, 2>> candidates_;
+  // What the listed pairs read each step: their vertices and the triangles'
+  // corners, and their triangles; and the parts the pairs are tested in
+  // (first candidate of each, at a vertex's first; one past the last at the end).
+  std::vector<int32_t> listed_vertices_, listed_tris_, narrow_begin_;
   std::vector<Vec3> node_listed_;
   double margin_ = 0;
   bool listed_ = false;
@@ -202,6 +230,20 @@ class BodyContact {
   bool comes_behind(int32_t v, int32_t t, Vec3& b) const;
   std::vector<Best> best_;  // per vertex
   std::vector<int32_t> touched_;
+  // The step the passes read (find()), and the threads they split over.
+  const State<Real>* cur_ = nullptr;
+  double cur_dt_ = 0;
+  ParallelFor* parallel_ = nullptr;
+  int32_t node_parts_ = 1;
+  // Per part of place_nodes(): per body, its nodes' largest move over the
+  // step, jump from the last, move over the next and from where they were
+  // listed, and their box; per part of narrow(), the vertices it found touching.
+  struct NodeSums {
+    std::vector<double> move, jump, ahead, listed;  // (squared)
+    std::vector<Vec3> lo, hi;
+  };
+  std::vector<NodeSums> node_sums_;
+  std::vector<std::vector<int32_t>> narrow_touched_;
   struct Box {
     double lo_x, hi_x;
     int32_t c;      // cluster
@@ -212,6 +254,7 @@ class BodyContact {
   std::vector<ContactPoint> points_;
   std::vector<double> point_sign_;  // per point: +1, -1 as exchanged() counts it, 0 within a body
   std::vector<double> point_held_;  // per point: the sum of its held carriers' weights
+  std::vector<uint8_t> held_;       // per model node: an essential BC holds it
   std::vector<int32_t> slot_of_;    // per model node, -1
   std::vector<int32_t> slot_node_;
   std::vector<Vec3> slot_v_;

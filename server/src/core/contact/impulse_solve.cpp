@@ -61,7 +61,7 @@ void ImpulseSolve::give(std::vector<CoupledBodyState>& bodies, const ContactPoin
 }
 
 void ImpulseSolve::solve(std::vector<ContactPoint>& points, size_t n_proxies, std::vector<CoupledBodyState>& bodies,
-                         const std::vector<Vec3>& v, const std::vector<double>& mass, double tolerance) {
+                         const std::vector<Vec3>& v, const std::vector<double>& mass, double tolerance, double floor) {
   // A coupled body's points see its mass and inertia in series with their
   // nodes' (the effective inverse mass along a direction e: sum w^2/m + 1/M
   // + |r x e|^2 / I). They take more sweeps to settle than a kinematic
@@ -113,7 +113,7 @@ void ImpulseSolve::solve(std::vector<ContactPoint>& points, size_t n_proxies, st
         largest = std::max(largest, change);
       }
       if (sweep == 0) first = largest;
-      if (largest <= tolerance * first) break;
+      if (largest <= std::max(tolerance * first, floor)) break;
     }
   }
 }

@@ -74,9 +74,9 @@ class ImpulseSolve {
   // jt, each slot's velocity change into dv(k) (the slots in moved()), and
   // each body's reaction into its next.v and next.w.
   // The sweeps stop when no velocity changes by more than `tolerance` times
-  // the first sweep's largest change.
+  // the first sweep's largest change, or by more than `floor` [m/s].
   void solve(std::vector<ContactPoint>& points, size_t n_proxies, std::vector<CoupledBodyState>& bodies,
-             const std::vector<Vec3>& v, const std::vector<double>& mass, double tolerance = 1e-6);
+             const std::vector<Vec3>& v, const std::vector<double>& mass, double tolerance = 1e-6, double floor = 0);
 
   // The slots given a velocity change since the last clear(), and each one's.
   const std::vector<int32_t>& moved() const { return moved_; }
