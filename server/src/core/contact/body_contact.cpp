@@ -118,6 +118,8 @@ BodyContact<Real>::BodyContact(const Model<Real>& model, ParallelFor* parallel) 
   vertex_stamp_.assign(vertices_.size(), 0u);
   tri_stamp_.assign(triangles_.size(), 0u);
   frame_stamp_.assign(triangles_.size(), 0u);
+  vertex_listed_.assign(vertices_.size(), 0u);
+  tri_listed_.assign(triangles_.size(), 0u);
   frames_.assign(triangles_.size(), Frame{});
   for (int32_t n : nodes_) nodes_body_.push_back(model.node_body[size_t(n)]);
   const size_t n_bodies = vertex_sets_.size();
@@ -453,6 +455,8 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
     std::fill(vertex_stamp_.begin(), vertex_stamp_.end(), 0u);
     std::fill(tri_stamp_.begin(), tri_stamp_.end(), 0u);
     std::fill(frame_stamp_.begin(), frame_stamp_.end(), 0u);
+    std::fill(vertex_listed_.begin(), vertex_listed_.end(), 0u);
+    std::fill(tri_listed_.begin(), tri_listed_.end(), 0u);
     stamp_ = 1;
   }
   // The candidate pairs, kept while no vertex and no triangle can have moved
@@ -481,16 +485,19 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
     listed_ = true;
     // What the pairs read each step, and the parts they are tested in: about
     // kPartItems pairs each, four a thread so that uneven parts even out.
+    // (Each once: marked with the listing's stamp, which no other listing has.)
     listed_vertices_.clear();
     listed_tris_.clear();
+    const auto list_once = [&](std::vector<uint32_t>& mark, std::vector<int32_t>& list, int32_t i) {
+      if (mark[size_t(i)] == stamp_) return;
+      mark[size_t(i)] = stamp_;
+      list.push_back(i);
+    };
     for (const auto& [v, t] : candidates_) {
-      listed_vertices_.push_back(v);
-      listed_tris_.push_back(t);
-      listed_vertices_.insert(listed_vertices_.end(), triangles_[size_t(t)].begin(), triangles_[size_t(t)].end());
-    }
-    for (std::vector<int32_t>* list : {&listed_vertices_, &listed_tris_}) {
-      std::sort(list->begin(), list->end());
-      list->erase(std::unique(list->begin(), list->end()), list->end());
+      list_once(vertex_listed_, listed_vertices_, v);
+      if (tri_listed_[size_t(t)] == stamp_) continue;
+      list_once(tri_listed_, listed_tris_, t);
+      for (int32_t c : triangles_[size_t(t)]) list_once(vertex_listed_, listed_vertices_, c);
     }
     const size_t parts =
         parallel_ ? std::clamp<size_t>(candidates_.size() / kPartItems, 1, 4 * size_t(parallel_->workers())) : 1;

@@ -211,6 +211,7 @@ class BodyContact {
   // corners, and their triangles; and the parts the pairs are tested in
   // (first candidate of each, at a vertex's first; one past the last at the end).
   std::vector<int32_t> listed_vertices_, listed_tris_, narrow_begin_;
+  std::vector<uint32_t> vertex_listed_, tri_listed_;  // the stamp of the step each was last listed in
   std::vector<Vec3> node_listed_;
   double margin_ = 0;
   bool listed_ = false;
