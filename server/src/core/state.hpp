@@ -67,11 +67,12 @@ struct EnergyLedger {
 // The critical step's refresh (core/critical_step.hpp): a sixteenth of the
 // body each advance(), and the elements around the nodes contact pushed.
 struct CriticalStepSweep {
-  double dt = 0;              // estimate for the current configuration [s]
-  int64_t refreshed_at = -1;  // step of the last complete sweep, -1 before the first
-  double last = 0;            // estimate of the last complete sweep [s]
-  double min = 0;             // of the sweep under way, so far [s]
-  int32_t next = 0;           // first lane block the next call examines
+  double dt = 0;                // estimate for the current configuration [s]
+  int64_t refreshed_at = -1;    // step of the last complete sweep, -1 before the first
+  double last = 0;              // estimate of the last complete sweep [s]
+  double min = 0;               // of the sweep under way, so far [s]
+  int32_t next = 0;             // first lane block the next call examines
+  double collapsed_since = -1;  // when dt fell under kCollapsedStep of the rest step [s]; -1 while above
 };
 
 template <class Real>

@@ -609,19 +609,31 @@ void Stepper<Real>::clear_fault(State<Real>& s) const {
   s.fault = Fault{};
   s.energy.open = false;
   s.critical.refreshed_at = -1;
+  s.critical.collapsed_since = -1;
 }
 
 // Elements squashed nearly flat (a held node driven into a proxy, say) make
 // the critical step fall without bound, and advance() would split each
 // interval into ever more steps: a run that never ends rather than a fault.
-// Below a hundredth of the step at rest it is a fault.
+// Below a hundredth of the step at rest for longer than a strike's crush
+// lasts, or below a thousandth at all, it is a fault.
 template <class Real>
 Fault Stepper<Real>::check_collapse(State<Real>& s, double dt_critical) {
-  if (!(dt_critical < kCollapsedStep * model_.dt_rest)) return {};
+  if (!(dt_critical < kCollapsedStep * model_.dt_rest)) {
+    s.critical.collapsed_since = -1;
+    return {};
+  }
+  if (s.critical.collapsed_since < 0) s.critical.collapsed_since = s.t;
+  const double lasted = s.t - s.critical.collapsed_since;
+  if (dt_critical >= kCrushedStep * model_.dt_rest && lasted <= kCollapseGrace) return {};
   std::ostringstream msg;
-  msg << "the critical step fell to " << dt_critical << " s, under " << kCollapsedStep << " of its " << model_.dt_rest
-      << " s at rest: elements are squashed nearly flat (a prescribed motion driving the body "
-      << "into a proxy or another body?)";
+  msg << "the critical step fell to " << dt_critical << " s, under ";
+  if (dt_critical < kCrushedStep * model_.dt_rest)
+    msg << kCrushedStep << " of its " << model_.dt_rest << " s at rest";
+  else
+    msg << kCollapsedStep << " of its " << model_.dt_rest << " s at rest for " << lasted << " s";
+  msg << ": elements are squashed nearly flat (a prescribed motion driving the body into a proxy or another body, or "
+         "a load it cannot bear?)";
   return make_fault(Fault::Kind::StepTooLarge, s, msg.str(), {});
 }
 

@@ -43,9 +43,16 @@ namespace tactile {
 // The passes of a step, for cost accounting by a StepProbe.
 enum class Pass : uint8_t { Predict, Essential, Elastic, Loads, Correct, Contact, BodyContact, Guard };
 inline constexpr int kPassCount = 8;
-// The least fraction of the critical step at rest the critical step may fall
-// to before advance() stops with a fault (Stepper::check_collapse).
+// How far the critical step may fall before advance() stops with a fault
+// (Stepper::check_collapse): below kCollapsedStep of the step at rest for
+// longer than kCollapseGrace of simulated time, or below kCrushedStep at once.
+// A strike under a bounded load (a coupled proxy at a hand's speed) crushes
+// the elements it hits for a few milliseconds, splitting the steps, and they
+// recover; a prescribed motion driving a body into a proxy squashes them on
+// without bound.
 inline constexpr double kCollapsedStep = 1e-2;
+inline constexpr double kCrushedStep = 1e-3;
+inline constexpr double kCollapseGrace = 5e-3;  // [s]
 const char* to_string(Pass p);
 
 // Told when each pass of a step starts and ends; the application layer times
