@@ -28,6 +28,14 @@ constexpr double kSweepDepth = 0.001;
 // ahead of a face must be bound for by the next step to be given a point
 // now.
 constexpr double kAheadSlop = 0.01;
+// A surface vertex is smooth when each of its triangles' normals at rest is
+// within this cosine of their area-weighted mean (about 20 degrees): a
+// vertex of a face's interior, or of a gently curved surface, not of an edge
+// or a corner.
+constexpr double kSmoothCos = 0.94;
+// Two bodies' surfaces whose mean edges differ by less than this fraction
+// are alike: the one of the lower index is then the slave.
+constexpr double kAlikeEdges = 0.05;
 // The least nodes, listed vertices or candidate pairs a part of a pass split
 // over threads takes.
 constexpr size_t kPartItems = 256;
@@ -158,6 +166,38 @@ BodyContact<Real>::BodyContact(const Model<Real>& model, ParallelFor* parallel) 
       rest.push_back(vertices_[size_t(v)].X);
     refit_drift_.push_back(0.005 * glm::length(compute_aabb(rest).size()));
   }
+  // The smooth vertices and each body's mean edge at rest, for the pass
+  // that tests a pair of bodies one way across their smooth patches (master_).
+  std::vector<Vec3> normal_sum(vertices_.size(), Vec3(0.0));
+  std::vector<double> edge_sum(n_bodies, 0.0);
+  std::vector<int64_t> edges(n_bodies, 0);
+  for (size_t t = 0; t < triangles_.size(); ++t) {
+    const Tri& tri = triangles_[t];
+    const Vec3 a = vertices_[size_t(tri[0])].X, b = vertices_[size_t(tri[1])].X, c = vertices_[size_t(tri[2])].X;
+    const Vec3 area2 = glm::cross(b - a, c - a);
+    for (int32_t v : tri) normal_sum[size_t(v)] += area2;
+    edge_sum[size_t(tri_body_[t])] += glm::length(b - a) + glm::length(c - b) + glm::length(a - c);
+    edges[size_t(tri_body_[t])] += 3;
+  }
+  smooth_.assign(vertices_.size(), 1);
+  for (size_t t = 0; t < triangles_.size(); ++t) {
+    const Tri& tri = triangles_[t];
+    const Vec3 a = vertices_[size_t(tri[0])].X;
+    const Vec3 area2 = glm::cross(vertices_[size_t(tri[1])].X - a, vertices_[size_t(tri[2])].X - a);
+    const double len = glm::length(area2);
+    for (int32_t v : tri) {
+      const double mean = glm::length(normal_sum[size_t(v)]);
+      if (!(len > 0 && mean > 0 && glm::dot(area2, normal_sum[size_t(v)]) >= kSmoothCos * len * mean))
+        smooth_[size_t(v)] = 0;
+    }
+  }
+  master_.assign(n_bodies * n_bodies, 0);
+  for (size_t a = 0; a < n_bodies; ++a)
+    for (size_t b = 0; b < n_bodies; ++b) {
+      if (a == b || edges[a] == 0 || edges[b] == 0) continue;
+      const double ea = edge_sum[a] / double(edges[a]), eb = edge_sum[b] / double(edges[b]);
+      master_[a * n_bodies + b] = ea > (1 + kAlikeEdges) * eb || (ea >= (1 - kAlikeEdges) * eb && a > b) ? 1 : 0;
+    }
   best_.assign(vertices_.size(), Best{});
   tri_lo_.assign(triangles_.size(), Vec3(0.0));
   body_lo_.assign(vertex_sets_.size(), Vec3(0.0));
@@ -758,6 +798,28 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       w[count++] = weight;
     };
     const Vertex& vx = vertices_[size_t(v)];
+    // A master's smooth vertex only where the slave's vertices let it in
+    // deeper than the slop, now or by the end of the next step (master_).
+    if (smooth_[size_t(v)] && master_[size_t(vx.body) * vertex_sets_.size() + size_t(tri_body_[size_t(best.t)])]) {
+      double vn = 0, an = 0;  // relative to the triangle, along its normal
+      for (size_t c = 0; c < 4 && vx.node[c] >= 0; ++c) {
+        vn += vx.w[c] * glm::dot(velocity(vx.node[c]), best.n);
+        an += vx.w[c] * glm::dot(acceleration(vx.node[c]), best.n);
+      }
+      const Tri& tri = triangles_[size_t(best.t)];
+      for (size_t j = 0; j < 3; ++j) {
+        const Vertex& ty = vertices_[size_t(tri[j])];
+        for (size_t c = 0; c < 4 && ty.node[c] >= 0; ++c) {
+          vn -= best.b[int(j)] * ty.w[c] * glm::dot(velocity(ty.node[c]), best.n);
+          an -= best.b[int(j)] * ty.w[c] * glm::dot(acceleration(ty.node[c]), best.n);
+        }
+      }
+      const double next = best.gap + dt * vn + 0.5 * dt * dt * an;
+      if (std::min(best.gap, next) > -slop_) {
+        best = Best{};
+        continue;
+      }
+    }
     for (size_t c = 0; c < 4 && vx.node[c] >= 0; ++c) add(vx.node[c], vx.w[c]);
     const Tri& tri = triangles_[size_t(best.t)];
     for (size_t j = 0; j < 3; ++j) {

@@ -12,13 +12,24 @@
 // the accelerations follow by eq. (9) as for proxies. Coulomb friction, when
 // asked, acts in the same impulse.
 //
-// Why vertex-face, both ways, on the surfaces contact meets (the fine
-// surfaces, else the boundaries): it is what SOFA's and Bridson et al.'s
-// (2002) deformable contact start from, the fine surface is what the user
-// sees touch, and it costs one test per vertex near a triangle. Edge-edge
-// contact is left out: with both surfaces' vertices tested against the
-// other's faces, two convex edges can cross between vertices by at most
-// the surfaces' cell size.
+// Why vertex-face on the surfaces contact meets (the fine surfaces, else
+// the boundaries): it is what SOFA's and Bridson et al.'s (2002) deformable
+// contact start from, the fine surface is what the user sees touch, and it
+// costs one test per vertex near a triangle. Between two bodies it is
+// tested both ways at edges and corners, and one way across smooth patches:
+// the finer surface's vertices (the slave's) against the coarser's
+// triangles (the master's), the master's smooth vertices only where the
+// slave's have let them in deeper than the slop (now, or by the end of the
+// next step as eq. (7) takes them). Both ways everywhere (the two-pass
+// node-to-segment method) over-constrains a resting patch, each point
+// nearly a combination of the reverse ones (Puso & Laursen 2004), and the
+// projection's sweeps stall there (BodyContact.ARestingPatchSettles-
+// WithinItsSweeps; contact_bench --bodies times it). A corner or an edge of
+// the master can enter the slave's surface between its vertices, and keeps
+// its points. Self contact is tested both ways. Edge-edge contact is left
+// out: with both surfaces' edge vertices tested against the other's faces,
+// two convex edges can cross between vertices by at most the surfaces'
+// cell size.
 //
 // Found without tunnelling: a vertex counts when it is behind the
 // triangle's plane at t_{n+1} over the triangle (its projection inside it)
@@ -111,6 +122,9 @@ class BodyContact {
   // (sum J times their weights) [N s]: the constraint holding them takes it,
   // and given() sums to its opposite.
   const Vec3& held_given() const { return held_given_; }
+  // Whether the latest apply()'s projection settled within its sweeps
+  // (ImpulseSolve::settled).
+  bool settled() const { return solve_.settled(); }
   // The sum of the latest apply()'s points' |J| [N s].
   double impulse_sum() const { return impulse_sum_; }
 
@@ -178,6 +192,11 @@ class BodyContact {
   std::vector<ClusterSet> vertex_sets_, tri_sets_;  // per body
   std::vector<int32_t> vertex_first_, tri_first_;   // per body: its first vertex, triangle
   std::vector<int32_t> nodes_;                      // every node a vertex follows
+  std::vector<uint8_t> smooth_;                     // per vertex: not on an edge or corner at rest (kSmoothCos)
+  // Per pair of bodies (a x n_bodies + b): a is the master of the pair (its
+  // surface the coarser), its smooth vertices given points against b's
+  // triangles only past the slop.
+  std::vector<uint8_t> master_;
   // Per step.
   std::vector<int32_t> nodes_body_;  // body of each of nodes_
   // Per node of nodes_ (indexed like the model's, sparse): at t_{n+1}, t_n,

@@ -77,6 +77,7 @@ void ImpulseSolve::solve(std::vector<ContactPoint>& points, size_t n_proxies, st
   order_.resize(points.size());
   std::copy(group_begin_.begin(), group_begin_.begin() + ptrdiff_t(n_groups), group_fill_.begin());
   for (size_t m = 0; m < points.size(); ++m) order_[size_t(group_fill_[group(points[m])]++)] = int32_t(m);
+  settled_ = true;
   for (size_t g = 0; g < n_groups; ++g) {
     if (group_begin_[g] == group_begin_[g + 1]) continue;
     const CoupledBodyState* body = g >= n_proxies ? &bodies[g - n_proxies] : nullptr;
@@ -86,7 +87,8 @@ void ImpulseSolve::solve(std::vector<ContactPoint>& points, size_t n_proxies, st
       return c.inv_mass + 1.0 / body->c.mass + glm::dot(re, re) / body->c.inertia;
     };
     double first = 0;
-    for (int sweep = 0; sweep < (body ? kMaxBodySweeps : kMaxSweeps); ++sweep) {
+    bool stopped = false;
+    for (int sweep = 0; sweep < (body ? kMaxBodySweeps : kMaxSweeps) && !stopped; ++sweep) {
       double largest = 0;
       for (int32_t m = group_begin_[g]; m < group_begin_[g + 1]; ++m) {
         ContactPoint& c = points[size_t(order_[size_t(m)])];
@@ -113,8 +115,9 @@ void ImpulseSolve::solve(std::vector<ContactPoint>& points, size_t n_proxies, st
         largest = std::max(largest, change);
       }
       if (sweep == 0) first = largest;
-      if (largest <= std::max(tolerance * first, floor)) break;
+      stopped = largest <= std::max(tolerance * first, floor);
     }
+    settled_ = settled_ && stopped;
   }
 }
 

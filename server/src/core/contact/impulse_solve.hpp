@@ -78,6 +78,11 @@ class ImpulseSolve {
   void solve(std::vector<ContactPoint>& points, size_t n_proxies, std::vector<CoupledBodyState>& bodies,
              const std::vector<Vec3>& v, const std::vector<double>& mass, double tolerance = 1e-6, double floor = 0);
 
+  // Whether the latest solve() stopped by its tolerance in every group, not
+  // at its most sweeps (a group whose points fight each other: its
+  // velocities are left still changing).
+  bool settled() const { return settled_; }
+
   // The slots given a velocity change since the last clear(), and each one's.
   const std::vector<int32_t>& moved() const { return moved_; }
   const Vec3& dv(int32_t slot) const { return dv_[size_t(slot)]; }
@@ -94,6 +99,7 @@ class ImpulseSolve {
   std::vector<uint8_t> moved_flag_;                // per slot: in moved_
   std::vector<int32_t> order_;                     // the points' indices, by group
   std::vector<int32_t> group_begin_, group_fill_;  // per group: its range in order_
+  bool settled_ = true;
 };
 
 }  // namespace tactile

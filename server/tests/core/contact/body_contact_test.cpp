@@ -213,6 +213,34 @@ TEST(BodyContact, ABodyRestingOnAnotherComesToRest) {
   EXPECT_GT(lowest_y(m, s, 1), 0.02 - 0.2e-3);
 }
 
+// A block resting on a plate of a coarser mesh: every step's projection
+// settles within its sweeps, and no vertex sinks in deeper than the depth
+// tolerance allows. (Tested both ways across the patch, each point nearly a
+// combination of the reverse ones, the sweeps ran out every step.)
+TEST(BodyContact, ARestingPatchSettlesWithinItsSweeps) {
+  BodyParts plate = block("plate", Vec3(-0.1, -0.01, -0.1), Vec3(0.1, 0, 0.1), {9, 1, 9}, 1e5);
+  plate.essential.push_back(hold_box(Vec3(-1), Vec3(1, -0.0099, 1)));
+  ModelSpec spec =
+      scene({plate, block("block", Vec3(-0.03, 0, -0.03), Vec3(0.03, 0.03, 0.03), {6, 3, 6}, 1e5)}, true, 20.0);
+  spec.effects.body_depth_tolerance = 1e-4;
+  const Model<double> m = build_model<double>(spec);
+  Stepper<double> stepper(m);
+  State<double> s = stepper.make_state();
+  const double dt = 0.9 * m.dt_rest;
+  int steps = 0, unsettled = 0;
+  double lowest = 1;
+  for (int k = 0; k < int(0.3 / dt); ++k) {
+    ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+    if (k < int(0.1 / dt)) continue;  // (settling onto it)
+    ++steps;
+    unsettled += !stepper.body_contact().settled();
+    lowest = std::min(lowest, lowest_y(m, s, 1));
+  }
+  EXPECT_GT(stepper.body_contact().body_contacts(), 0);  // resting on it
+  EXPECT_EQ(unsettled, 0) << "of " << steps << " steps";
+  EXPECT_GT(lowest, -2 * spec.effects.body_depth_tolerance);
+}
+
 TEST(BodyContact, AbsentTheBodiesPassThroughEachOther) {
   ModelSpec spec = scene({block("a", Vec3(0.0), Vec3(0.02), {1, 1, 1}),
                           block("b", Vec3(0.0205, 0, 0), Vec3(0.0405, 0.02, 0.02), {1, 1, 1})},
