@@ -23,12 +23,13 @@ int main(int argc, char** argv) {
   app.footer("exit status: 0 done, 1 a run failed to build, 2 bad command line");
   app.add_option("--out", out_path, "where the records go")->type_name("FILE.json")->required();
   app.add_flag("--quick", options.quick, "coarse levels and fewer variations (seconds), as the test suite runs it");
-  app.add_option("--scenes", options.scenes, "the shipped scenes (fig2_twist.json, fig3_cantilever.json)")
+  app.add_option("--scenes", options.scenes,
+                 "the shipped scenes (fig2_twist.json, fig3_cantilever.json, spheres_press.json)")
       ->type_name("DIR")
       ->capture_default_str();
   app.add_option("--only", options.only,
-                 "cantilever_deflection, cantilever_frequency, wave_speed, rotation, fig3_tip, fig2_area\n"
-                 "or realtime")
+                 "cantilever_deflection, cantilever_frequency, wave_speed, rotation, fig3_tip, fig2_area,\n"
+                 "hertz (two soft spheres pressed together; not with --quick) or realtime")
       ->type_name("PROBLEM");
   app.add_flag("--quiet", quiet, "no progress bar");
   if (const std::optional<int> status = tactile::parse_command_line(app, argc, argv)) return *status;

@@ -231,6 +231,19 @@ Simulation::BodyContactReport Simulation::body_contact_report() const {
     return r;
   });
 }
+Vec3 Simulation::held_force(int32_t body) const {
+  return visit([&](const auto& b) {
+    Vec3 sum(0.0);
+    size_t c = 0;  // the reactions run over the sets' nodes in order
+    for (const EssentialSet& set : b.model->essential)
+      for (int32_t i : set.nodes) {
+        if (b.model->node_body[size_t(i)] == body)
+          for (int d = 0; d < 3; ++d) sum[d] += double(b.state.reaction[3 * c + size_t(d)]);
+        ++c;
+      }
+    return sum;
+  });
+}
 const std::vector<DeviceReport>& Simulation::device_reports() const {
   return visit([](const auto& b) -> const std::vector<DeviceReport>& { return b.state.contact.device_reports; });
 }

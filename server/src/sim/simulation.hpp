@@ -116,6 +116,10 @@ class Simulation {
     double impulses = 0;
   };
   BodyContactReport body_contact_report() const;
+  // The force the essential BCs exert on body `body`'s held nodes in the
+  // latest step, summed [N] (a body pressed against a held one: the load
+  // through their contact, once it is quasi-static).
+  Vec3 held_force(int32_t body) const;
   double take_contact_impulses(std::vector<double>& impulse);
 
   // Takes over another simulation's body and proxies: displacements,

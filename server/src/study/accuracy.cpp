@@ -289,6 +289,109 @@ AccuracyRecord fig2(const std::string& scenes, Element el, MaterialModel m, int 
   return r;
 }
 
+// ---- Hertz's two spheres ----------------------------------------------------------------------------------
+
+// spheres_press.json at resolution n: two equal neo-Hookean spheres (R = 3 cm, E = 20 kPa, nu = 0.45), the
+// lower held at its base, the upper's top cap driven 8 mm down over 4 s and held. Their density is raised a
+// hundredfold (mass scaling, as quasi-static explicit analyses do): the step grows tenfold, and the spheres'
+// lowest mode (about 0.1 s) stays some forty times quicker than the press. At 2, 3 and 4.4 s, each a mean
+// over the 0.1 s before it: the load (the lower base's reaction), the approach of the centres (the mean
+// displacement of the nodes within 5 mm of each, less the 0.5 mm they start apart), and the contact radius
+// (the farthest from the axis of the lower sphere's boundary nodes within kHertzGap of the contact plane,
+// midway between the two poles). Against Hertz at the load measured: E* = E / (2 (1 - nu^2)), R* = R / 2,
+// a = (3 F R* / (4 E*))^(1/3), approach a^2 / R*.
+constexpr double kHertzMassScale = 100;
+constexpr double kHertzGap = 5e-5;  // [m]
+
+std::vector<AccuracyRecord> hertz(const std::string& scenes, Element el, int n, Precision p) {
+  const std::string path = scenes + "/spheres_press.json";
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot read " + path);
+  nlohmann::json j = nlohmann::json::parse(in);
+  for (nlohmann::json& b : j.at("bodies")) {
+    b["mesh"]["resolution"] = n;
+    b["element"] = el.name();
+    b["material"]["rho"] = kHertzMassScale * b["material"]["rho"].get<double>();
+  }
+  j["integrator"]["precision"] = name_of(p);
+  const Scene sc = parse_scene(j, path).at(0);
+  const MaterialSpec mat = sc.spec.materials.at(0);
+  const double R = 0.03, gap0 = 5e-4;
+  const double e_star = mat.E / (2 * (1 - mat.nu * mat.nu)), r_star = R / 2;
+  Simulation sim(sc.spec);
+  const Vec3 c_lower(0, 0.03, 0), c_upper(0, 0.0905, 0);
+  const auto near = [&](const Vec3& c) {
+    return nodes_where(sim.mesh(), [&](const Vec3& X) { return glm::length(X - c) < 5e-3; });
+  };
+  const std::vector<int32_t> lower_c = near(c_lower), upper_c = near(c_upper);
+  const auto body_of = [&](const Vec3& X) { return X.y < 0.06025 ? 0 : 1; };  // (the spheres start 0.5 mm apart)
+  std::vector<int32_t> lower_surface;
+  for (const std::array<int32_t, 3>& f : compute_boundary_faces(sim.mesh()))
+    for (int32_t i : f)
+      if (body_of(sim.mesh().X[size_t(i)]) == 0) lower_surface.push_back(i);
+  std::sort(lower_surface.begin(), lower_surface.end());
+  lower_surface.erase(std::unique(lower_surface.begin(), lower_surface.end()), lower_surface.end());
+  int32_t lower_pole = lower_surface.front(), upper_pole = 0;
+  for (int32_t i = 0; i < sim.n_nodes(); ++i) {
+    const Vec3& X = sim.mesh().X[size_t(i)];
+    if (glm::length(X - Vec3(0, 0.06, 0)) < glm::length(sim.mesh().X[size_t(lower_pole)] - Vec3(0, 0.06, 0)))
+      lower_pole = i;
+    if (glm::length(X - Vec3(0, 0.0605, 0)) < glm::length(sim.mesh().X[size_t(upper_pole)] - Vec3(0, 0.0605, 0)))
+      upper_pole = i;
+  }
+  struct Sums {
+    double load = 0, approach = 0, radius = 0;
+    int samples = 0;
+  };
+  const std::array<double, 3> at = {2.0, 3.0, 4.4};
+  std::array<Sums, 3> sums{};
+  Stepped total;
+  for (size_t k = 0; k < at.size(); ++k) {
+    const auto sample = [&](const Simulation& now) {
+      if (now.time() < at[k] - 0.1 - 1e-9) return;
+      Sums& s = sums[k];
+      s.load += now.held_force(0).y;
+      s.approach += mean_displacement(now, lower_c, 1) - mean_displacement(now, upper_c, 1) - gap0;
+      const double plane = 0.5 * (0.06 + now.displacement(lower_pole).y + 0.0605 + now.displacement(upper_pole).y);
+      double radius = 0;
+      for (int32_t i : lower_surface) {
+        const Vec3 x = now.mesh().X[size_t(i)] + now.displacement(i);
+        if (x.y >= plane - kHertzGap) radius = std::max(radius, std::hypot(x.x, x.z));
+      }
+      s.radius += radius;
+      ++s.samples;
+    };
+    const Stepped s = step_for(sim, at[k], 0.005, sample);
+    total.steps += s.steps;
+    total.wall += s.wall;
+    if (!s.fault.empty()) {
+      total.fault = s.fault;
+      break;
+    }
+  }
+  std::vector<AccuracyRecord> out;
+  for (const Sums& s : sums) {
+    if (s.samples == 0) continue;
+    const double F = s.load / s.samples, a = s.radius / s.samples, d = s.approach / s.samples;
+    const double a_hertz = std::cbrt(3 * std::max(F, 0.0) * r_star / (4 * e_star));
+    AccuracyRecord radius = make_record("hertz_radius", mat.model, n, sim, sc.spec.integrator.safety, p, total);
+    radius.load = F;
+    radius.value = a;
+    radius.reference = a_hertz;
+    radius.error = a_hertz > 0 ? a / a_hertz - 1 : 0;
+    radius.unit = "m";
+    AccuracyRecord approach = radius;
+    approach.problem = "hertz_approach";
+    approach.value = d;
+    approach.reference = a_hertz * a_hertz / r_star;
+    approach.error = approach.reference > 0 ? d / approach.reference - 1 : 0;
+    out.push_back(radius);
+    out.push_back(approach);
+  }
+  if (out.empty()) out.push_back(make_record("hertz_radius", mat.model, n, sim, sc.spec.integrator.safety, p, total));
+  return out;
+}
+
 // ---- invariance under rigid rotation --------------------------------------------------------------------------
 
 std::pair<AccuracyRecord, AccuracyRecord> rotation(Element el, MaterialModel m, int n, Precision p) {
@@ -462,6 +565,11 @@ std::vector<AccuracyCase> list_accuracy_cases(const AccuracyOptions& o) {
           for (int n : L->figures)
             if (L == &p1 || n < reference_level) add(problem, L->element, m, n, p);
   };
+  // Hertz's spheres, neo-Hookean as the scene is, in float: not quick (a minute and more a run).
+  if (!q && wants("hertz"))
+    for (const Levels* L : {&p1, &p2})
+      for (int n : L == &p1 ? std::vector<int>{1, 2, 3} : std::vector<int>{1, 2})
+        add("hertz", L->element, MaterialModel::NeoHookean, n, Precision::Float);
   figure("fig3_tip", "fig3_reference", q ? 3 : 4);
   figure("fig2_area", "fig2_reference", q ? 2 : 3);
   if (wants("realtime"))
@@ -505,6 +613,9 @@ AccuracyResults run_accuracy_case(const AccuracyCase& c, const std::string& scen
     AccuracyRecord r = fig2(scenes, el, m, n, p);
     r.problem = c.problem;
     out.records.push_back(r);
+  } else if (c.problem == "hertz") {
+    if (m != MaterialModel::NeoHookean) throw std::invalid_argument("accuracy case: hertz is neo-Hookean only");
+    for (AccuracyRecord& r : hertz(scenes, el, n, p)) out.records.push_back(std::move(r));
   } else if (c.problem == "realtime") {
     out.realtime.push_back(realtime(el, m, p, c.quick));
   } else {
@@ -574,6 +685,7 @@ std::string accuracy_json(const AccuracyResults& results, bool quick) {
                         {"tet_steps_per_s", r.tet_steps_per_s},
                         {"fault", r.fault}};
     if (r.problem == "fig3_tip" || r.problem == "fig3_reference") j["tip_m"] = r.tip;
+    if (r.problem.starts_with("hertz_")) j["load_n"] = r.load;
     records.push_back(std::move(j));
   }
   for (const RealtimeRecord& r : results.realtime)
@@ -612,6 +724,7 @@ AccuracyResults accuracy_from_json(const std::string& text) {
     a.tet_steps_per_s = r.at("tet_steps_per_s");
     a.fault = r.at("fault");
     if (r.contains("tip_m")) a.tip = r.at("tip_m");
+    a.load = r.value("load_n", 0.0);
     out.records.push_back(std::move(a));
   }
   for (const nlohmann::json& r : j.at("realtime")) {

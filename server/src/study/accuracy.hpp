@@ -12,6 +12,9 @@
 //   fig2_area              the paper's Fig. 2 column twisted 90 degrees, mid-height section area: likewise
 //   rotation               a body turned rigidly by 90 degrees: elastic energy and volume change, which
 //                          should be zero (the invariance the paper is about)
+//   hertz_radius,          two equal soft spheres pressed together (spheres_press.json), through their
+//   hertz_approach         own contact: the contact radius and the approach of their centres at three
+//                          loads, against Hertz's two-body solution at the load measured
 // and the cost: wall time per step and tet-steps per second on one core, and,
 // per material and precision, the largest mesh of the live poke block that
 // keeps 1 kHz real time (one 1 ms interval stepped in under 1 ms).
@@ -49,6 +52,7 @@ struct AccuracyRecord {
   std::string fault;  // a fault that stopped the run, if any
   // fig3_tip and its reference run: the tip's displacement [m], which the error is measured on.
   std::array<double, 3> tip{};
+  double load = 0;  // hertz_*: the load the two spheres were pressed together with [N]
 };
 
 struct RealtimeRecord {

@@ -266,6 +266,28 @@ TEST(Simulation, EveryShippedSceneTakesACoupledStrikeWithoutAFault) {
   EXPECT_GE(strikes, 8);
 }
 
+// A block hung from its held top under gravity, damped to rest: the force
+// its held nodes take is its weight, upward, and none of it the other body's.
+TEST(Simulation, HeldForceIsTheWeightOfAHangingBody) {
+  const nlohmann::json j = nlohmann::json::parse(R"({
+    "bodies": [
+      { "name": "hung", "mesh": { "primitive": "box", "lo": [0, 0, 0], "hi": [0.02, 0.04, 0.02], "cells": [2, 4, 2] },
+        "material": { "model": "neohookean", "E": 1e5, "nu": 0.3, "rho": 1000 },
+        "boundary": [ { "name": "top", "select": { "box": { "lo": [-1, 0.04, -1], "hi": [1, 1, 1] } }, "fixed": true } ] },
+      { "name": "free", "mesh": { "primitive": "box", "lo": [0.1, 0, 0], "hi": [0.12, 0.02, 0.02], "cells": [1, 1, 1] },
+        "material": { "model": "neohookean", "E": 1e5, "nu": 0.3, "rho": 1000 } }
+    ],
+    "effects": { "gravity": [0, -9.81, 0], "damping": { "alpha": 200.0 } },
+    "run": { "duration": 0.5 }
+  })");
+  Simulation sim(parse_scene(j, "hung.json").at(0).spec);
+  while (sim.time() < 0.5) ASSERT_FALSE(sim.advance(1e-3).fault) << sim.fault().message;
+  const double weight = 0.02 * 0.04 * 0.02 * 1000 * 9.81;
+  EXPECT_NEAR(sim.held_force(0).y, weight, 1e-3 * weight);
+  EXPECT_NEAR(sim.held_force(0).x, 0.0, 1e-6 * weight);
+  EXPECT_EQ(sim.held_force(1), Vec3(0.0));
+}
+
 // A sphere coupled at the default limits (5 N) strikes the corner of a soft
 // block (30 kPa, 3.3 mm cells) at a hand's fastest, 3 m/s, presses on and
 // draws back: the elements it hits are crushed for a moment, their critical
