@@ -499,9 +499,10 @@ Json HeadlessRun::summary_json() const {
   Json cost;
   for (int p = 0; p < kPassCount; ++p) {
     const Pass pass = Pass(p);
-    cost[to_string(pass)] = Json{{"total_s", timer_.total(pass)},
-                                 {"per_step_us", result.steps ? 1e6 * timer_.total(pass) / double(result.steps) : 0.0},
-                                 {"share", timer_.total(pass) / step_time}};
+    cost[sim_.pass_name(pass)] =
+        Json{{"total_s", timer_.total(pass)},
+             {"per_step_us", result.steps ? 1e6 * timer_.total(pass) / double(result.steps) : 0.0},
+             {"share", timer_.total(pass) / step_time}};
   }
   s["performance"] = Json{{"wall_s", wall_},
                           {"wall_with_output_s", std::chrono::duration<double>(Clock::now() - started_).count()},

@@ -162,7 +162,7 @@ Bytes LiveHost::telemetry_message(const std::string& extra_fault) {
   std::vector<fb::Offset<wire::EffectCost>> costs;  // per pass of the step; those a scene lacks cost 0 and are left out
   for (int p = 0; p < kPassCount; ++p)
     if (st.pass_ns[size_t(p)] > 0)
-      costs.push_back(wire::CreateEffectCostDirect(b, to_string(Pass(p)), float(st.pass_ns[size_t(p)])));
+      costs.push_back(wire::CreateEffectCostDirect(b, live_->sim().pass_name(Pass(p)), float(st.pass_ns[size_t(p)])));
   return seal(b, wire::Message::Telemetry,
               wire::CreateTelemetryDirect(
                   b, now_ns(), uint64_t(st.steps), st.clock, float(st.step_mean_us), float(st.step_max_us),

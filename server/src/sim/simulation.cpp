@@ -231,6 +231,10 @@ Simulation::BodyContactReport Simulation::body_contact_report() const {
     return r;
   });
 }
+const char* Simulation::pass_name(Pass p) const {
+  if (p != Pass::BodyContact) return to_string(p);
+  return visit([](const auto& b) { return b.stepper.body_contact().effect_name(); });
+}
 Vec3 Simulation::held_force(int32_t body) const {
   return visit([&](const auto& b) {
     Vec3 sum(0.0);

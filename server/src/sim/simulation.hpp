@@ -116,6 +116,9 @@ class Simulation {
     double impulses = 0;
   };
   BodyContactReport body_contact_report() const;
+  // A pass's name as its cost is reported: to_string(p), but the body
+  // contact pass named by what the scene asks of it (BodyContact::effect_name).
+  const char* pass_name(Pass p) const;
   // The force the essential BCs exert on body `body`'s held nodes in the
   // latest step, summed [N] (a body pressed against a held one: the load
   // through their contact, once it is quasi-static).

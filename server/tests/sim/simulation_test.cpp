@@ -288,6 +288,31 @@ TEST(Simulation, HeldForceIsTheWeightOfAHangingBody) {
   EXPECT_EQ(sim.held_force(1), Vec3(0.0));
 }
 
+// The body contact pass's cost is named by what the scene asks of it: the
+// telemetry and the headless summary tell a self-contact scene's cost from
+// a contact between bodies.
+TEST(Simulation, TheBodyContactPassIsNamedByItsEffects) {
+  const auto named = [](bool between, bool self) {
+    nlohmann::json j = nlohmann::json::parse(R"({
+      "bodies": [
+        { "name": "a", "mesh": { "primitive": "box", "lo": [0, 0, 0], "hi": [0.02, 0.02, 0.02], "cells": [1, 1, 1] },
+          "material": { "model": "neohookean", "E": 1e5, "nu": 0.3, "rho": 1000 } },
+        { "name": "b", "mesh": { "primitive": "box", "lo": [0.1, 0, 0], "hi": [0.12, 0.02, 0.02], "cells": [1, 1, 1] },
+          "material": { "model": "neohookean", "E": 1e5, "nu": 0.3, "rho": 1000 } }
+      ],
+      "effects": {},
+      "run": { "duration": 0.1 }
+    })");
+    if (between) j["effects"]["body_contact"] = true;
+    if (self) j["effects"]["self_contact"] = true;
+    return std::string(Simulation(parse_scene(j, "named.json").at(0).spec).pass_name(Pass::BodyContact));
+  };
+  EXPECT_EQ(named(true, false), "body_contact");
+  EXPECT_EQ(named(false, true), "self_contact");
+  EXPECT_EQ(named(true, true), "body_and_self_contact");
+  EXPECT_EQ(named(false, false), "body_contact");  // (absent: no cost reported under any name)
+}
+
 // A sphere coupled at the default limits (5 N) strikes the corner of a soft
 // block (30 kPa, 3.3 mm cells) at a hand's fastest, 3 m/s, presses on and
 // draws back: the elements it hits are crushed for a moment, their critical

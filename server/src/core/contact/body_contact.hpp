@@ -98,6 +98,11 @@ class BodyContact {
   // or self contact. `parallel` (optional) splits the per-step passes.
   explicit BodyContact(const Model<Real>& model, ParallelFor* parallel = nullptr);
   bool active() const { return active_; }
+  // The effect its pass is, as costs name it: body_contact, self_contact, or
+  // body_and_self_contact (one pass does both; its cost is not split).
+  const char* effect_name() const {
+    return between_ && self_ ? "body_and_self_contact" : self_ ? "self_contact" : "body_contact";
+  }
 
   // The pass for the step ending at s.t + dt: after the essential BCs have
   // set their nodes' velocities (held nodes take no impulse; they move as
