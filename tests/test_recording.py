@@ -592,6 +592,58 @@ def test_a_device_with_its_limits_resimulates_bit_for_bit(tmp_path: pathlib.Path
     assert m and m.group(1) == m.group(2) and m.group(3) == m.group(4), r.stdout
 
 
+# A block resting on a held bed, both soft, with contact between them; the stylus presses the block.
+TWO_BODIES: dict[str, Any] = {
+    "name": "two_bodies",
+    "bodies": [
+        {"name": "bed", "mesh": {"primitive": "box", "lo": [-0.03, -0.01, -0.03], "hi": [0.03, 0, 0.03],
+                                 "cells": [6, 1, 6]},
+         "material": {"model": "neohookean", "E": 30000, "nu": 0.3, "rho": 1000},
+         "boundary": [{"name": "base", "select": {"box": {"lo": [-1, -1, -1], "hi": [1, -0.0099, 1]}},
+                       "fixed": True}]},
+        {"name": "block", "mesh": {"primitive": "box", "lo": [-0.015, 0.0002, -0.015],
+                                   "hi": [0.015, 0.0152, 0.015], "cells": [4, 2, 4]},
+         "material": {"model": "neohookean", "E": 30000, "nu": 0.3, "rho": 1000}},
+    ],
+    "effects": {"gravity": [0, -9.81, 0], "damping": {"alpha": 20.0}, "body_contact": True},
+    "proxies": [{"name": "tip", "device": "stylus", "shape": "sphere", "radius": 0.008, "position": [0, 0.0245, 0]}],
+    "run": {"duration": 1.0},
+}
+
+
+def test_a_session_of_two_bodies_in_contact_records_both_and_resimulates_bit_for_bit(
+        tmp_path: pathlib.Path) -> None:
+    """A device presses a block resting on a bed, live, recorded: the recording's scene names both bodies, its
+    states carry both bodies' vertices, its telemetry the cost of their contact, and a re-simulation of its
+    inputs gives every state and haptic frame bit for bit."""
+    path = tmp_path / "two.mcap"
+
+    async def press(port: int) -> None:
+        async with websockets.connect(url(port), **READ_ON) as dev:
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            for k in range(1, 2500):  # (telemetry comes once a second, with the latest second's costs)
+                await dev.send(codec.encode(device_input(k, 0.0245 - 0.004 * min(k, 300) / 300)))
+                await asyncio.sleep(0.001)
+
+    with server_process(tmp_path, TWO_BODIES, TOKEN, "--record", str(path), file_name="two.json") as (port, _):
+        asyncio.run(press(port))
+    got = read_closed(path)
+    scene = got["/scene"][0][1]
+    assert [b.name.decode() if isinstance(b.name, bytes) else b.name for b in scene.bodies] == ["bed", "block"]
+    vertices = max(b.vertexEnd for b in scene.bodies)
+    assert all(len(s.positions) == 3 * vertices for _, s in got["/state"]), "a state without both bodies"
+    costs = [c for _, t in got["/telemetry"] for c in (t.effectCosts or [])]
+    names = {c.name.decode() if isinstance(c.name, bytes) else c.name for c in costs}
+    assert "body_contact" in names, names
+    forces = [abs(h.devices[0].force.y) for _, h in got["/haptic"]]
+    assert max(forces) > 0.05, f"the stylus never pressed the block ({max(forces)} N)"
+    r = resim(str(path))
+    assert r.returncode == 0, r.stdout + r.stderr
+    m = re.search(r"states: (\d+) of (\d+) identical bit for bit; haptic frames: (\d+) of (\d+)", r.stdout)
+    assert m and m.group(1) == m.group(2) and m.group(3) == m.group(4), r.stdout
+    assert int(m.group(2)) == len(got["/state"]) > 10, r.stdout
+
+
 def test_a_resimulation_refuses_what_it_cannot_replay_by_name(tmp_path: pathlib.Path) -> None:
     # Recorded from the middle of a session: the body's state at the start is not in the file.
     rec_dir = tmp_path / "recordings"
