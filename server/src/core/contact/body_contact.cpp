@@ -798,33 +798,30 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       w[count++] = weight;
     };
     const Vertex& vx = vertices_[size_t(v)];
-    // A master's smooth vertex only where the slave's vertices let it in
-    // deeper than the slop, now or by the end of the next step (master_).
-    if (smooth_[size_t(v)] && master_[size_t(vx.body) * vertex_sets_.size() + size_t(tri_body_[size_t(best.t)])]) {
-      double vn = 0, an = 0;  // relative to the triangle, along its normal
-      for (size_t c = 0; c < 4 && vx.node[c] >= 0; ++c) {
-        vn += vx.w[c] * glm::dot(velocity(vx.node[c]), best.n);
-        an += vx.w[c] * glm::dot(acceleration(vx.node[c]), best.n);
-      }
-      const Tri& tri = triangles_[size_t(best.t)];
-      for (size_t j = 0; j < 3; ++j) {
-        const Vertex& ty = vertices_[size_t(tri[j])];
-        for (size_t c = 0; c < 4 && ty.node[c] >= 0; ++c) {
-          vn -= best.b[int(j)] * ty.w[c] * glm::dot(velocity(ty.node[c]), best.n);
-          an -= best.b[int(j)] * ty.w[c] * glm::dot(acceleration(ty.node[c]), best.n);
-        }
-      }
-      const double next = best.gap + dt * vn + 0.5 * dt * dt * an;
-      if (std::min(best.gap, next) > -slop_) {
-        best = Best{};
-        continue;
-      }
-    }
     for (size_t c = 0; c < 4 && vx.node[c] >= 0; ++c) add(vx.node[c], vx.w[c]);
     const Tri& tri = triangles_[size_t(best.t)];
     for (size_t j = 0; j < 3; ++j) {
       const Vertex& ty = vertices_[size_t(tri[j])];
       for (size_t c = 0; c < 4 && ty.node[c] >= 0; ++c) add(ty.node[c], -best.b[int(j)] * ty.w[c]);
+    }
+    // The vertex's velocity and acceleration relative to the triangle, where
+    // a point ahead of it or a master's smooth vertex needs them (below).
+    const bool master =
+        smooth_[size_t(v)] && master_[size_t(vx.body) * vertex_sets_.size() + size_t(tri_body_[size_t(best.t)])];
+    Vec3 rel_v(0.0), rel_a(0.0);
+    if (master || best.gap >= 0)
+      for (size_t k = 0; k < count; ++k) {
+        rel_v += w[k] * velocity(node[k]);
+        rel_a += w[k] * acceleration(node[k]);
+      }
+    // A master's smooth vertex only where the slave's vertices let it in
+    // deeper than the slop, now or by the end of the next step (master_).
+    if (master) {
+      const double next = best.gap + dt * glm::dot(rel_v, best.n) + 0.5 * dt * dt * glm::dot(rel_a, best.n);
+      if (std::min(best.gap, next) > -slop_) {
+        best = Best{};
+        continue;
+      }
     }
     ContactPoint& p = points_.emplace_back();  // (dropped below if it moves no free node)
     p.proxy = 0;
@@ -848,14 +845,8 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     // a stiff surface's own oscillation, so it is left to the ahead case,
     // which the paper's rule follows once the vertex is behind.)
     p.vp = Vec3(0.0);
-    if (best.gap >= 0) {
-      Vec3 rel_v(0.0), rel_a(0.0);
-      for (size_t k = 0; k < count; ++k) {
-        rel_v += w[k] * velocity(node[k]);
-        rel_a += w[k] * acceleration(node[k]);
-      }
+    if (best.gap >= 0)
       p.vp = (0.5 * glm::dot(rel_v, p.n) - 0.5 * best.gap / dt - 0.25 * dt * glm::dot(rel_a, p.n)) * p.n;
-    }
     size_t free = 0;
     double held_w = 0;
     for (size_t k = 0; k < count; ++k) {
