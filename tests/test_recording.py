@@ -23,6 +23,7 @@ from collections import defaultdict
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 import websockets
 from mcap.reader import make_reader
 from mcap.records import Footer
@@ -42,6 +43,7 @@ from tactile_proto.generated.Seek import SeekT
 from tactile_proto.generated.SetSpeed import SetSpeedT
 from tactile_proto.generated.StartRecording import StartRecordingT
 from tactile_proto.generated.StopRecording import StopRecordingT
+from tactile_recording.gaps import frame_gaps, gaps, signed_gaps
 from tactile_recording.reader import TOPICS, open_recording
 from test_scenes_schema import built
 from test_server import READ_ON, SCENE, TOKEN, control, device_input, hello, next_of, running_server, set_parameter, url
@@ -642,6 +644,37 @@ def test_a_session_of_two_bodies_in_contact_records_both_and_resimulates_bit_for
     m = re.search(r"states: (\d+) of (\d+) identical bit for bit; haptic frames: (\d+) of (\d+)", r.stdout)
     assert m and m.group(1) == m.group(2) and m.group(3) == m.group(4), r.stdout
     assert int(m.group(2)) == len(got["/state"]) > 10, r.stdout
+    # The block rests on the bed all along: tactile-recording gaps finds it there, in every state, no deeper
+    # than the contact's allowance and never apart by more than its first millimetre's fall.
+    found = gaps(open_recording(path))
+    assert [len(found.frames), list(found.pairs)] == [len(got["/state"]), [("bed", "block")]], found.notes
+    every = [row[("bed", "block")] for _, row in found.frames]
+    assert all(-5e-4 <= g <= 1e-3 for g in every), (min(every), max(every))
+    assert found.pairs[("bed", "block")].smallest_m == min(every)
+    # The last state with the block moved 2 mm down into the bed, then 3 mm up off it: the gap follows.
+    x = np.asarray(got["/state"][-1][1].positions, np.float64).reshape(-1, 3)
+    block = scene.bodies[1]
+    for dy in (-0.002, 0.003):
+        moved = x.copy()
+        moved[block.vertexBegin:block.vertexEnd, 1] += dy
+        assert abs(frame_gaps(scene, moved)[("bed", "block")] - (every[-1] + dy)) < 2e-4, dy
+
+
+def test_the_gap_from_a_closed_surface_is_signed_by_its_winding_number() -> None:
+    """A unit cube's surface (two triangles a side, outward): its centre is 0.5 inside, a point 0.2 above a face
+    0.2 outside, one off an edge as far as the edge, one 0.1 in from a face 0.1 inside, one far off none."""
+    corner = [(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)]
+    at = {c: k for k, c in enumerate(corner)}
+    sides = [((0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)), ((1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1)),
+             ((0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)), ((0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)),
+             ((0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)), ((0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1))]
+    triangles = [t for a, b, c, d in sides for t in ((a, b, c), (a, c, d))]
+    surface = np.array([[corner[at[v]] for v in t] for t in triangles], dtype=float)
+    points = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 1.2], [1.1, 1.1, 0.5], [0.5, 0.9, 0.5], [3.0, 3.0, 3.0]])
+    got = signed_gaps(points, surface, near=1.0)
+    assert np.allclose(got[:4], [-0.5, 0.2, np.hypot(0.1, 0.1), -0.1]) and np.isnan(got[4]), got
+    # Turned inside out, the sign turns.
+    assert np.allclose(signed_gaps(points[:4], surface[:, ::-1], near=1.0), [0.5, 0.2, np.hypot(0.1, 0.1), 0.1])
 
 
 def test_a_resimulation_refuses_what_it_cannot_replay_by_name(tmp_path: pathlib.Path) -> None:

@@ -16,6 +16,12 @@
                                                            compare.png, prints whether they are identical bit
                                                            for bit or their largest differences;
                                                            tactile_recording/compare.py says what each holds
+    tactile-recording gaps FILE [--every N] [--near M] [--out CSV]
+                                                           between the bodies of a session: per pair, the
+                                                           smallest signed gap from a surface vertex of one
+                                                           to the other's surface over every Nth state
+                                                           (negative: inside, how deep); tactile_recording/
+                                                           gaps.py says how it is measured
     tactile-recording recover FILE OUT                     a recording cut short (a killed server) rewritten
                                                            as a complete, indexed MCAP file that the mcap
                                                            package's default readers and other tools open
@@ -37,6 +43,9 @@ from tactile_proto.codec import ProtocolError, decode
 
 from .compare import CompareError, compare, plot, plot_available, summarize, write_csv
 from .export import export
+from .gaps import gaps
+from .gaps import summarize as summarize_gaps
+from .gaps import write_csv as write_gaps_csv
 from .reader import TOPICS, Recording, RecordingError, open_recording, recover
 
 
@@ -98,6 +107,13 @@ def _seconds(text: str) -> float:
     return s
 
 
+def _metres(text: str) -> float:
+    m = float(text)
+    if not m > 0:
+        raise argparse.ArgumentTypeError(f"{text}: give a distance above 0 [m]")
+    return m
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="tactile-recording", description=__doc__.split("\n")[0],
                                      epilog="\n".join(__doc__.split("\n")[2:]),
@@ -113,6 +129,17 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     out.add_argument("--vtu", action="store_true", help="surface-<scene_id>.pvd and its .vtu files (needs meshio)")
     out.add_argument("--every", type=_count, default=1, metavar="N",
                      help="VTU of every Nth state frame of each scene (default 1: all of them)")
+    gap = commands.add_parser(
+        "gaps", help="the smallest signed gap between each pair of bodies over the session",
+        description="For every Nth state frame, per pair of bodies, the smallest signed distance from a surface "
+                    "vertex of one to the closed surface of the other, both ways (negative: inside it, how deep; "
+                    "a body's fine surface when it has one). Prints each pair's smallest and when; --out writes "
+                    "the per-frame table. Exit status 0 when the file was read, 2 when not.")
+    gap.add_argument("file")
+    gap.add_argument("--every", type=_count, default=1, metavar="N", help="every Nth state frame (default 1)")
+    gap.add_argument("--near", type=_metres, default=0.005, metavar="M",
+                     help="measure vertices within M [m] of the other surface (default 0.005)")
+    gap.add_argument("--out", metavar="CSV", help="also write the per-frame table here")
     fix = commands.add_parser(
         "recover", help="rewrite a recording cut short (a killed server) into a complete, indexed MCAP file",
         description="Reads everything whole in FILE (up to its cut, past damaged chunks) and writes it to OUT "
@@ -169,8 +196,30 @@ def run_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_gaps(args: argparse.Namespace) -> int:
+    """`gaps`: the summary on stdout, notes and problems on stderr."""
+    try:
+        recording = open_recording(args.file)
+        result = gaps(recording, every=args.every, near=args.near)
+        if args.out:
+            rows = write_gaps_csv(result, args.out)
+    except (RecordingError, OSError) as e:
+        print(f"tactile-recording: {e}", file=sys.stderr)
+        return 2
+    print(summarize_gaps(result))
+    if args.out:
+        print(f"{args.out}: {rows} rows")
+    for note in result.notes:
+        print(f"note: {note}", file=sys.stderr)
+    for problem in recording.problems:
+        print(f"problem: {problem}", file=sys.stderr)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.command == "gaps":
+        return run_gaps(args)
     if args.command == "compare":
         return run_compare(args)
     if args.command == "recover":
