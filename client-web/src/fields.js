@@ -4,6 +4,9 @@
 /** @import { SceneDescriptionT, StateFrameView } from '@tactile/proto' */
 
 export const DISPLACEMENT = 'displacement';
+// Which body each point is on (a scene of several bodies): the body's place in the scene's list, drawn in
+// the legend's colours at evenly spaced stops, the first body at the map's start and the last at its end.
+export const BODY = 'body';
 
 /** @typedef {{ name: string, unit: string, description: string }} FieldChoiceInfo */
 
@@ -15,6 +18,10 @@ export class FieldChoice {
     this.name = DISPLACEMENT;
     /** @type {FieldChoiceInfo[]} */
     this.available = [{ name: DISPLACEMENT, unit: 'm', description: 'how far each point moved from rest' }];
+    /** @type {string[]} */
+    this.bodyNames = [];
+    /** @type {Float32Array | null} */
+    this.bodyOf = null; // per frame vertex: its body's place in the scene's list (several bodies)
   }
 
   // A new scene: what it offers; the wanted field (the menu's last choice, or ?field=) when the scene has
@@ -22,6 +29,20 @@ export class FieldChoice {
   /** @param {SceneDescriptionT} d */
   setDescription(d) {
     this.available = [this.available[0]];
+    const bodies = d.bodies || [];
+    /** @type {string[]} */
+    this.bodyNames = bodies.map((b, k) => /** @type {string | null} */ (b.name) || `body ${k + 1}`);
+    /** @type {Float32Array | null} */
+    this.bodyOf = null;
+    if (bodies.length > 1) {
+      this.bodyOf = new Float32Array(Math.max(...bodies.map((b) => b.vertexEnd)));
+      bodies.forEach((b, k) => this.bodyOf?.fill(k, b.vertexBegin, b.vertexEnd));
+      this.available.push({
+        name: BODY,
+        unit: '',
+        description: `which body each point is on: ${this.bodyNames.join(', ')}, in the legend's colours from its start`,
+      });
+    }
     for (const f of d.fields || []) {
       const name = /** @type {string | null} */ (f.name) || '';
       if (name)
@@ -38,7 +59,18 @@ export class FieldChoice {
 
   // The field names to ask the server for (none for displacement).
   asked() {
-    return this.name === DISPLACEMENT ? [] : [this.name];
+    return this.name === DISPLACEMENT || this.name === BODY ? [] : [this.name];
+  }
+
+  // Whether the colours span from zero (a magnitude, or the bodies' places) rather than the range seen.
+  fromZero() {
+    return this.name === DISPLACEMENT || this.name === BODY;
+  }
+
+  // What the legend's ends say: the first and the last body's names for the bodies, else null (the range).
+  ends() {
+    const n = this.bodyNames ? this.bodyNames.length : 0;
+    return this.name === BODY && n > 1 ? [this.bodyNames[0], this.bodyNames[n - 1]] : null;
   }
 
   info() {
@@ -54,6 +86,11 @@ export class FieldChoice {
       for (let i = 0, j = 0; i < out.length; i++, j += 3) {
         out[i] = Math.hypot(p[j] - rest[j], p[j + 1] - rest[j + 1], p[j + 2] - rest[j + 2]);
       }
+      return true;
+    }
+    if (this.name === BODY) {
+      if (!this.bodyOf || this.bodyOf.length !== out.length) return false;
+      out.set(this.bodyOf);
       return true;
     }
     const v = frame.fields.get(this.name);

@@ -23,7 +23,7 @@ import { PRESETS, START, applyFraming, computeBoundingSphere, viewDirection } fr
 import { cssGradient } from './colormap.js';
 import { ClosedError, ServerError, connect } from './connection.js';
 import { ControlPanel } from './controls.js';
-import { DISPLACEMENT, FieldChoice } from './fields.js';
+import { FieldChoice } from './fields.js';
 import { FrameBuffer } from './frames.js';
 import { Panels } from './panels.js';
 import { PointerDevice } from './pointer.js';
@@ -187,7 +187,8 @@ fieldMenu.addEventListener('change', () => {
   fieldChoice.wanted = fieldMenu.value;
   showFieldChoice();
   askFields();
-  if (view) view.resetScalarRange(fieldChoice.name === DISPLACEMENT);
+  if (view) view.resetScalarRange(fieldChoice.fromZero());
+  legendRange[0] = NaN; // (the ends' text is rewritten at the next screen frame)
 });
 
 /** @type {SceneView | null} */
@@ -300,7 +301,7 @@ function onScene(d) {
   fieldChoice.setDescription(d);
   showFieldChoice();
   askFields();
-  view.resetScalarRange(fieldChoice.name === DISPLACEMENT);
+  view.resetScalarRange(fieldChoice.fromZero());
   scalarsNow = new Float32Array(view.scalars.length);
   showWire();
   resize();
@@ -474,8 +475,9 @@ function frame() {
     if (lo !== legendRange[0] || hi !== legendRange[1]) {
       legendRange[0] = lo;
       legendRange[1] = hi;
-      $('legend-lo').textContent = lo.toPrecision(3);
-      $('legend-hi').textContent = hi.toPrecision(3);
+      const ends = fieldChoice.ends();
+      $('legend-lo').textContent = ends ? ends[0] : lo.toPrecision(3);
+      $('legend-hi').textContent = ends ? ends[1] : hi.toPrecision(3);
     }
   }
   controls.update();
