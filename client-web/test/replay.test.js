@@ -100,3 +100,75 @@ test('a recording replays in the page with its timeline', { timeout: 180000 }, a
     proc.kill('SIGINT');
   }
 });
+
+// A block dropped 5 mm onto a soft bed held at its base: two bodies in contact.
+const TWO_BODIES = {
+  name: 'replay_two_bodies',
+  bodies: [
+    {
+      name: 'bed',
+      mesh: { primitive: 'box', lo: [-0.03, -0.01, -0.03], hi: [0.03, 0, 0.03], cells: [6, 1, 6] },
+      material: { model: 'neohookean', E: 30000, nu: 0.3, rho: 1000 },
+      boundary: [{ name: 'base', select: { box: { lo: [-1, -1, -1], hi: [1, -0.0099, 1] } }, fixed: true }],
+    },
+    {
+      name: 'block',
+      mesh: { primitive: 'box', lo: [-0.015, 0.005, -0.015], hi: [0.015, 0.02, 0.015], cells: [4, 2, 4] },
+      material: { model: 'neohookean', E: 30000, nu: 0.3, rho: 1000 },
+    },
+  ],
+  effects: { gravity: [0, -9.81, 0], damping: { alpha: 20.0 }, body_contact: true },
+  run: { duration: 2 },
+};
+
+test('a recording of two bodies replays with each body drawn and coloured as itself', { timeout: 180000 }, async () => {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-replay-'));
+  const recording = path.join(dir, 'two.mcap');
+  const live = await startServer(TWO_BODIES, ['--record', recording, '--duration', '1']);
+  await new Promise((resolve) => live.proc.on('exit', resolve));
+  assert.ok(fs.statSync(recording).size > 10000, live.proc.output());
+
+  const { proc, port } = await spawnServer(['--replay', recording, '--token', TOKEN]);
+  const { browser, page, problems } = await openPage(port, { query: `?token=${TOKEN}&field=body` });
+  try {
+    await page.waitForFunction(() => window.tactile?.replay && window.tactile.frames >= 5, null, { timeout: 30000 });
+    // The block falls onto the bed: it ends some 5 mm lower, the bed's top where it was, within the sag.
+    await page.waitForFunction(() => window.tactile.replay.positionS > 0.4, null, { timeout: 30000 });
+    const shown = await page.evaluate(() => {
+      const v = window.tactile.view;
+      const n = v.rest.length / 3;
+      const low = (from, to) => {
+        let y = Infinity;
+        for (let i = from; i < to; i++) y = Math.min(y, v.positions[3 * i + 1]);
+        return y;
+      };
+      const high = (from, to) => {
+        let y = -Infinity;
+        for (let i = from; i < to; i++) y = Math.max(y, v.positions[3 * i + 1]);
+        return y;
+      };
+      const bed = [];
+      const block = [];
+      for (let i = 0; i < n; i++) (v.rest[3 * i + 1] > 0.004 ? block : bed).push(i);
+      return {
+        scene: document.getElementById('scene').textContent,
+        field: document.getElementById('legend-field').value,
+        ends: [document.getElementById('legend-lo').textContent, document.getElementById('legend-hi').textContent],
+        scalars: [new Set(bed.map((i) => v.scalars[i])), new Set(block.map((i) => v.scalars[i]))].map((s) => [...s]),
+        blockLow: low(block[0], block[block.length - 1] + 1),
+        bedHigh: high(bed[0], bed[bed.length - 1] + 1),
+      };
+    });
+    assert.ok(shown.scene.includes('2 bodies: bed'), shown.scene);
+    assert.equal(shown.field, 'body');
+    assert.deepEqual(shown.ends, ['bed', 'block']);
+    assert.deepEqual(shown.scalars, [[0], [1]]);
+    assert.ok(shown.blockLow < 0.002 && shown.blockLow - shown.bedHigh > -5e-4, JSON.stringify(shown));
+    fs.mkdirSync(ARTEFACTS, { recursive: true });
+    await page.screenshot({ path: path.join(ARTEFACTS, 'e2e_replay_two_bodies.png') });
+    assert.deepEqual(problems, []);
+  } finally {
+    await browser.close();
+    proc.kill('SIGINT');
+  }
+});
