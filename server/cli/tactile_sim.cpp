@@ -104,6 +104,11 @@ int check(const Options& o) {
     const bool too_large = in.dt > dt_rest;
     // The step at rest: the fixed one where it is stable, else safety x critical (auto or subdivided).
     const double dt = in.dt > 0 && !too_large ? in.dt : in.safety * dt_rest;
+    if (sim.mass_scaled_tets() > 0)
+      std::cout << "  mass scaling to " << in.mass_scaling_dt << " s: " << sim.mass_scaled_tets()
+                << " tet(s) made denser, " << sim.added_mass() << " kg added ("
+                << 100.0 * sim.added_mass() / (sim.total_mass() - sim.added_mass()) << " % of "
+                << sim.total_mass() - sim.added_mass() << " kg)\n";
     std::cout << "  critical step at rest " << dt_rest << " s; ";
     if (in.dt > 0 && too_large && in.unstable == UnstablePolicy::Refuse) {
       std::cout << "fixed step " << in.dt << " s is above it: a run will be refused\n";

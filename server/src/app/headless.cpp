@@ -212,11 +212,15 @@ HeadlessRun::HeadlessRun(const Scene& scene, const HeadlessOptions& options)
     result.proxies.push_back({proxies[j].name, proxies[j].device, {}, {}, 0, sim_.proxy_pose(int32_t(j)).position, 0});
   for (const std::string& d : sim_.devices()) result.devices.push_back({d, d, {}, {}, 0, {}, 0});
 
-  if (options.log)
+  if (options.log) {
     *options.log << "running " << scene.name << (scene.variant.empty() ? "" : " [" + scene.variant + "]") << ": "
                  << mesh.n_tets() << " tets, " << mesh.n_nodes() << " nodes, " << precision_name(sim_.precision())
                  << ", " << n_frames_ << " frames of " << frame_dt_ << " s, critical step at rest " << sim_.dt_rest()
-                 << " s, " << sim_.parts() << " thread(s)\n";
+                 << " s";
+    if (sim_.mass_scaled_tets() > 0)
+      *options.log << " (mass scaled: " << sim_.mass_scaled_tets() << " tets, +" << sim_.added_mass() << " kg)";
+    *options.log << ", " << sim_.parts() << " thread(s)\n";
+  }
 }
 
 void HeadlessRun::run() {
@@ -411,6 +415,9 @@ Json HeadlessRun::summary_json() const {
   s["mesh"] = Json{{"nodes", mesh.n_nodes()},
                    {"tets", mesh.n_tets()},
                    {"total_mass_kg", sim_.total_mass()},
+                   {"mass_scaling", Json{{"dt_s", scene.spec.integrator.mass_scaling_dt},
+                                         {"tets", sim_.mass_scaled_tets()},
+                                         {"added_kg", sim_.added_mass()}}},
                    {"min_dihedral_deg", scene.quality.min_dihedral_deg},
                    {"max_dihedral_deg", scene.quality.max_dihedral_deg},
                    {"max_aspect_ratio", scene.quality.max_aspect_ratio},

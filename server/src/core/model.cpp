@@ -169,16 +169,31 @@ ElementConstants compute_element_constants(const TetMesh& mesh, const std::vecto
   return out;
 }
 
+std::vector<double> scale_element_masses(ElementConstants& elements, double target_dt) {
+  std::vector<double> scale(elements.dt.size(), 1.0);
+  if (!(target_dt > 0)) return scale;
+  for (size_t e = 0; e < scale.size(); ++e)
+    if (elements.dt[e] < target_dt) {
+      const double r = target_dt / elements.dt[e];
+      scale[e] = r * r;
+      elements.dt[e] = target_dt;
+    }
+  return scale;
+}
+
 std::vector<double> compute_lumped_masses(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
-                                          const std::vector<double>& volume) {
+                                          const std::vector<double>& volume, const std::vector<double>& density_scale) {
   std::vector<double> mass(size_t(mesh.n_nodes()), 0.0);
+  const auto rho = [&](size_t e) {
+    return material_of(mesh, materials, e).rho * (density_scale.empty() ? 1.0 : density_scale[e]);
+  };
   if (mesh.quadratic()) {
-    std::vector<double> rho(mesh.tets.size());
-    for (size_t e = 0; e < mesh.tets.size(); ++e) rho[e] = material_of(mesh, materials, e).rho;
-    mass = compute_quadratic_lumped_masses(mesh, rho, volume);
+    std::vector<double> rhos(mesh.tets.size());
+    for (size_t e = 0; e < mesh.tets.size(); ++e) rhos[e] = rho(e);
+    mass = compute_quadratic_lumped_masses(mesh, rhos, volume);
   } else {
     for (size_t e = 0; e < mesh.tets.size(); ++e) {
-      const double m4 = material_of(mesh, materials, e).rho * volume[e] / 4.0;  // section 4.1: lump by rows
+      const double m4 = rho(e) * volume[e] / 4.0;  // section 4.1: lump by rows
       for (int32_t id : mesh.tets[e]) mass[size_t(id)] += m4;
     }
   }
@@ -663,7 +678,8 @@ Model<Real> build_model(const ModelSpec& spec) {
   check_materials(spec.materials);
   const std::vector<BodySpec> bodies = check_bodies(spec);
   ElementConstants elements = compute_element_constants(mesh, spec.materials);
-  const std::vector<double> given_mass = compute_lumped_masses(mesh, spec.materials, elements.volume);
+  const std::vector<double> density_scale = scale_element_masses(elements, spec.integrator.mass_scaling_dt);
+  const std::vector<double> given_mass = compute_lumped_masses(mesh, spec.materials, elements.volume, density_scale);
   const ElementOrder order = compute_element_order(mesh, elements.volume, spec.integrator.threads);
   LaneBlocks<Real> lanes = make_lane_blocks<Real>(mesh, elements, order);
   // A quadratic mesh: its element pass runs over quadratic blocks laid out
@@ -709,6 +725,11 @@ Model<Real> build_model(const ModelSpec& spec) {
   model.tet_lambda = std::move(elements.lambda);
   model.tet_mu = std::move(elements.mu);
   model.tet_altitude = std::move(elements.altitude);
+  for (size_t e = 0; e < density_scale.size(); ++e)
+    if (density_scale[e] != 1.0) {
+      model.added_mass += (density_scale[e] - 1.0) * material_of(mesh, spec.materials, e).rho * model.tet_volume[e];
+      ++model.mass_scaled_tets;
+    }
   model.tet_dt = std::move(elements.dt);
   model.any_non_invertible = elements.any_non_invertible;
   model.dt_rest = *std::min_element(model.tet_dt.begin(), model.tet_dt.end());

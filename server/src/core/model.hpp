@@ -95,7 +95,11 @@ struct Model {
 
   std::vector<Real> m;      // lumped mass [kg] (n_nodes), section 4.1
   std::vector<Real> inv_m;  // 1 / m [1/kg] (n_nodes)
-  double total_mass = 0;    // [kg]
+  double total_mass = 0;    // [kg], with what mass scaling added
+  // Selective mass scaling (IntegratorSpec::mass_scaling_dt): the mass it
+  // added [kg] and the tets it made denser.
+  double added_mass = 0;
+  int32_t mass_scaled_tets = 0;
 
   std::vector<ElementBlock<Real>> blocks;  // lane-blocked elements (n_blocks); a quadratic mesh's corners
   // A quadratic mesh (mesh.quadratic()): its tets as quadratic blocks, in

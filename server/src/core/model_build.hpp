@@ -7,6 +7,9 @@
 //   compute_element_constants  per tet: rest volume (inverted and flat tets
 //                              refused, by id), material, Lame parameters,
 //                              smallest altitude, critical step at rest
+//   scale_element_masses       selective mass scaling: the tets whose
+//                              critical step is under the integrator's
+//                              mass_scaling_dt made denser to reach it
 //   compute_lumped_masses      per node: its share of its tets' mass (a node
 //                              in no tet refused)
 //   compute_element_order      the sweep the element pass follows, cut into
@@ -50,11 +53,20 @@ struct ElementConstants {
 // fold it (det J <= 0 at a quadrature point) is refused as inverted.
 ElementConstants compute_element_constants(const TetMesh& mesh, const std::vector<MaterialSpec>& materials);
 
+// Selective mass scaling to `target_dt` [s] (IntegratorSpec::mass_scaling_dt):
+// per tet, the factor its density is scaled by, (target_dt / dt)^2 where its
+// critical step dt is under target_dt, else 1, and that step raised to
+// target_dt in `elements` (a step goes as the square root of the density).
+// All ones for target_dt 0.
+std::vector<double> scale_element_masses(ElementConstants& elements, double target_dt);
+
 // Row-sum lumping, section 4.1: each tet gives a quarter of its mass to each
 // corner [kg] (n_nodes, the mesh's ids); a quadratic mesh, HRZ lumping
-// (compute_quadratic_lumped_masses).
+// (compute_quadratic_lumped_masses). `density_scale` (per tet, optional):
+// each tet's density times it.
 std::vector<double> compute_lumped_masses(const TetMesh& mesh, const std::vector<MaterialSpec>& materials,
-                                          const std::vector<double>& volume);
+                                          const std::vector<double>& volume,
+                                          const std::vector<double>& density_scale = {});
 
 // The tets in the element pass's order (a permutation of the tet ids), the
 // part each falls in (by tet id), and how many parts: `threads` at most, and

@@ -131,6 +131,12 @@ struct IntegratorSpec {
   // the work sums (second order per step) add up without bound over a live session of hours, and the
   // guard is there for blow-ups, which grow within milliseconds.
   double energy_window = 1.0;
+  // Selective mass scaling, as explicit FEM codes offer it (a target time
+  // increment): each element whose critical step at rest is under this [s]
+  // is made denser by (this / its step)^2, which brings its step up to this;
+  // the others are left as they are. 0: none. A mesh's few slivers set its
+  // step; their added mass is reported (Model::added_mass).
+  double mass_scaling_dt = 0.0;
 };
 
 // One body of a scene of several. The spec's mesh holds them all, one after

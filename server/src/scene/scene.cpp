@@ -446,8 +446,9 @@ Effects read_effects(const Json& j, const Origin& o) {
 }
 
 IntegratorSpec read_integrator(const Json& j, const Origin& o) {
-  const Fields f(j, "integrator", o,
-                 {"precision", "dt", "safety", "unstable", "threads", "energy_tolerance", "energy_window"});
+  const Fields f(
+      j, "integrator", o,
+      {"precision", "dt", "safety", "unstable", "threads", "energy_tolerance", "energy_window", "mass_scaling_dt"});
   IntegratorSpec s;
   if (const Json* p = f.find("precision"))
     s.precision = scene_json::read_choice(*p, f.path("precision"), o, {"float", "double"}) == "float"
@@ -472,6 +473,7 @@ IntegratorSpec read_integrator(const Json& j, const Origin& o) {
   s.threads = int32_t(f.integer_or("threads", 1, 256, 1));
   s.energy_tolerance = f.positive_or("energy_tolerance", s.energy_tolerance);
   s.energy_window = f.positive_or("energy_window", s.energy_window);
+  s.mass_scaling_dt = f.positive_or("mass_scaling_dt", 0.0);
   return s;
 }
 

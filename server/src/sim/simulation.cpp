@@ -88,6 +88,12 @@ int32_t Simulation::n_tets() const {
 double Simulation::total_mass() const {
   return visit([](const auto& b) { return b.model->total_mass; });
 }
+double Simulation::added_mass() const {
+  return visit([](const auto& b) { return b.model->added_mass; });
+}
+int32_t Simulation::mass_scaled_tets() const {
+  return visit([](const auto& b) { return b.model->mass_scaled_tets; });
+}
 const std::vector<double>& Simulation::tet_volume() const {
   return visit([](const auto& b) -> const std::vector<double>& { return b.model->tet_volume; });
 }

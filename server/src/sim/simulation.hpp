@@ -43,7 +43,9 @@ class Simulation {
   const std::vector<ModelBody>& bodies() const;
   int32_t n_nodes() const;
   int32_t n_tets() const;
-  double total_mass() const;                      // [kg]
+  double total_mass() const;                      // [kg], with what mass scaling added
+  double added_mass() const;                      // what mass scaling added [kg] (integrator.mass_scaling_dt)
+  int32_t mass_scaled_tets() const;               // the tets it made denser
   const std::vector<double>& tet_volume() const;  // rest volumes [m^3] (n_tets)
   double dt_rest() const;                         // critical step at rest [s]
   int32_t parts() const;                          // ways each pass is split (threads in use)

@@ -110,6 +110,44 @@ TEST(ComputeLumpedMasses, EachTetGivesAQuarterOfItsMassToEachCornerAndAStrayNode
   EXPECT_NEAR(std::accumulate(m.begin(), m.end(), 0.0), 1000.0 / 3, 1e-12);
 }
 
+// A regular tet and a flat one (its apex 5 % of the way up) sharing a face:
+// the flat one's step is the shorter.
+TetMesh a_tet_and_a_sliver() {
+  TetMesh m;
+  m.X = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1), Vec3(0.3, 0.3, -0.05)};
+  m.tets = {{0, 1, 2, 3}, {0, 2, 1, 4}};
+  return m;
+}
+
+TEST(ScaleElementMasses, TheTetsUnderTheTargetAreMadeDenserToReachItAndNoOthers) {
+  TetMesh mesh = a_tet_and_a_sliver();
+  ElementConstants c = compute_element_constants(mesh, kSoft);
+  const ElementConstants before = c;
+  ASSERT_LT(c.dt[1], c.dt[0]);
+  EXPECT_EQ(scale_element_masses(c, 0.0), (std::vector<double>{1.0, 1.0})) << "none asked for";
+  EXPECT_EQ(c.dt, before.dt);
+  const double target = std::sqrt(c.dt[0] * c.dt[1]);  // between the two
+  const std::vector<double> scale = scale_element_masses(c, target);
+  EXPECT_EQ(scale[0], 1.0);
+  EXPECT_NEAR(scale[1], (target / before.dt[1]) * (target / before.dt[1]), 1e-12 * scale[1]);
+  EXPECT_EQ(c.dt[0], before.dt[0]);
+  EXPECT_EQ(c.dt[1], target);
+  // The step it reports is the one the denser material has: a step goes as
+  // the square root of the density.
+  mesh.region = {0, 1};
+  MaterialSpec denser = kSoft[0];
+  denser.rho *= scale[1];
+  const ElementConstants dense = compute_element_constants(mesh, {kSoft[0], denser});
+  EXPECT_NEAR(dense.dt[1], target, 1e-12 * target);
+  // And the nodes of the sliver carry its added mass, a quarter each.
+  const std::vector<double> plain = compute_lumped_masses(mesh, {kSoft[0], kSoft[0]}, c.volume);
+  const std::vector<double> heavy = compute_lumped_masses(mesh, {kSoft[0], kSoft[0]}, c.volume, scale);
+  EXPECT_EQ(heavy, compute_lumped_masses(mesh, {kSoft[0], denser}, c.volume));
+  const double added = (scale[1] - 1.0) * kSoft[0].rho * c.volume[1];
+  EXPECT_NEAR(heavy[4] - plain[4], added / 4, 1e-12 * heavy[4]);
+  EXPECT_EQ(heavy[3], plain[3]) << "a node of the regular tet alone";
+}
+
 TEST(ComputeElementOrder, APermutationInPartsOfWholeSlabsGroupedByMaterial) {
   TetMesh mesh = make_box(Vec3(0.0), Vec3(0.3, 0.1, 0.1), {30, 8, 8});  // 11 520 tets, longest along x
   mesh.region.resize(mesh.tets.size());

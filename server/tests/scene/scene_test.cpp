@@ -87,7 +87,8 @@ TEST(SceneMapping, FieldsBecomeTheCoreSpec) {
       R"([{ "name": "push", "select": { "nodes": [1, 2] }, "force": [0, 1, 0], "ramp": { "duration": 0.2 } }])");
   j["effects"] = json::parse(R"({ "gravity": false, "damping": { "alpha": 1.5 } })");
   j["integrator"] = json::parse(
-      R"({ "precision": "float", "dt": 1e-4, "safety": 0.5, "unstable": "refuse", "threads": 2, "energy_tolerance": 0.1 })");
+      R"({ "precision": "float", "dt": 1e-4, "safety": 0.5, "unstable": "refuse", "threads": 2, "energy_tolerance": 0.1,
+          "mass_scaling_dt": 2e-4 })");
   const std::vector<Scene> scenes = load_scene(dir.write_json("m.json", j));
   ASSERT_EQ(scenes.size(), 1u);
   const Scene& s = scenes[0];
@@ -122,6 +123,7 @@ TEST(SceneMapping, FieldsBecomeTheCoreSpec) {
   EXPECT_EQ(s.spec.integrator.unstable, UnstablePolicy::Refuse);
   EXPECT_EQ(s.spec.integrator.threads, 2);
   EXPECT_EQ(s.spec.integrator.energy_tolerance, 0.1);
+  EXPECT_EQ(s.spec.integrator.mass_scaling_dt, 2e-4);
   // The tracked point is the nearest node, reported at its rest position.
   ASSERT_EQ(s.track.size(), 1u);
   EXPECT_EQ(s.track[0].X, Vec3(0.4, 0.05, 0.05));
@@ -489,6 +491,9 @@ TEST(SceneErrors, OutOfRangeValues) {
   j = make_beam_scene();
   j["integrator"] = json{{"safety", 1.5}};
   expect_scene_error(dir, "s.json", j, {"integrator.safety: must lie in (0, 1]"});
+  j = make_beam_scene();
+  j["integrator"] = json{{"mass_scaling_dt", -1e-4}};
+  expect_scene_error(dir, "s.json", j, {"integrator.mass_scaling_dt: must be a number > 0"});
 }
 
 // "element": "p2" makes the mesh quadratic: a node on each edge, which the

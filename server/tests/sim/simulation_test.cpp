@@ -3,6 +3,7 @@
 // scene takes a device's strike through its coupling without a fault.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -188,6 +189,39 @@ TEST(Simulation, ContinueFromCarriesTheBodyOver) {
 // their whole mass moving at 1 cm/s would have. (Resting contact whose solve
 // stops short rings: one stopped at a residual scaled by the scene's 0.1 mm
 // depth tolerance kept more than that.)
+// Selective mass scaling (integrator.mass_scaling_dt) on the organ's mesh:
+// the critical step at rest becomes the target, the mass it adds is what the
+// total gained, and the organ sags under its weight on its table as it did,
+// to the mass added (a few of its thinnest tets set its step).
+TEST(Simulation, MassScalingRaisesTheStepAndAddsWhatItReports) {
+  const Scene scene = load_scene(std::string(TACTILE_SCENE_DIR) + "/organ.json").at(0);
+  Simulation plain(scene.spec);
+  ModelSpec spec = scene.spec;
+  spec.integrator.mass_scaling_dt = 1.45 * plain.dt_rest();
+  Simulation scaled(spec);
+  EXPECT_EQ(plain.added_mass(), 0.0);
+  EXPECT_EQ(plain.mass_scaled_tets(), 0);
+  EXPECT_DOUBLE_EQ(scaled.dt_rest(), spec.integrator.mass_scaling_dt);
+  EXPECT_GT(scaled.mass_scaled_tets(), 0);
+  EXPECT_NEAR(scaled.total_mass() - plain.total_mass(), scaled.added_mass(), 1e-12 * scaled.total_mass());
+  const double added = scaled.added_mass() / plain.total_mass();
+  EXPECT_GT(added, 0.0);
+  EXPECT_LT(added, 0.01) << "the step of " << scaled.mass_scaled_tets() << " tets";
+  // Settled on the table under gravity: the deepest sag moves by no more than
+  // a few times the mass added.
+  const auto sag = [](Simulation& sim) {
+    while (sim.time() < 1.5) EXPECT_FALSE(sim.advance(1e-3).fault) << sim.fault().message;
+    std::vector<double> x;
+    sim.copy_positions(x);
+    double deepest = 0;
+    for (size_t i = 0; i < sim.mesh().X.size(); ++i) deepest = std::max(deepest, sim.mesh().X[i].y - x[3 * i + 1]);
+    return deepest;
+  };
+  const double a = sag(plain), b = sag(scaled);
+  EXPECT_GT(a, 1e-3);
+  EXPECT_NEAR(b, a, 5 * added * a + 1e-3 * a) << "[m]";
+}
+
 TEST(Simulation, TheOrganSettlesOnItsBedWithoutRinging) {
   const Scene scene = load_scene(std::string(TACTILE_SCENE_DIR) + "/organ_bed.json").at(0);
   Simulation sim(scene.spec);
