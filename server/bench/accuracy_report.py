@@ -438,25 +438,35 @@ def write_report(out: pathlib.Path) -> pathlib.Path:
     if hertz:
         approach = {(r["element"], r["level"], round(r["load_n"], 9)): r for r in records
                     if r["problem"] == "hertz_approach"}
+        by_nodes = {(r["element"], r["level"], round(r["load_n"], 9)): r for r in records
+                    if r["problem"] == "hertz_radius_nodes"}
         L += ["", "## Hertz's two spheres", "",
               "`server/scenes/spheres_press.json`: two equal neo-Hookean spheres (R = 3 cm, E = 20 kPa, nu = 0.45) "
               "pressed together through their own contact, quasi-statically (density raised a hundredfold, as "
               "quasi-static explicit runs do), float. At each load (the lower sphere's base reaction, a mean over "
-              "0.1 s), the contact radius (the farthest boundary node of the lower sphere within 0.05 mm of the "
-              "contact plane) and the approach of the centres, against Hertz at that load: "
+              "0.1 s), the contact radius and the approach of the centres, against Hertz at that load: "
               "a = (3 F R* / 4 E*)^(1/3), approach a^2 / R*, R* = R / 2, E* = E / 2 (1 - nu^2). The radius is "
-              "read off the mesh's nodes, so it is no finer than their spacing on the surface; the approach also "
+              "read off the normal impulses between the spheres: their spread about their centre in the contact "
+              "plane, which for Hertz's pressure p0 sqrt(1 - r^2/a^2) is a^2 / 2.5 (radius); 'nodes' is the "
+              "farthest boundary node of the lower sphere within 0.05 mm of the contact plane, no finer than the "
+              "nodes' spacing on the surface and lost where that plane is misplaced. Both need several of the finer "
+              "surface's vertices in the patch: on level 1 the lower loads press one or two, and neither means "
+              "anything there. The approach also "
               "holds the spheres' squeeze between centre and contact, which Hertz's half-spaces leave out. The cost is "
               "the mass-scaled run's: unscaled, the step is ten times shorter and the cost ten times this.", "",
-              "| element | level | tets | load N | radius mm | Hertz mm | error | approach mm | Hertz mm | error | "
-              "wall s per simulated s | fault |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| element | level | tets | load N | radius mm | Hertz mm | error | nodes mm | error | approach mm | "
+              "Hertz mm | error | wall s per simulated s | fault |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in hertz:
-            a = approach.get((r["element"], r["level"], round(r["load_n"], 9)))
+            key = (r["element"], r["level"], round(r["load_n"], 9))
+            a = approach.get(key)
             ap_cells = (f"{1e3 * a['value']:.3f} | {1e3 * a['reference']:.3f} | {a['error']:+.1%}" if a
                         else " | | ")
+            nd = by_nodes.get(key)
+            nd_cells = f"{1e3 * nd['value']:.2f} | {nd['error']:+.1%}" if nd else " | "
             L.append(f"| {element(r).upper()} | {r['level']} | {r['tets']} | {r['load_n']:.3f} | "
-                     f"{1e3 * r['value']:.2f} | {1e3 * r['reference']:.2f} | {r['error']:+.1%} | {ap_cells} | "
+                     f"{1e3 * r['value']:.2f} | {1e3 * r['reference']:.2f} | {r['error']:+.1%} | {nd_cells} | "
+                     f"{ap_cells} | "
                      f"{cost_per_sim_second(r):.3g} | {r['fault'][:40]} |")
     if haptic:
         L += ["", "## The haptic side", "",

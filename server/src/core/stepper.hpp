@@ -120,6 +120,7 @@ class Stepper {
   const Contact<Real>& contact() const { return contact_; }
   // Contact between bodies and within one, when the effects ask for it.
   const BodyContact<Real>& body_contact() const { return body_contact_; }
+  BodyContact<Real>& body_contact() { return body_contact_; }
 
  private:
   using Part = StepPlan::Part;

@@ -297,8 +297,10 @@ AccuracyRecord fig2(const std::string& scenes, Element el, MaterialModel m, int 
 // lowest mode (about 0.1 s) stays some forty times quicker than the press. At 2, 3 and 4.4 s, each a mean
 // over the 0.1 s before it: the load (the lower base's reaction), the approach of the centres (the mean
 // displacement of the nodes within 5 mm of each, less the 0.5 mm they start apart), and the contact radius
-// (the farthest from the axis of the lower sphere's boundary nodes within kHertzGap of the contact plane,
-// midway between the two poles). Against Hertz at the load measured: E* = E / (2 (1 - nu^2)), R* = R / 2,
+// from the spread of the normal impulses between the spheres about their centre (Simulation::
+// take_body_contact_moments; Hertz's pressure has mean r^2 = 2 a^2 / 5), and, as a check, the farthest from
+// the axis of the lower sphere's boundary nodes within kHertzGap of the contact plane, midway between the two
+// poles (hertz_radius_nodes). Against Hertz at the load measured: E* = E / (2 (1 - nu^2)), R* = R / 2,
 // a = (3 F R* / (4 E*))^(1/3), approach a^2 / R*.
 constexpr double kHertzMassScale = 100;
 constexpr double kHertzGap = 5e-5;  // [m]
@@ -342,14 +344,21 @@ std::vector<AccuracyRecord> hertz(const std::string& scenes, Element el, int n, 
   struct Sums {
     double load = 0, approach = 0, radius = 0;
     int samples = 0;
+    Simulation::ContactMoments moments;  // over the window
   };
   const std::array<double, 3> at = {2.0, 3.0, 4.4};
   std::array<Sums, 3> sums{};
   Stepped total;
   for (size_t k = 0; k < at.size(); ++k) {
     const auto sample = [&](const Simulation& now) {
+      const Simulation::ContactMoments m = sim.take_body_contact_moments();  // (`now` is sim)
       if (now.time() < at[k] - 0.1 - 1e-9) return;
       Sums& s = sums[k];
+      if (s.samples > 0) {  // (the first take holds the impulses from before the window)
+        s.moments.weight += m.weight;
+        s.moments.first += m.first;
+        for (size_t i = 0; i < 6; ++i) s.moments.second[i] += m.second[i];
+      }
       s.load += now.held_force(0).y;
       s.approach += mean_displacement(now, lower_c, 1) - mean_displacement(now, upper_c, 1) - gap0;
       const double plane = 0.5 * (0.06 + now.displacement(lower_pole).y + 0.0605 + now.displacement(upper_pole).y);
@@ -372,7 +381,18 @@ std::vector<AccuracyRecord> hertz(const std::string& scenes, Element el, int n, 
   std::vector<AccuracyRecord> out;
   for (const Sums& s : sums) {
     if (s.samples == 0) continue;
-    const double F = s.load / s.samples, a = s.radius / s.samples, d = s.approach / s.samples;
+    const double F = s.load / s.samples, d = s.approach / s.samples;
+    // The radius from the normal impulses' spread about their centre in the
+    // contact plane (x, z): Hertz's pressure p0 sqrt(1 - r^2/a^2) has mean
+    // r^2 = 2 a^2 / 5 over its load. (The farthest node in the plane comes in
+    // steps of the surface's spacing; it is kept below as a check.)
+    const Simulation::ContactMoments& m = s.moments;
+    double a = 0;
+    if (m.weight > 0) {
+      const double cx = m.first.x / m.weight, cz = m.first.z / m.weight;
+      const double spread = m.second[0] / m.weight - cx * cx + m.second[2] / m.weight - cz * cz;
+      a = std::sqrt(2.5 * std::max(spread, 0.0));
+    }
     const double a_hertz = std::cbrt(3 * std::max(F, 0.0) * r_star / (4 * e_star));
     AccuracyRecord radius = make_record("hertz_radius", mat.model, n, sim, sc.spec.integrator.safety, p, total);
     radius.load = F;
@@ -385,7 +405,12 @@ std::vector<AccuracyRecord> hertz(const std::string& scenes, Element el, int n, 
     approach.value = d;
     approach.reference = a_hertz * a_hertz / r_star;
     approach.error = approach.reference > 0 ? d / approach.reference - 1 : 0;
+    AccuracyRecord nodes = radius;
+    nodes.problem = "hertz_radius_nodes";
+    nodes.value = s.radius / s.samples;
+    nodes.error = a_hertz > 0 ? nodes.value / a_hertz - 1 : 0;
     out.push_back(radius);
+    out.push_back(nodes);
     out.push_back(approach);
   }
   if (out.empty()) out.push_back(make_record("hertz_radius", mat.model, n, sim, sc.spec.integrator.safety, p, total));

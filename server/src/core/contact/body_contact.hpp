@@ -132,6 +132,22 @@ class BodyContact {
   bool settled() const { return solve_.settled(); }
   // The sum of the latest apply()'s points' |J| [N s].
   double impulse_sum() const { return impulse_sum_; }
+  // Where the normal impulses between bodies landed since the last take:
+  // over the points, sum jn, sum jn x and sum jn x x^T (xx, yy, zz, xy, xz,
+  // yz) at the points' positions [N s, N s m, N s m^2]. Their ratios give
+  // the contact's centre of pressure and its spread about it, which, unlike
+  // the nodes inside the patch, do not come in steps of the surface's
+  // spacing (the Hertz study reads the contact radius off them).
+  struct Moments {
+    double weight = 0;
+    Vec3 first{0.0};
+    std::array<double, 6> second{};
+  };
+  Moments take_moments() {
+    const Moments m = moments_;
+    moments_ = Moments{};
+    return m;
+  }
 
  private:
   struct Vertex {
@@ -291,6 +307,7 @@ class BodyContact {
   std::vector<Vec3> given_;
   Vec3 held_given_{0.0};
   double impulse_sum_ = 0;
+  Moments moments_;
 };
 
 extern template class BodyContact<float>;

@@ -241,6 +241,40 @@ TEST(BodyContact, ARestingPatchSettlesWithinItsSweeps) {
   EXPECT_GT(lowest, -2 * spec.effects.body_depth_tolerance);
 }
 
+// A 4 x 3 x 4 cm block resting off centre on a plate: the normal impulses
+// between them (take_moments) are centred under the block, spread over its
+// footprint (a uniform pressure over a square of side L has variance L^2 / 12
+// along each side), and carry its weight: by eq. (10) a velocity change dv
+// is the force 2 m dv (1 + alpha dt / 2) / dt over the step.
+TEST(BodyContact, TheImpulsesMomentsAreTheRestingBlocksFootprintAndWeight) {
+  BodyParts plate = block("plate", Vec3(-0.1, -0.01, -0.1), Vec3(0.1, 0, 0.1), {9, 1, 9}, 1e5);
+  plate.essential.push_back(hold_box(Vec3(-1), Vec3(1, -0.0099, 1)));
+  const double L = 0.04, alpha = 20.0;
+  const Vec3 lo(0.01, 0, -0.03);
+  ModelSpec spec = scene({plate, block("block", lo, lo + Vec3(L, 0.03, L), {6, 3, 6}, 1e5)}, true, alpha);
+  spec.effects.body_depth_tolerance = 1e-4;
+  const Model<double> m = build_model<double>(spec);
+  Stepper<double> stepper(m);
+  State<double> s = stepper.make_state();
+  const double dt = 0.9 * m.dt_rest;
+  for (int k = 0; k < int(0.15 / dt); ++k) ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+  stepper.body_contact().take_moments();  // (settled onto it)
+  const int n = int(0.1 / dt);
+  for (int k = 0; k < n; ++k) ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
+  const BodyContact<double>::Moments got = stepper.body_contact().take_moments();
+  EXPECT_EQ(stepper.body_contact().take_moments().weight, 0.0) << "taken";
+  ASSERT_GT(got.weight, 0);
+  const Vec3 c = got.first / got.weight;
+  EXPECT_NEAR(c.x, lo.x + L / 2, 1e-3);
+  EXPECT_NEAR(c.z, lo.z + L / 2, 1e-3);
+  EXPECT_NEAR(c.y, 0.0, 5e-4) << "on the plate's top";
+  const double var_x = got.second[0] / got.weight - c.x * c.x, var_z = got.second[2] / got.weight - c.z * c.z;
+  EXPECT_NEAR(var_x / (L * L / 12), 1.0, 0.35);
+  EXPECT_NEAR(var_z / (L * L / 12), 1.0, 0.35);
+  const double weight = 1000 * L * 0.03 * L * 9.81;
+  EXPECT_NEAR(2 * (1 + 0.5 * alpha * dt) * got.weight / (n * dt), weight, 0.1 * weight) << "[N]";
+}
+
 TEST(BodyContact, AbsentTheBodiesPassThroughEachOther) {
   ModelSpec spec = scene({block("a", Vec3(0.0), Vec3(0.02), {1, 1, 1}),
                           block("b", Vec3(0.0205, 0, 0), Vec3(0.0405, 0.02, 0.02), {1, 1, 1})},
