@@ -29,16 +29,21 @@ const SCENE = {
   run: { duration: 6 },
 };
 
-test('a recording replays in the page with its timeline', { timeout: 180000 }, async () => {
+// Records `seconds` simulated of `scene` (the server stops itself and closes the file at the end), then
+// serves the recording (--replay) to a page opened with `query` after the token.
+/** @param {object} scene @param {string} name @param {number} seconds @param {string} [query] */
+async function recordThenReplay(scene, name, seconds, query = '') {
   const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-replay-'));
-  const recording = path.join(dir, 'twist.mcap');
-  // Record 3 simulated seconds; the server stops itself (and closes the file) at the end.
-  const live = await startServer(SCENE, ['--record', recording, '--duration', '3']);
+  const recording = path.join(dir, name);
+  const live = await startServer(scene, ['--record', recording, '--duration', String(seconds)]);
   await new Promise((resolve) => live.proc.on('exit', resolve));
   assert.ok(fs.statSync(recording).size > 10000, live.proc.output());
-
   const { proc, port } = await spawnServer(['--replay', recording, '--token', TOKEN]);
-  const { browser, page, problems } = await openPage(port, { query: `?token=${TOKEN}` });
+  return { proc, ...(await openPage(port, { query: `?token=${TOKEN}${query}` })) };
+}
+
+test('a recording replays in the page with its timeline', { timeout: 180000 }, async () => {
+  const { proc, browser, page, problems } = await recordThenReplay(SCENE, 'twist.mcap', 3);
   try {
     await page.waitForFunction(() => window.tactile?.replay && window.tactile.frames >= 5, null, { timeout: 30000 });
     const shown = await page.evaluate(() => ({
@@ -122,14 +127,7 @@ const TWO_BODIES = {
 };
 
 test('a recording of two bodies replays with each body drawn and coloured as itself', { timeout: 180000 }, async () => {
-  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tactile-replay-'));
-  const recording = path.join(dir, 'two.mcap');
-  const live = await startServer(TWO_BODIES, ['--record', recording, '--duration', '1']);
-  await new Promise((resolve) => live.proc.on('exit', resolve));
-  assert.ok(fs.statSync(recording).size > 10000, live.proc.output());
-
-  const { proc, port } = await spawnServer(['--replay', recording, '--token', TOKEN]);
-  const { browser, page, problems } = await openPage(port, { query: `?token=${TOKEN}&field=body` });
+  const { proc, browser, page, problems } = await recordThenReplay(TWO_BODIES, 'two.mcap', 1, '&field=body');
   try {
     await page.waitForFunction(() => window.tactile?.replay && window.tactile.frames >= 5, null, { timeout: 30000 });
     // The block falls onto the bed: it ends some 5 mm lower, the bed's top where it was, within the sag.

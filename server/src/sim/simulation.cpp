@@ -237,11 +237,8 @@ Simulation::BodyContactReport Simulation::body_contact_report() const {
     return r;
   });
 }
-Simulation::ContactMoments Simulation::take_body_contact_moments() {
-  return visit([](auto& b) {
-    const auto m = b.stepper.body_contact().take_moments();
-    return ContactMoments{m.weight, m.first, m.second};
-  });
+ContactMoments Simulation::take_body_contact_moments() {
+  return visit([](auto& b) { return b.stepper.body_contact().take_moments(); });
 }
 const char* Simulation::pass_name(Pass p) const {
   if (p != Pass::BodyContact) return to_string(p);

@@ -11,7 +11,6 @@
 // here, from the scene, so nothing above this file is a template.
 #pragma once
 
-#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -120,13 +119,7 @@ class Simulation {
   };
   BodyContactReport body_contact_report() const;
   // Where the normal impulses between bodies landed since the last call
-  // (BodyContact::take_moments): sum jn, sum jn x, sum jn x x^T as xx, yy,
-  // zz, xy, xz, yz; zeros without body contact.
-  struct ContactMoments {
-    double weight = 0;
-    Vec3 first{0.0};
-    std::array<double, 6> second{};
-  };
+  // (ContactMoments, BodyContact::take_moments); zeros without body contact.
   ContactMoments take_body_contact_moments();
   // A pass's name as its cost is reported: to_string(p), but the body
   // contact pass named by what the scene asks of it (BodyContact::effect_name).

@@ -344,21 +344,17 @@ std::vector<AccuracyRecord> hertz(const std::string& scenes, Element el, int n, 
   struct Sums {
     double load = 0, approach = 0, radius = 0;
     int samples = 0;
-    Simulation::ContactMoments moments;  // over the window
+    ContactMoments moments;  // over the window
   };
   const std::array<double, 3> at = {2.0, 3.0, 4.4};
   std::array<Sums, 3> sums{};
   Stepped total;
   for (size_t k = 0; k < at.size(); ++k) {
     const auto sample = [&](const Simulation& now) {
-      const Simulation::ContactMoments m = sim.take_body_contact_moments();  // (`now` is sim)
+      const ContactMoments m = sim.take_body_contact_moments();  // (`now` is sim)
       if (now.time() < at[k] - 0.1 - 1e-9) return;
       Sums& s = sums[k];
-      if (s.samples > 0) {  // (the first take holds the impulses from before the window)
-        s.moments.weight += m.weight;
-        s.moments.first += m.first;
-        for (size_t i = 0; i < 6; ++i) s.moments.second[i] += m.second[i];
-      }
+      if (s.samples > 0) s.moments.add(m);  // (the first take holds the impulses from before the window)
       s.load += now.held_force(0).y;
       s.approach += mean_displacement(now, lower_c, 1) - mean_displacement(now, upper_c, 1) - gap0;
       const double plane = 0.5 * (0.06 + now.displacement(lower_pole).y + 0.0605 + now.displacement(upper_pole).y);
@@ -386,7 +382,7 @@ std::vector<AccuracyRecord> hertz(const std::string& scenes, Element el, int n, 
     // contact plane (x, z): Hertz's pressure p0 sqrt(1 - r^2/a^2) has mean
     // r^2 = 2 a^2 / 5 over its load. (The farthest node in the plane comes in
     // steps of the surface's spacing; it is kept below as a check.)
-    const Simulation::ContactMoments& m = s.moments;
+    const ContactMoments& m = s.moments;
     double a = 0;
     if (m.weight > 0) {
       const double cx = m.first.x / m.weight, cz = m.first.z / m.weight;

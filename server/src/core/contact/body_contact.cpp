@@ -910,14 +910,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     exchanged_ += point_sign_[k] * J;
     held_given_ += point_held_[k] * J;
     impulse_sum_ += glm::length(J);
-    if (point_sign_[k] != 0) {
-      const double jn = points_[k].jn;
-      const Vec3& x = points_[k].x;
-      moments_.weight += jn;
-      moments_.first += jn * x;
-      const std::array<double, 6> xx = {x.x * x.x, x.y * x.y, x.z * x.z, x.x * x.y, x.x * x.z, x.y * x.z};
-      for (size_t i = 0; i < 6; ++i) moments_.second[i] += jn * xx[i];
-    }
+    if (point_sign_[k] != 0) moments_.add(points_[k].jn, points_[k].x);
   }
   solve_.clear();
   for (int32_t n : slot_node_) slot_of_[size_t(n)] = -1;

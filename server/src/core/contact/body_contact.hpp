@@ -91,6 +91,28 @@
 
 namespace tactile {
 
+// Normal impulses summed with their points' positions: sum jn, sum jn x and
+// sum jn x x^T (xx, yy, zz, xy, xz, yz) [N s, N s m, N s m^2]. Their ratios
+// give a contact's centre of pressure and its spread about it, which, unlike
+// the nodes inside the patch, do not come in steps of the surface's spacing
+// (the Hertz study reads the contact radius off them).
+struct ContactMoments {
+  double weight = 0;
+  Vec3 first{0.0};
+  std::array<double, 6> second{};
+  void add(double jn, const Vec3& x) {
+    weight += jn;
+    first += jn * x;
+    const std::array<double, 6> xx = {x.x * x.x, x.y * x.y, x.z * x.z, x.x * x.y, x.x * x.z, x.y * x.z};
+    for (size_t i = 0; i < 6; ++i) second[i] += jn * xx[i];
+  }
+  void add(const ContactMoments& o) {
+    weight += o.weight;
+    first += o.first;
+    for (size_t i = 0; i < 6; ++i) second[i] += o.second[i];
+  }
+};
+
 template <class Real>
 class BodyContact {
  public:
@@ -132,20 +154,11 @@ class BodyContact {
   bool settled() const { return solve_.settled(); }
   // The sum of the latest apply()'s points' |J| [N s].
   double impulse_sum() const { return impulse_sum_; }
-  // Where the normal impulses between bodies landed since the last take:
-  // over the points, sum jn, sum jn x and sum jn x x^T (xx, yy, zz, xy, xz,
-  // yz) at the points' positions [N s, N s m, N s m^2]. Their ratios give
-  // the contact's centre of pressure and its spread about it, which, unlike
-  // the nodes inside the patch, do not come in steps of the surface's
-  // spacing (the Hertz study reads the contact radius off them).
-  struct Moments {
-    double weight = 0;
-    Vec3 first{0.0};
-    std::array<double, 6> second{};
-  };
-  Moments take_moments() {
-    const Moments m = moments_;
-    moments_ = Moments{};
+  // Where the normal impulses between bodies landed since the last take
+  // (ContactMoments).
+  ContactMoments take_moments() {
+    const ContactMoments m = moments_;
+    moments_ = ContactMoments{};
     return m;
   }
 
@@ -307,7 +320,7 @@ class BodyContact {
   std::vector<Vec3> given_;
   Vec3 held_given_{0.0};
   double impulse_sum_ = 0;
-  Moments moments_;
+  ContactMoments moments_;
 };
 
 extern template class BodyContact<float>;

@@ -261,7 +261,7 @@ TEST(BodyContact, TheImpulsesMomentsAreTheRestingBlocksFootprintAndWeight) {
   stepper.body_contact().take_moments();  // (settled onto it)
   const int n = int(0.1 / dt);
   for (int k = 0; k < n; ++k) ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
-  const BodyContact<double>::Moments got = stepper.body_contact().take_moments();
+  const ContactMoments got = stepper.body_contact().take_moments();
   EXPECT_EQ(stepper.body_contact().take_moments().weight, 0.0) << "taken";
   ASSERT_GT(got.weight, 0);
   const Vec3 c = got.first / got.weight;
