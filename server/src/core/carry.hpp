@@ -41,14 +41,15 @@ Carried carry_out(const State<Real>& s, std::span<const int32_t> node_given) {
                                 pushed, memory, face_memory, embedded_memory, embedded_face_memory, embedded_lo,
                                 embedded_hi, embedded_group_lo, embedded_group_hi, embedded_refit_at, embedded_drift,
                                 fit, device_fit, device_felt, track_nodes, node_impulse, impulse_slots, node_elapsed,
-                                body_pushed] = s.contact;
+                                body_pushed, body_impulses] = s.contact;
   // Carried: the motions set for the proxies and hands, and the coupled
   // bodies (Contact::take_bodies re-couples them). Not carried: reports and
   // fits (the next step's), proxy_body (made by coupling), the contact
   // memory and previous positions per surface slot (in the old model's slot
   // numbering; a body in contact finds it again in one step), the per-node
-  // impulse tracking (an output's, asked again), the forces between bodies
-  // (the new model's first step has none).
+  // impulse tracking (an output's, asked again), the forces and impulses
+  // between bodies (the new model's first step has none, and starts its
+  // solve cold).
   Carried c;
   c.u.resize(u.size());
   c.v.resize(v.size());

@@ -762,16 +762,23 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   std::vector<std::pair<int32_t, Vec3>>& pushed = s.contact.body_pushed;
   for (const auto& [n, f] : pushed) sums.work += 0.5 * glm::dot(f, node_x1_[size_t(n)] - node_x0_[size_t(n)]);
   pushed.clear();
-  if (touched_.empty()) return sums;
+  if (touched_.empty()) {
+    s.contact.body_impulses.clear();
+    return sums;
+  }
   // In vertex order, whatever order the candidates were listed in: the
   // solve's sweeps (and so its last digits) see the same points the same way.
   std::sort(touched_.begin(), touched_.end());
 
   // The points: the vertex's nodes (+w) against the triangle's (-b_j w_jk),
-  // each node once; a held node adds its prescribed velocity.
+  // each node once; a held node adds its prescribed motion. The solve is
+  // over the next step's travel (body_contact.hpp): each slot's velocity is
+  // u = v + dt a / 2 and its mass half the node's, so that its impulses are
+  // the real ones and its changes 2 dv.
   points_.clear();
   point_sign_.clear();
   point_held_.clear();
+  point_vertex_.clear();
   slot_node_.clear();
   slot_v_.clear();
   slot_m_.clear();
@@ -783,6 +790,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     const size_t j = 3 * size_t(n);
     return Vec3(double(s.a[j]), double(s.a[j + 1]), double(s.a[j + 2]));
   };
+  const auto travel = [&](int32_t n) { return velocity(n) + (0.5 * dt) * acceleration(n); };
   for (int32_t v : touched_) {
     Best& best = best_[size_t(v)];
     std::array<int32_t, 16> node{};
@@ -804,21 +812,21 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       const Vertex& ty = vertices_[size_t(tri[j])];
       for (size_t c = 0; c < 4 && ty.node[c] >= 0; ++c) add(ty.node[c], -best.b[int(j)] * ty.w[c]);
     }
-    // The vertex's velocity and acceleration relative to the triangle, where
-    // a point ahead of it or a master's smooth vertex needs them (below).
+    // The vertex's normal travel relative to the triangle (its gap after
+    // the next step is g + dt un), where a master's smooth vertex or one in
+    // contact needs it (below).
     const bool master =
         smooth_[size_t(v)] && master_[size_t(vx.body) * vertex_sets_.size() + size_t(tri_body_[size_t(best.t)])];
-    Vec3 rel_v(0.0), rel_a(0.0);
-    if (master || best.gap >= 0)
-      for (size_t k = 0; k < count; ++k) {
-        rel_v += w[k] * velocity(node[k]);
-        rel_a += w[k] * acceleration(node[k]);
-      }
+    double un = 0;
+    if (master || best.gap < 0) {
+      Vec3 rel_u(0.0);
+      for (size_t k = 0; k < count; ++k) rel_u += w[k] * travel(node[k]);
+      un = glm::dot(rel_u, best.n);
+    }
     // A master's smooth vertex only where the slave's vertices let it in
     // deeper than the slop, now or by the end of the next step (master_).
     if (master) {
-      const double next = best.gap + dt * glm::dot(rel_v, best.n) + 0.5 * dt * dt * glm::dot(rel_a, best.n);
-      if (std::min(best.gap, next) > -slop_) {
+      if (std::min(best.gap, best.gap + dt * un) > -slop_) {
         best = Best{};
         continue;
       }
@@ -834,25 +842,24 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     p.v_held = Vec3(0.0);
     p.inv_mass = 0;
     p.mu = mu_;
-    // The least relative normal velocity the point may keep: in contact, the
-    // paper's zero (eq. 11). Ahead of the triangle (speculative contact, as
-    // rigid-body engines use it), what brings it to the triangle's plane by
-    // the end of the next step and no farther: a velocity change dv moves
-    // x_{n+2} by 2 dt dv (the step's, and eq. (9)'s through a), so the gap
-    // then is g + dt (v_n + 2 dv_n) + dt^2 a_n / 2, zero for v_n + dv_n =
-    // v_n / 2 - g / (2 dt) - dt a_n / 4. (The acceleration term holds a
-    // surface that the body behind it still pushes; in contact it would feed
-    // a stiff surface's own oscillation, so it is left to the ahead case,
-    // which the paper's rule follows once the vertex is behind.)
-    p.vp = Vec3(0.0);
-    if (best.gap >= 0)
-      p.vp = (0.5 * glm::dot(rel_v, p.n) - 0.5 * best.gap / dt - 0.25 * dt * glm::dot(rel_a, p.n)) * p.n;
+    // The least relative normal travel the point may keep over the next
+    // step, its gap then g + dt u: ahead of the triangle (speculative
+    // contact, as rigid-body engines use it), what brings it to the
+    // triangle's plane and no farther; in contact none (it stays where it
+    // is), or, deeper than the slop, back out toward it (what the sweeps
+    // leave and the surfaces' turning let in would otherwise add up), no
+    // faster than it came in: never more than the paper's own rule gives
+    // back (restitution one over the next step), and the only push that can
+    // add kinetic energy.
+    const double least =
+        best.gap >= 0 ? -best.gap / dt : std::min(std::max(0.0, -(best.gap + slop_) / dt), std::max(0.0, -un));
+    p.vp = least * p.n;
     size_t free = 0;
     double held_w = 0;
     for (size_t k = 0; k < count; ++k) {
       if (w[k] == 0) continue;
       if (held_[size_t(node[k])]) {
-        p.v_held += w[k] * velocity(node[k]);
+        p.v_held += w[k] * travel(node[k]);
         held_w += w[k];
         continue;
       }
@@ -860,8 +867,8 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       if (slot < 0) {
         slot = int32_t(slot_node_.size());
         slot_node_.push_back(node[k]);
-        slot_v_.push_back(velocity(node[k]));
-        slot_m_.push_back(double(model_.m[size_t(node[k])]));
+        slot_v_.push_back(travel(node[k]));
+        slot_m_.push_back(0.5 * double(model_.m[size_t(node[k])]));
       }
       p.slot[free] = slot;
       p.w[free++] = w[k];
@@ -874,23 +881,46 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       (vx.body == tb ? self_contacts_ : body_contacts_) += 1;
       point_sign_.push_back(vx.body == tb ? 0.0 : vx.body < tb ? 1.0 : -1.0);
       point_held_.push_back(held_w);
+      point_vertex_.push_back(v);
     }
     best = Best{};
   }
   touched_.clear();
 
+  // Warm: a vertex that had a point in the step before starts from its
+  // impulses (its normal one along today's normal, its friction in today's
+  // tangent plane), all scaled by the factor that lowers the solve's
+  // objective most (ImpulseSolve::warm_scale). A resting patch's points
+  // persist, and its sweeps then start near their end.
+  std::vector<ContactState::BodyImpulse>& before = s.contact.body_impulses;
+  for (size_t k = 0, b = 0; k < points_.size() && b < before.size(); ++k) {
+    while (b < before.size() && before[b].vertex < point_vertex_[k]) ++b;
+    if (b == before.size() || before[b].vertex != point_vertex_[k]) continue;
+    ContactPoint& c = points_[k];
+    c.jn = before[b].jn;
+    c.jt = before[b].jt - glm::dot(before[b].jt, c.n) * c.n;
+  }
+  const double warm = solve_.warm_scale(points_, slot_v_, slot_m_);
+  for (ContactPoint& c : points_) {
+    c.jn *= warm;
+    c.jt *= warm;
+  }
   // To a thousandth of the first sweep's change (a resting contact's
   // impulses are a step's weight, and a thousandth of that is far below
   // what moves a vertex by a rounding of its position), or to kSweepDepth of
-  // the slop a step. Started from no impulse, each sweep only lowers the
-  // kinetic energy the points see, so stopping early adds none.
-  solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_, kSolveTolerance, kSweepDepth * slop_ / dt);
+  // the slop a step. Each sweep only lowers the kinetic energy of the
+  // points' travel from where the guess left it, no higher than none does,
+  // so stopping early adds none.
+  solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_, kSolveTolerance, 2.0 * kSweepDepth * slop_ / dt);
+  before.clear();
+  for (size_t k = 0; k < points_.size(); ++k)
+    if (points_[k].jn > 0) before.push_back({point_vertex_[k], points_[k].jn, points_[k].jt});
   // The velocity change as a force over the step, eq. (10): q 2 dv / dt, q = m (1 + alpha dt / 2).
   const double to_force = (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt;
   for (int32_t k : solve_.moved()) {
     const int32_t n = slot_node_[size_t(k)];
-    const Vec3& dv = solve_.dv(k);
-    const double m = slot_m_[size_t(k)];
+    const Vec3 dv = 0.5 * solve_.dv(k);  // (the travel's change is 2 dv)
+    const double m = 2.0 * slot_m_[size_t(k)];
     const Vec3 f = (m * to_force) * dv;
     given_[size_t(model_.node_body[size_t(n)])] += m * dv;
     sums.work += 0.5 * glm::dot(f, node_x1_[size_t(n)] - node_x0_[size_t(n)]);

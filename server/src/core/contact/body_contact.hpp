@@ -1,16 +1,28 @@
-// Contact between bodies, and of a body with itself: the proxies' rule
-// (section 5.1, eq. (11)) with both sides deformable. A surface vertex of
-// one body that is inside another's surface at t_{n+1}, moving into it, has
-// its normal velocity relative to the point of the other surface it is
-// nearest set to zero, by an impulse J n on the vertex's nodes and -J n on
-// the triangle's, shared by their effective masses: one contact point whose
-// carriers are the vertex's nodes with weights w_k and the triangle's with
-// weights -b_j w_jk, whose velocity is the relative one and whose inverse
-// mass is sum w^2 / m over both (ImpulseSolve, with no proxy). Since each
-// side's weights sum to one, the momentum one body gains the other loses,
-// exactly; the projection is inelastic, so it never adds kinetic energy, and
-// the accelerations follow by eq. (9) as for proxies. Coulomb friction, when
-// asked, acts in the same impulse.
+// Contact between bodies, and of a body with itself: the proxies' velocity
+// projection (section 5.1, eq. (11)) with both sides deformable. A surface
+// vertex of one body that is inside another's surface at t_{n+1}, moving
+// into it, has its normal motion relative to the point of the other surface
+// it is nearest taken away, by an impulse J n on the vertex's nodes and -J n
+// on the triangle's, shared by their effective masses: one contact point
+// whose carriers are the vertex's nodes with weights w_k and the triangle's
+// with weights -b_j w_jk, whose velocity is the relative one and whose
+// inverse mass is sum w^2 / m over both (ImpulseSolve, with no proxy). Since
+// each side's weights sum to one, the momentum one body gains the other
+// loses, exactly; the accelerations follow by eq. (9) as for proxies.
+// Coulomb friction, when asked, acts in the same impulse.
+//
+// What is taken away is the relative motion over the next step, the travel
+// u = v_{n+1} + dt a_{n+1} / 2 = (x_{n+2} - x_{n+1}) / dt, not v_{n+1}
+// itself as for the proxies. A velocity change dv moves u by 2 dv (once
+// directly, once through eq. (9)'s 2 dv / dt on a), so zeroing v_{n+1}
+// reverses u: the vertex leaves at the speed it came (restitution one over
+// the next step), and a resting underside patters, each vertex struck, sent
+// off and struck again (BodyContact.ARestingUndersideStaysOnWhatItRestsOn).
+// The solve runs on u with each node's half mass, which gives the same
+// impulses J and a change 2 dv. It is inelastic in u, and a resting vertex
+// stays where it is: its point persists from step to step, so the solve
+// starts from the step before's impulses (ContactState::body_impulses,
+// scaled by ImpulseSolve::warm_scale) and settles in a few sweeps.
 //
 // Why vertex-face on the surfaces contact meets (the fine surfaces, else
 // the boundaries): it is what SOFA's and Bridson et al.'s (2002) deformable
@@ -48,8 +60,9 @@
 // step's velocity and acceleration, would take behind it by more than the
 // slop (effects.body_depth_tolerance, or 1 % of the shortest surface edge)
 // is slowed now to arrive at the triangle's plane. It only slows an
-// approach, so it adds no energy; the stability suite's body cases
-// (study/stability.hpp) measure the depths it leaves.
+// approach, so it adds no energy. A vertex found deeper than the slop is
+// sent back toward it, no faster than it came in (apply()); the stability
+// suite's body cases (study/stability.hpp) measure the depths left.
 //
 // Self contact excludes a vertex's own neighbourhood: a triangle of its own
 // body whose rest distance from the vertex is under twice its longest edge
@@ -306,10 +319,11 @@ class BodyContact {
   std::vector<Vec3> body_lo_, body_hi_;  // per body: a box around all its vertices over the step
   std::vector<Box> boxes_;
   std::vector<ContactPoint> points_;
-  std::vector<double> point_sign_;  // per point: +1, -1 as exchanged() counts it, 0 within a body
-  std::vector<double> point_held_;  // per point: the sum of its held carriers' weights
-  std::vector<uint8_t> held_;       // per model node: an essential BC holds it
-  std::vector<int32_t> slot_of_;    // per model node, -1
+  std::vector<double> point_sign_;     // per point: +1, -1 as exchanged() counts it, 0 within a body
+  std::vector<double> point_held_;     // per point: the sum of its held carriers' weights
+  std::vector<int32_t> point_vertex_;  // per point: its vertex (ascending)
+  std::vector<uint8_t> held_;          // per model node: an essential BC holds it
+  std::vector<int32_t> slot_of_;       // per model node, -1
   std::vector<int32_t> slot_node_;
   std::vector<Vec3> slot_v_;
   std::vector<double> slot_m_;

@@ -279,6 +279,7 @@ void Contact<Real>::start(State<Real>& s) const {
   std::fill(cs.f_prev.begin(), cs.f_prev.end(), Vec3(0.0));
   cs.pushed.clear();
   cs.body_pushed.clear();
+  cs.body_impulses.clear();
   std::fill(cs.memory.begin(), cs.memory.end(), Memory{});
   std::fill(cs.face_memory.begin(), cs.face_memory.end(), Memory{});
   std::fill(cs.embedded_memory.begin(), cs.embedded_memory.end(), Memory{});

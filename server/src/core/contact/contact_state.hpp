@@ -159,6 +159,14 @@ struct ContactState {
   // pushed in the latest step and the force on each over it [N], for the
   // next step's work trapezoid.
   std::vector<std::pair<int32_t, Vec3>> body_pushed;
+  // And its points' impulses, per surface vertex in BodyContact's order
+  // (ascending), for the next step's warm start.
+  struct BodyImpulse {
+    int32_t vertex;
+    double jn;  // [N s]
+    Vec3 jt;    // [N s]
+  };
+  std::vector<BodyImpulse> body_impulses;
 
   // Starts the impulse sums of every proxy and device report again.
   void clear_impulses() {

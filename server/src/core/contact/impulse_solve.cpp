@@ -16,6 +16,7 @@ Vec3 proxy_velocity(const std::vector<CoupledBodyState>& bodies, const ContactPo
 void ImpulseSolve::reserve(size_t slots, size_t groups, size_t points) {
   if (dv_.size() < slots) {
     dv_.resize(slots, Vec3(0.0));
+    guess_.resize(slots, Vec3(0.0));
     moved_flag_.resize(slots, 0);
   }
   moved_.reserve(slots);
@@ -60,6 +61,27 @@ void ImpulseSolve::give(std::vector<CoupledBodyState>& bodies, const ContactPoin
   }
 }
 
+double ImpulseSolve::warm_scale(const std::vector<ContactPoint>& points, const std::vector<Vec3>& v,
+                                const std::vector<double>& mass) {
+  // Along the guess J, the objective is s J . b + s^2 J^T A J / 2, with b
+  // each point's velocity less its vp and J^T A J = sum_k |sum w J|^2 / m_k.
+  double jb = 0;
+  for (const ContactPoint& c : points) {
+    const Vec3 J = c.jn * c.n + c.jt;
+    if (J == Vec3(0.0)) continue;
+    jb += glm::dot(J, point_velocity(c, v) - c.vp);
+    for (size_t j = 0; j < kPointCarriers && c.slot[j] >= 0; ++j) guess_[size_t(c.slot[j])] += c.w[j] * J;
+  }
+  double jaj = 0;
+  for (const ContactPoint& c : points)
+    for (size_t j = 0; j < kPointCarriers && c.slot[j] >= 0; ++j) {
+      Vec3& g = guess_[size_t(c.slot[j])];
+      jaj += glm::dot(g, g) / mass[size_t(c.slot[j])];
+      g = Vec3(0.0);  // (each slot counted once)
+    }
+  return jaj > 0 ? std::clamp(-jb / jaj, 0.0, 1.0) : 0.0;
+}
+
 void ImpulseSolve::solve(std::vector<ContactPoint>& points, size_t n_proxies, std::vector<CoupledBodyState>& bodies,
                          const std::vector<Vec3>& v, const std::vector<double>& mass, double tolerance, double floor) {
   // A coupled body's points see its mass and inertia in series with their
@@ -86,7 +108,18 @@ void ImpulseSolve::solve(std::vector<ContactPoint>& points, size_t n_proxies, st
       const Vec3 re = glm::cross(c.r, e);
       return c.inv_mass + 1.0 / body->c.mass + glm::dot(re, re) / body->c.inertia;
     };
+    // A warm start's guess, given first; the sweeps' scale is then the
+    // largest approach before it (what a cold first sweep would take out).
     double first = 0;
+    for (int32_t m = group_begin_[g]; m < group_begin_[g + 1]; ++m) {
+      const ContactPoint& c = points[size_t(order_[size_t(m)])];
+      if (c.jn == 0 && c.jt == Vec3(0.0)) continue;
+      first = std::max(first, -glm::dot(point_velocity(c, v) - proxy_velocity(bodies, c), c.n));
+    }
+    for (int32_t m = group_begin_[g]; m < group_begin_[g + 1]; ++m) {
+      const ContactPoint& c = points[size_t(order_[size_t(m)])];
+      if (c.jn != 0 || c.jt != Vec3(0.0)) give(bodies, c, c.jn * c.n + c.jt, mass);
+    }
     bool stopped = false;
     for (int sweep = 0; sweep < (body ? kMaxBodySweeps : kMaxSweeps) && !stopped; ++sweep) {
       double largest = 0;
@@ -114,7 +147,7 @@ void ImpulseSolve::solve(std::vector<ContactPoint>& points, size_t n_proxies, st
         if (J != Vec3(0.0)) give(bodies, c, J, mass);
         largest = std::max(largest, change);
       }
-      if (sweep == 0) first = largest;
+      if (sweep == 0) first = std::max(first, largest);
       stopped = largest <= std::max(tolerance * first, floor);
     }
     settled_ = settled_ && stopped;

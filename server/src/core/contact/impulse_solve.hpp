@@ -18,6 +18,10 @@
 // proxies pinching a node cannot both be, and they are solved one after the
 // other.
 //
+// A solve may start from a guess (a warm start: the step before's impulses
+// of points that persist), scaled so that it starts no higher than from none
+// (warm_scale).
+//
 // Pure: it reads the points, each slot's velocity and mass, and the bodies;
 // it writes the points' impulses, the slots' velocity changes and the
 // bodies' velocities. Contact (core/contact/contact.hpp) finds the points
@@ -73,10 +77,22 @@ class ImpulseSolve {
   // the slots the points name). Sums each point's impulse into its jn and
   // jt, each slot's velocity change into dv(k) (the slots in moved()), and
   // each body's reaction into its next.v and next.w.
+  // It starts from the points' jn and jt: zero (cold), or a guess such as
+  // the step before's impulses scaled by warm_scale() (warm), given first.
   // The sweeps stop when no velocity changes by more than `tolerance` times
-  // the first sweep's largest change, or by more than `floor` [m/s].
+  // the first sweep's largest change (or, warm, the largest speed at which a
+  // point approached before its guess), or by more than `floor` [m/s].
   void solve(std::vector<ContactPoint>& points, size_t n_proxies, std::vector<CoupledBodyState>& bodies,
              const std::vector<Vec3>& v, const std::vector<double>& mass, double tolerance = 1e-6, double floor = 0);
+
+  // The factor in [0, 1] by which the points' jn and jt (a guess: another
+  // step's impulses) lower most the solve's objective, the kinetic energy
+  // of their slots less each impulse's work against its point's vp (which,
+  // for vp = 0, is the kinetic energy alone). Scaled so, a warm solve starts
+  // no higher than a cold one, and each sweep only lowers it. For points
+  // of kinematic proxies, or between bodies (c.body < 0).
+  double warm_scale(const std::vector<ContactPoint>& points, const std::vector<Vec3>& v,
+                    const std::vector<double>& mass);
 
   // Whether the latest solve() stopped by its tolerance in every group, not
   // at its most sweeps (a group whose points fight each other: its
@@ -95,6 +111,7 @@ class ImpulseSolve {
             const std::vector<double>& mass);
 
   std::vector<Vec3> dv_;                           // per slot [m/s]
+  std::vector<Vec3> guess_;                        // per slot: sum w J of a guess (warm_scale) [N s]
   std::vector<int32_t> moved_;                     // slots with a dv_
   std::vector<uint8_t> moved_flag_;                // per slot: in moved_
   std::vector<int32_t> order_;                     // the points' indices, by group

@@ -141,6 +141,44 @@ TEST(ImpulseSolve, MomentumPassesExactlyToACoupledBody) {
   }
 }
 
+// Warm starts: a guess is scaled to where it lowers the kinetic energy
+// most, and a solve started from the answer keeps it.
+TEST(ImpulseSolve, AGuessIsScaledToLowerTheEnergyMostAndASolveFromTheAnswerKeepsIt) {
+  const std::vector<double> mass{0.5, 0.5};
+  const std::vector<Vec3> v{Vec3(0.1, -1.0, 0.0), Vec3(0.0, -1.0, 0.0)};
+  const auto pair = [&](double jn) {
+    std::vector<ContactPoint> points{point({0}, {1.0}, mass, Vec3(0, 1, 0)), point({1}, {1.0}, mass, Vec3(0, 1, 0))};
+    for (ContactPoint& c : points) c.jn = jn;
+    return points;
+  };
+  ImpulseSolve solve;
+  solve.reserve(2, 1, 2);
+  EXPECT_NEAR(solve.warm_scale(pair(0.5), v, mass), 1.0, 1e-12);   // m |v . n|: the answer
+  EXPECT_NEAR(solve.warm_scale(pair(2.0), v, mass), 0.25, 1e-12);  // four times it
+  EXPECT_EQ(solve.warm_scale(pair(0.0), v, mass), 0.0);
+  // Moving out of the proxy: any push adds energy.
+  const std::vector<Vec3> out{Vec3(0, 0.3, 0), Vec3(0, 0.2, 0)};
+  EXPECT_EQ(solve.warm_scale(pair(0.5), out, mass), 0.0);
+  // Its friction counts: a guess pushing with the sliding point's tangential velocity is cut.
+  std::vector<ContactPoint> rubbing = pair(0.5);
+  for (ContactPoint& c : rubbing) c.mu = 0.5;
+  EXPECT_NEAR(solve.warm_scale(rubbing, v, mass), 1.0, 1e-12);
+  rubbing[0].jt = Vec3(0.2, 0, 0);
+  EXPECT_LT(solve.warm_scale(rubbing, v, mass), 1.0);
+  // Started from the answer, the solve has nothing to change.
+  std::vector<CoupledBodyState> bodies;
+  std::vector<ContactPoint> points = pair(0.5);
+  solve.solve(points, 1, bodies, v, mass);
+  for (const ContactPoint& c : points) EXPECT_NEAR(c.jn, 0.5, 1e-15);
+  for (int32_t k = 0; k < 2; ++k) EXPECT_NEAR(velocity_after(solve, points[size_t(k)], v).y, 0.0, 1e-15);
+  EXPECT_TRUE(solve.settled());
+  // Started from a guess that pushes too hard, it takes the excess back.
+  solve.clear();
+  points = pair(0.8);
+  solve.solve(points, 1, bodies, v, mass);
+  for (const ContactPoint& c : points) EXPECT_NEAR(c.jn, 0.5, 1e-12);
+}
+
 TEST(ImpulseSolve, ClearForgetsTheChangesForTheNextSolve) {
   const std::vector<double> mass{1.0};
   const std::vector<Vec3> v{Vec3(0, -1, 0)};
