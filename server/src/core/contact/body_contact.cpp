@@ -33,6 +33,12 @@ constexpr double kAheadSlop = 0.01;
 // vertex of a face's interior, or of a gently curved surface, not of an edge
 // or a corner.
 constexpr double kSmoothCos = 0.94;
+// A second face across a rim from the one a vertex touches gets a point of
+// its own when their normals differ by more than this cosine (about 10
+// degrees): a sharp corner held on one face of a faceted surface would
+// otherwise slide along it into the next. (Nearly flush faces: the one point
+// holds it.)
+constexpr double kRimCos = 0.985;
 // Two bodies' surfaces whose mean edges differ by less than this fraction
 // are alike: the one of the lower index is then the slave.
 constexpr double kAlikeEdges = 0.05;
@@ -199,6 +205,7 @@ BodyContact<Real>::BodyContact(const Model<Real>& model, ParallelFor* parallel) 
       master_[a * n_bodies + b] = ea > (1 + kAlikeEdges) * eb || (ea >= (1 - kAlikeEdges) * eb && a > b) ? 1 : 0;
     }
   best_.assign(vertices_.size(), Best{});
+  second_.assign(vertices_.size(), Best{});
   tri_lo_.assign(triangles_.size(), Vec3(0.0));
   body_lo_.assign(vertex_sets_.size(), Vec3(0.0));
   margin_ = *std::min_element(refit_drift_.begin(), refit_drift_.end());
@@ -567,6 +574,12 @@ void BodyContact<Real>::find(const State<Real>& s, double dt) {
 template <class Real>
 void BodyContact<Real>::narrow(int32_t p) {
   constexpr double inf = std::numeric_limits<double>::infinity();
+  const auto neighbours = [&](int32_t t, int32_t u) {
+    for (int32_t a : triangles_[size_t(t)])
+      for (int32_t b : triangles_[size_t(u)])
+        if (a == b) return true;
+    return false;
+  };
   std::vector<int32_t>& touched = narrow_touched_[size_t(p)];
   touched.clear();
   // The listed pairs, vertex by vertex. Of the faces whose projection holds
@@ -618,6 +631,27 @@ void BodyContact<Real>::narrow(int32_t p) {
     if (nearest.t >= 0 && nearest.gap < 0) {
       touched.push_back(v);
       best_[size_t(v)] = nearest;
+      // Across a rim of it (a face that shares a corner with it, its normal
+      // differing by more than kRimCos): the nearest other face it is in
+      // front of and the next step takes it behind by more than the slop, as
+      // it slides over the rim. (Not one it is behind already: near a convex
+      // rim that is every vertex under the face, and a point there would
+      // push it sideways.)
+      Best across;
+      double across_distance = inf;
+      for (size_t k = first; k < i; ++k) {
+        const int32_t t = candidates_[k][1];
+        const Frame& f = frames_[size_t(t)];
+        if (t == nearest.t || !f.valid || glm::dot(f.n, nearest.n) > kRimCos || !neighbours(t, nearest.t)) continue;
+        const double d1 = gap(k);
+        if (d1 < 0 || d1 >= across_distance || d1 > ahead_listed_) continue;
+        Vec3 b(0.0);
+        if (comes_behind(v, t, b)) {
+          across = {t, d1, b, f.n};
+          across_distance = d1;
+        }
+      }
+      second_[size_t(v)] = across;
       continue;
     }
     // Outside: the nearest face it is in front of that the next step takes
@@ -778,7 +812,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   points_.clear();
   point_sign_.clear();
   point_held_.clear();
-  point_vertex_.clear();
+  point_key_.clear();
   slot_node_.clear();
   slot_v_.clear();
   slot_m_.clear();
@@ -791,8 +825,8 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     return Vec3(double(s.a[j]), double(s.a[j + 1]), double(s.a[j + 2]));
   };
   const auto travel = [&](int32_t n) { return velocity(n) + (0.5 * dt) * acceleration(n); };
-  for (int32_t v : touched_) {
-    Best& best = best_[size_t(v)];
+  // One point: vertex v against its face `best`, its key 2 v + `which`.
+  const auto make_point = [&](int32_t v, Best& best, int32_t which) {
     std::array<int32_t, 16> node{};
     std::array<double, 16> w{};
     size_t count = 0;
@@ -828,7 +862,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     if (master) {
       if (std::min(best.gap, best.gap + dt * un) > -slop_) {
         best = Best{};
-        continue;
+        return;
       }
     }
     ContactPoint& p = points_.emplace_back();  // (dropped below if it moves no free node)
@@ -881,21 +915,25 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       (vx.body == tb ? self_contacts_ : body_contacts_) += 1;
       point_sign_.push_back(vx.body == tb ? 0.0 : vx.body < tb ? 1.0 : -1.0);
       point_held_.push_back(held_w);
-      point_vertex_.push_back(v);
+      point_key_.push_back(2 * v + which);
     }
     best = Best{};
+  };
+  for (int32_t v : touched_) {
+    make_point(v, best_[size_t(v)], 0);
+    if (second_[size_t(v)].t >= 0) make_point(v, second_[size_t(v)], 1);
   }
   touched_.clear();
 
-  // Warm: a vertex that had a point in the step before starts from its
-  // impulses (its normal one along today's normal, its friction in today's
+  // Warm: a point (a vertex, on its first or second face) that was there
+  // in the step before starts from its impulses (its normal one along today's normal, its friction in today's
   // tangent plane), all scaled by the factor that lowers the solve's
   // objective most (ImpulseSolve::warm_scale). A resting patch's points
   // persist, and its sweeps then start near their end.
   std::vector<ContactState::BodyImpulse>& before = s.contact.body_impulses;
   for (size_t k = 0, b = 0; k < points_.size() && b < before.size(); ++k) {
-    while (b < before.size() && before[b].vertex < point_vertex_[k]) ++b;
-    if (b == before.size() || before[b].vertex != point_vertex_[k]) continue;
+    while (b < before.size() && before[b].key < point_key_[k]) ++b;
+    if (b == before.size() || before[b].key != point_key_[k]) continue;
     ContactPoint& c = points_[k];
     c.jn = before[b].jn;
     c.jt = before[b].jt - glm::dot(before[b].jt, c.n) * c.n;
@@ -914,7 +952,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_, kSolveTolerance, 2.0 * kSweepDepth * slop_ / dt);
   before.clear();
   for (size_t k = 0; k < points_.size(); ++k)
-    if (points_[k].jn > 0) before.push_back({point_vertex_[k], points_[k].jn, points_[k].jt});
+    if (points_[k].jn > 0) before.push_back({point_key_[k], points_[k].jn, points_[k].jt});
   // The velocity change as a force over the step, eq. (10): q 2 dv / dt, q = m (1 + alpha dt / 2).
   const double to_force = (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt;
   for (int32_t k : solve_.moved()) {

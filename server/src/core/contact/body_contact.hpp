@@ -53,7 +53,12 @@
 // projection leaves unchanged (it moves a by 2 dv / dt). Of the triangles
 // whose projection holds a vertex (or misses it by no more than its depth,
 // behind a corner or a rim), the nearest says whether it is inside; one
-// outside gets a point only ahead of the crossing (below).
+// outside gets a point only ahead of the crossing (below). A vertex inside
+// may get a second point, against a face across a rim of its own (sharing
+// a corner, bent by more than about 10 degrees) that the next step would
+// take it behind: held on one face only, the sharp corner of one body
+// slides along it into the next facet of the other (the stability suite's
+// ball_3m_s on quadratic tets guards it).
 //
 // Stopped short (speculative contact, as rigid-body engines use it): a
 // vertex in front of a triangle that the next step, eq. (7) from this
@@ -286,6 +291,10 @@ class BodyContact {
     double gap = 0;  // at t_{n+1} [m]: negative behind the triangle (in contact), else ahead of it
     Vec3 b{0.0}, n{0.0};
   };
+  // Per vertex in contact, a second face across a rim of the one it touches
+  // (best_): one it is also behind, or that the next step takes it behind
+  // (narrow()). t < 0: none.
+  std::vector<Best> second_;
   // Whether p's projection on triangle t's plane at end `end` (0: t_n, 1:
   // t_{n+1}, 2: the next step's) is over the triangle, or out of it by no
   // more than `depth`; its barycentric coordinates (clamped to it) in b, and
@@ -319,11 +328,11 @@ class BodyContact {
   std::vector<Vec3> body_lo_, body_hi_;  // per body: a box around all its vertices over the step
   std::vector<Box> boxes_;
   std::vector<ContactPoint> points_;
-  std::vector<double> point_sign_;     // per point: +1, -1 as exchanged() counts it, 0 within a body
-  std::vector<double> point_held_;     // per point: the sum of its held carriers' weights
-  std::vector<int32_t> point_vertex_;  // per point: its vertex (ascending)
-  std::vector<uint8_t> held_;          // per model node: an essential BC holds it
-  std::vector<int32_t> slot_of_;       // per model node, -1
+  std::vector<double> point_sign_;  // per point: +1, -1 as exchanged() counts it, 0 within a body
+  std::vector<double> point_held_;  // per point: the sum of its held carriers' weights
+  std::vector<int32_t> point_key_;  // per point: 2 x its vertex, + 1 for a second face (ascending)
+  std::vector<uint8_t> held_;       // per model node: an essential BC holds it
+  std::vector<int32_t> slot_of_;    // per model node, -1
   std::vector<int32_t> slot_node_;
   std::vector<Vec3> slot_v_;
   std::vector<double> slot_m_;

@@ -159,10 +159,11 @@ struct ContactState {
   // pushed in the latest step and the force on each over it [N], for the
   // next step's work trapezoid.
   std::vector<std::pair<int32_t, Vec3>> body_pushed;
-  // And its points' impulses, per surface vertex in BodyContact's order
-  // (ascending), for the next step's warm start.
+  // And its points' impulses, by point key (2 x the surface vertex in
+  // BodyContact's order, + 1 for its second face; ascending), for the next
+  // step's warm start.
   struct BodyImpulse {
-    int32_t vertex;
+    int32_t key;
     double jn;  // [N s]
     Vec3 jt;    // [N s]
   };
