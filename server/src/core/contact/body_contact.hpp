@@ -292,7 +292,7 @@ class BodyContact {
     Vec3 b{0.0}, n{0.0};
   };
   // Per vertex in contact, a second face across a rim of the one it touches
-  // (best_): one it is also behind, or that the next step takes it behind
+  // (best_): one it is in front of that the next step takes it behind
   // (narrow()). t < 0: none.
   std::vector<Best> second_;
   // Whether p's projection on triangle t's plane at end `end` (0: t_n, 1:
