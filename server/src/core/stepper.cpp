@@ -409,6 +409,7 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   cur_ = &s;
   cur_dt_ = Real(dt);
   cur_t1_ = s.t + dt;
+  const double dt_before = s.energy.open ? s.energy.dt : dt;  // (the account keeps the step it was measured with)
   open_energy_account(s, dt);
   keep_work_positions(s);
   predict_and_add_elastic_forces(s);           // eq. (7), essential positions, R(u_{n+1})
@@ -422,7 +423,7 @@ Fault Stepper<Real>::step(State<Real>& s, double dt) {
   }
   if (body_contact_.active()) {  // after the held nodes' velocities are set: they move as prescribed
     enter(Pass::BodyContact);
-    const ContactSums between = body_contact_.apply(s, dt);
+    const ContactSums between = body_contact_.apply(s, dt, dt_before);
     s.work_contact += between.work;
     contact.mv2_delta += between.mv2_delta;
     contact.ma2_delta += between.ma2_delta;

@@ -168,8 +168,8 @@ TEST(ThreadPool, BodyContactSplitOverThreadsGivesTheSameImpulses) {
   for (int k = 0; k < 400; ++k) {
     ASSERT_FALSE(stepper.step(s, dt)) << s.fault.message;
     State<double> a = s, b = s;
-    one.apply(a, dt);
-    split.apply(b, dt);
+    one.apply(a, dt, dt);
+    split.apply(b, dt, dt);
     ASSERT_EQ(one.body_contacts(), split.body_contacts()) << "step " << k;
     most = std::max(most, one.body_contacts());
     ASSERT_EQ(a.v, b.v) << "step " << k;

@@ -426,8 +426,9 @@ void BodyContact<Real>::place_nodes(int32_t p) {
     const Vec3 a1(double(acc[j]), double(acc[j + 1]), double(acc[j + 2]));
     const Vec3 x0 = x1 - dt * (v1 - (0.5 * dt) * a1);
     // Where the next step takes it under this one's velocity and forces, as
-    // eq. (7) will: x_{n+2} = x_{n+1} + dt v_{n+1} + dt^2/2 a_{n+1}.
-    const Vec3 x2 = x1 + dt * v1 + (0.5 * dt * dt) * a1;
+    // eq. (7) will over a step of the horizon h (apply()): x_{n+2} = x_{n+1}
+    // + h v_{n+1} + h^2/2 a_{n+1}.
+    const Vec3 x2 = x1 + horizon_ * v1 + (0.5 * horizon_ * horizon_) * a1;
     // (Where the step before ended: x0 to rounding, unless the state was
     // reset or replaced since; the kept boxes grow by that jump too.)
     // (Squares, their roots taken once per body: the largest move plus the
@@ -781,7 +782,7 @@ void BodyContact<Real>::list_pairs(size_t a, size_t vc, size_t b, size_t tc) {
 }
 
 template <class Real>
-ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
+ContactSums BodyContact<Real>::apply(State<Real>& s, double dt, double horizon) {
   ContactSums sums;
   body_contacts_ = self_contacts_ = 0;
   exchanged_ = Vec3(0.0);
@@ -789,6 +790,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   given_.assign(model_.bodies.size(), Vec3(0.0));
   held_given_ = Vec3(0.0);
   impulse_sum_ = 0;
+  horizon_ = std::max(dt, horizon);
   find(s, dt);
   // The work of the forces between bodies over the step, by the trapezoid
   // as the proxies' (contact.cpp): the previous step's forces on this
@@ -807,8 +809,9 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   // The points: the vertex's nodes (+w) against the triangle's (-b_j w_jk),
   // each node once; a held node adds its prescribed motion. The solve is
   // over the next step's travel (body_contact.hpp): each slot's velocity is
-  // u = v + dt a / 2 and its mass half the node's, so that its impulses are
-  // the real ones and its changes 2 dv.
+  // u = v + H a / 2 (H the horizon) and its mass half the node's, so that
+  // over steps of one length its impulses are the real ones and its changes
+  // 2 dv.
   points_.clear();
   point_sign_.clear();
   point_held_.clear();
@@ -824,7 +827,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     const size_t j = 3 * size_t(n);
     return Vec3(double(s.a[j]), double(s.a[j + 1]), double(s.a[j + 2]));
   };
-  const auto travel = [&](int32_t n) { return velocity(n) + (0.5 * dt) * acceleration(n); };
+  const auto travel = [&](int32_t n) { return velocity(n) + (0.5 * horizon_) * acceleration(n); };
   // One point: vertex v against its face `best`, its key 2 v + `which`.
   const auto make_point = [&](int32_t v, Best& best, int32_t which) {
     std::array<int32_t, 16> node{};
@@ -847,8 +850,8 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
       for (size_t c = 0; c < 4 && ty.node[c] >= 0; ++c) add(ty.node[c], -best.b[int(j)] * ty.w[c]);
     }
     // The vertex's normal travel relative to the triangle (its gap after
-    // the next step is g + dt un), where a master's smooth vertex or one in
-    // contact needs it (below).
+    // the next step is g + h un, h the horizon), where a master's smooth
+    // vertex or one in contact needs it (below).
     const bool master =
         smooth_[size_t(v)] && master_[size_t(vx.body) * vertex_sets_.size() + size_t(tri_body_[size_t(best.t)])];
     double un = 0;
@@ -860,7 +863,7 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     // A master's smooth vertex only where the slave's vertices let it in
     // deeper than the slop, now or by the end of the next step (master_).
     if (master) {
-      if (std::min(best.gap, best.gap + dt * un) > -slop_) {
+      if (std::min(best.gap, best.gap + horizon_ * un) > -slop_) {
         best = Best{};
         return;
       }
@@ -877,16 +880,16 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
     p.inv_mass = 0;
     p.mu = mu_;
     // The least relative normal travel the point may keep over the next
-    // step, its gap then g + dt u: ahead of the triangle (speculative
-    // contact, as rigid-body engines use it), what brings it to the
+    // step, its gap then g + h u (h the horizon): ahead of the triangle
+    // (speculative contact, as rigid-body engines use it), what brings it to the
     // triangle's plane and no farther; in contact none (it stays where it
     // is), or, deeper than the slop, back out toward it (what the sweeps
     // leave and the surfaces' turning let in would otherwise add up), no
     // faster than it came in: never more than the paper's own rule gives
     // back (restitution one over the next step), and the only push that can
     // add kinetic energy.
-    const double least =
-        best.gap >= 0 ? -best.gap / dt : std::min(std::max(0.0, -(best.gap + slop_) / dt), std::max(0.0, -un));
+    const double least = best.gap >= 0 ? -best.gap / horizon_
+                                       : std::min(std::max(0.0, -(best.gap + slop_) / horizon_), std::max(0.0, -un));
     p.vp = least * p.n;
     size_t free = 0;
     double held_w = 0;
@@ -949,24 +952,26 @@ ContactSums BodyContact<Real>::apply(State<Real>& s, double dt) {
   // the slop a step. Each sweep only lowers the kinetic energy of the
   // points' travel from where the guess left it, no higher than none does,
   // so stopping early adds none.
-  solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_, kSolveTolerance, 2.0 * kSweepDepth * slop_ / dt);
+  solve_.solve(points_, 1, no_bodies_, slot_v_, slot_m_, kSolveTolerance, 2.0 * kSweepDepth * slop_ / horizon_);
   before.clear();
   for (size_t k = 0; k < points_.size(); ++k)
     if (points_[k].jn > 0) before.push_back({point_key_[k], points_[k].jn, points_[k].jt});
-  // The velocity change as a force over the step, eq. (10): q 2 dv / dt, q = m (1 + alpha dt / 2).
-  const double to_force = (1.0 + 0.5 * alpha_ * dt) * 2.0 / dt;
+  // A travel change du: the acceleration change 2 du / (dt + H) and, by eq.
+  // (9), the velocity change dt du / (dt + H) (apply()); its force over the
+  // step by eq. (10), m q da, q = 1 + alpha dt / 2.
+  const double to_a = 2.0 / (dt + horizon_), to_v = dt / (dt + horizon_), q = 1.0 + 0.5 * alpha_ * dt;
   for (int32_t k : solve_.moved()) {
     const int32_t n = slot_node_[size_t(k)];
-    const Vec3 dv = 0.5 * solve_.dv(k);  // (the travel's change is 2 dv)
-    const double m = 2.0 * slot_m_[size_t(k)];
-    const Vec3 f = (m * to_force) * dv;
+    const Vec3 du = solve_.dv(k), dv = to_v * du, da = to_a * du;
+    const double m = double(model_.m[size_t(n)]);
+    const Vec3 f = (m * q) * da;
     given_[size_t(model_.node_body[size_t(n)])] += m * dv;
     sums.work += 0.5 * glm::dot(f, node_x1_[size_t(n)] - node_x0_[size_t(n)]);
     pushed.emplace_back(n, f);
     const size_t j = 3 * size_t(n);
     for (size_t d = 0; d < 3; ++d) {
       const double v0 = double(s.v[j + d]), a0 = double(s.a[j + d]);
-      const auto v1 = Real(v0 + dv[int(d)]), a1 = Real(a0 + (2.0 / dt) * dv[int(d)]);  // eq. (9)
+      const auto v1 = Real(v0 + dv[int(d)]), a1 = Real(a0 + da[int(d)]);  // eq. (9)
       s.v[j + d] = v1;
       s.a[j + d] = a1;
       sums.mv2_delta += m * (double(v1) * double(v1) - v0 * v0);

@@ -22,7 +22,9 @@
 // impulses J and a change 2 dv. It is inelastic in u, and a resting vertex
 // stays where it is: its point persists from step to step, so the solve
 // starts from the step before's impulses (ContactState::body_impulses,
-// scaled by ImpulseSolve::warm_scale) and settles in a few sweeps.
+// scaled by ImpulseSolve::warm_scale) and settles in a few sweeps. (The
+// next step is taken as long as the longer of this one and the one before;
+// apply() says why.)
 //
 // Why vertex-face on the surfaces contact meets (the fine surfaces, else
 // the boundaries): it is what SOFA's and Bridson et al.'s (2002) deformable
@@ -150,7 +152,16 @@ class BodyContact {
   // what it changed for the energy account and the work of its forces on
   // the bodies over the step (the trapezoid, as the proxies'; the forces of
   // this step are kept in s.contact.body_pushed for the next).
-  ContactSums apply(State<Real>& s, double dt);
+  //
+  // `horizon` (>= dt): the step the travel it sets is for, the next one as
+  // the stepper expects it (the longer of this step and the one before: a
+  // sliver of a step, as an interval ending a hair past a whole number of
+  // steps leaves, is followed by a full one). A travel change du over a
+  // horizon H is the acceleration change 2 du / (dt + H), which by eq. (9)
+  // changes v_{n+1} by dt du / (dt + H): for H = dt, du / dt and du / 2. (Set
+  // for a step of dt alone, a sliver's du became an acceleration du / sliver
+  // that the full step after it integrated.)
+  ContactSums apply(State<Real>& s, double dt, double horizon);
   // Contact points in the latest apply(): between bodies, and within one.
   int32_t body_contacts() const { return body_contacts_; }
   int32_t self_contacts() const { return self_contacts_; }
@@ -309,6 +320,8 @@ class BodyContact {
   // The step the passes read (find()), and the threads they split over.
   const State<Real>* cur_ = nullptr;
   double cur_dt_ = 0;
+  // The step the travel it sets is for (apply()'s `horizon`).
+  double horizon_ = 0;
   ParallelFor* parallel_ = nullptr;
   int32_t node_parts_ = 1;
   // Per part of place_nodes(): per body, its nodes' largest move over the
