@@ -258,6 +258,8 @@ def test_decoded_values_are_the_written_ones():
     assert hello.devices == ["left", "right"]
     assert [(d.maxForceN, d.stiffnessNPerM, d.direct) for d in hello.deviceLimits] == [(6.0, 2000.0, False),
                                                                                        (3.5, 1200.0, True)]
+    assert hello.maxRateHz == 500.0  # (1.10)
+    assert tp.decode(golden("error_lagging")[1]).message.code == ErrorCode.Lagging
     state = tp.decode(golden("state_frame")[1]).message
     assert state.step == 123456 and state.serverTimeNs == 987654321012
     assert state.positions[4] == np.float32(-0.001) and state.proxies[1].orientation.x == 0.5

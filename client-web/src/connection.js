@@ -40,6 +40,8 @@ export class ClosedError extends Error {
  * @typedef {object} ConnectOptions
  * @property {string} [token] the server's token (the device and controller roles need it)
  * @property {string} [clientName] @property {string[]} [devices] @property {string[]} [fields] the Hello's
+ * @property {number} [maxRateHz] the frames a second it takes at most (Hello.max_rate_hz, 1.10): haptic frames
+ *   for a device, states otherwise; 0, the server's rate. What it has not read when a newer one comes is replaced
  * @property {() => void} [onOpen] the socket opened (the Hello goes right after)
  * @property {(data: Uint8Array) => void} [onMessage] each message after the Welcome
  * @property {(closed: Closed) => void} [onClose] the socket closed (not after close({ quiet: true }))
@@ -56,6 +58,7 @@ export class Connection {
       clientName = 'client-web',
       devices = [],
       fields = [],
+      maxRateHz = 0,
       onOpen,
       onMessage,
       onClose,
@@ -83,7 +86,7 @@ export class Connection {
     ws.onopen = () => {
       if (this.quiet) return;
       onOpen?.();
-      ws.send(encode(makeHello({ role, token, clientName, devices, fields })));
+      ws.send(encode(makeHello({ role, token, clientName, devices, fields, maxRateHz })));
     };
     ws.onmessage = (e) => {
       if (this.quiet) return;

@@ -25,6 +25,9 @@ import { channelOrder, pressTarget } from './press.js';
 /** @import { Connection } from './connection.js' */
 /** @import { SceneView } from './view.js' */
 
+// Haptic frames a second the page asks for (Hello.max_rate_hz): about two per displayed frame.
+export const HAPTIC_RATE_HZ = 120;
+
 export class PointerDevice {
   // `canvas`, `camera`, `controls` (OrbitControls, paused while dragging); `token` for the device role;
   // `onStatus(text)` for what it is doing.
@@ -109,6 +112,9 @@ export class PointerDevice {
       token: this.token,
       clientName: 'client-web mouse',
       devices: [channel],
+      // The page draws and reads at its display's rate: a haptic frame after every step (7.8 kHz for the
+      // default scene) would wait in the socket's buffers for seconds while the browser draws.
+      maxRateHz: HAPTIC_RATE_HZ,
       onMessage: (data) => {
         const type = messageTypeOf(data);
         if (type === Message.HapticFrame) {

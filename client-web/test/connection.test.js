@@ -93,6 +93,7 @@ test('the Hello says the role and its options; the Welcome resolves, and later m
     token: 's3cret',
     clientName: 'a mouse',
     devices: ['mouse'],
+    maxRateHz: 120,
   });
   assert.equal(socket.binaryType, 'arraybuffer');
   assert.equal(connection.open, false);
@@ -102,8 +103,8 @@ test('the Hello says the role and its options; the Welcome resolves, and later m
   const hello = /** @type {HelloT} */ (decode(socket.sent[0]).message);
   assert.equal(messageTypeOf(socket.sent[0]), Message.Hello);
   assert.deepEqual(
-    [hello.role, hello.token, hello.clientName, hello.devices, hello.protocolMajor],
-    [Role.Device, 's3cret', 'a mouse', ['mouse'], PROTOCOL_MAJOR],
+    [hello.role, hello.token, hello.clientName, hello.devices, hello.protocolMajor, hello.maxRateHz],
+    [Role.Device, 's3cret', 'a mouse', ['mouse'], PROTOCOL_MAJOR, 120],
   );
   socket.receive(welcome());
   const w = await connection.welcome;

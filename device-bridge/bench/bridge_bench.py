@@ -18,7 +18,16 @@
              felt against what it should be, drag in free space, the latency from the hand's motion to force,
              faults.
 
+  staleness  the age of the haptic frames a device client reads (its read time less the frame's server_time_ns,
+             both CLOCK_MONOTONIC on this machine): p50, p99, max over what it read, for a client that wakes every
+             2 ms (500 Hz) and reads one frame (a device loop written from proto/README.md), and asks for
+             nothing (the server's rate: a frame after every step of the default scene, 7.7 kHz), against one
+             that asks for 500 Hz in its Hello (max_rate_hz, protocol 1.10) and one that asks for 450 (what a
+             client should ask: less than it reads, or what it falls short of piles up in its own socket's
+             buffer); --loaded also beside two busy processes.
+
   .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
+  .venv/bin/python device-bridge/bench/bridge_bench.py staleness --seconds 20 [--loaded]
   .venv/bin/python device-bridge/bench/bridge_bench.py modes --seconds 12 [--object stiff] [--json modes.json]
   .venv/bin/python device-bridge/bench/bridge_bench.py loop [--cases soft,stiff] [--rates 1000] [--loaded]
       [--json loop.json]
@@ -27,6 +36,7 @@
 from __future__ import annotations
 
 import argparse
+import asyncio
 import contextlib
 import csv
 import json
@@ -591,6 +601,60 @@ def loop(args: argparse.Namespace) -> None:
         pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
 
 
+# ---- staleness -------------------------------------------------------------------------------------------
+
+async def read_ages(port: int, seconds: float, read_hz: float, ask_hz: float) -> tuple[np.ndarray, int, str]:
+    """A device client on 'stylus' that reads one frame every 1/read_hz s on average (a device loop written from
+    proto/README.md: one recv a tick, catching up when a tick was late): each frame's age when read [ms], the
+    frames it read, and what the server told it (an Error such as Lagging, or "")."""
+    import websockets
+
+    from tactile_bridge.wire import HAPTIC_FRAME, message_type
+    from tactile_proto import decode, encode, make_hello
+    from tactile_proto.generated.Role import Role
+    ages: list[float] = []
+    told = ""
+    frames = 0
+    async with websockets.connect(f"ws://127.0.0.1:{port}/", max_size=64 << 20, compression=None,
+                                  ping_interval=None) as ws:
+        await ws.send(encode(make_hello(Role.Device, TOKEN, "staleness", ["stylus"], max_rate_hz=ask_hz)))
+        start = time.monotonic()
+        period = 1.0 / read_hz
+        next_read = start
+        while time.monotonic() - start < seconds:
+            raw = await ws.recv()
+            now = time.monotonic_ns()
+            kind, _ = message_type(raw)
+            if kind == HAPTIC_FRAME:
+                frames += 1
+                if time.monotonic() - start > 2.0:  # (the connection's first seconds: the scene, warming up)
+                    ages.append((now - decode(raw).message.serverTimeNs) / 1e6)
+            elif not told:
+                m = decode(raw).message
+                if type(m).__name__ == "ErrorT":
+                    told = m.message
+            next_read += period
+            delay = next_read - time.monotonic()
+            if delay > 0:
+                await asyncio.sleep(delay)
+    return np.asarray(ages), frames, told
+
+
+def staleness(args: argparse.Namespace) -> None:
+    scene = json.loads((ROOT / "server/scenes/default.json").read_text())
+    print(f"device client reading at {args.read_hz:g} Hz, default scene, haptic frames after every step; "
+          f"{args.seconds:g} s each (the first 2 s left out)")
+    print(f"{'load':>6} {'asks Hz':>8} {'read/s':>9} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8}  told")
+    for loaded in ([False, True] if args.loaded else [False]):
+        for ask in (0.0, args.read_hz, 0.9 * args.read_hz):
+            with tempfile.TemporaryDirectory() as d, server(pathlib.Path(d), scene) as port, \
+                    (busy(2) if loaded else contextlib.nullcontext()):
+                ages, n, told = asyncio.run(read_ages(port, args.seconds, args.read_hz, ask))
+            p50, p99, mx = (np.percentile(ages, 50), np.percentile(ages, 99), ages.max()) if len(ages) else (0, 0, 0)
+            print(f"{'busy 2' if loaded else 'quiet':>6} {ask:>8g} {n / args.seconds:>9.0f} "
+                  f"{p50:>8.2f} {p99:>8.2f} {mx:>8.2f}  {told[:70]}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="what", required=True)
@@ -603,6 +667,10 @@ def main() -> None:
     b.add_argument("--object", choices=sorted(OBJECTS), default="soft",
                    help="the block: soft (30 kPa) or stiff (300 kPa)")
     b.add_argument("--json", help="also write the figures to this file")
+    d = sub.add_parser("staleness")
+    d.add_argument("--seconds", type=float, default=20.0, help="per client")
+    d.add_argument("--read-hz", type=float, default=500.0, help="how often the client reads a frame")
+    d.add_argument("--loaded", action="store_true", help="also beside two busy processes")
     c = sub.add_parser("loop")
     c.add_argument("--seconds", type=float, default=12.0, help="per run")
     c.add_argument("--cases", default="", help=f"comma-separated, of {', '.join(LOOP_CASES)} (default: all)")
@@ -612,7 +680,7 @@ def main() -> None:
     c.add_argument("--json", help="also write the figures to this file")
     c.add_argument("--keep", help="keep each run's trace, recording and profile under this folder")
     args = ap.parse_args()
-    {"lateness": lateness, "modes": modes, "loop": loop}[args.what](args)
+    {"lateness": lateness, "modes": modes, "loop": loop, "staleness": staleness}[args.what](args)
 
 
 if __name__ == "__main__":

@@ -35,6 +35,7 @@ class Options:
     url: str = "ws://127.0.0.1:8765/"
     token: str = ""
     mode: str = "coupled"          # interpolation.MODES
+    state_rate_hz: float = 2000.0  # haptic states per second asked of the server (0: every one it makes)
     network: str = "process"       # thread | process
     passivity: bool = True
     priority: int = 0              # SCHED_FIFO priority of the tick (0: normal scheduling)
@@ -94,7 +95,8 @@ class Bridge:
         self.opts = opts
         self.ex = ex.Exchange(len(profiles), shared=opts.network == "process")
         self.wake_r, self.wake_w = _pipe()
-        self.network = Network(opts.url, opts.token, self.profiles, self.ex, self.wake_r, mode=opts.mode)
+        self.network = Network(opts.url, opts.token, self.profiles, self.ex, self.wake_r, mode=opts.mode,
+                               max_rate_hz=opts.state_rate_hz)
         self.devices = list(devices) if devices is not None else None
         self.tick: Tick | None = None
         self._thread: threading.Thread | None = None

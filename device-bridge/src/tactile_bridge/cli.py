@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import json
 import logging
+import math
 import os
 import pathlib
 import signal
@@ -127,6 +128,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                          "the tick; the others drive the proxy directly (kinematic) and display the body's force: "
                          "delay, the paper's one-step delay, interpolated; hold, zero-order hold; extrapolate, no "
                          "delay, from the local stiffness")
+    ap.add_argument("--state-rate", type=float, default=2000.0, metavar="HZ",
+                    help="haptic states a second to ask of the server; what the bridge has not read when a newer "
+                         "one comes is replaced, so it reads the newest (0: every one the server makes)")
     ap.add_argument("--network", choices=("process", "thread"), default="process",
                     help="run the tick in its own process (default) or in a thread beside the network")
     ap.add_argument("--no-passivity", action="store_true", help="turn the passivity observer/controller off")
@@ -170,7 +174,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{p.path}: {p.name}, driver {p.driver}, channel {p.channel!r}, {p.rate_hz:g} Hz, "
                   f"max {p.force.max_N:g} N, continuous {p.force.continuous_N:g} N, slew {p.force.slew_N_per_s:g} N/s")
         return 0
+    if not (args.state_rate >= 0 and math.isfinite(args.state_rate)):
+        print(f"tactile-bridge: --state-rate must be 0 or a positive rate, got {args.state_rate}", file=sys.stderr)
+        return 2
     opts = Options(url=args.server, token=args.token, mode=args.mode, network=args.network,
+                   state_rate_hz=args.state_rate,
                    passivity=not args.no_passivity, priority=args.priority, spin_us=args.spin_us,
                    seconds=args.seconds, status_s=args.status, trace=args.trace, trace_s=args.trace_seconds)
     try:

@@ -62,7 +62,7 @@ class LinkError(RuntimeError):
 class Network:
     def __init__(self, url: str, token: str, profiles: Sequence[Profile], exchange: ex.Exchange, wake_fd: int,
                  *, client_name: str = "tactile-bridge", lateness_window: int = 2000, mode: str = "coupled",
-                 status_s: float = 1.0,
+                 status_s: float = 1.0, max_rate_hz: float = 0.0,
                  reconnect_s: float = 0.5, ping_s: float = 0.2,
                  clock: Callable[[], int] = time.monotonic_ns) -> None:
         self.url = url
@@ -75,6 +75,7 @@ class Network:
         self.ping_s = ping_s
         self.clock = clock
         self.mode = mode
+        self.max_rate_hz = max_rate_hz  # haptic states a second asked of the server (0: all; protocol 1.10)
         self.status_s = status_s
         self._status_at = (time.monotonic(), exchange.i[ex.H_TICKS], exchange.histogram())
         self.sync = ClockSync()
@@ -139,6 +140,7 @@ class Network:
                                       ping_interval=None) as ws:
             hello = make_hello(Role.Device, self.token, self.client_name, [p.channel for p in self.profiles])
             hello.deviceLimits = [self._limits(p) for p in self.profiles]
+            hello.maxRateHz = self.max_rate_hz
             await ws.send(encode(hello))
             welcome = await self._expect(ws, WelcomeT)
             check_version(welcome)

@@ -91,4 +91,7 @@ func TestHelloReadsAsWritten(t *testing.T) {
 	if m.DevicesLength() != len(devices) || string(m.Devices(1)) != devices[1] {
 		t.Errorf("devices %d", m.DevicesLength())
 	}
+	if float64(m.MaxRateHz()) != v.Message["max_rate_hz"] { // (1.10)
+		t.Errorf("max_rate_hz %v", m.MaxRateHz())
+	}
 }

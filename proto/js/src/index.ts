@@ -156,6 +156,7 @@ export interface HelloOptions {
   clientName?: string;
   devices?: string[]; // channels a Device client drives
   fields?: string[]; // per-vertex fields asked for in state frames (1.8; SceneDescription.fields names them)
+  maxRateHz?: number; // frames per second it takes at most (1.10): haptic for a Device, states otherwise; 0: the server's
 }
 
 // The first message of a client, carrying this codec's protocol version.
@@ -169,6 +170,7 @@ export function makeHello(options: HelloOptions = {}): EnvelopeT {
     options.devices ?? [],
     [],
     options.fields ?? [],
+    options.maxRateHz ?? 0,
   );
   return new EnvelopeT(Message.Hello, hello);
 }

@@ -79,6 +79,8 @@ test('typed reads of the vectors see the written values', () => {
   assert.equal(hello.devices[1], 'right');
   assert.equal(hello.deviceLimits[0].maxForceN, 6);
   assert.equal(hello.deviceLimits[1].direct, true);
+  assert.equal(hello.maxRateHz, 500); // (1.10)
+  assert.equal(byName.error_lagging.code, proto.ErrorCode.Lagging);
   const state = byName.state_frame;
   assert.equal(state.step, 123456n);
   assert.equal(state.serverTimeNs, 987654321012n);

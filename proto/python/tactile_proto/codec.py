@@ -218,10 +218,12 @@ def encode(message: Any) -> bytes:
 
 
 def make_hello(
-    role: int, token: str = "", client_name: str = "", devices: Sequence[str] = (), fields: Sequence[str] = ()
+    role: int, token: str = "", client_name: str = "", devices: Sequence[str] = (), fields: Sequence[str] = (),
+    max_rate_hz: float = 0.0,
 ) -> HelloT:
     """A Hello in this codec's protocol version; `role` is a generated Role value (Role.Device...); `fields`
-    the per-vertex fields asked for in state frames (1.8)."""
+    the per-vertex fields asked for in state frames (1.8); `max_rate_hz` the frames per second the client
+    takes at most, haptic frames for a Device and state frames otherwise (1.10; 0: the server's rate)."""
     hello = HelloT()
     hello.protocolMajor = PROTOCOL_MAJOR
     hello.protocolMinor = PROTOCOL_MINOR
@@ -230,6 +232,7 @@ def make_hello(
     hello.clientName = client_name
     hello.devices = list(devices)
     hello.fields = list(fields)
+    hello.maxRateHz = max_rate_hz
     return hello
 
 

@@ -203,6 +203,11 @@ void Connection::on_hello(const wire::Hello& h) {
         outside_.push_back(false);
       }
   }
+  const double rate = double(h.max_rate_hz());
+  if (!std::isfinite(rate) || rate < 0)
+    return refuse(wire::ErrorCode::BadRequest,
+                  "Hello.max_rate_hz must be 0 (the server's rate) or a positive number of frames per second, got " +
+                      std::to_string(rate));
   std::string bad_fields;
   const ViewFieldMask fields = read_view_fields(h.fields(), "Hello.fields", &bad_fields);
   if (!bad_fields.empty()) return refuse(wire::ErrorCode::BadRequest, bad_fields);
@@ -211,6 +216,7 @@ void Connection::on_hello(const wire::Hello& h) {
   greeted_ = true;
   role_ = h.role();
   protocol_minor_ = h.protocol_minor();
+  max_rate_hz_ = rate;
   if (role_ == wire::Role::Device) bind_devices();
   fb::FlatBufferBuilder b;
   send(seal(b, wire::Message::Welcome,
@@ -364,33 +370,62 @@ void Connection::send(const Bytes& message, OutKind kind, ConnectionClock::time_
       wire::GetEnvelope(message->data())->message_type() == wire::Message::Error)
     host_.record(Topic::Error, *message, host_.now_ns());
   if (closed_ || disconnect_) return;
-  if (kind == OutKind::State) {
-    // Latest wins, at the viewer's rate on average: each state passed sets
-    // the next one's due time a period on, and a state a little early (a
-    // quarter period: the simulation's publishing jitters) still passes,
-    // or states made at exactly the viewer's rate would lose every other one.
-    const auto period = std::chrono::duration_cast<ConnectionClock::duration>(
-        std::chrono::duration<double>(1.0 / limits_.viewer_rate_hz));
-    if (now + period / 4 < next_state_due_) return;
-    if (pending_state_) {
-      pending_state_ = message;  // replaces the one not yet sent
+  if (kind == OutKind::State || kind == OutKind::Haptic) {
+    // Latest wins, at the client's rate on average: each frame passed sets
+    // the next one's due time a period on, and a frame a little early (a
+    // quarter period: the simulation's publishing jitters) still passes, or
+    // frames made at exactly the client's rate would lose every other one.
+    // A frame not yet written when the next passes is replaced by it: what
+    // the client reads is the newest, never a backlog.
+    const bool state = kind == OutKind::State;
+    const double rate =
+        state ? (max_rate_hz_ > 0 ? std::min(max_rate_hz_, limits_.viewer_rate_hz) : limits_.viewer_rate_hz)
+              : max_rate_hz_;  // (0: every haptic frame the server makes)
+    ConnectionClock::time_point& due = state ? next_state_due_ : next_haptic_due_;
+    const auto period =
+        rate > 0 ? std::chrono::duration_cast<ConnectionClock::duration>(std::chrono::duration<double>(1.0 / rate))
+                 : ConnectionClock::duration::zero();
+    if (now + period / 4 < due) return;
+    // Told once, when over a second it let more than half the frames that
+    // passed be replaced unread: not for the few a connection's first
+    // moments replace while the scene description goes out.
+    LagWindow& lag = state ? state_lag_ : haptic_lag_;
+    if (now - lag.start >= std::chrono::seconds(1)) {
+      if (!told_lagging_ && protocol_minor_ >= 10 && greeted_ && lag.replaced >= 10 && 2 * lag.replaced > lag.passed) {
+        told_lagging_ = true;
+        reply(wire::ErrorCode::Lagging,
+              std::string("this client reads ") + (state ? "state" : "haptic") +
+                  " frames slower than they come: an unread frame is replaced by the newest (said once; "
+                  "Hello.max_rate_hz asks for fewer)");
+      }
+      lag = {now, 0, 0};
+    }
+    ++lag.passed;
+    Bytes& pending = state ? pending_state_ : pending_haptic_;
+    if (pending) {
+      pending = message;  // replaces the one not yet written
+      ++lag.replaced;
+      if (state) {
+        ++states_replaced_;
+      } else {
+        ++haptics_dropped_;
+      }
       return;
     }
-    next_state_due_ = std::max(next_state_due_, now - period) + period;
-    pending_state_ = message;
-    queue_.push_back(nullptr);  // a marker: the pending state goes here
+    due = std::max(due, now - period) + period;
+    pending = message;
+    queue_.push_back(nullptr);  // a marker: the pending frame of its kind goes here
   } else if (kind != OutKind::Control) {
     // A reader too slow: its oldest waiting message of the kind goes (not
     // the one being written), so what it does read is the newest.
-    const bool haptic = kind == OutKind::Haptic;
-    size_t& queued = haptic ? haptics_queued_ : kind == OutKind::Event ? events_queued_ : statuses_queued_;
-    if (queued >= (haptic ? limits_.device_queue : limits_.event_queue))
+    size_t& queued = kind == OutKind::Event ? events_queued_ : statuses_queued_;
+    if (queued >= limits_.event_queue)
       for (size_t k = writing_ ? 1 : 0; k < queue_.size(); ++k)
         if (kinds_[k] == kind) {
           queue_.erase(queue_.begin() + long(k));
           kinds_.erase(kinds_.begin() + long(k));
           --queued;
-          ++(haptic ? haptics_dropped_ : events_dropped_);
+          ++events_dropped_;
           break;
         }
     ++queued;
@@ -411,15 +446,20 @@ void Connection::send(const Bytes& message, OutKind kind, ConnectionClock::time_
 const Bytes* Connection::next_write() {
   if (writing_ || queue_.empty() || closed_) return nullptr;
   writing_ = true;
-  current_ = queue_.front() ? queue_.front() : pending_state_;
-  if (!queue_.front()) pending_state_.reset();
+  if (queue_.front()) {
+    current_ = queue_.front();
+  } else {
+    Bytes& pending = kinds_.front() == OutKind::State ? pending_state_ : pending_haptic_;
+    current_ = std::move(pending);
+    pending.reset();
+  }
   return &current_;
 }
 
 void Connection::written() {
   writing_ = false;
   switch (kinds_.front()) {
-    case OutKind::Haptic: --haptics_queued_; break;
+    case OutKind::Haptic: break;
     case OutKind::Event: --events_queued_; break;
     case OutKind::Status: --statuses_queued_; break;
     case OutKind::Control: --controls_queued_; break;

@@ -53,9 +53,10 @@ Bytes seal(flatbuffers::FlatBufferBuilder& b, proto::Message type, flatbuffers::
 }
 Bytes make_error(proto::ErrorCode code, const std::string& message, uint32_t request_id = 0);
 
-// What a slow reader loses (Connection::send): a State is replaced by the next,
-// a Haptic frame, an Event (SafetyEvent) or a Status (DeviceStatus) beyond
-// its bound drops the oldest of its kind waiting, a Control message
+// What a slow reader loses (Connection::send): a State or a Haptic frame not
+// yet written is replaced by the next (the newest wins, at the rate the
+// client asked for in its Hello: 1.10), an Event (SafetyEvent) or a Status
+// (DeviceStatus) beyond its bound drops the oldest of its kind waiting, a Control message
 // (replies, Telemetry, ReplayStatus) is never dropped: a reader that lets
 // control_queue of them wait is disconnected.
 enum class OutKind { Control, State, Haptic, Event, Status };
@@ -66,7 +67,6 @@ struct ConnectionLimits {
   std::string server_name = "tactile";
   double viewer_rate_hz = 30;            // states per second at most
   double max_messages_per_s = 5000;      // inbound (a second's burst)
-  size_t device_queue = 256;             // haptic frames waiting before the oldest drops
   double max_safety_events_per_s = 100;  // relayed (a second's burst)
   size_t event_queue = 256;              // safety events (and statuses) waiting before the oldest drops
   size_t control_queue = 1024;           // control messages waiting unread: disconnected
@@ -151,7 +151,15 @@ class Connection {
   void bind_devices();
 
   // What it lost as a slow reader, and what it sent over its bounds.
-  int64_t haptics_dropped() const { return haptics_dropped_; }
+  int64_t haptics_dropped() const { return haptics_dropped_; }  // replaced unwritten by a newer one
+  int64_t states_replaced() const { return states_replaced_; }
+  double max_rate_hz() const { return max_rate_hz_; }  // Hello.max_rate_hz (0: the server's rate)
+  // Whether the message next_write() would give is a frame (State or
+  // Haptic), which the shell holds back while the socket has more unsent
+  // than a few frames: the newest then replaces it as it waits.
+  bool frame_next() const {
+    return !writing_ && !queue_.empty() && (kinds_.front() == OutKind::State || kinds_.front() == OutKind::Haptic);
+  }
   int64_t events_dropped() const { return events_dropped_; }
   int64_t safety_dropped() const { return safety_dropped_; }
   int64_t inputs_coalesced() const { return inputs_coalesced_; }  // dropped for a newer one over the rate
@@ -182,13 +190,22 @@ class Connection {
   std::vector<int32_t> devices_;           // their index in the current scene, -1 if absent
   std::vector<bool> outside_;              // each one's latest input was outside the workspace
 
-  // The outbound queue: null entries stand for pending_state_.
+  // The outbound queue: null entries stand for the pending frame of their kind.
   std::deque<Bytes> queue_;
   std::deque<OutKind> kinds_;
-  Bytes pending_state_, current_;
-  size_t haptics_queued_ = 0, events_queued_ = 0, statuses_queued_ = 0, controls_queued_ = 0;
-  int64_t haptics_dropped_ = 0, events_dropped_ = 0;
-  ConnectionClock::time_point next_state_due_{};
+  Bytes pending_state_, pending_haptic_, current_;
+  size_t events_queued_ = 0, statuses_queued_ = 0, controls_queued_ = 0;
+  int64_t haptics_dropped_ = 0, states_replaced_ = 0, events_dropped_ = 0;
+  ConnectionClock::time_point next_state_due_{}, next_haptic_due_{};
+  double max_rate_hz_ = 0;
+  // Per kind of frame, over the current second: frames passed by the rate,
+  // and of them those replaced unread (Lagging is told from these).
+  struct LagWindow {
+    ConnectionClock::time_point start{};
+    int64_t passed = 0, replaced = 0;
+  };
+  LagWindow state_lag_, haptic_lag_;
+  bool told_lagging_ = false;
 
   // Token buckets: inbound messages, safety events, statuses.
   struct Bucket {

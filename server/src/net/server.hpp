@@ -55,8 +55,8 @@ struct ServerOptions {
   size_t max_waiting = 1024;                 // upgraded, no Hello yet (net/admission.hpp: who makes room)
   double hello_grace_s = 1;                  // a connection waiting for less is never evicted
   size_t max_message_bytes = 64 * 1024;      // inbound
+  size_t unsent_frames_bytes = 4096;         // a frame waits while more than this is unsent in the socket
   double max_messages_per_s = 5000;          // inbound per connection (burst: a second's worth)
-  size_t device_queue = 256;                 // haptic frames queued per device before the oldest drop
   double max_safety_events_per_s = 100;      // relayed per device connection (burst: a second's worth); more drop
   size_t event_queue = 256;                  // safety events queued per reader before the oldest drop
   size_t control_queue = 1024;               // control messages (replies, telemetry) unread: disconnected

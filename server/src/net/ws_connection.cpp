@@ -4,6 +4,12 @@
 #include <chrono>
 #include <cstdio>
 
+#ifdef __linux__
+#include <linux/sockios.h>
+#include <netinet/tcp.h>
+#include <sys/ioctl.h>
+#endif
+
 #include "net/host.hpp"
 
 namespace tactile {
@@ -16,9 +22,8 @@ using tcp = asio::ip::tcp;
 namespace {
 
 ConnectionLimits limits(const ServerOptions& o) {
-  return {
-      o.token,       o.server_name,  o.viewer_rate_hz, o.max_messages_per_s, o.device_queue, o.max_safety_events_per_s,
-      o.event_queue, o.control_queue};
+  return {o.token,       o.server_name,  o.viewer_rate_hz, o.max_messages_per_s, o.max_safety_events_per_s,
+          o.event_queue, o.control_queue};
 }
 
 uint64_t next_id = 1;  // on the network thread
@@ -50,6 +55,15 @@ void WsConnection::start(beast::http::request<beast::http::string_body> req) {
   // peer's next message acks the previous one: a whole input period of latency.
   beast::error_code ignored;
   beast::get_lowest_layer(ws_).socket().set_option(tcp::no_delay(true), ignored);
+#ifdef __linux__
+  // What waits in the kernel for a slow reader is a few frames, not seconds
+  // of them: the socket is writable again only once less than this is
+  // unsent, and pump() holds a frame back until then (the newest replaces it
+  // as it waits: Connection::send).
+  unsent_bound_ = int(host_->options().unsent_frames_bytes);
+  const int fd = beast::get_lowest_layer(ws_).socket().native_handle();
+  if (::setsockopt(fd, IPPROTO_TCP, TCP_NOTSENT_LOWAT, &unsent_bound_, sizeof unsent_bound_) != 0) unsent_bound_ = 0;
+#endif
   websocket::stream_base::timeout t = websocket::stream_base::timeout::suggested(beast::role_type::server);
   t.idle_timeout = std::chrono::milliseconds(int64_t(host_->options().idle_timeout_s * 1000));
   t.keep_alive_pings = true;
@@ -143,8 +157,33 @@ void WsConnection::read() {
   });
 }
 
+// Bytes written to the socket that TCP has not sent yet (0 where it cannot tell).
+int WsConnection::unsent() {
+#ifdef __linux__
+  int n = 0;
+  if (unsent_bound_ > 0 && ::ioctl(beast::get_lowest_layer(ws_).socket().native_handle(), SIOCOUTQNSD, &n) == 0)
+    return n;
+#endif
+  return 0;
+}
+
 void WsConnection::pump() {
   if (core_.disconnect()) return drop();
+  if (awaiting_drain_) return;
+  if (core_.frame_next() && unsent() > unsent_bound_) {
+    // A frame waits for the socket to drain below the bound (TCP_NOTSENT_LOWAT
+    // makes it writable then); newer frames replace it meanwhile.
+    awaiting_drain_ = true;
+    beast::get_lowest_layer(ws_).socket().async_wait(tcp::socket::wait_write,
+                                                     [weak = weak_from_this()](beast::error_code ec) {
+                                                       auto self = weak.lock();
+                                                       if (!self) return;
+                                                       self->awaiting_drain_ = false;
+                                                       if (ec || self->core_.closed()) return;
+                                                       self->pump();
+                                                     });
+    return;
+  }
   if (const Bytes* message = core_.next_write()) {
     ws_.async_write(asio::buffer(**message), [self = shared_from_this()](beast::error_code ec, size_t) {
       self->core_.written();

@@ -58,6 +58,11 @@ class WsConnection : public std::enable_shared_from_this<WsConnection> {
   boost::asio::steady_timer hello_timer_;
   boost::asio::steady_timer flush_timer_;
   bool flush_armed_ = false;
+  // A frame held back while the socket has more than unsent_bound_ bytes
+  // unsent (0: the platform cannot tell, and nothing is held back).
+  int unsent();
+  int unsent_bound_ = 0;
+  bool awaiting_drain_ = false;
   Connection core_;
 };
 

@@ -83,6 +83,7 @@ struct HelloFields {
   uint16_t minor = uint16_t(proto::ProtocolMinor::Current);
   float max_force_N = 5;
   std::vector<std::string> fields;  // Hello.fields (1.8)
+  float max_rate_hz = 0;            // Hello.max_rate_hz (1.10)
 };
 
 std::vector<uint8_t> hello(const HelloFields& f) {
@@ -95,10 +96,10 @@ std::vector<uint8_t> hello(const HelloFields& f) {
   }
   std::vector<fb::Offset<fb::String>> fields;
   for (const std::string& x : f.fields) fields.push_back(b.CreateString(x));
-  return wrap(
-      b, Message::Hello,
-      proto::CreateHelloDirect(b, f.major, f.minor, f.role, f.token, "test", f.devices.empty() ? nullptr : &names,
-                               f.devices.empty() ? nullptr : &limits, f.fields.empty() ? nullptr : &fields));
+  return wrap(b, Message::Hello,
+              proto::CreateHelloDirect(b, f.major, f.minor, f.role, f.token, "test",
+                                       f.devices.empty() ? nullptr : &names, f.devices.empty() ? nullptr : &limits,
+                                       f.fields.empty() ? nullptr : &fields, f.max_rate_hz));
 }
 
 std::vector<uint8_t> view_fields(const std::vector<std::string>& names) {
@@ -531,36 +532,126 @@ TEST(SessionOutbound, StatesAreLatestWinsAtTheViewerRate) {
   EXPECT_EQ(passed, 30);
 }
 
-TEST(SessionOutbound, ASlowDeviceLosesItsOldestHapticFramesNotTheNewest) {
-  ConnectionLimits l = Client::with_token();
-  l.device_queue = 4;
-  Client c(true, l);
+// A device that reads slower than frames come: an unread frame is replaced
+// by the next, so what it reads is the newest; one that, over a second,
+// lets more than half of them be replaced is told so, once (1.10).
+TEST(SessionOutbound, ASlowDeviceReadsTheNewestHapticFrameAndIsToldOnce) {
+  Client c;
   c.receive(hello({.role = Role::Device, .devices = {"stylus"}}));
   c.drain();
   std::vector<Bytes> frames;
-  for (int k = 0; k < 7; ++k) {
-    frames.push_back(make_error(ErrorCode::Internal, "frame " + std::to_string(k)));
-    c.connection.send(frames.back(), OutKind::Haptic);
+  for (int k = 0; k < 10; ++k) frames.push_back(make_error(ErrorCode::Internal, "frame " + std::to_string(k)));
+  for (int k = 0; k < 7; ++k) c.connection.send(frames[size_t(k)], OutKind::Haptic, t0 + 1s);
+  EXPECT_EQ(c.connection.haptics_dropped(), 6);
+  EXPECT_EQ(c.drain(), (std::vector<Bytes>{frames[6]})) << "the newest; a moment's lag is not told";
+  // For two seconds it reads one frame in four.
+  std::vector<Bytes> told;
+  for (int k = 0; k < 2000; ++k) {
+    c.connection.send(frames[size_t(k % 10)], OutKind::Haptic, t0 + 2s + std::chrono::milliseconds(k));
+    if (k % 4 == 3)
+      for (const Bytes& m : c.drain())
+        if (error_of(m)->code() == ErrorCode::Lagging) told.push_back(m);
   }
-  EXPECT_EQ(c.connection.haptics_dropped(), 3);
-  const std::vector<Bytes> out = c.drain();
-  EXPECT_EQ(out, (std::vector<Bytes>{frames[3], frames[4], frames[5], frames[6]}));
+  ASSERT_EQ(told.size(), 1u) << "told once";
+  EXPECT_EQ(error_of(told[0])->code(), ErrorCode::Lagging);
+  EXPECT_NE(error_of(told[0])->message()->str().find("haptic frames"), std::string::npos);
+  EXPECT_FALSE(c.connection.disconnect());
 }
 
-TEST(SessionOutbound, TheMessageBeingWrittenIsNeverTheOneDropped) {
-  ConnectionLimits l = Client::with_token();
-  l.device_queue = 2;
-  Client c(true, l);
+// One that reads every frame is never told, however many come.
+TEST(SessionOutbound, ADeviceThatReadsEveryFrameIsNotTold) {
+  Client c;
+  c.receive(hello({.role = Role::Device, .devices = {"stylus"}}));
+  c.drain();
+  const Bytes f = make_error(ErrorCode::Internal, "frame");
+  int errors = 0;
+  for (int k = 0; k < 20000; ++k) {
+    c.connection.send(f, OutKind::Haptic, t0 + std::chrono::microseconds(100 * k));
+    for (const Bytes& m : c.drain()) errors += m != f;
+  }
+  EXPECT_EQ(errors, 0);
+}
+
+// A 1.9 client has no Lagging code to read: it is not told.
+TEST(SessionOutbound, AnOlderDeviceIsNotToldItLags) {
+  Client c;
+  c.receive(hello({.role = Role::Device, .devices = {"stylus"}, .minor = 9}));
+  c.drain();
+  const Bytes f0 = make_error(ErrorCode::Internal, "0"), f1 = make_error(ErrorCode::Internal, "1");
+  for (int k = 0; k < 2000; ++k) {
+    c.connection.send(f0, OutKind::Haptic, t0 + std::chrono::milliseconds(k));
+    c.connection.send(f1, OutKind::Haptic, t0 + std::chrono::milliseconds(k));
+    EXPECT_EQ(c.drain(), (std::vector<Bytes>{f1}));
+  }
+}
+
+TEST(SessionOutbound, TheMessageBeingWrittenIsNeverTheOneReplaced) {
+  Client c;
+  c.receive(hello({.role = Role::Device, .devices = {"stylus"}, .minor = 9}));
+  c.drain();
   const Bytes f0 = make_error(ErrorCode::Internal, "0"), f1 = make_error(ErrorCode::Internal, "1"),
               f2 = make_error(ErrorCode::Internal, "2");
   c.connection.send(f0, OutKind::Haptic);
-  c.connection.send(f1, OutKind::Haptic);
   const Bytes* writing = c.connection.next_write();
   ASSERT_NE(writing, nullptr);
   EXPECT_EQ(*writing, f0);
-  c.connection.send(f2, OutKind::Haptic);  // drops f1, not f0 which is on the wire
+  c.connection.send(f1, OutKind::Haptic);
+  c.connection.send(f2, OutKind::Haptic);  // replaces f1, not f0 which is on the wire
+  EXPECT_EQ(*writing, f0);
   c.connection.written();
   EXPECT_EQ(c.drain(), (std::vector<Bytes>{f2}));
+}
+
+// A device asking for 250 Hz, offered a frame every millisecond for two
+// seconds and reading each at once, gets 250 of them in the second second,
+// evenly spread.
+TEST(SessionOutbound, ADeviceAskingFor250HzGetsAtMost250FramesASecond) {
+  Client c;
+  c.receive(hello({.role = Role::Device, .devices = {"stylus"}, .max_rate_hz = 250}));
+  c.drain();
+  EXPECT_EQ(c.connection.max_rate_hz(), 250.0);
+  const Bytes f = make_error(ErrorCode::Internal, "frame");
+  int got = 0, longest_gap = 0, since = 0;
+  for (int k = 0; k < 2000; ++k) {
+    c.connection.send(f, OutKind::Haptic, t0 + std::chrono::milliseconds(k));
+    const int n = int(c.drain().size());
+    if (k < 1000) continue;
+    got += n;
+    since = n ? 0 : since + 1;
+    longest_gap = std::max(longest_gap, since);
+  }
+  EXPECT_LE(got, 250);
+  EXPECT_GE(got, 249);
+  EXPECT_LE(longest_gap, 4);  // [ms]
+  EXPECT_EQ(c.connection.haptics_dropped(), 0) << "held back by the rate, not replaced";
+}
+
+// A viewer's state frames: at the rate it asks for, never above the server's.
+TEST(SessionOutbound, AViewerGetsStatesAtTheRateItAsksUpToTheServers) {
+  for (const auto& [asked, expected] : {std::pair{10.0f, 10}, std::pair{100.0f, 30}, std::pair{0.0f, 30}}) {
+    Client c;
+    c.receive(hello({.max_rate_hz = asked}));
+    c.drain();
+    const Bytes f = make_error(ErrorCode::Internal, "state");
+    int got = 0;
+    for (int k = 0; k < 1000; ++k) {
+      c.connection.send(f, OutKind::State, t0 + std::chrono::milliseconds(k));
+      got += int(c.drain().size());
+    }
+    EXPECT_NEAR(got, expected, 1) << "asked " << asked;
+  }
+}
+
+TEST(SessionHello, ARateBelowZeroIsRefusedNamingTheField) {
+  Client c;
+  c.receive(hello({.role = Role::Device, .devices = {"stylus"}, .max_rate_hz = -5}));
+  const std::vector<Bytes> out = c.drain();
+  ASSERT_FALSE(out.empty());
+  const proto::Error* e = error_of(out.back());
+  ASSERT_NE(e, nullptr);
+  EXPECT_EQ(e->code(), ErrorCode::BadRequest);
+  EXPECT_NE(e->message()->str().find("Hello.max_rate_hz"), std::string::npos) << e->message()->str();
+  EXPECT_FALSE(c.connection.greeted());
 }
 
 TEST(SessionOutbound, AReaderThatLetsControlMessagesPileUpIsDisconnected) {

@@ -122,6 +122,9 @@ TEST(ProtoGolden, GeneratedAccessorsReadTheWrittenValues) {
   EXPECT_FLOAT_EQ(h->device_limits()->Get(1)->stiffness_N_per_m(), 1200.0f);
   EXPECT_TRUE(h->device_limits()->Get(1)->direct());
   EXPECT_FALSE(h->device_limits()->Get(0)->direct());
+  EXPECT_FLOAT_EQ(h->max_rate_hz(), 500.0f);  // (1.10)
+  const std::string lagging = load("error_lagging.tctl");
+  EXPECT_EQ(GetEnvelope(lagging.data())->message_as_Error()->code(), ErrorCode::Lagging);
 
   const std::string scene = load("scene_description.tctl");
   const SceneDescription* d = GetEnvelope(scene.data())->message_as_SceneDescription();

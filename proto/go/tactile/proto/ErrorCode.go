@@ -16,6 +16,7 @@ const (
 	ErrorCodeBadRequest      ErrorCode = 6
 	ErrorCodeBusy            ErrorCode = 7
 	ErrorCodeInternal        ErrorCode = 8
+	ErrorCodeLagging         ErrorCode = 9
 )
 
 var EnumNamesErrorCode = map[ErrorCode]string{
@@ -28,6 +29,7 @@ var EnumNamesErrorCode = map[ErrorCode]string{
 	ErrorCodeBadRequest:      "BadRequest",
 	ErrorCodeBusy:            "Busy",
 	ErrorCodeInternal:        "Internal",
+	ErrorCodeLagging:         "Lagging",
 }
 
 var EnumValuesErrorCode = map[string]ErrorCode{
@@ -40,6 +42,7 @@ var EnumValuesErrorCode = map[string]ErrorCode{
 	"BadRequest":      ErrorCodeBadRequest,
 	"Busy":            ErrorCodeBusy,
 	"Internal":        ErrorCodeInternal,
+	"Lagging":         ErrorCodeLagging,
 }
 
 func (v ErrorCode) String() string {

@@ -139,8 +139,20 @@ func (rcv *Hello) FieldsLength() int {
 	return 0
 }
 
+func (rcv *Hello) MaxRateHz() float32 {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(20))
+	if o != 0 {
+		return rcv._tab.GetFloat32(o + rcv._tab.Pos)
+	}
+	return 0.0
+}
+
+func (rcv *Hello) MutateMaxRateHz(n float32) bool {
+	return rcv._tab.MutateFloat32Slot(20, n)
+}
+
 func HelloStart(builder *flatbuffers.Builder) {
-	builder.StartObject(8)
+	builder.StartObject(9)
 }
 func HelloAddProtocolMajor(builder *flatbuffers.Builder, protocolMajor uint16) {
 	builder.PrependUint16Slot(0, protocolMajor, 0)
@@ -174,6 +186,9 @@ func HelloAddFields(builder *flatbuffers.Builder, fields flatbuffers.UOffsetT) {
 }
 func HelloStartFieldsVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
 	return builder.StartVector(4, numElems, 4)
+}
+func HelloAddMaxRateHz(builder *flatbuffers.Builder, maxRateHz float32) {
+	builder.PrependFloat32Slot(8, maxRateHz, 0.0)
 }
 func HelloEnd(builder *flatbuffers.Builder) flatbuffers.UOffsetT {
 	return builder.EndObject()

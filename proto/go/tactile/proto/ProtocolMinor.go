@@ -7,7 +7,7 @@ import "strconv"
 type ProtocolMinor uint16
 
 const (
-	ProtocolMinorCurrent ProtocolMinor = 9
+	ProtocolMinorCurrent ProtocolMinor = 10
 )
 
 var EnumNamesProtocolMinor = map[ProtocolMinor]string{

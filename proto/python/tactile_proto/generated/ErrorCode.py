@@ -12,3 +12,4 @@ class ErrorCode(object):
     BadRequest = 6
     Busy = 7
     Internal = 8
+    Lagging = 9

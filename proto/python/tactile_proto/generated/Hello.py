@@ -128,7 +128,14 @@ class Hello(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(18))
         return o == 0
 
-def HelloStart(builder): builder.StartObject(8)
+    # Hello
+    def MaxRateHz(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(20))
+        if o != 0:
+            return self._tab.Get(flatbuffers.number_types.Float32Flags, o + self._tab.Pos)
+        return 0.0
+
+def HelloStart(builder): builder.StartObject(9)
 def Start(builder):
     return HelloStart(builder)
 def HelloAddProtocolMajor(builder, protocolMajor): builder.PrependUint16Slot(0, protocolMajor, 0)
@@ -164,6 +171,9 @@ def AddFields(builder, fields):
 def HelloStartFieldsVector(builder, numElems): return builder.StartVector(4, numElems, 4)
 def StartFieldsVector(builder, numElems):
     return HelloStartFieldsVector(builder, numElems)
+def HelloAddMaxRateHz(builder, maxRateHz): builder.PrependFloat32Slot(8, maxRateHz, 0.0)
+def AddMaxRateHz(builder, maxRateHz):
+    return HelloAddMaxRateHz(builder, maxRateHz)
 def HelloEnd(builder): return builder.EndObject()
 def End(builder):
     return HelloEnd(builder)
@@ -185,6 +195,7 @@ class HelloT(object):
         self.devices = None  # type: List[str]
         self.deviceLimits = None  # type: List[tactile_proto.generated.DeviceLimits.DeviceLimitsT]
         self.fields = None  # type: List[str]
+        self.maxRateHz = 0.0  # type: float
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -223,6 +234,7 @@ class HelloT(object):
             self.fields = []
             for i in range(hello.FieldsLength()):
                 self.fields.append(hello.Fields(i))
+        self.maxRateHz = hello.MaxRateHz()
 
     # HelloT
     def Pack(self, builder):
@@ -268,5 +280,6 @@ class HelloT(object):
             HelloAddDeviceLimits(builder, deviceLimits)
         if self.fields is not None:
             HelloAddFields(builder, fields)
+        HelloAddMaxRateHz(builder, self.maxRateHz)
         hello = HelloEnd(builder)
         return hello

@@ -3,4 +3,4 @@
 # namespace: proto
 
 class ProtocolMinor(object):
-    Current = 9
+    Current = 10

@@ -9,5 +9,6 @@ export enum ErrorCode {
   RateLimited = 5,
   BadRequest = 6,
   Busy = 7,
-  Internal = 8
+  Internal = 8,
+  Lagging = 9
 }

@@ -87,8 +87,13 @@ fieldsLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+maxRateHz():number {
+  const offset = this.bb!.__offset(this.bb_pos, 20);
+  return offset ? this.bb!.readFloat32(this.bb_pos + offset) : 0.0;
+}
+
 static startHello(builder:flatbuffers.Builder) {
-  builder.startObject(8);
+  builder.startObject(9);
 }
 
 static addProtocolMajor(builder:flatbuffers.Builder, protocolMajor:number) {
@@ -159,12 +164,16 @@ static startFieldsVector(builder:flatbuffers.Builder, numElems:number) {
   builder.startVector(4, numElems, 4);
 }
 
+static addMaxRateHz(builder:flatbuffers.Builder, maxRateHz:number) {
+  builder.addFieldFloat32(8, maxRateHz, 0.0);
+}
+
 static endHello(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createHello(builder:flatbuffers.Builder, protocolMajor:number, protocolMinor:number, role:Role, tokenOffset:flatbuffers.Offset, clientNameOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, deviceLimitsOffset:flatbuffers.Offset, fieldsOffset:flatbuffers.Offset):flatbuffers.Offset {
+static createHello(builder:flatbuffers.Builder, protocolMajor:number, protocolMinor:number, role:Role, tokenOffset:flatbuffers.Offset, clientNameOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, deviceLimitsOffset:flatbuffers.Offset, fieldsOffset:flatbuffers.Offset, maxRateHz:number):flatbuffers.Offset {
   Hello.startHello(builder);
   Hello.addProtocolMajor(builder, protocolMajor);
   Hello.addProtocolMinor(builder, protocolMinor);
@@ -174,6 +183,7 @@ static createHello(builder:flatbuffers.Builder, protocolMajor:number, protocolMi
   Hello.addDevices(builder, devicesOffset);
   Hello.addDeviceLimits(builder, deviceLimitsOffset);
   Hello.addFields(builder, fieldsOffset);
+  Hello.addMaxRateHz(builder, maxRateHz);
   return Hello.endHello(builder);
 }
 
@@ -186,7 +196,8 @@ unpack(): HelloT {
     this.clientName(),
     this.bb!.createScalarList(this.devices.bind(this), this.devicesLength()),
     this.bb!.createObjList(this.deviceLimits.bind(this), this.deviceLimitsLength()),
-    this.bb!.createScalarList(this.fields.bind(this), this.fieldsLength())
+    this.bb!.createScalarList(this.fields.bind(this), this.fieldsLength()),
+    this.maxRateHz()
   );
 }
 
@@ -200,6 +211,7 @@ unpackTo(_o: HelloT): void {
   _o.devices = this.bb!.createScalarList(this.devices.bind(this), this.devicesLength());
   _o.deviceLimits = this.bb!.createObjList(this.deviceLimits.bind(this), this.deviceLimitsLength());
   _o.fields = this.bb!.createScalarList(this.fields.bind(this), this.fieldsLength());
+  _o.maxRateHz = this.maxRateHz();
 }
 }
 
@@ -212,7 +224,8 @@ constructor(
   public clientName: string|Uint8Array|null = null,
   public devices: (string)[] = [],
   public deviceLimits: (DeviceLimitsT)[] = [],
-  public fields: (string)[] = []
+  public fields: (string)[] = [],
+  public maxRateHz: number = 0.0
 ){}
 
 
@@ -231,7 +244,8 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     clientName,
     devices,
     deviceLimits,
-    fields
+    fields,
+    this.maxRateHz
   );
 }
 }
