@@ -207,3 +207,14 @@ def test_each_driver_module_imports_first_in_a_fresh_interpreter(driver: registr
     out = run_python(f"import {driver.module_name}, tactile_bridge.profile as p, tactile_bridge.drivers.registry as r\n"
                      "print(r.names())\n")
     assert out.strip() == repr(registry.names())
+
+
+def test_tick_rate_overrides_every_profiles_rate_and_refuses_one_out_of_range(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["--check", "--profile", "sim", "--profile", "sim_pinch_left", "--tick-rate", "4000"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2 and all(", 4000 Hz," in line for line in lines), lines
+    assert cli.main(["--check", "--profile", "sim"]) == 0
+    assert ", 1000 Hz," in capsys.readouterr().out, "the profile's own rate without it"
+    assert cli.main(["--check", "--tick-rate", "50"]) == 2
+    assert "--tick-rate must be 100 to 20000 Hz, got 50" in capsys.readouterr().err
