@@ -29,7 +29,8 @@ ENGAGED = 2  # the trace's safety mode when the force goes out as rendered (tact
 
 
 def run_bridge(tmp: pathlib.Path, port: int, profile: str, seconds: float) -> tuple[str, np.ndarray]:
-    """Runs the bridge (default mode: coupled) for `seconds`; its output and its trace (every tick)."""
+    """Runs the bridge (default mode: model, the local model) for `seconds`; its output and its trace (every
+    tick)."""
     trace = tmp / "trace.csv"
     r = subprocess.run([str(BRIDGE), "--profile", profile, "--server", f"ws://127.0.0.1:{port}/", "--token", TOKEN,
                         "--seconds", str(seconds), "--status", "5", "--trace", str(trace),
@@ -46,7 +47,7 @@ def test_the_default_scene_runs_a_minute_in_closed_loop_without_a_clip_or_a_faul
         out, tr = run_bridge(tmp_path, port, "sim", 60.0)
     server_out = "".join(server.lines)  # type: ignore[attr-defined]
     print(out[-2000:])
-    assert "coupled" in out and "engaged" in out, out
+    assert "mode model" in out and "engaged" in out, out
     assert " clipped: " not in out, out  # the safety layer never had to clip the force
     assert not re.search(r"\bfault", server_out), server_out[-3000:]
     assert "server fault" not in out, out
@@ -92,24 +93,46 @@ period_s = 2.0
 """
 
 
+def presses(tr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float]]:
+    """The trace's time from its start [s], the device's force [N], the engaged ticks, and the work the force
+    did on the hand over each whole press after the first [J] (the forces engage in the first)."""
+    t = tr["t_s"] - tr["t_s"][0]
+    x = np.stack([tr["x_m"], tr["y_m"], tr["z_m"]], axis=1)  # the sim arm: device frame = scene frame, gain 1
+    f = np.stack([tr["out_x_N"], tr["out_y_N"], tr["out_z_N"]], axis=1)
+    work = []
+    for k in range(1, int(t[-1] // PERIOD)):
+        m = (t[:-1] >= k * PERIOD) & (t[:-1] < (k + 1) * PERIOD)
+        work.append(float(np.einsum("ij,ij->i", f[:-1][m], np.diff(x, axis=0)[m]).sum()))
+    return t, f, tr["safety"] == ENGAGED, work
+
+
+def test_presses_with_states_10_ms_apart_stay_passive_with_the_local_model(tmp_path: pathlib.Path) -> None:
+    # The server sends a frame every 10 ms (100 Hz): between frames the bridge renders each one's local model at
+    # the tick's pose. Over every press the device still does no net work on the hand, and the hold is felt.
+    profile = tmp_path / "block.toml"
+    profile.write_text(PROFILE)
+    with server_process(tmp_path, BLOCK, TOKEN, "--haptic-rate", "100") as (port, _):
+        out, tr = run_bridge(tmp_path, port, str(profile), 11.0)
+    assert " clipped: " not in out, out
+    t, f, engaged, work = presses(tr)
+    print(f"work per press {work} J")
+    assert len(work) >= 4
+    assert max(work) <= 1e-4, f"work on the hand per press [J]: {work}"
+    u = (t % PERIOD) / PERIOD
+    hold = (t > PERIOD) & (u > 0.35) & (u < 0.65) & engaged
+    assert np.linalg.norm(f[hold], axis=1).mean() > 0.5
+
+
 def test_repeated_presses_are_passive_continuous_and_steady(tmp_path: pathlib.Path) -> None:
     profile = tmp_path / "block.toml"
     profile.write_text(PROFILE)
     with server_process(tmp_path, BLOCK, TOKEN, "--haptic-rate", "2000") as (port, _):
         out, tr = run_bridge(tmp_path, port, str(profile), 11.0)
     assert " clipped: " not in out, out
-    t = tr["t_s"] - tr["t_s"][0]
-    x = np.stack([tr["x_m"], tr["y_m"], tr["z_m"]], axis=1)  # the sim arm: device frame = scene frame, gain 1
-    f = np.stack([tr["out_x_N"], tr["out_y_N"], tr["out_z_N"]], axis=1)
-    engaged = tr["safety"] == ENGAGED
-    cycles = range(1, int(t[-1] // PERIOD))  # whole presses after the first (the forces engage in it)
+    t, f, engaged, work = presses(tr)
     # Passive: over each press, out and back, the device's force does no net work on the hand (what a delayed
     # spring would give back shows as positive work). A press stores about F^2 / 2K = 2.1^2 / (2 x 520) = 4 mJ;
     # 0.1 mJ allows the trace's rounding and the arm's jitter, not a loop that gives back a fortieth of it.
-    work = []
-    for k in cycles:
-        m = (t[:-1] >= k * PERIOD) & (t[:-1] < (k + 1) * PERIOD)
-        work.append(float(np.einsum("ij,ij->i", f[:-1][m], np.diff(x, axis=0)[m]).sum()))
     assert max(work) <= 1e-4, f"work on the hand per press [J]: {work}"
     assert len(work) >= 4
     # In contact through every hold (the frames' contact count, the busiest step since the previous frame).

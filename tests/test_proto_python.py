@@ -279,6 +279,10 @@ def test_decoded_values_are_the_written_ones():
     coupling = haptic.deviceCouplings[0]
     assert coupling.coupled and not haptic.deviceCouplings[1].coupled
     assert (coupling.body.position.y, coupling.maxForceN, coupling.maxTorqueNm) == (np.float32(0.4875), 6.0, 0.125)
+    model = haptic.deviceModels[0]  # (1.11)
+    assert (model.damping.m12, model.velocity.y, model.normal.y) == (np.float32(-0.0125), -0.0625, 0.9921875)
+    assert (model.releaseM, model.radiusM) == (np.float32(0.0025), np.float32(0.005))
+    assert haptic.deviceModels[1].radiusM == 0.0
     safety = tp.decode(golden("safety_event")[1]).message
     assert (safety.device, safety.kind, safety.forceN) == ("stylus", SafetyKind.Clipped, 5.0)
     assert (safety.deviceTimeNs, safety.serverTimeNs) == (5000250123, 987654521012)

@@ -12,11 +12,11 @@
   .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
   loop       the closed haptic loop per case (the default scene, a soft and a stiff block poked and held, a stroke
              with friction, the hand twisting the Fig. 1 beam, the organ's fine surface pressed, strokes in free
-             space), coupled against direct, with haptic states 0.25, 1 and 4 ms apart (and --loaded: beside two
-             busy processes): the peak force sent and commanded against the device's limit, clip events, ripple in
-             holds, contact continuity, the work done on the hand per cycle and passivity's share, the stiffness
-             felt against what it should be, drag in free space, the latency from the hand's motion to force,
-             faults.
+             space), the local model (the default) against coupled, with haptic states 0.25, 1 and 4 ms apart, at
+             each --tick-rates (and --loaded: beside two busy processes): the peak force sent and commanded against
+             the device's limit, clip events, ripple in holds, contact continuity, touches per poke, the work done
+             on the hand per cycle and passivity's share, the stiffness felt against what it should be, drag in
+             free space, the latency from the hand's motion to force, missed ticks, faults.
 
   staleness  the age of the haptic frames a device client reads (its read time less the frame's server_time_ns,
              both CLOCK_MONOTONIC on this machine): p50, p99, max over what it read, for a client that wakes every
@@ -30,7 +30,7 @@
   .venv/bin/python device-bridge/bench/bridge_bench.py staleness --seconds 20 [--loaded]
   .venv/bin/python device-bridge/bench/bridge_bench.py modes --seconds 12 [--object stiff] [--json modes.json]
   .venv/bin/python device-bridge/bench/bridge_bench.py loop [--cases soft,stiff] [--rates 1000] [--loaded]
-      [--json loop.json]
+      [--modes model,coupled] [--tick-rates 1000,2000,4000] [--json loop.json]
 """
 
 from __future__ import annotations
@@ -478,6 +478,7 @@ def analyse(trace: pathlib.Path, case: dict[str, Any], period: float, start: flo
         if hold.any() else float("nan")
     r["hold_N"] = float(mag[hold].mean()) if hold.any() else float("nan")
     r["contact_pct"] = float(100 * np.mean(tr["contacts"][hold] > 0)) if hold.any() else float("nan")
+    r["touches"] = touches_per_poke(t, tr["contacts"] > 0, period, live) if case["holds"] else float("nan")
     # The work the device's force did on the hand over each whole cycle (passive: <= 0), and passivity's part.
     dx = np.diff(pos, axis=0)
     work = np.einsum("ij,ij->i", out[:-1], dx)
@@ -501,6 +502,25 @@ def analyse(trace: pathlib.Path, case: dict[str, Any], period: float, start: flo
     r["drag_max_N"] = float(np.linalg.norm(f[fast], axis=1).max()) if fast.any() else float("nan")
     r["motion_lag_ms"] = motion_lag(t, pos[:, 1], f[:, 1], period, live) if case.get("tap") else float("nan")
     return r
+
+
+def touches_per_poke(t: np.ndarray, touching: np.ndarray, period: float, live: np.ndarray) -> float:
+    """The most separate touches in one poke cycle: runs of ticks whose newest state had contact, joined where
+    the gap between them is under 20 ms (a flicker of the contact set is one touch)."""
+    most = 0
+    for c in range(1, int(t[-1] // period)):
+        m = (t >= c * period) & (t < (c + 1) * period) & live
+        if m.sum() < 2:
+            continue
+        tc, on = t[m], touching[m]
+        starts = np.nonzero(on & ~np.concatenate(([False], on[:-1])))[0]
+        ends = np.nonzero(on & ~np.concatenate((on[1:], [False])))[0]
+        n = 0
+        for k, s in enumerate(starts):
+            if k == 0 or tc[s] - tc[ends[k - 1]] >= 0.020:
+                n += 1
+        most = max(most, n)
+    return float(most)
 
 
 def motion_lag(t: np.ndarray, y: np.ndarray, fy: np.ndarray, period: float, live: np.ndarray) -> float:
@@ -528,14 +548,16 @@ def loop(args: argparse.Namespace) -> None:
     cases = args.cases.split(",") if args.cases else list(LOOP_CASES)
     rates = [float(x) for x in args.rates.split(",")]
     print(f"the closed haptic loop: the real server, the bridge's tick, the simulated arm (device: {LOOP_LIMIT_N:g} N "
-          f"peak, 3 N continuous, {LOOP_STIFFNESS:g} N/m), {args.seconds:g} s per run; coupled (the default) against "
-          f"direct (a kinematic proxy, the paper's delay); haptic states at each rate; 'loaded': two busy processes "
-          f"beside it")
+          f"peak, 3 N continuous, {LOOP_STIFFNESS:g} N/m), {args.seconds:g} s per run; modes: model (the default, the "
+          f"server's local model rendered at the tick), coupled (the coupling's force one step late), delay (a "
+          f"kinematic proxy, the paper's delay); haptic states at each rate; ticks at each rate; 'loaded': two busy "
+          f"processes beside it")
     print("  server/cmd: the peak force the server sent / the bridge commanded [N] (limit 6); "
           "clips: safety clip events;\n"
           "  ripple: rms about the 20 ms moving mean over the mean in steady holds [%]; hold: its mean [N]; "
           "contact: ticks\n"
-          "  in contact during holds [%]; work/cycle: the most work the device did on the hand over one cycle "
+          "  in contact during holds [%]; touch: the most separate touches in one poke (gaps under 20 ms join);\n"
+          "  work/cycle: the most work the device did on the hand over one cycle "
           "(passive\n"
           "  <= 0) [mJ]; pc: passivity controller's active ticks and what it dissipated [mJ]; K felt / K due: "
           "dF/dx while\n"
@@ -543,24 +565,27 @@ def loop(args: argparse.Namespace) -> None:
           "  0.45-0.55 m/s in free space, median and max [N]; motion: the latency from the hand's own motion "
           "to force,\n"
           "  from the device's first motion at each of the tap's steps to the force's first answer [ms]; delay:\n"
-          "  display delay, what a change of the body takes to reach the hand [ms]")
-    print(f"{'case':>8} {'mode':>8} {'states':>7} {'server':>7} {'cmd':>6} {'clips':>5} {'ripple':>7} {'hold':>6} "
-          f"{'contact':>8} {'work/cyc':>9} {'pc':>6} {'pc mJ':>7} {'K felt':>7} {'K due':>7} {'drag':>6} {'max':>6} "
-          f"{'motion':>6} {'delay':>6} {'faults':>6}")
+          "  display delay, what a change of the body takes to reach the hand [ms]; missed: ticks that started\n"
+          "  more than a period late")
+    print(f"{'case':>8} {'mode':>13} {'tick':>5} {'states':>7} {'server':>7} {'cmd':>6} {'clips':>5} {'ripple':>7} "
+          f"{'hold':>6} {'contact':>8} {'touch':>5} {'work/cyc':>9} {'pc':>6} {'pc mJ':>7} {'K felt':>7} {'K due':>7} "
+          f"{'drag':>6} {'max':>6} "
+          f"{'motion':>6} {'delay':>6} {'missed':>6} {'faults':>6}")
     rows = []
     modes = args.modes.split(",")
-    runs = [(c, m, r, False) for c in cases for m in modes for r in rates]
+    ticks = [float(x) for x in args.tick_rates.split(",")]
+    runs = [(c, m, r, False, k) for c in cases for m in modes for r in rates for k in ticks]
     if args.loaded:
-        runs += [(c, m, rates[min(1, len(rates) - 1)], True) for c in cases for m in modes]
+        runs += [(c, m, rates[min(1, len(rates) - 1)], True, ticks[0]) for c in cases for m in modes]
     body_k: dict[str, float] = {}
-    for case_name, mode, rate, loaded in runs:
+    for case_name, mode, rate, loaded, tick in runs:
         case = LOOP_CASES[case_name]
         arm = case["arm"]
         scene = case["scene"]()
         with tempfile.TemporaryDirectory() as d, busy(2 if loaded else 0):
             tmp = pathlib.Path(d)
             if args.keep:  # the run's trace, recording and profile, for a closer look
-                tmp = pathlib.Path(args.keep) / f"{case_name}-{mode}{'-load' if loaded else ''}-{rate:g}"
+                tmp = pathlib.Path(args.keep) / f"{case_name}-{mode}{'-load' if loaded else ''}-{rate:g}-{tick:g}"
                 shutil.rmtree(tmp, ignore_errors=True)
                 tmp.mkdir(parents=True)
             rec = tmp / "run.mcap"
@@ -571,7 +596,7 @@ def loop(args: argparse.Namespace) -> None:
                 r = subprocess.run([str(BRIDGE), "--profile", str(profile), "--server", f"ws://127.0.0.1:{port}/",
                                     "--token", TOKEN, "--seconds", str(args.seconds), "--status", "0", "--mode", mode,
                                     "--summary", str(summary), "--trace", str(trace),
-                                    "--trace-seconds", str(args.seconds + 2)],
+                                    "--trace-seconds", str(args.seconds + 2), "--tick-rate", str(tick)],
                                    capture_output=True, text=True, timeout=args.seconds + 60)
                 if r.returncode != 0:
                     sys.exit(f"the bridge failed ({r.returncode}):\n{r.stderr[-3000:]}")
@@ -587,16 +612,18 @@ def loop(args: argparse.Namespace) -> None:
                     body_k[key] = probe_body_stiffness(tmp, scene, case["channel"], [arm["ox"], 0.0, arm["oz"]], touch,
                                                        a["hold_N"])
                 kb = body_k[key]
-                k_due = kb * LOOP_STIFFNESS / (kb + LOOP_STIFFNESS) if mode == "coupled" else kb
+                k_due = kb * LOOP_STIFFNESS / (kb + LOOP_STIFFNESS) if mode in ("model", "coupled") else kb
         label = mode + ("+load" if loaded else "")
-        row = {"case": case_name, "mode": mode, "loaded": loaded, "rate_hz": rate, "server_peak_N": peak,
-               "clips": clips, "faults": faults, "delay_ms": s["delay_ms"], "k_due": k_due, **a}
+        row = {"case": case_name, "mode": mode, "loaded": loaded, "rate_hz": rate, "tick_hz": tick,
+               "server_peak_N": peak, "clips": clips, "faults": faults, "delay_ms": s["delay_ms"],
+               "missed": s["missed"], "k_due": k_due, **a}
         rows.append(row)
-        print(f"{case_name:>8} {label:>8} {1e3 / rate:>5.2f}ms {peak:>7.2f} {a['peak_cmd']:>6.2f} {clips:>5d} "
-              f"{a['ripple_pct']:>6.2f}% {a['hold_N']:>6.2f} {a['contact_pct']:>7.2f}% {a['cycle_work_mJ']:>9.2f} "
+        print(f"{case_name:>8} {label:>13} {tick / 1e3:>4g}k {1e3 / rate:>5.2f}ms {peak:>7.2f} {a['peak_cmd']:>6.2f} "
+              f"{clips:>5d} {a['ripple_pct']:>6.2f}% {a['hold_N']:>6.2f} {a['contact_pct']:>7.2f}% "
+              f"{a['touches']:>5.0f} {a['cycle_work_mJ']:>9.2f} "
               f"{a['pc_ticks']:>6.0f} {a['pc_mJ']:>7.2f} {a['k_felt']:>7.0f} {k_due:>7.0f} {a['drag_N']:>6.3f} "
               f"{a['drag_max_N']:>6.3f} "
-              f"{a['motion_lag_ms']:>6.1f} {s['delay_ms']:>6.2f} {faults:>6d}", flush=True)
+              f"{a['motion_lag_ms']:>6.1f} {s['delay_ms']:>6.2f} {s['missed']:>6d} {faults:>6d}", flush=True)
     if args.json:
         pathlib.Path(args.json).write_text(json.dumps(rows, indent=1) + "\n")
 
@@ -676,7 +703,9 @@ def main() -> None:
     c.add_argument("--cases", default="", help=f"comma-separated, of {', '.join(LOOP_CASES)} (default: all)")
     c.add_argument("--rates", default="4000,1000,250", help="haptic states per second, comma-separated")
     c.add_argument("--loaded", action="store_true", help="also each case at 1 kHz beside two busy processes")
-    c.add_argument("--modes", default="coupled,delay", help="the bridge's modes, comma-separated")
+    c.add_argument("--modes", default="model,coupled", help="the bridge's modes, comma-separated (model, the "
+                   "default, renders the server's local model at the tick; coupled, the state one step late)")
+    c.add_argument("--tick-rates", default="1000", help="the bridge's tick rates [Hz], comma-separated")
     c.add_argument("--json", help="also write the figures to this file")
     c.add_argument("--keep", help="keep each run's trace, recording and profile under this folder")
     args = ap.parse_args()

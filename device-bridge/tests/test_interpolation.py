@@ -309,3 +309,166 @@ def test_coupled_shows_a_state_from_a_server_that_does_not_couple_as_delay_does(
         ra.render(int(now), (0.1, 0.2, 0.3), oa)
         rb.render(int(now), (0.1, 0.2, 0.3), ob)
         assert oa == ob
+
+
+# ---- model: the local model at the tick's pose (protocol 1.11) -------------------------------------------
+
+
+def push_model(h: StateHistory, t_ns: int, force: tuple[float, float, float], K: tuple[float, ...],
+               x0: tuple[float, float, float], *, damping: tuple[float, ...] = ZERO_K,
+               velocity: tuple[float, float, float] = ZERO_X, normal: tuple[float, float, float] = ZERO_X,
+               release: float = 0.0, radius: float = 0.005, max_force: float = 6.0) -> None:
+    """A coupled state with its local model (DeviceModel's numbers in the order the wire gives them)."""
+    h.push(t_ns, t_ns, h.count, force, K, x0, 1, True, max_force,
+           [*damping, *velocity, *normal, release, radius])
+
+
+def random_passive(rng: np.random.Generator, scale: float) -> tuple[float, ...]:
+    """A symmetric negative definite 3x3 (row-major) with eigenvalues in [-scale, -scale / 10]."""
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    k = q @ np.diag(-rng.uniform(scale / 10, scale, size=3)) @ q.T
+    return tuple(float(v) for v in k.ravel())
+
+
+def test_model_renders_the_force_plus_the_stiffness_times_a_motion_the_state_has_not_seen() -> None:
+    rng = np.random.default_rng(1101)
+    for _ in range(50):
+        h = StateHistory()
+        r = ForceRender(h, "model")
+        K = random_passive(rng, 2000.0)
+        f0 = rng.uniform(0.5, 3.0) * np.array([0.0, 1.0, 0.0])
+        x0 = tuple(rng.uniform(-0.1, 0.1, size=3))
+        push_model(h, 0, tuple(f0), K, x0, normal=(0.0, 1.0, 0.0), release=1.0, radius=0.004, max_force=100.0)
+        dx = rng.uniform(-1.0, 1.0, size=3)
+        dx *= rng.uniform(0.0, 0.0039) / np.linalg.norm(dx)
+        dx[1] = -abs(dx[1])  # pressed in, on the contact's side of its release
+        x = np.add(x0, dx)
+        out = [0.0, 0.0, 0.0]
+        assert r.render(1_000_000, tuple(x), out)  # the first tick after a reset: no velocity yet
+        want = f0 + np.array(K).reshape(3, 3) @ dx
+        if want[1] > 0.0:
+            assert out == pytest.approx(list(want), abs=1e-9), (K, dx)
+            assert not r.outside and not r.released
+        else:  # the model would pull the device in: a contact does not, it lets go
+            assert out == [0.0, 0.0, 0.0] and r.released
+
+
+def test_model_damps_the_device_relative_to_the_velocity_the_step_used() -> None:
+    # A device moving at 0.1 m/s into a contact the model says moved at 0.04 m/s feels -D (v - v0) more.
+    h = StateHistory()
+    r = ForceRender(h, "model")
+    D = (2.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 2.0)
+    push_model(h, 0, (0.0, 2.0, 0.0), (0.0,) * 9, (0.0, 0.0, 0.0), damping=D, velocity=(0.0, -0.04, 0.0),
+               normal=(0.0, 1.0, 0.0), release=1.0, radius=0.01)
+    out = [0.0, 0.0, 0.0]
+    for i in range(200):  # 0.2 s at 1 kHz, from 0 to -0.02 m
+        r.render(1_000_000 * (i + 1), (0.0, -0.1e-3 * i, 0.0), out)
+    assert r.velocity[1] == pytest.approx(-0.1, rel=1e-6)
+    assert out == pytest.approx([0.0, 2.0 + 3.0 * 0.06, 0.0], rel=1e-6)
+
+
+def test_model_holds_the_force_past_its_radius() -> None:
+    h = StateHistory()
+    r = ForceRender(h, "model")
+    K = (-1000.0, 0.0, 0.0, 0.0, -1000.0, 0.0, 0.0, 0.0, -1000.0)
+    push_model(h, 0, (0.0, 1.0, 0.0), K, (0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), release=0.001, radius=0.002)
+    out = [0.0, 0.0, 0.0]
+    r.render(1_000_000, (0.0, -0.0015, 0.0), out)  # within: 1 + 1.5 N
+    assert out == pytest.approx([0.0, 2.5, 0.0], abs=1e-12) and not r.outside
+    r.reset_model()
+    r.render(2_000_000, (0.0, -0.0020, 0.0), out)  # at the radius: 3 N
+    assert out == pytest.approx([0.0, 3.0, 0.0], abs=1e-12)
+    for depth in (0.0021, 0.003, 0.01, 0.5):  # past it the model no longer holds: what it gave at the radius
+        r.reset_model()
+        r.render(3_000_000, (0.0, -depth, 0.0), out)
+        assert r.outside and out == pytest.approx([0.0, 3.0, 0.0], abs=1e-9), depth
+    r.reset_model()
+    r.render(4_000_000, (0.003, -0.0, 0.0), out)  # sideways past it: the radius's edge in that direction
+    assert r.outside and out == pytest.approx([-2.0, 1.0, 0.0], abs=1e-9)
+
+
+def test_model_lets_go_past_its_release_plane() -> None:
+    h = StateHistory()
+    r = ForceRender(h, "model")
+    K = (-1000.0, 0.0, 0.0, 0.0, -1000.0, 0.0, 0.0, 0.0, -1000.0)
+    push_model(h, 0, (0.0, 1.0, 0.0), K, (0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), release=0.001, radius=0.005)
+    out = [0.0, 0.0, 0.0]
+    for y, want in ((0.0005, 0.5), (0.00099, 0.01), (0.001, 0.0), (0.002, 0.0), (0.004, 0.0)):
+        r.reset_model()
+        r.render(1_000_000, (0.0, y, 0.0), out)
+        assert out == pytest.approx([0.0, want, 0.0], abs=1e-9), y
+        assert r.released == (want == 0.0)
+
+
+def test_model_blends_successive_models_without_a_step_larger_than_the_slew() -> None:
+    # Models 3 N apart, 10 ms apart, the device still: the displayed force moves between them by at most
+    # blend_rate a second, reaches each model, and never jumps at a model's arrival.
+    h = StateHistory()
+    r = ForceRender(h, "model")
+    r.blend_rate = 250.0  # [N/s]: half a 500 N/s slew
+    K = (-500.0, 0.0, 0.0, 0.0, -500.0, 0.0, 0.0, 0.0, -500.0)
+    out = [0.0, 0.0, 0.0]
+    shown = []
+    for tick in range(100):
+        if tick % 10 == 0:
+            f = 1.0 if (tick // 10) % 2 == 0 else 4.0
+            push_model(h, tick * 1_000_000, (0.0, f, 0.0), K, (0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0),
+                       release=f / 500.0)
+        r.render(tick * 1_000_000, (0.0, 0.0, 0.0), out)
+        shown.append(out[1])
+    steps = np.abs(np.diff(shown))
+    assert steps.max() <= 250.0 * 1e-3 + 1e-12, steps.max()
+    assert steps.max() > 0.2  # it did move at the rate it may
+    # Within each model's 10 ms the offset fades: the last tick of each is nearer the model than the first.
+    for k in range(1, 10):
+        model = 1.0 if k % 2 == 0 else 4.0
+        assert abs(shown[10 * k + 9] - model) < abs(shown[10 * k] - model) - 1.0
+
+
+def test_model_blends_in_a_model_that_differs_a_little_within_its_time_constant() -> None:
+    h = StateHistory()
+    r = ForceRender(h, "model")
+    r.blend_s = 0.002
+    K = (-500.0, 0.0, 0.0, 0.0, -500.0, 0.0, 0.0, 0.0, -500.0)
+    out = [0.0, 0.0, 0.0]
+    push_model(h, 0, (0.0, 2.0, 0.0), K, ZERO_X, normal=(0.0, 1.0, 0.0), release=0.004)
+    r.render(0, ZERO_X, out)
+    push_model(h, 1_000_000, (0.0, 2.1, 0.0), K, ZERO_X, normal=(0.0, 1.0, 0.0), release=0.0042)
+    for tick in range(1, 12):
+        r.render(tick * 1_000_000, ZERO_X, out)
+        if tick == 1:  # the arrival is no step: the 0.1 N between the models fades, by dt / tau in this tick
+            assert out[1] == pytest.approx(2.0 + 0.1 * 0.5, abs=1e-12)
+    assert out[1] == pytest.approx(2.1, abs=0.1 * math.exp(-10 * 0.5) * 1.01)  # e^(-t/tau) of the 0.1 N
+
+
+def test_model_renders_a_state_without_a_model_as_coupled_does() -> None:
+    rng = np.random.default_rng(11)
+    a, b = StateHistory(), StateHistory()
+    ra, rb = ForceRender(a, "model"), ForceRender(b, "coupled")
+    ra.delay_ns = rb.delay_ns = 1_000_000
+    oa, ob = [0.0] * 3, [0.0] * 3
+    for i in range(30):
+        f = tuple(rng.normal(size=3))
+        x = tuple(rng.normal(size=3) * 1e-3)
+        push_coupled(a, 500_000 * i, f, 1500.0, x)
+        push_coupled(b, 500_000 * i, f, 1500.0, x)
+        now = 500_000 * i + 250_000
+        ra.render(now, (0.0, 0.001, 0.0), oa)
+        rb.render(now, (0.0, 0.001, 0.0), ob)
+        assert oa == ob
+
+
+def test_model_answers_the_devices_motion_at_once_while_models_arrive_every_tick() -> None:
+    # Against a still contact (the same model, restated every tick), a device that steps 1 mm in feels the
+    # whole of K dx at that tick: the blend carries only what differs between models, not the motion.
+    h = StateHistory()
+    r = ForceRender(h, "model")
+    K = (-1000.0, 0.0, 0.0, 0.0, -1000.0, 0.0, 0.0, 0.0, -1000.0)
+    out = [0.0, 0.0, 0.0]
+    y = 0.0
+    for tick in range(20):
+        push_model(h, tick * 1_000_000, (0.0, 2.0, 0.0), K, ZERO_X, normal=(0.0, 1.0, 0.0), release=0.002)
+        if tick == 10:
+            y = -0.001
+        r.render(tick * 1_000_000, (0.0, y, 0.0), out)
+        assert out[1] == pytest.approx(2.0 - 1000.0 * y, abs=1e-12), tick

@@ -181,3 +181,33 @@ def test_reset_zeroes_energy_and_motion() -> None:
     # The first position after reset gives no velocity (no jump from the old position).
     pc.observe_position((1.0, 1.0, 1.0))
     assert pc.v == [0.0, 0.0, 0.0]
+
+
+def test_release_forgets_what_a_contact_stored_but_keeps_what_it_owes() -> None:
+    # A contact that took energy from the hand: released, it has nothing stored to give back.
+    pc = PassivityController(DT_S, enabled=True)
+    for i in range(20):
+        pc.observe_position((0.2 * i * DT_S, 0.0, 0.0))
+        pc.commit((-3.0, 0.0, 0.0))
+    assert pc.energy > 0.0
+    pc.release()
+    assert pc.energy == 0.0 and pc.v[0] > 0.0  # the motion goes on being observed
+    # One that gave the hand energy (a force along the motion): released with its force at zero, it still
+    # damps the hand's motion until the debt is paid, then stops.
+    pc = PassivityController(DT_S, enabled=True)
+    for i in range(20):
+        pc.observe_position((0.2 * i * DT_S, 0.0, 0.0))
+        pc.commit((1.0, 0.0, 0.0))
+    debt = -pc.energy
+    assert debt > 0.0
+    pc.release()
+    assert pc.energy == -debt
+    paid_ticks = 0
+    for i in range(20, 200):
+        pc.observe_position((0.2 * i * DT_S, 0.0, 0.0))
+        f = pc.correct((0.0, 0.0, 0.0))
+        pc.commit(f)
+        pc.release()
+        paid_ticks += f[0] < 0.0
+    assert paid_ticks > 0 and pc.energy >= -1e-12
+    assert pc.correct((0.0, 0.0, 0.0)) == [0.0, 0.0, 0.0]

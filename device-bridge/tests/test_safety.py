@@ -11,7 +11,7 @@ import pytest
 
 from tactile_bridge import safety
 from tactile_bridge.profile import ForceLimits
-from tactile_bridge.safety import HOLD_S, WINDOW_S, ZERO_S, Inputs, Kind, Mode, Safety, SafetyEvent
+from tactile_bridge.safety import HOLD_S, MAX_INTERVAL_S, WINDOW_S, ZERO_S, Inputs, Kind, Mode, Safety, SafetyEvent
 
 DT_S = 1e-3
 DT_NS = 1_000_000
@@ -266,8 +266,13 @@ def test_each_cause_is_logged_once_when_causes_follow_each_other() -> None:
 
 
 @pytest.mark.parametrize("command", [(0.0, 0.8, 0.0), (0.3, -0.6, 0.6)])   # 0.8 N and 0.9 N: under the limits
-def test_stalled_states_hold_then_fade_to_exactly_zero_by_50_ms(command: tuple[float, float, float]) -> None:
+@pytest.mark.parametrize("interval_ms", [0, 20, 100])  # the interval states come at (100: waits its 40 ms at most)
+def test_stalled_states_hold_then_fade_to_exactly_zero_by_50_ms(command: tuple[float, float, float],
+                                                               interval_ms: int) -> None:
+    """Held 10 ms past when the next state was due, zero 40 ms later: states 20 ms apart are not stalled."""
     rig = Rig()
+    rig.inp.state_interval_ns = interval_ms * 1_000_000
+    wait = min(MAX_INTERVAL_S, interval_ms * 1e-3)
     rig.engage(command)
     rig.run(command, 100)
     c = np.array(command)
@@ -275,8 +280,8 @@ def test_stalled_states_hold_then_fade_to_exactly_zero_by_50_ms(command: tuple[f
     last_arrival = rig.now_ns - DT_NS
     rig.arriving = False
     n_events = len(rig.events)
-    out = np.array(rig.run(command, 100))
-    age_s = (np.arange(len(out)) * DT_NS + rig.now_ns - 100 * DT_NS - last_arrival) * 1e-9
+    out = np.array(rig.run(command, 150))
+    age_s = (np.arange(len(out)) * DT_NS + rig.now_ns - 150 * DT_NS - last_arrival) * 1e-9 - wait
     for f, age in zip(out, age_s, strict=True):
         if age <= HOLD_S + 1e-12:
             np.testing.assert_allclose(f, c, rtol=1e-12)                     # hold: the command
@@ -287,9 +292,10 @@ def test_stalled_states_hold_then_fade_to_exactly_zero_by_50_ms(command: tuple[f
             assert norm(f) == 0.0                                          # exactly zero from 50 ms
     assert_slew_limited(out, c)
     new = rig.events[n_events:]
+    ticks = round(wait * 1e3)
     assert [e.kind for e in new] == [Kind.STALE, Kind.STALE]
-    assert new[0].time_ns == last_arrival + 11 * DT_NS and "fading" in new[0].message
-    assert new[1].time_ns == last_arrival + 50 * DT_NS and new[1].force_N == pytest.approx(norm(c) / 40)
+    assert new[0].time_ns == last_arrival + (11 + ticks) * DT_NS and "fading" in new[0].message
+    assert new[1].time_ns == last_arrival + (50 + ticks) * DT_NS and new[1].force_N == pytest.approx(norm(c) / 40)
     assert rig.safety.mode == Mode.WAITING
     # States arrive again: the force does not come back without start-up.
     rig.arriving = True

@@ -228,3 +228,40 @@ def test_the_tick_does_not_accumulate_memory(rig: Rig) -> None:
         tracemalloc.stop()
     grown = sum(s.size_diff for s in after.compare_to(before, "filename") if "tactile_bridge" in str(s.traceback))
     assert grown < 4096, f"the tick's code holds {grown} more bytes after 5000 ticks"
+
+
+def test_a_local_model_reaches_the_renderer_through_the_exchange() -> None:
+    """Protocol 1.11: the model the network side writes beside a state is what the tick renders: F0 + K dx this
+    side of the model's release plane, nothing past it (where `coupled`, which has no plane, gives F0 + K dx;
+    before the exchange carried the model, that is what the device got)."""
+    rig = Rig(mode="model")
+    try:
+        ch = rig.tick.channels[0]
+        rig.run(20, (0.0, 0.0, 0.0))
+        stiff = (-1000.0, 0.0, 0.0, 0.0, -1000.0, 0.0, 0.0, 0.0, -1000.0)
+
+        def press(x0_y: float, release: float, ms: int) -> float:
+            """States with x0 at height x0_y for `ms` ticks; the device's height above x0 at the last."""
+            for _ in range(ms):
+                rig.now += MS
+                rig.step += 1
+                model = [0.0] * 12 + [0.0, 1.0, 0.0, release, 0.005]  # damping, velocity, normal, release, radius
+                rig.ex.write_state(0, rig.now, rig.now, rig.step, 1, (0.0, 1.0, 0.0), stiff,
+                                   (ch.position[0], x0_y, ch.position[2]), True, 6.0, model)
+                rig.tick.tick_once(rig.now)
+            return ch.position[1] - x0_y
+
+        y = ch.position[1]
+        rise = press(y - 0.0003, 0.001, 300)  # x0 0.3 mm under the device: about 1 - 0.3 N
+        assert ch.safety.mode == Mode.ENGAGED and 0.0 < rise < 0.001
+        assert ch.f_scene == pytest.approx([0.0, 1.0 - 1000.0 * rise, 0.0], abs=1e-9)
+        assert not ch.render.released
+        y = ch.position[1]
+        rise = press(y - 0.002, 0.0004, 100)  # x0 2 mm under the device, its plane at 0.4 mm: released
+        assert rise > 0.0004 and 1.0 - 1000.0 * rise < 0.0  # (coupled would pull, and pull back hard)
+        assert ch.render.released and ch.f_scene == [0.0, 0.0, 0.0]
+        y = ch.position[1]
+        rise = press(y - 0.0002, 0.003, 100)  # and back in contact
+        assert ch.f_scene == pytest.approx([0.0, 1.0 - 1000.0 * rise, 0.0], abs=1e-9)
+    finally:
+        rig.close()

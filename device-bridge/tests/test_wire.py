@@ -91,6 +91,18 @@ def test_reader_reads_the_golden_vector() -> None:
     assert r.coupled == [c[0].coupled, c[1].coupled] == [True, False]
     assert r.body[0] == [c[0].body.position.x, c[0].body.position.y, c[0].body.position.z]
     assert r.max_force[0] == c[0].maxForceN == 6.0
+    # Protocol 1.11: each channel's local model, in the order the renderer keeps it.
+    for k, m in enumerate(ref.deviceModels):
+        want = ([getattr(m.damping, e) for e in MAT] + [m.velocity.x, m.velocity.y, m.velocity.z]
+                + [m.normal.x, m.normal.y, m.normal.z, m.releaseM, m.radiusM])
+        assert r.model[k] == want
+    assert r.model[0][-1] > 0.0 and r.model[1][-1] == 0.0  # a model, and none
+    # A frame from a 1.10 server has no models: none is read (radius 0), whatever the previous frame had.
+    old = decode(raw).message
+    old.deviceModels = None
+    _, table = message_type(encode(old))
+    r.read(table, list(range(len(ref.devices))))
+    assert r.model[0][-1] == 0.0
 
 
 def test_a_sim_time_no_simulation_has_is_a_bad_state() -> None:

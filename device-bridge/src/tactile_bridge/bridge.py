@@ -34,7 +34,7 @@ log = logging.getLogger("tactile_bridge")
 class Options:
     url: str = "ws://127.0.0.1:8765/"
     token: str = ""
-    mode: str = "coupled"          # interpolation.MODES
+    mode: str = "model"            # interpolation.MODES
     state_rate_hz: float = 2000.0  # haptic states per second asked of the server (0: every one it makes)
     network: str = "process"       # thread | process
     passivity: bool = True

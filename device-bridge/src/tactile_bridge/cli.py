@@ -123,10 +123,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--server", default="ws://127.0.0.1:8765/", help="the server's WebSocket URL")
     ap.add_argument("--token", default=os.environ.get("TACTILE_TOKEN", ""),
                     help="the server's token (default: $TACTILE_TOKEN)")
-    ap.add_argument("--mode", choices=MODES, default="coupled",
-                    help="coupled (default): the server couples the proxy to the device through a spring within "
-                         "the profile's limits, and the device displays that spring, its own motion answered at "
-                         "the tick; the others drive the proxy directly (kinematic) and display the body's force: "
+    ap.add_argument("--mode", choices=MODES, default="model",
+                    help="model (default): the server couples the proxy to the device through a spring within "
+                         "the profile's limits and sends the contact's local model, which the device renders at "
+                         "every tick at its own pose and velocity; coupled: the same coupling, displayed one step "
+                         "late with the device's own motion answered at the tick; the others drive the proxy "
+                         "directly (kinematic) and display the body's force: "
                          "delay, the paper's one-step delay, interpolated; hold, zero-order hold; extrapolate, no "
                          "delay, from the local stiffness")
     ap.add_argument("--tick-rate", type=float, default=0.0, metavar="HZ",

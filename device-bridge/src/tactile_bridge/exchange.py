@@ -47,8 +47,8 @@ H_INTS = 16
 
 # ---- per device ints, doubles ---------------------------------------------------------------------------
 # states ring: ints [seq, t_ns, arrival_ns, step, contacts, coupled], doubles [force 3, stiffness 9, position 3,
-# coupling's max force]
-S_INTS, S_DBLS = 6, 16
+# coupling's max force, local model 17 (wire.MODEL_FLOATS)]
+S_INTS, S_DBLS = 6, 33
 # pose slot: ints [seq, time_ns, sequence, buttons, connected], doubles [position 3, orientation 4]
 P_INTS, P_DBLS = 5, 7
 # status: ints [safety mode, engaged ticks, passivity ticks, states used], doubles [command 3, out 3,
@@ -111,7 +111,7 @@ class Exchange:
 
     def write_state(self, dev: int, t_ns: int, arrival_ns: int, step: int, contacts: int,
                     force: Sequence[float], stiffness: Sequence[float], position: Sequence[float],
-                    coupled: bool = False, max_force: float = 0.0) -> None:
+                    coupled: bool = False, max_force: float = 0.0, model: Sequence[float] | None = None) -> None:
         i, d = self.i, self.d
         count = i[self._dev_i[dev]]
         slot = count % RING
@@ -124,6 +124,11 @@ class Exchange:
             d[bd + 3 + k] = stiffness[k]
         d[bd + 12], d[bd + 13], d[bd + 14] = position[0], position[1], position[2]
         d[bd + 15] = max_force
+        if model is None:
+            d[bd + 32] = 0.0  # no model: radius 0
+        else:
+            for k in range(17):
+                d[bd + 16 + k] = model[k]
         i[bi] = 2 * count + 2
         i[self._dev_i[dev]] = count + 1
 
@@ -138,7 +143,7 @@ class Exchange:
             if seq != 2 * count + 2:
                 return False  # overwritten by a newer state (the tick fell RING states behind), or being written
             history.push(i[bi + 1], i[bi + 2], i[bi + 3], d[bd: bd + 3], d[bd + 3: bd + 12], d[bd + 12: bd + 15],
-                         i[bi + 4], bool(i[bi + 5]), d[bd + 15])
+                         i[bi + 4], bool(i[bi + 5]), d[bd + 15], d[bd + 16: bd + 33])
             if i[bi] == seq:
                 return True
         return False

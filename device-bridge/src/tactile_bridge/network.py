@@ -39,6 +39,7 @@ from tactile_proto.generated.Welcome import WelcomeT
 
 from . import exchange as ex
 from .clock import ClockSync
+from .interpolation import COUPLED_MODES
 from .profile import Profile
 from .safety import Kind
 from .wire import HAPTIC_FRAME, HapticReader, InputTemplate, message_type
@@ -61,7 +62,7 @@ class LinkError(RuntimeError):
 
 class Network:
     def __init__(self, url: str, token: str, profiles: Sequence[Profile], exchange: ex.Exchange, wake_fd: int,
-                 *, client_name: str = "tactile-bridge", lateness_window: int = 2000, mode: str = "coupled",
+                 *, client_name: str = "tactile-bridge", lateness_window: int = 2000, mode: str = "model",
                  status_s: float = 1.0, max_rate_hz: float = 0.0,
                  reconnect_s: float = 0.5, ping_s: float = 0.2,
                  clock: Callable[[], int] = time.monotonic_ns) -> None:
@@ -172,7 +173,7 @@ class Network:
         """What the device renders, for the server's coupling; or, in the other modes, that it drives directly."""
         limits = DeviceLimitsT()
         limits.maxForceN, limits.maxTorqueNm, limits.stiffnessNPerM = profile.scene_limits()
-        limits.direct = self.mode != "coupled"
+        limits.direct = self.mode not in COUPLED_MODES
         return limits
 
     async def _expect(self, ws: Any, kind: type, timeout: float = 5.0) -> Any:
@@ -242,7 +243,7 @@ class Network:
                 if pose is not None:
                     pos[0], pos[1], pos[2] = pose[4]
             self.ex.write_state(k, t, arrival, r.step, r.contacts[k], r.force[k], r.stiffness[k], pos,
-                                r.coupled[k], r.max_force[k])
+                                r.coupled[k], r.max_force[k], r.model[k])
 
     def _on_message(self, m: Any, arrival: int) -> None:
         if isinstance(m, PongT):

@@ -51,6 +51,14 @@ class PassivityController:
         self.v[0] = self.v[1] = self.v[2] = 0.0
         self._f[0] = self._f[1] = self._f[2] = 0.0
 
+    def release(self) -> None:
+        """Out of contact: what the contact stored is forgotten (the next contact starts with nothing to give
+        back), but what it gave the hand beyond what it took stays owed, and the damping goes on until it is
+        paid. (Forgotten too, a contact whose force ends exactly at zero, as a local model's release does,
+        would keep what it gave.)"""
+        if self.energy > 0.0:
+            self.energy = 0.0
+
     def observe_position(self, x: Sequence[float]) -> None:
         """Books the work of the force displayed since the latest position; updates the velocity estimate."""
         if self._have_x:

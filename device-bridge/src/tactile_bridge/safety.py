@@ -6,8 +6,9 @@ tick, under these rules (docs/design.md "Safety of the arm", issue 5), in this o
   1. A non-finite command, a lost link, a server fault or an unplugged device: the target is zero at once,
      and forces disengage (they come back only through start-up, rule 6).
   2. States stop arriving: the command (which the renderer holds at the newest state) passes for at most
-     HOLD_S after the newest state arrived, then fades linearly to zero at ZERO_S; past that, forces
-     disengage.
+     HOLD_S after the next state was due (the newest's arrival plus the measured interval between states,
+     at most MAX_INTERVAL_S), then fades linearly to zero ZERO_S - HOLD_S later; past that, forces
+     disengage. (States that come 20 ms apart by the server's choice have not stopped.)
   3. The magnitude never exceeds max_N (the vector is scaled, its direction kept).
   4. The mean magnitude over any 10 s window stays within continuous_N, by a token bucket: it fills at
      SUSTAIN * continuous_N, holds at most (1 - SUSTAIN) * continuous_N * 10 s, and the force spends from it,
@@ -35,7 +36,9 @@ from enum import IntEnum
 from .profile import ForceLimits
 
 HOLD_S = 0.010          # states stop: hold the last force this long after it arrived...
-ZERO_S = 0.050          # ...and reach zero by this long after it arrived
+ZERO_S = 0.050          # ...and reach zero by this long after it arrived (each plus the interval between states)
+MAX_INTERVAL_S = 0.040  # the most of an interval between states that rule 2 waits for
+MAX_INTERVAL_NS = round(MAX_INTERVAL_S * 1e9)
 WINDOW_S = 10.0         # the continuous limit's averaging window
 SUSTAIN = 0.95          # rule 4: the bucket's fill rate, relative to continuous_N
 BUCKET_S = 0.05         # rule 4: the limit spreads the bucket's contents over this time (its decay when used up)
@@ -78,7 +81,8 @@ class SafetyEvent:
 class Inputs:
     """What the tick knows about its sources this tick (filled in place)."""
 
-    __slots__ = ("link_up", "server_fault", "device_connected", "state_arrival_ns", "have_state")
+    __slots__ = ("link_up", "server_fault", "device_connected", "state_arrival_ns", "have_state",
+                 "state_interval_ns")
 
     def __init__(self) -> None:
         self.link_up = False            # connected to the server, with a scene
@@ -86,6 +90,7 @@ class Inputs:
         self.device_connected = False
         self.state_arrival_ns = 0       # when the newest state arrived [ns]
         self.have_state = False
+        self.state_interval_ns = 0      # the interval states come at, measured (0: unknown) [ns]
 
 
 class Safety:
@@ -148,17 +153,20 @@ class Safety:
             self._disengage(now_ns, Kind.STALE, "no state from the server yet")
         else:
             # Rule 2: late states.
-            age = (now_ns - inp.state_arrival_ns) * 1e-9
+            wait_ns = min(MAX_INTERVAL_NS, max(0, inp.state_interval_ns))
+            wait = wait_ns * 1e-9
+            age = (now_ns - inp.state_arrival_ns - wait_ns) * 1e-9
             scale = 1.0
             if age > HOLD_S:
                 if age >= ZERO_S:
-                    self._disengage(now_ns, Kind.STALE, f"no state for {ZERO_S * 1e3:.0f} ms")
+                    self._disengage(now_ns, Kind.STALE, f"no state for {(ZERO_S + wait) * 1e3:.0f} ms")
                     scale = 0.0
                 else:
                     scale = (ZERO_S - age) / (ZERO_S - HOLD_S)
                     if not self.fading:
                         self.fading = True
-                        self._event(now_ns, Kind.STALE, f"no state for {HOLD_S * 1e3:.0f} ms: fading to zero")
+                        self._event(now_ns, Kind.STALE,
+                                    f"no state for {(HOLD_S + wait) * 1e3:.0f} ms: fading to zero")
             elif self.fading:
                 self.fading = False
             if self.mode != Mode.WAITING and scale > 0.0:

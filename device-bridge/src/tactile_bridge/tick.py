@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from . import exchange as ex
 from .drivers import Device, DeviceSample
-from .interpolation import ForceRender, StateHistory
+from .interpolation import COUPLED_MODES, ForceRender, StateHistory
 from .passivity import PassivityController
 from .profile import Profile
 from .safety import Inputs, Kind, Mode, Safety, SafetyEvent
@@ -53,13 +53,17 @@ class Channel:
         # The device's stiffness limit in scene terms: a scene metre is 1/scale device metres, and a scene
         # newton gain device newtons (at gain 0, open loop, as at gain 1: what it would render).
         self.render.max_stiffness = profile.scene_limits()[2]
+        # Successive models blend at no more than half the safety layer's slew (scene newtons): the other half
+        # is the device's own motion's.
+        gain = profile.force.gain if profile.force.gain > 0 else 1.0
+        self.render.blend_rate = 0.5 * profile.force.slew_N_per_s / gain
         # Coupled, the command stays within the device's limit by construction (the server saturates the
         # coupling at it, the renderer at the coupling's saturation); passivity's damping is held to it too,
         # so the safety layer's clip is a guard that never acts. (A state that is not coupled within this
         # device's limits, from a server that does not couple or a recording of another session, goes to the
         # safety layer as it is: there a force over the limit is clipped, and said.)
         # (A hair under max_N: the safety layer's own magnitude, summed otherwise, must not read it as over.)
-        self.command_limit = profile.force.max_N * (1.0 - 1e-9) if mode == "coupled" else math.inf
+        self.command_limit = profile.force.max_N * (1.0 - 1e-9) if mode in COUPLED_MODES else math.inf
         self.scene_max_N = profile.scene_limits()[0] * (1.0 + 1e-6)  # what the coupling may saturate at
         self.passivity = PassivityController(1.0 / profile.rate_hz, enabled=passivity)
         self.safety = Safety(profile.force, 1.0 / profile.rate_hz, lambda e: on_event(index, e))
@@ -76,7 +80,7 @@ class Channel:
 
 class Tick:
     def __init__(self, profiles: Sequence[Profile], devices: Sequence[Device], exchange: ex.Exchange, *,
-                 mode: str = "coupled", passivity: bool = True, wake_fd: int = -1, spin_ns: int = 200_000,
+                 mode: str = "model", passivity: bool = True, wake_fd: int = -1, spin_ns: int = 200_000,
                  max_backlog: int = 20, clock: Callable[[], int] = time.monotonic_ns) -> None:
         rates = {p.rate_hz for p in profiles}
         if len(rates) != 1:
@@ -128,6 +132,7 @@ class Tick:
         fault = "the server reports a fault" if xi[ex.H_FAULT] else ""
         gen = xi[ex.H_SCENE_GEN]
         delay = xi[ex.H_DELAY_NS]
+        interval = xi[ex.H_DT_NS]
         for ch in self.channels:
             k = ch.index
             dev = ch.device
@@ -140,6 +145,7 @@ class Tick:
                 if ok:
                     ch.safety.zero()
                     ch.passivity.reset()
+                    ch.render.reset_model()
                     if ch.ever_connected:
                         self._event(k, SafetyEvent(now_ns, Kind.DEVICE_RECONNECTED,
                                                    f"reconnected: {dev.describe()}", 0.0))
@@ -155,6 +161,7 @@ class Tick:
             if gen != ch.scene_gen:
                 ch.scene_gen = gen
                 h.clear()
+                ch.render.reset_model()
                 ch.states_read = x.states_written(k)
             written = x.states_written(k)
             if written - ch.states_read > ex.RING:
@@ -166,6 +173,7 @@ class Tick:
             if h.count:
                 inp.state_arrival_ns = h.arrival_ns[h.newest()]
             inp.link_up = link
+            inp.state_interval_ns = interval
             inp.server_fault = fault
 
             # Render, passivity, safety, write.
@@ -188,8 +196,10 @@ class Tick:
                 cmd[0], cmd[1], cmd[2] = cmd[0] * c, cmd[1] * c, cmd[2] * c
             out = ch.safety.apply(now_ns, cmd, inp)
             pc.commit(out)
-            if ch.safety.mode == Mode.WAITING or (fd[0] == 0.0 and fd[1] == 0.0 and fd[2] == 0.0):
-                pc.reset()  # out of contact nothing is stored: the next contact starts passive
+            if ch.safety.mode == Mode.WAITING:
+                pc.reset()  # forces off: the next engagement starts afresh
+            elif fd[0] == 0.0 and fd[1] == 0.0 and fd[2] == 0.0:
+                pc.release()  # out of contact nothing is stored, but a debt is still paid
             dev.write_force(now_ns, out)
 
             tr = self.trace

@@ -29,10 +29,12 @@ _DEVICE = struct.Struct("<3f3f9fI")      # DeviceHaptics: force, torque, stiffne
 _POSE = struct.Struct("<3f4f")           # ProxyPose: position, orientation (w, x, y, z); 28 bytes
 _COUPLING = struct.Struct("<3f4f3f??2x")  # DeviceCoupling: body pose, stiffness, max force, max torque, coupled,
                                           # saturated; 44 bytes
+_MODEL = struct.Struct("<9f3f3fff")      # DeviceModel: damping (row-major), velocity, normal, release, radius; 68 bytes
+MODEL_FLOATS = 17                        # a DeviceModel as the bridge keeps it: the same 17 numbers, in that order
 
 # HapticFrame field slots (declaration order in the schema).
 (F_SCENE_ID, F_STEP, F_SIM_TIME, F_SERVER_TIME, F_LAST_INPUT, F_PROXIES, F_DEVICES, F_DEVICE_POSES, F_DEVICE_SEQS,
- F_DEVICE_COUPLINGS) = range(10)
+ F_DEVICE_COUPLINGS, F_DEVICE_MODELS) = range(11)
 
 
 class Table:
@@ -118,6 +120,8 @@ class HapticReader:
         self.coupled = [False] * n_devices                              # protocol 1.5: a coupled channel
         self.body = [[0.0, 0.0, 0.0] for _ in range(n_devices)]        # its proxy's body [m]
         self.max_force = [0.0] * n_devices                              # its coupling's saturation [N]
+        # protocol 1.11: its local model (MODEL_FLOATS: damping, velocity, normal, release, radius; radius 0: none)
+        self.model = [[0.0] * MODEL_FLOATS for _ in range(n_devices)]
 
     def read(self, t: Table, channels: list[int]) -> None:
         """Fills the lists for channels[k] (the wire index of bridge device k, -1 if the scene lacks it).
@@ -134,6 +138,7 @@ class HapticReader:
         pstart, pn = t.vector(F_DEVICE_POSES, _POSE.size)
         sstart, sn = t.vector(F_DEVICE_SEQS, 8)
         cstart, cn = t.vector(F_DEVICE_COUPLINGS, _COUPLING.size)
+        mstart, mn = t.vector(F_DEVICE_MODELS, _MODEL.size)
         buf = t.buf
         for k, w in enumerate(channels):
             if w < 0 or w >= n:
@@ -159,6 +164,11 @@ class HapticReader:
                 self.coupled[k] = c[10]
             else:
                 self.coupled[k] = False
+            m = self.model[k]
+            if w < mn:
+                m[:] = _MODEL.unpack_from(buf, mstart + w * _MODEL.size)
+            else:
+                m[-1] = 0.0  # no model (a server before 1.11)
 
 
 def device_input(device: str, sequence: int, device_time_ns: int, position: Any, orientation: Any,

@@ -95,3 +95,35 @@ func TestHelloReadsAsWritten(t *testing.T) {
 		t.Errorf("max_rate_hz %v", m.MaxRateHz())
 	}
 }
+
+func TestHapticFrameCarriesTheLocalModels(t *testing.T) {
+	raw, v := load(t, "haptic_frame")
+	var tab flatbuffers.Table
+	if !proto.GetRootAsEnvelope(raw, 0).Message(&tab) {
+		t.Fatal("no message")
+	}
+	var m proto.HapticFrame
+	m.Init(tab.Bytes, tab.Pos)
+	want := v.Message["device_models"].([]any) // (1.11)
+	if m.DeviceModelsLength() != len(want) {
+		t.Fatalf("%d device models, want %d", m.DeviceModelsLength(), len(want))
+	}
+	for i, w := range want {
+		var dm proto.DeviceModel
+		if !m.DeviceModels(&dm, i) {
+			t.Fatalf("device_models[%d] missing", i)
+		}
+		mw := w.(map[string]any)
+		if dm.ReleaseM() != float32(mw["release_m"].(float64)) || dm.RadiusM() != float32(mw["radius_m"].(float64)) {
+			t.Errorf("device_models[%d]: release %v radius %v", i, dm.ReleaseM(), dm.RadiusM())
+		}
+		n := mw["normal"].(map[string]any)
+		if dm.Normal(nil).Y() != float32(n["y"].(float64)) {
+			t.Errorf("device_models[%d]: normal y %v", i, dm.Normal(nil).Y())
+		}
+		d := mw["damping"].(map[string]any)
+		if dm.Damping(nil).M12() != float32(d["m12"].(float64)) {
+			t.Errorf("device_models[%d]: damping m12 %v", i, dm.Damping(nil).M12())
+		}
+	}
+}

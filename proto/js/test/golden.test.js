@@ -93,6 +93,11 @@ test('typed reads of the vectors see the written values', () => {
   assert.equal(byName.haptic_frame.deviceCouplings[0].coupled, true);
   assert.equal(byName.haptic_frame.deviceCouplings[0].body.position.y, Math.fround(0.4875));
   assert.equal(byName.haptic_frame.deviceCouplings[1].maxForceN, 0);
+  assert.equal(byName.haptic_frame.deviceModels[0].damping.m12, Math.fround(-0.0125)); // (1.11)
+  assert.equal(byName.haptic_frame.deviceModels[0].normal.y, 0.9921875);
+  assert.equal(byName.haptic_frame.deviceModels[0].releaseM, Math.fround(0.0025));
+  assert.equal(byName.haptic_frame.deviceModels[0].radiusM, Math.fround(0.005));
+  assert.equal(byName.haptic_frame.deviceModels[1].radiusM, 0);
   const safety = byName.safety_event;
   assert.ok(safety instanceof proto.SafetyEventT);
   assert.equal(safety.device, 'stylus');

@@ -6,6 +6,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/proxy.hpp"
 #include "tactile_generated.h"
 
 namespace tactile {
@@ -87,6 +88,12 @@ constexpr double kMaxOffsetForStiffness = 1e-3;
 // A coupled channel whose proxy has touched nothing for this long is free
 // and sent no stiffness (haptic_frame) [s].
 constexpr double kFreeAfter = 2e-3;
+// A device's local model (DeviceModel) holds within half its smallest
+// proxy's bounding radius, where the contact's points and normal change
+// little, and within these bounds [m]: past a centimetre the server's next
+// frames know better than any extrapolation.
+constexpr double kModelRadiusMin = 1e-3;
+constexpr double kModelRadiusMax = 1e-2;
 
 wire::Vec3f to_wire(const Vec3& v) { return {float(v.x), float(v.y), float(v.z)}; }
 wire::Quatf to_wire(const Quat& q) { return {float(q.w), float(q.x), float(q.y), float(q.z)}; }
@@ -103,6 +110,30 @@ wire::ProxyShape to_wire(ProxyShape s) {
     case ProxyShape::Plane: return wire::ProxyShape::Plane;
   }
   return wire::ProxyShape::Sphere;
+}
+
+// A coupled channel's local model (proto DeviceModel) from its report, the
+// stiffness K it is sent (negative semidefinite, zero while free) and the
+// contact force on its proxies (a window's mean). The normal is the contact
+// force's direction, not the coupling's: a proxy that lags a lifting hand
+// pulls it toward the body through the coupling while the contact still
+// pushes the proxy out. The damping is the coupling's damper as the device
+// feels it through the contact in series: the felt stiffness times the
+// coupling's time constant c/k (the coupling's own damper against a rigid
+// body). The release plane is where the model's force along the normal,
+// F0.n + n.K n (x - x0).n, falls to zero (behind x0 where the coupling
+// already pulls the device in: the contact is letting go).
+wire::DeviceModel local_model(const DeviceReport& r, const glm::dmat3& K, const Vec3& contact_force, double radius) {
+  const double c = glm::length(contact_force);
+  const Vec3 n = c > 0 ? contact_force / c : Vec3(0.0);
+  const double k_n = -glm::dot(n, K * n);
+  if (k_n <= 0) {  // no contact, or no stiffness along it: the force alone
+    return wire::DeviceModel(to_wire(glm::dmat3(0.0)), to_wire(r.target_velocity), wire::Vec3f(0, 0, 0), 0.0f,
+                             float(radius));
+  }
+  const double tau = r.coupling_stiffness > 0 ? r.coupling_damping / r.coupling_stiffness : 0.0;
+  return wire::DeviceModel(to_wire(-tau * K), to_wire(r.target_velocity), to_wire(n), float(glm::dot(r.force, n) / k_n),
+                           float(radius));
 }
 
 template <class T>
@@ -124,6 +155,13 @@ FrameEncoder::FrameEncoder(const Simulation& sim, std::string scene_name, uint32
   device_poses_.resize(sim.devices().size());
   state_device_poses_.resize(sim.devices().size());
   device_couplings_.resize(sim.devices().size());
+  device_models_.resize(sim.devices().size());
+  model_radius_.assign(sim.devices().size(), kModelRadiusMax);
+  for (size_t j = 0; j < sim.proxies().size(); ++j) {
+    const double r = bounding_radius(sim.proxies()[j].geometry);  // infinite for a plane
+    double& m = model_radius_[size_t(sim.proxy_device()[j])];
+    if (std::isfinite(r)) m = std::min(m, std::max(kModelRadiusMin, 0.5 * r));
+  }
   contacts_proxy_.assign(sim.proxies().size(), 0);
   contacts_device_.assign(sim.devices().size(), 0);
   touched_.assign(sim.devices().size(), -std::numeric_limits<double>::infinity());
@@ -375,9 +413,14 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
       const bool gliding = d < device_offsets.size() && glm::dot(device_offsets[d], device_offsets[d]) >
                                                             kMaxOffsetForStiffness * kMaxOffsetForStiffness;
       const bool free = sim_.time() - touched_[d] > kFreeAfter;
+      const glm::dmat3 K = gliding || free ? glm::dmat3(0.0) : r.stiffness;
       device_haptics_[d] =
-          wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque),
-                              to_wire(gliding || free ? glm::dmat3(0.0) : r.stiffness), uint32_t(contacts_device_[d]));
+          wire::DeviceHaptics(to_wire(r.force), to_wire(r.torque), to_wire(K), uint32_t(contacts_device_[d]));
+      Vec3 contact_force(0.0);
+      for (size_t j = 0; j < pr.size(); ++j) {
+        if (size_t(sim_.proxy_device()[j]) == d) contact_force += inv * sum_proxy_[j].force;
+      }
+      device_models_[d] = local_model(r, K, contact_force, model_radius_[d]);
       device_poses_[d] = wire::ProxyPose(to_wire(r.target.position), to_wire(r.target.orientation));
       device_couplings_[d] =
           wire::DeviceCoupling(wire::ProxyPose(to_wire(r.body.position), to_wire(r.body.orientation)),
@@ -385,6 +428,7 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
       continue;
     }
     device_couplings_[d] = wire::DeviceCoupling();
+    device_models_[d] = wire::DeviceModel();
     device_haptics_[d] = wire::DeviceHaptics(to_wire(inv * sum_device_[d].force), to_wire(inv * sum_device_[d].torque),
                                              to_wire(dr[d].stiffness), uint32_t(contacts_device_[d]));
     // A lone proxy's pose is the one just staged for it; a hand's is its own.
@@ -400,6 +444,7 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
   const auto device_poses = b.CreateVectorOfStructs(device_poses_.data(), dr.size());
   const auto sequences = b.CreateVector(input_sequences_.data(), dr.size());
   const auto couplings = b.CreateVectorOfStructs(device_couplings_.data(), dr.size());
+  const auto models = b.CreateVectorOfStructs(device_models_.data(), dr.size());
   std::fill(contacts_proxy_.begin(), contacts_proxy_.end(), 0);
   std::fill(contacts_device_.begin(), contacts_device_.end(), 0);
   wire::HapticFrameBuilder f(b);
@@ -413,6 +458,7 @@ std::span<const uint8_t> FrameEncoder::haptic_frame(int64_t server_time_ns, uint
   f.add_device_poses(device_poses);
   f.add_device_input_sequences(sequences);
   f.add_device_couplings(couplings);
+  f.add_device_models(models);
   return seal(b, wire::Message::HapticFrame, f.Finish());
 }
 

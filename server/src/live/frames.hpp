@@ -105,6 +105,8 @@ class FrameEncoder {
   std::vector<proto::ProxyPose> state_device_poses_;       // the same, for the state frames' builder
   std::vector<uint64_t> input_sequences_;                  // per device channel
   std::vector<proto::DeviceCoupling> device_couplings_;    // per device channel
+  std::vector<proto::DeviceModel> device_models_;          // per device channel
+  std::vector<double> model_radius_;                       // per device channel, DeviceModel.radius_m [m]
   std::vector<int32_t> contacts_proxy_, contacts_device_;  // the most contacts of a step since the last haptic frame
   std::vector<double> touched_;  // per device channel, the time its proxy last touched the body [s]
   // What each device channel's pose is: its hand (>= 0), else its first proxy.

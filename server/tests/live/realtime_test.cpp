@@ -18,6 +18,7 @@
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
+#include <glm/matrix.hpp>
 
 #include "core/bodies.hpp"
 #include "core/embedding.hpp"
@@ -25,6 +26,7 @@
 #include "core/material.hpp"
 #include "core/mesh.hpp"
 #include "core/model.hpp"
+#include "core/proxy.hpp"
 #include "live/frames.hpp"
 #include "live/realtime.hpp"
 #include "mesh/primitives.hpp"
@@ -645,6 +647,96 @@ TEST(FrameEncoder, AFreeCoupledProxyTellsItsDeviceNoStiffness) {
   EXPECT_EQ(told_pressing, pressed);
   EXPECT_GT(free_frames, 100) << "the proxy should leave the block";
   EXPECT_EQ(told_free, 0) << "of " << free_frames << " frames of a free proxy";
+}
+
+// The local model (protocol 1.11) of a device pressing its coupled proxy
+// into the block: while pressed, the normal points out of the block, the
+// release plane lies where the model's normal force falls to zero, the
+// damping is the coupling's time constant times the felt stiffness, and the
+// model predicts a frame 5 ms later from the device's pose then better than
+// the force held would; once free, it is the force alone.
+TEST(FrameEncoder, ACoupledDevicesLocalModelPredictsTheForceAtALaterPose) {
+  Simulation sim(poke_spec());
+  const double dt = 2e-4;
+  FrameEncoder frames(sim, "poke", 1, dt);
+  const DeviceLimits limits{4.0, 0.0, 2000.0};
+  sim.couple_device(0, &limits);
+  Pose device = sim.proxy_pose(0);
+  struct Seen {
+    glm::dvec3 force, x0, v0, normal;
+    glm::dmat3 K, D;
+    double release, radius;
+    uint32_t contacts;
+  };
+  std::vector<Seen> seen;
+  for (int k = 0; k < 1500; ++k) {  // 6 mm down over 0.1 s, held 0.1 s, up 12 mm over 0.1 s at 0.12 m/s
+    ProxyMotion m;
+    m.t0 = sim.time();
+    m.t1 = m.t0 + dt;
+    m.from = device;
+    if (k < 500)
+      device.position.y -= 0.006 / 500;
+    else if (k >= 1000)
+      device.position.y += 0.012 / 500;
+    m.to = device;
+    sim.set_proxy_motion(0, m);
+    ASSERT_FALSE(sim.advance(dt).fault) << "step " << k;
+    frames.add_step_forces();
+    sim.clear_impulses();
+    const proto::HapticFrame* h = envelope(frames.haptic_frame(0, 0))->message_as_HapticFrame();
+    ASSERT_EQ(h->device_models()->size(), 1u);
+    const proto::DeviceHaptics& d = *h->devices()->Get(0);
+    const proto::DeviceModel& dm = *h->device_models()->Get(0);
+    const auto vec = [](const proto::Vec3f& v) { return glm::dvec3(v.x(), v.y(), v.z()); };
+    const auto mat = [](const proto::Mat3f& a) {  // row-major on the wire, glm column-major
+      return glm::transpose(
+          glm::dmat3(a.m00(), a.m01(), a.m02(), a.m10(), a.m11(), a.m12(), a.m20(), a.m21(), a.m22()));
+    };
+    seen.push_back({vec(d.force()), vec(h->device_poses()->Get(0)->position()), vec(dm.velocity()), vec(dm.normal()),
+                    mat(d.stiffness()), mat(dm.damping()), dm.release_m(), dm.radius_m(), d.contacts()});
+  }
+  const double radius = bounding_radius(sim.proxies()[0].geometry);
+  int pressed = 0, free_frames = 0;
+  double err_model = 0, err_hold = 0;
+  const int ahead = 25;  // 5 ms
+  for (size_t k = 0; k + ahead < seen.size(); ++k) {
+    const Seen& s = seen[k];
+    EXPECT_FLOAT_EQ(float(s.radius), float(std::clamp(0.5 * radius, 1e-3, 1e-2)));
+    if (s.K[1][1] == 0) {  // free (or gliding): the force alone
+      ++free_frames;
+      EXPECT_EQ(s.normal, glm::dvec3(0.0));
+      EXPECT_EQ(s.D, glm::dmat3(0.0));
+      continue;
+    }
+    ++pressed;
+    EXPECT_GT(s.normal.y, 0.99) << k;
+    EXPECT_NEAR(glm::length(s.normal), 1.0, 1e-6);
+    // The release plane: F0.n + n.K n release = 0 (float on the wire).
+    EXPECT_NEAR(glm::dot(s.force, s.normal) + glm::dot(s.normal, s.K * s.normal) * s.release, 0.0,
+                1e-5 + 1e-4 * glm::length(s.force));
+    // The damper as felt: the same multiple of -K in every entry, a few milliseconds' worth.
+    const double tau = s.D[1][1] / -s.K[1][1];
+    EXPECT_GT(tau, 1e-4);
+    EXPECT_LT(tau, 2e-2);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) EXPECT_NEAR(s.D[i][j], -tau * s.K[i][j], 1e-5 * std::abs(s.D[1][1])) << k;
+    }
+    if (k > 100 && k < 480) {
+      EXPECT_NEAR(s.v0.y, -0.06, 1e-6) << k;  // the press's speed
+    }
+    // Prediction within the radius, while pressing in and holding.
+    if (k < 100 || k >= 950 || seen[k + ahead].contacts == 0) continue;
+    const Seen& later = seen[k + ahead];
+    const glm::dvec3 dx = later.x0 - s.x0;
+    if (glm::length(dx) > s.radius) continue;
+    const glm::dvec3 predicted = s.force + s.K * dx - s.D * (later.v0 - s.v0);
+    err_model += glm::length(predicted - later.force);
+    err_hold += glm::length(s.force - later.force);
+  }
+  EXPECT_GT(pressed, 400);
+  EXPECT_GT(free_frames, 100);
+  EXPECT_LT(err_model, 0.5 * err_hold) << "the model's error over the press and hold, against holding the force: "
+                                       << err_hold;
 }
 
 // The default: a device with its limits (its Hello) goes 5 mm into the

@@ -41,7 +41,7 @@ TEST(ProtoCodec, HelloCarriesVersionRoleTokenAndDevices) {
   ASSERT_EQ(e->message_type(), Message::Hello);
   const Hello* h = e->message_as_Hello();
   EXPECT_EQ(h->protocol_major(), 1);
-  EXPECT_EQ(h->protocol_minor(), 10);
+  EXPECT_EQ(h->protocol_minor(), 11);
   EXPECT_EQ(h->role(), Role::Device);
   EXPECT_STREQ(h->token()->c_str(), "s3cret");
   EXPECT_STREQ(h->client_name()->c_str(), "bridge@lab");

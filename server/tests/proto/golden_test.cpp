@@ -157,6 +157,13 @@ TEST(ProtoGolden, GeneratedAccessorsReadTheWrittenValues) {
   EXPECT_FALSE(hf->device_couplings()->Get(1)->coupled());
   EXPECT_FLOAT_EQ(hf->device_couplings()->Get(0)->body().position().y(), 0.4875f);
   EXPECT_FLOAT_EQ(hf->device_couplings()->Get(0)->max_torque_Nm(), 0.125f);
+  ASSERT_EQ(hf->device_models()->size(), 2u);  // (1.11)
+  EXPECT_FLOAT_EQ(hf->device_models()->Get(0)->damping().m12(), -0.0125f);
+  EXPECT_FLOAT_EQ(hf->device_models()->Get(0)->velocity().y(), -0.0625f);
+  EXPECT_FLOAT_EQ(hf->device_models()->Get(0)->normal().y(), 0.9921875f);
+  EXPECT_FLOAT_EQ(hf->device_models()->Get(0)->release_m(), 0.0025f);
+  EXPECT_FLOAT_EQ(hf->device_models()->Get(0)->radius_m(), 0.005f);
+  EXPECT_FLOAT_EQ(hf->device_models()->Get(1)->radius_m(), 0.0f);
 
   const std::string safety = load("safety_event.tctl");
   const SafetyEvent* se = GetEnvelope(safety.data())->message_as_SafetyEvent();

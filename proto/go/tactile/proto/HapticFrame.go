@@ -195,8 +195,27 @@ func (rcv *HapticFrame) DeviceCouplingsLength() int {
 	return 0
 }
 
+func (rcv *HapticFrame) DeviceModels(obj *DeviceModel, j int) bool {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(24))
+	if o != 0 {
+		x := rcv._tab.Vector(o)
+		x += flatbuffers.UOffsetT(j) * 68
+		obj.Init(rcv._tab.Bytes, x)
+		return true
+	}
+	return false
+}
+
+func (rcv *HapticFrame) DeviceModelsLength() int {
+	o := flatbuffers.UOffsetT(rcv._tab.Offset(24))
+	if o != 0 {
+		return rcv._tab.VectorLen(o)
+	}
+	return 0
+}
+
 func HapticFrameStart(builder *flatbuffers.Builder) {
-	builder.StartObject(10)
+	builder.StartObject(11)
 }
 func HapticFrameAddSceneId(builder *flatbuffers.Builder, sceneId uint32) {
 	builder.PrependUint32Slot(0, sceneId, 0)
@@ -242,6 +261,12 @@ func HapticFrameAddDeviceCouplings(builder *flatbuffers.Builder, deviceCouplings
 }
 func HapticFrameStartDeviceCouplingsVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
 	return builder.StartVector(44, numElems, 4)
+}
+func HapticFrameAddDeviceModels(builder *flatbuffers.Builder, deviceModels flatbuffers.UOffsetT) {
+	builder.PrependUOffsetTSlot(10, flatbuffers.UOffsetT(deviceModels), 0)
+}
+func HapticFrameStartDeviceModelsVector(builder *flatbuffers.Builder, numElems int) flatbuffers.UOffsetT {
+	return builder.StartVector(68, numElems, 4)
 }
 func HapticFrameEnd(builder *flatbuffers.Builder) flatbuffers.UOffsetT {
 	return builder.EndObject()

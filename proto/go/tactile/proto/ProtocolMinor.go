@@ -7,7 +7,7 @@ import "strconv"
 type ProtocolMinor uint16
 
 const (
-	ProtocolMinorCurrent ProtocolMinor = 10
+	ProtocolMinorCurrent ProtocolMinor = 11
 )
 
 var EnumNamesProtocolMinor = map[ProtocolMinor]string{

@@ -7,6 +7,7 @@ export { DeviceCoupling, DeviceCouplingT } from './tactile/proto/device-coupling
 export { DeviceHaptics, DeviceHapticsT } from './tactile/proto/device-haptics';
 export { DeviceInput, DeviceInputT } from './tactile/proto/device-input';
 export { DeviceLimits, DeviceLimitsT } from './tactile/proto/device-limits';
+export { DeviceModel, DeviceModelT } from './tactile/proto/device-model';
 export { DeviceStatus, DeviceStatusT } from './tactile/proto/device-status';
 export { EffectCost, EffectCostT } from './tactile/proto/effect-cost';
 export { EmbeddedSurface, EmbeddedSurfaceT } from './tactile/proto/embedded-surface';

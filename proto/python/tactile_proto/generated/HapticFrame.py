@@ -186,7 +186,31 @@ class HapticFrame(object):
         o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(22))
         return o == 0
 
-def HapticFrameStart(builder): builder.StartObject(10)
+    # HapticFrame
+    def DeviceModels(self, j):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
+        if o != 0:
+            x = self._tab.Vector(o)
+            x += flatbuffers.number_types.UOffsetTFlags.py_type(j) * 68
+            from tactile_proto.generated.DeviceModel import DeviceModel
+            obj = DeviceModel()
+            obj.Init(self._tab.Bytes, x)
+            return obj
+        return None
+
+    # HapticFrame
+    def DeviceModelsLength(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
+        if o != 0:
+            return self._tab.VectorLen(o)
+        return 0
+
+    # HapticFrame
+    def DeviceModelsIsNone(self):
+        o = flatbuffers.number_types.UOffsetTFlags.py_type(self._tab.Offset(24))
+        return o == 0
+
+def HapticFrameStart(builder): builder.StartObject(11)
 def Start(builder):
     return HapticFrameStart(builder)
 def HapticFrameAddSceneId(builder, sceneId): builder.PrependUint32Slot(0, sceneId, 0)
@@ -234,11 +258,18 @@ def AddDeviceCouplings(builder, deviceCouplings):
 def HapticFrameStartDeviceCouplingsVector(builder, numElems): return builder.StartVector(44, numElems, 4)
 def StartDeviceCouplingsVector(builder, numElems):
     return HapticFrameStartDeviceCouplingsVector(builder, numElems)
+def HapticFrameAddDeviceModels(builder, deviceModels): builder.PrependUOffsetTRelativeSlot(10, flatbuffers.number_types.UOffsetTFlags.py_type(deviceModels), 0)
+def AddDeviceModels(builder, deviceModels):
+    return HapticFrameAddDeviceModels(builder, deviceModels)
+def HapticFrameStartDeviceModelsVector(builder, numElems): return builder.StartVector(68, numElems, 4)
+def StartDeviceModelsVector(builder, numElems):
+    return HapticFrameStartDeviceModelsVector(builder, numElems)
 def HapticFrameEnd(builder): return builder.EndObject()
 def End(builder):
     return HapticFrameEnd(builder)
 import tactile_proto.generated.DeviceCoupling
 import tactile_proto.generated.DeviceHaptics
+import tactile_proto.generated.DeviceModel
 import tactile_proto.generated.ProxyHaptics
 import tactile_proto.generated.ProxyPose
 try:
@@ -260,6 +291,7 @@ class HapticFrameT(object):
         self.devicePoses = None  # type: List[tactile_proto.generated.ProxyPose.ProxyPoseT]
         self.deviceInputSequences = None  # type: List[int]
         self.deviceCouplings = None  # type: List[tactile_proto.generated.DeviceCoupling.DeviceCouplingT]
+        self.deviceModels = None  # type: List[tactile_proto.generated.DeviceModel.DeviceModelT]
 
     @classmethod
     def InitFromBuf(cls, buf, pos):
@@ -321,6 +353,14 @@ class HapticFrameT(object):
                 else:
                     deviceCoupling_ = tactile_proto.generated.DeviceCoupling.DeviceCouplingT.InitFromObj(hapticFrame.DeviceCouplings(i))
                     self.deviceCouplings.append(deviceCoupling_)
+        if not hapticFrame.DeviceModelsIsNone():
+            self.deviceModels = []
+            for i in range(hapticFrame.DeviceModelsLength()):
+                if hapticFrame.DeviceModels(i) is None:
+                    self.deviceModels.append(None)
+                else:
+                    deviceModel_ = tactile_proto.generated.DeviceModel.DeviceModelT.InitFromObj(hapticFrame.DeviceModels(i))
+                    self.deviceModels.append(deviceModel_)
 
     # HapticFrameT
     def Pack(self, builder):
@@ -352,6 +392,11 @@ class HapticFrameT(object):
             for i in reversed(range(len(self.deviceCouplings))):
                 self.deviceCouplings[i].Pack(builder)
             deviceCouplings = builder.EndVector()
+        if self.deviceModels is not None:
+            HapticFrameStartDeviceModelsVector(builder, len(self.deviceModels))
+            for i in reversed(range(len(self.deviceModels))):
+                self.deviceModels[i].Pack(builder)
+            deviceModels = builder.EndVector()
         HapticFrameStart(builder)
         HapticFrameAddSceneId(builder, self.sceneId)
         HapticFrameAddStep(builder, self.step)
@@ -368,5 +413,7 @@ class HapticFrameT(object):
             HapticFrameAddDeviceInputSequences(builder, deviceInputSequences)
         if self.deviceCouplings is not None:
             HapticFrameAddDeviceCouplings(builder, deviceCouplings)
+        if self.deviceModels is not None:
+            HapticFrameAddDeviceModels(builder, deviceModels)
         hapticFrame = HapticFrameEnd(builder)
         return hapticFrame

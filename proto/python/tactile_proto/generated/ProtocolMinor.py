@@ -3,4 +3,4 @@
 # namespace: proto
 
 class ProtocolMinor(object):
-    Current = 10
+    Current = 11

@@ -442,8 +442,9 @@ void Contact<Real>::move_proxies(ContactState& cs, double t0, double t1, double 
     b.previous_target = b.target.position;
     b.target = m.at(t1);
     const bool moving = t1 > m.t0 && t0 < m.t1;
-    b.wrench = step_coupled_body(b.c, b.now, b.target, moving ? m.velocity() : Vec3(0.0),
-                                 moving ? m.angular_velocity() : Vec3(0.0), dt, b.next);
+    b.target_velocity = moving ? m.velocity() : Vec3(0.0);
+    b.wrench = step_coupled_body(b.c, b.now, b.target, b.target_velocity, moving ? m.angular_velocity() : Vec3(0.0), dt,
+                                 b.next);
     b.v_free = b.next.v;
     b.w_free = b.next.w;
   }

@@ -74,7 +74,9 @@ struct DeviceReport : ContactReport {
   bool saturated = false;         // the coupling was at its force or torque limit
   Pose target;                    // the device's pose the coupling pulled toward at t_{n+1}
   Pose body;                      // where its body (hand, or first proxy) was at t_{n+1}
+  Vec3 target_velocity{0.0};      // the device's velocity the coupling's damper used [m/s]
   double coupling_stiffness = 0;  // [N/m]
+  double coupling_damping = 0;    // [N s/m]
   double max_force = 0;           // the coupling's saturation [N]
   double max_torque = 0;          // [N m]
 };
@@ -106,6 +108,7 @@ struct CoupledBodyState {
   CouplingWrench wrench;          // the coupling on the body at t_{n+1}
   CouplingWrench previous;        // and at t_n
   Pose target;                    // the device's pose at t_{n+1}
+  Vec3 target_velocity{0.0};      // its velocity over the step [m/s]
   Vec3 previous_target{0.0};      // its position at t_n [m]
 };
 

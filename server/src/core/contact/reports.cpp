@@ -96,7 +96,9 @@ void Contact<Real>::report(ContactState& cs, double t1, double dt) {
       d.target = b.target;
       d.target.position = 0.5 * (b.target.position + b.previous_target);
       d.body = b.now.pose;
+      d.target_velocity = b.target_velocity;
       d.coupling_stiffness = b.c.stiffness;
+      d.coupling_damping = b.c.damping;
       d.max_force = b.c.max_force;
       d.max_torque = b.c.max_torque;
     }

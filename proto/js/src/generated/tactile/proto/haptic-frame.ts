@@ -4,6 +4,7 @@ import * as flatbuffers from 'flatbuffers';
 
 import { DeviceCoupling, DeviceCouplingT } from '../../tactile/proto/device-coupling';
 import { DeviceHaptics, DeviceHapticsT } from '../../tactile/proto/device-haptics';
+import { DeviceModel, DeviceModelT } from '../../tactile/proto/device-model';
 import { ProxyHaptics, ProxyHapticsT } from '../../tactile/proto/proxy-haptics';
 import { ProxyPose, ProxyPoseT } from '../../tactile/proto/proxy-pose';
 
@@ -101,8 +102,18 @@ deviceCouplingsLength():number {
   return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
 }
 
+deviceModels(index: number, obj?:DeviceModel):DeviceModel|null {
+  const offset = this.bb!.__offset(this.bb_pos, 24);
+  return offset ? (obj || new DeviceModel()).__init(this.bb!.__vector(this.bb_pos + offset) + index * 68, this.bb!) : null;
+}
+
+deviceModelsLength():number {
+  const offset = this.bb!.__offset(this.bb_pos, 24);
+  return offset ? this.bb!.__vector_len(this.bb_pos + offset) : 0;
+}
+
 static startHapticFrame(builder:flatbuffers.Builder) {
-  builder.startObject(10);
+  builder.startObject(11);
 }
 
 static addSceneId(builder:flatbuffers.Builder, sceneId:number) {
@@ -173,12 +184,20 @@ static startDeviceCouplingsVector(builder:flatbuffers.Builder, numElems:number) 
   builder.startVector(44, numElems, 4);
 }
 
+static addDeviceModels(builder:flatbuffers.Builder, deviceModelsOffset:flatbuffers.Offset) {
+  builder.addFieldOffset(10, deviceModelsOffset, 0);
+}
+
+static startDeviceModelsVector(builder:flatbuffers.Builder, numElems:number) {
+  builder.startVector(68, numElems, 4);
+}
+
 static endHapticFrame(builder:flatbuffers.Builder):flatbuffers.Offset {
   const offset = builder.endObject();
   return offset;
 }
 
-static createHapticFrame(builder:flatbuffers.Builder, sceneId:number, step:bigint, simTime:number, serverTimeNs:bigint, lastInputSequence:bigint, proxiesOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, devicePosesOffset:flatbuffers.Offset, deviceInputSequencesOffset:flatbuffers.Offset, deviceCouplingsOffset:flatbuffers.Offset):flatbuffers.Offset {
+static createHapticFrame(builder:flatbuffers.Builder, sceneId:number, step:bigint, simTime:number, serverTimeNs:bigint, lastInputSequence:bigint, proxiesOffset:flatbuffers.Offset, devicesOffset:flatbuffers.Offset, devicePosesOffset:flatbuffers.Offset, deviceInputSequencesOffset:flatbuffers.Offset, deviceCouplingsOffset:flatbuffers.Offset, deviceModelsOffset:flatbuffers.Offset):flatbuffers.Offset {
   HapticFrame.startHapticFrame(builder);
   HapticFrame.addSceneId(builder, sceneId);
   HapticFrame.addStep(builder, step);
@@ -190,6 +209,7 @@ static createHapticFrame(builder:flatbuffers.Builder, sceneId:number, step:bigin
   HapticFrame.addDevicePoses(builder, devicePosesOffset);
   HapticFrame.addDeviceInputSequences(builder, deviceInputSequencesOffset);
   HapticFrame.addDeviceCouplings(builder, deviceCouplingsOffset);
+  HapticFrame.addDeviceModels(builder, deviceModelsOffset);
   return HapticFrame.endHapticFrame(builder);
 }
 
@@ -204,7 +224,8 @@ unpack(): HapticFrameT {
     this.bb!.createObjList(this.devices.bind(this), this.devicesLength()),
     this.bb!.createObjList(this.devicePoses.bind(this), this.devicePosesLength()),
     this.bb!.createScalarList(this.deviceInputSequences.bind(this), this.deviceInputSequencesLength()),
-    this.bb!.createObjList(this.deviceCouplings.bind(this), this.deviceCouplingsLength())
+    this.bb!.createObjList(this.deviceCouplings.bind(this), this.deviceCouplingsLength()),
+    this.bb!.createObjList(this.deviceModels.bind(this), this.deviceModelsLength())
   );
 }
 
@@ -220,6 +241,7 @@ unpackTo(_o: HapticFrameT): void {
   _o.devicePoses = this.bb!.createObjList(this.devicePoses.bind(this), this.devicePosesLength());
   _o.deviceInputSequences = this.bb!.createScalarList(this.deviceInputSequences.bind(this), this.deviceInputSequencesLength());
   _o.deviceCouplings = this.bb!.createObjList(this.deviceCouplings.bind(this), this.deviceCouplingsLength());
+  _o.deviceModels = this.bb!.createObjList(this.deviceModels.bind(this), this.deviceModelsLength());
 }
 }
 
@@ -234,7 +256,8 @@ constructor(
   public devices: (DeviceHapticsT)[] = [],
   public devicePoses: (ProxyPoseT)[] = [],
   public deviceInputSequences: (bigint)[] = [],
-  public deviceCouplings: (DeviceCouplingT)[] = []
+  public deviceCouplings: (DeviceCouplingT)[] = [],
+  public deviceModels: (DeviceModelT)[] = []
 ){}
 
 
@@ -244,6 +267,7 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
   const devicePoses = builder.createStructOffsetList(this.devicePoses, HapticFrame.startDevicePosesVector);
   const deviceInputSequences = HapticFrame.createDeviceInputSequencesVector(builder, this.deviceInputSequences);
   const deviceCouplings = builder.createStructOffsetList(this.deviceCouplings, HapticFrame.startDeviceCouplingsVector);
+  const deviceModels = builder.createStructOffsetList(this.deviceModels, HapticFrame.startDeviceModelsVector);
 
   return HapticFrame.createHapticFrame(builder,
     this.sceneId,
@@ -255,7 +279,8 @@ pack(builder:flatbuffers.Builder): flatbuffers.Offset {
     devices,
     devicePoses,
     deviceInputSequences,
-    deviceCouplings
+    deviceCouplings,
+    deviceModels
   );
 }
 }
