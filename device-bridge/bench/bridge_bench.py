@@ -29,7 +29,7 @@
   .venv/bin/python device-bridge/bench/bridge_bench.py lateness --seconds 60
   .venv/bin/python device-bridge/bench/bridge_bench.py staleness --seconds 20 [--loaded]
   .venv/bin/python device-bridge/bench/bridge_bench.py modes --seconds 12 [--object stiff] [--json modes.json]
-  .venv/bin/python device-bridge/bench/bridge_bench.py loop [--cases soft,stiff] [--rates 1000] [--loaded]
+  .venv/bin/python device-bridge/bench/bridge_bench.py loop [--cases soft,stiff] [--rates 1000] [--loaded[-only]]
       [--modes model,coupled] [--tick-rates 1000,2000,4000] [--json loop.json]
 """
 
@@ -574,8 +574,8 @@ def loop(args: argparse.Namespace) -> None:
     rows = []
     modes = args.modes.split(",")
     ticks = [float(x) for x in args.tick_rates.split(",")]
-    runs = [(c, m, r, False, k) for c in cases for m in modes for r in rates for k in ticks]
-    if args.loaded:
+    runs = [] if args.loaded_only else [(c, m, r, False, k) for c in cases for m in modes for r in rates for k in ticks]
+    if args.loaded or args.loaded_only:
         runs += [(c, m, rates[min(1, len(rates) - 1)], True, ticks[0]) for c in cases for m in modes]
     body_k: dict[str, float] = {}
     for case_name, mode, rate, loaded, tick in runs:
@@ -703,6 +703,7 @@ def main() -> None:
     c.add_argument("--cases", default="", help=f"comma-separated, of {', '.join(LOOP_CASES)} (default: all)")
     c.add_argument("--rates", default="4000,1000,250", help="haptic states per second, comma-separated")
     c.add_argument("--loaded", action="store_true", help="also each case at 1 kHz beside two busy processes")
+    c.add_argument("--loaded-only", action="store_true", help="only the runs beside two busy processes")
     c.add_argument("--modes", default="model,coupled", help="the bridge's modes, comma-separated (model, the "
                    "default, renders the server's local model at the tick; coupled, the state one step late)")
     c.add_argument("--tick-rates", default="1000", help="the bridge's tick rates [Hz], comma-separated")

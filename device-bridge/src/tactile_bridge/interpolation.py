@@ -134,7 +134,9 @@ class ForceRender:
         self.max_stiffness = float("inf")  # extrapolate: the largest |K| used, scene frame [N/m]
         self._k = [0.0] * 9                # coupled: the interpolated stiffness (no allocation per tick)
         # model: the blend between successive models, the device's velocity, what the latest render did.
-        self.blend_s = 0.002 # an offset between models fades with this time constant [s]...
+        # An offset between models fades with this time constant [s] (a shorter one let states 20 ms apart
+        # give the hand work, a longer one lags; `bridge_bench.py loop --cases stiff --rates 100,50`)...
+        self.blend_s = 0.002
         self.blend_rate = math.inf         # ...by at most this many newtons a second (scene)
         self.velocity_cutoff_hz = 200.0    # the device's velocity: differences of its positions, filtered
         self.outside = False               # the latest render's pose was past its model's radius
