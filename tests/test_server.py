@@ -834,3 +834,26 @@ def test_device_status_is_relayed_stamped_to_viewers_and_bad_figures_are_refused
 
     with running_server(tmp_path) as (port, _):
         asyncio.run(run(port))
+
+
+def thread_nice(pid: int) -> list[int]:
+    """The nice value of each thread of process `pid` (/proc/PID/task/TID/stat, field 19)."""
+    values = []
+    for stat in pathlib.Path(f"/proc/{pid}/task").glob("*/stat"):
+        with contextlib.suppress(FileNotFoundError):  # (a thread that ended meanwhile)
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            values.append(int(fields[16]))  # after "pid (comm)": state is field 3, nice field 19
+    return values
+
+
+def test_every_server_thread_runs_at_the_nice_it_was_given(tmp_path: pathlib.Path) -> None:
+    # The default, -10, where the system allows it (as root, or with CAP_SYS_NICE): the simulation and the
+    # network are served before ordinary work on a busy machine. Another value as asked.
+    allowed = os.geteuid() == 0
+    for args, want in (((), -10 if allowed else 0), (("--nice", "5"), 5)):
+        with server_process(tmp_path, SCENE, TOKEN, *args) as (_, proc):
+            time.sleep(0.3)
+            nice = thread_nice(proc.pid)
+        out = "".join(proc.lines)  # type: ignore[attr-defined]
+        assert len(nice) >= 2 and set(nice) == {want}, (args, nice, out[-2000:])
+        assert ("refused" in out) == (want == 0 and not args), out[-2000:]
