@@ -822,6 +822,8 @@ def test_device_status_is_relayed_stamped_to_viewers_and_bad_figures_are_refused
             got = await next_of(viewer, "DeviceStatusT")
             assert (got.device, got.mode, got.missedTicks, got.displayDelayMs) == ("stylus", "delay", 2, 0.75)
             assert got.serverTimeNs > 0 and got.deviceTimeNs == 123
+            await device.send(codec.encode(status(mode="model")))  # the bridge's default since 1.11
+            assert (await next_of(viewer, "DeviceStatusT")).mode == "model"
             for bad, words in ((status(latenessP99Us=math.nan), "lateness_p99_us"),
                                (status(mode="fast"), "mode 'fast'"),
                                (status(device="other"), "'other'")):

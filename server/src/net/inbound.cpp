@@ -103,10 +103,10 @@ std::string check_device_status(const proto::DeviceStatus& st) {
     return "DeviceStatus with a device channel that is not UTF-8 of at most " + std::to_string(kMaxSafetyDeviceBytes) +
            " bytes";
   const std::string mode = st.mode() ? st.mode()->str() : "";
-  if (mode != "coupled" && mode != "delay" && mode != "hold" && mode != "extrapolate")
+  if (mode != "model" && mode != "coupled" && mode != "delay" && mode != "hold" && mode != "extrapolate")
     return "DeviceStatus with mode '" +
            (st.mode() && is_utf8(*st.mode()) && mode.size() <= 32 ? mode : std::string("?")) +
-           "' (coupled, delay, hold or extrapolate)";
+           "' (model, coupled, delay, hold or extrapolate)";
   const std::pair<const char*, float> figures[] = {{"tick_rate_hz", st.tick_rate_hz()},
                                                    {"lateness_p99_us", st.lateness_p99_us()},
                                                    {"lateness_max_us", st.lateness_max_us()},
