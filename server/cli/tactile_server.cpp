@@ -178,9 +178,8 @@ int main(int argc, char** argv) {
   add_options(app, o, on_fault);
   if (const std::optional<int> status = parse_command_line(app, argc, argv)) return *status;
   o.server.reset_on_fault = on_fault == "reset";
-  // Before any thread starts, so that every thread the server makes inherits it (`bridge_bench.py loop
-  // --loaded`: beside two busy processes, the default scene's server at normal priority fell behind real
-  // time and the hand got the coupling's 6 N).
+  // Before any thread starts, so that every thread the server makes inherits it: a busy machine must not
+  // slow the simulation a hand is coupled to (`bridge_bench.py loop --loaded` guards it).
   if (setpriority(PRIO_PROCESS, 0, o.nice) != 0)
     std::printf("tactile-server: nice %d refused (%s): running at normal priority\n", o.nice, std::strerror(errno));
   o.server.viewer_rate_hz = o.state_rate;

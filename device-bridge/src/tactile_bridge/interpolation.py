@@ -134,8 +134,8 @@ class ForceRender:
         self.max_stiffness = float("inf")  # extrapolate: the largest |K| used, scene frame [N/m]
         self._k = [0.0] * 9                # coupled: the interpolated stiffness (no allocation per tick)
         # model: the blend between successive models, the device's velocity, what the latest render did.
-        # An offset between models fades with this time constant [s] (a shorter one let states 20 ms apart
-        # give the hand work, a longer one lags; `bridge_bench.py loop --cases stiff --rates 100,50`)...
+        # An offset between models fades with this time constant [s] (chosen by the work a cycle gives the
+        # hand with states 10 and 20 ms apart: `bridge_bench.py loop --cases stiff --rates 100,50`)...
         self.blend_s = 0.002
         self.blend_rate = math.inf         # ...by at most this many newtons a second (scene)
         self.velocity_cutoff_hz = 200.0    # the device's velocity: differences of its positions, filtered
@@ -143,7 +143,8 @@ class ForceRender:
         self.released = False              # the latest render's model let go (past the release plane)
         self.velocity = [0.0, 0.0, 0.0]    # the device's, scene frame [m/s]
         self._offset = [0.0, 0.0, 0.0]     # what the displayed force carries over from earlier models [N]
-        self._f = [0.0, 0.0, 0.0]          # a model's force (no allocation per tick) [N]
+        self._f = [0.0, 0.0, 0.0]          # the newest model's force (no allocation per tick) [N]
+        self._g = [0.0, 0.0, 0.0]          # the model before it, at the same pose [N]
         self._model_count = 0              # the history's count when the displayed model came
         self._x = [0.0, 0.0, 0.0]
         self._t_ns = -1                    # the latest render's time (-1: none since a reset)
@@ -266,16 +267,17 @@ class ForceRender:
 
         # The blend: a new model takes over the offset between what the one before gives here and what it
         # gives (the device's motion answered by both alike), and the offset then fades.
-        o, f = self._offset, self._f
+        o, f, g = self._offset, self._f, self._g
+        carry = False
         if h.count != self._model_count:
             old = self._model_count
-            if old and h.count - old < h.capacity and h.coupled[(old - 1) % h.capacity]:
-                self._evaluate((old - 1) % h.capacity, x, f)
-                o[0], o[1], o[2] = o[0] + f[0], o[1] + f[1], o[2] + f[2]
-                self._evaluate(n, x, f)
-                o[0], o[1], o[2] = o[0] - f[0], o[1] - f[1], o[2] - f[2]
+            carry = bool(old) and h.count - old < h.capacity and h.coupled[(old - 1) % h.capacity]
+            if carry:  # (the one before first: `outside` and `released` are then this model's)
+                self._evaluate((old - 1) % h.capacity, x, g)
             self._model_count = h.count
         self._evaluate(n, x, f)
+        if carry:
+            o[0], o[1], o[2] = o[0] + g[0] - f[0], o[1] + g[1] - f[1], o[2] + g[2] - f[2]
         if dt > 0.0:
             mag = math.sqrt(o[0] * o[0] + o[1] * o[1] + o[2] * o[2])
             if mag > 0.0:
