@@ -108,13 +108,13 @@ def message_type(raw: bytes) -> int:
 
 
 async def next_error(ws: Any, timeout: float = 5.0) -> Any:
-    """The next Error on a device's connection: the haptic frames (thousands a second) are skipped without
-    being decoded, so that the client keeps up."""
+    """The next Error on a device's connection but Lagging (as next_of): the haptic frames (thousands a second)
+    are skipped without being decoded, so that the client keeps up."""
     end = time.monotonic() + timeout
     while True:
         raw = await asyncio.wait_for(ws.recv(), max(0.01, end - time.monotonic()))
-        if message_type(raw) == Message.Error:
-            return codec.decode(raw).message
+        if message_type(raw) == Message.Error and (err := codec.decode(raw).message).code != ErrorCode.Lagging:
+            return err
 
 
 def device_input(sequence: int, y: float, x: float = 0.0, z: float = 0.0,
