@@ -20,16 +20,17 @@ from test_scenes_schema import built
 
 @contextlib.contextmanager
 def server_process(tmp_path: pathlib.Path, scene: dict[str, Any], token: str, *args: str,
-                   file_name: str | None = None) -> Iterator[tuple[int, subprocess.Popen[str]]]:
+                   file_name: str | None = None, new_session: bool = False,
+                   ) -> Iterator[tuple[int, subprocess.Popen[str]]]:
     """Yields (port, process) of a tactile-server running `scene` (written to tmp_path/file_name, by default
-    its name .json); fails the test if it does not start or stop."""
+    its name .json), in a session of its own with `new_session`; fails the test if it does not start or stop."""
     exe = built("tactile-server")
     if exe is None:
         pytest.fail("tactile-server is not built (scripts/setup.sh builds it)")
     path = tmp_path / (file_name or f"{scene.get('name', 'scene')}.json")
     path.write_text(json.dumps(scene))
     proc = subprocess.Popen([exe, str(path), "--port", "0", "--token", token, *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+                            stderr=subprocess.STDOUT, text=True, start_new_session=new_session)
     port = None
     deadline = time.time() + 30
     lines = []

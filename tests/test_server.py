@@ -866,3 +866,19 @@ def test_every_server_thread_runs_at_the_nice_it_was_given(tmp_path: pathlib.Pat
         out = "".join(proc.lines)  # type: ignore[attr-defined]
         assert len(nice) >= 2 and set(nice) == {want}, (args, nice, out[-2000:])
         assert ("refused" in out) == (want == 0 and not args), out[-2000:]
+
+
+def test_the_server_gives_its_session_group_its_nice_where_the_kernel_groups_by_session(tmp_path: pathlib.Path) -> None:
+    """With the kernel's autogroup scheduling a nice value ranks threads only within their session: a browser
+    started from another session (Playwright's Chromium is) would share the CPU with the server's as an equal
+    group. The server lowers its session group's nice to its own, never raises it. (Each server here runs in a
+    session of its own, so that the test's group is left as it was.)"""
+    enabled = pathlib.Path("/proc/sys/kernel/sched_autogroup_enabled")
+    if not enabled.exists() or enabled.read_text().strip() != "1":
+        pytest.skip("this kernel does not group the CPU by session")
+    if os.geteuid() != 0:
+        pytest.skip("lowering a nice value needs root or CAP_SYS_NICE")
+    for args, want in (((), -10), (("--nice", "-3"), -3), (("--nice", "5"), 0)):
+        with server_process(tmp_path, SCENE, TOKEN, *args, new_session=True) as (_, proc):
+            group = pathlib.Path(f"/proc/{proc.pid}/autogroup").read_text().split()
+        assert group[1:] == ["nice", str(want)], (args, group)

@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <limits>
 #include <optional>
@@ -35,6 +36,31 @@
 namespace {
 
 using namespace tactile;
+
+// Sets the process's nice value, and, where the kernel groups the CPU by
+// session (autogroup, sched(7)), its session group's: there a nice value
+// ranks threads only within their session, and a browser started from another
+// session shares the CPU with ours as an equal group whatever our threads'
+// nice (Playwright's Chromium does: client-web/bench/round_trip.mjs). The
+// group's nice is lowered, never raised; a refusal is said, not fatal.
+void set_priority(int nice) {
+  if (setpriority(PRIO_PROCESS, 0, nice) != 0)
+    std::printf("tactile-server: nice %d refused (%s): running at normal priority\n", nice, std::strerror(errno));
+  std::ifstream enabled("/proc/sys/kernel/sched_autogroup_enabled");
+  int on = 0;
+  if (nice >= 0 || !(enabled >> on) || on != 1) return;
+  std::ifstream group_in("/proc/self/autogroup");  // "/autogroup-155 nice 0"
+  std::string name, word;
+  int group_nice = 0;
+  if (!(group_in >> name >> word >> group_nice) || group_nice <= nice) return;
+  std::ofstream group_out("/proc/self/autogroup");
+  group_out << nice << std::flush;
+  if (!group_out)
+    std::printf(
+        "tactile-server: session group nice %d refused: the threads of other sessions (a browser) share "
+        "the CPU with this one as equals\n",
+        nice);
+}
 
 // Refusals after the command line is read (an unknown variant, a missing folder).
 struct BadInput {
@@ -128,7 +154,8 @@ void add_options(CLI::App& app, Options& o, std::string& on_fault) {
   app.add_option("--nice", o.nice,
                  "the server's nice value, -20 to 19: below 0 its simulation and network threads are served\n"
                  "before ordinary processes (a browser, a build) on a busy machine; where the system refuses\n"
-                 "(no CAP_SYS_NICE) it runs at its normal priority and says so")
+                 "(no CAP_SYS_NICE) it runs at its normal priority and says so; below 0, where the kernel groups\n"
+                 "the CPU by session (autogroup), its session's group is given it too")
       ->type_name("N")
       ->check(CLI::Range(-20, 19).description(""))
       ->capture_default_str();
@@ -180,8 +207,7 @@ int main(int argc, char** argv) {
   o.server.reset_on_fault = on_fault == "reset";
   // Before any thread starts, so that every thread the server makes inherits it: a busy machine must not
   // slow the simulation a hand is coupled to (`bridge_bench.py loop --loaded` guards it).
-  if (setpriority(PRIO_PROCESS, 0, o.nice) != 0)
-    std::printf("tactile-server: nice %d refused (%s): running at normal priority\n", o.nice, std::strerror(errno));
+  set_priority(o.nice);
   o.server.viewer_rate_hz = o.state_rate;
   try {
     if (!o.replay.empty()) return replay(o);
