@@ -4,7 +4,7 @@
 # port, and the device bridge with the simulated arm poking the scene through
 # it (TACTILE_DEVICE=PROFILE picks another device profile, =none runs no
 # bridge). It prints the URL to open and runs until Ctrl-C. Haptic frames go out
-# at 2 kHz at most: the default scene steps at 7.7 kHz, and a bridge ticking at
+# at 2 kHz at most: the default scene steps at 12 kHz, and a bridge ticking at
 # 1 kHz needs no more (a later --haptic-rate among the options wins). The page's
 # record button writes into recordings/ (a later --recordings wins).
 #   scripts/run.sh [SCENE.json] [tactile-server options...]   (e.g. --record run.mcap)

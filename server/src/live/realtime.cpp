@@ -8,7 +8,6 @@
 
 #include <glm/common.hpp>
 
-#include <immintrin.h>
 #include <sys/prctl.h>
 
 namespace tactile {
@@ -18,11 +17,6 @@ namespace {
 // A stall longer than this is not caught up on: the loop re-anchors its
 // clock and says so, rather than running a burst of steps faster than real time.
 constexpr double kMaxBacklog = 0.05;  // [s]
-// Sleeping wakes late by the kernel's timer slack (50 us by default; the
-// loop asks for 1 us) plus the wake-up latency; the last stretch before a
-// deadline is spun. Spinning is paid for by whatever else the machine runs
-// (a bridge beside the server on the same cores), so it is kept short.
-constexpr double kSpinWindow = 60e-6;  // [s]
 // How fast a proxy's pose glides onto its device's path when the path
 // starts away from it (DevicePath::add).
 constexpr double kApproachSpeed = 0.25;  // [m/s]
@@ -248,11 +242,13 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
         anchor + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(target));
     Clock::time_point now = Clock::now();
     if (now < due) {
-      const double wait = seconds(due - now);
-      if (wait > kSpinWindow)
-        std::this_thread::sleep_until(
-            due - std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kSpinWindow)));
-      while ((now = Clock::now()) < due) _mm_pause();
+      // Slept, not spun: the wake-up comes tens of microseconds late on a
+      // busy or virtual machine, which the absolute schedule makes up on
+      // the next step, and a spin would take from the bridge and the browser
+      // beside the server the time a step leaves (at the default scene's
+      // 81 us step, all of it). scripts/run.sh with
+      // client-web/bench/round_trip.mjs shows what they get.
+      std::this_thread::sleep_until(due);
     } else {
       const double late = seconds(now - due);
       if (late > dt_) ++missed;
