@@ -112,7 +112,7 @@ export class PointerDevice {
       token: this.token,
       clientName: 'client-web mouse',
       devices: [channel],
-      // The page draws and reads at its display's rate: a haptic frame after every step (7.8 kHz for the
+      // The page draws and reads at its display's rate: a haptic frame after every step (12 kHz for the
       // default scene) would wait in the socket's buffers for seconds while the browser draws.
       maxRateHz: HAPTIC_RATE_HZ,
       onMessage: (data) => {

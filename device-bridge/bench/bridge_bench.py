@@ -21,7 +21,7 @@
   staleness  the age of the haptic frames a device client reads (its read time less the frame's server_time_ns,
              both CLOCK_MONOTONIC on this machine): p50, p99, max over what it read, for a client that wakes every
              2 ms (500 Hz) and reads one frame (a device loop written from proto/README.md), and asks for
-             nothing (the server's rate: a frame after every step of the default scene, 7.7 kHz), against one
+             nothing (the server's rate: a frame after every step of the default scene, 12 kHz), against one
              that asks for 500 Hz in its Hello (max_rate_hz, protocol 1.10) and one that asks for 450 (what a
              client should ask: less than it reads, or what it falls short of piles up in its own socket's
              buffer); --loaded also beside two busy processes.

@@ -35,11 +35,12 @@ class Options:
     url: str = "ws://127.0.0.1:8765/"
     token: str = ""
     mode: str = "model"            # interpolation.MODES
-    state_rate_hz: float = 2000.0  # haptic states per second asked of the server (0: every one it makes)
+    state_rate_hz: float | None = None  # haptic states a second asked of the server (0: every one it makes;
+    #                                      None: the fastest device's tick rate, one state a tick)
     network: str = "process"       # thread | process
     passivity: bool = True
     priority: int = 0              # SCHED_FIFO priority of the tick (0: normal scheduling)
-    spin_us: int = 200             # the tick spins this long before each deadline
+    spin_us: int = 50              # the tick spins this long before each deadline
     seconds: float = 0.0           # stop after this long (0: until interrupted)
     status_s: float = 0.5          # status line period (0: none)
     trace: str = ""                # write every tick of the first trace_s seconds to this CSV
@@ -96,7 +97,8 @@ class Bridge:
         self.ex = ex.Exchange(len(profiles), shared=opts.network == "process")
         self.wake_r, self.wake_w = _pipe()
         self.network = Network(opts.url, opts.token, self.profiles, self.ex, self.wake_r, mode=opts.mode,
-                               max_rate_hz=opts.state_rate_hz)
+                               max_rate_hz=max(p.rate_hz for p in self.profiles) if opts.state_rate_hz is None
+                               else opts.state_rate_hz)
         self.devices = list(devices) if devices is not None else None
         self.tick: Tick | None = None
         self._thread: threading.Thread | None = None

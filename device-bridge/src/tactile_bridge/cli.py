@@ -134,16 +134,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--tick-rate", type=float, default=0.0, metavar="HZ",
                     help="the tick's rate for every device, instead of its profile's rate_hz (100 to 20000; "
                          "1000, 2000 or 4000 are the ones measured)")
-    ap.add_argument("--state-rate", type=float, default=2000.0, metavar="HZ",
-                    help="haptic states a second to ask of the server; what the bridge has not read when a newer "
-                         "one comes is replaced, so it reads the newest (0: every one the server makes)")
+    ap.add_argument("--state-rate", type=float, default=None, metavar="HZ",
+                    help="haptic states a second to ask of the server (default: the tick's rate, the fastest "
+                         "device's: one state a tick, the local model rendering the motion between); what the "
+                         "bridge has not read when a newer one comes is replaced, so it reads the newest (0: every "
+                         "one the server makes)")
     ap.add_argument("--network", choices=("process", "thread"), default="process",
                     help="run the tick in its own process (default) or in a thread beside the network")
     ap.add_argument("--no-passivity", action="store_true", help="turn the passivity observer/controller off")
     ap.add_argument("--priority", type=int, default=80, metavar="N",
                     help="run the tick SCHED_FIFO at priority N (default 80; where the system refuses, the tick runs "
                          "at normal priority and says so; 0: normal scheduling)")
-    ap.add_argument("--spin-us", type=int, default=200, help="spin this long before each deadline [us]")
+    ap.add_argument("--spin-us", type=int, default=50,
+                    help="spin this long before each deadline [us] (SCHED_FIFO wakes within it on most ticks; "
+                         "what it spins, a browser beside the bridge does not get)")
     ap.add_argument("--seconds", type=float, default=0.0, help="stop after this long (default: run until Ctrl-C)")
     ap.add_argument("--status", type=float, default=0.5, metavar="S", help="status line every S seconds (0: off)")
     ap.add_argument("--trace", metavar="CSV", default="",
@@ -185,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{p.path}: {p.name}, driver {p.driver}, channel {p.channel!r}, {p.rate_hz:g} Hz, "
                   f"max {p.force.max_N:g} N, continuous {p.force.continuous_N:g} N, slew {p.force.slew_N_per_s:g} N/s")
         return 0
-    if not (args.state_rate >= 0 and math.isfinite(args.state_rate)):
+    if args.state_rate is not None and not (args.state_rate >= 0 and math.isfinite(args.state_rate)):
         print(f"tactile-bridge: --state-rate must be 0 or a positive rate, got {args.state_rate}", file=sys.stderr)
         return 2
     opts = Options(url=args.server, token=args.token, mode=args.mode, network=args.network,

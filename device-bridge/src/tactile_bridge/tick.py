@@ -80,7 +80,7 @@ class Channel:
 
 class Tick:
     def __init__(self, profiles: Sequence[Profile], devices: Sequence[Device], exchange: ex.Exchange, *,
-                 mode: str = "model", passivity: bool = True, wake_fd: int = -1, spin_ns: int = 200_000,
+                 mode: str = "model", passivity: bool = True, wake_fd: int = -1, spin_ns: int = 50_000,
                  max_backlog: int = 20, clock: Callable[[], int] = time.monotonic_ns) -> None:
         rates = {p.rate_hz for p in profiles}
         if len(rates) != 1:
