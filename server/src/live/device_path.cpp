@@ -16,6 +16,15 @@ namespace {
 // is parts per million; a loop that fell behind re-anchors by more, and the
 // minimum filter takes the new offset at its first faster input).
 constexpr double kDrift = 1e-3;
+// How fast the offset rises [s per second of device time] while inputs come
+// later than it by more than the playout delay can hold (kMaxDelay): the
+// minimum that set it was no transit of the link but a loop catching up on
+// a stall, which applies inputs at a time behind the wall clock's. Held at
+// kDrift, the path would play ahead of its newest input, extrapolating, for
+// seconds after each such stall (bridge_bench.py loop --cases free: the
+// coupling then jolts the hand in free space). A single late input moves
+// it by a twentieth of its lateness at most.
+constexpr double kRecover = 0.05;
 // A lag this much below the offset is a stall of the loop's time [s].
 constexpr double kStall = 0.01;
 // The jitter's memory [s]: a burst of lateness sets the delay for about this
@@ -145,6 +154,8 @@ bool DevicePath::add(double device_s, const Pose& pose, double t) {
     } else if (lag < offset_) {  // the fastest input yet: the others came later than thought
       jitter_ += offset_ - lag;
       offset_ = lag;
+    } else if (lag - offset_ > kMaxDelay) {
+      offset_ = std::min(lag - kMaxDelay, offset_ + kRecover * gap);
     }
     jitter_ = std::min(kMaxDelay, std::max(jitter_, lag - offset_));
   }

@@ -64,6 +64,50 @@ TEST(DevicePath, LateInputsNeitherStallNorJumpThePath) {
   EXPECT_GT(fastest_change, 0.0) << "the lead never moved: the test shows nothing";
 }
 
+// A loop that stalls for 4 ms and catches up over the next 20 ms applies the inputs that came meanwhile at a time
+// behind the wall clock's: their lags dip 4 ms below the link's 1 ms, more than the playout delay holds. Once it
+// has caught up, the path plays no further past its newest input than a loop that never stalled (up to an input's
+// interval, between one input and the next); held at the clocks' drift, the offset would leave it further ahead
+// for a second, extrapolating. Its speed changes smoothly all along.
+TEST(DevicePath, AMinimumLeftByALoopCatchingUpOnAStallDoesNotPlayThePathAheadOfItsInputs) {
+  const double v = 0.5;
+  const auto run = [&](bool stall) {            // the most the path plays past its newest input from 0.45 s [s]
+    const auto loop_time = [stall](double w) {  // the loop's time at wall time w
+      if (!stall || w < 0.2) return w;
+      if (w < 0.204) return 0.2;
+      return std::min(w, 0.2 + 1.2 * (w - 0.204));
+    };
+    DevicePath path;
+    int k = 1;
+    double newest = -1, prev_x = -1, prev_step = -1, ahead = 0;
+    for (double w = 0.0; w < 0.6; w += 1e-4) {  // the loop's steps, in wall time
+      const double t = loop_time(w);
+      while (1e-3 * k + 1e-3 <= w) {  // inputs every 1 ms, arriving 1 ms after their stamp
+        path.add(1e-3 * k, at_x(v * 1e-3 * k), t);
+        newest = 1e-3 * k;
+        ++k;
+      }
+      if (w < 0.05) continue;
+      const double x = path.at(t).position.x;
+      if (w > 0.225) {  // (steps 0.1 ms apart in the loop's time again)
+        if (prev_step >= 0) {
+          EXPECT_LE(std::fabs((x - prev_x) - prev_step), v * DevicePath::kLeadAccel * 1e-8 * 1.01 + 1e-15)
+              << "the path's speed changed at once at w = " << w;
+        }
+        if (prev_x >= 0) prev_step = x - prev_x;
+      }
+      prev_x = x;
+      if (w > 0.45) ahead = std::max(ahead, x / v - newest);
+    }
+    return ahead;
+  };
+  const double steady = run(false), after_stall = run(true);
+  EXPECT_GT(steady, 0.5e-3) << "between inputs the path plays on past the newest: the test shows nothing";
+  // (Within a quarter of an input's interval: the loop's 0.1 ms steps round the lags the offset recovers to.)
+  EXPECT_LE(after_stall, steady + 0.25e-3)
+      << "after the stall the path played " << (after_stall - steady) * 1e3 << " ms further past its newest input";
+}
+
 // A loaded host: the loop runs at 0.75 of the device's pace (its 1 kHz inputs applied every 0.75 ms of the
 // loop's time) for 2 s. The path follows the device's own motion, played at 1/0.75 of the loop's pace, and once the
 // lead has found the drift it stays within the playout delay (and 2.5 ms) of the newest input, its speed
