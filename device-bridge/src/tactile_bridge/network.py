@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import gc
 import itertools
 import logging
 import math
@@ -108,6 +109,12 @@ class Network:
 
     async def run(self, stop: asyncio.Event) -> None:
         """Connects, serves, and reconnects until `stop` is set."""
+        # What lives as long as the process (modules, the websockets library, the codec) is frozen out of the
+        # cyclic collector's scans, here and at each scene: a full collection of it stalled this loop 11 ms,
+        # and a stall of tens of milliseconds leaves the server's device path extrapolating past the hand
+        # (bridge_bench.py loop --cases free).
+        gc.collect()
+        gc.freeze()
         loop = asyncio.get_running_loop()
         loop.add_reader(self.wake_fd, self._on_wake)
         pump = asyncio.create_task(self._pump(stop))
@@ -208,6 +215,7 @@ class Network:
         self.fault = ""
         x[ex.H_SCENE_GEN] += 1
         x[ex.H_LINK] = 1
+        gc.freeze()
 
     async def _read(self, ws: Any) -> None:
         async for raw in ws:
