@@ -135,10 +135,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                     help="the tick's rate for every device, instead of its profile's rate_hz (100 to 20000; "
                          "1000, 2000 or 4000 are the ones measured)")
     ap.add_argument("--state-rate", type=float, default=None, metavar="HZ",
-                    help="haptic states a second to ask of the server (default: the tick's rate, the fastest "
-                         "device's: one state a tick, the local model rendering the motion between); what the "
-                         "bridge has not read when a newer one comes is replaced, so it reads the newest (0: every "
-                         "one the server makes)")
+                    help="haptic states a second to ask of the server (default: the tick's rate, one state a "
+                         "tick, the local model rendering the motion between); what the bridge has not read when a "
+                         "newer one comes is replaced, so it reads the newest (0: every one the server makes)")
     ap.add_argument("--network", choices=("process", "thread"), default="process",
                     help="run the tick in its own process (default) or in a thread beside the network")
     ap.add_argument("--no-passivity", action="store_true", help="turn the passivity observer/controller off")

@@ -110,9 +110,9 @@ class Network:
     async def run(self, stop: asyncio.Event) -> None:
         """Connects, serves, and reconnects until `stop` is set."""
         # What lives as long as the process (modules, the websockets library, the codec) is frozen out of the
-        # cyclic collector's scans, here and at each scene: a full collection of it stalled this loop 11 ms,
-        # and a stall of tens of milliseconds leaves the server's device path extrapolating past the hand
-        # (bridge_bench.py loop --cases free).
+        # cyclic collector's scans, here and at each scene: a full collection of it stops this loop, and poses
+        # that stop leave the server's device path extrapolating past the hand (bridge_bench.py loop --cases
+        # free guards it).
         gc.collect()
         gc.freeze()
         loop = asyncio.get_running_loop()

@@ -245,9 +245,9 @@ void RealtimeLoop::run(const std::atomic<bool>& stop, double duration) {
       // Slept, not spun: the wake-up comes tens of microseconds late on a
       // busy or virtual machine, which the absolute schedule makes up on
       // the next step, and a spin would take from the bridge and the browser
-      // beside the server the time a step leaves (at the default scene's
-      // 81 us step, all of it). scripts/run.sh with
-      // client-web/bench/round_trip.mjs shows what they get.
+      // beside the server the time a step leaves, all of it where a step is
+      // short. scripts/run.sh with client-web/bench/round_trip.mjs shows
+      // what they get.
       std::this_thread::sleep_until(due);
     } else {
       const double late = seconds(now - due);
