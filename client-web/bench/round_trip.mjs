@@ -3,7 +3,8 @@
 // mouse channel's proxy along the default scene's beam, pressing it, for --seconds. Start the main job
 // first (scripts/run.sh, which prints the URL with its token), then:
 //   node client-web/bench/round_trip.mjs 'http://127.0.0.1:8765/?token=...' [--seconds 20]
-// Prints the count, p50, p95 and max [ms].
+// Prints the count, p50, p95 and max [ms], and how often the page drew meanwhile (the interval between
+// its animation frames, p50 and p95 [ms]): the page sends the mouse's pose once a frame.
 import { parseArgs } from 'node:util';
 
 import { launchBrowser } from '../test/live.js';
@@ -28,6 +29,12 @@ try {
   });
   // Every round trip the page measures (the telemetry panel takes them once a second).
   await page.evaluate(() => {
+    window.frameTimes = [];
+    const mark = (/** @type {number} */ t) => {
+      window.frameTimes.push(t);
+      requestAnimationFrame(mark);
+    };
+    requestAnimationFrame(mark);
     const list = window.tactile.pointer.latencies;
     const push = list.push.bind(list);
     window.roundTrips = [];
@@ -47,13 +54,25 @@ try {
     await page.waitForTimeout(16);
   }
   await page.mouse.up();
+  const frames = await page.evaluate(() => window.frameTimes);
   const ms = (await page.evaluate(() => window.roundTrips)).sort((x, y) => x - y);
   if (!ms.length) throw new Error('no round trip measured: did the page take the mouse channel?');
-  const at = (q) => ms[Math.min(ms.length - 1, Math.floor(q * ms.length))];
+  const quantile = (sorted, q) => sorted[Math.min(sorted.length - 1, Math.floor(q * sorted.length))];
+  const at = (q) => quantile(ms, q);
   console.log(
     `input to force: ${ms.length} round trips, p50 ${at(0.5).toFixed(1)} ms, p95 ${at(0.95).toFixed(1)} ms, ` +
       `max ${ms[ms.length - 1].toFixed(1)} ms`,
   );
+  const gaps = frames
+    .slice(1)
+    .map((t, i) => t - frames[i])
+    .sort((x, y) => x - y);
+  if (gaps.length) {
+    console.log(
+      `the page drew ${frames.length} frames: interval p50 ${quantile(gaps, 0.5).toFixed(1)} ms, ` +
+        `p95 ${quantile(gaps, 0.95).toFixed(1)} ms`,
+    );
+  }
 } finally {
   await browser.close();
 }

@@ -598,6 +598,8 @@ def loop(args: argparse.Namespace) -> None:
                                     "--summary", str(summary), "--trace", str(trace),
                                     "--trace-seconds", str(args.seconds + 2), "--tick-rate", str(tick)],
                                    capture_output=True, text=True, timeout=args.seconds + 60)
+                if args.keep:
+                    (tmp / "bridge.log").write_text(r.stderr)
                 if r.returncode != 0:
                     sys.exit(f"the bridge failed ({r.returncode}):\n{r.stderr[-3000:]}")
             clips = r.stderr.count(" clipped: ")
@@ -708,7 +710,7 @@ def main() -> None:
                    "default, renders the server's local model at the tick; coupled, the state one step late)")
     c.add_argument("--tick-rates", default="1000", help="the bridge's tick rates [Hz], comma-separated")
     c.add_argument("--json", help="also write the figures to this file")
-    c.add_argument("--keep", help="keep each run's trace, recording and profile under this folder")
+    c.add_argument("--keep", help="keep each run's trace, recording, profile and bridge log under this folder")
     args = ap.parse_args()
     {"lateness": lateness, "modes": modes, "loop": loop, "staleness": staleness}[args.what](args)
 
