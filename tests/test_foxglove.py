@@ -1,7 +1,8 @@
-"""Recordings open in Foxglove (proto/RECORDING.md): a fresh recording is decoded channel by channel with the
-libraries Foxglove decodes MCAP with (@mcap/core, flatbuffers_reflection; tests/foxglove/decode_recording.mjs), so
-that "Foxglove opens it" is a test, not a claim. Every FlatBuffers channel decodes through its own schema's root
-table, and its numbers are there for a Plot panel."""
+"""Recordings open in Foxglove (proto/RECORDING.md): a fresh recording is decoded channel by channel the way
+Foxglove decodes MCAP (@mcap/core's reader, then Foxglove's own channel parsing, ported in
+tests/foxglove/foxglove_parse.mjs: a datatype for every object of a channel's schema, then the decode), so that
+"Foxglove opens it" is a test, not a claim. Every channel's schema gets through that pass, every message decodes,
+and its numbers are there for a Plot panel."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ import subprocess
 
 import pytest
 import websockets
+from mcap.reader import make_reader
+from mcap.writer import Writer
 
 from serverproc import server_process
 from tactile_proto import codec
@@ -63,10 +66,15 @@ def record_a_session(tmp_path: pathlib.Path) -> pathlib.Path:
 def test_every_channel_of_a_fresh_recording_decodes_with_foxglove_libraries(tmp_path: pathlib.Path) -> None:
     report = decode_with_foxglove_libraries(record_a_session(tmp_path))
     recorded = {topic: r for topic, r in report.items() if r["messages"] > 0}
-    assert {"/scene", "/state", "/haptic", "/input", "/control", "/telemetry", "/applied"} <= set(recorded), \
-        sorted(recorded)
-    for topic, r in recorded.items():
+    assert {"/scene", "/state", "/haptic", "/input", "/control", "/telemetry", "/applied",
+            "/foxglove/transform"} <= set(recorded), sorted(recorded)
+    # Every channel, with messages or not: Foxglove parses a channel's schema when it opens the file.
+    for topic, r in report.items():
         assert r["error"] is None and r["decoded"] == r["messages"], (topic, r)
+    # Each FlatBuffers channel's schema holds what its root reaches, not the protocol's unions.
+    assert "tactile.proto.HapticFrame" in report["/haptic"]["datatypes"]
+    for topic, r in report.items():
+        assert not {"tactile.proto.Envelope", "tactile.proto.Control"} & set(r["datatypes"]), (topic, r["datatypes"])
     assert report["/control"]["schema"] == "tactile.Control" and report["/control"]["message_encoding"] == "json"
     # Foxglove's own schemas, checked against @foxglove/schemas' JSON Schemas: the body for the 3D panel, one
     # update per state.
@@ -140,3 +148,56 @@ def test_a_scene_of_several_bodies_draws_each_as_an_entity_of_its_own(tmp_path: 
     assert body["entity_ids"] == ["body/organ", "body/bed", "proxies"], body["entity_ids"]
     assert surface["error"] is None and surface["decoded"] == surface["messages"] >= 1, surface
     assert surface["entity_ids"] == ["surface/organ", "surface/bed"], surface["entity_ids"]
+
+
+def test_foxglove_refuses_a_channel_whose_schema_holds_a_union(tmp_path: pathlib.Path) -> None:
+    """The pass the recordings get through can fail: a channel whose binary schema is the whole protocol (what
+    each channel carried before, Envelope's and Control's unions included) is refused with Foxglove's own error,
+    though its root, the HapticFrame, reaches no union."""
+    made = subprocess.run(["flatc", "--binary", "--schema", "-o", str(tmp_path), str(ROOT / "proto" / "tactile.fbs")],
+                          capture_output=True, text=True, check=False)
+    assert made.returncode == 0, made.stderr
+    path = tmp_path / "whole.mcap"
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start()
+        schema = w.register_schema("tactile.proto.HapticFrame", "flatbuffer", (tmp_path / "tactile.bfbs").read_bytes())
+        w.register_channel("/haptic", "flatbuffer", schema)
+        w.finish()
+    report = decode_with_foxglove_libraries(path)
+    assert report["/haptic"]["error"] == "Unions and Arrays are not supported in @mcap/support currently.", report
+
+
+def test_the_scene_stands_upright_in_foxglove_world(tmp_path: pathlib.Path) -> None:
+    """The scenes are y-up and Foxglove's 3D panel z-up: /foxglove/transform places the frame "scene", which the
+    bodies are drawn in, in "world" by a rotation that takes the scene's up (+y) to the world's (+z), lengths
+    kept; it is written at the scene and again within every second of log time."""
+    path = record_a_session(tmp_path)
+    transforms, frames, times = [], set(), []
+    with path.open("rb") as f:
+        for _, channel, message in make_reader(f).iter_messages(topics=["/foxglove/transform", "/foxglove/body"]):
+            m = json.loads(message.data)
+            if channel.topic == "/foxglove/body":
+                frames |= {e["frame_id"] for e in m["entities"]}
+            else:
+                transforms.append(m)
+            times.append((channel.topic, message.log_time))
+    assert transforms and frames == {"scene"}, (len(transforms), frames)
+    for t in transforms:
+        assert (t["parent_frame_id"], t["child_frame_id"]) == ("world", "scene")
+        q = t["rotation"]
+        x, y, z, w = q["x"], q["y"], q["z"], q["w"]
+        # The rotation matrix's second column: where the scene's +y goes.
+        up = (2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x))
+        assert abs(x * x + y * y + z * z + w * w - 1) < 1e-9
+        assert all(abs(a - b) < 1e-9 for a, b in zip(up, (0.0, 0.0, 1.0), strict=True)), up
+    # Each body drawn finds a transform written before it, at most a second before the body drawn before it.
+    latest, previous_body = None, None
+    for topic, ns in sorted(times, key=lambda x: (x[1], x[0] != "/foxglove/transform")):
+        if topic == "/foxglove/transform":
+            latest = ns
+            continue
+        assert latest is not None and latest <= ns
+        if previous_body is not None:
+            assert previous_body - latest < 1_000_000_000, (previous_body - latest)
+        previous_body = ns

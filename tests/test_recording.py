@@ -69,7 +69,8 @@ def read_closed(path: pathlib.Path) -> dict[str, list[tuple[int, Any]]]:
                 out[channel.topic].append((message.log_time, json.loads(message.data)))
                 continue
             if channel.topic.startswith("/foxglove/"):  # Foxglove's views (tests/test_foxglove.py checks them)
-                assert schema.name in ("foxglove.SceneUpdate", "foxglove.Log") and schema.encoding == "jsonschema"
+                assert schema.name in ("foxglove.SceneUpdate", "foxglove.Log", "foxglove.FrameTransform")
+                assert schema.encoding == "jsonschema"
                 assert channel.message_encoding == "json"
                 out[channel.topic].append((message.log_time, json.loads(message.data)))
                 continue

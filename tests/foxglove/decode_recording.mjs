@@ -1,21 +1,22 @@
 // Decodes every message of a recording the way Foxglove does: the MCAP file
-// through @mcap/core's indexed reader, each FlatBuffers channel through
-// flatbuffers_reflection against the channel's own binary schema (rooted at
-// its message type), each JSON channel with JSON.parse; a message of one of
-// Foxglove's own schemas (foxglove.SceneUpdate, foxglove.Log) must also
-// satisfy that schema's official JSON Schema (@foxglove/schemas), which is
-// what its panels read. Prints a JSON report on stdout: per topic, its
-// schema, encoding, message count, what failed to decode (with the first
-// error) and the numeric fields a Plot panel could draw (paths to numbers in
-// the first decoded message).
+// through @mcap/core's indexed reader, each channel through Foxglove's own
+// channel parsing (foxglove_parse.mjs: the schema pass that builds a
+// datatype for every object of a channel's schema, then the decode); a
+// message of one of Foxglove's own schemas (foxglove.SceneUpdate,
+// foxglove.Log, foxglove.FrameTransform) must also satisfy that schema's
+// official JSON Schema (@foxglove/schemas), which is what its panels read.
+// Prints a JSON report on stdout: per topic, its schema, encoding, message
+// count, what failed to decode (with the first error), the datatypes the
+// schema pass built, and the numeric fields a Plot panel could draw (paths
+// to numbers in the first decoded message).
 //   node decode_recording.mjs FILE.mcap
 import { open } from "node:fs/promises";
 
 import * as foxgloveSchemas from "@foxglove/schemas/jsonschema.js";
 import { McapIndexedReader } from "@mcap/core";
 import Ajv from "ajv";
-import { ByteBuffer } from "flatbuffers";
-import { Parser, Schema, Table } from "flatbuffers_reflection";
+
+import { parseChannel } from "./foxglove_parse.mjs";
 
 const path = process.argv[2];
 if (!path) {
@@ -36,30 +37,23 @@ const reader = await McapIndexedReader.Initialize({ readable });
 
 const ajv = new Ajv({ strict: false });
 
-// One decoder per schema, as Foxglove builds them: FlatBuffers by
-// reflection over the binary schema's root table, JSON by parsing.
-function decoderFor(schema, encoding) {
-  if (encoding === "flatbuffer") {
-    if (schema?.encoding !== "flatbuffer") throw new Error(`schema ${schema?.name}: encoding ${schema?.encoding}`);
-    const reflection = Schema.getRootAsSchema(new ByteBuffer(schema.data));
-    const parser = new Parser(reflection);
-    const toObject = parser.toObjectLambda(-1); // the root table, as Foxglove reads a channel
-    return (data) => toObject(Table.getRootTable(new ByteBuffer(data)));
-  }
-  if (encoding === "json") {
-    const text = new TextDecoder();
-    const name = schema?.name ?? "";
-    if (!name.startsWith("foxglove.")) return (data) => JSON.parse(text.decode(data));
-    const official = foxgloveSchemas[name.slice("foxglove.".length)];
-    if (!official) throw new Error(`${name} is not one of @foxglove/schemas`);
-    const valid = ajv.compile(official);
-    return (data) => {
-      const object = JSON.parse(text.decode(data));
-      if (!valid(object)) throw new Error(`not a valid ${name}: ${ajv.errorsText(valid.errors)}`);
-      return object;
-    };
-  }
-  throw new Error(`message encoding ${encoding} is not one Foxglove decodes here`);
+// One decoder per channel, as Foxglove builds them; a message of one of its
+// own schemas is checked against the official JSON Schema as well.
+function decoderFor(channel, schema) {
+  const parsed = parseChannel({ messageEncoding: channel.messageEncoding, schema });
+  const name = schema?.name ?? "";
+  if (channel.messageEncoding !== "json" || !name.startsWith("foxglove.")) return parsed;
+  const official = foxgloveSchemas[name.slice("foxglove.".length)];
+  if (!official) throw new Error(`${name} is not one of @foxglove/schemas`);
+  const valid = ajv.compile(official);
+  const text = new TextDecoder();
+  return {
+    datatypes: parsed.datatypes,
+    deserialize: (data) => {
+      if (!valid(JSON.parse(text.decode(data)))) throw new Error(`not a valid ${name}: ${ajv.errorsText(valid.errors)}`);
+      return parsed.deserialize(data);
+    },
+  };
 }
 
 // Paths to numbers in a decoded message (what a Plot panel offers), the
@@ -87,10 +81,13 @@ for (const [id, channel] of reader.channelsById) {
     decoded: 0,
     error: null,
     numeric_fields: [],
+    datatypes: [],
   };
   report[channel.topic] = entry;
   try {
-    decoders.set(id, decoderFor(schema, channel.messageEncoding));
+    const parsed = decoderFor(channel, schema);
+    entry.datatypes = [...parsed.datatypes.keys()];
+    decoders.set(id, parsed.deserialize);
   } catch (e) {
     entry.error = String(e.message ?? e);
   }

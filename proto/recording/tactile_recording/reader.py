@@ -82,7 +82,8 @@ TOPICS: dict[str, str] = {
 # Topics of JSON objects, not Envelopes (RECORDING.md): topic -> their schema's name.
 JSON_TOPICS: dict[str, str] = {"/applied": "tactile.AppliedInput",
                                # Foxglove's views of the session, for its 3D and Log panels (RECORDING.md)
-                               "/foxglove/body": "foxglove.SceneUpdate", "/foxglove/log": "foxglove.Log"}
+                               "/foxglove/body": "foxglove.SceneUpdate", "/foxglove/surface": "foxglove.SceneUpdate",
+                               "/foxglove/log": "foxglove.Log", "/foxglove/transform": "foxglove.FrameTransform"}
 
 _HEAD = struct.Struct("<BQ")  # a record's opcode and body length [bytes]
 _COMPRESSIONS = ("", "zstd", "lz4")  # what mcap 1.2.2 decompresses (it reads any other name as "")

@@ -70,21 +70,125 @@ json triangle_list(json points, const std::vector<uint32_t>& indices, json c) {
 
 }  // namespace
 
-std::string_view scene_update_json_schema() {
-  return R"({"title":"foxglove.SceneUpdate","type":"object","properties":{)"
-         R"("deletions":{"type":"array"},)"
-         R"("entities":{"type":"array","items":{"type":"object","properties":{)"
-         R"("timestamp":{"type":"object"},"frame_id":{"type":"string"},"id":{"type":"string"},)"
-         R"("lifetime":{"type":"object"},"frame_locked":{"type":"boolean"},"metadata":{"type":"array"},)"
-         R"("arrows":{"type":"array"},"cubes":{"type":"array"},"spheres":{"type":"array"},)"
-         R"("cylinders":{"type":"array"},"lines":{"type":"array"},"triangles":{"type":"array"},)"
-         R"("texts":{"type":"array"},"models":{"type":"array"}}}}}})";
+namespace {
+
+// JSON Schema pieces. Every object lists its properties and every array its
+// items: Foxglove builds a datatype from the whole schema before it decodes
+// a message (parseJsonSchema in its mcap-support), and refuses an object
+// without properties or an array without items.
+json object_of(json properties) { return {{"type", "object"}, {"properties", std::move(properties)}}; }
+json array_of(json items) { return {{"type", "array"}, {"items", std::move(items)}}; }
+json of_type(const char* type, const char* description = nullptr) {
+  json t{{"type", type}};
+  if (description) t["description"] = description;
+  return t;
+}
+json xyz(const char* description) {
+  return object_of({{"x", of_type("number", description)},
+                    {"y", of_type("number", description)},
+                    {"z", of_type("number", description)}});
+}
+json quaternion() {
+  return object_of(
+      {{"x", of_type("number")}, {"y", of_type("number")}, {"z", of_type("number")}, {"w", of_type("number")}});
+}
+json time_schema() { return object_of({{"sec", of_type("integer")}, {"nsec", of_type("integer")}}); }
+json pose_schema() { return object_of({{"position", xyz("[m]")}, {"orientation", quaternion()}}); }
+json colour_schema() {
+  return object_of(
+      {{"r", of_type("number")}, {"g", of_type("number")}, {"b", of_type("number")}, {"a", of_type("number")}});
+}
+// A primitive: its pose and colour, and `more`.
+json primitive(json more) {
+  json p = object_of({{"pose", pose_schema()}, {"color", colour_schema()}});
+  p["properties"].update(more);
+  return p;
 }
 
-std::string_view log_json_schema() {
-  return R"({"title":"foxglove.Log","type":"object","properties":{)"
-         R"("timestamp":{"type":"object"},"level":{"type":"integer","description":"1 debug, 2 info, 3 warning, 4 error"},)"
-         R"("message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer"}}})";
+std::string schema_text(const char* title, json schema) {
+  schema["title"] = title;
+  return schema.dump();
+}
+
+}  // namespace
+
+const std::string& scene_update_json_schema() {
+  static const std::string text = [] {
+    const json points = array_of(xyz("[m]"));
+    const json colours = array_of(colour_schema());
+    const json indices = array_of(of_type("integer"));
+    const json entity = object_of({
+        {"timestamp", time_schema()},
+        {"frame_id", of_type("string")},
+        {"id", of_type("string")},
+        {"lifetime", time_schema()},
+        {"frame_locked", of_type("boolean")},
+        {"metadata", array_of(object_of({{"key", of_type("string")}, {"value", of_type("string")}}))},
+        {"arrows", array_of(primitive({{"shaft_length", of_type("number")},
+                                       {"shaft_diameter", of_type("number")},
+                                       {"head_length", of_type("number")},
+                                       {"head_diameter", of_type("number")}}))},
+        {"cubes", array_of(primitive({{"size", xyz("[m]")}}))},
+        {"spheres", array_of(primitive({{"size", xyz("[m]")}}))},
+        {"cylinders",
+         array_of(
+             primitive({{"size", xyz("[m]")}, {"bottom_scale", of_type("number")}, {"top_scale", of_type("number")}}))},
+        {"lines", array_of(primitive({{"type", of_type("integer", "0 strip, 1 loop, 2 list")},
+                                      {"thickness", of_type("number")},
+                                      {"scale_invariant", of_type("boolean")},
+                                      {"points", points},
+                                      {"colors", colours},
+                                      {"indices", indices}}))},
+        {"triangles", array_of(primitive({{"points", points}, {"colors", colours}, {"indices", indices}}))},
+        {"texts", array_of(primitive({{"billboard", of_type("boolean")},
+                                      {"font_size", of_type("number")},
+                                      {"scale_invariant", of_type("boolean")},
+                                      {"text", of_type("string")}}))},
+        {"models", array_of(primitive({{"scale", xyz("")},
+                                       {"override_color", of_type("boolean")},
+                                       {"url", of_type("string")},
+                                       {"media_type", of_type("string")},
+                                       {"data", {{"type", "string"}, {"contentEncoding", "base64"}}}}))},
+    });
+    const json deletion = object_of(
+        {{"timestamp", time_schema()}, {"type", of_type("integer", "0 by id, 1 all")}, {"id", of_type("string")}});
+    return schema_text("foxglove.SceneUpdate",
+                       object_of({{"deletions", array_of(deletion)}, {"entities", array_of(entity)}}));
+  }();
+  return text;
+}
+
+const std::string& log_json_schema() {
+  static const std::string text = schema_text(
+      "foxglove.Log", object_of({{"timestamp", time_schema()},
+                                 {"level", of_type("integer", "1 debug, 2 info, 3 warning, 4 error, 5 fatal")},
+                                 {"message", of_type("string")},
+                                 {"name", of_type("string")},
+                                 {"file", of_type("string")},
+                                 {"line", of_type("integer")}}));
+  return text;
+}
+
+const std::string& frame_transform_json_schema() {
+  static const std::string text =
+      schema_text("foxglove.FrameTransform", object_of({{"timestamp", time_schema()},
+                                                        {"parent_frame_id", of_type("string")},
+                                                        {"child_frame_id", of_type("string")},
+                                                        {"translation", xyz("[m]")},
+                                                        {"rotation", quaternion()}}));
+  return text;
+}
+
+std::string FoxgloveViews::upright(int64_t log_ns) {
+  // The scenes are y-up, Foxglove's world z-up: a quarter turn about x
+  // takes the scene's y to the world's z.
+  const double h = std::sqrt(0.5);
+  return json{{"timestamp", time_of(log_ns)},
+              {"parent_frame_id", "world"},
+              {"child_frame_id", "scene"},
+              {"translation", {{"x", 0}, {"y", 0}, {"z", 0}}},
+              {"rotation", {{"x", h}, {"y", 0}, {"z", 0}, {"w", h}}}}
+      .dump();
 }
 
 void FoxgloveViews::scene(const proto::SceneDescription& s) {

@@ -13,7 +13,11 @@
 //                   triangles are some 0.8 MB of JSON a message: at every
 //                   state they were nine tenths of a recording's bytes);
 //   /foxglove/log   foxglove.Log, one per SafetyEvent and Error, for the Log
-//                   panel.
+//                   panel;
+//   /foxglove/transform  foxglove.FrameTransform, at each scene and once a
+//                   second of log time: the scene's frame, y-up, stood
+//                   upright in Foxglove's z-up "world" (its 3D panel's
+//                   display frame), so that a body does not lie on its side.
 // They are views: the replay and the readers use the protocol's channels.
 #pragma once
 
@@ -27,10 +31,11 @@
 
 namespace tactile {
 
-// The JSON Schemas the views' channels carry (written for this project:
-// the fields it fills, named as Foxglove's schemas name them).
-std::string_view scene_update_json_schema();
-std::string_view log_json_schema();
+// The JSON Schemas the views' channels carry (written for this project,
+// each field named as Foxglove's schemas name it).
+const std::string& scene_update_json_schema();
+const std::string& log_json_schema();
+const std::string& frame_transform_json_schema();
 
 class FoxgloveViews {
  public:
@@ -46,6 +51,10 @@ class FoxgloveViews {
   // A log line for a safety event or an error the server answered.
   static std::string log(const proto::SafetyEvent& e, int64_t log_ns);
   static std::string log(const proto::Error& e, int64_t log_ns);
+  // The transform that stands the scene upright in Foxglove's z-up world
+  // (foxglove.FrameTransform, "world" to "scene").
+  static std::string upright(int64_t log_ns);
+  static constexpr int64_t kUprightEveryNs = 1'000'000'000;  // (a panel opened mid-file finds one near)
 
  private:
   struct Proxy {

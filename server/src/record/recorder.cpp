@@ -6,6 +6,8 @@
 #include <cctype>
 #include <cstdio>
 #include <cstring>
+#include <memory>
+#include <set>
 #include <string_view>
 
 #include <nlohmann/json.hpp>
@@ -161,12 +163,51 @@ std::string quote_non_finite(const std::string& text) {
 // JSON, with its Envelope in base64 beside the decoded fields.
 bool rooted_at_message(Topic t) { return t != Topic::Applied && t != Topic::Control; }
 
-// The protocol's schema with `type` as its root table, serialised as a
-// binary schema (what flatc --binary --schema writes for a root_type).
-std::vector<uint8_t> schema_rooted_at(flatbuffers::Parser& parser, const std::string& type) {
+// The protocol's schema with `type` as its root table, holding only the
+// tables, structs and enums `type` reaches, serialised as a binary schema
+// (what flatc --binary --schema writes for a root_type). Only what it
+// reaches: Foxglove builds a datatype for every object of a channel's
+// schema before it decodes a message (parseFlatbufferSchema in its
+// mcap-support), and refuses a union anywhere, so Envelope and Control,
+// which hold the protocol's two unions, must stay out of the channels they
+// are not part of (tests/test_foxglove.py runs that pass).
+std::vector<uint8_t> schema_rooted_at(std::string_view fbs, const std::string& type) {
+  // What is cut from the parser's tables outlives the parser, which deletes
+  // only what its tables still hold.
+  std::vector<std::unique_ptr<flatbuffers::StructDef>> cut_objects;
+  std::vector<std::unique_ptr<flatbuffers::EnumDef>> cut_enums;
+  flatbuffers::Parser parser;
+  if (!parser.Parse(std::string(fbs).c_str()))
+    throw mcap::McapError("the embedded protocol schema does not parse: " + parser.error_);
   if (!parser.SetRootType(("tactile.proto." + type).c_str()))
     throw mcap::McapError("the protocol schema has no table tactile.proto." + type);
-  parser.Serialize();
+  std::set<const flatbuffers::StructDef*> objects;
+  std::set<const flatbuffers::EnumDef*> enums;
+  std::vector<const flatbuffers::StructDef*> todo{parser.root_struct_def_};
+  const auto reach = [&](const flatbuffers::Type& t) {
+    if (t.struct_def && objects.insert(t.struct_def).second) todo.push_back(t.struct_def);
+    if (t.enum_def && enums.insert(t.enum_def).second)
+      for (const flatbuffers::EnumVal* v : t.enum_def->Vals())  // a union's members
+        if (v->union_type.struct_def && objects.insert(v->union_type.struct_def).second)
+          todo.push_back(v->union_type.struct_def);
+  };
+  objects.insert(parser.root_struct_def_);
+  while (!todo.empty()) {
+    const flatbuffers::StructDef* def = todo.back();
+    todo.pop_back();
+    for (const flatbuffers::FieldDef* f : def->fields.vec) reach(f->value.type);
+  }
+  const auto prune = [](auto& table, const auto& keep, auto& cut) {
+    std::erase_if(table.dict, [&](const auto& entry) { return !keep.contains(entry.second); });
+    std::erase_if(table.vec, [&](auto* def) {
+      if (keep.contains(def)) return false;
+      cut.emplace_back(def);
+      return true;
+    });
+  };
+  prune(parser.structs_, objects, cut_objects);
+  prune(parser.enums_, enums, cut_enums);
+  parser.Serialize();  // (indexes what is left afresh)
   return {parser.builder_.GetBufferPointer(), parser.builder_.GetBufferPointer() + parser.builder_.GetSize()};
 }
 
@@ -203,17 +244,17 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
       R"({"title":"tactile.Control","type":"object","properties":{)"
       R"("request_id":{"type":"integer","description":"echoed in the server's answer"},)"
       R"("command_type":{"type":"string","description":"the ControlCommand it holds"},)"
-      R"("command":{"type":"object","description":"its fields, named as in proto/tactile.fbs"},)"
+      R"("command":{"type":"object","properties":{},"description":"its fields, named as in proto/tactile.fbs"},)"
       R"("envelope":{"type":"string","contentEncoding":"base64",)"
       R"("description":"the Control's Envelope as it came, for replay"}}})";
   const uint16_t control = writer_.add_schema("tactile.Control", "jsonschema", bytes_of(kControlSchema));
-  schema_ = std::make_unique<flatbuffers::Parser>();
-  flatbuffers::Parser& parser = *schema_;
-  parser.opts.strict_json = true;
-  parser.opts.indent_step = -1;  // one line
   const std::span<const uint8_t> fbs = tactile_fbs();
-  if (!parser.Parse(std::string(reinterpret_cast<const char*>(fbs.data()), fbs.size()).c_str()))
-    throw mcap::McapError("the embedded protocol schema does not parse: " + parser.error_);
+  const std::string_view fbs_text(reinterpret_cast<const char*>(fbs.data()), fbs.size());
+  schema_ = std::make_unique<flatbuffers::Parser>();
+  schema_->opts.strict_json = true;
+  schema_->opts.indent_step = -1;  // one line
+  if (!schema_->Parse(std::string(fbs_text).c_str()))
+    throw mcap::McapError("the embedded protocol schema does not parse: " + schema_->error_);
   for (int t = 0; t < kTopicCount; ++t) {
     const Topic topic = Topic(t);
     if (topic == Topic::Applied) {
@@ -222,7 +263,8 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
       channel_[t] = writer_.add_channel(control, topic_name(topic), "json", {{"envelope_field", "envelope"}});
     } else if (rooted_at_message(topic)) {
       const std::string type = message_type_name(topic);
-      const uint16_t schema = writer_.add_schema("tactile.proto." + type, "flatbuffer", schema_rooted_at(parser, type));
+      const uint16_t schema =
+          writer_.add_schema("tactile.proto." + type, "flatbuffer", schema_rooted_at(fbs_text, type));
       channel_[t] = writer_.add_channel(schema, topic_name(topic), "flatbuffer",
                                         {{"envelope_offset", std::to_string(kEnvelopeOffset)}});
     }
@@ -234,6 +276,9 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
   surface_channel_ = writer_.add_channel(scene_update, "/foxglove/surface", "json");
   log_channel_ = writer_.add_channel(writer_.add_schema("foxglove.Log", "jsonschema", bytes_of(log_json_schema())),
                                      "/foxglove/log", "json");
+  transform_channel_ = writer_.add_channel(
+      writer_.add_schema("foxglove.FrameTransform", "jsonschema", bytes_of(frame_transform_json_schema())),
+      "/foxglove/transform", "json");
   mcap::Map meta = metadata;
   meta["started_unix_ns"] = std::to_string(unix_now_ns());
   writer_.add_metadata("tactile", meta);
@@ -316,11 +361,20 @@ bool Recorder::write_item(const Item& item) {
     const proto::Envelope* e = proto::GetEnvelope(item.bytes.data());
     std::optional<std::string> view;
     uint16_t to = log_channel_;
+    // The transform that stands the bodies upright: at each scene, and
+    // with a body drawn a second or more after the last.
+    const auto upright = [&] {
+      writer_.write(transform_channel_, uint64_t(item.log_ns), uint64_t(item.publish_ns),
+                    bytes_of(FoxgloveViews::upright(item.log_ns)));
+      last_upright_ns_ = item.log_ns;
+    };
     if (const auto* scene = e->message_as_SceneDescription()) {
       views_.scene(*scene);
+      upright();
     } else if (const auto* state = e->message_as_StateFrame()) {
       view = views_.body(*state, item.log_ns);
       to = body_channel_;
+      if (view && (!last_upright_ns_ || item.log_ns - *last_upright_ns_ >= FoxgloveViews::kUprightEveryNs)) upright();
       if (const std::optional<std::string> fine = views_.surface(*state, item.log_ns))
         writer_.write(surface_channel_, uint64_t(item.log_ns), uint64_t(item.publish_ns), bytes_of(*fine));
     } else if (const auto* safety = e->message_as_SafetyEvent()) {

@@ -22,6 +22,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -109,7 +110,8 @@ class Recorder {
   mcap::Writer writer_;
   std::unique_ptr<flatbuffers::Parser> schema_;  // the protocol schema, for /control's JSON
   FoxgloveViews views_;                          // /foxglove/body, /foxglove/surface and /foxglove/log
-  uint16_t body_channel_ = 0, surface_channel_ = 0, log_channel_ = 0;
+  uint16_t body_channel_ = 0, surface_channel_ = 0, log_channel_ = 0, transform_channel_ = 0;
+  std::optional<int64_t> last_upright_ns_;  // when /foxglove/transform was last written (log time)
   uint16_t channel_[kTopicCount] = {};
   int64_t epoch_offset_ns_;  // steady -> Unix time, fixed at the start
 

@@ -194,7 +194,7 @@ TEST(Recorder, EveryPostedMessageIsWrittenInOrderPerTopic) {
   const uint16_t haptic = r.channel_of("/haptic"), input = r.channel_of("/input");
   ASSERT_NE(haptic, 0);
   ASSERT_NE(input, 0);
-  EXPECT_EQ(r.channels.size(), size_t(kTopicCount) + 3);  // and /foxglove/body, /surface, /log
+  EXPECT_EQ(r.channels.size(), size_t(kTopicCount) + 4);  // and /foxglove/body, /surface, /log, /transform
   EXPECT_EQ(r.channels.at(haptic).metadata.at("envelope_offset"), "8");
   const uint64_t offset = r.messages[0].log_time - 1'000'000;  // steady -> Unix: a constant
   EXPECT_GT(offset, uint64_t(1.6e18));
