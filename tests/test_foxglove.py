@@ -39,9 +39,9 @@ def decode_with_foxglove_libraries(path: pathlib.Path) -> dict[str, dict]:
     return json.loads(out.stdout)
 
 
-def record_a_session(tmp_path: pathlib.Path) -> pathlib.Path:
-    """A device presses the block while a controller pauses and resumes the simulation: every kind of message
-    the session makes but errors and safety events."""
+def record_a_session(tmp_path: pathlib.Path, scene: dict | None = None) -> pathlib.Path:
+    """A device presses the block (`scene`, else test_server's) while a controller pauses and resumes the
+    simulation: every kind of message the session makes but errors and safety events."""
     path = tmp_path / "session.mcap"
 
     async def session(port: int) -> None:
@@ -58,7 +58,7 @@ def record_a_session(tmp_path: pathlib.Path) -> pathlib.Path:
                 await asyncio.sleep(0.002)
             await asyncio.sleep(1.2)  # a telemetry message
 
-    with server_process(tmp_path, SCENE, TOKEN, "--record", str(path), file_name="scene.json") as (port, _):
+    with server_process(tmp_path, scene or SCENE, TOKEN, "--record", str(path), file_name="scene.json") as (port, _):
         asyncio.run(session(port))
     return path
 
@@ -201,3 +201,52 @@ def test_the_scene_stands_upright_in_foxglove_world(tmp_path: pathlib.Path) -> N
         if previous_body is not None:
             assert previous_body - latest < 1_000_000_000, (previous_body - latest)
         previous_body = ns
+
+
+# The page's colour map (client-web/src/colormap.js), which the body view matches.
+VIRIDIS = [(0.267, 0.005, 0.329), (0.283, 0.141, 0.458), (0.254, 0.265, 0.53), (0.207, 0.372, 0.553),
+           (0.164, 0.471, 0.558), (0.128, 0.567, 0.551), (0.135, 0.659, 0.518), (0.267, 0.749, 0.441),
+           (0.478, 0.821, 0.318), (0.741, 0.873, 0.15), (0.993, 0.906, 0.144)]
+
+
+def viridis(u: float) -> tuple[float, ...]:
+    x = min(1.0, max(0.0, u)) * (len(VIRIDIS) - 1)
+    i = min(len(VIRIDIS) - 2, int(x))
+    return tuple(a + (x - i) * (b - a) for a, b in zip(VIRIDIS[i], VIRIDIS[i + 1], strict=True))
+
+
+def test_the_body_is_coloured_by_the_field_the_states_carry(tmp_path: pathlib.Path) -> None:
+    """A scene whose states carry von Mises stress ("view": {"fields": [...]}): each /foxglove/body message
+    colours every point by that state's value, on the page's colour map over the range the field has shown so far
+    in the recording (it only widens); a state without a field leaves the body one colour."""
+    from tactile_recording import open_recording
+
+    scene = {**SCENE, "view": {"fields": ["von_mises"]}}
+    path = record_a_session(tmp_path, scene)
+    states = [m.envelope.message for m in open_recording(path).decoded("/state")]
+    bodies = []
+    with path.open("rb") as f:
+        for _, _, message in make_reader(f).iter_messages(topics=["/foxglove/body"]):
+            bodies.append(json.loads(message.data))
+    assert len(bodies) == len(states) > 30
+    lo, hi, compared, spread = float("inf"), float("-inf"), 0, 0.0
+    for state, body in zip(states, bodies, strict=True):
+        values = [float(v) for v in state.fields[0].values]
+        assert state.fields[0].name in (b"von_mises", "von_mises")
+        lo, hi = min(lo, *values), max(hi, *values)
+        triangles = body["entities"][0]["triangles"][0]
+        colours = triangles["colors"]
+        assert len(colours) == len(triangles["points"]) == len(values)
+        for v, c in zip(values, colours, strict=True):
+            want = viridis((v - lo) / ((hi - lo) or 1.0))
+            assert all(abs(a - b) <= 1.5e-3 for a, b in zip((c["r"], c["g"], c["b"]), want, strict=True)), (v, c, want)
+            assert c["a"] == 1.0
+        compared += 1
+        spread = max(spread, max(c["g"] for c in colours) - min(c["g"] for c in colours))
+    assert compared > 30 and spread > 0.5, spread  # the press shows: the map's ends both appear
+    # Without a field: one colour for the body, none per point.
+    (tmp_path / "plain").mkdir()
+    plain = record_a_session(tmp_path / "plain")
+    with plain.open("rb") as f:
+        body = json.loads(next(make_reader(f).iter_messages(topics=["/foxglove/body"]))[2].data)
+    assert body["entities"][0]["triangles"][0]["colors"] == []

@@ -1,5 +1,6 @@
 #include "record/foxglove_views.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include <nlohmann/json.hpp>
@@ -59,13 +60,32 @@ json body_colour(size_t b) {
   return colour(c[0], c[1], c[2], 1.0);
 }
 
-// A triangle list of the points and indices, in colour c.
-json triangle_list(json points, const std::vector<uint32_t>& indices, json c) {
+// A triangle list of the points and indices, in colour c, or in colours
+// per point where `colours` has them.
+json triangle_list(json points, const std::vector<uint32_t>& indices, json c, json colours = json::array()) {
   return json::array({{{"pose", pose(nullptr)},
                        {"points", std::move(points)},
                        {"color", std::move(c)},
-                       {"colors", json::array()},
+                       {"colors", std::move(colours)},
                        {"indices", indices}}});
+}
+
+// Viridis at u in [0, 1] (clamped; NaN reads as 0), sampled at the stops
+// the browser's colour map uses (client-web/src/colormap.js), so that a
+// field looks the same in Foxglove as on the page.
+json viridis(double u) {
+  static constexpr double kStops[][3] = {{0.267, 0.005, 0.329}, {0.283, 0.141, 0.458}, {0.254, 0.265, 0.53},
+                                         {0.207, 0.372, 0.553}, {0.164, 0.471, 0.558}, {0.128, 0.567, 0.551},
+                                         {0.135, 0.659, 0.518}, {0.267, 0.749, 0.441}, {0.478, 0.821, 0.318},
+                                         {0.741, 0.873, 0.15},  {0.993, 0.906, 0.144}};
+  constexpr size_t n = sizeof kStops / sizeof kStops[0];
+  const double x = (std::isfinite(u) ? std::clamp(u, 0.0, 1.0) : 0.0) * double(n - 1);
+  const size_t i = std::min(n - 2, size_t(x));
+  const double f = x - double(i);
+  const auto at = [&](int c) {
+    return std::round((kStops[i][c] + f * (kStops[i + 1][c] - kStops[i][c])) * 1e3) * 1e-3;
+  };
+  return colour(at(0), at(1), at(2), 1.0);
 }
 
 }  // namespace
@@ -196,6 +216,7 @@ void FoxgloveViews::scene(const proto::SceneDescription& s) {
   described_ = true;
   n_vertices_ = s.rest_positions() ? s.rest_positions()->size() / 3 : 0;
   triangles_.clear();
+  field_ranges_.clear();
   if (s.triangles()) triangles_.assign(s.triangles()->begin(), s.triangles()->end());
   fine_triangles_.clear();
   carriers_.clear();
@@ -260,7 +281,7 @@ void FoxgloveViews::scene(const proto::SceneDescription& s) {
     }
 }
 
-std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64_t log_ns) const {
+std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64_t log_ns) {
   if (!described_ || f.scene_id() != scene_id_ || !f.positions() || f.positions()->size() != 3 * n_vertices_)
     return std::nullopt;
   const auto* x = f.positions();
@@ -282,10 +303,36 @@ std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64
       spheres.push_back({{"pose", pose(p)}, {"size", point(d, d, d)}, {"color", colour(0.3, 0.6, 0.9, 0.8)}});
     }
   }
+  // The frame's first field, as colours over the range it has shown so far
+  // in this scene (it only widens, as on the page, so colours do not
+  // flicker); none without one.
+  const proto::FrameField* field = nullptr;
+  if (f.fields())
+    for (const proto::FrameField* ff : *f.fields())
+      if (ff->name() && ff->values() && ff->values()->size() == n_vertices_) {
+        field = ff;
+        break;
+      }
+  std::pair<double, double>* range = nullptr;
+  if (field) {
+    range = &field_ranges_.try_emplace(field->name()->str(), INFINITY, -INFINITY).first->second;
+    for (float v : *field->values())
+      if (std::isfinite(v))
+        range->first = std::min(range->first, double(v)), range->second = std::max(range->second, double(v));
+  }
+  const auto colours = [&](uint32_t begin, uint32_t end) {
+    json out = json::array();
+    if (!field || !(range->second >= range->first)) return out;
+    const double span = range->second > range->first ? range->second - range->first : 1.0;
+    for (uint32_t v = begin; v < end; ++v)
+      out.push_back(viridis((double(field->values()->Get(v)) - range->first) / span));
+    return out;
+  };
   if (bodies_.empty())
-    return scene_update(
-        json::array({entity(log_ns, "body", triangle_list(points(0, uint32_t(n_vertices_)), triangles_, body_colour(0)),
-                            std::move(spheres), std::move(cubes))}));
+    return scene_update(json::array({entity(
+        log_ns, "body",
+        triangle_list(points(0, uint32_t(n_vertices_)), triangles_, body_colour(0), colours(0, uint32_t(n_vertices_))),
+        std::move(spheres), std::move(cubes))}));
   // A scene of several: an entity per body ("body/<name>", its own vertices
   // and colour), and one for the proxies.
   json entities = json::array();
@@ -296,7 +343,8 @@ std::optional<std::string> FoxgloveViews::body(const proto::StateFrame& f, int64
                    triangles_.begin() + ptrdiff_t(3 * size_t(body.triangle_end)));
     for (uint32_t& v : indices) v -= body.vertex_begin;
     entities.push_back(entity(log_ns, "body/" + body.name,
-                              triangle_list(points(body.vertex_begin, body.vertex_end), indices, body_colour(b)),
+                              triangle_list(points(body.vertex_begin, body.vertex_end), indices, body_colour(b),
+                                            colours(body.vertex_begin, body.vertex_end)),
                               json::array(), json::array()));
   }
   entities.push_back(entity(log_ns, "proxies", json::array(), std::move(spheres), std::move(cubes)));

@@ -3,7 +3,9 @@
 // schemas, which its panels recognise by schema name:
 //   /foxglove/body  foxglove.SceneUpdate, one per StateFrame: the body's
 //                   boundary as a triangle list, each proxy as a sphere,
-//                   capsule (a sphere at its centre) or box, for the 3D panel
+//                   capsule (a sphere at its centre) or box, for the 3D panel;
+//                   the body coloured (viridis, as the page) by the state's
+//                   first field, when it carries one
 //                   (a scene of several bodies: an entity "body/<name>" per
 //                   body, in its own vertices and colour, and "proxies");
 //   /foxglove/surface  foxglove.SceneUpdate, for a scene with an embedded
@@ -22,6 +24,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -41,9 +44,10 @@ class FoxgloveViews {
  public:
   // Remembers the surface and proxies a StateFrame of this scene places.
   void scene(const proto::SceneDescription& s);
-  // The body and proxies at this state; nothing for a state of another
-  // scene than the last described, or of another size.
-  std::optional<std::string> body(const proto::StateFrame& f, int64_t log_ns) const;
+  // The body and proxies at this state, the body coloured by the state's
+  // first field when it has one; nothing for a state of another scene than
+  // the last described, or of another size.
+  std::optional<std::string> body(const proto::StateFrame& f, int64_t log_ns);
   // The fine surface at this state, when the scene has one and a second of
   // log time has passed since the last (the first state of a scene has it).
   std::optional<std::string> surface(const proto::StateFrame& f, int64_t log_ns);
@@ -71,6 +75,7 @@ class FoxgloveViews {
   std::vector<float> weights_;
   std::optional<int64_t> last_surface_ns_;
   std::vector<Proxy> proxies_;
+  std::map<std::string, std::pair<double, double>> field_ranges_;  // per field, the range seen in this scene
   // A scene of several bodies: each one's slices (proto BodyInfo); empty
   // for a scene of one.
   struct Body {
