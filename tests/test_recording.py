@@ -29,6 +29,7 @@ from mcap.reader import make_reader
 from mcap.records import Footer
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
 
 from serverproc import server_process
 from tactile_proto import codec
@@ -336,9 +337,9 @@ def test_a_server_killed_mid_recording_leaves_a_file_that_reads_back_to_its_last
 
 
 def record_a_press(tmp_path: pathlib.Path, name: str = "press.mcap",
-                   limits: DeviceLimitsT | None = None) -> pathlib.Path:
+                   limits: DeviceLimitsT | None = None, *server_args: str) -> pathlib.Path:
     """A closed recording of a second or more: a device presses the block and holds (with `limits` in its Hello:
-    coupled within them; without, the scene's coupling)."""
+    coupled within them; without, the scene's coupling); `server_args` go to the server."""
     path = tmp_path / name
 
     async def press(port: int) -> None:
@@ -354,7 +355,8 @@ def record_a_press(tmp_path: pathlib.Path, name: str = "press.mcap",
                 await dev.send(codec.encode(device_input(k, 0.029 - 0.003 * min(k, 300) / 300)))
                 await asyncio.sleep(0.001)
 
-    with server_process(tmp_path, SCENE, TOKEN, "--record", str(path), file_name="scene.json") as (port, _):
+    with server_process(tmp_path, SCENE, TOKEN, "--record", str(path), *server_args, file_name="scene.json") as (
+            port, _):
         asyncio.run(press(port))
     return path
 
@@ -704,3 +706,86 @@ def test_a_resimulation_refuses_what_it_cannot_replay_by_name(tmp_path: pathlib.
     assert r.returncode == 2 and "not an MCAP file" in r.stderr, r.stderr
     r = resim(str(tmp_path / "nothing.mcap"))
     assert r.returncode == 2 and "nothing.mcap" in r.stderr, r.stderr
+
+
+# ---- compression ------------------------------------------------------------------------------
+
+
+def chunk_compressions(path: pathlib.Path) -> set[str]:
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    return {c.compression for c in summary.chunk_indexes}
+
+
+def test_a_killed_zstd_recording_recovers_then_replays_and_resimulates_bit_for_bit(tmp_path: pathlib.Path) -> None:
+    """Recordings are zstd-compressed by default. One killed mid-press keeps every chunk it closed; `recover`
+    rewrites it into a closed file, which the server replays (its scene and states served) and which
+    re-simulates bit for bit."""
+    killed = tmp_path / "killed.mcap"
+    record_and_kill(tmp_path, killed, 1500)
+    messages, complete = read_cut(killed)
+    assert not complete and {"/scene", "/state", "/haptic", "/applied"} <= {t for t, _, _ in messages}
+    recovered = tmp_path / "recovered.mcap"
+    again, _ = recover_and_read(killed, recovered)
+    assert again == messages
+    assert chunk_compressions(recovered) == {"zstd"}
+
+    async def watch(port: int) -> tuple[int, int]:
+        async with websockets.connect(url(port), **READ_ON) as view:
+            _, scene = await hello(view, Role.Viewer)
+            state = await next_of(view, "StateFrameT")
+            return scene.sceneId, state.sceneId
+
+    with replaying(tmp_path, recovered) as (port, _):
+        scene_id, state_scene = asyncio.run(watch(port))
+    assert scene_id == state_scene
+    r = resim(str(recovered), "--out", str(tmp_path / "resim.mcap"))
+    assert r.returncode == 0, r.stdout + r.stderr
+    m = re.search(r"states: (\d+) of (\d+) identical bit for bit; haptic frames: (\d+) of (\d+)", r.stdout)
+    assert m and m.group(1) == m.group(2) and m.group(3) == m.group(4) and int(m.group(2)) > 10, r.stdout
+
+
+def test_an_uncompressed_recording_is_written_on_request_and_still_replays_and_resimulates(
+        tmp_path: pathlib.Path) -> None:
+    """--record-compression none writes chunks as they are (what every recording was before zstd): the same
+    messages, more bytes; it replays and re-simulates bit for bit as a compressed one does."""
+    plain = record_a_press(tmp_path, "plain.mcap", None, "--record-compression", "none")
+    packed = record_a_press(tmp_path, "packed.mcap")
+    assert chunk_compressions(plain) == {""} and chunk_compressions(packed) == {"zstd"}
+    per_message = [p.stat().st_size / sum(len(v) for v in read_closed(p).values()) for p in (plain, packed)]
+    assert per_message[1] < 0.5 * per_message[0], per_message
+    with replaying(tmp_path, plain) as (_, proc):
+        time.sleep(0.2)
+    assert "replaying" in proc.lines[0], proc.lines  # type: ignore[attr-defined]
+    r = resim(str(plain))
+    assert r.returncode == 0 and "identical" in r.stdout.splitlines()[-1], r.stdout + r.stderr
+
+
+def test_a_recording_whose_chunks_this_server_cannot_read_is_refused_by_name(tmp_path: pathlib.Path) -> None:
+    """A recording rewritten with lz4 chunks (the mcap package's writer; the server reads zstd and uncompressed
+    only): the Python tools read it as before, while replay and re-simulation refuse it naming the compression,
+    where they said only that it "holds no scene description"."""
+    original = record_a_press(tmp_path)
+    lz4 = tmp_path / "lz4.mcap"
+    with original.open("rb") as f, lz4.open("wb") as out:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        w = Writer(out, compression=CompressionType.LZ4)
+        w.start(profile="", library="tactile-server")
+        schema_ids = {s.id: w.register_schema(s.name, s.encoding, s.data) for s in summary.schemas.values()}
+        channel_ids = {c.id: w.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id], c.metadata)
+                       for c in summary.channels.values()}
+        for m in reader.iter_metadata():
+            w.add_metadata(m.name, m.metadata)
+        for _, c, m in reader.iter_messages(log_time_order=False):
+            w.add_message(channel_ids[c.id], m.log_time, m.data, m.publish_time, m.sequence)
+        w.finish()
+    assert chunk_compressions(lz4) == {"lz4"}
+    assert read_closed(lz4).keys() == read_closed(original).keys()
+    r = subprocess.run([built("tactile-server"), "--replay", str(lz4), "--port", "0"], capture_output=True,
+                       text=True, timeout=30)
+    assert r.returncode == 2 and "compressed with 'lz4', which this reader does not read" in r.stderr, r.stderr
+    r = resim(str(lz4))
+    assert r.returncode != 0 and "compressed with 'lz4'" in r.stdout + r.stderr, r.stdout + r.stderr

@@ -15,6 +15,7 @@
 #include <fstream>
 #include <iostream>
 #include <limits>
+#include <map>
 #include <optional>
 #include <string>
 #include <thread>
@@ -131,6 +132,11 @@ void add_options(CLI::App& app, Options& o, std::string& on_fault) {
       ->type_name("DIR");
   app.add_option("--record", o.server.record, "record the session from the start into FILE (MCAP), until stopped")
       ->type_name("FILE");
+  app.add_option("--record-compression", o.server.record_compression,
+                 "how every recording's chunks are stored: zstd (the default) or none")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, mcap::Compression>{{"zstd", mcap::Compression::Zstd},
+                                                                                   {"none", mcap::Compression::None}},
+                                          CLI::ignore_case));
   CLI::Option* replay =
       app.add_option("--replay", o.replay,
                      "serve the recording FILE (MCAP) instead of a scene; it plays from the first client")

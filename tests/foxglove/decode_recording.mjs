@@ -1,5 +1,6 @@
 // Decodes every message of a recording the way Foxglove does: the MCAP file
-// through @mcap/core's indexed reader, each channel through Foxglove's own
+// through @mcap/core's indexed reader (its chunks decompressed by
+// @mcap/support's handlers, as Foxglove's are), each channel through Foxglove's own
 // channel parsing (foxglove_parse.mjs: the schema pass that builds a
 // datatype for every object of a channel's schema, then the decode); a
 // message of one of Foxglove's own schemas (foxglove.SceneUpdate,
@@ -14,6 +15,7 @@ import { open } from "node:fs/promises";
 
 import * as foxgloveSchemas from "@foxglove/schemas/jsonschema.js";
 import { McapIndexedReader } from "@mcap/core";
+import { loadDecompressHandlers } from "@mcap/support";
 import Ajv from "ajv";
 
 import { parseChannel } from "./foxglove_parse.mjs";
@@ -33,7 +35,8 @@ const readable = {
     return out;
   },
 };
-const reader = await McapIndexedReader.Initialize({ readable });
+// Compressed chunks (zstd, lz4, bz2) through the handlers Foxglove loads.
+const reader = await McapIndexedReader.Initialize({ readable, decompressHandlers: await loadDecompressHandlers() });
 
 const ajv = new Ajv({ strict: false });
 

@@ -177,9 +177,12 @@ void Resimulation::read_recording() {
       recorded_scene = wire::GetEnvelope(m.data.data())->message_as_SceneDescription();
       break;
     }
-  if (!recorded_scene)
-    throw ResimError("recording '" + o.recording + "' holds no scene description" +
-                     (rec.complete ? "" : " whole" + cut_note(rec)));
+  if (!recorded_scene) {
+    std::string why = "recording '" + o.recording + "' holds no scene description";
+    if (!rec.complete) why += " whole" + cut_note(rec);
+    for (size_t k = 0; rec.complete && k < rec.problems.size(); ++k) why += "; " + rec.problems[k];  // (unread chunks)
+    throw ResimError(why);
+  }
   scene_id = recorded_scene->scene_id();
   if (recorded_scene->devices())
     for (const flatbuffers::String* d : *recorded_scene->devices()) recorded_devices.push_back(d->str());

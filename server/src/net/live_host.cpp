@@ -238,7 +238,8 @@ std::string LiveHost::start_recording(const std::string& name, bool any_path) {
                        {"force_window", exact(options().live.force_window)},
                        {"server", options().server_name}};
   deliver();  // frames published before the start are not the recording's
-  if (const std::string bad = recording_.start(path, meta); !bad.empty()) return bad;
+  if (const std::string bad = recording_.start(path, meta, {.compression = options().record_compression}); !bad.empty())
+    return bad;
   recording_.post(Topic::Scene, *served_.description, now_ns());
   send_telemetry();
   return "";

@@ -63,10 +63,11 @@ struct ServerOptions {
   double hello_timeout_s = 5;
   double idle_timeout_s = 30;
   std::string server_name = "tactile";
-  std::string scenes_dir;       // where LoadScene finds scenes ("" for none)
-  std::string recordings_dir;   // where StartRecording writes ("" refuses it)
-  std::string record;           // a recording to start with the server (any path), "" for none
-  LiveOptions live;             // how loaded and reset scenes run
+  std::string scenes_dir;      // where LoadScene finds scenes ("" for none)
+  std::string recordings_dir;  // where StartRecording writes ("" refuses it)
+  std::string record;          // a recording to start with the server (any path), "" for none
+  mcap::Compression record_compression = mcap::Compression::Zstd;  // of every recording's chunks
+  LiveOptions live;                                                // how loaded and reset scenes run
   bool reset_on_fault = false;  // a fault resets the scene (once a telemetry has named it)
 };
 

@@ -4,9 +4,9 @@
 // file in order up to where it was cut, checking every chunk's CRC.
 //
 // Only what recordings use: one profile, schemas, channels, messages in
-// uncompressed chunks with their message indexes, metadata, and the summary
-// a closed file ends with (statistics, chunk and metadata indexes, summary
-// offsets). No C++ MCAP library is packaged for Debian 12; the files are
+// chunks (zstd-compressed or not) with their message indexes, metadata, and
+// the summary a closed file ends with (statistics, chunk and metadata
+// indexes, summary offsets). No C++ MCAP library is packaged for Debian 12; the files are
 // checked against the reference readers (`mcap` on PyPI, `@mcap/core` on
 // npm) in tests/test_recording.py.
 #pragma once
@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+struct ZSTD_CCtx_s;  // zstd.h's compression context
+
 namespace tactile::mcap {
 
 struct McapError : std::runtime_error {
@@ -26,12 +28,17 @@ struct McapError : std::runtime_error {
 
 using Map = std::map<std::string, std::string>;
 
+// How a chunk's records are stored: as they are, or compressed with zstd
+// (what Foxglove recommends for MCAP files; every MCAP reader reads it).
+enum class Compression { None, Zstd };
+
 // Writes one file. Not thread-safe: one thread writes.
 class Writer {
  public:
   // Creates (or truncates) `path` and writes the magic and header; throws
   // McapError naming the path and the reason.
-  Writer(const std::string& path, const std::string& profile, const std::string& library);
+  Writer(const std::string& path, const std::string& profile, const std::string& library,
+         Compression compression = Compression::None);
   ~Writer();  // finish()es a file not yet finished, ignoring errors
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
@@ -48,8 +55,8 @@ class Writer {
   void write(uint16_t channel, uint64_t log_time, uint64_t publish_time, std::span<const uint8_t> data,
              std::span<const uint8_t> prefix = {});
 
-  // Writes the open chunk and its message indexes to the file (one write
-  // call), if it holds any message.
+  // Writes the open chunk (compressed as the writer was made to) and its
+  // message indexes to the file (one write call), if it holds any message.
   void close_chunk();
   size_t chunk_bytes() const { return chunk_.size(); }
   bool chunk_empty() const { return chunk_messages_ == 0; }
@@ -60,6 +67,7 @@ class Writer {
 
   uint64_t messages() const { return message_count_; }
   uint64_t bytes() const { return offset_ + chunk_.size(); }  // in the file, and in the open chunk
+  uint64_t records_bytes() const { return records_bytes_; }   // of the closed chunks' records, uncompressed
 
  private:
   struct ChannelInfo {
@@ -78,7 +86,7 @@ class Writer {
   struct ChunkIndex {
     uint64_t start_time, end_time, offset, length;
     std::map<uint16_t, uint64_t> index_offsets;
-    uint64_t index_length, records_size;
+    uint64_t index_length, records_size, stored_size;  // the records uncompressed, and as stored
   };
   struct MetadataIndex {
     uint64_t offset, length;
@@ -100,6 +108,10 @@ class Writer {
   uint64_t chunk_messages_ = 0, chunk_start_ = 0, chunk_end_ = 0;
   uint64_t message_count_ = 0, first_time_ = UINT64_MAX, last_time_ = 0;
   std::vector<uint8_t> out_;  // staging for one write
+  Compression compression_;
+  ZSTD_CCtx_s* zstd_ = nullptr;  // reused for every chunk
+  std::vector<uint8_t> packed_;  // a chunk's records, compressed
+  uint64_t records_bytes_ = 0;
 };
 
 // ---- reading ----------------------------------------------------------------------
@@ -117,10 +129,12 @@ struct Channel {
   Map metadata;
 };
 
-// A whole file read in order. A file cut short (no footer) reads up to its
-// last complete record; a chunk whose CRC does not match is skipped. Both
-// are reported in `problems`, never thrown; a file that is not MCAP at all
-// throws McapError.
+// A whole file read in order, its chunks uncompressed or zstd-compressed.
+// A file cut short (no footer) reads up to its last complete record; a
+// chunk whose CRC does not match, that does not decompress, or that is
+// compressed another way (lz4) is skipped. All are reported in `problems`,
+// never thrown, each naming the chunk and why; a file that is not MCAP at
+// all throws McapError.
 struct Recording {
   std::string profile, library;
   std::map<uint16_t, Channel> channels;

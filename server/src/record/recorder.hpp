@@ -46,8 +46,11 @@ inline constexpr int kTopicCount = 10;
 const char* topic_name(Topic t);  // "/scene", "/state", ...
 
 struct RecorderOptions {
+  // Chunks close at 1 MiB (uncompressed; Foxglove advises at most 4 MiB,
+  // the MCAP C++ writer's default is 768 KiB) or a quarter second.
   size_t chunk_bytes = 1 << 20;
   double chunk_seconds = 0.25;
+  mcap::Compression compression = mcap::Compression::Zstd;
   // How long a message waits for earlier-stamped ones [s]: frames are
   // stamped when the simulation made them and network messages when they
   // came, and the two reach the recorder up to ~50 ms apart under load

@@ -55,8 +55,13 @@ Replay::Replay(const std::string& path) : path_(path) {
   // merged its two sources (frames stamped when made, network messages when
   // they came), which interleave slightly out of order.
   std::stable_sort(items_.begin(), items_.end(), [](const Item& a, const Item& b) { return a.t_ns < b.t_ns; });
-  if (!std::any_of(items_.begin(), items_.end(), [](const Item& i) { return i.topic == Topic::Scene; }))
-    throw mcap::McapError("recording '" + path + "' holds no scene description (/scene): nothing to replay");
+  if (!std::any_of(items_.begin(), items_.end(), [](const Item& i) { return i.topic == Topic::Scene; })) {
+    // What the reader could not read says why (a chunk compressed another way, damaged, cut short).
+    std::string why = "recording '" + path + "' holds no scene description (/scene): nothing to replay";
+    for (size_t k = 0; k < problems_.size() && k < 3; ++k) why += "; " + problems_[k];
+    if (problems_.size() > 3) why += "; and " + std::to_string(problems_.size() - 3) + " more";
+    throw mcap::McapError(why);
+  }
 }
 
 double Replay::position(Clock::time_point now) const {

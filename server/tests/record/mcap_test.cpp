@@ -4,6 +4,7 @@
 // reference readers: tests/test_recording.py.)
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -71,8 +72,9 @@ void write_bytes(const std::string& path, const std::vector<uint8_t>& b) {
 
 // 200 messages on two channels, a chunk closed every 20; returns the byte
 // offset in the file where each chunk ends (after its message indexes).
-std::vector<uint64_t> write_sample(const std::string& path, bool finish = true) {
-  mcap::Writer w(path, "", "test");
+std::vector<uint64_t> write_sample(const std::string& path, bool finish = true,
+                                   mcap::Compression compression = mcap::Compression::None) {
+  mcap::Writer w(path, "", "test", compression);
   const uint8_t schema_data[3] = {1, 2, 3};
   const uint16_t s = w.add_schema("tactile.proto.Envelope", "flatbuffer", schema_data);
   const uint16_t a = w.add_channel(s, "/a", "flatbuffer");
@@ -90,72 +92,116 @@ std::vector<uint64_t> write_sample(const std::string& path, bool finish = true) 
   return ends;
 }
 
+constexpr mcap::Compression kBoth[] = {mcap::Compression::None, mcap::Compression::Zstd};
+
 TEST(Mcap, WhatIsWrittenReadsBack) {
-  test::TempDir dir;
-  const std::string path = dir.file("a.mcap");
-  write_sample(path);
-  const mcap::Recording r = mcap::read_file(path);
-  EXPECT_TRUE(r.complete);
-  EXPECT_TRUE(r.problems.empty()) << r.problems.front();
-  EXPECT_EQ(r.library, "test");
-  ASSERT_EQ(r.messages.size(), 200u);
-  EXPECT_EQ(r.chunks, 10u);
-  for (int i = 0; i < 200; ++i) {
-    const mcap::Message& m = r.messages[size_t(i)];
-    EXPECT_EQ(r.channels.at(m.channel).topic, i % 3 == 0 ? "/b" : "/a");
-    EXPECT_EQ(m.log_time, uint64_t(1000 + i));
-    EXPECT_EQ(m.publish_time, uint64_t(2000 + i));
-    EXPECT_EQ(m.data, payload(i)) << i;
+  for (const mcap::Compression compression : kBoth) {
+    SCOPED_TRACE(compression == mcap::Compression::Zstd ? "zstd" : "uncompressed");
+    test::TempDir dir;
+    const std::string path = dir.file("a.mcap");
+    write_sample(path, true, compression);
+    const mcap::Recording r = mcap::read_file(path);
+    EXPECT_TRUE(r.complete);
+    EXPECT_TRUE(r.problems.empty()) << r.problems.front();
+    EXPECT_EQ(r.library, "test");
+    ASSERT_EQ(r.messages.size(), 200u);
+    EXPECT_EQ(r.chunks, 10u);
+    for (int i = 0; i < 200; ++i) {
+      const mcap::Message& m = r.messages[size_t(i)];
+      EXPECT_EQ(r.channels.at(m.channel).topic, i % 3 == 0 ? "/b" : "/a");
+      EXPECT_EQ(m.log_time, uint64_t(1000 + i));
+      EXPECT_EQ(m.publish_time, uint64_t(2000 + i));
+      EXPECT_EQ(m.data, payload(i)) << i;
+    }
+    // Sequences count per channel.
+    EXPECT_EQ(r.messages[3].sequence, 1u);  // the second on /b
+    EXPECT_EQ(r.messages[2].sequence, 1u);  // the second on /a
+    ASSERT_EQ(r.metadata.size(), 1u);
+    EXPECT_EQ(r.metadata[0].second.at("scene_name"), "block");
+    EXPECT_EQ(r.channels.at(r.channel_of("/b")).metadata.at("k"), "v");
   }
-  // Sequences count per channel.
-  EXPECT_EQ(r.messages[3].sequence, 1u);  // the second on /b
-  EXPECT_EQ(r.messages[2].sequence, 1u);  // the second on /a
-  ASSERT_EQ(r.metadata.size(), 1u);
-  EXPECT_EQ(r.metadata[0].second.at("scene_name"), "block");
-  EXPECT_EQ(r.channels.at(r.channel_of("/b")).metadata.at("k"), "v");
 }
 
 TEST(Mcap, AFileCutAnywhereReadsBackEveryChunkBeforeTheCut) {
-  test::TempDir dir;
-  const std::string path = dir.file("a.mcap");
-  const std::vector<uint64_t> ends = write_sample(path);
-  const std::vector<uint8_t> whole = read_bytes(path);
-  const std::string cut = dir.file("cut.mcap");
-  int cuts = 0;
-  for (size_t n = 8; n < whole.size(); n += 7) {
-    write_bytes(cut, std::vector<uint8_t>(whole.begin(), whole.begin() + std::ptrdiff_t(n)));
-    const mcap::Recording r = mcap::read_file(cut);
-    size_t chunks_before = 0;
-    while (chunks_before < ends.size() && ends[chunks_before] <= n) ++chunks_before;
-    // Every message of each chunk that ends before the cut (the message
-    // indexes after a chunk are not needed to read it: >= its records).
-    EXPECT_GE(r.messages.size(), 20 * chunks_before) << "cut at " << n;
-    EXPECT_LE(r.messages.size(), 20 * (chunks_before + 1)) << "cut at " << n;
-    for (size_t i = 0; i < r.messages.size(); ++i) ASSERT_EQ(r.messages[i].data, payload(int(i))) << n;
-    EXPECT_FALSE(r.complete);
-    EXPECT_FALSE(r.problems.empty()) << "cut at " << n << " went unreported";
-    ++cuts;
+  for (const mcap::Compression compression : kBoth) {
+    SCOPED_TRACE(compression == mcap::Compression::Zstd ? "zstd" : "uncompressed");
+    test::TempDir dir;
+    const std::string path = dir.file("a.mcap");
+    const std::vector<uint64_t> ends = write_sample(path, true, compression);
+    const std::vector<uint8_t> whole = read_bytes(path);
+    const std::string cut = dir.file("cut.mcap");
+    int cuts = 0;
+    for (size_t n = 8; n < whole.size(); n += 7) {
+      write_bytes(cut, std::vector<uint8_t>(whole.begin(), whole.begin() + std::ptrdiff_t(n)));
+      const mcap::Recording r = mcap::read_file(cut);
+      size_t chunks_before = 0;
+      while (chunks_before < ends.size() && ends[chunks_before] <= n) ++chunks_before;
+      // Every message of each chunk that ends before the cut (the message
+      // indexes after a chunk are not needed to read it: >= its records).
+      EXPECT_GE(r.messages.size(), 20 * chunks_before) << "cut at " << n;
+      EXPECT_LE(r.messages.size(), 20 * (chunks_before + 1)) << "cut at " << n;
+      for (size_t i = 0; i < r.messages.size(); ++i) ASSERT_EQ(r.messages[i].data, payload(int(i))) << n;
+      EXPECT_FALSE(r.complete);
+      EXPECT_FALSE(r.problems.empty()) << "cut at " << n << " went unreported";
+      ++cuts;
+    }
+    EXPECT_GT(cuts, 100);
   }
-  EXPECT_GT(cuts, 100);
 }
 
-TEST(Mcap, ADamagedChunkIsReportedAndSkipped) {
+TEST(Mcap, ZstdChunksHoldTheSameMessagesInFewerBytes) {
+  test::TempDir dir;
+  write_sample(dir.file("plain.mcap"));
+  write_sample(dir.file("zstd.mcap"), true, mcap::Compression::Zstd);
+  const mcap::Recording plain = mcap::read_file(dir.file("plain.mcap")), zstd = mcap::read_file(dir.file("zstd.mcap"));
+  ASSERT_EQ(zstd.messages.size(), plain.messages.size());
+  for (size_t i = 0; i < plain.messages.size(); ++i) EXPECT_EQ(zstd.messages[i].data, plain.messages[i].data) << i;
+  EXPECT_LT(std::filesystem::file_size(dir.file("zstd.mcap")), std::filesystem::file_size(dir.file("plain.mcap")));
+}
+
+TEST(Mcap, AChunkCompressedAnotherWayIsNamedAndSkipped) {
   test::TempDir dir;
   const std::string path = dir.file("a.mcap");
-  const std::vector<uint64_t> ends = write_sample(path);
+  const std::vector<uint64_t> ends = write_sample(path, true, mcap::Compression::Zstd);
   std::vector<uint8_t> bytes = read_bytes(path);
-  // A byte in the middle of the fourth chunk's records.
-  const size_t at = size_t(ends[2] + (ends[3] - ends[2]) / 2);
-  bytes[at] ^= 0x40;
+  // The second chunk's compression, renamed (same length) to one this reader does not read.
+  const size_t at = size_t(ends[0]) + 9 + 28 + 4;
+  ASSERT_EQ(std::string(bytes.begin() + std::ptrdiff_t(at), bytes.begin() + std::ptrdiff_t(at + 4)), "zstd");
+  std::memcpy(bytes.data() + at, "lzma", 4);
   write_bytes(path, bytes);
   const mcap::Recording r = mcap::read_file(path);
   ASSERT_EQ(r.problems.size(), 1u);
-  EXPECT_NE(r.problems[0].find("fails its CRC"), std::string::npos) << r.problems[0];
-  ASSERT_EQ(r.messages.size(), 180u);
-  for (const mcap::Message& m : r.messages) {
-    EXPECT_FALSE(m.log_time >= 1060 && m.log_time < 1080) << "a message of the damaged chunk was read";
+  EXPECT_NE(r.problems[0].find("is compressed with 'lzma', which this reader does not read"), std::string::npos)
+      << r.problems[0];
+  EXPECT_EQ(r.messages.size(), 180u);
+}
+
+TEST(Mcap, ADamagedChunkIsReportedAndSkipped) {
+  for (const mcap::Compression compression : kBoth) {
+    SCOPED_TRACE(compression == mcap::Compression::Zstd ? "zstd" : "uncompressed");
+    test::TempDir dir;
+    const std::string path = dir.file("a.mcap");
+    const std::vector<uint64_t> ends = write_sample(path, true, compression);
+    std::vector<uint8_t> bytes = read_bytes(path);
+    // A byte of the fourth chunk's records (as stored): behind the chunk
+    // record's opcode and length (9 bytes), its times, size and CRC (28),
+    // its compression's name (4 + n) and the records' length (8).
+    const size_t name = compression == mcap::Compression::Zstd ? 4 : 0;
+    const size_t at = size_t(ends[2]) + 9 + 28 + 4 + name + 8 + 10;
+    ASSERT_LT(at, size_t(ends[3]));
+    bytes[at] ^= 0x40;
+    write_bytes(path, bytes);
+    const mcap::Recording r = mcap::read_file(path);
+    ASSERT_EQ(r.problems.size(), 1u);
+    const bool said = r.problems[0].find("fails its CRC") != std::string::npos ||
+                      (name && r.problems[0].find("does not decompress (zstd: ") != std::string::npos);
+    EXPECT_TRUE(said) << r.problems[0];
+    ASSERT_EQ(r.messages.size(), 180u);
+    for (const mcap::Message& m : r.messages) {
+      EXPECT_FALSE(m.log_time >= 1060 && m.log_time < 1080) << "a message of the damaged chunk was read";
+    }
+    EXPECT_TRUE(r.complete);
   }
-  EXPECT_TRUE(r.complete);
 }
 
 TEST(Mcap, NotAnMcapFileIsRefusedByName) {
