@@ -21,6 +21,8 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "tactile_version.hpp"
+
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -773,6 +775,7 @@ void bind_simulation(py::module_& m) {
 PYBIND11_MODULE(_core, m) {
   using namespace tactile;
   m.doc() = "The tactile simulation core: scenes, simulations and their arrays (see the tactile package).";
+  m.attr("__version__") = kVersion;  // (VERSION, through CMake)
   bind_errors(m);
   bind_scene(m);
   bind_runs(m);

@@ -13,10 +13,13 @@ import pathlib
 import signal
 import sys
 import time
+from importlib.metadata import version
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+
+from tactile_proto import PROTOCOL_MAJOR, PROTOCOL_MINOR
 
 from . import exchange as ex
 from .bridge import Bridge, Options
@@ -118,6 +121,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                + f" (in {PROFILES}). Drivers (a profile's driver = \"...\"): "
                + "; ".join(f"{d.name}, {d.summary}" for d in registry.REGISTRY)
                + ". Events and the status line go to stderr.")
+    ap.add_argument("--version", action="version",
+                    version=f"tactile-bridge {version('tactile-bridge')} (protocol {PROTOCOL_MAJOR}.{PROTOCOL_MINOR})")
     ap.add_argument("--profile", "-p", action="append", metavar="PROFILE",
                     help="a device profile (TOML path or shipped name); repeat for several devices (default: sim)")
     ap.add_argument("--server", default="ws://127.0.0.1:8765/", help="the server's WebSocket URL")

@@ -38,7 +38,9 @@ import datetime
 import pathlib
 import sys
 from collections import Counter
+from importlib.metadata import version
 
+from tactile_proto import PROTOCOL_MAJOR, PROTOCOL_MINOR
 from tactile_proto.codec import ProtocolError, decode
 
 from .compare import CompareError, compare, plot, plot_available, summarize, write_csv
@@ -118,6 +120,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="tactile-recording", description=__doc__.split("\n")[0],
                                      epilog="\n".join(__doc__.split("\n")[2:]),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"tactile-recording {version('tactile-recording')} "
+                                                              f"(protocol {PROTOCOL_MAJOR}.{PROTOCOL_MINOR})")
     commands = parser.add_subparsers(dest="command", required=True)
     info = commands.add_parser("info", help="duration, messages per topic, scene, complete or truncated, problems")
     info.add_argument("file")

@@ -20,10 +20,10 @@ import os
 from typing import Any
 
 from tactile._core import ModelError, RecordingError, Scene, SceneError, Simulation, resimulate, run_headless
+from tactile._core import __version__ as __version__  # the project's VERSION, compiled in
 from tactile._core import load_scene as _load_scene
 from tactile._core import parse_scene as _parse_scene
 
-__version__ = "0.1.0"
 __all__ = ["ModelError", "RecordingError", "Scene", "SceneError", "Simulation", "load_scene", "load_scenes",
            "parse_scene", "resimulate", "run_headless"]
 

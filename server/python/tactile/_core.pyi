@@ -5,6 +5,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+__version__: str  # the project's VERSION
+
 Pose = tuple[tuple[float, float, float], tuple[float, float, float, float]]  # position [m], quaternion (w, x, y, z)
 
 class SceneError(ValueError): ...

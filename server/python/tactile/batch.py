@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import importlib.util
 import itertools
 import json
 import os
@@ -486,6 +487,7 @@ def stability_command(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="tactile-batch", description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--version", action="version", version=f"tactile-batch {tactile.__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     sweep = sub.add_parser("sweep", help="a sweep file's runs into a table")
     sweep.add_argument("sweep", help="the sweep file (JSON)")
@@ -512,6 +514,13 @@ def main(argv: list[str] | None = None) -> int:
                            "<name>-runs.parquet); cases in it are not run again")
     add_where(stability)
     args = ap.parse_args(argv)
+    # Dask, pandas and tqdm come with the [batch] extra: without it, say so rather than die of an import.
+    missing = [m for m in ("dask", "distributed", "pandas", "tqdm") if importlib.util.find_spec(m) is None]
+    if missing:
+        print(f"tactile-batch: {', '.join(missing)} not installed: tactile-batch needs the package's [batch] extra "
+              "(pip install 'tactile[batch]': Dask's distributed scheduler, pandas, pyarrow, tqdm)",
+              file=sys.stderr)
+        return 2
     if not (args.scheduler or args.workers or args.serial):
         # Dask's own setting, as its Client reads it (DASK_SCHEDULER_ADDRESS, or a dask config file): the batch
         # containers set it, so that a run inside one goes to the cluster's scheduler.

@@ -12,15 +12,20 @@
 
 #include <CLI/CLI.hpp>
 
+#include "tactile_version.hpp"
+
 namespace tactile {
 
 // What every tool shares: -h/--help prints the usage with every subcommand's
-// options; an option given twice keeps its last value, as scripts/run.sh
-// relies on (the user's options come after its own).
+// options; --version the project's version and the protocol's; an option
+// given twice keeps its last value, as scripts/run.sh relies on (the user's
+// options come after its own).
 inline void configure_command_line(CLI::App& app) {
   app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
   app.set_help_flag();
   app.set_help_all_flag("-h,--help", "print this help and exit");
+  app.set_version_flag("--version", app.get_name() + " " + kVersion + " (protocol " + kProtocolVersion + ")",
+                       "print the version and exit");
 }
 
 // Parses argv into the options bound to `app`: nullopt when the tool is to
@@ -30,6 +35,9 @@ inline std::optional<int> parse_command_line(CLI::App& app, int argc, char** arg
   try {
     app.parse(argc, argv);
     return std::nullopt;
+  } catch (const CLI::CallForVersion& e) {
+    std::cout << e.what() << "\n";
+    return 0;
   } catch (const CLI::CallForAllHelp&) {
     std::cout << app.help("", CLI::AppFormatMode::All);  // (a subcommand's, after `tool SUBCOMMAND --help`)
     return 0;
