@@ -68,3 +68,16 @@ def test_every_python_command_prints_the_version(tool: str) -> None:
 def test_the_changelog_names_this_version_as_its_newest_release() -> None:
     releases = re.findall(r"^## (\d+\.\d+\.\d+) — (\d{4}-\d{2}-\d{2})", (ROOT / "CHANGELOG.md").read_text(), re.M)
     assert releases and releases[0][0] == VERSION, releases[:2]
+
+
+def test_tactile_batch_without_its_extra_says_what_to_install() -> None:
+    """With Dask and pandas absent (hidden from the import system here), tactile-batch names them and the
+    [batch] extra, exit 2, instead of dying of a ModuleNotFoundError."""
+    code = ("import sys\n"
+            "for m in ('dask', 'distributed', 'pandas'): sys.modules[m] = None\n"
+            "from tactile.batch import main\n"
+            "sys.exit(main(['sweep', 'nowhere.json', '--serial']))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2, out.stderr
+    assert "dask, distributed, pandas not installed" in out.stderr and "tactile[batch]" in out.stderr, out.stderr
+    assert "Traceback" not in out.stderr
