@@ -304,18 +304,26 @@ def test_a_proxy_moved_from_python_presses_and_the_force_points_out_of_the_body(
     sim = tactile.Simulation(tactile.load_scene(SCENES / "poke.json"))
     sim.move_proxy(0, (0, 0.047, 0), duration=0.2)  # 5 mm into the block's top at y = 0.04 (radius 12 mm)
     sim.advance(0.25)
+    sim.write_vtu(str(tmp_path / "pressing.vtu"), ["contact_force"])  # (the nodes' mean force over the press)
     sim.clear_impulses()
     sim.advance(0.05)  # held: the mean over it, as a device would be sent
     force = sim.proxy_reports["mean_force"][0]
     assert force[1] > 0.1 and abs(force[0]) < 0.1 * force[1] and abs(force[2]) < 0.1 * force[1]
     assert sim.proxy_reports["contacts"][0] > 0
-    sim.write_vtu(str(tmp_path / "poke.vtu"), ["von_mises"])
+    # Every field a scene's run.vtu_fields takes; contact_force over the same 0.05 s as the proxy's mean force.
+    sim.write_vtu(str(tmp_path / "poke.vtu"), ["von_mises", "principal_stretches", "contact_force"])
     import meshio  # the VTU opens in a reader that is not ours
 
     mesh = meshio.read(tmp_path / "poke.vtu")
     assert mesh.points.shape == (sim.n_nodes, 3)
     np.testing.assert_allclose(mesh.point_data["displacement"], sim.displacements, rtol=0, atol=1e-12)
     assert mesh.cell_data["von_mises"][0].max() > 0
+    stretches = mesh.cell_data["principal_stretches"][0]
+    assert stretches.shape == (sim.n_tets, 3) and (np.diff(stretches, axis=1) <= 0).all()  # largest first
+    assert stretches[:, 2].min() < 1 < stretches[:, 0].max()  # pressed: shortened somewhere, stretched elsewhere
+    # Newton's third law: what the nodes felt is what the proxy felt, the other way.
+    np.testing.assert_allclose(mesh.point_data["contact_force"].sum(axis=0), -np.asarray(force), rtol=1e-6,
+                               atol=1e-9)
 
 
 def test_proxy_forces_is_an_array_of_its_own_that_outlives_its_report() -> None:

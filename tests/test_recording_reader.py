@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import functools
+import itertools
 import pathlib
 import re
 import shutil
@@ -623,7 +624,8 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
     telemetry_rows = read_csv(tmp_path / "telemetry.csv")
     sent = [w for w in written if w.topic == "/telemetry"]
     column = {"sim_time": "sim_time_s"}  # names that get their unit
-    assert list(telemetry_rows[0]) == ["log_time_ns"] + [column.get(n, n) for n, _ in scalars] + ["faults"]
+    assert list(telemetry_rows[0]) == (["log_time_ns"] + [column.get(n, n) for n, _ in scalars]
+                                       + ["fault_count", "faults"])
     assert len(telemetry_rows) == len(sent) == 4
     costs = read_csv(tmp_path / "effect_costs.csv")  # long: one row per effect per message
     assert list(costs[0]) == ["log_time_ns", "sim_time_s", "effect", "ns_per_step"]
@@ -642,7 +644,7 @@ def test_csv_tables_hold_the_written_values(tmp_path, closed):
                 assert cell == value, name
             else:
                 assert int(cell) == value, name
-        assert row["faults"] == "a fault; another"
+        assert row["faults"] == "a fault; another" and row["fault_count"] == "2"
 
     # inputs
     inputs = [w for w in written if w.topic == "/input"]
@@ -798,7 +800,7 @@ def test_export_command_writes_what_its_flags_ask(tmp_path, closed, capsys):
 def test_the_command_is_installed_and_runs_as_a_module(closed):
     project = tomllib.loads((ROOT / "proto" / "recording" / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     assert project["scripts"]["tactile-recording"] == "tactile_recording.cli:main"
-    assert "mcap==1.2.2" in project["dependencies"]
+    assert "mcap>=1.2.2" in project["dependencies"]  # a lower bound: a user's newer mcap stays
     # The protocol package, which the bridge installs, carries neither the tools nor mcap.
     codec = tomllib.loads((ROOT / "proto" / "python" / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     assert not any(d.startswith("mcap") for d in codec["dependencies"]) and "scripts" not in codec
@@ -806,3 +808,16 @@ def test_the_command_is_installed_and_runs_as_a_module(closed):
     run = subprocess.run([sys.executable, "-m", "tactile_recording.cli", "info", str(closed)],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0 and "complete: summary and footer" in run.stdout, run.stderr
+
+
+def test_an_export_reports_its_progress_up_to_the_summary_count(tmp_path, closed):
+    """export(progress=...) is told how far it is: calls that never go back, the last at the number of messages
+    the summary counts on the topics the tables read (what `tactile-recording export` shows on a terminal)."""
+    calls: list[tuple[int, int | None]] = []
+    export(open_recording(closed), tmp_path / "out", surface=False,
+           progress=lambda done, total: calls.append((done, total)))
+    counts = open_recording(closed).summary_counts
+    assert counts is not None
+    total = sum(counts.get(t, 0) for t in ("/scene", "/state", "/haptic", "/telemetry", "/input"))
+    assert calls and calls[-1] == (total, total), calls[-3:]
+    assert all(a[0] <= b[0] for a, b in itertools.pairwise(calls))

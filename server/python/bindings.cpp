@@ -227,6 +227,9 @@ class Published {
 class PySimulation {
  public:
   explicit PySimulation(const Scene& scene) : scene_(scene), sim_(scene.spec) {
+    // Each node's contact impulse is summed from the start, for write_vtu's contact_force (a few adds per
+    // node pushed, as a headless run that writes it does).
+    sim_.track_contact_forces(true);
     const TetMesh& mesh = sim_.mesh();
     per_tet_ = size_t(mesh.nodes_per_tet());
     tets_.reserve(per_tet_ * size_t(sim_.n_tets()));
@@ -372,6 +375,7 @@ class PySimulation {
   void write_vtu(const std::string& path, const std::vector<std::string>& cell_fields) {
     const Busy busy(mutex_);
     ElementFieldRequest ask;
+    bool contact = false;
     for (const std::string& f : cell_fields) {
       if (f == "cauchy_stress")
         ask.cauchy_stress = true;
@@ -379,8 +383,15 @@ class PySimulation {
         ask.green_strain = true;
       else if (f == "von_mises")
         ask.von_mises = true;
+      else if (f == "principal_stretches")
+        ask.principal_stretches = true;
+      else if (f == "contact_force")
+        contact = true;
       else
-        throw py::value_error("fields: must be cauchy_stress, green_strain or von_mises, got " + f);
+        throw py::value_error(
+            "fields: must be cauchy_stress, green_strain, von_mises, principal_stretches or contact_force (the "
+            "scene's run.vtu_fields), got " +
+            f);
     }
     std::vector<double> u, v, density = sim_.compute_element_energy();
     sim_.copy_displacement(u);
@@ -388,7 +399,12 @@ class PySimulation {
     for (size_t t = 0; t < density.size(); ++t) density[t] /= sim_.tet_volume()[t];
     const std::vector<uint8_t> fixed = sim_.node_constraint();
     const ElementFields fields = sim_.compute_element_fields(ask);
-    tactile::write_vtu(path, VtuFrame{&sim_.mesh(), &u, &v, &fixed, nullptr, &density, &fields});
+    std::vector<double> force;
+    if (contact) {  // the mean over what was advanced since the previous write that asked for it
+      const double span = sim_.take_contact_impulses(force);
+      for (double& x : force) x = span > 0 ? x / span : 0.0;
+    }
+    tactile::write_vtu(path, VtuFrame{&sim_.mesh(), &u, &v, &fixed, contact ? &force : nullptr, &density, &fields});
   }
 
   Locked sim() { return Locked(mutex_, sim_); }
@@ -766,7 +782,9 @@ void bind_simulation(py::module_& m) {
            })
       .def("write_vtu", &PySimulation::write_vtu, py::arg("path"), py::arg("fields") = std::vector<std::string>{},
            "Writes the body as it is now (VTK XML, .vtu): displacement, velocity, constraint and energy density, and "
-           "the cell fields named (cauchy_stress, green_strain, von_mises).");
+           "the fields named, those a scene's run.vtu_fields takes: cauchy_stress [Pa], green_strain [1], "
+           "von_mises [Pa], principal_stretches [1] (per tet), contact_force [N] (per node: the mean over what "
+           "was advanced since the previous write_vtu that asked for it, or since the start).");
 }
 
 }  // namespace

@@ -37,7 +37,9 @@ import argparse
 import datetime
 import pathlib
 import sys
+import time
 from collections import Counter
+from collections.abc import Callable
 from importlib.metadata import version
 
 from tactile_proto import PROTOCOL_MAJOR, PROTOCOL_MINOR
@@ -114,6 +116,22 @@ def _metres(text: str) -> float:
     if not m > 0:
         raise argparse.ArgumentTypeError(f"{text}: give a distance above 0 [m]")
     return m
+
+
+def _progress_line() -> Callable[[int, int | None], None]:
+    """An export's progress on stderr, one line rewritten in place at most every half second (a terminal's)."""
+    shown = [0.0]
+
+    def show(done: int, total: int | None) -> None:
+        now = time.monotonic()
+        last = total is not None and done >= total
+        if now - shown[0] < 0.5 and not last:
+            return
+        shown[0] = now
+        of = f" of {total} ({100 * done / total:.0f} %)" if total else ""
+        print(f"\rexport: {done} messages read{of}", end="\n" if last else "", file=sys.stderr, flush=True)
+
+    return show
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -247,7 +265,7 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         both = not args.csv and not args.vtu
         result = export(recording, args.out, tables=args.csv or both, surface=args.vtu or both,
-                        surface_every=args.every)
+                        surface_every=args.every, progress=_progress_line() if sys.stderr.isatty() else None)
     except (RecordingError, OSError, RuntimeError) as e:
         print(f"tactile-recording: {e}", file=sys.stderr)
         return 2

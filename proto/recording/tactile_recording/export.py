@@ -18,7 +18,7 @@ CSV, one row per message, in file order; floats as the shortest text that reads 
                  work_essential - work_contact + dissipated). Frames without energies (a server before
                  protocol 1.4) leave those columns empty, and a note counts them.
   telemetry.csv  /telemetry: log_time_ns and every scalar and string field of Telemetry (sim_time as
-                 sim_time_s), then faults (`; `-joined).
+                 sim_time_s), then fault_count (0 without one) and faults (`; `-joined, empty without one).
   effect_costs.csv  /telemetry, long: log_time_ns, sim_time_s, effect, ns_per_step: one row per effect per
                  message (what each effect of the simulation cost a step, Telemetry.effect_costs).
   inputs.csv     /input: log_time_ns, device, sequence, device_time_ns, position [m], orientation, buttons.
@@ -46,6 +46,7 @@ import importlib
 import pathlib
 import re
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, TextIO
 
@@ -224,9 +225,11 @@ class _Tables:
         self.energies.write(header, row, t)
 
     def add_telemetry(self, t: int, telemetry: TelemetryT) -> None:
-        header = ("log_time_ns",) + tuple(_UNITS.get(_snake(a), _snake(a)) for a, _ in self.TELEMETRY) + ("faults",)
+        header = (("log_time_ns",) + tuple(_UNITS.get(_snake(a), _snake(a)) for a, _ in self.TELEMETRY)
+                  + ("fault_count", "faults"))
         row = [str(t)] + [_text(getattr(telemetry, a), kind) for a, kind in self.TELEMETRY]
-        row.append("; ".join(telemetry.faults or []))
+        # The count is a number in every row (0 without a fault), where an empty `faults` reads as missing.
+        row += [str(len(telemetry.faults or [])), "; ".join(telemetry.faults or [])]
         self.telemetry.write(header, row, t)
         for c in telemetry.effectCosts or []:
             self.effect_costs.write(("log_time_ns", "sim_time_s", "effect", "ns_per_step"),
@@ -370,11 +373,12 @@ class _Surface:
 
 
 def export(recording: Recording, out_dir: str | pathlib.Path, tables: bool = True, surface: bool = True,
-           surface_every: int = 1) -> Export:
+           surface_every: int = 1, progress: Callable[[int, int | None], None] | None = None) -> Export:
     """Writes the CSV tables and/or the VTU series of the surface of `recording` into out_dir (made if
     missing), in one pass; the series hold every `surface_every`th state. What could not be read is in
-    recording.problems afterwards; notes about the files are in the result. Raises RuntimeError when
-    `surface` is asked for and meshio is not installed."""
+    recording.problems afterwards; notes about the files are in the result. `progress(done, total)` is called
+    every 4096 messages read and at the end (total: what the summary counts on the topics read, None without
+    a summary). Raises RuntimeError when `surface` is asked for and meshio is not installed."""
     if surface_every < 1:
         raise ValueError(f"surface_every is {surface_every}: it counts state frames, from 1")
     out = pathlib.Path(out_dir)
@@ -385,8 +389,14 @@ def export(recording: Recording, out_dir: str | pathlib.Path, tables: bool = Tru
     topics = ["/scene", "/state"] + (["/haptic", "/telemetry", "/input"] if tables else [])
     scenes: dict[int, SceneDescriptionT] = {}  # scene_id -> its latest SceneDescription
     latest: SceneDescriptionT | None = None
+    counts = recording.summary_counts
+    total = sum(counts.get(topic, 0) for topic in topics) if counts is not None else None
+    done = 0
     try:
         for topic, t, envelope in recording.decoded(topics):
+            done += 1
+            if progress is not None and done % 4096 == 0:
+                progress(done, total)
             message = envelope.message
             if topic == "/scene":
                 scenes[message.sceneId] = latest = message
@@ -408,6 +418,8 @@ def export(recording: Recording, out_dir: str | pathlib.Path, tables: bool = Tru
             csvs.close()
         if vtus is not None:
             vtus.close()
+    if progress is not None:
+        progress(done, total)
     return result
 
 

@@ -258,7 +258,7 @@ def resim_row(report: dict[str, Any], own_scene: bool) -> dict[str, Any]:
 
 def execute(run: Run) -> dict[str, Any]:
     """One run, on whichever worker: its row of the table."""
-    row: dict[str, Any] = {"index": run.index, "run_id": run.run_id, "sweep": run.sweep, "scene": run.scene_path,
+    row: dict[str, Any] = {"run_index": run.index, "run_id": run.run_id, "sweep": run.sweep, "scene": run.scene_path,
                            "variant": run.variant, **run.params()}
     if run.recording is not None:
         row["recording"] = run.recording
@@ -399,7 +399,7 @@ def execute_accuracy(job: tuple[int, dict[str, Any], str]) -> dict[str, Any]:
     index, case, scenes = job
     t0 = time.perf_counter()
     result = tactile._core.run_accuracy_case(case, scenes)
-    return {"index": index, "run_id": accuracy_case_key(case), **{f"case.{k}": v for k, v in case.items()},
+    return {"run_index": index, "run_id": accuracy_case_key(case), **{f"case.{k}": v for k, v in case.items()},
             "result": result, "wall_s": time.perf_counter() - t0, "build": build_id(),
             "worker": f"{socket.gethostname()}:{os.getpid()}", "finished_at": time.time()}
 
@@ -455,7 +455,7 @@ def execute_stability(job: tuple[int, str, bool, int]) -> dict[str, Any]:
     index, name, quick, seed = job
     outcome = tactile._core.run_stability_case(name, quick, seed)
     figures = json.loads(outcome)
-    return {"index": index, "run_id": hashlib.sha256(json.dumps([name, quick, seed]).encode()).hexdigest()[:16],
+    return {"run_index": index, "run_id": hashlib.sha256(json.dumps([name, quick, seed]).encode()).hexdigest()[:16],
             "name": name, "pass": figures["pass"], "outcome": figures["outcome"], "why": figures["why"],
             "result": outcome, "wall_s": figures["wall_s"], "build": build_id(),
             "worker": f"{socket.gethostname()}:{os.getpid()}", "finished_at": time.time()}
