@@ -250,3 +250,83 @@ def test_the_body_is_coloured_by_the_field_the_states_carry(tmp_path: pathlib.Pa
     with plain.open("rb") as f:
         body = json.loads(next(make_reader(f).iter_messages(topics=["/foxglove/body"]))[2].data)
     assert body["entities"][0]["triangles"][0]["colors"] == []
+
+
+# ---- live: the Foxglove WebSocket protocol -----------------------------------------------------------------------
+
+
+def foxglove_live(port: int, seconds: float, topics: str, query: str = "") -> dict:
+    node = shutil.which("node")
+    assert node is not None
+    out = subprocess.run([node, str(CHECK / "live_client.mjs"), f"ws://127.0.0.1:{port}/{query}", "--seconds",
+                          str(seconds), "--topics", topics], capture_output=True, text=True, timeout=120, check=False)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout)
+
+
+def test_a_foxglove_client_sees_the_live_session_through_foxglove_libraries(tmp_path: pathlib.Path) -> None:
+    """A Foxglove client (@foxglove/ws-protocol's FoxgloveClient) connects to a live server while a device presses
+    the block: the serverInfo names the version and the protocol, every channel a recording has is advertised,
+    and /haptic, /state and /foxglove/body each bring messages that all decode through Foxglove's channel parsing,
+    the haptic frames at the 250 Hz the session asks for at most (the server steps far faster)."""
+    version = (ROOT / "VERSION").read_text().strip()
+    seconds = 3.0
+
+    async def session(port: int) -> dict:
+        async with websockets.connect(url(port), **READ_ON) as dev:
+            await hello(dev, Role.Device, TOKEN, ("stylus",))
+            client = asyncio.create_task(asyncio.to_thread(foxglove_live, port, seconds,
+                                                           "/haptic,/state,/foxglove/body,/telemetry"))
+            k = 0
+            while not client.done():
+                k += 1
+                await dev.send(codec.encode(device_input(k, 0.029 - 0.003 * min(k, 300) / 300)))
+                await asyncio.sleep(0.002)
+            return await client
+
+    with server_process(tmp_path, SCENE, TOKEN, file_name="scene.json") as (port, _):
+        report = asyncio.run(session(port))
+    assert report["server"]["metadata"] == {"version": version, "protocol": "1.11"}, report["server"]
+    assert set(report["advertised"]) >= {"/scene", "/state", "/haptic", "/telemetry", "/safety", "/device_status",
+                                         "/foxglove/body", "/foxglove/surface", "/foxglove/log", "/foxglove/transform"}
+    assert report["statuses"] == [], report["statuses"]
+    for topic in ("/haptic", "/state", "/foxglove/body", "/telemetry"):
+        r = report["topics"][topic]
+        assert r["error"] is None and r["messages"] == r["decoded"] > 0, (topic, r)
+    assert report["topics"]["/haptic"]["messages"] <= 250 * seconds * 1.1 + 10, report["topics"]["/haptic"]
+    assert report["topics"]["/haptic"]["messages"] >= 50 * seconds, report["topics"]["/haptic"]
+    assert any(p.startswith("devices[0].force") for p in report["topics"]["/haptic"]["numeric_fields"])
+    assert "entities[0].triangles[0].points[0].x" in report["topics"]["/foxglove/body"]["numeric_fields"]
+
+
+def test_a_foxglove_client_is_told_what_the_server_does_not_take(tmp_path: pathlib.Path) -> None:
+    """The server takes subscriptions and nothing else: a subscription to a channel it did not advertise, a
+    message that is no JSON, an op it does not serve and a binary message are each answered with a status that
+    names it, and the session goes on (a subscription after them is served)."""
+
+    async def run(port: int) -> tuple[list[dict], int]:
+        async with websockets.connect(url(port), subprotocols=["foxglove.websocket.v1"], max_queue=None) as ws:
+            assert ws.subprotocol == "foxglove.websocket.v1"
+            info = json.loads(await ws.recv())
+            advertise = json.loads(await ws.recv())
+            assert info["op"] == "serverInfo" and advertise["op"] == "advertise"
+            state = next(c["id"] for c in advertise["channels"] if c["topic"] == "/state")
+            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": 999}]}))
+            await ws.send("not json")
+            await ws.send(json.dumps({"op": "setParameters", "parameters": []}))
+            await ws.send(b"\x01\x00\x00\x00\x00")
+            statuses = [json.loads(await ws.recv()) for _ in range(4)]
+            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 7, "channelId": state}]}))
+            while True:
+                m = await asyncio.wait_for(ws.recv(), 5)
+                if isinstance(m, bytes):
+                    assert m[0] == 1
+                    return statuses, int.from_bytes(m[1:5], "little")
+
+    with server_process(tmp_path, SCENE, TOKEN, file_name="scene.json") as (port, _):
+        statuses, subscription = asyncio.run(run(port))
+    assert all(s["op"] == "status" for s in statuses), statuses
+    text = " | ".join(s["message"] for s in statuses)
+    assert "no channel 999 is advertised" in text and "no JSON object" in text and '"setParameters"' in text \
+        and "binary message" in text, text
+    assert subscription == 7

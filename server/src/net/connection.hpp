@@ -146,6 +146,9 @@ class Connection {
   bool reads(OutKind kind) const;
   bool reads_replay_status() const { return greeted_ && protocol_minor_ >= 4; }
   bool drives(const std::string& channel) const;
+  // A viewer that also reads haptic frames (a Foxglove client, net/foxglove_session.hpp), at its Hello's rate.
+  bool reads_haptic() const { return greeted_ && (role_ == proto::Role::Device || reads_haptic_); }
+  void set_reads_haptic(bool on) { reads_haptic_ = on; }
   // Maps the channels it named onto the scene's (after a scene change);
   // those the scene lacks are said once and their inputs dropped.
   void bind_devices();
@@ -184,6 +187,7 @@ class Connection {
   bool greeted_ = false, close_after_write_ = false, disconnect_ = false, closed_ = false, writing_ = false;
   proto::Role role_ = proto::Role::Viewer;
   uint16_t protocol_minor_ = 0;
+  bool reads_haptic_ = false;
   ViewFieldMask view_fields_ = 0;
   std::vector<std::string> device_names_;  // channels named in Hello
   std::vector<DeviceDrive> drives_;        // how each drives its channel (Hello.device_limits)

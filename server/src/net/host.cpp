@@ -77,6 +77,13 @@ size_t Host::count_greeted(proto::Role role) const {
   return n;
 }
 
+size_t Host::count_haptic_readers() const {
+  size_t n = 0;
+  for (const WsConnection* w : connections_)
+    if (w->core().reads_haptic()) ++n;
+  return n;
+}
+
 Admission Host::admit(const std::string& address) {
   const ConnectionClock::time_point now = ConnectionClock::now();
   size_t greeted = 0;

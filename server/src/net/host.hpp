@@ -87,6 +87,7 @@ class Host : public ConnectionHost, public std::enable_shared_from_this<Host> {
   void serve_scene(Served next);
   ViewFieldMask fields_asked() const;  // by the greeted connections, together
   size_t count_greeted(proto::Role role) const;
+  size_t count_haptic_readers() const;  // devices, and viewers that read haptic frames (Foxglove)
 
   bool stopped_ = false;
 

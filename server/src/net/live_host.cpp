@@ -114,13 +114,13 @@ void LiveHost::wait_wakeup() {
 void LiveHost::deliver() {
   Outbox& out = *live_->outbox();
   const bool recording = recording_.active();
-  const bool devices = count_greeted(wire::Role::Device) > 0;
-  auto is_device = [](const Connection& s) { return s.role() == wire::Role::Device; };
+  auto reads_haptic = [](const Connection& s) { return s.reads_haptic(); };
+  const bool devices = count_greeted(wire::Role::Device) > 0 || count_haptic_readers() > 0;
   // Every haptic frame, to the devices and the recording, stamped with its own server time.
   out.haptics.drain([&](const uint8_t* data, size_t n) {
     if (recording)
       recording_.post(Topic::Haptic, {data, n}, wire::GetEnvelope(data)->message_as_HapticFrame()->server_time_ns());
-    if (devices) send_each(copy_bytes(data, n), OutKind::Haptic, is_device);
+    if (devices) send_each(copy_bytes(data, n), OutKind::Haptic, reads_haptic);
   });
   // Every state to the recording; the newest to the clients.
   bool state = false;

@@ -75,7 +75,7 @@ void ReplayHost::serve_item(const Replay::Item& item) {
       return serve_scene(recorded(m));
     case Topic::State: return send_each(m, OutKind::State, [&](const Connection& s) { return !is_device(s); });
     case Topic::Haptic:  // a bridge plays the recorded forces to its device, under its safety rules
-      return send_each(m, OutKind::Haptic, is_device);
+      return send_each(m, OutKind::Haptic, [](const Connection& s) { return s.reads_haptic(); });
     case Topic::Telemetry: return send_each(m, OutKind::Control);
     case Topic::Safety: return relay(m, OutKind::Event);
     case Topic::DeviceStatus: return relay(m, OutKind::Status);

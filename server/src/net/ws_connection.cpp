@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cstdio>
 
+#include <nlohmann/json.hpp>
+
 #ifdef __linux__
 #include <linux/sockios.h>
 #include <netinet/tcp.h>
@@ -70,11 +72,37 @@ void WsConnection::start(beast::http::request<beast::http::string_body> req) {
   ws_.set_option(t);
   ws_.read_message_max(host_->options().max_message_bytes);
   ws_.binary(true);
-  ws_.async_accept(req, [self = shared_from_this()](beast::error_code ec) {
+  if (asks_for_foxglove(std::string(req[beast::http::field::sec_websocket_protocol]))) {
+    fox_ = std::make_unique<FoxgloveSession>(host_->options().server_name);
+    ws_.set_option(websocket::stream_base::decorator([](websocket::response_type& res) {
+      res.set(beast::http::field::sec_websocket_protocol, kFoxgloveSubprotocol);
+    }));
+  }
+  ws_.async_accept(req, [self = shared_from_this(), target = std::string(req.target())](beast::error_code ec) {
     if (ec) return;
     self->arm_hello_timer();
+    if (self->fox_) self->start_foxglove(target);
     self->read();
   });
+}
+
+// The Foxglove client's greeting, and its rules greeted as a viewer that
+// reads haptic frames at most kFoxgloveHapticHz (a panel draws far fewer).
+void WsConnection::start_foxglove(const std::string& target) {
+  constexpr float kFoxgloveHapticHz = 250;
+  for (FoxgloveSession::Frame& f : fox_->greeting()) fox_out_.push_back(std::move(f));
+  const size_t q = target.find("token=");
+  const std::string token = q == std::string::npos ? "" : target.substr(q + 6, target.find('&', q) - q - 6);
+  flatbuffers::FlatBufferBuilder b;
+  const Bytes hello =
+      seal(b, wire::Message::Hello,
+           wire::CreateHelloDirect(b, uint16_t(wire::ProtocolMajor::Current), uint16_t(wire::ProtocolMinor::Current),
+                                   wire::Role::Viewer, token.c_str(), "foxglove", nullptr, nullptr, nullptr,
+                                   kFoxgloveHapticHz));
+  core_.set_reads_haptic(true);
+  core_.receive(*hello, true, ConnectionClock::now());
+  if (core_.greeted()) hello_timer_.cancel();
+  pump();
 }
 
 void WsConnection::rebind() {
@@ -148,6 +176,19 @@ void WsConnection::read() {
       return;
     }
     const auto* data = static_cast<const uint8_t*>(self->in_.data().data());
+    if (self->fox_) {
+      // Its subscriptions; a client that lets the answers pile up unread is dropped, as the rules drop one.
+      if (!self->ws_.got_binary()) {
+        if (auto f = self->fox_->on_text({reinterpret_cast<const char*>(data), self->in_.size()}))
+          self->fox_out_.push_back(std::move(*f));
+      } else {
+        self->fox_out_.push_back(self->fox_->on_binary());
+      }
+      self->in_.consume(self->in_.size());
+      if (self->fox_out_.size() > self->host_->options().control_queue) return self->drop();
+      self->pump();
+      return self->read();
+    }
     self->core_.receive({data, self->in_.size()}, self->ws_.got_binary(), ConnectionClock::now());
     self->in_.consume(self->in_.size());
     if (self->core_.greeted()) self->hello_timer_.cancel();
@@ -170,6 +211,7 @@ int WsConnection::unsent() {
 void WsConnection::pump() {
   if (core_.disconnect()) return drop();
   if (awaiting_drain_) return;
+  if (fox_) return pump_foxglove();
   if (core_.frame_next() && unsent() > unsent_bound_) {
     // A frame waits for the socket to drain below the bound (TCP_NOTSENT_LOWAT
     // makes it writable then); newer frames replace it meanwhile.
@@ -193,6 +235,57 @@ void WsConnection::pump() {
     return;
   }
   if (core_.idle() && core_.close_after_write()) close();
+}
+
+// As pump(), for a Foxglove client: each message the rules queue is
+// translated into the frames of its subscriptions (none when it has none),
+// which are written one by one; a frame waits for the socket to drain as
+// there, newer ones replacing it in the rules' queue meanwhile.
+void WsConnection::pump_foxglove() {
+  while (fox_out_.empty()) {
+    if (core_.frame_next() && unsent() > unsent_bound_) {
+      awaiting_drain_ = true;
+      beast::get_lowest_layer(ws_).socket().async_wait(tcp::socket::wait_write,
+                                                       [weak = weak_from_this()](beast::error_code ec) {
+                                                         auto self = weak.lock();
+                                                         if (!self) return;
+                                                         self->awaiting_drain_ = false;
+                                                         if (ec || self->core_.closed()) return;
+                                                         self->pump();
+                                                       });
+      return;
+    }
+    const Bytes* message = core_.next_write();
+    if (!message) break;
+    const Bytes m = *message;
+    core_.written();
+    const uint64_t unix_ns = uint64_t(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+            .count());
+    std::vector<FoxgloveSession::Frame> frames;
+    fox_->translate(*m, unix_ns, frames);
+    // A refusal (a wrong token) comes before any subscription: said as a status.
+    const wire::Envelope* e = wire::GetEnvelope(m->data());
+    if (!core_.greeted() && e->message_type() == wire::Message::Error && e->message_as_Error()->message()) {
+      const std::string text =
+          nlohmann::json{{"op", "status"}, {"level", 2}, {"message", e->message_as_Error()->message()->str()}}.dump();
+      frames.push_back({true, std::vector<uint8_t>(text.begin(), text.end())});
+    }
+    for (FoxgloveSession::Frame& f : frames) fox_out_.push_back(std::move(f));
+  }
+  if (fox_out_.empty()) {
+    if (core_.idle() && core_.close_after_write()) close();
+    return;
+  }
+  if (writing_fox_) return;
+  writing_fox_ = true;
+  ws_.text(fox_out_.front().text);
+  ws_.async_write(asio::buffer(fox_out_.front().bytes), [self = shared_from_this()](beast::error_code ec, size_t) {
+    self->writing_fox_ = false;
+    self->fox_out_.pop_front();
+    if (ec) return self->core_.mark_closed();
+    self->pump();
+  });
 }
 
 }  // namespace tactile

@@ -4,6 +4,7 @@
 // (net/host.hpp) when its upgrade starts and leaves it when destroyed.
 #pragma once
 
+#include <deque>
 #include <memory>
 #include <string>
 
@@ -14,6 +15,7 @@
 #include <boost/beast/websocket.hpp>
 
 #include "net/connection.hpp"
+#include "net/foxglove_session.hpp"
 
 namespace tactile {
 
@@ -26,7 +28,10 @@ class WsConnection : public std::enable_shared_from_this<WsConnection> {
   WsConnection(std::shared_ptr<Host> host, boost::asio::ip::tcp::socket socket, bool loopback, std::string address);
   ~WsConnection();
 
-  // Completes the upgrade `req` asked for and starts reading.
+  // Completes the upgrade `req` asked for and starts reading. An upgrade
+  // that offers the Foxglove subprotocol is served in it
+  // (net/foxglove_session.hpp): its rules greeted at once as a viewer that
+  // reads haptic frames, with the ?token= of its URL.
   void start(boost::beast::http::request<boost::beast::http::string_body> req);
 
   Connection& core() { return core_; }
@@ -64,6 +69,13 @@ class WsConnection : public std::enable_shared_from_this<WsConnection> {
   int unsent_bound_ = 0;
   bool awaiting_drain_ = false;
   Connection core_;
+  // A Foxglove client's session, and the frames it made that wait to be
+  // written (null: the protocol's own client).
+  std::unique_ptr<FoxgloveSession> fox_;
+  std::deque<FoxgloveSession::Frame> fox_out_;
+  bool writing_fox_ = false;
+  void pump_foxglove();
+  void start_foxglove(const std::string& target);
 };
 
 }  // namespace tactile

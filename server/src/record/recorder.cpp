@@ -164,6 +164,21 @@ std::string quote_non_finite(const std::string& text) {
 // JSON, with its Envelope in base64 beside the decoded fields.
 bool rooted_at_message(Topic t) { return t != Topic::Applied && t != Topic::Control; }
 
+std::span<const uint8_t> bytes_of(std::string_view text) {
+  return {reinterpret_cast<const uint8_t*>(text.data()), text.size()};
+}
+
+int64_t steady_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+int64_t unix_now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace
+
 // The protocol's schema with `type` as its root table, holding only the
 // tables, structs and enums `type` reaches, serialised as a binary schema
 // (what flatc --binary --schema writes for a root_type). Only what it
@@ -172,13 +187,15 @@ bool rooted_at_message(Topic t) { return t != Topic::Applied && t != Topic::Cont
 // mcap-support), and refuses a union anywhere, so Envelope and Control,
 // which hold the protocol's two unions, must stay out of the channels they
 // are not part of (tests/test_foxglove.py runs that pass).
-std::vector<uint8_t> schema_rooted_at(std::string_view fbs, const std::string& type) {
+std::vector<uint8_t> channel_schema(const std::string& type) {
+  const std::span<const uint8_t> text = tactile_fbs();
+  const std::string fbs(reinterpret_cast<const char*>(text.data()), text.size());
   // What is cut from the parser's tables outlives the parser, which deletes
   // only what its tables still hold.
   std::vector<std::unique_ptr<flatbuffers::StructDef>> cut_objects;
   std::vector<std::unique_ptr<flatbuffers::EnumDef>> cut_enums;
   flatbuffers::Parser parser;
-  if (!parser.Parse(std::string(fbs).c_str()))
+  if (!parser.Parse(fbs.c_str()))
     throw mcap::McapError("the embedded protocol schema does not parse: " + parser.error_);
   if (!parser.SetRootType(("tactile.proto." + type).c_str()))
     throw mcap::McapError("the protocol schema has no table tactile.proto." + type);
@@ -212,20 +229,15 @@ std::vector<uint8_t> schema_rooted_at(std::string_view fbs, const std::string& t
   return {parser.builder_.GetBufferPointer(), parser.builder_.GetBufferPointer() + parser.builder_.GetSize()};
 }
 
-std::span<const uint8_t> bytes_of(std::string_view text) {
-  return {reinterpret_cast<const uint8_t*>(text.data()), text.size()};
+bool root_header(std::span<const uint8_t> envelope, std::array<uint8_t, kEnvelopeOffset>& head) {
+  flatbuffers::Verifier v(envelope.data(), envelope.size());
+  if (!proto::VerifyEnvelopeBuffer(v) || !proto::GetEnvelope(envelope.data())->message()) return false;
+  const auto* table = static_cast<const uint8_t*>(proto::GetEnvelope(envelope.data())->message());
+  const uint32_t root = uint32_t(kEnvelopeOffset + size_t(table - envelope.data()));
+  std::memcpy(head.data(), &root, 4);  // little-endian, as FlatBuffers are on every target we build for
+  std::memcpy(head.data() + 4, proto::EnvelopeIdentifier(), 4);
+  return true;
 }
-
-int64_t steady_now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-int64_t unix_now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
-}  // namespace
 
 Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderOptions options)
     : path_(path),
@@ -264,8 +276,7 @@ Recorder::Recorder(const std::string& path, const mcap::Map& metadata, RecorderO
       channel_[t] = writer_.add_channel(control, topic_name(topic), "json", {{"envelope_field", "envelope"}});
     } else if (rooted_at_message(topic)) {
       const std::string type = message_type_name(topic);
-      const uint16_t schema =
-          writer_.add_schema("tactile.proto." + type, "flatbuffer", schema_rooted_at(fbs_text, type));
+      const uint16_t schema = writer_.add_schema("tactile.proto." + type, "flatbuffer", channel_schema(type));
       channel_[t] = writer_.add_channel(schema, topic_name(topic), "flatbuffer",
                                         {{"envelope_offset", std::to_string(kEnvelopeOffset)}});
     }
@@ -350,17 +361,9 @@ bool Recorder::write_item(const Item& item) {
     // then the file identifier. Envelopes come from the server's own
     // encoders and its verified inputs; one that does not verify here
     // is left out, counted.
-    flatbuffers::Verifier v(item.bytes.data(), item.bytes.size());
-    if (!proto::VerifyEnvelopeBuffer(v) || !proto::GetEnvelope(item.bytes.data())->message()) {
-      return false;
-    }
-    const auto* table = static_cast<const uint8_t*>(proto::GetEnvelope(item.bytes.data())->message());
-    const uint32_t root = uint32_t(kEnvelopeOffset + size_t(table - item.bytes.data()));
-    uint8_t head[kEnvelopeOffset];
-    std::memcpy(head, &root, 4);  // little-endian, as FlatBuffers are on every target we build for
-    std::memcpy(head + 4, proto::EnvelopeIdentifier(), 4);
-    writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes,
-                  {head, kEnvelopeOffset});
+    std::array<uint8_t, kEnvelopeOffset> head;
+    if (!root_header(item.bytes, head)) return false;
+    writer_.write(channel_[int(item.topic)], uint64_t(item.log_ns), uint64_t(item.publish_ns), item.bytes, head);
     // Foxglove's views of it, at the same time.
     const proto::Envelope* e = proto::GetEnvelope(item.bytes.data());
     std::optional<std::string> view;

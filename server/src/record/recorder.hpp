@@ -14,6 +14,7 @@
 // the messages still waiting and the chunk it had open.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -141,6 +142,16 @@ inline constexpr size_t kEnvelopeOffset = 8;
 // The message type a topic's Envelopes hold ("StateFrame", ...); "" for
 // the JSON topic (/applied).
 const char* message_type_name(Topic t);
+
+// The binary schema (flatbuffer, "tactile.proto.<type>") of a channel of
+// `type`'s messages: rooted at it and holding only what it reaches
+// (RECORDING.md), as a recording and the live Foxglove view advertise it.
+// Throws mcap::McapError for a type the protocol lacks.
+std::vector<uint8_t> channel_schema(const std::string& type);
+
+// The root header that makes `envelope`'s message the buffer's root
+// (kEnvelopeOffset); false when the bytes are no Envelope holding a message.
+bool root_header(std::span<const uint8_t> envelope, std::array<uint8_t, kEnvelopeOffset>& head);
 
 // A recording read back as Envelopes, whatever its layout: each message of a
 // channel with "envelope_offset" loses its root header; each of a JSON
