@@ -95,6 +95,41 @@ def test_a_scripted_poke_driven_from_python_feels_what_the_cli_run_felt(tmp_path
     assert peak > 0.1, "the sphere never pressed: the comparison shows nothing"
 
 
+def test_advance_plays_the_scene_scripts_as_the_cli_run_does(tmp_path: pathlib.Path) -> None:
+    """advance(frame_dt) in a loop, nothing else, on the scripted poke: the sphere moves as `tactile-sim run`
+    moves it (the same steps, bit for bit the same pose and tracked displacements), and proxy_reports' force is
+    the mean over each advance (its peak, the CLI's peak of the mean over each control interval, is no lower
+    than that's mean over a frame). With scripts=False the sphere stays where it starts, and a proxy moved from
+    Python leaves its script."""
+    data = scene_json("poke", duration=0.4, vtu_fields=[])
+    summary = cli_summary(tmp_path, data)
+    scene = tactile.parse_scene(data, tmp_path / "poke.json")
+    sim = tactile.Simulation(scene)
+    n, frame_dt = frames(scene)
+    peak = 0.0
+    for _ in range(n):
+        assert sim.advance(frame_dt)["fault"] is None
+        peak = max(peak, float(np.linalg.norm(sim.proxy_reports["force"][0])))
+        np.testing.assert_array_equal(sim.proxy_forces, sim.proxy_reports["force"])
+    assert sim.steps == summary["run"]["steps"]
+    assert list(sim.proxy_pose(0)[0]) == summary["proxies"][0]["position_m"]
+    u = sim.displacements
+    for (name, node), tracked in zip(scene.tracked, summary["tracked"], strict=True):
+        assert tracked["name"] == name and list(u[node]) == tracked["displacement_m"], name
+    assert 0.1 < peak <= summary["proxies"][0]["peak_force_N"] * (1 + 1e-12)
+    # The last step's force has its own name; the mean over the advance is not it (a contact chatters).
+    assert sim.proxy_reports["step_force"].shape == (1, 3)
+
+    still = tactile.Simulation(scene)
+    start = still.proxy_pose(0)
+    still.advance(0.2, scripts=False)
+    assert still.proxy_pose(0) == start
+    moved = tactile.Simulation(scene)
+    moved.move_proxy(0, (0.05, 0.1, 0.0), duration=0.1)  # up and aside, where the script never goes
+    moved.advance(0.2)
+    assert list(moved.proxy_pose(0)[0]) == [0.05, 0.1, 0.0]
+
+
 def test_a_view_shows_the_step_it_was_read_at_and_cannot_be_written() -> None:
     sim = tactile.Simulation(tactile.load_scene(SCENES / "fig3_cantilever.json", variant="stvk"))
     x, u, v = sim.positions, sim.displacements, sim.velocities

@@ -226,10 +226,19 @@ class Published {
 // arrays its views show.
 class PySimulation {
  public:
+  // A report's impulse sums at a moment, and (means()) the mean force and
+  // torque between two such moments [N, N m] in `impulse`, `angular_impulse`.
+  struct ImpulseMark {
+    Vec3 impulse{0.0}, angular_impulse{0.0};
+    double elapsed = 0;
+  };
+
   explicit PySimulation(const Scene& scene) : scene_(scene), sim_(scene.spec) {
     // Each node's contact impulse is summed from the start, for write_vtu's contact_force (a few adds per
     // node pushed, as a headless run that writes it does).
     sim_.track_contact_forces(true);
+    proxy_taken_.assign(scene_.proxy_script.size(), false);
+    hand_taken_.assign(scene_.hand_script.size(), false);
     const TetMesh& mesh = sim_.mesh();
     per_tet_ = size_t(mesh.nodes_per_tet());
     tets_.reserve(per_tet_ * size_t(sim_.n_tets()));
@@ -237,16 +246,41 @@ class PySimulation {
       for (int k = 0; k < mesh.nodes_per_tet(); ++k) tets_.push_back(mesh.node(e, k));
   }
 
-  py::dict advance(double seconds) {
+  // `seconds` on: with `scripts`, a scene's scripted proxies and hands (those
+  // not moved from Python since) follow their scripts, in control intervals
+  // of at most HeadlessOptions::control_interval set as tactile-sim run sets
+  // them, so that advance(frame_dt) in a loop steps as its frames do. The
+  // reports' mean over the call is kept for proxy_reports and device_reports.
+  py::dict advance(double seconds, bool scripts = true) {
     if (!(seconds > 0) || !std::isfinite(seconds))
       throw py::value_error("advance: seconds must be finite and > 0, got " + std::to_string(seconds));
     const Busy busy(mutex_);
+    const std::vector<ImpulseMark> proxies0 = marks(sim_.proxy_reports()), devices0 = marks(sim_.device_reports());
     AdvanceReport r;
     SignalCheck signals;
     {
       py::gil_scoped_release release;
-      r = sim_.advance(seconds, std::ref(signals));
+      if (!scripts || !scripted()) {
+        r = sim_.advance(seconds, std::ref(signals));
+      } else {
+        const double most = HeadlessOptions{}.control_interval;
+        const auto pieces = int32_t(std::max(1.0, std::ceil(seconds / most * (1.0 - 1e-12))));
+        const double interval = seconds / double(pieces);
+        for (int32_t k = 0; k < pieces && !r.fault && !r.interrupted; ++k) {
+          const double t0 = sim_.time();
+          drive(t0, t0 + interval);
+          const AdvanceReport piece = sim_.advance(interval, std::ref(signals));
+          r.substeps += piece.substeps;
+          r.dt = piece.dt > 0 ? piece.dt : r.dt;
+          r.dt_critical = piece.dt_critical;
+          r.subdivided = r.subdivided || piece.subdivided;
+          r.interrupted = piece.interrupted;
+          r.fault = piece.fault;
+        }
+      }
     }
+    proxy_means_ = means(proxies0, sim_.proxy_reports());
+    device_means_ = means(devices0, sim_.device_reports());
     ++generation_;
     signals.rethrow();
     return report_dict(r);
@@ -313,18 +347,23 @@ class PySimulation {
   // and the mean over the steps since clear_impulses().
   // (The caller holds the lock: sim()->proxy_reports().)
   template <class Report>
-  py::dict reports(const std::vector<Report>& rs) const {
+  py::dict reports(const std::vector<Report>& rs, const std::vector<ImpulseMark>& over_advance) const {
     py::array_t<double> force({rs.size(), size_t(3)}), torque({rs.size(), size_t(3)}),
-        mean_force({rs.size(), size_t(3)}), mean_torque({rs.size(), size_t(3)});
+        step_force({rs.size(), size_t(3)}), step_torque({rs.size(), size_t(3)}), mean_force({rs.size(), size_t(3)}),
+        mean_torque({rs.size(), size_t(3)});
     py::array_t<int32_t> contacts(rs.size());
-    auto f = force.mutable_unchecked<2>(), t = torque.mutable_unchecked<2>(), mf = mean_force.mutable_unchecked<2>(),
+    auto f = force.mutable_unchecked<2>(), t = torque.mutable_unchecked<2>(), sf = step_force.mutable_unchecked<2>(),
+         st = step_torque.mutable_unchecked<2>(), mf = mean_force.mutable_unchecked<2>(),
          mt = mean_torque.mutable_unchecked<2>();
     auto c = contacts.mutable_unchecked<1>();
     for (size_t k = 0; k < rs.size(); ++k) {
       const Report& r = rs[k];
+      const bool advanced = k < over_advance.size();
       for (int d = 0; d < 3; ++d) {
-        f(k, d) = r.force[d];
-        t(k, d) = r.torque[d];
+        f(k, d) = advanced ? over_advance[k].impulse[d] : 0.0;
+        t(k, d) = advanced ? over_advance[k].angular_impulse[d] : 0.0;
+        sf(k, d) = r.force[d];
+        st(k, d) = r.torque[d];
         mf(k, d) = r.elapsed > 0 ? r.impulse[d] / r.elapsed : 0.0;
         mt(k, d) = r.elapsed > 0 ? r.angular_impulse[d] / r.elapsed : 0.0;
       }
@@ -333,20 +372,48 @@ class PySimulation {
     py::dict out;
     out["force"] = force;
     out["torque"] = torque;
+    out["step_force"] = step_force;
+    out["step_torque"] = step_torque;
     out["mean_force"] = mean_force;
     out["mean_torque"] = mean_torque;
     out["contacts"] = contacts;
+    return out;
+  }
+  py::dict locked_reports(bool proxies) {
+    const Busy busy(mutex_);
+    return proxies ? reports(sim_.proxy_reports(), proxy_means_) : reports(sim_.device_reports(), device_means_);
+  }
+
+  template <class Report>
+  static std::vector<ImpulseMark> marks(const std::vector<Report>& rs) {
+    std::vector<ImpulseMark> out;
+    for (const Report& r : rs) out.push_back({r.impulse, r.angular_impulse, r.elapsed});
+    return out;
+  }
+  template <class Report>
+  static std::vector<ImpulseMark> means(const std::vector<ImpulseMark>& before, const std::vector<Report>& rs) {
+    std::vector<ImpulseMark> out;
+    for (size_t k = 0; k < rs.size(); ++k) {
+      // (A clear_impulses() inside the span, from drive_scripts, leaves sums smaller than before: from zero then.)
+      const ImpulseMark b = k < before.size() && rs[k].elapsed >= before[k].elapsed ? before[k] : ImpulseMark{};
+      const double span = rs[k].elapsed - b.elapsed;
+      out.push_back(span > 0 ? ImpulseMark{(rs[k].impulse - b.impulse) / span,
+                                           (rs[k].angular_impulse - b.angular_impulse) / span, span}
+                             : ImpulseMark{});
+    }
     return out;
   }
 
   void set_proxy_motion(int32_t proxy, const PoseTuple& from, const PoseTuple& to, double t0, double t1) {
     const Busy busy(mutex_);
     check_index("proxy", proxy, sim_.proxies().size());
+    proxy_taken_[size_t(proxy)] = true;
     sim_.set_proxy_motion(proxy, motion(from, to, t0, t1));
   }
   void set_hand_motion(int32_t hand, const PoseTuple& from, const PoseTuple& to, double t0, double t1) {
     const Busy busy(mutex_);
     check_index("hand", hand, sim_.hands().size());
+    hand_taken_[size_t(hand)] = true;
     sim_.set_hand_motion(hand, motion(from, to, t0, t1));
   }
   // Glides proxy `proxy` from where it is now to `position` (and
@@ -359,6 +426,7 @@ class PySimulation {
     const Pose from = sim_.proxy_pose(proxy);
     Pose to = to_pose(position, orientation);
     if (!orientation) to.orientation = from.orientation;
+    proxy_taken_[size_t(proxy)] = true;
     sim_.set_proxy_motion(proxy, ProxyMotion{sim_.time(), sim_.time() + duration, from, to});
   }
   // The scene's scripted motions over [t0, t1], as a headless run sets them
@@ -370,6 +438,24 @@ class PySimulation {
     for (size_t h = 0; h < scene_.hand_script.size(); ++h)
       if (scene_.hand_script[h]) sim_.set_hand_motion(int32_t(h), scene_.hand_script[h]->motion(t0, t1));
     sim_.clear_impulses();
+  }
+
+  // Whether a script is left to play: a scripted proxy or hand not moved from Python.
+  bool scripted() const {
+    for (size_t j = 0; j < scene_.proxy_script.size(); ++j)
+      if (scene_.proxy_script[j] && !proxy_taken_[j]) return true;
+    for (size_t h = 0; h < scene_.hand_script.size(); ++h)
+      if (scene_.hand_script[h] && !hand_taken_[h]) return true;
+    return false;
+  }
+  // The scripts over [t0, t1], but of the proxies and hands Python moved.
+  void drive(double t0, double t1) {
+    for (size_t j = 0; j < scene_.proxy_script.size(); ++j)
+      if (scene_.proxy_script[j] && !proxy_taken_[j])
+        sim_.set_proxy_motion(int32_t(j), scene_.proxy_script[j]->motion(t0, t1));
+    for (size_t h = 0; h < scene_.hand_script.size(); ++h)
+      if (scene_.hand_script[h] && !hand_taken_[h])
+        sim_.set_hand_motion(int32_t(h), scene_.hand_script[h]->motion(t0, t1));
   }
 
   void write_vtu(const std::string& path, const std::vector<std::string>& cell_fields) {
@@ -423,10 +509,12 @@ class PySimulation {
   std::recursive_mutex mutex_;  // held by every call on sim_ (Busy)
   Scene scene_;
   Simulation sim_;
-  Published positions_, displacements_, velocities_;  // mesh order (n_nodes x 3)
-  uint64_t generation_ = 0;                           // advance() calls so far: a view's array is of one
-  std::vector<int32_t> tets_;                         // (n_tets x per_tet_)
-  size_t per_tet_ = 4;                                // 10 for quadratic tets (corners, then edge nodes)
+  Published positions_, displacements_, velocities_;     // mesh order (n_nodes x 3)
+  uint64_t generation_ = 0;                              // advance() calls so far: a view's array is of one
+  std::vector<int32_t> tets_;                            // (n_tets x per_tet_)
+  size_t per_tet_ = 4;                                   // 10 for quadratic tets (corners, then edge nodes)
+  std::vector<bool> proxy_taken_, hand_taken_;           // moved from Python: their scripts no longer play
+  std::vector<ImpulseMark> proxy_means_, device_means_;  // over the latest advance()
 };
 
 }  // namespace
@@ -671,10 +759,14 @@ void bind_studies(py::module_& m) {
 void bind_simulation(py::module_& m) {
   py::class_<PySimulation>(m, "Simulation", "One body in motion: a scene's model, stepper and state.")
       .def(py::init<const Scene&>(), py::arg("scene"))
-      .def("advance", &PySimulation::advance, py::arg("seconds"),
-           "Covers `seconds` with as many steps as stability needs; returns the report (substeps, dt, dt_critical, "
-           "subdivided, fault). Another thread's call on this Simulation waits for it; Ctrl-C (KeyboardInterrupt) "
-           "stops it between two steps, at the time reached.")
+      .def("advance", &PySimulation::advance, py::arg("seconds"), py::arg("scripts") = true,
+           "Covers `seconds` [s] with as many steps as stability needs; returns the report (substeps, dt [s], "
+           "dt_critical [s], subdivided, fault). With `scripts` (the default) the scene's scripted proxies and "
+           "hands follow their scripts, those moved from Python (move_proxy, set_proxy_motion, set_hand_motion) "
+           "excepted, in control intervals of at most 1 ms as tactile-sim run drives them; scripts=False leaves "
+           "every proxy to Python. proxy_reports['force'] is then the mean over this call. Another thread's call "
+           "on this Simulation waits for it; Ctrl-C (KeyboardInterrupt) stops it between two steps, at the time "
+           "reached.")
       .def("step", &PySimulation::step, py::arg("dt") = py::none(),
            "One step of dt [s] (default: the scene's fixed step, else safety x the current critical step).")
       .def("time_advance", &PySimulation::time_advance, py::arg("seconds"), py::arg("count"),
@@ -742,12 +834,20 @@ void bind_simulation(py::module_& m) {
                                return out;
                              })
       .def_property_readonly("devices", [](PySimulation& s) { return s.sim()->devices(); })
-      .def_property_readonly("proxy_reports", [](PySimulation& s) { return s.reports(s.sim()->proxy_reports()); })
-      .def_property_readonly("device_reports", [](PySimulation& s) { return s.reports(s.sim()->device_reports()); })
+      .def_property_readonly(
+          "proxy_reports", [](PySimulation& s) { return s.locked_reports(true); },
+          "per proxy, (n_proxies, 3) arrays: force [N] and torque [N m] on it, their mean over the latest "
+          "advance() (what a device would be sent); step_force, step_torque: the latest step's alone (a "
+          "contact pushes every other step or so, so it chatters); mean_force, mean_torque: over every step "
+          "since clear_impulses(); and contacts (n_proxies,), the latest step's contact points")
+      .def_property_readonly(
+          "device_reports", [](PySimulation& s) { return s.locked_reports(false); },
+          "per device channel, as proxy_reports: for a coupled device the coupling's force on the device")
       // The report dict is a temporary: take the array out of it as an
       // object before it dies (an item accessor would outlive its dict).
-      .def_property_readonly("proxy_forces",
-                             [](PySimulation& s) -> py::object { return s.reports(s.sim()->proxy_reports())["force"]; })
+      .def_property_readonly(
+          "proxy_forces", [](PySimulation& s) -> py::object { return s.locked_reports(true)["force"]; },
+          "proxy_reports['force']: each proxy's mean force over the latest advance() [N] (n_proxies, 3)")
       .def("clear_impulses", [](PySimulation& s) { s.sim()->clear_impulses(); })
       .def(
           "proxy_pose", [](PySimulation& s, int32_t j) { return from_pose(s.sim()->proxy_pose(j)); }, py::arg("proxy"))
