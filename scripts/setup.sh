@@ -93,7 +93,8 @@ cmake --build "$build" -j"$(nproc)"
 site="$(.venv/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["platlib"])')"
 module="$(find "$build" -maxdepth 1 -name '_core*.so' -print -quit)"
 if [ ! -d "$site/tactile" ] || ! cmp -s "$module" "$site/tactile/$(basename "$module")" ||
-   ! diff -rq -x '__pycache__' -x '_core*.so' server/python/tactile "$site/tactile" >/dev/null 2>&1; then
+   ! diff -rq -x '__pycache__' -x '_core*.so' -x scenes server/python/tactile "$site/tactile" >/dev/null 2>&1 ||
+   ! diff -rq -x '*.py' -x '*.md' -x '__pycache__' server/scenes "$site/tactile/scenes" >/dev/null 2>&1; then
   echo "setup: installing the Python module (import tactile) into .venv"
   .venv/bin/python -m pip install -q --no-build-isolation --no-deps ./server
 fi

@@ -442,3 +442,40 @@ def test_each_body_is_a_slice_of_the_arrays_in_its_own_node_order() -> None:
     np.testing.assert_allclose(sim.rest_positions[block["nodes"]][0], [0.3, 0.1, 0.0], atol=1e-12)
     sim.advance(0.05)
     assert np.abs(sim.displacements[block["nodes"]]).max() > 0  # it moves (gravity, its load)
+
+
+def test_a_scene_pickles_and_steps_the_same_in_another_process(tmp_path: pathlib.Path) -> None:
+    """A Scene (from a file with variants, or from a dict) pickles as its JSON, path and variant, and is parsed
+    again where it is unpickled: in another interpreter (as on a Dask worker) it is the same scene, and a
+    Simulation of it steps bit for bit as one of the original."""
+    import pickle
+
+    from_file = tactile.load_scene(SCENES / "fig3_cantilever.json", variant="stvk")
+    data = scene_json("poke", duration=0.1)
+    from_dict = tactile.parse_scene(data, tmp_path / "poke.json")
+    code = """
+import pickle, sys
+import tactile
+scene = pickle.loads(sys.stdin.buffer.read())
+sim = tactile.Simulation(scene)
+sim.advance(0.02)
+sys.stdout.buffer.write(pickle.dumps((scene.name, scene.variant, scene.n_nodes, sim.steps, sim.positions.tobytes())))
+"""
+    for scene in (from_file, from_dict):
+        out = subprocess.run([sys.executable, "-c", code], input=pickle.dumps(scene), capture_output=True,
+                             timeout=120)
+        assert out.returncode == 0, out.stderr.decode()
+        name, variant, n_nodes, steps, positions = pickle.loads(out.stdout)
+        here = tactile.Simulation(scene)
+        here.advance(0.02)
+        assert (name, variant, n_nodes) == (scene.name, scene.variant, scene.n_nodes)
+        assert steps == here.steps and positions == here.positions.tobytes()
+
+
+def test_the_scenes_ship_with_the_module() -> None:
+    """tactile.SCENES holds every scene of server/scenes (and the meshes they read), installed with the module:
+    each loads from there."""
+    shipped = sorted(p.name for p in tactile.SCENES.glob("*.json") if p.name != "scene.schema.json")
+    assert shipped == sorted(p.name for p in SCENES.glob("*.json") if p.name != "scene.schema.json")
+    organ = tactile.load_scene(tactile.SCENES / "organ.json")  # reads meshes/organ_*.obj beside it
+    assert organ.n_tets > 100 and str(tactile.SCENES) in organ.path

@@ -550,13 +550,18 @@ void bind_errors(py::module_& m) {
 // Scene, load_scene and parse_scene: the CLIs' loader.
 void bind_scene(py::module_& m) {
   py::class_<Scene>(m, "Scene", "A scene as the loader checked it (one variant).")
-      .def_readonly("name", &Scene::name)
-      .def_readonly("variant", &Scene::variant)
-      .def_readonly("path", &Scene::path)
-      .def_property_readonly("duration", [](const Scene& s) { return s.run.duration; })
-      .def_property_readonly("frame_rate", [](const Scene& s) { return s.run.frame_rate; })
-      .def_property_readonly("n_nodes", [](const Scene& s) { return s.spec.mesh.n_nodes(); })
-      .def_property_readonly("n_tets", [](const Scene& s) { return int32_t(s.spec.mesh.tets.size()); })
+      .def_readonly("name", &Scene::name, "the scene's name (its file's \"name\")")
+      .def_readonly("variant", &Scene::variant, "the variant this Scene is, \"\" for a scene without variants")
+      .def_readonly("path", &Scene::path, "the scene file, as given (relative mesh paths are read from its folder)")
+      .def_property_readonly(
+          "duration", [](const Scene& s) { return s.run.duration; }, "run.duration: what tactile-sim run simulates [s]")
+      .def_property_readonly(
+          "frame_rate", [](const Scene& s) { return s.run.frame_rate; },
+          "run.frame_rate: frames a second of simulated time [Hz]")
+      .def_property_readonly(
+          "n_nodes", [](const Scene& s) { return s.spec.mesh.n_nodes(); }, "nodes of the mesh (every body's)")
+      .def_property_readonly(
+          "n_tets", [](const Scene& s) { return int32_t(s.spec.mesh.tets.size()); }, "tets of the mesh (every body's)")
       .def_property_readonly(
           "bodies",
           [](const Scene& s) {
@@ -568,25 +573,43 @@ void bind_scene(py::module_& m) {
           },
           "the bodies (one for a scene of one): dicts of name, and slices nodes, tets, fine_vertices, "
           "fine_triangles into the arrays a Simulation gives (a body's node i is nodes.start + i)")
-      .def_property_readonly("proxies",
-                             [](const Scene& s) {
-                               std::vector<std::string> out;
-                               for (const ProxySpec& p : s.spec.proxies) out.push_back(p.name);
-                               return out;
-                             })
-      .def_property_readonly("tracked",
-                             [](const Scene& s) {
-                               std::vector<std::pair<std::string, int32_t>> out;
-                               for (const TrackedPoint& p : s.track) out.emplace_back(p.name, p.node);
-                               return out;
-                             })
-      .def_property_readonly("scripted", [](const Scene& s) {
-        for (const auto& p : s.proxy_script)
-          if (p) return true;
-        for (const auto& h : s.hand_script)
-          if (h) return true;
-        return false;
-      });
+      .def_property_readonly(
+          "proxies",
+          [](const Scene& s) {
+            std::vector<std::string> out;
+            for (const ProxySpec& p : s.spec.proxies) out.push_back(p.name);
+            return out;
+          },
+          "the proxies' names, in the order of a Simulation's per-proxy arrays")
+      .def_property_readonly(
+          "tracked",
+          [](const Scene& s) {
+            std::vector<std::pair<std::string, int32_t>> out;
+            for (const TrackedPoint& p : s.track) out.emplace_back(p.name, p.node);
+            return out;
+          },
+          "the scene's tracked points: (name, node), the node nearest each (index into the node arrays)")
+      .def_property_readonly(
+          "scripted",
+          [](const Scene& s) {
+            for (const auto& p : s.proxy_script)
+              if (p) return true;
+            for (const auto& h : s.hand_script)
+              if (h) return true;
+            return false;
+          },
+          "whether a proxy or hand of the scene follows a script (Simulation.advance() plays them)")
+      // A Scene pickles as its JSON, its path and its variant, and is parsed
+      // again where it is unpickled (its mesh files, if any, read there).
+      .def(py::pickle([](const Scene& s) { return py::make_tuple(s.source, s.path, s.variant); },
+                      [](const py::tuple& t) {
+                        if (t.size() != 3) throw std::runtime_error("a pickled Scene is (source, path, variant)");
+                        const auto path = t[1].cast<std::string>(), variant = t[2].cast<std::string>();
+                        std::vector<Scene> one =
+                            pick(parse_scene(nlohmann::json::parse(t[0].cast<std::string>()), path),
+                                 variant.empty() ? std::nullopt : std::optional<std::string>(variant), path);
+                        return std::move(one.front());
+                      }));
 
   m.def(
       "load_scene",
@@ -772,11 +795,17 @@ void bind_simulation(py::module_& m) {
       .def("time_advance", &PySimulation::time_advance, py::arg("seconds"), py::arg("count"),
            "advance(seconds) `count` times in a loop in C++; the wall time of each call [s] (a benchmark's "
            "reference for the same loop from Python).")
-      .def_property_readonly("time", [](PySimulation& s) { return s.sim()->time(); })
-      .def_property_readonly("steps", [](PySimulation& s) { return s.sim()->steps(); })
-      .def_property_readonly("n_nodes", [](PySimulation& s) { return s.sim()->n_nodes(); })
-      .def_property_readonly("n_tets", [](PySimulation& s) { return s.sim()->n_tets(); })
-      .def_property_readonly("dt_rest", [](PySimulation& s) { return s.sim()->dt_rest(); })
+      .def_property_readonly(
+          "time", [](PySimulation& s) { return s.sim()->time(); }, "simulated time since the start [s]")
+      .def_property_readonly(
+          "steps", [](PySimulation& s) { return s.sim()->steps(); }, "steps taken since the start")
+      .def_property_readonly(
+          "n_nodes", [](PySimulation& s) { return s.sim()->n_nodes(); }, "nodes (the rows of the node arrays)")
+      .def_property_readonly(
+          "n_tets", [](PySimulation& s) { return s.sim()->n_tets(); }, "tets (the rows of tets and the cell arrays)")
+      .def_property_readonly(
+          "dt_rest", [](PySimulation& s) { return s.sim()->dt_rest(); },
+          "the critical step of the mesh at rest [s] (what \"dt\": \"auto\" starts from)")
       .def_property_readonly(
           "bodies",
           [](PySimulation& s) {
@@ -787,8 +816,11 @@ void bind_simulation(py::module_& m) {
           "the bodies, as Scene.bodies: dicts of name and slices nodes, tets, fine_vertices, fine_triangles; "
           "e.g. sim.displacements[b['nodes']] is body b's own displacement, in its own node order")
       .def_property_readonly(
-          "precision", [](PySimulation& s) { return s.sim()->precision() == Precision::Float ? "float" : "double"; })
-      .def("critical_dt", [](PySimulation& s) { return s.sim()->compute_critical_dt(); })
+          "precision", [](PySimulation& s) { return s.sim()->precision() == Precision::Float ? "float" : "double"; },
+          "the arithmetic the core steps in: \"float\" or \"double\" (integrator.precision)")
+      .def(
+          "critical_dt", [](PySimulation& s) { return s.sim()->compute_critical_dt(); },
+          "the critical step of the body as it is now [s]: a step above it is unstable")
       .def_property_readonly(
           "positions", &PySimulation::positions,
           "X + u [m] (n_nodes x 3) now: a read-only view that never changes (read it again after advance())")
@@ -805,14 +837,24 @@ void bind_simulation(py::module_& m) {
           "tets", [](py::object self) { return self.cast<PySimulation&>().tets(self); },
           "node ids of each tet (n_tets x 4; quadratic tets n_tets x 10: corners, then edge nodes in VTK's order), "
           "read-only")
-      .def_property_readonly("energy", [](PySimulation& s) { return energy_dict(s.sim()->energy()); })
-      .def("compute_energy", [](PySimulation& s) { return energy_dict(s.sim()->compute_energy()); })
-      .def_property_readonly("fault", [](PySimulation& s) { return fault_object(s.sim()->fault()); })
-      .def("element_energy",
-           [](PySimulation& s) {
-             const std::vector<double> e = s.sim()->compute_element_energy();
-             return py::array_t<double>(py::ssize_t(e.size()), e.data());
-           })
+      .def_property_readonly(
+          "energy", [](PySimulation& s) { return energy_dict(s.sim()->energy()); },
+          "the energy balance's terms as of the latest step [J]: kinetic, elastic, gravity, work_loads, "
+          "work_essential, work_contact, dissipated, discrete, restated (server/scenes/README.md: the balance)")
+      .def(
+          "compute_energy", [](PySimulation& s) { return energy_dict(s.sim()->compute_energy()); },
+          "the same terms, computed afresh from the state now [J]")
+      .def_property_readonly(
+          "fault", [](PySimulation& s) { return fault_object(s.sim()->fault()); },
+          "None, or what stopped the simulation (kind, message, time [s], step, and the elements or nodes at "
+          "fault); advance() does nothing more after one")
+      .def(
+          "element_energy",
+          [](PySimulation& s) {
+            const std::vector<double> e = s.sim()->compute_element_energy();
+            return py::array_t<double>(py::ssize_t(e.size()), e.data());
+          },
+          "each tet's elastic energy now, V psi(F) [J] (n_tets,)")
       .def(
           "element_fields",
           [](PySimulation& s, bool cauchy_stress, bool green_strain, bool von_mises) {
@@ -826,14 +868,20 @@ void bind_simulation(py::module_& m) {
             if (von_mises) out["von_mises"] = py::array_t<double>(py::ssize_t(n), f.von_mises.data());
             return out;
           },
-          py::arg("cauchy_stress") = false, py::arg("green_strain") = false, py::arg("von_mises") = false)
-      .def_property_readonly("proxy_names",
-                             [](PySimulation& s) {
-                               std::vector<std::string> out;
-                               for (const ProxySpec& p : s.sim()->proxies()) out.push_back(p.name);
-                               return out;
-                             })
-      .def_property_readonly("devices", [](PySimulation& s) { return s.sim()->devices(); })
+          py::arg("cauchy_stress") = false, py::arg("green_strain") = false, py::arg("von_mises") = false,
+          "per tet, the fields asked for: cauchy_stress [Pa] and green_strain [1] (n_tets, 3, 3), von_mises [Pa] "
+          "(n_tets,)")
+      .def_property_readonly(
+          "proxy_names",
+          [](PySimulation& s) {
+            std::vector<std::string> out;
+            for (const ProxySpec& p : s.sim()->proxies()) out.push_back(p.name);
+            return out;
+          },
+          "the proxies' names, in the order of every per-proxy array")
+      .def_property_readonly(
+          "devices", [](PySimulation& s) { return s.sim()->devices(); },
+          "the device channels' names, in the order of device_reports")
       .def_property_readonly(
           "proxy_reports", [](PySimulation& s) { return s.locked_reports(true); },
           "per proxy, (n_proxies, 3) arrays: force [N] and torque [N m] on it, their mean over the latest "
@@ -848,19 +896,27 @@ void bind_simulation(py::module_& m) {
       .def_property_readonly(
           "proxy_forces", [](PySimulation& s) -> py::object { return s.locked_reports(true)["force"]; },
           "proxy_reports['force']: each proxy's mean force over the latest advance() [N] (n_proxies, 3)")
-      .def("clear_impulses", [](PySimulation& s) { s.sim()->clear_impulses(); })
       .def(
-          "proxy_pose", [](PySimulation& s, int32_t j) { return from_pose(s.sim()->proxy_pose(j)); }, py::arg("proxy"))
+          "clear_impulses", [](PySimulation& s) { s.sim()->clear_impulses(); },
+          "starts the reports' mean_force and mean_torque again from now")
       .def(
-          "hand_pose", [](PySimulation& s, int32_t h) { return from_pose(s.sim()->hand_pose(h)); }, py::arg("hand"))
+          "proxy_pose", [](PySimulation& s, int32_t j) { return from_pose(s.sim()->proxy_pose(j)); }, py::arg("proxy"),
+          "the proxy's pose now: (position [m], orientation as a quaternion (w, x, y, z))")
+      .def(
+          "hand_pose", [](PySimulation& s, int32_t h) { return from_pose(s.sim()->hand_pose(h)); }, py::arg("hand"),
+          "the hand's pose now, as proxy_pose")
       .def("set_proxy_motion", &PySimulation::set_proxy_motion, py::arg("proxy"), py::arg("pose_from"),
-           py::arg("pose_to"), py::arg("t0"), py::arg("t1"))
+           py::arg("pose_to"), py::arg("t0"), py::arg("t1"),
+           "Moves the proxy from pose_from to pose_to (each (position [m], quaternion (w, x, y, z))) over simulated "
+           "time [t0, t1] [s]; it leaves its script, if it has one.")
       .def("set_hand_motion", &PySimulation::set_hand_motion, py::arg("hand"), py::arg("pose_from"), py::arg("pose_to"),
-           py::arg("t0"), py::arg("t1"))
+           py::arg("t0"), py::arg("t1"), "As set_proxy_motion, for a hand.")
       .def("move_proxy", &PySimulation::move_proxy, py::arg("proxy"), py::arg("position"),
            py::arg("orientation") = py::none(), py::kw_only(), py::arg("duration"),
            "Glides the proxy from where it is to `position` (and `orientation`) over the next `duration` seconds.")
-      .def("drive_scripts", &PySimulation::drive_scripts, py::arg("t0"), py::arg("t1"))
+      .def("drive_scripts", &PySimulation::drive_scripts, py::arg("t0"), py::arg("t1"),
+           "Sets every scripted proxy's and hand's motion over [t0, t1] [s] from its script, and clears the "
+           "impulses (what advance() does itself; for a loop that steps with advance(..., scripts=False)).")
       .def(
           "couple_device",
           [](PySimulation& s, int32_t device, std::optional<std::array<double, 3>> limits) {
@@ -873,13 +929,15 @@ void bind_simulation(py::module_& m) {
           },
           py::arg("device"), py::arg("limits") = py::none(),
           "Couples a device channel's proxies (limits: max force [N], max torque [N m], stiffness [N/m]).")
-      .def("release_device",
-           [](PySimulation& s, int32_t device) {
-             if (device < 0 || size_t(device) >= s.sim()->devices().size())
-               throw py::index_error("device " + std::to_string(device) + ": the scene has " +
-                                     std::to_string(s.sim()->devices().size()));
-             s.sim()->release_device(device);
-           })
+      .def(
+          "release_device",
+          [](PySimulation& s, int32_t device) {
+            if (device < 0 || size_t(device) >= s.sim()->devices().size())
+              throw py::index_error("device " + std::to_string(device) + ": the scene has " +
+                                    std::to_string(s.sim()->devices().size()));
+            s.sim()->release_device(device);
+          },
+          py::arg("device"), "Uncouples a device channel: its proxies move as scripted or set again.")
       .def("write_vtu", &PySimulation::write_vtu, py::arg("path"), py::arg("fields") = std::vector<std::string>{},
            "Writes the body as it is now (VTK XML, .vtu): displacement, velocity, constraint and energy density, and "
            "the fields named, those a scene's run.vtu_fields takes: cauchy_stress [Pa], green_strain [1], "

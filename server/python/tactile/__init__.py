@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import pathlib
 from typing import Any
 
 from tactile._core import ModelError, RecordingError, Scene, SceneError, Simulation, resimulate, run_headless
@@ -24,7 +25,10 @@ from tactile._core import __version__ as __version__  # the project's VERSION, c
 from tactile._core import load_scene as _load_scene
 from tactile._core import parse_scene as _parse_scene
 
-__all__ = ["ModelError", "RecordingError", "Scene", "SceneError", "Simulation", "load_scene", "load_scenes",
+# The scenes shipped with the module (server/scenes): tactile.load_scene(tactile.SCENES / "poke.json").
+SCENES = pathlib.Path(__file__).resolve().parent / "scenes"
+
+__all__ = ["SCENES", "ModelError", "RecordingError", "Scene", "SceneError", "Simulation", "load_scene", "load_scenes",
            "parse_scene", "resimulate", "run_headless"]
 
 

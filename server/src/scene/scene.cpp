@@ -789,7 +789,20 @@ ProxyMotion PoseScript::motion(double t0, double t1) const {
   return m;
 }
 
+namespace {
+std::vector<Scene> parse_variants(const Json& j, const std::string& path);
+}  // namespace
+
 std::vector<Scene> parse_scene(const Json& j, const std::string& path) {
+  std::vector<Scene> out = parse_variants(j, path);
+  const std::string source = j.dump();
+  for (Scene& s : out) s.source = source;
+  return out;
+}
+
+namespace {
+
+std::vector<Scene> parse_variants(const Json& j, const std::string& path) {
   std::map<std::string, SceneMesh> meshes;
   std::map<std::string, std::shared_ptr<const EmbeddedSurface>> surfaces;
   Context ctx{Origin{path, ""}, fs::path(path).parent_path().string(), &meshes, &surfaces};
@@ -927,6 +940,8 @@ class NamedDom {
   nlohmann::detail::json_sax_dom_parser<Json> dom_;
   std::vector<Level> levels_;
 };
+
+}  // namespace
 
 }  // namespace
 

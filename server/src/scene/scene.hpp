@@ -95,6 +95,9 @@ struct Scene {
   // "view.fields": per-vertex fields the live server's state frames carry
   // whether or not a viewer asks (none by default: none computed).
   ViewFieldMask view_fields = 0;
+  // The scene's JSON (every variant's) as it was parsed, so that a copy of
+  // it can be made elsewhere (a pickled Scene, on a Dask worker).
+  std::string source;
 };
 
 // Reads and checks a scene file; one entry per variant (one when it has none).
