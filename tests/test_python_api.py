@@ -479,3 +479,32 @@ def test_the_scenes_ship_with_the_module() -> None:
     assert shipped == sorted(p.name for p in SCENES.glob("*.json") if p.name != "scene.schema.json")
     organ = tactile.load_scene(tactile.SCENES / "organ.json")  # reads meshes/organ_*.obj beside it
     assert organ.n_tets > 100 and str(tactile.SCENES) in organ.path
+
+
+def test_a_vtu_series_written_from_a_python_loop_opens_frame_by_frame(tmp_path: pathlib.Path) -> None:
+    """tactile.VtuSeries: each write() is a frame at the simulation's time; series.pvd lists every frame with its
+    time (rewritten at each, so a loop stopped early leaves one that opens), and each frame, read back by
+    meshio, holds that moment's displacements and the fields asked for."""
+    import xml.etree.ElementTree as ET
+
+    import meshio
+
+    sim = tactile.Simulation(tactile.load_scene(SCENES / "poke.json"))
+    series = tactile.VtuSeries(tmp_path / "out", fields=["von_mises", "contact_force"])
+    kept = []
+    for _ in range(4):
+        sim.advance(0.05)
+        series.write(sim)
+        kept.append((sim.time, sim.displacements.copy()))
+        listed = ET.parse(series.pvd).getroot().find("Collection")
+        assert listed is not None and len(listed) == len(kept)
+    root = ET.parse(tmp_path / "out" / "series.pvd").getroot()
+    assert root.get("type") == "Collection"
+    entries = root.find("Collection")
+    assert entries is not None
+    for entry, (t, u) in zip(entries, kept, strict=True):
+        assert float(entry.get("timestep", "nan")) == pytest.approx(t, rel=1e-9)
+        mesh = meshio.read(tmp_path / "out" / entry.get("file", ""))
+        np.testing.assert_allclose(mesh.point_data["displacement"], u, rtol=0, atol=1e-12)
+        assert "von_mises" in mesh.cell_data and "contact_force" in mesh.point_data
+    assert float(entries[-1].get("timestep", "nan")) > float(entries[0].get("timestep", "nan"))

@@ -24,12 +24,13 @@ from tactile._core import ModelError, RecordingError, Scene, SceneError, Simulat
 from tactile._core import __version__ as __version__  # the project's VERSION, compiled in
 from tactile._core import load_scene as _load_scene
 from tactile._core import parse_scene as _parse_scene
+from tactile.vtu import VtuSeries
 
 # The scenes shipped with the module (server/scenes): tactile.load_scene(tactile.SCENES / "poke.json").
 SCENES = pathlib.Path(__file__).resolve().parent / "scenes"
 
-__all__ = ["SCENES", "ModelError", "RecordingError", "Scene", "SceneError", "Simulation", "load_scene", "load_scenes",
-           "parse_scene", "resimulate", "run_headless"]
+__all__ = ["SCENES", "ModelError", "RecordingError", "Scene", "SceneError", "Simulation", "VtuSeries", "load_scene",
+           "load_scenes", "parse_scene", "resimulate", "run_headless"]
 
 
 def _one(scenes: list[Scene], where: str) -> Scene:
