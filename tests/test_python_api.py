@@ -508,3 +508,29 @@ def test_a_vtu_series_written_from_a_python_loop_opens_frame_by_frame(tmp_path: 
         np.testing.assert_allclose(mesh.point_data["displacement"], u, rtol=0, atol=1e-12)
         assert "von_mises" in mesh.cell_data and "contact_force" in mesh.point_data
     assert float(entries[-1].get("timestep", "nan")) > float(entries[0].get("timestep", "nan"))
+
+
+def test_a_parameter_set_from_python_changes_the_body_as_it_goes_on(tmp_path: pathlib.Path) -> None:
+    """set_parameter takes the live server's names and ranges: the cantilever, made twice as stiff halfway
+    through, goes on from where it was (time, steps and positions continue) and sags less than one left as it
+    was; an unknown name and a value out of range are refused naming the parameter, and parameters lists them
+    with their values."""
+    scene = tactile.load_scene(SCENES / "fig3_cantilever.json", variant="stvk")
+    tip = dict(scene.tracked)["tip"]
+    soft, stiff = tactile.Simulation(scene), tactile.Simulation(scene)
+    for sim in (soft, stiff):
+        sim.advance(0.05)
+    e = next(p for p in stiff.parameters if p["name"] == "material.E")
+    assert e["min"] < e["value"] < e["max"] and e["unit"] == "Pa"
+    before = (stiff.time, stiff.steps, stiff.positions.copy())
+    stiff.set_parameter("material.E", 2 * e["value"])
+    assert (stiff.time, stiff.steps) == before[:2]
+    np.testing.assert_array_equal(stiff.positions, before[2])
+    assert next(p for p in stiff.parameters if p["name"] == "material.E")["value"] == 2 * e["value"]
+    for sim in (soft, stiff):
+        sim.advance(0.3)
+    assert abs(stiff.displacements[tip, 1]) < 0.9 * abs(soft.displacements[tip, 1])
+    with pytest.raises(tactile.SceneError, match="material.Q"):
+        stiff.set_parameter("material.Q", 1.0)
+    with pytest.raises(tactile.SceneError, match="material.nu"):
+        stiff.set_parameter("material.nu", 0.7)

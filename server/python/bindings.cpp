@@ -42,6 +42,7 @@
 #include "live/resim.hpp"
 #include "mesh/mesh_error.hpp"
 #include "record/mcap.hpp"
+#include "scene/parameters.hpp"
 #include "scene/scene.hpp"
 #include "sim/simulation.hpp"
 #include "study/accuracy.hpp"
@@ -438,6 +439,37 @@ class PySimulation {
     for (size_t h = 0; h < scene_.hand_script.size(); ++h)
       if (scene_.hand_script[h]) sim_.set_hand_motion(int32_t(h), scene_.hand_script[h]->motion(t0, t1));
     sim_.clear_impulses();
+  }
+
+  // A parameter by the live server's name (scene/parameters.hpp: material.E,
+  // damping.alpha, gravity.y, friction.mu, ...): the model is rebuilt with it
+  // and the body goes on from where it is, as the live server's SetParameter
+  // carries it. Raises SceneError naming the parameter (an unknown name, a
+  // value out of its range).
+  void set_parameter(const std::string& name, double value) {
+    const Busy busy(mutex_);
+    ModelSpec spec = scene_.spec;
+    apply_parameter(spec, name, value);
+    Simulation next(spec);
+    next.track_contact_forces(true);
+    next.continue_from(sim_);
+    sim_ = std::move(next);
+    scene_.spec = std::move(spec);
+    ++generation_;
+  }
+  py::list parameters() {
+    const Busy busy(mutex_);
+    py::list out;
+    for (const Parameter& p : list_parameters(scene_.spec)) {
+      py::dict d;
+      d["name"] = p.name;
+      d["value"] = p.value;
+      d["min"] = p.min;
+      d["max"] = p.max;
+      d["unit"] = p.unit;
+      out.append(d);
+    }
+    return out;
   }
 
   // Whether a script is left to play: a scripted proxy or hand not moved from Python.
@@ -938,6 +970,13 @@ void bind_simulation(py::module_& m) {
             s.sim()->release_device(device);
           },
           py::arg("device"), "Uncouples a device channel: its proxies move as scripted or set again.")
+      .def("set_parameter", &PySimulation::set_parameter, py::arg("name"), py::arg("value"),
+           "Sets a parameter by the live server's name (material.E [Pa], material.nu, material.rho [kg/m^3], "
+           "damping.alpha [1/s], gravity.x|y|z [m/s^2], friction.mu, effects.damping ...; `parameters` lists this "
+           "scene's with their ranges): the model is rebuilt with it and the body goes on from where it is. Raises "
+           "SceneError naming the parameter when the name is unknown or the value out of its range.")
+      .def_property_readonly("parameters", &PySimulation::parameters,
+                             "the parameters set_parameter takes for this scene: dicts of name, value, min, max, unit")
       .def("write_vtu", &PySimulation::write_vtu, py::arg("path"), py::arg("fields") = std::vector<std::string>{},
            "Writes the body as it is now (VTK XML, .vtu): displacement, velocity, constraint and energy density, and "
            "the fields named, those a scene's run.vtu_fields takes: cauchy_stress [Pa], green_strain [1], "
