@@ -218,14 +218,14 @@ def test_the_module_source_compiles_against_debians_pybind11() -> None:
     version = re.findall(r"#define PYBIND11_VERSION_(MAJOR|MINOR) (\d+)",
                          pathlib.Path("/usr/include/pybind11/detail/common.h").read_text())
     assert dict(version) == {"MAJOR": "2", "MINOR": "10"}, version
-    generated = ROOT / "build/release/generated/proto"
+    generated = ROOT / "build/release/generated/proto"  # (and its parent: tactile_version.hpp)
     # Debian's Python headers, as the image's python3-dev; pybind11 from /usr/include, where nothing else is.
     where = "import sysconfig; print(sysconfig.get_paths()['include'])"
     python_include = subprocess.run([str(DEBIAN_PYTHON), "-c", where], capture_output=True, text=True,
                                     check=True).stdout.strip()
     compile_ = subprocess.run(
         ["c++", "-std=c++20", "-fsyntax-only", "-Wall", "-Wextra", "-Werror", "-DGLM_FORCE_XYZW_ONLY",
-         f"-I{ROOT / 'server/src'}", f"-I{generated}", "-isystem", python_include,
+         f"-I{ROOT / 'server/src'}", f"-I{generated}", f"-I{generated.parent}", "-isystem", python_include,
          str(ROOT / "server/python/bindings.cpp")], capture_output=True, text=True, timeout=300)
     assert compile_.returncode == 0, compile_.stderr[-3000:]
 
