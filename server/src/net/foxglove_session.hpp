@@ -65,12 +65,13 @@ class FoxgloveSession {
   void translate(std::span<const uint8_t> envelope, uint64_t unix_ns, std::vector<Frame>& out);
 
   size_t subscriptions() const { return subscriptions_.size(); }
+  // A status message (level 0 info, 1 warning, 2 error).
+  Frame status(int level, const std::string& message) const;
 
  private:
   std::optional<uint32_t> channel_of(const std::string& topic) const;
   void emit(uint32_t channel, uint64_t unix_ns, std::span<const uint8_t> head, std::span<const uint8_t> payload,
             std::vector<Frame>& out) const;
-  Frame status(int level, const std::string& message) const;
 
   std::string server_name_;
   std::vector<Channel> channels_;

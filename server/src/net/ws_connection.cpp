@@ -4,8 +4,6 @@
 #include <chrono>
 #include <cstdio>
 
-#include <nlohmann/json.hpp>
-
 #ifdef __linux__
 #include <linux/sockios.h>
 #include <netinet/tcp.h>
@@ -208,24 +206,28 @@ int WsConnection::unsent() {
   return 0;
 }
 
+// A frame waits for the socket to drain below the bound (TCP_NOTSENT_LOWAT
+// makes it writable then); newer frames replace it meanwhile. True when it
+// waits (pump() runs again once the socket drains).
+bool WsConnection::hold_for_drain() {
+  if (!core_.frame_next() || unsent() <= unsent_bound_) return false;
+  awaiting_drain_ = true;
+  beast::get_lowest_layer(ws_).socket().async_wait(tcp::socket::wait_write,
+                                                   [weak = weak_from_this()](beast::error_code ec) {
+                                                     auto self = weak.lock();
+                                                     if (!self) return;
+                                                     self->awaiting_drain_ = false;
+                                                     if (ec || self->core_.closed()) return;
+                                                     self->pump();
+                                                   });
+  return true;
+}
+
 void WsConnection::pump() {
   if (core_.disconnect()) return drop();
   if (awaiting_drain_) return;
   if (fox_) return pump_foxglove();
-  if (core_.frame_next() && unsent() > unsent_bound_) {
-    // A frame waits for the socket to drain below the bound (TCP_NOTSENT_LOWAT
-    // makes it writable then); newer frames replace it meanwhile.
-    awaiting_drain_ = true;
-    beast::get_lowest_layer(ws_).socket().async_wait(tcp::socket::wait_write,
-                                                     [weak = weak_from_this()](beast::error_code ec) {
-                                                       auto self = weak.lock();
-                                                       if (!self) return;
-                                                       self->awaiting_drain_ = false;
-                                                       if (ec || self->core_.closed()) return;
-                                                       self->pump();
-                                                     });
-    return;
-  }
+  if (hold_for_drain()) return;
   if (const Bytes* message = core_.next_write()) {
     ws_.async_write(asio::buffer(**message), [self = shared_from_this()](beast::error_code ec, size_t) {
       self->core_.written();
@@ -243,18 +245,7 @@ void WsConnection::pump() {
 // there, newer ones replacing it in the rules' queue meanwhile.
 void WsConnection::pump_foxglove() {
   while (fox_out_.empty()) {
-    if (core_.frame_next() && unsent() > unsent_bound_) {
-      awaiting_drain_ = true;
-      beast::get_lowest_layer(ws_).socket().async_wait(tcp::socket::wait_write,
-                                                       [weak = weak_from_this()](beast::error_code ec) {
-                                                         auto self = weak.lock();
-                                                         if (!self) return;
-                                                         self->awaiting_drain_ = false;
-                                                         if (ec || self->core_.closed()) return;
-                                                         self->pump();
-                                                       });
-      return;
-    }
+    if (hold_for_drain()) return;
     const Bytes* message = core_.next_write();
     if (!message) break;
     const Bytes m = *message;
@@ -266,11 +257,8 @@ void WsConnection::pump_foxglove() {
     fox_->translate(*m, unix_ns, frames);
     // A refusal (a wrong token) comes before any subscription: said as a status.
     const wire::Envelope* e = wire::GetEnvelope(m->data());
-    if (!core_.greeted() && e->message_type() == wire::Message::Error && e->message_as_Error()->message()) {
-      const std::string text =
-          nlohmann::json{{"op", "status"}, {"level", 2}, {"message", e->message_as_Error()->message()->str()}}.dump();
-      frames.push_back({true, std::vector<uint8_t>(text.begin(), text.end())});
-    }
+    if (!core_.greeted() && e->message_type() == wire::Message::Error && e->message_as_Error()->message())
+      frames.push_back(fox_->status(2, e->message_as_Error()->message()->str()));
     for (FoxgloveSession::Frame& f : frames) fox_out_.push_back(std::move(f));
   }
   if (fox_out_.empty()) {

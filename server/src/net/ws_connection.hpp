@@ -55,7 +55,8 @@ class WsConnection : public std::enable_shared_from_this<WsConnection> {
   void arm_hello_timer();
   void arm_flush_timer();  // inputs coalesced over the rate wait for a token (Connection::flush)
   void read();
-  void pump();  // writes what the rules queued; closes when they say
+  void pump();            // writes what the rules queued; closes when they say
+  bool hold_for_drain();  // a frame waits for the socket to drain (then pump() again)
 
   std::shared_ptr<Host> host_;
   Stream ws_;

@@ -215,8 +215,8 @@ void Writer::close_chunk() {
   const uint64_t chunk_offset = offset_;
   std::span<const uint8_t> stored = chunk_;
   if (compression_ == Compression::Zstd) {
-    // Level 3, zstd's default: the default demo's chunks to about a fifth,
-    // at a few percent of a core (docs/perf.md, "Recordings").
+    // Level 3, zstd's default: higher levels barely shrink our chunks and
+    // cost more (docs/perf.md, "Recordings"; server/bench/recording_bench.py).
     packed_.resize(ZSTD_compressBound(chunk_.size()));
     const size_t n = ZSTD_compressCCtx(zstd_, packed_.data(), packed_.size(), chunk_.data(), chunk_.size(), 3);
     if (ZSTD_isError(n))
